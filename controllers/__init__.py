@@ -1,0 +1,1 @@
+"""Controllers for the identified models: PD designs (python-control), RL agents, sweeps and evaluation."""

@@ -1,0 +1,85 @@
+"""Attitude from body rates (eqs. 25-29) and the paper's 10 s detrend.
+
+The quaternion kinematics of eq. (25) are integrated exactly for rates held
+constant over each sample interval (the rotation increment is the quaternion
+exponential of ``omega*dt/2``, trapezoidal mean of the two samples), starting
+from the level attitude of eq. (26). Euler angles follow from the rotation
+matrix of eq. (27) with :func:`identification.model.euler_from_quaternion`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import signal
+
+from .model import euler_from_quaternion, quaternion_from_euler
+
+
+def quaternions_from_rates(time, rates, euler0=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """Integrate eq. (25) over a rate history.
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        Sample times [s].
+    rates : ndarray, shape (3, n)
+        Body rates p, q, r [rad/s].
+    euler0 : tuple of 3 float
+        Initial roll, pitch, yaw [rad]; eq. (26) is the default level start.
+
+    Returns
+    -------
+    ndarray, shape (4, n)
+        Unit quaternions (q0, q1, q2, q3).
+    """
+    time = np.asarray(time, dtype=float)
+    rates = np.asarray(rates, dtype=float)
+    dt = np.diff(time)
+    mean = 0.5 * (rates[:, 1:] + rates[:, :-1]) * dt  # rotation vector per step
+    angle = np.sqrt(np.sum(mean * mean, axis=0))
+    half = 0.5 * angle
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = np.where(angle > 1e-12, np.sin(half) / angle, 0.5)
+    inc = np.vstack([np.cos(half), mean * scale]).T.tolist()  # body-frame increments
+    out = np.empty((time.size, 4))
+    a0, a1, a2, a3 = (float(v) for v in quaternion_from_euler(*euler0))
+    out[0] = (a0, a1, a2, a3)
+    for k, (b0, b1, b2, b3) in enumerate(inc, start=1):
+        # q_{k} = q_{k-1} (x) dq : the exact solution of eq. (25) for constant omega
+        a0, a1, a2, a3 = (
+            a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
+            a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
+            a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1,
+            a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0,
+        )
+        norm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
+        a0, a1, a2, a3 = a0 / norm, a1 / norm, a2 / norm, a3 / norm
+        out[k] = (a0, a1, a2, a3)
+    return out.T
+
+
+def attitude_from_rates(time, rates, euler0=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """Euler angles (phi, theta, psi) [rad], shape (3, n), from body rates, eqs. (25)-(29)."""
+    return euler_from_quaternion(quaternions_from_rates(time, rates, euler0))
+
+
+def detrend_piecewise(time, values, period: float = 10.0) -> np.ndarray:
+    """Subtract the best least-squares piecewise-linear function over ``period`` s pieces.
+
+    The paper removes integration drift from modelled and measured angles this
+    way (Matlab ``detrend`` with break points every 10 s, Section 3.2);
+    :func:`scipy.signal.detrend` with ``bp`` does the same.
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+    values : ndarray, shape (..., n)
+    period : float
+        Length of the linear pieces [s].
+    """
+    time = np.asarray(time, dtype=float)
+    idx = np.searchsorted(time, np.arange(time[0] + period, time[-1], period))
+    idx = idx[(idx > 1) & (idx < time.size - 1)]
+    return signal.detrend(np.asarray(values, dtype=float), axis=-1, type="linear", bp=idx)

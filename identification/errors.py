@@ -1,0 +1,45 @@
+"""Named exceptions of the identification package.
+
+Every error says what was expected and what came, so a user can fix the input
+without reading a traceback. They subclass the standard exception that a
+caller would otherwise catch (``ValueError``, ``ImportError``).
+"""
+
+from __future__ import annotations
+
+
+class FlightLogError(ValueError):
+    """A flight log or in-memory flight is malformed (columns, NaNs, time base, units, ranges)."""
+
+
+class IdentifiabilityError(ValueError):
+    """The data cannot determine the requested parameters (too short, no excitation, ill-conditioned)."""
+
+
+class ModelFileError(ValueError):
+    """A model file is missing, corrupt, of the wrong schema version or lacks parameters."""
+
+
+class MissingDependency(ImportError):
+    """An optional dependency (an extra of ``heli-env``) is not installed."""
+
+
+def require(module: str, extra: str):
+    """Import an optional module lazily, naming the extra that provides it.
+
+    Parameters
+    ----------
+    module : str
+        Importable module name, e.g. ``"pyulog"``.
+    extra : str
+        The ``heli-env`` extra that installs it, e.g. ``"logs"``.
+    """
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError as e:  # pragma: no cover - depends on the environment
+        raise MissingDependency(
+            f"'{module}' is needed for this and is not installed; "
+            f"install it with: pip install 'heli-env[{extra}]'"
+        ) from e

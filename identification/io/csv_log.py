@@ -1,0 +1,164 @@
+"""The canonical CSV flight log, and raw servo logs converted with eqs. (65)-(67).
+
+Canonical CSV (one header line, comma separated, SI units)::
+
+    time,p,q,r,phi,theta,psi,lat,lon,col,ped
+
+``time`` [s]; ``p, q, r`` body rates [rad/s]; ``phi, theta, psi`` Euler angles
+[rad] (optional: reconstructed from the rates with eqs. 25-29 when absent);
+``lat, lon, col, ped`` sticks normalised to [-1, 1] (lat drives roll, lon pitch,
+ped yaw, col is collective). Any further column is kept as an extra column.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import FlightLogError
+from ..files import atomic_path, sha256_of
+from ..flight import ATTITUDE_COLUMNS, CSV_COLUMNS, RATE_COLUMNS, REQUIRED_COLUMNS, STICK_COLUMNS, Flight, make_flight
+
+SERVO_COLUMNS = ("u_aile", "u_aux", "u_elev", "u_rudd")
+"""Servo pulse widths of eq. (65), in the order of its left-hand side."""
+SERVO_STICK_ORDER = ("lon", "lat", "col", "ped")
+"""Order of the stick vector delta in eqs. (65)-(67)."""
+
+
+def _read_table(path: Path) -> tuple[list[str], np.ndarray]:
+    if not path.exists():
+        raise FlightLogError(f"flight log {str(path)!r} does not exist")
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        header_line = fh.readline()
+    header = [h.strip() for h in header_line.strip().split(",")]
+    if not header or header == [""]:
+        raise FlightLogError(f"{path}: empty file; expected a header line {','.join(CSV_COLUMNS)}")
+    if len(set(header)) != len(header):
+        dup = sorted({h for h in header if header.count(h) > 1})
+        raise FlightLogError(f"{path}: duplicated column(s) {dup} in the header")
+    try:
+        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, dtype=float)
+    except ValueError as e:
+        raise FlightLogError(f"{path}: expected numbers in every field after the header: {e}") from e
+    if data.shape[0] == 0:
+        raise FlightLogError(f"{path}: header but no data rows")
+    if data.shape[1] != len(header):
+        raise FlightLogError(f"{path}: header names {len(header)} columns but rows have {data.shape[1]}")
+    return header, data.T
+
+
+def read_csv_flight(path) -> Flight:
+    """Read a canonical CSV flight log into a validated :class:`Flight`.
+
+    Raises
+    ------
+    FlightLogError
+        Missing required columns, non-numeric fields, and everything
+        :func:`identification.flight.make_flight` checks.
+    """
+    path = Path(path)
+    header, cols = _read_table(path)
+    missing = [c for c in REQUIRED_COLUMNS if c not in header]
+    if missing:
+        raise FlightLogError(
+            f"{path}: missing required column(s) {missing}; expected at least "
+            f"{','.join(REQUIRED_COLUMNS)}, found {','.join(header)}"
+        )
+    get = {name: cols[i] for i, name in enumerate(header)}
+    att_present = [c for c in ATTITUDE_COLUMNS if c in header]
+    if att_present and len(att_present) != 3:
+        raise FlightLogError(f"{path}: attitude columns must be all of phi,theta,psi or none; found {att_present}")
+    attitude = np.array([get[c] for c in ATTITUDE_COLUMNS]) if att_present else None
+    extra = {k: v for k, v in get.items() if k not in CSV_COLUMNS}
+    meta = {"source": path.name, "sha256": sha256_of(path), "format": "csv"}
+    try:
+        return make_flight(
+            get["time"], np.array([get[c] for c in RATE_COLUMNS]), np.array([get[c] for c in STICK_COLUMNS]),
+            attitude=attitude, metadata=meta, extra=extra,
+        )
+    except FlightLogError as e:
+        raise FlightLogError(f"{path}: {e}") from None
+
+
+def write_csv_flight(flight: Flight, path, extra: bool = True) -> Path:
+    """Write a flight as a canonical CSV (atomically). Extra columns follow the canonical ones."""
+    names = list(CSV_COLUMNS)
+    cols = [flight.time, *flight.rates, *flight.attitude, *flight.sticks]
+    if extra:
+        for k, v in flight.extra.items():
+            names.append(k)
+            cols.append(np.asarray(v, dtype=float))
+    with atomic_path(path) as tmp:
+        np.savetxt(tmp, np.column_stack(cols), delimiter=",", header=",".join(names), comments="", fmt="%.9g")
+    return Path(path)
+
+
+def sticks_from_servos(servos, gain, trim) -> np.ndarray:
+    """Convert servo pulse widths to sticks, eq. (67): ``delta = G'^-1 (U - U_trim)``.
+
+    Parameters
+    ----------
+    servos : ndarray, shape (4, n)
+        Pulse widths U_AILE, U_AUX, U_ELEV, U_RUDD (any unit, the same as the calibration).
+    gain : ndarray, shape (4, 4)
+        Mixing gain G' of eq. (66), mapping (lon, lat, col, ped) to pulse widths.
+    trim : ndarray, shape (4,)
+        Pulse widths U_trim at centred sticks, eq. (66).
+
+    Returns
+    -------
+    ndarray, shape (4, n)
+        Sticks in the canonical order lat, lon, col, ped.
+    """
+    G = np.asarray(gain, dtype=float)
+    if G.shape != (4, 4):
+        raise FlightLogError(f"servo mixing gain G' must be 4x4, got shape {G.shape}")
+    cond = np.linalg.cond(G)
+    if not np.isfinite(cond) or cond > 1e8:
+        raise FlightLogError(f"servo mixing gain G' is singular (condition number {cond:.3g}); cannot invert eq. (67)")
+    trim = np.asarray(trim, dtype=float).reshape(4, 1)
+    delta = np.linalg.solve(G, np.asarray(servos, dtype=float) - trim)  # (lon, lat, col, ped)
+    order = [SERVO_STICK_ORDER.index(s) for s in STICK_COLUMNS]
+    return delta[order]
+
+
+def read_servo_csv(path, calibration) -> Flight:
+    """Read a raw servo log and convert it to sticks with eqs. (65)-(67).
+
+    Parameters
+    ----------
+    path : str or Path
+        CSV with ``time,p,q,r`` (optionally ``phi,theta,psi``) and the four servo
+        pulse-width columns ``u_aile,u_aux,u_elev,u_rudd``.
+    calibration : dict or str or Path
+        ``{"G": 4x4 list, "U_trim": 4 list}`` or a JSON file holding it.
+    """
+    path = Path(path)
+    if not isinstance(calibration, dict):
+        cal_path = Path(calibration)
+        try:
+            calibration = json.loads(cal_path.read_text())
+        except (OSError, json.JSONDecodeError) as e:
+            raise FlightLogError(f"servo calibration {str(cal_path)!r} is not a readable JSON file: {e}") from e
+    for key in ("G", "U_trim"):
+        if key not in calibration:
+            raise FlightLogError(f"servo calibration lacks {key!r}; expected keys 'G' (4x4) and 'U_trim' (4)")
+    header, cols = _read_table(path)
+    need = ("time",) + RATE_COLUMNS + SERVO_COLUMNS
+    missing = [c for c in need if c not in header]
+    if missing:
+        raise FlightLogError(f"{path}: missing column(s) {missing}; a servo log needs {','.join(need)}")
+    get = {name: cols[i] for i, name in enumerate(header)}
+    servos = np.array([get[c] for c in SERVO_COLUMNS])
+    sticks = sticks_from_servos(servos, calibration["G"], calibration["U_trim"])
+    att = np.array([get[c] for c in ATTITUDE_COLUMNS]) if all(c in header for c in ATTITUDE_COLUMNS) else None
+    meta = {"source": path.name, "sha256": sha256_of(path), "format": "servo-csv",
+            "input_source": "servos (eq. 67)", "servo_calibration": calibration}
+    extra = {k: v for k, v in get.items() if k not in need and k not in ATTITUDE_COLUMNS}
+    try:
+        return make_flight(get["time"], np.array([get[c] for c in RATE_COLUMNS]), sticks, attitude=att,
+                           metadata=meta, extra=extra)
+    except FlightLogError as e:
+        raise FlightLogError(f"{path}: {e}") from None

@@ -1,0 +1,366 @@
+"""Model parameters and the one physics core of the package.
+
+The attitude model is the paper's minimal model (eqs. 18 and 21) plus any terms
+added from :mod:`identification.terms`, the servo delay as a first-order Padé
+approximation (eq. 31) and the quaternion kinematics (eqs. 25-26). Everything
+that moves a model forward in time — the forward simulator used for
+validation, the synthetic flight generator, the Gymnasium environments and the
+PD linearisation — calls :func:`derivatives` / :func:`step` from here.
+
+State vector ``x`` (shape ``(N_STATE, ...)``, trailing axes are batch)::
+
+    0..2  p, q, r        body rates                         [rad/s]
+    3..5  z_roll ... yaw servo (Padé) states, eq. (31)      [stick units]
+    6..9  q0, q1, q2, q3 attitude quaternion, eqs. (25)-(26) [-]
+
+Input vector ``u`` (shape ``(4, ...)``): ``lat, lon, col, ped`` sticks in [-1, 1].
+Disturbance ``d`` (shape ``(3, ...)``): wind torque per inertia on roll, pitch,
+yaw [rad/s^2], i.e. the ``k2*u_d`` part of eq. (42) (the constant offsets
+``kd`` are model parameters).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+
+from .terms import BASE_PARAMS, EXTRA_PARAMS, FEATURES, TERMS
+
+N_STATE = 10
+RATES = slice(0, 3)
+SERVO = slice(3, 6)
+QUAT = slice(6, 10)
+INPUT_NAMES = ("lat", "lon", "col", "ped")
+_CMD_INPUT = (0, 1, 3)  # indices in u of the stick driving roll, pitch, yaw
+
+
+@dataclass(frozen=True)
+class ModelParams:
+    """Parameters of the coupled attitude model, eqs. (18) and (21).
+
+    All fields default to 0, so a decoupled model simply leaves the coupling
+    terms at zero. Names and signs follow the paper.
+
+    Attributes
+    ----------
+    k1, k5, k9 : float
+        Gyroscopic inertia ratios [-] (eqs. 19, 22, 23).
+    k2, k6, k10 : float
+        Control effectiveness of lateral cyclic, longitudinal cyclic and pedal
+        [rad/s^2 per unit stick].
+    k3, k7, k11 : float
+        Damping of roll, pitch and yaw [1/s].
+    k4, k8 : float
+        Flybar cross-coupling (``+k4*q`` in roll, ``-k8*p`` in pitch) [1/s].
+    k12 : float
+        Main-rotor reaction torque per unit collective, entering as ``-k12*col``
+        [rad/s^2].
+    kd1, kd2, kd3 : float
+        Constant torque offsets [rad/s^2].
+    tau_roll, tau_pitch, tau_yaw : float
+        Servo transport delay per axis [s], modelled by the first-order Padé
+        approximation of eq. (31); 0 means no delay.
+    extra : tuple of (str, float)
+        Added catalogue terms (:data:`identification.terms.EXTRA_PARAMS`) and
+        their values, e.g. ``(("nld1", 0.2),)``.
+    """
+
+    k1: float = 0.0
+    k2: float = 0.0
+    k3: float = 0.0
+    k4: float = 0.0
+    kd1: float = 0.0
+    k5: float = 0.0
+    k6: float = 0.0
+    k7: float = 0.0
+    k8: float = 0.0
+    kd2: float = 0.0
+    k9: float = 0.0
+    k10: float = 0.0
+    k11: float = 0.0
+    k12: float = 0.0
+    kd3: float = 0.0
+    tau_roll: float = 0.0
+    tau_pitch: float = 0.0
+    tau_yaw: float = 0.0
+    extra: tuple = field(default=())
+
+    def __post_init__(self):
+        for name in BASE_PARAMS + ("tau_roll", "tau_pitch", "tau_yaw"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(float(v)):
+                raise ValueError(f"parameter {name} must be a finite number, got {v!r}")
+            object.__setattr__(self, name, float(v))
+        for name in ("tau_roll", "tau_pitch", "tau_yaw"):
+            if not 0.0 <= getattr(self, name) <= 2.0:
+                raise ValueError(f"{name} must be a delay in [0, 2] s, got {getattr(self, name)}")
+        extra = tuple((str(k), float(v)) for k, v in dict(self.extra).items())
+        if len(extra) != len(self.extra):
+            raise ValueError(f"extra terms must have unique names, got {[k for k, _ in self.extra]}")
+        for k, v in extra:
+            if k not in EXTRA_PARAMS:
+                raise ValueError(f"unknown extra term {k!r}; known: {', '.join(EXTRA_PARAMS)}")
+            if not math.isfinite(v):
+                raise ValueError(f"extra term {k} must be finite, got {v}")
+        object.__setattr__(self, "extra", tuple(sorted(extra)))
+
+    # ------------------------------------------------------------------ access
+    @property
+    def taus(self) -> tuple[float, float, float]:
+        """Servo delays (roll, pitch, yaw) [s]."""
+        return (self.tau_roll, self.tau_pitch, self.tau_yaw)
+
+    @property
+    def control_gains(self) -> np.ndarray:
+        """(k2, k6, k10): torque per unit stick on each axis [rad/s^2]."""
+        return np.array([self.k2, self.k6, self.k10])
+
+    def values(self) -> dict[str, float]:
+        """All term parameters (base and extra) by name."""
+        out = {name: getattr(self, name) for name in BASE_PARAMS}
+        out.update(dict(self.extra))
+        return out
+
+    def get(self, name: str) -> float:
+        """Value of a base or extra parameter; 0 for an extra term not in the model."""
+        if name in BASE_PARAMS or name.startswith("tau_"):
+            return getattr(self, name)
+        if name not in TERMS:
+            raise KeyError(f"unknown parameter {name!r}")
+        return dict(self.extra).get(name, 0.0)
+
+    def with_values(self, **values) -> "ModelParams":
+        """A copy with some parameters replaced; extra-term names add or replace terms."""
+        base = {k: v for k, v in values.items() if k in BASE_PARAMS or k.startswith("tau_")}
+        extra = dict(self.extra)
+        for k, v in values.items():
+            if k not in base:
+                if k not in EXTRA_PARAMS:
+                    raise KeyError(f"unknown parameter {k!r}")
+                extra[k] = v
+        return dataclasses.replace(self, **base, extra=tuple(extra.items()))
+
+
+# ---------------------------------------------------------------------- servo
+@lru_cache(maxsize=256)
+def servo_coefficients(tau: float) -> tuple[float, float, float]:
+    """Coefficients ``(d1, n1, n2)`` of the servo-delay model, eq. (31).
+
+    ``theta + d1*theta' = n1*delta - n2*delta'`` is the first-order Padé
+    approximation of ``exp(-s*tau)``, computed with ``control.pade``.
+    """
+    if tau <= 0.0:
+        return (0.0, 1.0, 0.0)
+    import control
+
+    num, den = control.pade(tau, 1)  # (-s + 2/tau) / (s + 2/tau)
+    return (den[0] / den[1], num[1] / den[1], -num[0] / den[1])
+
+
+@lru_cache(maxsize=256)
+def _compiled(params: ModelParams):
+    """Precompute what the core needs per parameter set.
+
+    Returns ``terms``, a tuple of ``(axis, feature_fn, signed_value)`` for every
+    non-zero parameter, and ``servo``, per axis ``(1/d1, feedthrough, state
+    gain)`` of eq. (31) in state-space form, ``None`` where there is no delay:
+    ``(n1 - n2 s)/(1 + d1 s) = -n2/d1 + (n1 + n2/d1)/(1 + d1 s)``.
+    """
+    terms = tuple(
+        (TERMS[name].axis, FEATURES[TERMS[name].feature], TERMS[name].sign * value)
+        for name, value in params.values().items()
+        if value != 0.0
+    )
+    servo = []
+    for tau in params.taus:
+        d1, n1, n2 = servo_coefficients(tau)
+        servo.append(None if d1 == 0.0 else (1.0 / d1, -n2 / d1, n1 + n2 / d1))
+    return terms, tuple(servo)
+
+
+def _rhs(x, u, d, compiled):
+    """Right-hand side on a sequence of state components (floats or equal-shape arrays).
+
+    Written with arithmetic operators only, so the same lines serve a single
+    trajectory in Python floats and a batch of environments in numpy rows.
+    """
+    terms, servo = compiled
+    p, q, r = x[0], x[1], x[2]
+    sticks = (u[0], u[1], u[3])
+    cmd = [0.0, 0.0, 0.0]
+    dz = [0.0, 0.0, 0.0]
+    for i in range(3):
+        s = servo[i]
+        if s is None:
+            cmd[i] = sticks[i]
+            dz[i] = 0.0 * x[3 + i]
+        else:
+            cmd[i] = s[1] * sticks[i] + s[2] * x[3 + i]
+            dz[i] = s[0] * (sticks[i] - x[3 + i])
+    w = (p, q, r)
+    acc = [0.0 * p, 0.0 * q, 0.0 * r]
+    if d is not None:
+        acc = [acc[0] + d[0], acc[1] + d[1], acc[2] + d[2]]
+    for axis, fn, c in terms:
+        acc[axis] = acc[axis] + c * fn(w, cmd, u[2])
+    # Quaternion kinematics, eq. (25) (the paper's q3' row has a typo: q3*p -> q2*p).
+    q0, q1, q2, q3 = x[6], x[7], x[8], x[9]
+    return [
+        acc[0], acc[1], acc[2], dz[0], dz[1], dz[2],
+        -0.5 * (q1 * p + q2 * q + q3 * r),
+        0.5 * (q0 * p + q2 * r - q3 * q),
+        0.5 * (q0 * q + q3 * p - q1 * r),
+        0.5 * (q0 * r + q1 * q - q2 * p),
+    ]
+
+
+def derivatives(x, u, d, params: ModelParams) -> np.ndarray:
+    """Time derivative of the state: eqs. (18), (21), (31) and (25).
+
+    Parameters
+    ----------
+    x : ndarray, shape (N_STATE, ...)
+        State (see module docstring).
+    u : ndarray, shape (4, ...)
+        Sticks lat, lon, col, ped in [-1, 1].
+    d : ndarray, shape (3, ...) or None
+        Wind torque per inertia on roll, pitch, yaw [rad/s^2].
+    params : ModelParams
+
+    Returns
+    -------
+    ndarray, shape (N_STATE, ...)
+    """
+    x = np.asarray(x, dtype=float)
+    out = _rhs(x, np.asarray(u, dtype=float), None if d is None else np.asarray(d, dtype=float), _compiled(params))
+    return np.array([np.broadcast_to(v, x.shape[1:]) for v in out])
+
+
+def _rk4(x, u, d, compiled, h):
+    k1 = _rhs(x, u, d, compiled)
+    k2 = _rhs([a + 0.5 * h * b for a, b in zip(x, k1)], u, d, compiled)
+    k3 = _rhs([a + 0.5 * h * b for a, b in zip(x, k2)], u, d, compiled)
+    k4 = _rhs([a + h * b for a, b in zip(x, k3)], u, d, compiled)
+    return [a + (h / 6.0) * (b1 + 2.0 * b2 + 2.0 * b3 + b4) for a, b1, b2, b3, b4 in zip(x, k1, k2, k3, k4)]
+
+
+def _normalise(x):
+    n = (x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9]) ** 0.5
+    return x[:6] + [x[6] / n, x[7] / n, x[8] / n, x[9] / n]
+
+
+def step(x, u, d, params: ModelParams, dt: float, substeps: int = 1):
+    """Advance the state by ``dt`` with inputs and disturbance held (zero-order hold).
+
+    Classical fourth-order Runge-Kutta with ``substeps`` equal sub-steps; the
+    quaternion is renormalised afterwards (eq. 26).
+
+    Parameters
+    ----------
+    x : ndarray, shape (N_STATE, ...), or a list of N_STATE floats
+        State. A list of floats takes the fast scalar path and a list is returned.
+    u : ndarray, shape (4, ...), or sequence of 4 floats
+        Sticks lat, lon, col, ped.
+    d : ndarray, shape (3, ...), sequence of 3 floats, or None
+        Wind torque per inertia [rad/s^2].
+    params : ModelParams
+    dt : float
+        Step [s].
+    substeps : int
+        RK4 sub-steps.
+    """
+    compiled = _compiled(params)
+    as_array = isinstance(x, np.ndarray)
+    xs = list(x)
+    h = dt / substeps
+    for _ in range(substeps):
+        xs = _rk4(xs, u, d, compiled, h)
+    xs = _normalise(xs)
+    return np.array(xs) if as_array else xs
+
+
+def initial_state(rates=(0.0, 0.0, 0.0), euler=(0.0, 0.0, 0.0), sticks=(0.0, 0.0, 0.0), batch=()):
+    """A state at the given rates [rad/s], Euler angles [rad] and settled servo states.
+
+    ``sticks`` are the (lat, lon, ped) commands the servo states are settled on.
+    ``batch`` is the trailing batch shape.
+    """
+    x = np.zeros((N_STATE,) + tuple(batch))
+    x[RATES] = np.reshape(rates, (3,) + (1,) * len(batch))
+    x[SERVO] = np.reshape(sticks, (3,) + (1,) * len(batch))
+    x[QUAT] = np.reshape(quaternion_from_euler(*euler), (4,) + (1,) * len(batch))
+    return x
+
+
+def quaternion_from_euler(phi, theta, psi) -> np.ndarray:
+    """Unit quaternion (q0, q1, q2, q3) of ZYX Euler angles roll, pitch, yaw [rad]."""
+    cr, sr = np.cos(np.multiply(phi, 0.5)), np.sin(np.multiply(phi, 0.5))
+    cp, sp = np.cos(np.multiply(theta, 0.5)), np.sin(np.multiply(theta, 0.5))
+    cy, sy = np.cos(np.multiply(psi, 0.5)), np.sin(np.multiply(psi, 0.5))
+    return np.array([
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    ])
+
+
+def euler_from_quaternion(quat) -> np.ndarray:
+    """ZYX Euler angles (phi, theta, psi) [rad] of a quaternion, shape (4, ...) -> (3, ...).
+
+    Equivalent to eqs. (27)-(29) with atan2 in place of the paper's arcsin/arccos,
+    so that the yaw angle keeps its sign and the full range (-pi, pi].
+    """
+    q0, q1, q2, q3 = quat
+    phi = np.arctan2(2.0 * (q0 * q1 + q2 * q3), 1.0 - 2.0 * (q1 * q1 + q2 * q2))
+    theta = np.arcsin(np.clip(2.0 * (q0 * q2 - q3 * q1), -1.0, 1.0))
+    psi = np.arctan2(2.0 * (q0 * q3 + q1 * q2), 1.0 - 2.0 * (q2 * q2 + q3 * q3))
+    return np.array([phi, theta, psi])
+
+
+def simulate(params: ModelParams, time, sticks, disturbance=None, x0=None, substeps: int = 1):
+    """Forward-simulate the model with measured inputs (zero-order hold between samples).
+
+    Parameters
+    ----------
+    params : ModelParams
+    time : ndarray, shape (n,)
+        Sample times [s], uniformly spaced.
+    sticks : ndarray, shape (4, n)
+        lat, lon, col, ped in [-1, 1].
+    disturbance : ndarray, shape (3, n), optional
+        Wind torque per inertia [rad/s^2] held over each sample interval.
+    x0 : ndarray, shape (N_STATE,), optional
+        Initial state; default rest, level, servo settled on the first sticks.
+    substeps : int
+        RK4 sub-steps per sample interval.
+
+    Returns
+    -------
+    ndarray, shape (N_STATE, n)
+        State at every sample time.
+    """
+    time = np.asarray(time, dtype=float)
+    sticks = np.asarray(sticks, dtype=float)
+    n = time.size
+    dt = float(np.median(np.diff(time))) if n > 1 else 0.0
+    if x0 is None:
+        x0 = initial_state(sticks=sticks[list(_CMD_INPUT), 0])
+    x = [float(v) for v in x0]
+    u_rows = sticks.T.tolist()
+    d_rows = None if disturbance is None else np.asarray(disturbance, dtype=float).T.tolist()
+    compiled = _compiled(params)
+    h = dt / substeps
+    out = np.empty((n, N_STATE))
+    out[0] = x
+    for k in range(n - 1):
+        d = None if d_rows is None else d_rows[k]
+        for _ in range(substeps):
+            x = _rk4(x, u_rows[k], d, compiled, h)
+        x = _normalise(x)
+        out[k + 1] = x
+    return out.T
