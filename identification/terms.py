@@ -62,6 +62,13 @@ FEATURES: dict[str, FeatureFn] = {
 
 FEATURE_NAMES: tuple[str, ...] = tuple(FEATURES)
 
+RATE_DEPENDENCE: dict[str, frozenset] = {
+    "q*r": frozenset({1, 2}), "p*r": frozenset({0, 2}), "p*q": frozenset({0, 1}),
+    "p": frozenset({0}), "q": frozenset({1}), "r": frozenset({2}),
+    "p|p|": frozenset({0}), "q|q|": frozenset({1}), "r|r|": frozenset({2}),
+}
+"""Which body rates (0 p, 1 q, 2 r) each feature reads; features not listed read only inputs."""
+
 
 @dataclass(frozen=True)
 class Term:
