@@ -20,6 +20,10 @@ class ModelFileError(ValueError):
     """A model file is missing, corrupt, of the wrong schema version or lacks parameters."""
 
 
+class NotFittedError(ValueError, AttributeError):
+    """An estimator was used before ``fit`` (as scikit-learn's ``NotFittedError``)."""
+
+
 class MissingDependency(ImportError):
     """An optional dependency (an extra of ``heli-env``) is not installed."""
 

@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal
 
-from .errors import IdentifiabilityError
+from .errors import IdentifiabilityError, NotFittedError
 from .flight import Flight
 from .model import ModelParams, servo_coefficients
 from .preprocess import DEFAULT_PASS_HZ, DEFAULT_STOP_HZ, lowpass_flight
@@ -422,7 +422,7 @@ class IntegralIdentifier:
     # ----------------------------------------------------------------- use
     def _check_fitted(self):
         if not hasattr(self, "params_"):
-            raise RuntimeError("this IntegralIdentifier is not fitted yet; call fit(flight) first")
+            raise NotFittedError("this IntegralIdentifier is not fitted yet; call fit(flight) first")
 
     def predict(self, flight: Flight) -> np.ndarray:
         """Forward-simulate the identified model with the flight's sticks; rates (3, n) [rad/s]."""

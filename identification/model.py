@@ -249,7 +249,13 @@ def _rk4(x, u, d, compiled, h):
 
 
 def _normalise(x):
+    """Renormalise the quaternion (eq. 26); a blown-up state stays non-finite instead of raising."""
     n = (x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9]) ** 0.5
+    if isinstance(n, float):
+        if not 0.0 < n < float("inf"):
+            return x[:6] + [float("nan")] * 4
+    else:
+        n = np.where((n > 0) & np.isfinite(n), n, np.nan)
     return x[:6] + [x[6] / n, x[7] / n, x[8] / n, x[9] / n]
 
 
