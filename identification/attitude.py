@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import signal
 
 from .model import euler_from_quaternion, quaternion_from_euler
 
@@ -66,11 +65,13 @@ def attitude_from_rates(time, rates, euler0=(0.0, 0.0, 0.0)) -> np.ndarray:
 
 
 def detrend_piecewise(time, values, period: float = 10.0) -> np.ndarray:
-    """Subtract the best least-squares piecewise-linear function over ``period`` s pieces.
+    """Subtract the best least-squares continuous piecewise-linear function over ``period`` s pieces.
 
     The paper removes integration drift from modelled and measured angles this
-    way (Matlab ``detrend`` with break points every 10 s, Section 3.2);
-    :func:`scipy.signal.detrend` with ``bp`` does the same.
+    way (Matlab ``detrend`` with break points every 10 s, Section 3.2). Matlab's
+    trend is continuous at the break points (a line plus one ramp per break);
+    :func:`scipy.signal.detrend` with ``bp`` is not (it fits every piece on its
+    own and so also removes jumps), so the regression is built here.
 
     Parameters
     ----------
@@ -80,6 +81,11 @@ def detrend_piecewise(time, values, period: float = 10.0) -> np.ndarray:
         Length of the linear pieces [s].
     """
     time = np.asarray(time, dtype=float)
+    values = np.asarray(values, dtype=float)
     idx = np.searchsorted(time, np.arange(time[0] + period, time[-1], period))
-    idx = idx[(idx > 1) & (idx < time.size - 1)]
-    return signal.detrend(np.asarray(values, dtype=float), axis=-1, type="linear", bp=idx)
+    idx = np.unique(idx[(idx > 1) & (idx < time.size - 1)])
+    s = (time - time[0]) / max(time[-1] - time[0], np.finfo(float).tiny)  # scaled for conditioning
+    basis = np.column_stack([np.ones_like(s), s] + [np.maximum(s - s[i], 0.0) for i in idx])  # (n, 2 + breaks)
+    y = values.reshape(-1, time.size).T  # (n, m)
+    coef = np.linalg.lstsq(basis, y, rcond=None)[0]
+    return (y - basis @ coef).T.reshape(values.shape)

@@ -156,7 +156,8 @@ def _check_time(time: np.ndarray) -> None:
         i = int(np.argmax(gaps))
         raise FlightLogError(
             f"sampling gap: {int(gaps.sum())} interval(s) longer than {GAP_FACTOR}x the median "
-            f"{med * 1e3:.2f} ms; the first is {dt[i] * 1e3:.2f} ms at row {i + 1} (t={time[i]:.3f} s). "
+            f"{med * 1e3:.2f} ms; the first is {dt[i] * 1e3:.2f} ms between rows {i} and {i + 1} "
+            f"(t={time[i]:.3f} s to {time[i + 1]:.3f} s). "
             "Expected uniform sampling: cut the flight into segments or resample it"
         )
 
@@ -179,7 +180,7 @@ def _check_rates_units(rates: np.ndarray, attitude: np.ndarray | None, time: np.
         dang = np.gradient(ang, time)
         w = rates[i]
         denom = float(w @ w)
-        if denom <= 0 or np.std(dang) < 1e-3:
+        if denom <= 0 or np.std(dang) < 1e-3 or np.ptp(w) == 0.0:  # constant w: no correlation to test
             continue
         slope = float(dang @ w) / denom
         corr = float(np.corrcoef(dang, w)[0, 1])
@@ -215,7 +216,8 @@ def make_flight(time, rates, sticks, attitude=None, metadata=None, extra=None) -
         Shapes, non-finite values, a time base that is not strictly increasing
         or has gaps, rates that look like deg/s, sticks outside [-1, 1].
     """
-    time = np.asarray(time, dtype=float)
+    # np.array copies: the Flight owns its arrays and the caller's are left writable.
+    time = np.array(time, dtype=float)
     if time.ndim != 1:
         raise FlightLogError(f"time must be 1-D, got shape {time.shape}")
     n = time.size
@@ -224,7 +226,7 @@ def make_flight(time, rates, sticks, attitude=None, metadata=None, extra=None) -
         arrays["attitude"] = (attitude, 3)
     conv = {}
     for key, (arr, rows) in arrays.items():
-        a = np.asarray(arr, dtype=float)
+        a = np.array(arr, dtype=float)
         if a.shape != (rows, n):
             raise FlightLogError(f"{key} must have shape ({rows}, {n}) to match time, got {a.shape}")
         conv[key] = a
@@ -256,7 +258,7 @@ def make_flight(time, rates, sticks, attitude=None, metadata=None, extra=None) -
         meta["attitude_source"] = "reconstructed"
     ex = {}
     for k, v in (extra or {}).items():
-        v = np.asarray(v)
+        v = np.array(v)
         if v.shape != (n,):
             raise FlightLogError(f"extra column {k!r} must have {n} values, got shape {v.shape}")
         ex[k] = v

@@ -19,7 +19,9 @@ import numpy as np
 
 from ..errors import FlightLogError
 from ..files import atomic_path, sha256_of
-from ..flight import ATTITUDE_COLUMNS, CSV_COLUMNS, RATE_COLUMNS, REQUIRED_COLUMNS, STICK_COLUMNS, Flight, make_flight
+from ..flight import (
+    ATTITUDE_COLUMNS, CSV_COLUMNS, RATE_COLUMNS, REQUIRED_COLUMNS, STICK_COLUMNS, Flight, _check_finite, make_flight,
+)
 
 SERVO_COLUMNS = ("u_aile", "u_aux", "u_elev", "u_rudd")
 """Servo pulse widths of eq. (65), in the order of its left-hand side."""
@@ -30,7 +32,7 @@ SERVO_STICK_ORDER = ("lon", "lat", "col", "ped")
 def _read_table(path: Path) -> tuple[list[str], np.ndarray]:
     if not path.exists():
         raise FlightLogError(f"flight log {str(path)!r} does not exist")
-    with open(path, encoding="utf-8", errors="replace") as fh:
+    with open(path, encoding="utf-8-sig", errors="replace") as fh:  # -sig: drop a spreadsheet BOM
         header_line = fh.readline()
     header = [h.strip() for h in header_line.strip().split(",")]
     if not header or header == [""]:
@@ -47,6 +49,14 @@ def _read_table(path: Path) -> tuple[list[str], np.ndarray]:
     if data.shape[1] != len(header):
         raise FlightLogError(f"{path}: header names {len(header)} columns but rows have {data.shape[1]}")
     return header, data.T
+
+
+def _attitude_columns(path: Path, header: list[str], get: dict) -> np.ndarray | None:
+    """The (3, n) attitude if the log has phi, theta, psi; None if it has none of them."""
+    att_present = [c for c in ATTITUDE_COLUMNS if c in header]
+    if att_present and len(att_present) != 3:
+        raise FlightLogError(f"{path}: attitude columns must be all of phi,theta,psi or none; found {att_present}")
+    return np.array([get[c] for c in ATTITUDE_COLUMNS]) if att_present else None
 
 
 def read_csv_flight(path) -> Flight:
@@ -67,10 +77,7 @@ def read_csv_flight(path) -> Flight:
             f"{','.join(REQUIRED_COLUMNS)}, found {','.join(header)}"
         )
     get = {name: cols[i] for i, name in enumerate(header)}
-    att_present = [c for c in ATTITUDE_COLUMNS if c in header]
-    if att_present and len(att_present) != 3:
-        raise FlightLogError(f"{path}: attitude columns must be all of phi,theta,psi or none; found {att_present}")
-    attitude = np.array([get[c] for c in ATTITUDE_COLUMNS]) if att_present else None
+    attitude = _attitude_columns(path, header, get)
     extra = {k: v for k, v in get.items() if k not in CSV_COLUMNS}
     meta = {"source": path.name, "sha256": sha256_of(path), "format": "csv"}
     try:
@@ -91,7 +98,7 @@ def write_csv_flight(flight: Flight, path, extra: bool = True) -> Path:
             names.append(k)
             cols.append(np.asarray(v, dtype=float))
     with atomic_path(path) as tmp:
-        np.savetxt(tmp, np.column_stack(cols), delimiter=",", header=",".join(names), comments="", fmt="%.9g")
+        np.savetxt(tmp, np.column_stack(cols), delimiter=",", header=",".join(names), comments="", fmt="%.17g")
     return Path(path)
 
 
@@ -118,7 +125,10 @@ def sticks_from_servos(servos, gain, trim) -> np.ndarray:
     cond = np.linalg.cond(G)
     if not np.isfinite(cond) or cond > 1e8:
         raise FlightLogError(f"servo mixing gain G' is singular (condition number {cond:.3g}); cannot invert eq. (67)")
-    trim = np.asarray(trim, dtype=float).reshape(4, 1)
+    trim = np.asarray(trim, dtype=float)
+    if trim.size != 4:
+        raise FlightLogError(f"servo trim U_trim must have 4 values, got shape {trim.shape}")
+    trim = trim.reshape(4, 1)
     delta = np.linalg.solve(G, np.asarray(servos, dtype=float) - trim)  # (lon, lat, col, ped)
     order = [SERVO_STICK_ORDER.index(s) for s in STICK_COLUMNS]
     return delta[order]
@@ -152,8 +162,13 @@ def read_servo_csv(path, calibration) -> Flight:
         raise FlightLogError(f"{path}: missing column(s) {missing}; a servo log needs {','.join(need)}")
     get = {name: cols[i] for i, name in enumerate(header)}
     servos = np.array([get[c] for c in SERVO_COLUMNS])
+    try:  # name the servo column (not the stick it mixes into) when a pulse width is NaN/inf
+        for name in SERVO_COLUMNS:
+            _check_finite(name, get[name], get["time"])
+    except FlightLogError as e:
+        raise FlightLogError(f"{path}: {e}") from None
     sticks = sticks_from_servos(servos, calibration["G"], calibration["U_trim"])
-    att = np.array([get[c] for c in ATTITUDE_COLUMNS]) if all(c in header for c in ATTITUDE_COLUMNS) else None
+    att = _attitude_columns(path, header, get)
     meta = {"source": path.name, "sha256": sha256_of(path), "format": "servo-csv",
             "input_source": "servos (eq. 67)", "servo_calibration": calibration}
     extra = {k: v for k, v in get.items() if k not in need and k not in ATTITUDE_COLUMNS}
