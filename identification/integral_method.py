@@ -171,8 +171,8 @@ class IntegralIdentifier:
     axes_ : dict of str to AxisFit
     fit_time_ : float
         Wall time of ``fit`` [s].
-    flight_ : Flight
-        The (filtered) flight the model was fitted on.
+    flights_ : list of Flight
+        The (filtered) flights the model was fitted on.
     """
 
     def __init__(self, structure="decoupled", extra_terms=(), interval: float = 1.0, offsets: str = "per_interval",
@@ -231,15 +231,22 @@ class IntegralIdentifier:
         return d
 
     # ------------------------------------------------------------------- fit
-    def fit(self, flight: Flight) -> "IntegralIdentifier":
-        """Identify the parameters of every requested axis from ``flight``.
+    def fit(self, flight) -> "IntegralIdentifier":
+        """Identify the parameters of every requested axis.
+
+        Parameters
+        ----------
+        flight : Flight or sequence of Flight
+            One flight, or several flights of the same sample rate: their
+            intervals are pooled into one least-squares problem (eq. 35), which
+            is possible because every interval restarts from measured data (eq. 34).
 
         Raises
         ------
         IdentifiabilityError
-            The flight is too short for the intervals, or an axis is not excited
-            (the normalised least-squares problem is ill-conditioned; its
-            condition number is reported).
+            A flight is too short for the intervals, the flights' sample rates
+            differ, or an axis is not excited (the normalised least-squares
+            problem is ill-conditioned; its condition number is reported).
         """
         t0 = _time.perf_counter()
         if self.offsets not in ("per_interval", "global"):
@@ -248,22 +255,41 @@ class IntegralIdentifier:
             raise ValueError(f"input_hold must be 'linear' or 'zoh', got {self.input_hold!r}")
         if int(self.disturbance_order) != self.disturbance_order or not 0 <= self.disturbance_order <= 3:
             raise ValueError(f"disturbance_order must be an integer 0..3, got {self.disturbance_order!r}")
+        flights = [flight] if isinstance(flight, Flight) else list(flight)
+        if not flights:
+            raise ValueError("fit needs at least one flight")
         names = self._param_names()
         delays = self._delays()
-        data = lowpass_flight(flight, self.pass_hz, self.stop_hz) if self.prefilter else flight
-        fs = data.sample_rate
+        datas = [lowpass_flight(f, self.pass_hz, self.stop_hz) if self.prefilter else f for f in flights]
+        fs = datas[0].sample_rate
+        for d in datas[1:]:
+            if abs(d.sample_rate - fs) > 1e-3 * fs:
+                raise IdentifiabilityError(
+                    f"flights must share one sample rate to be pooled; got {fs:.3f} Hz and {d.sample_rate:.3f} Hz"
+                )
         dt = 1.0 / fs
         N = int(round(self.interval * fs))
         if N < 2:
             raise IdentifiabilityError(f"interval {self.interval} s holds {N} samples at {fs:.1f} Hz; need at least 2")
-        n_int = (data.n - 1) // N
+        starts = [np.arange((d.n - 1) // N) * N for d in datas]
+        n_int = sum(s.size for s in starts)
         if n_int < 2:
             raise IdentifiabilityError(
-                f"flight of {data.duration:.2f} s holds {n_int} interval(s) of {self.interval} s; need at least 2 "
-                f"(use a longer flight or shorter intervals)"
+                f"flight of {sum(d.duration for d in datas):.2f} s holds {n_int} interval(s) of {self.interval} s; "
+                "need at least 2 (use a longer flight or shorter intervals)"
             )
-        starts = np.arange(n_int) * N
-        sticks3 = data.sticks[[0, 1, 3]]
+        Wr = np.concatenate([_windows(d.rates, s, N) for d, s in zip(datas, starts)], axis=1)  # (3, n_int, N+1)
+        Wcol = np.concatenate([_windows(d.sticks[2], s, N) for d, s in zip(datas, starts)], axis=0)
+        start_times = np.concatenate([d.time[s] for d, s in zip(datas, starts)])
+
+        def command_windows(a, tau):
+            out = []
+            for d, s in zip(datas, starts):
+                cmd = d.sticks[[0, 1, 3]].copy()
+                cmd[a] = pade_filter(cmd[a], tau, fs)
+                out.append(_windows(cmd, s, N))
+            return np.concatenate(out, axis=1)
+
         fits = {}
         values = {}
         for axis_name in self.axes:
@@ -279,29 +305,26 @@ class IntegralIdentifier:
             grid = delays[a]
             if grid == "auto":
                 candidates = self.delay_grid if self.delay_grid is not None else np.arange(0.0, 0.501, 0.01)
-                scores = []
-                for tau in candidates:
-                    cmd = sticks3.copy()
-                    cmd[a] = pade_filter(sticks3[a], tau, fs)
-                    fit = self._fit_axis(a, axis_params, data, cmd, starts, N, dt, max_iter=1, check=False)
-                    scores.append(fit.r2)
+                scores = [self._fit_axis(a, axis_params, Wr, command_windows(a, tau), Wcol, dt, start_times,
+                                         max_iter=1, check=False).r2 for tau in candidates]
                 tau = float(candidates[int(np.argmax(scores))])
             else:
                 tau = float(grid)
-            cmd = sticks3.copy()
-            cmd[a] = pade_filter(sticks3[a], tau, fs)
-            fit = self._fit_axis(a, axis_params, data, cmd, starts, N, dt, max_iter=self.max_iter, check=True)
+            fit = self._fit_axis(a, axis_params, Wr, command_windows(a, tau), Wcol, dt, start_times,
+                                 max_iter=self.max_iter, check=True)
             fit = AxisFit(**{**fit.__dict__, "delay": tau})
             fits[axis_name] = fit
             values.update(fit.params)
             values[f"tau_{axis_name}"] = tau
         self.axes_ = fits
         self.params_ = ModelParams().with_values(**values)
-        self.flight_ = data
+        self.flights_ = datas
         self.fit_time_ = _time.perf_counter() - t0
         return self
 
-    def _fit_axis(self, a, axis_params, data, cmd, starts, N, dt, max_iter, check) -> AxisFit:
+    def _fit_axis(self, a, axis_params, Wr, Wc, Wcol, dt, start_times, max_iter, check) -> AxisFit:
+        """Eqs. (32)-(40) for one axis on windows (3, n_int, N+1) of rates and commands."""
+        N = Wr.shape[-1] - 1
         terms = [TERMS[p] for p in axis_params]
         feats = [t.feature for t in terms]
         per_interval = self.offsets == "per_interval"
@@ -310,9 +333,6 @@ class IntegralIdentifier:
         signs = np.array([terms[j].sign for j in keep])[:, None, None]
         input_only = [f not in RATE_DEPENDENCE for f in kfeats]
         own = [a in RATE_DEPENDENCE.get(f, ()) for f in kfeats]  # re-evaluated at each iteration
-        Wr = _windows(data.rates, starts, N)  # (3, n_int, N+1)
-        Wc = _windows(cmd, starts, N)
-        Wcol = _windows(data.sticks[2], starts, N)
         y_meas = Wr[a][:, 1:]
         p0 = Wr[a][:, :1]
         y = y_meas - p0  # eq. (37)
@@ -363,7 +383,7 @@ class IntegralIdentifier:
                 zero = axis_params[keep[(fast if per_interval else list(range(len(keep))))[int(np.argmin(scale))]]]
                 raise IdentifiabilityError(
                     f"{AXES[a]} axis is not identifiable from this flight: the regressor of {zero} is identically "
-                    f"zero (condition number inf); the input is probably not excited (stick std {np.std(cmd[a]):.2g})"
+                    f"zero (condition number inf); the input is probably not excited (command std {np.std(Wc[a]):.2g})"
                 )
             An = A / scale
             G = An.T @ An
@@ -373,7 +393,7 @@ class IntegralIdentifier:
                 raise IdentifiabilityError(
                     f"{AXES[a]} axis is not identifiable from this flight: the normalised least-squares "
                     f"problem (eq. 35) has condition number {cond:.3g} (limit {MAX_CONDITION:.0e}); "
-                    f"the input is probably not excited (stick std {np.std(cmd[a]):.2g})"
+                    f"the input is probably not excited (command std {np.std(Wc[a]):.2g})"
                 )
             beta = np.zeros(len(keep))
             beta[fast if per_interval else slice(None)] = np.linalg.solve(G, An.T @ b) / scale
@@ -388,6 +408,9 @@ class IntegralIdentifier:
                     M = np.column_stack([np.ones(offsets.size)] + [F[i].mean(axis=1) * signs[i, 0, 0] for i in slow])
                     c = np.linalg.lstsq(M, offsets, rcond=None)[0]
                     beta[slow] = c[1:]
+                    r_between = offsets - M @ c
+                    s2 = float(r_between @ r_between) / max(offsets.size - M.shape[1], 1)
+                    slow_se = np.sqrt(np.clip(np.diag(s2 * np.linalg.pinv(M.T @ M)), 0, None))[1:]
                     offsets = offsets - M[:, 1:] @ c[1:]
             else:
                 nuisance, offsets = 0.0, np.zeros(0)
@@ -407,6 +430,8 @@ class IntegralIdentifier:
         try:
             se = np.full(beta.size, np.nan)
             se[used] = np.sqrt(np.clip(np.diag(sigma2 * np.linalg.inv(A.T @ A)), 0, None))
+            if per_interval and slow:
+                se[slow] = slow_se
         except np.linalg.LinAlgError:
             se = np.full(beta.size, np.nan)
         params = {axis_params[j]: float(beta[i]) for i, j in enumerate(keep)}
@@ -417,7 +442,7 @@ class IntegralIdentifier:
             std[off_name] = float(np.std(offsets) / np.sqrt(offsets.size))
         ss_tot = float(np.sum((b - b.mean()) ** 2)) or 1.0
         r2 = 1.0 - float(resid @ resid) / ss_tot
-        return AxisFit(AXES[a], params, std, 0.0, float(cond), r2, tuple(history), offsets, data.time[starts])
+        return AxisFit(AXES[a], params, std, 0.0, float(cond), r2, tuple(history), offsets, start_times)
 
     # ----------------------------------------------------------------- use
     def _check_fitted(self):

@@ -79,9 +79,22 @@ def save_model(path, params: ModelParams, **kwargs) -> Path:
     path = Path(path)
     if path.suffix != ".json":
         path = path / MODEL_FILENAME
-    doc = model_document(params, **kwargs)
+    doc = _finite(model_document(params, **kwargs))
     write_text(path, json.dumps(doc, indent=2, allow_nan=False, default=_jsonable) + "\n")
     return path
+
+
+def _finite(obj):
+    """Replace non-finite floats (an undefined standard error, say) by None: JSON has no NaN."""
+    import math
+
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
 
 
 def _jsonable(obj):
