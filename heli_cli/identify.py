@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import argparse
+import math
+
 
 def _delay(text):
     if text is None or text == "auto":
@@ -9,9 +12,19 @@ def _delay(text):
     try:
         v = float(text)
     except ValueError:
-        import argparse
+        v = math.nan
+    if not 0.0 <= v <= 2.0:  # the range ModelParams accepts for a servo delay; NaN fails too
+        raise argparse.ArgumentTypeError(f"expected 'auto' or a delay in seconds in [0, 2], got {text!r}")
+    return v
 
-        raise argparse.ArgumentTypeError(f"expected 'auto' or a delay in seconds, got {text!r}") from None
+
+def _interval(text):
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not 0.0 < v < math.inf:
+        raise argparse.ArgumentTypeError(f"expected a positive interval in seconds, got {text!r}")
     return v
 
 
@@ -25,7 +38,7 @@ def register(sub):
     p.add_argument("flights", nargs="+", metavar="FLIGHT.csv", help="canonical CSV flight log(s)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--coupled", action="store_true", help="write the coupled model (k1..k12) instead of the decoupled one")
-    p.add_argument("--interval", type=float, default=1.0, help="integration interval T_i - T_(i-1) in s (default 1.0)")
+    p.add_argument("--interval", type=_interval, default=1.0, help="integration interval T_i - T_(i-1) in s (default 1.0)")
     p.add_argument("--delay", type=_delay, default=None,
                    help="servo delay: 'auto' (searched, eq. 31) or seconds (default: none)")
     p.add_argument("--no-filter", action="store_true", help="skip the 4/8 Hz zero-phase FIR prefilter (Section 3.1)")

@@ -47,3 +47,11 @@ def require(module: str, extra: str):
             f"'{module}' is needed for this and is not installed; "
             f"install it with: pip install 'heli-env[{extra}]'"
         ) from e
+
+
+class DisturbanceError(ValueError):
+    """Disturbance identification cannot run as asked (Δt out of range, bad smoothing, axis without a control gain)."""
+
+
+class LibraryError(ValueError):
+    """A disturbance library is missing, corrupt, of an unknown version, or its traces do not match the manifest."""

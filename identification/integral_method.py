@@ -110,9 +110,21 @@ def pade_filter(command: np.ndarray, tau: float, fs: float) -> np.ndarray:
 
 
 def _windows(values: np.ndarray, starts: np.ndarray, length: int) -> np.ndarray:
-    """values (..., n) -> (..., n_intervals, length + 1) sharing interval end points."""
-    idx = starts[:, None] + np.arange(length + 1)[None, :]
-    return values[..., idx]
+    """values (..., n) -> (..., n_intervals, length + 1) sharing interval end points (a read-only view).
+
+    ``starts`` must be ``arange(n_intervals) * length`` (equal, adjacent intervals).
+    """
+    values = np.ascontiguousarray(values, dtype=float)
+    step = values.strides[-1]
+    shape = values.shape[:-1] + (starts.size, length + 1)
+    strides = values.strides[:-1] + (length * step, step)
+    return np.lib.stride_tricks.as_strided(values, shape=shape, strides=strides, writeable=False)
+
+
+def _project_out(Z: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """Remove from every interval (last axis) its least-squares fit on the orthonormal columns Q."""
+    flat = Z.reshape(-1, Z.shape[-1])
+    return (flat - (flat @ Q) @ Q.T).reshape(Z.shape)
 
 
 def _cumtrapz(w: np.ndarray, dt: float) -> np.ndarray:
@@ -336,12 +348,14 @@ class IntegralIdentifier:
         y_meas = Wr[a][:, 1:]
         p0 = Wr[a][:, :1]
         y = y_meas - p0  # eq. (37)
+        n_int = y.shape[0]
         tt = np.arange(1, N + 1) * dt
         if per_interval:
             # Integrated polynomial disturbance per interval: d(t) = sum_j a_j t^j, j <= order.
             B = np.stack([tt ** (j + 1) / (j + 1) for j in range(self.disturbance_order + 1)], axis=1)  # (N, o)
             Q, _ = np.linalg.qr(B)
-            yp = y - (y @ Q) @ Q.T
+            B_pinv = np.linalg.pinv(B)
+            yp = _project_out(y, Q)
         else:
             yp = y
         b = yp.ravel()
@@ -354,39 +368,41 @@ class IntegralIdentifier:
             X[input_only] = (np.cumsum(F[:, :, :-1], axis=-1) * dt)[input_only]
         X *= signs
         own_idx = [i for i in range(len(kfeats)) if own[i]]
+        used = list(range(len(keep)))
+        slow = []
+        if per_interval:
+            # Features that hardly change within an interval (collective) are all but
+            # absorbed by the per-interval disturbance: estimate them between intervals.
+            Qt, _ = np.linalg.qr(np.vander(np.arange(N + 1) * dt, self.disturbance_order + 1))
+            Fw = _project_out(F, Qt)  # the feature less a per-interval polynomial like the disturbance's
+            within = np.einsum("ijk,ijk->i", Fw, Fw)
+            Fc = F - F.mean(axis=(1, 2), keepdims=True)
+            total = np.einsum("ijk,ijk->i", Fc, Fc)
+            slow = [i for i in range(len(keep))
+                    if input_only[i] and kfeats[i] != "1" and total[i] > 0 and within[i] < SLOW_FRACTION * total[i]]
+            used = [i for i in range(len(keep)) if i not in slow]
+            if not used:
+                raise IdentifiabilityError(f"{AXES[a]}: every regressor is constant within the intervals")
+            slow_means = [F[i].mean(axis=1) * signs[i, 0, 0] for i in slow]
         for it in range(max(1, max_iter)):
-            if it > 0 and own_idx:
+            if it > 0:
                 # eqs. (39)-(40): p_approx replaces the measured own-axis rate in the integrals
                 rates = list(Wr)
                 rates[a] = np.concatenate([p0, approx], axis=1)
                 Fo = evaluate_features([kfeats[i] for i in own_idx], rates, Wc, Wcol)
                 X = X.copy()
                 X[own_idx] = _cumtrapz(Fo, dt) * signs[own_idx]
-            Xp = X - (X @ Q) @ Q.T if per_interval else X  # Frisch-Waugh: nuisance projected out
-            if per_interval and it == 0:
-                # Features that hardly change within an interval (collective) are all but
-                # absorbed by the per-interval disturbance: estimate them between intervals.
-                Qt, _ = np.linalg.qr(np.vander(np.arange(N + 1) * dt, self.disturbance_order + 1))
-                Fw = F - (F @ Qt) @ Qt.T  # the feature less a per-interval polynomial like the disturbance's
-                within = np.sum(Fw * Fw, axis=(1, 2))
-                total = np.sum((F - F.mean(axis=(1, 2), keepdims=True)) ** 2, axis=(1, 2))
-                slow = [i for i in range(len(keep))
-                        if input_only[i] and kfeats[i] != "1" and total[i] > 0 and within[i] < SLOW_FRACTION * total[i]]
-                fast = [i for i in range(len(keep)) if i not in slow]
-            if per_interval:
-                Xp = Xp[fast]
-                if not fast:
-                    raise IdentifiabilityError(f"{AXES[a]}: every regressor is constant within the intervals")
-            A = Xp.reshape(len(Xp), -1).T
-            scale = np.sqrt(np.sum(A * A, axis=0))
+            Xu = X[used]
+            Xp = (_project_out(Xu, Q) if per_interval else Xu).reshape(len(used), -1)  # Frisch-Waugh
+            G_raw = Xp @ Xp.T
+            scale = np.sqrt(np.diag(G_raw))
             if np.any(scale == 0):
-                zero = axis_params[keep[(fast if per_interval else list(range(len(keep))))[int(np.argmin(scale))]]]
+                zero = axis_params[keep[used[int(np.argmin(scale))]]]
                 raise IdentifiabilityError(
                     f"{AXES[a]} axis is not identifiable from this flight: the regressor of {zero} is identically "
                     f"zero (condition number inf); the input is probably not excited (command std {np.std(Wc[a]):.2g})"
                 )
-            An = A / scale
-            G = An.T @ An
+            G = G_raw / np.outer(scale, scale)
             ev = np.linalg.eigvalsh(G)
             cond = float(np.sqrt(ev[-1] / ev[0])) if ev[0] > 0 else float("inf")
             if check and (not np.isfinite(cond) or cond > MAX_CONDITION):
@@ -396,44 +412,45 @@ class IntegralIdentifier:
                     f"the input is probably not excited (command std {np.std(Wc[a]):.2g})"
                 )
             beta = np.zeros(len(keep))
-            beta[fast if per_interval else slice(None)] = np.linalg.solve(G, An.T @ b) / scale
+            beta[used] = np.linalg.solve(G, (Xp @ b) / scale) / scale
             fitted = np.tensordot(beta, X, axes=(0, 0))  # (n_int, N), slow terms still 0 here
+            slow_se = None
             if per_interval:
-                coef = np.linalg.lstsq(B, (y - fitted).T, rcond=None)[0]  # (o, n_int)
+                coef = B_pinv @ (y - fitted).T  # (o, n_int)
                 nuisance = (B @ coef).T
                 T = N * dt
                 offsets = sum(coef[j] * T**j / (j + 1) for j in range(coef.shape[0]))  # mean torque
                 if slow:
                     # between-interval regression of the mean torque on the slow features' means
-                    M = np.column_stack([np.ones(offsets.size)] + [F[i].mean(axis=1) * signs[i, 0, 0] for i in slow])
+                    M = np.column_stack([np.ones(n_int)] + slow_means)
                     c = np.linalg.lstsq(M, offsets, rcond=None)[0]
                     beta[slow] = c[1:]
                     r_between = offsets - M @ c
-                    s2 = float(r_between @ r_between) / max(offsets.size - M.shape[1], 1)
+                    s2 = float(r_between @ r_between) / max(n_int - M.shape[1], 1)
                     slow_se = np.sqrt(np.clip(np.diag(s2 * np.linalg.pinv(M.T @ M)), 0, None))[1:]
                     offsets = offsets - M[:, 1:] @ c[1:]
             else:
                 nuisance, offsets = 0.0, np.zeros(0)
             approx = p0 + fitted + nuisance  # eqs. (39)-(40)
-            err = float(np.mean((approx - y_meas) ** 2))
+            d = approx - y_meas
+            err = float(np.einsum("ij,ij->", d, d)) / d.size
             history.append(err)
             if best is None or err <= best[0]:
-                best = (err, beta, offsets, A, cond)
+                best = (err, beta, offsets, Xp, G_raw, cond, slow_se)
             if not own_idx or (it > 0 and (abs(history[-2] - err) <= self.tol * max(history[-2], 1e-30)
                                            or err > history[-2])):
                 break  # converged, or the Picard step stopped improving: keep the best iterate
-        err, beta, offsets, A, cond = best
-        used = fast if per_interval else list(range(len(keep)))
-        resid = b - A @ beta[used]
-        dof = max(b.size - beta.size - (offsets.size * (self.disturbance_order + 1) if per_interval else 0), 1)
+        err, beta, offsets, Xp, G_raw, cond, slow_se = best
+        resid = b - beta[used] @ Xp
+        dof = max(b.size - beta.size - (n_int * (self.disturbance_order + 1) if per_interval else 0), 1)
         sigma2 = float(resid @ resid) / dof
+        se = np.full(beta.size, np.nan)
         try:
-            se = np.full(beta.size, np.nan)
-            se[used] = np.sqrt(np.clip(np.diag(sigma2 * np.linalg.inv(A.T @ A)), 0, None))
-            if per_interval and slow:
-                se[slow] = slow_se
+            se[used] = np.sqrt(np.clip(np.diag(sigma2 * np.linalg.inv(G_raw)), 0, None))
         except np.linalg.LinAlgError:
-            se = np.full(beta.size, np.nan)
+            pass
+        if slow_se is not None:
+            se[slow] = slow_se
         params = {axis_params[j]: float(beta[i]) for i, j in enumerate(keep)}
         std = {axis_params[j]: float(se[i]) for i, j in enumerate(keep)}
         if per_interval and "1" in feats:

@@ -92,7 +92,8 @@ class ModelParams:
     def __post_init__(self):
         for name in BASE_PARAMS + ("tau_roll", "tau_pitch", "tau_yaw"):
             v = getattr(self, name)
-            if not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(float(v)):
+            if (isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.floating, np.integer))
+                    or not math.isfinite(float(v))):
                 raise ValueError(f"parameter {name} must be a finite number, got {v!r}")
             object.__setattr__(self, name, float(v))
         for name in ("tau_roll", "tau_pitch", "tau_yaw"):

@@ -88,6 +88,12 @@ def _finite(obj):
     """Replace non-finite floats (an undefined standard error, say) by None: JSON has no NaN."""
     import math
 
+    import numpy as np
+
+    if isinstance(obj, np.ndarray):  # before the float test: numpy NaNs must become None too
+        obj = obj.tolist()
+    elif isinstance(obj, np.generic):
+        obj = obj.item()
     if isinstance(obj, dict):
         return {k: _finite(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -128,10 +134,14 @@ def params_from_document(doc: dict, where: str = "model") -> ModelParams:
     if unknown:
         raise ModelFileError(f"{where}: unknown parameter(s) {unknown} in 'parameters'")
     added = doc.get("added_terms") or {}
+    if not isinstance(added, dict):
+        raise ModelFileError(f"{where}: 'added_terms' must be an object of term name to value, got {type(added).__name__}")
     bad = [k for k in added if k not in EXTRA_PARAMS]
     if bad:
         raise ModelFileError(f"{where}: unknown added term(s) {bad}; known: {', '.join(EXTRA_PARAMS)}")
     delays = doc.get("servo_delay_s") or {}
+    if not isinstance(delays, dict) or set(delays) - set(AXES):
+        raise ModelFileError(f"{where}: 'servo_delay_s' must be an object with keys among {', '.join(AXES)}, got {delays!r}")
     try:
         return ModelParams(
             **{k: params[k] for k in BASE_PARAMS},

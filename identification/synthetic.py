@@ -141,12 +141,16 @@ class FlightConfig:
     substeps: int = 4
 
     def __post_init__(self):
+        wind = np.asarray(self.wind_level, dtype=float)
         checks = {
-            "duration": self.duration > 0, "sample_rate": self.sample_rate > 0,
-            "wind_level": bool(np.all(np.asarray(self.wind_level) >= 0)), "wind_corner_hz": self.wind_corner_hz > 0,
+            "duration": 0 < self.duration < math.inf, "sample_rate": 0 < self.sample_rate < math.inf,
+            "wind_level": wind.ndim <= 1 and wind.size in (1, 3) and bool(np.all((wind >= 0) & np.isfinite(wind))),
+            "wind_corner_hz": self.wind_corner_hz > 0,
             "pilot_bandwidth": self.pilot_bandwidth > 0, "reaction_delay": self.reaction_delay >= 0,
-            "substeps": self.substeps >= 1,
+            "substeps": isinstance(self.substeps, (int, np.integer)) and self.substeps >= 1,
         }
+        for name in ("stick_noise", "collective_wander", "gyro_noise", "vibration", "attitude_noise"):
+            checks[name] = getattr(self, name) >= 0
         for name, ok in checks.items():
             if not ok:
                 raise ValueError(f"FlightConfig.{name} out of range: {getattr(self, name)!r}")
@@ -256,14 +260,15 @@ def sweep_schedule(time: np.ndarray, config: FlightConfig) -> np.ndarray:
     return out
 
 
-def simulate_flight(duration: float = 300.0, seed: int = 1, effects=(), config: FlightConfig | None = None,
+def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), config: FlightConfig | None = None,
                     truth: ModelParams | None = None) -> SyntheticFlight:
     """Fly a synthetic hover flight.
 
     Parameters
     ----------
-    duration : float
-        Flight length [s] (overrides ``config.duration``).
+    duration : float, optional
+        Flight length [s]; overrides ``config.duration`` when given (default:
+        ``config.duration``, 300 s without a config).
     seed : int
         Seed of every random draw (wind, collective, pilot jitter, sensors):
         same seed, same flight.
@@ -278,7 +283,7 @@ def simulate_flight(duration: float = 300.0, seed: int = 1, effects=(), config: 
     SyntheticFlight
     """
     cfg = config or FlightConfig()
-    if duration != cfg.duration:
+    if duration is not None and duration != cfg.duration:
         cfg = FlightConfig(**{**asdict(cfg), "duration": float(duration)})
     params = truth_params(effects, truth or PAPER_PARAMS)
     rng = np.random.default_rng(seed)

@@ -1,0 +1,157 @@
+"""Tests of the ``heli`` command line, called through :func:`heli_cli.main.main` (in-process, for speed).
+
+Session fixtures write one 40 s synthetic flight with ``heli simulate-flight``
+and identify it twice (default; ``--coupled --no-plots``). One test runs the
+installed ``heli`` console script.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from heli_cli.main import main
+from identification.model_file import load_model
+from identification.terms import BASE_PARAMS
+
+
+@pytest.fixture(scope="session")
+def flight_csv(tmp_path_factory):
+    """``heli simulate-flight --duration 40 --seed 3 --out X.csv``."""
+    path = tmp_path_factory.mktemp("sim") / "X.csv"
+    assert main(["simulate-flight", "--duration", "40", "--seed", "3", "--out", str(path)]) == 0
+    return path
+
+
+@pytest.fixture(scope="session")
+def identified(flight_csv, tmp_path_factory):
+    """``heli identify X.csv --out DIR`` with the defaults (decoupled model, figures)."""
+    out = tmp_path_factory.mktemp("ident") / "DIR"
+    assert main(["identify", str(flight_csv), "--out", str(out)]) == 0
+    return out
+
+
+@pytest.fixture(scope="session")
+def identified_coupled(flight_csv, tmp_path_factory):
+    """``heli identify X.csv --out DIR --coupled --no-plots``."""
+    out = tmp_path_factory.mktemp("ident") / "DIR"
+    assert main(["identify", str(flight_csv), "--out", str(out), "--coupled", "--no-plots"]) == 0
+    return out
+
+
+def _model(out):
+    return json.loads((out / "model.json").read_text())
+
+
+# ---------------------------------------------------------------------------------------- simulate-flight
+
+
+def test_simulate_flight_writes_flight_truth_and_wind(flight_csv):
+    folder = flight_csv.parent
+    assert sorted(p.name for p in folder.iterdir()) == ["X.csv", "X.truth.json", "X.wind.csv"]
+    truth = json.loads((folder / "X.truth.json").read_text())
+    assert truth["seed"] == 3
+    assert truth["config"]["duration"] == 40.0
+    assert (folder / "X.csv").read_text().splitlines()[0] == "time,p,q,r,phi,theta,psi,lat,lon,col,ped"
+    assert len((folder / "X.wind.csv").read_text().splitlines()) == 4001 + 1  # header + 40 s at 100 Hz
+
+
+@pytest.mark.parametrize(
+    "option, value",
+    [("--duration", "-1"), ("--duration", "0"), ("--duration", "nan"), ("--wind", "-0.1"), ("--wind", "inf"),
+     ("--effect", "bogus")],
+)
+def test_simulate_flight_rejects_bad_options(tmp_path, capsys, option, value):
+    with pytest.raises(SystemExit) as exc:
+        main(["simulate-flight", option, value, "--out", str(tmp_path / "f.csv")])
+    assert exc.value.code == 2
+    assert f"argument {option}" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+# ---------------------------------------------------------------------------------------- identify
+
+
+def test_identify_writes_model_report_and_figures(identified):
+    assert sorted(p.name for p in identified.iterdir()) == ["attitude.png", "model.json", "rates.png", "report.md"]
+    for png in ("rates.png", "attitude.png"):
+        assert (identified / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    report = (identified / "report.md").read_text()
+    assert "![Measured vs modelled body rates](rates.png)" in report
+    assert "| Truth |" in report  # the truth written beside X.csv was found
+
+
+def test_model_json_schema_parameters_and_provenance(identified, flight_csv):
+    doc = _model(identified)
+    assert doc["schema_version"] == 1
+    assert doc["structure"] == "decoupled"
+    assert list(doc["parameters"]) == list(BASE_PARAMS)
+    assert list(BASE_PARAMS)[0] == "k1" and list(BASE_PARAMS)[-1] == "kd3"
+    (source,) = doc["provenance"]["sources"]
+    assert source == {"file": "X.csv", "sha256": hashlib.sha256(flight_csv.read_bytes()).hexdigest()}
+    params, _ = load_model(identified)  # what the CLI writes, the loader reads
+    assert params.k2 > 0 and params.k3 > 0
+
+
+def test_identify_coupled_without_plots(identified_coupled):
+    assert sorted(p.name for p in identified_coupled.iterdir()) == ["model.json", "report.md"]
+    assert _model(identified_coupled)["structure"] == "coupled"
+    assert "rates.png" not in (identified_coupled / "report.md").read_text()
+
+
+def test_identify_prints_a_summary(flight_csv, capsys, tmp_path):
+    assert main(["identify", str(flight_csv), "--out", str(tmp_path), "--no-plots", "--interval", "2"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("identified decoupled model from 1 flight(s):")
+    assert f"wrote {tmp_path / 'model.json'}" in out
+
+
+def test_identify_flight_with_nan_exits_2_naming_the_column(flight_csv, tmp_path, capsys):
+    lines = flight_csv.read_text().splitlines()
+    row = lines[101].split(",")  # data row 100, t = 1.00 s
+    row[lines[0].split(",").index("q")] = "nan"
+    lines[101] = ",".join(row)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("\n".join(lines) + "\n")
+    assert main(["identify", str(bad), "--out", str(tmp_path / "out")]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err.endswith("\n") and captured.err.count("\n") == 1  # one line, no traceback
+    assert captured.err.startswith("heli identify: error: FlightLogError: ")
+    assert "column 'q' has 1 non-finite values (NaN first), first at row 100 (t=1.00 s)" in captured.err
+    assert not (tmp_path / "out").exists()
+
+
+def test_identify_missing_file_exits_2(tmp_path, capsys):
+    assert main(["identify", str(tmp_path / "nowhere.csv"), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert "nowhere.csv' does not exist" in err
+
+
+@pytest.mark.parametrize(
+    "option, value", [("--delay", "bogus"), ("--delay", "nan"), ("--delay", "-0.1"), ("--delay", "5"),
+                      ("--interval", "nan"), ("--interval", "-1")],
+)
+def test_identify_rejects_bad_options(flight_csv, tmp_path, capsys, option, value):
+    with pytest.raises(SystemExit) as exc:
+        main(["identify", str(flight_csv), "--out", str(tmp_path / "out"), option, value])
+    assert exc.value.code == 2
+    assert f"argument {option}: expected" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+# ---------------------------------------------------------------------------------------- installed script
+
+
+def test_console_script_help():
+    heli = Path(sys.executable).with_name("heli")
+    done = subprocess.run([str(heli), "--help"], capture_output=True, text=True, timeout=60, check=False)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("usage: heli")
+    assert "simulate-flight" in done.stdout and "identify" in done.stdout

@@ -1,0 +1,213 @@
+"""Tests of :mod:`identification.model_file`: ``model.json`` round trip, checks and atomic writes.
+
+One ``pytest.raises(ModelFileError, match=...)`` per bad input class; each
+match checks that the message says what was expected and what came.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import pathlib
+
+import numpy as np
+import pytest
+
+from identification.errors import ModelFileError
+from identification.model import ModelParams
+from identification.model_file import (
+    MODEL_FILENAME, SCHEMA, SCHEMA_VERSION, load_model, model_document, params_from_document, save_model,
+)
+from identification.terms import BASE_PARAMS
+
+# Every one of the 15 base parameters non-zero and distinct, delays on all axes, two added terms.
+PARAMS = ModelParams(
+    **{name: 0.1 * (i + 1) * (-1) ** i for i, name in enumerate(BASE_PARAMS)},
+    tau_roll=0.08, tau_pitch=0.07, tau_yaw=0.05, extra=(("nld1", 2.0), ("gs3", -8.1)),
+)
+SOURCES = [{"file": "hover.csv", "sha256": "ab" * 32}]
+
+
+def _strict_json(text):
+    """Parse as standard JSON: NaN / Infinity tokens are an error."""
+    def refuse(token):
+        raise ValueError(f"non-standard JSON token {token}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def _write(tmp_path, doc, name=MODEL_FILENAME):
+    path = tmp_path / name
+    path.write_text(json.dumps(doc), encoding="utf-8")  # json.dumps writes NaN as the token NaN
+    return path
+
+
+@pytest.fixture
+def doc():
+    """A valid model document, to spoil one field at a time."""
+    return json.loads(json.dumps(model_document(PARAMS, structure="coupled")))
+
+
+# ---------------------------------------------------------------------------------------- round trip
+
+
+def test_save_and_load_round_trip(tmp_path):
+    path = save_model(tmp_path, PARAMS, structure="coupled", sample_rate=100.0, sources=SOURCES,
+                      identification={"method": "integral (Fig. 5)", "interval": 1.0})
+    assert path == tmp_path / MODEL_FILENAME
+    params, document = load_model(path)
+    assert params == PARAMS  # all 15 parameters, the three delays and the added terms, exactly
+    assert list(document["parameters"]) == list(BASE_PARAMS)
+    assert document["parameters"] == {k: getattr(PARAMS, k) for k in BASE_PARAMS}
+    assert document["added_terms"] == {"gs3": -8.1, "nld1": 2.0}
+    assert document["servo_delay_s"] == {"roll": 0.08, "pitch": 0.07, "yaw": 0.05}
+    assert (document["schema"], document["schema_version"]) == (SCHEMA, SCHEMA_VERSION)
+    assert document["structure"] == "coupled"
+    assert document["sample_rate_hz"] == 100.0
+    assert document["provenance"]["sources"] == SOURCES
+    assert document["units"]["k2"] == "rad/s^2" and document["units"]["nld1"]
+
+
+def test_load_model_on_a_directory_reads_its_model_json(tmp_path):
+    save_model(tmp_path / "run", PARAMS)
+    params, _ = load_model(tmp_path / "run")
+    assert params == PARAMS
+
+
+def test_save_model_to_a_named_json_file(tmp_path):
+    path = save_model(tmp_path / "roll_only.json", PARAMS)
+    assert path == tmp_path / "roll_only.json"
+    assert load_model(path)[0] == PARAMS
+
+
+def test_non_finite_fit_statistics_are_stored_as_null(tmp_path):
+    stats = {
+        "r2": float("nan"), "condition": float("inf"), "se64": np.float64("nan"), "se32": np.float32("nan"),
+        "errors": np.array([0.5, np.nan]), "history": (1.0, -math.inf), "ok": np.float32(0.25),
+    }
+    path = save_model(tmp_path, PARAMS, fit_statistics={"axes": {"roll": stats}})
+    got = _strict_json(path.read_text())["fit_statistics"]["axes"]["roll"]
+    assert got == {"r2": None, "condition": None, "se64": None, "se32": None, "errors": [0.5, None],
+                   "history": [1.0, None], "ok": 0.25}
+
+
+# ---------------------------------------------------------------------------------------- bad input
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(ModelFileError, match=r"model file '.*nowhere.json' does not exist"):
+        load_model(tmp_path / "nowhere.json")
+    with pytest.raises(ModelFileError, match=r"model\.json' does not exist"):
+        load_model(tmp_path)  # a directory without model.json
+
+
+def test_invalid_json(tmp_path):
+    path = tmp_path / MODEL_FILENAME
+    path.write_text('{"schema": "heli-env/model", "parameters": {', encoding="utf-8")
+    with pytest.raises(ModelFileError, match="not a readable JSON model file"):
+        load_model(path)
+
+
+def test_not_an_object(tmp_path):
+    with pytest.raises(ModelFileError, match="expected a JSON object, got list"):
+        load_model(_write(tmp_path, [1, 2, 3]))
+
+
+def test_wrong_schema(tmp_path, doc):
+    doc["schema"] = "heli-env/disturbance-library"
+    with pytest.raises(ModelFileError, match="expected schema 'heli-env/model', got 'heli-env/disturbance-library'"):
+        load_model(_write(tmp_path, doc))
+
+
+def test_wrong_schema_version(tmp_path, doc):
+    doc["schema_version"] = 2
+    with pytest.raises(ModelFileError, match="schema_version 2 is not supported; this heli-env reads version 1"):
+        load_model(_write(tmp_path, doc))
+
+
+def test_missing_parameters_are_named(tmp_path, doc):
+    del doc["parameters"]["k4"], doc["parameters"]["kd2"]
+    with pytest.raises(ModelFileError, match=r"missing parameter\(s\) \['k4', 'kd2'\]; expected all of k1, k2"):
+        load_model(_write(tmp_path, doc))
+
+
+def test_parameters_not_an_object(tmp_path, doc):
+    doc["parameters"] = [1.0] * 15
+    with pytest.raises(ModelFileError, match="'parameters' must be an object keyed by the paper's names"):
+        load_model(_write(tmp_path, doc))
+
+
+def test_unknown_parameter(tmp_path, doc):
+    doc["parameters"]["k13"] = 1.0
+    with pytest.raises(ModelFileError, match=r"unknown parameter\(s\) \['k13'\] in 'parameters'"):
+        load_model(_write(tmp_path, doc))
+
+
+def test_unknown_added_term(tmp_path, doc):
+    doc["added_terms"]["drag9"] = 0.1
+    with pytest.raises(ModelFileError, match=r"unknown added term\(s\) \['drag9'\]; known: ct1, ct2, nld1"):
+        load_model(_write(tmp_path, doc))
+
+
+@pytest.mark.parametrize("section", ["added_terms", "servo_delay_s"])
+def test_sections_that_are_not_objects(tmp_path, doc, section):
+    doc[section] = [0.1, 0.1, 0.1]
+    with pytest.raises(ModelFileError, match=f"'{section}' must be an object"):
+        load_model(_write(tmp_path, doc))
+
+
+def test_unknown_servo_delay_axis(tmp_path, doc):
+    doc["servo_delay_s"] = {"rol": 0.1}
+    with pytest.raises(ModelFileError, match="'servo_delay_s' must be an object with keys among roll, pitch, yaw"):
+        load_model(_write(tmp_path, doc))
+
+
+@pytest.mark.parametrize(
+    "section, name, value, says",
+    [
+        ("parameters", "k2", float("nan"), "parameter k2 must be a finite number"),
+        ("parameters", "k7", float("inf"), "parameter k7 must be a finite number"),
+        ("parameters", "k3", "2.4", "parameter k3 must be a finite number, got '2.4'"),
+        ("parameters", "kd1", None, "parameter kd1 must be a finite number, got None"),
+        ("added_terms", "nld1", float("nan"), "extra term nld1 must be finite"),
+        ("servo_delay_s", "roll", 3.0, r"tau_roll must be a delay in \[0, 2\] s, got 3.0"),
+        ("servo_delay_s", "yaw", "slow", "could not convert string to float"),
+    ],
+)
+def test_invalid_values(tmp_path, doc, section, name, value, says):
+    doc[section][name] = value
+    with pytest.raises(ModelFileError, match=f"invalid parameter value: {says}"):
+        load_model(_write(tmp_path, doc))
+
+
+def test_params_from_document_names_where_it_came_from(doc):
+    doc["schema_version"] = 0
+    with pytest.raises(ModelFileError, match="^library/model: schema_version 0"):
+        params_from_document(doc, "library/model")
+
+
+# ---------------------------------------------------------------------------------------- atomic write
+
+
+def test_a_failed_write_leaves_the_old_model_untouched(tmp_path, monkeypatch):
+    path = save_model(tmp_path, PARAMS)
+    before = path.read_bytes()
+
+    def write_half_then_fail(self, text, *args, **kwargs):
+        with open(self, "w", encoding="utf-8") as fh:
+            fh.write(text[: len(text) // 2])
+        raise OSError("No space left on device")
+
+    monkeypatch.setattr(pathlib.Path, "write_text", write_half_then_fail)
+    with pytest.raises(OSError, match="No space left"):
+        save_model(tmp_path, PARAMS.with_values(k2=99.0))
+    monkeypatch.undo()
+    assert path.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == [MODEL_FILENAME]  # no stray temporary file
+    assert load_model(tmp_path)[0] == PARAMS
+
+
+def test_an_unstorable_value_writes_nothing(tmp_path):
+    with pytest.raises(TypeError, match="cannot store object in model.json"):
+        save_model(tmp_path, PARAMS, identification={"settings": object()})
+    assert list(tmp_path.iterdir()) == []

@@ -1,0 +1,190 @@
+"""Tests of :mod:`identification.synthetic`: the truth-model flights the other tests identify.
+
+Session fixtures fly one 90 s flight twice with the same seed (about 1.5 s
+each); everything else uses flights of a few seconds or no simulation at all.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import fields
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from identification.io import read_csv_flight
+from identification.synthetic import (
+    EFFECT_ALIASES, EFFECTS, PAPER_PARAMS, FlightConfig, load_truth, simulate_flight, truth_paths, truth_params,
+)
+
+SEED = 7
+DURATION = 90.0
+ARRAYS = ("time", "rates", "attitude", "sticks")
+
+
+@pytest.fixture(scope="session")
+def flight():
+    """The paper's truth, default wind and sensors, 90 s."""
+    return simulate_flight(DURATION, seed=SEED)
+
+
+@pytest.fixture(scope="session")
+def flight_again():
+    """The same flight flown a second time from the same seed."""
+    return simulate_flight(DURATION, seed=SEED)
+
+
+def _changed(params, base=PAPER_PARAMS) -> dict:
+    """Parameters (base, delays, extra terms) whose value differs from ``base``."""
+    names = [f.name for f in fields(params) if f.name != "extra"]
+    out = {k: getattr(params, k) for k in names if getattr(params, k) != getattr(base, k)}
+    base_extra = dict(base.extra)
+    out.update({k: v for k, v in params.extra if base_extra.get(k) != v})
+    return out
+
+
+# ---------------------------------------------------------------------------------------- determinism
+
+
+def test_same_seed_gives_a_bit_identical_flight_and_wind(flight, flight_again):
+    for name in ARRAYS:
+        assert_array_equal(getattr(flight.flight, name), getattr(flight_again.flight, name), err_msg=name)
+    assert_array_equal(flight.wind, flight_again.wind)
+    assert_array_equal(flight.wind_torque, flight_again.wind_torque)
+    assert_array_equal(flight.true_rates, flight_again.true_rates)
+    assert flight.truth == flight_again.truth
+
+
+def test_different_seeds_give_different_flights_and_wind():
+    a, b = simulate_flight(10, seed=1), simulate_flight(10, seed=2)
+    assert not np.allclose(a.wind, b.wind)
+    for name in ("rates", "attitude", "sticks"):
+        assert not np.allclose(getattr(a.flight, name), getattr(b.flight, name)), name
+    assert a.truth == b.truth  # the seed draws noise, never parameters
+
+
+# ---------------------------------------------------------------------------------------- effects
+
+
+@pytest.mark.parametrize("effect", list(EFFECTS))
+def test_each_effect_switches_exactly_its_parameters(effect):
+    assert _changed(truth_params([effect])) == EFFECTS[effect]
+
+
+@pytest.mark.parametrize("alias", list(EFFECT_ALIASES))
+def test_effect_aliases_switch_the_same_parameters(alias):
+    assert truth_params([alias]) == truth_params([EFFECT_ALIASES[alias]])
+
+
+def test_no_effect_is_the_paper_model_and_effects_combine():
+    assert truth_params() == PAPER_PARAMS
+    both = truth_params(["flybar", "servo_delay"])
+    assert _changed(both) == EFFECTS["cross_coupling"] | EFFECTS["servo_delay"]
+
+
+def test_an_effect_reaches_the_simulated_aircraft():
+    """Same seed, same wind and noise draws; the flybar terms change the motion."""
+    plain, flybar = simulate_flight(8, seed=3), simulate_flight(8, seed=3, effects=("flybar",))
+    assert flybar.truth == truth_params(["cross_coupling"])
+    assert flybar.effects == ("flybar",)
+    assert_array_equal(plain.wind, flybar.wind)
+    assert not np.allclose(plain.true_rates, flybar.true_rates)
+
+
+def test_unknown_effect_is_rejected_naming_the_known_ones():
+    known = ", ".join(list(EFFECTS) + list(EFFECT_ALIASES))
+    with pytest.raises(ValueError, match=re.escape(f"unknown effect 'bogus'; known: {known}")):
+        truth_params(["flybar", "bogus"])
+    with pytest.raises(ValueError, match="unknown effect 'bogus'"):
+        simulate_flight(1, effects=("bogus",))
+
+
+# ---------------------------------------------------------------------------------------- config
+
+
+@pytest.mark.parametrize(
+    "field_name, value",
+    [
+        ("duration", 0.0), ("duration", -5.0), ("duration", float("nan")), ("duration", float("inf")),
+        ("sample_rate", 0.0), ("sample_rate", float("inf")),
+        ("wind_level", -0.01), ("wind_level", (0.09, -0.09, 0.03)), ("wind_level", (0.09, 0.09)),
+        ("wind_level", float("nan")),
+        ("wind_corner_hz", 0.0), ("pilot_bandwidth", -1.0), ("reaction_delay", -0.1),
+        ("substeps", 0), ("substeps", 2.5),
+        ("gyro_noise", -0.01), ("attitude_noise", -0.01), ("vibration", -0.01), ("stick_noise", -0.01),
+    ],
+)
+def test_flight_config_rejects_bad_values(field_name, value):
+    with pytest.raises(ValueError, match=rf"FlightConfig\.{field_name} out of range"):
+        FlightConfig(**{field_name: value})
+
+
+def test_config_duration_is_used_when_no_duration_is_given():
+    assert simulate_flight(config=FlightConfig(duration=2.0)).flight.duration == pytest.approx(2.0)
+    assert simulate_flight(3.0, config=FlightConfig(duration=2.0)).flight.duration == pytest.approx(3.0)
+
+
+# ---------------------------------------------------------------------------------------- the flight
+
+
+def test_sample_rate_is_100_hz(flight):
+    f = flight.flight
+    assert f.sample_rate == pytest.approx(100.0, rel=1e-9)
+    assert_allclose(np.diff(f.time), 0.01, rtol=1e-9)
+    assert f.n == int(DURATION * 100) + 1
+    assert f.time[0] == 0.0
+
+
+def test_sticks_stay_in_range(flight):
+    assert np.all(np.abs(flight.flight.sticks) <= 1.0)
+    # Sweeps far beyond full stick must be clipped, not passed on.
+    wild = simulate_flight(12, seed=1, config=FlightConfig(sweep_amplitude=(3.0, 3.0, 3.0), collective_wander=2.0))
+    s = wild.flight.sticks
+    assert np.all(np.abs(s) <= 1.0)
+    assert np.abs(s[0]).max() == 1.0  # the roll sweep (from t = 5 s) hit the stop
+
+
+def test_wind_has_the_stated_90_percent_interval(flight):
+    """Half-width of the 5-95 % interval of u_d per axis vs ``wind_level`` (0.09, 0.09, 0.03).
+
+    Over 90 s of wind with a 0.5 Hz corner the half-width of a seed scatters by
+    about 2.5 % (1 sigma over 200 seeds); 10 % is four sigma.
+    """
+    q05, q95 = np.quantile(flight.wind, [0.05, 0.95], axis=1)
+    assert_allclose((q95 - q05) / 2, [0.09, 0.09, 0.03], rtol=0.10)
+    assert_allclose(flight.wind.mean(axis=1), 0.0, atol=1e-12)  # zero-mean part: offsets are kd
+    assert_allclose(flight.wind_torque, flight.truth.control_gains[:, None] * flight.wind, rtol=1e-12)
+
+
+# ---------------------------------------------------------------------------------------- files
+
+
+def test_save_writes_flight_truth_and_wind(flight, tmp_path):
+    paths = flight.save(tmp_path / "hover.csv")
+    assert paths == {"flight": tmp_path / "hover.csv", "truth": tmp_path / "hover.truth.json",
+                     "wind": tmp_path / "hover.wind.csv"}
+    assert truth_paths(tmp_path / "hover.csv") == {"truth": paths["truth"], "wind": paths["wind"]}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["hover.csv", "hover.truth.json", "hover.wind.csv"]
+    doc = json.loads(paths["truth"].read_text())
+    assert doc["schema"] == "heli-env/synthetic-truth/1"
+    assert doc["seed"] == SEED
+    assert doc["config"]["duration"] == DURATION
+    assert doc["wind_file"] == "hover.wind.csv"
+
+
+def test_load_truth_returns_the_saved_parameters_and_wind(tmp_path):
+    s = simulate_flight(5, seed=4, effects=tuple(EFFECTS))  # every base, delay and extra term non-zero
+    s.save(tmp_path / "f.csv")
+    params, wind = load_truth(tmp_path / "f.csv")
+    assert params == s.truth
+    assert wind.shape == s.wind.shape
+    assert_allclose(wind, s.wind, rtol=1e-8, atol=1e-12)  # the wind file keeps 9 significant digits
+
+
+def test_saved_flight_reads_back_equal(flight, tmp_path):
+    path = flight.save(tmp_path / "f.csv")["flight"]
+    back = read_csv_flight(path)
+    for name in ARRAYS:
+        assert_allclose(getattr(back, name), getattr(flight.flight, name), rtol=0, atol=1e-9, err_msg=name)
