@@ -16,6 +16,7 @@ import sys
 COMMAND_MODULES = (
     "heli_cli.simulate_flight",
     "heli_cli.identify",
+    "heli_cli.compare_methods",
 )
 """Modules that register sub-commands, in the order ``heli --help`` lists them."""
 

@@ -28,7 +28,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from .terms import BASE_PARAMS, EXTRA_PARAMS, FEATURES, TERMS
+from .terms import BASE_PARAMS, EXTRA_PARAMS, FEATURE_EXPRESSIONS, TERMS
 
 N_STATE = 10
 RATES = slice(0, 3)
@@ -162,61 +162,86 @@ def servo_coefficients(tau: float) -> tuple[float, float, float]:
     return (den[0] / den[1], num[1] / den[1], -num[0] / den[1])
 
 
+def _fmt(v: float) -> str:
+    return repr(float(v))
+
+
 @lru_cache(maxsize=256)
-def _compiled(params: ModelParams):
-    """Precompute what the core needs per parameter set.
+def _kernel(params: ModelParams):
+    """Compile the model into straight-line Python: the right-hand side and an RK4 step.
 
-    Returns ``terms``, a tuple of ``(axis, feature_fn, signed_value)`` for every
-    non-zero parameter, and ``servo``, per axis ``(1/d1, feedthrough, state
-    gain)`` of eq. (31) in state-space form, ``None`` where there is no delay:
-    ``(n1 - n2 s)/(1 + d1 s) = -n2/d1 + (n1 + n2/d1)/(1 + d1 s)``.
+    The source is generated from :data:`identification.terms.FEATURE_EXPRESSIONS`
+    and the parameter values (the model's only definition), with zero terms
+    left out and constants inlined. It uses arithmetic and ``abs`` only, so the
+    same functions step one trajectory in Python floats (a few microseconds per
+    step) and a batch of environments in numpy rows. :func:`model_source` shows it.
+
+    Returns
+    -------
+    namespace : dict
+        ``rhs(x, u, d)`` and ``rk4(x, u, d, h)`` over sequences of components.
+    source : str
     """
-    terms = tuple(
-        (TERMS[name].axis, FEATURES[TERMS[name].feature], TERMS[name].sign * value)
-        for name, value in params.values().items()
-        if value != 0.0
-    )
-    servo = []
-    for tau in params.taus:
-        d1, n1, n2 = servo_coefficients(tau)
-        servo.append(None if d1 == 0.0 else (1.0 / d1, -n2 / d1, n1 + n2 / d1))
-    return terms, tuple(servo)
-
-
-def _rhs(x, u, d, compiled):
-    """Right-hand side on a sequence of state components (floats or equal-shape arrays).
-
-    Written with arithmetic operators only, so the same lines serve a single
-    trajectory in Python floats and a batch of environments in numpy rows.
-    """
-    terms, servo = compiled
-    p, q, r = x[0], x[1], x[2]
-    sticks = (u[0], u[1], u[3])
-    cmd = [0.0, 0.0, 0.0]
-    dz = [0.0, 0.0, 0.0]
-    for i in range(3):
-        s = servo[i]
-        if s is None:
-            cmd[i] = sticks[i]
-            dz[i] = 0.0 * x[3 + i]
-        else:
-            cmd[i] = s[1] * sticks[i] + s[2] * x[3 + i]
-            dz[i] = s[0] * (sticks[i] - x[3 + i])
-    w = (p, q, r)
-    acc = [0.0 * p, 0.0 * q, 0.0 * r]
-    if d is not None:
-        acc = [acc[0] + d[0], acc[1] + d[1], acc[2] + d[2]]
-    for axis, fn, c in terms:
-        acc[axis] = acc[axis] + c * fn(w, cmd, u[2])
-    # Quaternion kinematics, eq. (25) (the paper's q3' row has a typo: q3*p -> q2*p).
-    q0, q1, q2, q3 = x[6], x[7], x[8], x[9]
-    return [
-        acc[0], acc[1], acc[2], dz[0], dz[1], dz[2],
-        -0.5 * (q1 * p + q2 * q + q3 * r),
-        0.5 * (q0 * p + q2 * r - q3 * q),
-        0.5 * (q0 * q + q3 * p - q1 * r),
-        0.5 * (q0 * r + q1 * q - q2 * p),
+    acc = [[], [], []]
+    for name, value in params.values().items():
+        if value != 0.0:
+            term = TERMS[name]
+            acc[term.axis].append(f"{_fmt(term.sign * value)}*({FEATURE_EXPRESSIONS[term.feature]})")
+    lines = [
+        "def rhs(x, u, d):",
+        '    """Eqs. (18), (21) with the servo of eq. (31) and the quaternion kinematics of eq. (25)."""',
+        "    p, q, r, z0, z1, z2, q0, q1, q2, q3 = x",
+        "    lat, lon, col, ped = u",
     ]
+    dz = []
+    for i, (stick, tau) in enumerate(zip(("lat", "lon", "ped"), params.taus)):
+        d1, n1, n2 = servo_coefficients(tau)
+        if d1 == 0.0:
+            lines.append(f"    c{i} = {stick}")
+            dz.append(f"0.0*z{i}")
+        else:  # (n1 - n2 s)/(1 + d1 s) = -n2/d1 + (n1 + n2/d1)/(1 + d1 s)
+            lines.append(f"    c{i} = {_fmt(-n2 / d1)}*{stick} + {_fmt(n1 + n2 / d1)}*z{i}")
+            dz.append(f"{_fmt(1.0 / d1)}*({stick} - z{i})")
+    for i, rate in enumerate("pqr"):
+        lines.append(f"    a{i} = d[{i}] + 0.0*{rate}" + "".join(f" + {t}" for t in acc[i]))
+    lines += [
+        "    # eq. (25); the paper's q3' row has a typo (q3*p for q2*p)",
+        f"    return (a0, a1, a2, {dz[0]}, {dz[1]}, {dz[2]},",
+        "            -0.5*(q1*p + q2*q + q3*r), 0.5*(q0*p + q2*r - q3*q),",
+        "            0.5*(q0*q + q3*p - q1*r), 0.5*(q0*r + q1*q - q2*p))",
+    ]
+    xs = [f"x{i}" for i in range(N_STATE)]
+    body = [
+        "",
+        "",
+        "def rk4(x, u, d, h):",
+        '    """One classical Runge-Kutta step of length h with u and d held; quaternion renormalised (eq. 26)."""',
+        "    " + ", ".join(xs) + " = x",
+        "    hh = 0.5*h",
+        "    h6 = h/6.0",
+        "    k1 = rhs(x, u, d)",
+        "    k2 = rhs((" + ", ".join(f"{x} + hh*k1[{i}]" for i, x in enumerate(xs)) + "), u, d)",
+        "    k3 = rhs((" + ", ".join(f"{x} + hh*k2[{i}]" for i, x in enumerate(xs)) + "), u, d)",
+        "    k4 = rhs((" + ", ".join(f"{x} + h*k3[{i}]" for i, x in enumerate(xs)) + "), u, d)",
+    ]
+    for i, x in enumerate(xs):
+        body.append(f"    {x} = {x} + h6*(k1[{i}] + 2.0*k2[{i}] + 2.0*k3[{i}] + k4[{i}])")
+    body += [
+        "    n = (x6*x6 + x7*x7 + x8*x8 + x9*x9)**0.5",
+        "    return (x0, x1, x2, x3, x4, x5, x6/n, x7/n, x8/n, x9/n)",
+    ]
+    source = "\n".join(lines + body) + "\n"
+    namespace = {"abs": abs}
+    exec(compile(source, f"<heli-env model {hash(params) & 0xFFFFFFFF:08x}>", "exec"), namespace)  # noqa: S102
+    return namespace, source
+
+
+def model_source(params: ModelParams) -> str:
+    """The Python source the physics core runs for ``params`` (for reading and debugging)."""
+    return _kernel(params)[1]
+
+
+_ZERO_D = (0.0, 0.0, 0.0)
 
 
 def derivatives(x, u, d, params: ModelParams) -> np.ndarray:
@@ -237,39 +262,23 @@ def derivatives(x, u, d, params: ModelParams) -> np.ndarray:
     ndarray, shape (N_STATE, ...)
     """
     x = np.asarray(x, dtype=float)
-    out = _rhs(x, np.asarray(u, dtype=float), None if d is None else np.asarray(d, dtype=float), _compiled(params))
-    return np.array([np.broadcast_to(v, x.shape[1:]) for v in out])
-
-
-def _rk4(x, u, d, compiled, h):
-    k1 = _rhs(x, u, d, compiled)
-    k2 = _rhs([a + 0.5 * h * b for a, b in zip(x, k1)], u, d, compiled)
-    k3 = _rhs([a + 0.5 * h * b for a, b in zip(x, k2)], u, d, compiled)
-    k4 = _rhs([a + h * b for a, b in zip(x, k3)], u, d, compiled)
-    return [a + (h / 6.0) * (b1 + 2.0 * b2 + 2.0 * b3 + b4) for a, b1, b2, b3, b4 in zip(x, k1, k2, k3, k4)]
-
-
-def _normalise(x):
-    """Renormalise the quaternion (eq. 26); a blown-up state stays non-finite instead of raising."""
-    n = (x[6] * x[6] + x[7] * x[7] + x[8] * x[8] + x[9] * x[9]) ** 0.5
-    if isinstance(n, float):
-        if not 0.0 < n < float("inf"):
-            return x[:6] + [float("nan")] * 4
-    else:
-        n = np.where((n > 0) & np.isfinite(n), n, np.nan)
-    return x[:6] + [x[6] / n, x[7] / n, x[8] / n, x[9] / n]
+    u = np.asarray(u, dtype=float)
+    out = _kernel(params)[0]["rhs"](x, u, _ZERO_D if d is None else np.asarray(d, dtype=float))
+    shape = np.broadcast_shapes(x.shape[1:], u.shape[1:])
+    return np.array([np.broadcast_to(v, shape) for v in out])
 
 
 def step(x, u, d, params: ModelParams, dt: float, substeps: int = 1):
     """Advance the state by ``dt`` with inputs and disturbance held (zero-order hold).
 
     Classical fourth-order Runge-Kutta with ``substeps`` equal sub-steps; the
-    quaternion is renormalised afterwards (eq. 26).
+    quaternion is renormalised after each (eq. 26). A state that blows up
+    becomes non-finite rather than raising.
 
     Parameters
     ----------
-    x : ndarray, shape (N_STATE, ...), or a list of N_STATE floats
-        State. A list of floats takes the fast scalar path and a list is returned.
+    x : ndarray, shape (N_STATE, ...), or a sequence of N_STATE floats
+        State. A sequence of floats takes the fast scalar path and a tuple is returned.
     u : ndarray, shape (4, ...), or sequence of 4 floats
         Sticks lat, lon, col, ped.
     d : ndarray, shape (3, ...), sequence of 3 floats, or None
@@ -280,14 +289,22 @@ def step(x, u, d, params: ModelParams, dt: float, substeps: int = 1):
     substeps : int
         RK4 sub-steps.
     """
-    compiled = _compiled(params)
-    as_array = isinstance(x, np.ndarray)
-    xs = list(x)
+    rk4 = _kernel(params)[0]["rk4"]
+    d = _ZERO_D if d is None else d
     h = dt / substeps
-    for _ in range(substeps):
-        xs = _rk4(xs, u, d, compiled, h)
-    xs = _normalise(xs)
-    return np.array(xs) if as_array else xs
+    if isinstance(x, np.ndarray):
+        xs = tuple(x)
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            for _ in range(substeps):
+                xs = rk4(xs, u, d, h)
+        return np.array(xs)
+    xs = tuple(x)
+    try:
+        for _ in range(substeps):
+            xs = rk4(xs, u, d, h)
+    except (ZeroDivisionError, OverflowError):
+        return (float("nan"),) * N_STATE
+    return xs
 
 
 def initial_state(rates=(0.0, 0.0, 0.0), euler=(0.0, 0.0, 0.0), sticks=(0.0, 0.0, 0.0), batch=()):
@@ -357,17 +374,22 @@ def simulate(params: ModelParams, time, sticks, disturbance=None, x0=None, subst
     dt = float(np.median(np.diff(time))) if n > 1 else 0.0
     if x0 is None:
         x0 = initial_state(sticks=sticks[list(_CMD_INPUT), 0])
-    x = [float(v) for v in x0]
+    x = tuple(float(v) for v in x0)
     u_rows = sticks.T.tolist()
     d_rows = None if disturbance is None else np.asarray(disturbance, dtype=float).T.tolist()
-    compiled = _compiled(params)
+    rk4 = _kernel(params)[0]["rk4"]
     h = dt / substeps
     out = np.empty((n, N_STATE))
     out[0] = x
+    zero = _ZERO_D
     for k in range(n - 1):
-        d = None if d_rows is None else d_rows[k]
-        for _ in range(substeps):
-            x = _rk4(x, u_rows[k], d, compiled, h)
-        x = _normalise(x)
+        d = zero if d_rows is None else d_rows[k]
+        u = u_rows[k]
+        try:
+            for _ in range(substeps):
+                x = rk4(x, u, d, h)
+        except (ZeroDivisionError, OverflowError):
+            out[k + 1:] = np.nan
+            break
         out[k + 1] = x
     return out.T

@@ -37,7 +37,7 @@ from scipy import signal
 from .files import write_text
 from .flight import Flight, make_flight
 from .io.csv_log import write_csv_flight
-from .model import ModelParams, _compiled, _normalise, _rk4, initial_state
+from .model import ModelParams, _kernel, initial_state
 
 PAPER_PARAMS = ModelParams(
     k2=1.3475, k3=2.4208, kd1=0.0399,
@@ -311,8 +311,8 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
             -(params.kd3 - params.k12 * cfg.collective_trim) / gains[2]]
     delay = max(1, int(round(cfg.reaction_delay * fs)))
 
-    compiled = _compiled(params)
-    x = [float(v) for v in initial_state(sticks=trim)]
+    rk4 = _kernel(params)[0]["rk4"]
+    x = tuple(float(v) for v in initial_state(sticks=trim))
     h = dt / cfg.substeps
     states = np.empty((n, 10))
     sticks = np.empty((n, 4))
@@ -357,8 +357,7 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
         for j in range(cfg.substeps):
             w = (j + 0.5) / cfg.substeps
             uj = [a + w * (b - a) for a, b in zip(u, u_next)]
-            x = _rk4(x, uj, torque_l[k], compiled, h)
-        x = _normalise(x)
+            x = rk4(x, uj, torque_l[k], h)
         if len(hist_ang) > 4 * (delay + 2):
             del hist_ang[: -(delay + 2)], hist_rate[: -(delay + 2)]
 

@@ -39,26 +39,40 @@ INPUT_FOR_AXIS = ("lat", "lon", "ped")
 # stick units; col is the collective stick in [-1, 1].
 FeatureFn = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
-FEATURES: dict[str, FeatureFn] = {
-    "q*r": lambda w, u, c: w[1] * w[2],
-    "p*r": lambda w, u, c: w[0] * w[2],
-    "p*q": lambda w, u, c: w[0] * w[1],
-    "p": lambda w, u, c: w[0],
-    "q": lambda w, u, c: w[1],
-    "r": lambda w, u, c: w[2],
-    "u_lat": lambda w, u, c: u[0],
-    "u_lon": lambda w, u, c: u[1],
-    "u_ped": lambda w, u, c: u[2],
-    "col": lambda w, u, c: c,
-    "1": lambda w, u, c: 1.0,
-    "p|p|": lambda w, u, c: w[0] * abs(w[0]),
-    "q|q|": lambda w, u, c: w[1] * abs(w[1]),
-    "r|r|": lambda w, u, c: w[2] * abs(w[2]),
-    "u_lat*col": lambda w, u, c: u[0] * c,
-    "u_lon*col": lambda w, u, c: u[1] * c,
-    "u_ped*col": lambda w, u, c: u[2] * c,
+FEATURE_EXPRESSIONS: dict[str, str] = {
+    "q*r": "q*r",
+    "p*r": "p*r",
+    "p*q": "p*q",
+    "p": "p",
+    "q": "q",
+    "r": "r",
+    "u_lat": "c0",
+    "u_lon": "c1",
+    "u_ped": "c2",
+    "col": "col",
+    "1": "1.0",
+    "p|p|": "p*abs(p)",
+    "q|q|": "q*abs(q)",
+    "r|r|": "r*abs(r)",
+    "u_lat*col": "c0*col",
+    "u_lon*col": "c1*col",
+    "u_ped*col": "c2*col",
 }
-"""Named features, each vectorised over any trailing shape (samples, envs)."""
+"""Every feature as an arithmetic expression in ``p, q, r`` (body rates), ``c0, c1, c2``
+(servo-side roll, pitch, yaw commands) and ``col`` (collective). This is the single
+definition of the model's terms: the physics core compiles it into its right-hand
+side, and :data:`FEATURES` into vectorised functions for the identifiers. Only
+arithmetic and ``abs`` are used, so the same expression evaluates Python floats
+and numpy arrays alike."""
+
+
+def _feature_fn(expr: str) -> FeatureFn:
+    f = eval(f"lambda p, q, r, c0, c1, c2, col: {expr}", {"abs": abs})  # noqa: S307 - our own constant table
+    return lambda w, u, c: f(w[0], w[1], w[2], u[0], u[1], u[2], c)
+
+
+FEATURES: dict[str, FeatureFn] = {name: _feature_fn(expr) for name, expr in FEATURE_EXPRESSIONS.items()}
+"""Named features as functions of (rates[3, ...], cmd[3, ...], col[...]), vectorised over any trailing shape."""
 
 FEATURE_NAMES: tuple[str, ...] = tuple(FEATURES)
 

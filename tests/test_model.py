@@ -255,7 +255,7 @@ def test_derivatives_on_a_batch_equal_the_single_state_path():
 
 @pytest.mark.parametrize("with_disturbance", [True, False])
 def test_batched_step_equals_scalar_steps(with_disturbance):
-    """A (10, N) batch advanced by step() equals N float-list trajectories (to 1e-12)."""
+    """A (10, N) batch advanced by step() equals N scalar trajectories (to 1e-12)."""
     x, u, d = _random_batch(7, seed=1)
     params = COUPLED.with_values(nld1=0.2, gs1=0.3)
     dd = d if with_disturbance else None
@@ -266,7 +266,7 @@ def test_batched_step_equals_scalar_steps(with_disturbance):
         xs = [step(xs[j], list(u[:, j]), None if dd is None else list(d[:, j]), params, 0.01, substeps=2)
               for j in range(7)]
     assert isinstance(xb, np.ndarray) and xb.shape == (N_STATE, 7)
-    assert isinstance(xs[0], list) and len(xs[0]) == N_STATE
+    assert isinstance(xs[0], tuple) and len(xs[0]) == N_STATE
     assert_allclose(xb, np.array(xs).T, rtol=0, atol=1e-12)
 
 

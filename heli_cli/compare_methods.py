@@ -1,0 +1,61 @@
+"""``heli compare-methods``: the paper's Tables 3-5 (integral method, NLR, EKF) on one flight."""
+
+from __future__ import annotations
+
+import sys
+
+DEFAULT_OUT = "method-comparison"
+
+
+def register(sub):
+    p = sub.add_parser(
+        "compare-methods",
+        help="time the integral method against nonlinear regression and the EKF (paper Tables 3-5)",
+        description="Identify the decoupled single-axis model (roll: eq. 18 with k1 = k4 = 0) on one flight with "
+        "the integral method, nonlinear regression from each of Table 3's start points and the EKF in each of "
+        "Table 4's cases and Table 5's sample lengths, all on the same prefiltered data. Prints the tables with "
+        "CPU times, forward-simulation errors and the speed ratios of this run, and writes DIR/comparison.json "
+        "and DIR/comparison.md. A synthetic flight's truth (<stem>.truth.json beside it) adds parameter errors.",
+    )
+    p.add_argument("flight", metavar="FLIGHT.csv", help="canonical CSV flight log")
+    p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR",
+                   help=f"output directory (default ./{DEFAULT_OUT})")
+    p.add_argument("--axis", default="roll", choices=("roll", "pitch", "yaw"),
+                   help="axis to compare (default roll, as the paper)")
+    p.add_argument("--quick", action="store_true",
+                   help="cap each NLR run at a few objective evaluations and time fewer repeats (for a fast "
+                   "look; the NLR figures are then indicative only)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from identification.io import read_flight
+    from identification.method_comparison import QUICK_NLR_MAX_NFEV, compare_methods
+
+    flight = read_flight(args.flight)
+    truth = load_truth_if_any(args.flight)
+    kwargs = {}
+    if args.quick:
+        kwargs = {"nlr_max_nfev": QUICK_NLR_MAX_NFEV, "repeats": {"integral": 5, "ekf": 1, "nlr": 1}, "quick": True}
+        print(f"--quick: NLR limited to {QUICK_NLR_MAX_NFEV} objective evaluations per start, integral timed "
+              "5 times, EKF once; run without --quick for the real figures.")
+    result = compare_methods(flight, axis=args.axis, truth=truth, progress=not args.no_progress, **kwargs)
+    print(result.markdown())
+    paths = result.save(args.out)
+    for path in paths.values():
+        print(f"wrote {path}")
+    return 0
+
+
+def load_truth_if_any(flight_path):
+    """The truth parameters saved beside a synthetic flight, or None (with a warning if unreadable)."""
+    from identification.synthetic import load_truth, truth_paths
+
+    if not truth_paths(flight_path)["truth"].exists():
+        return None
+    try:
+        return load_truth(flight_path)[0]
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        print(f"heli compare-methods: warning: ignoring the truth beside {flight_path}: {e}", file=sys.stderr)
+        return None
