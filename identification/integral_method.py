@@ -127,14 +127,6 @@ def _project_out(Z: np.ndarray, Q: np.ndarray) -> np.ndarray:
     return (flat - (flat @ Q) @ Q.T).reshape(Z.shape)
 
 
-def _cumtrapz(w: np.ndarray, dt: float) -> np.ndarray:
-    """Trapezium-rule integral from each interval start to each later sample (eq. 36).
-
-    w (..., n_int, N + 1) -> (..., n_int, N).
-    """
-    return np.cumsum(0.5 * (w[..., 1:] + w[..., :-1]), axis=-1) * dt
-
-
 class IntegralIdentifier:
     """Identify the attitude model with the integral method of Fig. 5.
 
@@ -190,7 +182,7 @@ class IntegralIdentifier:
     def __init__(self, structure="decoupled", extra_terms=(), interval: float = 1.0, offsets: str = "per_interval",
                  prefilter: bool = True, pass_hz: float = DEFAULT_PASS_HZ, stop_hz: float = DEFAULT_STOP_HZ,
                  disturbance_order: int = 2, input_hold: str = "linear", delay=None, delay_grid=None,
-                 max_iter: int = 20, tol: float = 1e-4, axes=AXES):
+                 max_iter: int = 20, tol: float = 1e-3, axes=AXES):
         self.structure = structure
         self.extra_terms = extra_terms
         self.interval = interval
@@ -361,43 +353,52 @@ class IntegralIdentifier:
         b = yp.ravel()
         history = []
         best = None
-        zoh = self.input_hold == "zoh"
+        # Integrals of every feature from each interval start (eq. 36), sign of eq. (18)/(21) folded in.
         F = evaluate_features(kfeats, Wr, Wc, Wcol)  # (m, n_int, N+1)
-        X = _cumtrapz(F, dt)  # eq. (36)
-        if zoh and any(input_only):
-            X[input_only] = (np.cumsum(F[:, :, :-1], axis=-1) * dt)[input_only]
-        X *= signs
-        own_idx = [i for i in range(len(kfeats)) if own[i]]
-        used = list(range(len(keep)))
+        scale_f = (0.5 * dt) * signs
+        X = np.cumsum(F[..., 1:] + F[..., :-1], axis=-1) * scale_f
+        if self.input_hold == "zoh" and any(input_only):
+            X[input_only] = (np.cumsum(F[:, :, :-1], axis=-1) * (dt * signs))[input_only]
         slow = []
         if per_interval:
-            # Features that hardly change within an interval (collective) are all but
+            # Input features that hardly change within an interval (collective) are all but
             # absorbed by the per-interval disturbance: estimate them between intervals.
-            Qt, _ = np.linalg.qr(np.vander(np.arange(N + 1) * dt, self.disturbance_order + 1))
-            Fw = _project_out(F, Qt)  # the feature less a per-interval polynomial like the disturbance's
-            within = np.einsum("ijk,ijk->i", Fw, Fw)
-            Fc = F - F.mean(axis=(1, 2), keepdims=True)
-            total = np.einsum("ijk,ijk->i", Fc, Fc)
-            slow = [i for i in range(len(keep))
-                    if input_only[i] and kfeats[i] != "1" and total[i] > 0 and within[i] < SLOW_FRACTION * total[i]]
-            used = [i for i in range(len(keep)) if i not in slow]
-            if not used:
-                raise IdentifiabilityError(f"{AXES[a]}: every regressor is constant within the intervals")
+            cand = [i for i in range(len(kfeats)) if input_only[i] and kfeats[i] != "1"]
+            if cand:
+                Qt, _ = np.linalg.qr(np.vander(np.arange(N + 1) * dt, self.disturbance_order + 1))
+                Fs = F[cand]
+                Fw = _project_out(Fs, Qt)  # the feature less a per-interval polynomial like the disturbance's
+                Fc = Fs - Fs.mean(axis=(1, 2), keepdims=True)
+                within = np.einsum("ijk,ijk->i", Fw, Fw)
+                total = np.einsum("ijk,ijk->i", Fc, Fc)
+                slow = [i for k, i in enumerate(cand) if total[k] > 0 and within[k] < SLOW_FRACTION * total[k]]
             slow_means = [F[i].mean(axis=1) * signs[i, 0, 0] for i in slow]
+        fixed = [i for i in range(len(kfeats)) if i not in slow and not own[i]]
+        ownu = [i for i in range(len(kfeats)) if i not in slow and own[i]]
+        order = fixed + ownu
+        if not order:
+            raise IdentifiabilityError(f"{AXES[a]}: every regressor is constant within the intervals")
+
+        def projected(Z):
+            return (_project_out(Z, Q) if per_interval else Z).reshape(len(Z), -1)  # Frisch-Waugh
+
+        Xp_fixed = projected(X[fixed])
+        G_ff = Xp_fixed @ Xp_fixed.T
+        b_f = Xp_fixed @ b
+        X_own = X[ownu]
         for it in range(max(1, max_iter)):
             if it > 0:
                 # eqs. (39)-(40): p_approx replaces the measured own-axis rate in the integrals
                 rates = list(Wr)
                 rates[a] = np.concatenate([p0, approx], axis=1)
-                Fo = evaluate_features([kfeats[i] for i in own_idx], rates, Wc, Wcol)
-                X = X.copy()
-                X[own_idx] = _cumtrapz(Fo, dt) * signs[own_idx]
-            Xu = X[used]
-            Xp = (_project_out(Xu, Q) if per_interval else Xu).reshape(len(used), -1)  # Frisch-Waugh
-            G_raw = Xp @ Xp.T
+                Fo = evaluate_features([kfeats[i] for i in ownu], rates, Wc, Wcol)
+                X_own = np.cumsum(Fo[..., 1:] + Fo[..., :-1], axis=-1) * scale_f[ownu]
+            Xp_own = projected(X_own)
+            G_raw = np.block([[G_ff, Xp_fixed @ Xp_own.T], [Xp_own @ Xp_fixed.T, Xp_own @ Xp_own.T]])
+            rhs = np.concatenate([b_f, Xp_own @ b])
             scale = np.sqrt(np.diag(G_raw))
             if np.any(scale == 0):
-                zero = axis_params[keep[used[int(np.argmin(scale))]]]
+                zero = axis_params[keep[order[int(np.argmin(scale))]]]
                 raise IdentifiabilityError(
                     f"{AXES[a]} axis is not identifiable from this flight: the regressor of {zero} is identically "
                     f"zero (condition number inf); the input is probably not excited (command std {np.std(Wc[a]):.2g})"
@@ -412,12 +413,11 @@ class IntegralIdentifier:
                     f"the input is probably not excited (command std {np.std(Wc[a]):.2g})"
                 )
             beta = np.zeros(len(keep))
-            beta[used] = np.linalg.solve(G, (Xp @ b) / scale) / scale
-            fitted = np.tensordot(beta, X, axes=(0, 0))  # (n_int, N), slow terms still 0 here
+            beta[order] = np.linalg.solve(G, rhs / scale) / scale
+            fitted = np.tensordot(beta[fixed], X[fixed], axes=(0, 0)) + np.tensordot(beta[ownu], X_own, axes=(0, 0))
             slow_se = None
             if per_interval:
-                coef = B_pinv @ (y - fitted).T  # (o, n_int)
-                nuisance = (B @ coef).T
+                coef = B_pinv @ (y - fitted).T  # (o, n_int): the per-interval disturbance
                 T = N * dt
                 offsets = sum(coef[j] * T**j / (j + 1) for j in range(coef.shape[0]))  # mean torque
                 if slow:
@@ -429,24 +429,25 @@ class IntegralIdentifier:
                     s2 = float(r_between @ r_between) / max(n_int - M.shape[1], 1)
                     slow_se = np.sqrt(np.clip(np.diag(s2 * np.linalg.pinv(M.T @ M)), 0, None))[1:]
                     offsets = offsets - M[:, 1:] @ c[1:]
+                approx = p0 + fitted + coef.T @ B.T  # eqs. (39)-(40)
             else:
-                nuisance, offsets = 0.0, np.zeros(0)
-            approx = p0 + fitted + nuisance  # eqs. (39)-(40)
+                offsets = np.zeros(0)
+                approx = p0 + fitted
             d = approx - y_meas
             err = float(np.einsum("ij,ij->", d, d)) / d.size
             history.append(err)
             if best is None or err <= best[0]:
-                best = (err, beta, offsets, Xp, G_raw, cond, slow_se)
-            if not own_idx or (it > 0 and (abs(history[-2] - err) <= self.tol * max(history[-2], 1e-30)
-                                           or err > history[-2])):
+                best = (err, beta, offsets, Xp_own, G_raw, cond, slow_se)
+            if not ownu or (it > 0 and (abs(history[-2] - err) <= self.tol * max(history[-2], 1e-30)
+                                        or err > history[-2])):
                 break  # converged, or the Picard step stopped improving: keep the best iterate
-        err, beta, offsets, Xp, G_raw, cond, slow_se = best
-        resid = b - beta[used] @ Xp
+        err, beta, offsets, Xp_own, G_raw, cond, slow_se = best
+        resid = b - beta[fixed] @ Xp_fixed - beta[ownu] @ Xp_own
         dof = max(b.size - beta.size - (n_int * (self.disturbance_order + 1) if per_interval else 0), 1)
         sigma2 = float(resid @ resid) / dof
         se = np.full(beta.size, np.nan)
         try:
-            se[used] = np.sqrt(np.clip(np.diag(sigma2 * np.linalg.inv(G_raw)), 0, None))
+            se[order] = np.sqrt(np.clip(np.diag(sigma2 * np.linalg.inv(G_raw)), 0, None))
         except np.linalg.LinAlgError:
             pass
         if slow_se is not None:
