@@ -380,6 +380,8 @@ class IntegralIdentifier:
             raise IdentifiabilityError(f"{AXES[a]}: every regressor is constant within the intervals")
 
         def projected(Z):
+            if len(Z) == 0:
+                return np.zeros((0, b.size))
             return (_project_out(Z, Q) if per_interval else Z).reshape(len(Z), -1)  # Frisch-Waugh
 
         Xp_fixed = projected(X[fixed])
