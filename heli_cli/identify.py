@@ -31,9 +31,12 @@ def _interval(text):
 def register(sub):
     p = sub.add_parser(
         "identify",
-        help="identify the roll/pitch/yaw models with the integral method; write model.json and report.md",
+        help="identify the roll/pitch/yaw models (integral method) and the wind; write model.json, report.md "
+        "and the disturbance library",
         description="Identify the minimal attitude models (paper eqs. 18, 21) from one or more canonical CSV "
-        "flights with the integral method (Fig. 5). Writes DIR/model.json, DIR/report.md and figures.",
+        "flights with the integral method (Fig. 5), then each flight's wind as a piecewise torque profile (eqs. "
+        "41-47). Writes DIR/model.json, DIR/report.md, figures, and appends the profiles to the disturbance "
+        "library DIR/disturbances (a new version; earlier versions are kept).",
     )
     p.add_argument("flights", nargs="+", metavar="FLIGHT.csv", help="canonical CSV flight log(s)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
@@ -43,6 +46,8 @@ def register(sub):
                    help="servo delay: 'auto' (searched, eq. 31) or seconds (default: none)")
     p.add_argument("--no-filter", action="store_true", help="skip the 4/8 Hz zero-phase FIR prefilter (Section 3.1)")
     p.add_argument("--no-plots", action="store_true", help="do not draw PNG figures")
+    p.add_argument("--no-disturbances", action="store_true",
+                   help="do not identify wind profiles nor write the disturbance library")
     p.set_defaults(func=run)
 
 
@@ -58,6 +63,7 @@ def run(args) -> int:
     run = identify_and_report(
         flights, args.out, coupled=args.coupled, sources=[source_entry(p) for p in args.flights],
         identifier_kwargs=kwargs, flight_paths=args.flights, plots=not args.no_plots,
+        disturbances=not args.no_disturbances,
     )
     params = run.params.values()
     print(f"identified {run.chosen} model from {len(flights)} flight(s):")
@@ -67,6 +73,15 @@ def run(args) -> int:
         print(f"  {axis:5s}: {vals}  (R² {fit.r2:.3f}{delay})")
     stats = run.validation.rate_stats[run.chosen]
     print("forward-simulation MAE (deg/s): " + ", ".join(f"{a} {stats[a]['mae_deg_s']:.3f}" for a in stats))
+    for profile in run.disturbances:
+        mae = profile.simulation.rate_stats if profile.simulation is not None else None
+        if mae:
+            label = list(mae)[-1]
+            print(f"with its identified wind ({profile.source.get('name', 'flight')}): MAE (deg/s) "
+                  + ", ".join(f"{a} {mae[label][a]['mae_deg_s']:.3f}" for a in mae[label]))
+    if run.library_version is not None:
+        print(f"disturbance library: {run.paths['library']} version {run.library_version}")
     for key, path in run.paths.items():
-        print(f"wrote {path}")
+        if key != "library":
+            print(f"wrote {path}")
     return 0

@@ -24,11 +24,12 @@ eq. 21: ``-k12*col``). Files are written atomically.
 from __future__ import annotations
 
 import datetime as _dt
+import hashlib
 import json
 from pathlib import Path
 
 from .errors import ModelFileError
-from .files import write_text
+from .files import write_bytes, write_text
 from .model import ModelParams
 from .terms import AXES, BASE_PARAMS, EXTRA_PARAMS, TERMS
 
@@ -75,10 +76,20 @@ def model_document(params: ModelParams, *, structure: str = "custom", sample_rat
 
 
 def save_model(path, params: ModelParams, **kwargs) -> Path:
-    """Write ``model.json`` atomically; ``path`` may be the file or its directory. Returns the file path."""
+    """Write ``model.json`` atomically; ``path`` may be the file or its directory. Returns the file path.
+
+    A model file already there is first copied to ``history/model-<sha256[:12]>.json``.
+    """
     path = Path(path)
     if path.suffix != ".json":
         path = path / MODEL_FILENAME
+    if path.exists():
+        # nothing the user had is lost: the model being replaced is kept under history/
+        old = path.read_bytes()
+        digest = hashlib.sha256(old).hexdigest()[:12]
+        backup = path.parent / "history" / f"{path.stem}-{digest}.json"
+        if not backup.exists():
+            write_bytes(backup, old)
     doc = _finite(model_document(params, **kwargs))
     write_text(path, json.dumps(doc, indent=2, allow_nan=False, default=_jsonable) + "\n")
     return path

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .disturbance import compare_with_truth, identify_disturbance, save_figures
+from .disturbance_library import DisturbanceLibrary
 from .files import sha256_of, write_text
 from .flight import Flight
 from .integral_method import IntegralIdentifier
@@ -41,6 +43,10 @@ class IdentificationRun:
         Truth of a synthetic flight.
     paths : dict of str to Path
         Files written.
+    disturbances : list of DisturbanceProfile
+        One identified wind profile per flight (eqs. 41-47), in flight order.
+    library_version : int or None
+        Version of the disturbance library written.
     """
 
     identifiers: dict
@@ -48,6 +54,8 @@ class IdentificationRun:
     validation: ValidationResult
     truth: ModelParams | None = None
     paths: dict = field(default_factory=dict)
+    disturbances: list = field(default_factory=list)
+    library_version: int | None = None
 
     @property
     def params(self) -> ModelParams:
@@ -62,6 +70,17 @@ def _truth_of(flight: Flight, path) -> ModelParams | None:
         return load_truth(path)[0]
     except Exception:  # a broken truth file must not stop identification
         return None
+
+
+def _true_wind(path, flight: Flight):
+    """The true wind u_d (3, n) saved beside a synthetic flight, if it matches the flight."""
+    if path is None or not truth_paths(path)["wind"].exists():
+        return None
+    try:
+        wind = load_truth(path)[1]
+    except Exception:
+        return None
+    return wind if wind.shape == (3, flight.n) else None
 
 
 def parameter_table(identifiers: dict, truth: ModelParams | None) -> str:
@@ -117,7 +136,8 @@ def fit_table(identifiers: dict) -> str:
 
 
 def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), identifier_kwargs=None,
-                        flight_paths=None, plots: bool = True) -> IdentificationRun:
+                        flight_paths=None, plots: bool = True, disturbances: bool = True,
+                        progress: bool | None = None) -> IdentificationRun:
     """Identify, validate and write ``model.json`` + ``report.md`` (+ figures) into ``out_dir``.
 
     Parameters
@@ -135,6 +155,11 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
         Where the flights came from (to find a synthetic flight's truth).
     plots : bool
         Write the PNG figures.
+    disturbances : bool
+        Identify each flight's wind profile with the model (eqs. 41-47) and
+        append them to the disturbance library ``out_dir/disturbances``.
+    progress : bool, optional
+        Progress bar over flights (default: when there are several).
     """
     flights = [flights] if isinstance(flights, Flight) else list(flights)
     out = Path(out_dir)
@@ -165,6 +190,33 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
     if plots:
         paths["rates_png"] = plot_rate_fit(validation, out / "rates.png")
         paths["attitude_png"] = plot_attitude_fit(validation, out / "attitude.png")
+    profiles, dist_md, library_version = [], [], None
+    if disturbances:
+        from tqdm import tqdm
+
+        library = DisturbanceLibrary.open(out, create=True)
+        model_sha = sha256_of(model_path)
+        names = [Path(p).name for p in (flight_paths or [])] or [f"flight {i + 1}" for i in range(len(flights))]
+        show = (len(flights) > 1) if progress is None else progress
+        for i, flight in enumerate(tqdm(flights, desc="disturbance profiles", unit="flight", disable=not show)):
+            profile = identify_disturbance(flight, ident.params_)
+            profiles.append(profile)
+            library_version = library.append(profile, metadata={"flight": names[i]}, model_sha256=model_sha)
+            prefix = f"disturbance_{i + 1}" if len(flights) > 1 else "disturbance"
+            section = [f"### {names[i]}", "", profile.markdown()]
+            true_ud = _true_wind(flight_paths[i] if flight_paths else None, flight)
+            if true_ud is not None:
+                cmp = compare_with_truth(profile, true_ud)
+                section += ["", "Against the true wind of this synthetic flight:", "",
+                            "| Axis | correlation | RMS error | RMS of the true wind |", "|---|---|---|---|"]
+                section += [f"| {a} | {v['correlation']:.3f} | {v['rms_error']:.4f} | {v['rms_truth']:.4f} |"
+                            for a, v in cmp.items()]
+            if plots:
+                figs = save_figures(profile, out, true_ud=true_ud, prefix=prefix)
+                paths.update({f"{prefix}_{k}": v for k, v in figs.items()})
+                section += [""] + [f"![{k}]({v.name})" for k, v in figs.items()]
+            dist_md += section + [""]
+        paths["library"] = out / "disturbances"
     n_total = sum(f.n for f in flights)
     dur = sum(f.duration for f in flights)
     src_lines = "\n".join(f"- `{s.get('file')}` (SHA-256 `{s.get('sha256', '')[:16]}…`)" for s in sources) or "- (in memory)"
@@ -197,8 +249,12 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
     ]
     if plots:
         md += ["![Measured vs modelled body rates](rates.png)", "", "![Detrended attitude](attitude.png)", ""]
+    if disturbances:
+        md += ["## Wind disturbance (eqs. 41-47)", "",
+               f"Identified with the {chosen} model and appended to the disturbance library "
+               f"`disturbances/` as version {library_version}.", ""] + dist_md
     paths["report"] = write_text(out / "report.md", "\n".join(md) + "\n")
-    return IdentificationRun(identifiers, chosen, validation, truth, paths)
+    return IdentificationRun(identifiers, chosen, validation, truth, paths, profiles, library_version)
 
 
 def source_entry(path) -> dict:

@@ -78,7 +78,9 @@ def test_simulate_flight_rejects_bad_options(tmp_path, capsys, option, value):
 
 
 def test_identify_writes_model_report_and_figures(identified):
-    assert sorted(p.name for p in identified.iterdir()) == ["attitude.png", "model.json", "rates.png", "report.md"]
+    assert sorted(p.name for p in identified.iterdir()) == [
+        "attitude.png", "disturbance_distributions.png", "disturbance_profile.png", "disturbance_simulation.png",
+        "disturbances", "model.json", "rates.png", "report.md"]
     for png in ("rates.png", "attitude.png"):
         assert (identified / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     report = (identified / "report.md").read_text()
@@ -99,9 +101,49 @@ def test_model_json_schema_parameters_and_provenance(identified, flight_csv):
 
 
 def test_identify_coupled_without_plots(identified_coupled):
-    assert sorted(p.name for p in identified_coupled.iterdir()) == ["model.json", "report.md"]
+    assert sorted(p.name for p in identified_coupled.iterdir()) == ["disturbances", "model.json", "report.md"]
     assert _model(identified_coupled)["structure"] == "coupled"
     assert "rates.png" not in (identified_coupled / "report.md").read_text()
+
+
+def test_identify_writes_the_disturbance_library(identified, flight_csv):
+    from identification.disturbance_library import DisturbanceLibrary
+
+    lib = DisturbanceLibrary.open(identified)
+    (trace,) = lib.load()
+    assert trace.n == 4001 and abs(trace.sample_rate - 100.0) < 1e-6
+    entry = lib.manifest()["traces"][0]
+    assert entry["source"]["sha256"] == hashlib.sha256(flight_csv.read_bytes()).hexdigest()
+    assert entry["model"]["sha256"] == hashlib.sha256((identified / "model.json").read_bytes()).hexdigest()
+    assert "## Wind disturbance (eqs. 41-47)" in (identified / "report.md").read_text()
+
+
+def test_identifying_again_keeps_the_previous_model_and_library_version(flight_csv, tmp_path, capsys):
+    out = tmp_path / "DIR"
+    assert main(["identify", str(flight_csv), "--out", str(out), "--no-plots"]) == 0
+    first = (out / "model.json").read_bytes()
+    other = tmp_path / "Y.csv"
+    assert main(["simulate-flight", "--duration", "30", "--seed", "4", "--out", str(other)]) == 0
+    assert main(["identify", str(other), "--out", str(out), "--no-plots"]) == 0
+    from identification.disturbance_library import DisturbanceLibrary
+
+    lib = DisturbanceLibrary.open(out)
+    assert lib.versions() == [1, 2]
+    assert len(lib.load(1)) == 1 and len(lib.load(2)) == 2
+    (kept,) = (out / "history").iterdir()
+    assert kept.read_bytes() == first
+    assert "version 2" in capsys.readouterr().out
+
+
+def test_identify_several_flights_pools_them(flight_csv, tmp_path):
+    other = tmp_path / "Z.csv"
+    assert main(["simulate-flight", "--duration", "30", "--seed", "5", "--out", str(other)]) == 0
+    out = tmp_path / "DIR"
+    assert main(["identify", str(flight_csv), str(other), "--out", str(out), "--no-plots"]) == 0
+    assert len(_model(out)["provenance"]["sources"]) == 2
+    from identification.disturbance_library import DisturbanceLibrary
+
+    assert len(DisturbanceLibrary.open(out).load()) == 2
 
 
 def test_identify_prints_a_summary(flight_csv, capsys, tmp_path):
