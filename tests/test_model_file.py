@@ -203,7 +203,9 @@ def test_a_failed_write_leaves_the_old_model_untouched(tmp_path, monkeypatch):
         save_model(tmp_path, PARAMS.with_values(k2=99.0))
     monkeypatch.undo()
     assert path.read_bytes() == before
-    assert [p.name for p in tmp_path.iterdir()] == [MODEL_FILENAME]  # no stray temporary file
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["history", MODEL_FILENAME]  # no stray temporary file
+    (backup,) = (tmp_path / "history").iterdir()  # the model about to be replaced was kept first
+    assert backup.read_bytes() == before
     assert load_model(tmp_path)[0] == PARAMS
 
 
