@@ -9,6 +9,7 @@ column, row and time of the problem. Past that point the code trusts the arrays.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from types import MappingProxyType
 
 import numpy as np
@@ -77,9 +78,9 @@ class Flight:
         """Number of samples."""
         return self.time.size
 
-    @property
+    @cached_property
     def dt(self) -> float:
-        """Sample interval [s] (median)."""
+        """Sample interval [s] (median; computed once)."""
         return float(np.median(np.diff(self.time)))
 
     @property

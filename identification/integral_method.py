@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import time as _time
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy import signal
@@ -119,6 +120,23 @@ def _windows(values: np.ndarray, starts: np.ndarray, length: int) -> np.ndarray:
     shape = values.shape[:-1] + (starts.size, length + 1)
     strides = values.strides[:-1] + (length * step, step)
     return np.lib.stride_tricks.as_strided(values, shape=shape, strides=strides, writeable=False)
+
+
+@lru_cache(maxsize=16)
+def _disturbance_basis(N: int, dt: float, order: int):
+    """Per-interval disturbance basis of degree ``order`` on N samples of step dt.
+
+    Returns ``B`` (N, o): integrals t^(j+1)/(j+1) of the torque polynomial t^j;
+    ``Q``: orthonormal basis of B; ``B_pinv``; ``Qt`` (N+1, o): orthonormal basis
+    of the polynomials themselves on the N+1 samples of an interval.
+    """
+    tt = np.arange(1, N + 1) * dt
+    B = np.stack([tt ** (j + 1) / (j + 1) for j in range(order + 1)], axis=1)
+    Q, _ = np.linalg.qr(B)
+    Qt, _ = np.linalg.qr(np.vander(np.arange(N + 1) * dt, order + 1))
+    for a in (B, Q, Qt):
+        a.setflags(write=False)
+    return B, Q, np.linalg.pinv(B), Qt
 
 
 def _project_out(Z: np.ndarray, Q: np.ndarray) -> np.ndarray:
@@ -341,12 +359,8 @@ class IntegralIdentifier:
         p0 = Wr[a][:, :1]
         y = y_meas - p0  # eq. (37)
         n_int = y.shape[0]
-        tt = np.arange(1, N + 1) * dt
         if per_interval:
-            # Integrated polynomial disturbance per interval: d(t) = sum_j a_j t^j, j <= order.
-            B = np.stack([tt ** (j + 1) / (j + 1) for j in range(self.disturbance_order + 1)], axis=1)  # (N, o)
-            Q, _ = np.linalg.qr(B)
-            B_pinv = np.linalg.pinv(B)
+            B, Q, B_pinv, Qt = _disturbance_basis(N, dt, self.disturbance_order)
             yp = _project_out(y, Q)
         else:
             yp = y
@@ -365,7 +379,6 @@ class IntegralIdentifier:
             # absorbed by the per-interval disturbance: estimate them between intervals.
             cand = [i for i in range(len(kfeats)) if input_only[i] and kfeats[i] != "1"]
             if cand:
-                Qt, _ = np.linalg.qr(np.vander(np.arange(N + 1) * dt, self.disturbance_order + 1))
                 Fs = F[cand]
                 Fw = _project_out(Fs, Qt)  # the feature less a per-interval polynomial like the disturbance's
                 Fc = Fs - Fs.mean(axis=(1, 2), keepdims=True)
@@ -384,6 +397,7 @@ class IntegralIdentifier:
                 return np.zeros((0, b.size))
             return (_project_out(Z, Q) if per_interval else Z).reshape(len(Z), -1)  # Frisch-Waugh
 
+        X_fixed_flat = X[fixed].reshape(len(fixed), b.size)
         Xp_fixed = projected(X[fixed])
         G_ff = Xp_fixed @ Xp_fixed.T
         b_f = Xp_fixed @ b
@@ -396,7 +410,12 @@ class IntegralIdentifier:
                 Fo = evaluate_features([kfeats[i] for i in ownu], rates, Wc, Wcol)
                 X_own = np.cumsum(Fo[..., 1:] + Fo[..., :-1], axis=-1) * scale_f[ownu]
             Xp_own = projected(X_own)
-            G_raw = np.block([[G_ff, Xp_fixed @ Xp_own.T], [Xp_own @ Xp_fixed.T, Xp_own @ Xp_own.T]])
+            nf = len(fixed)
+            G_raw = np.empty((len(order), len(order)))
+            G_raw[:nf, :nf] = G_ff
+            G_raw[:nf, nf:] = Xp_fixed @ Xp_own.T
+            G_raw[nf:, :nf] = G_raw[:nf, nf:].T
+            G_raw[nf:, nf:] = Xp_own @ Xp_own.T
             rhs = np.concatenate([b_f, Xp_own @ b])
             scale = np.sqrt(np.diag(G_raw))
             if np.any(scale == 0):
@@ -416,7 +435,7 @@ class IntegralIdentifier:
                 )
             beta = np.zeros(len(keep))
             beta[order] = np.linalg.solve(G, rhs / scale) / scale
-            fitted = np.tensordot(beta[fixed], X[fixed], axes=(0, 0)) + np.tensordot(beta[ownu], X_own, axes=(0, 0))
+            fitted = (beta[fixed] @ X_fixed_flat + beta[ownu] @ X_own.reshape(len(ownu), b.size)).reshape(y.shape)
             slow_se = None
             if per_interval:
                 coef = B_pinv @ (y - fitted).T  # (o, n_int): the per-interval disturbance

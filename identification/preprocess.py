@@ -16,6 +16,7 @@ from functools import lru_cache
 from types import MappingProxyType
 
 import numpy as np
+from scipy import fft as sp_fft
 from scipy import signal
 
 from .flight import Flight
@@ -52,19 +53,35 @@ def fir_lowpass(fs: float, pass_hz: float = DEFAULT_PASS_HZ, stop_hz: float = DE
 def zero_phase_lowpass(values: np.ndarray, fs: float, pass_hz: float = DEFAULT_PASS_HZ,
                        stop_hz: float = DEFAULT_STOP_HZ) -> np.ndarray:
     """Zero-phase FIR low-pass of ``values`` (shape (..., n)) along the last axis."""
-    taps = fir_lowpass(float(fs), float(pass_hz), float(stop_hz))
     values = np.asarray(values, dtype=float)
+    n = values.shape[-1]
+    kernel = _zero_phase_kernel(float(fs), float(pass_hz), float(stop_hz))
     # Forward-backward FIR filtering is one convolution with the symmetric kernel
-    # taps * reversed(taps); done by overlap-add FFT on all rows at once, with
-    # odd reflection at both ends as scipy.signal.filtfilt pads by default.
-    kernel = np.convolve(taps, taps[::-1])
-    pad = min(kernel.size // 2, values.shape[-1] - 1)
+    # taps * reversed(taps), done here by FFT on all rows at once (both cores),
+    # with odd reflection at both ends as scipy.signal.filtfilt pads by default.
+    pad = min(kernel.size // 2, n - 1)
     first, last = values[..., :1], values[..., -1:]
     head = 2 * first - values[..., pad:0:-1]
     tail = 2 * last - values[..., -2 : -pad - 2 : -1]
     ext = np.concatenate([head, values, tail], axis=-1)
-    out = signal.oaconvolve(ext, kernel[(None,) * (values.ndim - 1)], mode="same", axes=-1)
-    return out[..., pad : pad + values.shape[-1]]
+    nfft = sp_fft.next_fast_len(ext.shape[-1] + kernel.size - 1, real=True)
+    spec = sp_fft.rfft(ext, nfft, axis=-1, workers=-1) * _kernel_spectrum(kernel.tobytes(), nfft)
+    full = sp_fft.irfft(spec, nfft, axis=-1, workers=-1)
+    start = kernel.size // 2 + pad
+    return full[..., start : start + n]
+
+
+@lru_cache(maxsize=32)
+def _zero_phase_kernel(fs: float, pass_hz: float, stop_hz: float) -> np.ndarray:
+    taps = fir_lowpass(fs, pass_hz, stop_hz)
+    k = np.convolve(taps, taps[::-1])
+    k.setflags(write=False)
+    return k
+
+
+@lru_cache(maxsize=32)
+def _kernel_spectrum(kernel_bytes: bytes, nfft: int) -> np.ndarray:
+    return sp_fft.rfft(np.frombuffer(kernel_bytes, dtype=float), nfft)
 
 
 def lowpass_flight(flight: Flight, pass_hz: float = DEFAULT_PASS_HZ, stop_hz: float = DEFAULT_STOP_HZ) -> Flight:

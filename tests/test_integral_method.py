@@ -157,3 +157,11 @@ def test_bad_settings(windy, kwargs, match):
 def test_predict_before_fit():
     with pytest.raises(NotFittedError, match="not fitted"):
         IntegralIdentifier().predict(None)
+
+
+def test_an_axis_with_input_terms_only_and_one_with_rate_terms_only(windy):
+    """Structures without a fixed (input) or without an own-rate regressor still fit."""
+    inputs_only = IntegralIdentifier(structure={0: ("k2", "kd1")}, axes=("roll",)).fit(windy.flight)
+    assert inputs_only.params_.k2 > 0
+    rate_only = IntegralIdentifier(structure={0: ("k3", "kd1")}, axes=("roll",)).fit(windy.flight)
+    assert np.isfinite(rate_only.params_.k3)
