@@ -139,6 +139,34 @@ def _disturbance_basis(N: int, dt: float, order: int):
     return B, Q, np.linalg.pinv(B), Qt
 
 
+@lru_cache(maxsize=16)
+def _prefix_blocks(N: int):
+    """Block size b (a divisor of N near sqrt(N)) and the triangular matrices of a two-level prefix sum."""
+    divisors = [b for b in range(4, N // 4 + 1) if N % b == 0]
+    if not divisors:
+        return None
+    b = min(divisors, key=lambda d: abs(d - N**0.5))
+    nb = N // b
+    return b, np.triu(np.ones((b, b))), np.triu(np.ones((nb, nb)), 1)
+
+
+def _interval_cumsum(D: np.ndarray) -> np.ndarray:
+    """Cumulative sum along the last axis (length N), as two small matrix products.
+
+    numpy's cumsum runs at several ns per element; splitting each row into
+    blocks, prefix-summing inside the blocks and adding the exclusive prefix of
+    the block totals turns it into BLAS work, about twice as fast for the
+    interval lengths used here. Exact up to rounding (the same sums, regrouped).
+    """
+    N = D.shape[-1]
+    blocks = _prefix_blocks(N)
+    if blocks is None:
+        return np.cumsum(D, axis=-1)
+    b, inner, outer = blocks
+    P = (D.reshape(-1, b) @ inner).reshape(-1, N // b, b)
+    return (P + (P[..., -1] @ outer)[..., None]).reshape(D.shape)
+
+
 def _project_out(Z: np.ndarray, Q: np.ndarray) -> np.ndarray:
     """Remove from every interval (last axis) its least-squares fit on the orthonormal columns Q."""
     flat = Z.reshape(-1, Z.shape[-1])
@@ -370,7 +398,7 @@ class IntegralIdentifier:
         # Integrals of every feature from each interval start (eq. 36), sign of eq. (18)/(21) folded in.
         F = evaluate_features(kfeats, Wr, Wc, Wcol)  # (m, n_int, N+1)
         scale_f = (0.5 * dt) * signs
-        X = np.cumsum(F[..., 1:] + F[..., :-1], axis=-1) * scale_f
+        X = _interval_cumsum(F[..., 1:] + F[..., :-1]) * scale_f
         if self.input_hold == "zoh" and any(input_only):
             X[input_only] = (np.cumsum(F[:, :, :-1], axis=-1) * (dt * signs))[input_only]
         slow = []
@@ -408,7 +436,7 @@ class IntegralIdentifier:
                 rates = list(Wr)
                 rates[a] = np.concatenate([p0, approx], axis=1)
                 Fo = evaluate_features([kfeats[i] for i in ownu], rates, Wc, Wcol)
-                X_own = np.cumsum(Fo[..., 1:] + Fo[..., :-1], axis=-1) * scale_f[ownu]
+                X_own = _interval_cumsum(Fo[..., 1:] + Fo[..., :-1]) * scale_f[ownu]
             Xp_own = projected(X_own)
             nf = len(fixed)
             G_raw = np.empty((len(order), len(order)))
