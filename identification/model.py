@@ -5,7 +5,10 @@ added from :mod:`identification.terms`, the servo delay as a first-order Padé
 approximation (eq. 31) and the quaternion kinematics (eqs. 25-26). Everything
 that moves a model forward in time — the forward simulator used for
 validation, the synthetic flight generator, the Gymnasium environments and the
-PD linearisation — calls :func:`derivatives` / :func:`step` from here.
+PD linearisation — calls :func:`derivatives`, :func:`step` (RK4, continuous
+inputs) or :func:`discrete_step` (one control period under a zero-order hold,
+the environments' integrator) from here. All three are generated from the one
+table of terms, :data:`identification.terms.FEATURE_EXPRESSIONS`.
 
 State vector ``x`` (shape ``(N_STATE, ...)``, trailing axes are batch)::
 
@@ -318,6 +321,173 @@ def initial_state(rates=(0.0, 0.0, 0.0), euler=(0.0, 0.0, 0.0), sticks=(0.0, 0.0
     x[SERVO] = np.reshape(sticks, (3,) + (1,) * len(batch))
     x[QUAT] = np.reshape(quaternion_from_euler(*euler), (4,) + (1,) * len(batch))
     return x
+
+
+# ------------------------------------------------------------- discrete time
+_LINEAR_FEATURES = {"p": ("state", 0), "q": ("state", 1), "r": ("state", 2),
+                    "u_lat": ("servo", 0), "u_lon": ("servo", 1), "u_ped": ("servo", 2),
+                    "col": ("input", 2), "1": ("input", 4)}
+_STICK_INPUT = (0, 1, 3)  # lat, lon, ped in the input vector (lat, lon, col, ped, 1, d0, d1, d2)
+
+
+def linear_structure(params: ModelParams):
+    """The model split into its linear part and its remaining products, eqs. (18), (21), (31).
+
+    With the state ``s = (p, q, r, z0, z1, z2)`` and the held input vector
+    ``v = (lat, lon, col, ped, 1, d0, d1, d2)``::
+
+        s' = A s + B v + G n(s, v)
+
+    where ``n`` holds the non-linear features (products of rates, ``p|p|``,
+    commands times collective) per axis and ``G`` routes them to the rate rows.
+
+    Returns
+    -------
+    A : ndarray (6, 6)
+    B : ndarray (6, 8)
+    nonlinear : tuple of (axis, expression, coefficient)
+    """
+    A = np.zeros((6, 6))
+    B = np.zeros((6, 8))
+    servo = []
+    for i, tau in enumerate(params.taus):
+        d1, n1, n2 = servo_coefficients(tau)
+        if d1 == 0.0:
+            servo.append((1.0, 0.0))
+        else:  # (n1 - n2 s)/(1 + d1 s) = -n2/d1 + (n1 + n2/d1)/(1 + d1 s)
+            servo.append((-n2 / d1, n1 + n2 / d1))
+            A[3 + i, 3 + i] = -1.0 / d1
+            B[3 + i, _STICK_INPUT[i]] = 1.0 / d1
+    nonlinear = []
+    for name, value in params.values().items():
+        if value == 0.0:
+            continue
+        term = TERMS[name]
+        c = term.sign * value
+        kind = _LINEAR_FEATURES.get(term.feature)
+        if kind is None:
+            nonlinear.append((term.axis, FEATURE_EXPRESSIONS[term.feature], c))
+        elif kind[0] == "state":
+            A[term.axis, kind[1]] += c
+        elif kind[0] == "servo":
+            feed, gain = servo[kind[1]]
+            B[term.axis, _STICK_INPUT[kind[1]]] += c * feed
+            A[term.axis, 3 + kind[1]] += c * gain
+        else:
+            B[term.axis, kind[1]] += c
+    for i in range(3):
+        B[i, 5 + i] = 1.0  # the disturbance torque
+    return A, B, tuple(nonlinear), tuple(servo)
+
+
+@lru_cache(maxsize=64)
+def _discrete_kernel(params: ModelParams, dt: float):
+    """Generate ``dstep(x, u, d)``: one control period of length ``dt`` with u and d held.
+
+    The linear part is discretised exactly for a zero-order hold (matrix
+    exponential of the augmented system, ``scipy.linalg.expm``); the remaining
+    products of rates are held over the step and integrated through the same
+    exponential (exponential Euler); the attitude turns by the rotation of the
+    mean of the start and end rates (eq. 25, quaternion renormalised as eq. 26).
+    Like :func:`_kernel`, the source uses arithmetic only and serves floats and
+    numpy batches alike.
+    """
+    from scipy.linalg import expm
+
+    A, B, nonlinear, servo = linear_structure(params)
+    M = np.zeros((14, 14))
+    M[:6, :6] = A
+    M[:6, 6:] = B
+    E = expm(M * dt)
+    Ad, Bd = E[:6, :6], E[:6, 6:]
+    names_s = ("p", "q", "r", "z0", "z1", "z2")
+    names_v = ("lat", "lon", "col", "ped", "1.0", "e0", "e1", "e2")
+    lines = [
+        "def dstep(x, u, d):",
+        '    """One control period, zero-order hold: exact linear part, exponential Euler for products."""',
+        "    p, q, r, z0, z1, z2, q0, q1, q2, q3 = x",
+        "    lat, lon, col, ped = u",
+    ]
+    for i, (feed, gain) in enumerate(servo):
+        stick = ("lat", "lon", "ped")[i]
+        lines.append(f"    c{i} = {stick}" if gain == 0.0 else f"    c{i} = {_fmt(feed)}*{stick} + {_fmt(gain)}*z{i}")
+    for i in range(3):
+        extra = "".join(f" + {_fmt(c)}*({expr})" for axis, expr, c in nonlinear if axis == i)
+        lines.append(f"    e{i} = d[{i}]{extra}")
+    for row in range(6):
+        if row >= 3 and servo[row - 3][1] == 0.0:
+            lines.append(f"    {names_s[row]}n = {names_s[row]}")  # no servo delay: the state is unused
+            continue
+        terms = [f"{_fmt(Ad[row, j])}*{names_s[j]}" for j in range(6) if Ad[row, j] != 0.0]
+        terms += [f"{_fmt(Bd[row, j])}*{names_v[j]}" if names_v[j] != "1.0" else _fmt(Bd[row, j])
+                  for j in range(8) if Bd[row, j] != 0.0]
+        lines.append(f"    {names_s[row]}n = " + (" + ".join(terms) if terms else f"0.0*{names_s[row]}"))
+    hdt = 0.25 * dt  # half the step times the mean of two rates
+    lines += [
+        f"    wx = {_fmt(hdt)}*(p + pn)",
+        f"    wy = {_fmt(hdt)}*(q + qn)",
+        f"    wz = {_fmt(hdt)}*(r + rn)",
+        "    a0 = q0 - q1*wx - q2*wy - q3*wz",
+        "    a1 = q1 + q0*wx + q2*wz - q3*wy",
+        "    a2 = q2 + q0*wy + q3*wx - q1*wz",
+        "    a3 = q3 + q0*wz + q1*wy - q2*wx",
+        "    n = (a0*a0 + a1*a1 + a2*a2 + a3*a3)**0.5",
+        "    return (pn, qn, rn, z0n, z1n, z2n, a0/n, a1/n, a2/n, a3/n)",
+    ]
+    source = "\n".join(lines) + "\n"
+    namespace = {"abs": abs}
+    exec(compile(source, f"<heli-env discrete model {hash((params, dt)) & 0xFFFFFFFF:08x}>", "exec"), namespace)  # noqa: S102
+    return namespace["dstep"], source
+
+
+def discrete_step(x, u, d, params: ModelParams, dt: float):
+    """Advance one control period ``dt`` with the sticks and the disturbance held (digital control).
+
+    The integrator of the environments: the linear part of eqs. (18), (21), (31)
+    is exact under a zero-order hold, products of rates (gyroscopic terms,
+    ``p|p|``) are held over the step, and the quaternion of eq. (25) turns by
+    the mean of the start and end rates. :func:`step` (RK4) is the reference
+    it is checked against.
+
+    Parameters
+    ----------
+    x : ndarray (N_STATE, ...) or sequence of N_STATE floats
+    u : ndarray (4, ...) or sequence of 4 floats
+        lat, lon, col, ped.
+    d : ndarray (3, ...), sequence of 3 floats, or None
+        Wind torque per inertia [rad/s^2].
+    params : ModelParams
+    dt : float
+        Control period [s].
+
+    Returns
+    -------
+    tuple of N_STATE components (floats or arrays)
+    """
+    return _discrete_kernel(params, float(dt))[0](x, u, _ZERO_D if d is None else d)
+
+
+def trim_sticks(params: ModelParams, col):
+    """Cyclic and pedal sticks (lat, lon, ped) that hold the aircraft at rest, for a collective.
+
+    At rest (zero rates, servo settled) each rate derivative is
+    ``F_i(col) + G_i(col) * stick_i`` (eqs. 18, 21: offsets kd, collective torque,
+    and the control gain, possibly scheduled by the collective); the trim is
+    ``-F_i / G_i``. Works on floats and arrays of collective.
+    """
+    rhs = _kernel(params)[0]["rhs"]
+    zero = 0.0 * col
+    rest = (zero, zero, zero, zero, zero, zero, 1.0 + zero, zero, zero, zero)
+    f = rhs(rest, (zero, zero, col, zero), _ZERO_D)
+    out = []
+    for i, idx in enumerate((3, 4, 5)):
+        x = list(rest)
+        x[idx] = 1.0 + zero  # servo settled on a unit stick
+        u = [zero, zero, col, zero]
+        u[_STICK_INPUT[i] if _STICK_INPUT[i] != 3 else 3] = 1.0 + zero
+        g = rhs(tuple(x), tuple(u), _ZERO_D)[i] - f[i]
+        out.append(-f[i] / g)
+    return tuple(out)
 
 
 def quaternion_from_euler(phi, theta, psi) -> np.ndarray:

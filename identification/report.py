@@ -201,7 +201,6 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
         for i, flight in enumerate(tqdm(flights, desc="disturbance profiles", unit="flight", disable=not show)):
             profile = identify_disturbance(flight, ident.params_)
             profiles.append(profile)
-            library_version = library.append(profile, metadata={"flight": names[i]}, model_sha256=model_sha)
             prefix = f"disturbance_{i + 1}" if len(flights) > 1 else "disturbance"
             section = [f"### {names[i]}", "", profile.markdown()]
             true_ud = _true_wind(flight_paths[i] if flight_paths else None, flight)
@@ -216,6 +215,7 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
                 paths.update({f"{prefix}_{k}": v for k, v in figs.items()})
                 section += [""] + [f"![{k}]({v.name})" for k, v in figs.items()]
             dist_md += section + [""]
+        library_version = library.append(profiles, model_sha256=model_sha)  # one new version per run
         paths["library"] = out / "disturbances"
     n_total = sum(f.n for f in flights)
     dur = sum(f.duration for f in flights)

@@ -1,0 +1,125 @@
+"""Load what an environment needs from a model directory written by ``heli identify``.
+
+A model directory holds ``model.json`` (:mod:`identification.model_file`) and
+the disturbance library ``disturbances/`` (:mod:`identification.disturbance_library`).
+:func:`load_env_model` reads and checks both once and packs the library's
+traces into flat arrays the environments index without copying.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from identification.disturbance_library import DisturbanceLibrary
+from identification.errors import LibraryError, ModelFileError
+from identification.model import ModelParams
+from identification.model_file import MODEL_FILENAME, load_model
+
+from .errors import EnvModelError
+
+DEFAULT_MODEL_NAME = "default"
+
+
+def default_model_dir() -> Path:
+    """The model directory that ships with the package (see ``heli_env/data/README.md``)."""
+    return Path(str(resources.files("heli_env") / "data" / DEFAULT_MODEL_NAME))
+
+
+@dataclass(frozen=True, eq=False)
+class EnvModel:
+    """An identified model and its disturbance traces, ready for an environment.
+
+    Attributes
+    ----------
+    params : ModelParams
+    path : Path
+        The model directory.
+    document : dict
+        The model file's JSON document.
+    ud : ndarray, shape (3, total)
+        u_d of every trace, concatenated [stick units].
+    collective : ndarray, shape (total,)
+        Recorded collective of every trace, concatenated [-1, 1].
+    starts, lengths : ndarray of int, shape (n_traces,)
+        Where each trace starts in the concatenation, and its length [samples].
+    sample_rate : float
+        Sample rate shared by all traces [Hz].
+    trace_ids : tuple of str
+        Library id of each trace.
+    sources : tuple of str
+        Source flight of each trace.
+    library_version : int
+    """
+
+    params: ModelParams
+    path: Path
+    document: dict
+    ud: np.ndarray
+    collective: np.ndarray
+    starts: np.ndarray
+    lengths: np.ndarray
+    sample_rate: float
+    trace_ids: tuple
+    sources: tuple
+    library_version: int
+
+    @property
+    def n_traces(self) -> int:
+        return int(self.starts.size)
+
+
+def load_env_model(path=None, library_version: int | None = None) -> EnvModel:
+    """Read ``model.json`` and the disturbance library of a model directory.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        Model directory (or its ``model.json``). Default: the model shipped with the package.
+    library_version : int, optional
+        Library version to replay (default the latest).
+
+    Raises
+    ------
+    EnvModelError
+        The directory, ``model.json`` or the library is missing or corrupt, or
+        the traces do not share one sample rate; the message names the file.
+    """
+    root = default_model_dir() if path is None else Path(path)
+    if root.suffix == ".json":
+        root = root.parent
+    if not root.is_dir():
+        raise EnvModelError(f"model directory {str(root)!r} does not exist (write one with 'heli identify')")
+    try:
+        params, doc = load_model(root / MODEL_FILENAME)
+    except ModelFileError as e:
+        raise EnvModelError(str(e)) from e
+    lib_dir = root / "disturbances"
+    if not lib_dir.is_dir():
+        raise EnvModelError(
+            f"{lib_dir}: no disturbance library beside {MODEL_FILENAME}; 'heli identify' writes one "
+            "(the environment replays its gusts)"
+        )
+    try:
+        library = DisturbanceLibrary.open(root)
+        version = library_version if library_version is not None else library.latest_version
+        traces = library.load(version)
+    except LibraryError as e:
+        raise EnvModelError(f"{lib_dir}: {e}") from e
+    if not traces:
+        raise EnvModelError(f"{lib_dir}: the library holds no traces")
+    rates = np.array([t.sample_rate for t in traces])
+    if np.any(np.abs(rates - rates[0]) > 1e-6 * rates[0]):
+        raise EnvModelError(f"{lib_dir}: traces must share one sample rate to be replayed, got {sorted(set(rates))} Hz")
+    lengths = np.array([t.n for t in traces], dtype=np.int64)
+    starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
+    ud = np.ascontiguousarray(np.concatenate([t.ud for t in traces], axis=1))
+    col = np.ascontiguousarray(np.concatenate([t.collective for t in traces]))
+    for a in (ud, col, starts, lengths):
+        a.setflags(write=False)
+    ids = tuple(str(t.metadata.get("id", i)) for i, t in enumerate(traces))
+    sources = tuple(str((t.metadata.get("source") or {}).get("name", "")) for t in traces)
+    return EnvModel(params, root, doc, ud, col, starts, lengths, float(rates[0]), ids, sources, int(version))

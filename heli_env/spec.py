@@ -1,0 +1,92 @@
+"""Settings and precomputed arrays shared by the single and the vector environment.
+
+:func:`build_spec` checks the constructor arguments once and precomputes what
+every step needs: the model's discrete-time step (:func:`identification.model.discrete_step`
+generated for the control period), the gust torque ``k*u_d`` of every library
+sample, and the trim sticks for every recorded collective.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from identification.model import _discrete_kernel, trim_sticks
+
+from .model_dir import EnvModel, load_env_model
+from .tasks import TaskConfig
+
+MAX_RATE = 35.0
+"""Observation bound of body rates and rate errors [rad/s]."""
+
+
+@dataclass(frozen=True, eq=False)
+class EnvSpec:
+    """Everything an environment instance needs, validated and precomputed."""
+
+    model: EnvModel
+    task: TaskConfig
+    dt: float
+    ratio: int  # trace samples per control period
+    episode_steps: int
+    needed: int  # trace samples a full episode uses
+    collective: object  # "trace" or a float
+    gust_scale: float
+    obs_noise: tuple  # (attitude [rad], rate [rad/s]) standard deviations
+    action_delay: int
+    init_angle: float
+    init_rate: float
+    dstep: object
+    torque: np.ndarray  # (3, total) k * u_d
+    trim: np.ndarray  # (3, total) trim lat, lon, ped at each recorded collective
+    col: np.ndarray  # (total,) collective applied at each library sample
+
+
+def build_spec(model=None, task="hold", reference="mixed", dt: float = 0.01, episode_seconds: float = 30.0,
+               collective="trace", gust_scale: float = 1.0, obs_noise=(0.0, 0.0), action_delay: int = 0,
+               init_angle_deg: float = 5.0, init_rate_deg: float = 5.0, library_version=None) -> EnvSpec:
+    """Validate the environment arguments (see :class:`heli_env.env.HeliAttitudeEnv`) and precompute."""
+    env_model = model if isinstance(model, EnvModel) else load_env_model(model, library_version)
+    cfg = task if isinstance(task, TaskConfig) else TaskConfig(task=task, reference=reference)
+    if not (isinstance(dt, (int, float)) and dt > 0 and math.isfinite(dt)):
+        raise ValueError(f"dt must be a positive control period in seconds, got {dt!r}")
+    ratio_f = dt * env_model.sample_rate
+    ratio = int(round(ratio_f))
+    if ratio < 1 or abs(ratio_f - ratio) > 1e-6:
+        raise ValueError(
+            f"dt={dt} s must be a whole number of the disturbance traces' sample periods "
+            f"({1.0 / env_model.sample_rate:g} s); got {ratio_f:g} periods"
+        )
+    if not (episode_seconds > 0 and math.isfinite(episode_seconds)):
+        raise ValueError(f"episode_seconds must be positive, got {episode_seconds!r}")
+    episode_steps = int(round(episode_seconds / dt))
+    if not (gust_scale >= 0 and math.isfinite(gust_scale)):
+        raise ValueError(f"gust_scale must be a non-negative number, got {gust_scale!r}")
+    noise = (float(obs_noise), float(obs_noise)) if np.ndim(obs_noise) == 0 else tuple(float(v) for v in obs_noise)
+    if len(noise) != 2 or any(not (v >= 0 and math.isfinite(v)) for v in noise):
+        raise ValueError(f"obs_noise must be a std or (attitude rad, rate rad/s) stds >= 0, got {obs_noise!r}")
+    if int(action_delay) != action_delay or action_delay < 0:
+        raise ValueError(f"action_delay must be a whole number of steps >= 0, got {action_delay!r}")
+    params = env_model.params
+    if collective == "trace":
+        col = np.asarray(env_model.collective, dtype=float)
+    else:
+        c = float(collective)
+        if not -1.0 <= c <= 1.0:
+            raise ValueError(f"collective must be 'trace' or a stick value in [-1, 1], got {collective!r}")
+        col = np.full(env_model.collective.shape, c)
+    trim = np.array(trim_sticks(params, col))
+    if not np.all(np.isfinite(trim)):
+        raise ValueError("the model has a zero control gain on some axis; it cannot be trimmed")
+    torque = params.control_gains[:, None] * env_model.ud
+    for a in (trim, torque, col):
+        a.setflags(write=False)
+    return EnvSpec(
+        model=env_model, task=cfg, dt=float(dt), ratio=ratio, episode_steps=episode_steps,
+        needed=episode_steps * ratio + 1, collective=collective if collective == "trace" else float(collective),
+        gust_scale=float(gust_scale), obs_noise=noise, action_delay=int(action_delay),
+        init_angle=math.radians(init_angle_deg), init_rate=math.radians(init_rate_deg),
+        dstep=_discrete_kernel(params, float(dt))[0], torque=torque, trim=trim, col=col,
+    )

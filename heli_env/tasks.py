@@ -1,0 +1,170 @@
+"""Tasks of the attitude environments: references, observation, reward, termination.
+
+Every draw an episode makes happens in :func:`draw_episode`, in one fixed order
+from the environment's ``np_random``, so the single and the vector environment
+draw the same episode from the same seed. The reward and observation are
+written once, with arithmetic that serves floats (single env) and arrays
+(vector env) alike.
+
+References (``task``):
+
+* ``"hold"`` — level attitude and the initial heading; reference rates zero.
+* ``"track"`` — a reference attitude that is either a staircase of random steps
+  (a new target every ``step_period`` s, roll/pitch within ±``max_angle_ref``,
+  yaw within ±``max_yaw_ref`` of the initial heading) or a smooth random path
+  (per axis a sum of two sinusoids of 0.05-0.4 Hz, same bounds), chosen per
+  episode by ``reference`` = "steps" | "smooth" | "mixed" (half and half); the
+  reference rates are its time derivative (zero between steps).
+* ``"rate"`` — reference body rates, steps or smooth as above within
+  ±``max_rate_ref``; attitude is not rewarded.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+TASKS = ("hold", "track", "rate")
+REFERENCES = ("steps", "smooth", "mixed")
+N_SINES = 2
+TWO_PI = 2.0 * math.pi
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    """What the agent is asked to do, and how it is scored.
+
+    Attributes
+    ----------
+    task : {"hold", "track", "rate"}
+    reference : {"steps", "smooth", "mixed"}
+        Reference shape for "track" and "rate".
+    step_period : float
+        Time between reference steps [s].
+    max_angle_ref : float
+        Roll and pitch reference bound [rad] (default 15°).
+    max_yaw_ref : float
+        Yaw reference bound about the initial heading [rad] (default 30°).
+    max_rate_ref : float
+        Rate reference bound for "rate" [rad/s] (default 30°/s).
+    attitude_scale, rate_scale : float
+        Errors that cost 1 per axis and step: 10° and 30°/s by default [rad, rad/s].
+    weights : tuple of 3 float
+        Weights of the attitude, rate and control-effort terms. Default
+        (1, 0.1, 0.01) for "hold"/"track", (0, 1, 0.01) for "rate".
+    max_angle : float
+        |roll| or |pitch| beyond this terminates the episode [rad] (default 60°).
+    """
+
+    task: str = "hold"
+    reference: str = "mixed"
+    step_period: float = 3.0
+    max_angle_ref: float = math.radians(15.0)
+    max_yaw_ref: float = math.radians(30.0)
+    max_rate_ref: float = math.radians(30.0)
+    attitude_scale: float = math.radians(10.0)
+    rate_scale: float = math.radians(30.0)
+    weights: tuple | None = None
+    max_angle: float = math.radians(60.0)
+
+    def __post_init__(self):
+        if self.task not in TASKS:
+            raise ValueError(f"task must be one of {TASKS}, got {self.task!r}")
+        if self.reference not in REFERENCES:
+            raise ValueError(f"reference must be one of {REFERENCES}, got {self.reference!r}")
+        for name in ("step_period", "attitude_scale", "rate_scale", "max_angle"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be positive, got {getattr(self, name)!r}")
+        if self.weights is None:
+            object.__setattr__(self, "weights", (0.0, 1.0, 0.01) if self.task == "rate" else (1.0, 0.1, 0.01))
+        if len(self.weights) != 3 or any(not w >= 0 for w in self.weights):
+            raise ValueError(f"weights must be 3 non-negative numbers (attitude, rate, effort), got {self.weights!r}")
+
+
+@dataclass
+class Episode:
+    """The draws of one episode (see :func:`draw_episode`)."""
+
+    trace: int
+    offset: int
+    angles: np.ndarray  # initial roll, pitch [rad]
+    rates: np.ndarray  # initial p, q, r [rad/s]
+    smooth: bool
+    steps: np.ndarray  # (3, n_segments) staircase values
+    amp: np.ndarray  # (3, N_SINES)
+    freq: np.ndarray  # (3, N_SINES) [rad/s]
+    phase: np.ndarray  # (3, N_SINES)
+
+
+def draw_episode(rng: np.random.Generator, cfg: TaskConfig, n_traces: int, lengths, needed: int,
+                 episode_steps: int, dt: float, init_angle: float, init_rate: float, options=None) -> Episode:
+    """Draw everything random about an episode, in a fixed order.
+
+    Parameters
+    ----------
+    rng : numpy Generator
+        The environment's ``np_random``.
+    n_traces, lengths :
+        Library size and trace lengths [samples].
+    needed : int
+        Trace samples an episode of full length uses.
+    options : dict, optional
+        ``trace`` (index) and ``offset`` (sample) pin the replayed gust.
+    """
+    options = options or {}
+    trace = int(rng.integers(n_traces))
+    if options.get("trace") is not None:
+        trace = int(options["trace"])
+        if not 0 <= trace < n_traces:
+            raise ValueError(f"options['trace'] must be a trace index in [0, {n_traces}), got {trace}")
+    room = int(lengths[trace]) - needed
+    offset = int(rng.integers(max(room, 0) + 1))
+    if options.get("offset") is not None:
+        offset = int(options["offset"])
+        if not 0 <= offset < int(lengths[trace]) - 1:
+            raise ValueError(
+                f"options['offset'] must be a sample in [0, {int(lengths[trace]) - 1}) of trace {trace}, got {offset}")
+    angles = rng.uniform(-init_angle, init_angle, 2)
+    rates = rng.uniform(-init_rate, init_rate, 3)
+    smooth = bool(rng.random() < 0.5) if cfg.reference == "mixed" else cfg.reference == "smooth"
+    n_seg = int(episode_steps * dt // cfg.step_period) + 1
+    unit_steps = rng.uniform(-1.0, 1.0, (3, n_seg))
+    unit_amp = rng.uniform(0.2, 1.0, (3, N_SINES))
+    freq = TWO_PI * rng.uniform(0.05, 0.4, (3, N_SINES))
+    phase = rng.uniform(0.0, TWO_PI, (3, N_SINES))
+    bound = reference_bounds(cfg)[:, None]
+    unit_steps[:, 0] = 0.0  # start from the current hold point, then step
+    amp = unit_amp / unit_amp.sum(axis=1, keepdims=True) * bound
+    return Episode(trace, offset, angles, rates, smooth, unit_steps * bound, amp, freq, phase)
+
+
+def reference_bounds(cfg: TaskConfig) -> np.ndarray:
+    """Bounds of the reference per axis [rad or rad/s]."""
+    if cfg.task == "rate":
+        return np.full(3, cfg.max_rate_ref)
+    return np.array([cfg.max_angle_ref, cfg.max_angle_ref, cfg.max_yaw_ref])
+
+
+def wrap(angle):
+    """Wrap an angle (float or array) to [-pi, pi] (ties to even at the boundary).
+
+    ``round`` on a float and ``numpy.round`` on an array both round half to even,
+    so the single and the vector environment wrap identically.
+    """
+    if isinstance(angle, float):
+        return angle - TWO_PI * round(angle / TWO_PI)
+    return angle - TWO_PI * np.round(angle / TWO_PI)
+
+
+def reward_from_sums(cfg: TaskConfig, att2, rate2, effort2):
+    """Reward of one step from the sums of squares of the errors and the action.
+
+    ``-(w_att * att2/attitude_scale^2 + w_rate * rate2/rate_scale^2 + w_u * effort2)``
+    with ``att2 = sum(e_att^2)`` [rad^2], ``rate2 = sum(e_rate^2)`` [(rad/s)^2] and
+    ``effort2 = sum(a^2)`` [stick^2]; floats or arrays over copies.
+    """
+    wa, wr, wu = cfg.weights
+    return -(wa / (cfg.attitude_scale * cfg.attitude_scale) * att2
+             + wr / (cfg.rate_scale * cfg.rate_scale) * rate2 + wu * effort2)
