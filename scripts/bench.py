@@ -9,6 +9,10 @@ Sections (``--only NAME`` runs one):
   all three axes. Target: <= 10 ms median (issue #2).
 * ``physics`` — the physics core: one RK4 step on the scalar path, a 300 s
   forward simulation, a batched step over 4096 states.
+* ``env`` — ``HeliAttitude-v0`` steps/s through ``gym.make`` against
+  ``Pendulum-v1`` (target ratio >= 1.0), and the native vector env's
+  env-steps/s at 4096 copies against Gymnasium's ``CartPoleVectorEnv``
+  (target ratio >= 1.0); the two of each pair are timed interleaved.
 
 Usage::
 
@@ -79,7 +83,60 @@ def bench_physics(repeats: int) -> dict:
     }
 
 
-SECTIONS = {"identification": bench_identification, "physics": bench_physics}
+def _steps_per_second(env, action, steps: int, blocks: int, vector: bool = False) -> float:
+    """Median over ``blocks`` of steps per second, resetting when an episode ends."""
+    rates = []
+    for _ in range(blocks):
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            _, _, term, trunc, _ = env.step(action)
+            if not vector and (term or trunc):
+                env.reset()
+        rates.append(steps / (time.perf_counter() - t0))
+    return statistics.median(rates)
+
+
+def bench_env(repeats: int) -> dict:
+    import gymnasium as gym
+    from gymnasium.envs.classic_control.cartpole import CartPoleVectorEnv
+
+    import heli_env  # noqa: F401  (registers HeliAttitude-v0)
+
+    out = {}
+    heli = gym.make("HeliAttitude-v0")
+    pend = gym.make("Pendulum-v1")
+    heli.reset(seed=0)
+    pend.reset(seed=0)
+    a_h = np.zeros(3, dtype=np.float32)
+    a_p = np.zeros(1, dtype=np.float32)
+    # interleave the two so that machine noise hits both alike
+    h_rates, p_rates = [], []
+    for _ in range(max(5, repeats // 3)):
+        h_rates.append(_steps_per_second(heli, a_h, 2000, 1))
+        p_rates.append(_steps_per_second(pend, a_p, 2000, 1))
+    h, p = statistics.median(h_rates), statistics.median(p_rates)
+    out["single env steps/s, HeliAttitude-v0 via gym.make"] = h
+    out["single env steps/s, Pendulum-v1 via gym.make"] = p
+    out["single env ratio heli / Pendulum (target >= 1.0)"] = h / p
+    n = 4096
+    venv = gym.make_vec("HeliAttitude-v0", num_envs=n, vectorization_mode="vector_entry_point")
+    cart = CartPoleVectorEnv(num_envs=n)
+    venv.reset(seed=0)
+    cart.reset(seed=0)
+    a_v = np.zeros((n, 3), dtype=np.float32)
+    a_c = np.zeros(n, dtype=np.int64)
+    v_rates, c_rates = [], []
+    for _ in range(max(5, repeats // 3)):
+        v_rates.append(n * _steps_per_second(venv, a_v, 100, 1, vector=True))
+        c_rates.append(n * _steps_per_second(cart, a_c, 100, 1, vector=True))
+    v, c = statistics.median(v_rates), statistics.median(c_rates)
+    out[f"vector env-steps/s at {n} envs, HeliAttitude-v0 native vector env"] = v
+    out[f"vector env-steps/s at {n} envs, CartPoleVectorEnv"] = c
+    out["vector ratio heli / CartPole (target >= 1.0)"] = v / c
+    return out
+
+
+SECTIONS = {"identification": bench_identification, "physics": bench_physics, "env": bench_env}
 
 
 def main(argv=None):
