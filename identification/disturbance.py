@@ -91,7 +91,7 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage, stats
 
-from .disturbance_library import jsonable
+from .files import jsonable
 from .errors import DisturbanceError
 from .flight import Flight
 from .integral_method import pade_filter

@@ -84,7 +84,7 @@ from types import MappingProxyType
 import numpy as np
 
 from .errors import LibraryError
-from .files import atomic_path, sha256_of, write_text
+from .files import atomic_path, jsonable, sha256_of, write_text
 from .terms import AXES
 
 LIBRARY_DIRNAME = "disturbances"
@@ -234,21 +234,6 @@ class Trace:
 
 def _sample_rate(time: np.ndarray) -> float:
     return float(1.0 / np.median(np.diff(time)))
-
-
-def jsonable(obj):
-    """``obj`` with numpy scalars and arrays as plain Python values, non-finite floats as None."""
-    if isinstance(obj, Mapping):
-        return {str(k): jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple, np.ndarray)):
-        return [jsonable(v) for v in obj]
-    if isinstance(obj, (bool, np.bool_)):
-        return bool(obj)
-    if isinstance(obj, (int, np.integer)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        return float(obj) if np.isfinite(obj) else None
-    return obj
 
 
 def _statistics(trace: Trace) -> dict:

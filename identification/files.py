@@ -71,6 +71,31 @@ def save_figure(fig, path, **kwargs) -> Path:
     return path
 
 
+def jsonable(obj):
+    """``obj`` ready for :func:`json.dumps` with ``allow_nan=False``.
+
+    Mappings become dicts with string keys, sequences and arrays lists, numpy
+    scalars plain Python numbers, and non-finite floats (an undefined standard
+    error, say) ``None``: JSON has no NaN.
+    """
+    import math
+    from collections.abc import Mapping
+
+    import numpy as np
+
+    if isinstance(obj, Mapping):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, np.ndarray)):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if math.isfinite(obj) else None
+    return obj
+
+
 def sha256_of(path) -> str:
     """Hex SHA-256 of a file's bytes."""
     h = hashlib.sha256()

@@ -67,7 +67,7 @@ from .baselines import (
 )
 from .baselines.single_axis import axis_index, make_params
 from .errors import FlightLogError, IdentifiabilityError
-from .files import write_text
+from .files import jsonable, write_text
 from .flight import Flight
 from .integral_method import IntegralIdentifier
 from .model import ModelParams
@@ -160,7 +160,7 @@ class MethodRun:
 
     def to_dict(self) -> dict:
         return {
-            "method": self.method, "label": self.label, "settings": _jsonable(self.settings),
+            "method": self.method, "label": self.label, "settings": jsonable(self.settings),
             "params": dict(self.params), "mae_deg_s": self.mae, "p90_deg_s": self.p90,
             "cpu_time_s": self.cpu_time, "wall_time_s": self.wall_time, "repeats": self.repeats,
             "cpu_times_s": list(self.cpu_times), "wall_times_s": list(self.wall_times),
@@ -307,7 +307,7 @@ class MethodComparison:
     # ---------------------------------------------------------- serialisation
     def to_dict(self) -> dict:
         """JSON-ready dictionary (non-finite floats become ``None``); inverse of :meth:`from_dict`."""
-        return _jsonable({
+        return jsonable({
             "schema": SCHEMA,
             "axis": self.axis,
             "param_names": list(self.param_names),
@@ -791,20 +791,6 @@ def _verdict(mae_integral, mae_nlr, ratio, change, faster, accurate, met, speedu
         why.append(f"integral MAE {change:+.1f} % against NLR")
     return (f"MAE integral {mae_integral:.4f} vs NLR {mae_nlr:.4f} deg/s, ratio integral/NLR {ratio:.3f} "
             f"({change:+.1f} %): **{'met' if met else 'NOT met'}**" + (f" ({'; '.join(why)})" if why else "") + ".")
-
-
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, (bool, np.bool_)):
-        return bool(obj)
-    if isinstance(obj, (int, np.integer)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        return float(obj) if math.isfinite(obj) else None
-    return obj
 
 
 def _fmt(v) -> str:

@@ -29,7 +29,7 @@ import json
 from pathlib import Path
 
 from .errors import ModelFileError
-from .files import write_bytes, write_text
+from .files import jsonable, write_bytes, write_text
 from .model import ModelParams
 from .terms import AXES, BASE_PARAMS, EXTRA_PARAMS, TERMS
 
@@ -90,37 +90,12 @@ def save_model(path, params: ModelParams, **kwargs) -> Path:
         backup = path.parent / "history" / f"{path.stem}-{digest}.json"
         if not backup.exists():
             write_bytes(backup, old)
-    doc = _finite(model_document(params, **kwargs))
-    write_text(path, json.dumps(doc, indent=2, allow_nan=False, default=_jsonable) + "\n")
+    doc = jsonable(model_document(params, **kwargs))
+    write_text(path, json.dumps(doc, indent=2, allow_nan=False, default=_unstorable) + "\n")
     return path
 
 
-def _finite(obj):
-    """Replace non-finite floats (an undefined standard error, say) by None: JSON has no NaN."""
-    import math
-
-    import numpy as np
-
-    if isinstance(obj, np.ndarray):  # before the float test: numpy NaNs must become None too
-        obj = obj.tolist()
-    elif isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
-
-
-def _jsonable(obj):
-    import numpy as np
-
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
+def _unstorable(obj):
     raise TypeError(f"cannot store {type(obj).__name__} in model.json")
 
 

@@ -27,7 +27,7 @@ import numpy as np
 
 from .attitude import detrend_piecewise
 from .errors import MissingDependency
-from .files import save_figure
+from .files import jsonable, save_figure
 from .flight import Flight
 from .model import ModelParams, QUAT, euler_from_quaternion, initial_state, simulate
 from .terms import AXES
@@ -200,21 +200,6 @@ def attitude_error_stats(time, measured_att, modelled_att, period: float = DETRE
 
 
 # ---------------------------------------------------------------- the result
-def _json_float(v):
-    v = float(v)
-    return v if math.isfinite(v) else None
-
-
-def _json(obj):
-    if isinstance(obj, Mapping):
-        return {str(k): _json(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_json(v) for v in obj]
-    if isinstance(obj, (float, int, np.floating, np.integer)) and not isinstance(obj, bool):
-        return _json_float(obj)
-    return obj
-
-
 def _md_cell(text: str) -> str:
     return str(text).replace("|", "\\|")
 
@@ -278,7 +263,7 @@ class ValidationResult:
         ``n_samples``, ``duration_s``, ``detrend_period_s``, ``rate_stats``,
         ``attitude_stats`` and ``between``.
         """
-        return _json({
+        return jsonable({
             "models": self.labels,
             "n_samples": int(np.size(self.time)),
             "duration_s": float(self.time[-1] - self.time[0]),
