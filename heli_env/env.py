@@ -44,15 +44,27 @@ class HeliAttitudeEnv(gym.Env):
     ``k*u_d`` is applied sample by sample. With no ``model`` argument the
     environment uses the model shipped with the package, which heli-env
     identified itself from synthetic flights of its truth model
-    (``heli_env/data/README.md``).
+    (``scripts/build_default_model.py``; its report is ``heli_env/data/default/report.md``).
 
     The control period is ``dt`` (default 0.01 s). Each period is integrated
     exactly for the model's linear part under a zero-order hold of the action
     (:func:`identification.model.discrete_step`); products of rates are held
-    over the period and the attitude turns by the mean rate. Against RK4 with
-    20 sub-steps the rate error is below 1e-14 rad/s for the paper's decoupled
-    model and below 5e-4 rad/s with every coupling term on (30 s of
-    excitation); the attitude drifts by less than 0.006° in 30 s.
+    over the period and the attitude turns by the mean rate. Largest error
+    against RK4 with 20 sub-steps (:func:`identification.model.step`) over 30 s
+    of random sticks (σ 0.4) in replayed gusts, worst of four episodes
+    (``tests/test_env.py`` checks the first three rows):
+
+    | model | rate error | attitude error |
+    |---|---|---|
+    | decoupled (eqs. 18, 21; the shipped model) | < 1e-13 rad/s (rounding) | < 0.002° |
+    | with the coupling terms k1, k4, k5, k8, k9 | < 5e-4 rad/s | < 0.005° |
+    | with servo delay (eq. 31) | < 1e-9 rad/s | < 0.015° |
+    | with nonlinear damping (p·abs(p) terms) | < 2e-3 rad/s | < 0.05° |
+    | every catalogue term and the servo delay at once | < 0.05 rad/s | < 0.2° |
+
+    Held products are first order in ``dt`` (the last row is dominated by the
+    collective-scheduled gain acting on the delayed servo state), and ``dt`` is a
+    whole number of the traces' sample periods.
 
     ## Action Space
 
@@ -80,7 +92,8 @@ class HeliAttitudeEnv(gym.Env):
     | 6-8 | rate error: reference rate − (p, q, r) | rad/s | ±35 (clipped) |
     | 9-11 | previous action (lat, lon, ped) | stick | ±1 |
 
-    With ``obs_noise`` the measured attitude and rates carry white Gaussian noise.
+    With ``obs_noise`` the measured attitude and rates carry white Gaussian noise
+    (drawn from ``np_random``); the reward, termination and ``info`` use the true state.
 
     ## Rewards
 
@@ -96,7 +109,9 @@ class HeliAttitudeEnv(gym.Env):
     ## Episode End
 
     * Termination: |roll| or |pitch| beyond 60° (``TaskConfig.max_angle``), or a non-finite state.
-    * Truncation: ``episode_seconds`` elapsed (default 30 s), or the disturbance trace ran out.
+    * Truncation: ``episode_seconds`` elapsed (default 30 s), or the replay reached the
+      last sample of its disturbance trace. Stepping on after that raises
+      :class:`gymnasium.error.ResetNeeded` (there is no gust left to replay).
 
     ## Arguments
 
@@ -156,14 +171,15 @@ class HeliAttitudeEnv(gym.Env):
         super().reset(seed=seed)
         s = self.spec_
         options = dict(options or {})
+        gust = s.gust_scale if options.get("gust_scale") is None else float(options["gust_scale"])
+        if options.get("gusts") is False:
+            gust = 0.0
+        if not (gust >= 0 and math.isfinite(gust)):
+            raise ValueError(f"options['gust_scale'] must be a non-negative number, got {gust!r}")
         ep = draw_episode(self.np_random, s.task, s.model.n_traces, s.model.lengths, s.needed, s.episode_steps,
                           s.dt, s.init_angle, s.init_rate, options)
         self._episode = ep
-        self._gust = s.gust_scale if options.get("gust_scale") is None else float(options["gust_scale"])
-        if options.get("gusts") is False:
-            self._gust = 0.0
-        if not (self._gust >= 0 and math.isfinite(self._gust)):
-            raise ValueError(f"options['gust_scale'] must be a non-negative number, got {self._gust!r}")
+        self._gust = gust
         self._base = int(s.model.starts[ep.trace]) + ep.offset
         self._end = int(s.model.starts[ep.trace] + s.model.lengths[ep.trace])  # exclusive
         self._k = 0
@@ -176,7 +192,9 @@ class HeliAttitudeEnv(gym.Env):
                      s.col[window].tolist(), (g * s.torque[0, window]).tolist(), (g * s.torque[1, window]).tolist(),
                      (g * s.torque[2, window]).tolist(), (g * s.model.ud[0, window]).tolist(),
                      (g * s.model.ud[1, window]).tolist(), (g * s.model.ud[2, window]).tolist())
-        self._last = len(self._seq[0]) - 1  # the last step index with a gust sample
+        # Steps the episode can take: the time limit, or until the replay reaches the trace's last sample
+        # (a trace of n samples spans n - 1 periods; at least one step).
+        self._steps = min(s.episode_steps, max(len(self._seq[0]) - 1, 1))
         trim = s.trim[:, self._base]
         quat = quaternion_from_euler(ep.angles[0], ep.angles[1], 0.0)
         self._x = (float(ep.rates[0]), float(ep.rates[1]), float(ep.rates[2]),
@@ -192,6 +210,9 @@ class HeliAttitudeEnv(gym.Env):
     def step(self, action):
         if self._x is None:
             raise ResetNeeded("call reset() before step()")
+        if self._k >= self._steps:
+            raise ResetNeeded(f"the episode is over: t = {self._k * self.spec_.dt:g} s reached the time limit or the "
+                              "end of the disturbance trace; call reset() before step()")
         s = self.spec_
         if isinstance(action, np.ndarray) and action.shape == (3,):
             a0, a1, a2 = action.tolist()
@@ -222,7 +243,7 @@ class HeliAttitudeEnv(gym.Env):
         x = self._x
         terminated = not (abs(self._att[0]) <= s.task.max_angle and abs(self._att[1]) <= s.task.max_angle
                           and math.isfinite(x[0]) and math.isfinite(x[1]) and math.isfinite(x[2]))
-        truncated = (not terminated) and (self._k >= s.episode_steps or self._k > self._last)
+        truncated = (not terminated) and self._k >= self._steps
         if self.render_mode == "human":
             self.render()
         return obs, r, terminated, truncated, info
@@ -252,27 +273,24 @@ class HeliAttitudeEnv(gym.Env):
         psi = math.atan2(2.0 * (q0 * q3 + q1 * q2), 1.0 - 2.0 * (q2 * q2 + q3 * q3))
         self._att = (phi, theta, psi)
         p, q, r = x[0], x[1], x[2]
-        if s.obs_noise[0] or s.obs_noise[1]:
-            n = self.np_random.normal(0.0, 1.0, 6)
-            phi, theta, psi = phi + s.obs_noise[0] * n[0], theta + s.obs_noise[0] * n[1], psi + s.obs_noise[0] * n[2]
-            p, q, r = p + s.obs_noise[1] * n[3], q + s.obs_noise[1] * n[4], r + s.obs_noise[1] * n[5]
         t = self._k * s.dt
         ref_att, ref_rate = self._reference(t)
-        if s.task.task == "rate":
-            e_att = (0.0, 0.0, 0.0)
-            shown = (-phi, -theta, -psi)  # atan2/asin give [-pi, pi]: wrapping would change nothing
-        elif s.task.task == "hold":
-            e_att = shown = (-phi, -theta, -psi)
-        else:
-            e_att = (wrap(ref_att[0] - phi), wrap(ref_att[1] - theta), wrap(ref_att[2] - psi))
-            shown = e_att
-        e_rate = (ref_rate[0] - p, ref_rate[1] - q, ref_rate[2] - r)
-        self._errors = (e_att, e_rate)
+        # Reward, termination and info score the true state; only the observation is measured.
+        shown, e_rate = self._error_terms(ref_att, ref_rate, phi, theta, psi, p, q, r)
+        self._errors = ((0.0, 0.0, 0.0) if s.task.task == "rate" else shown, e_rate)
+        m_shown, m_rate, mp, mq, mr = shown, e_rate, p, q, r
+        if s.obs_noise[0] or s.obs_noise[1]:
+            n = self.np_random.normal(0.0, 1.0, 6)
+            na, nr = s.obs_noise
+            mp, mq, mr = p + nr * n[3], q + nr * n[4], r + nr * n[5]
+            m_shown, m_rate = self._error_terms(ref_att, ref_rate, phi + na * n[0], theta + na * n[1],
+                                                psi + na * n[2], mp, mq, mr)
+            m_shown = (wrap(m_shown[0]), wrap(m_shown[1]), wrap(m_shown[2]))  # noise may cross +-pi
         a = self._prev
         lim = MAX_RATE
-        obs = np.array([shown[0], shown[1], shown[2], min(lim, max(-lim, p)), min(lim, max(-lim, q)),
-                        min(lim, max(-lim, r)), min(lim, max(-lim, e_rate[0])), min(lim, max(-lim, e_rate[1])),
-                        min(lim, max(-lim, e_rate[2])), a[0], a[1], a[2]], dtype=np.float32)
+        obs = np.array([m_shown[0], m_shown[1], m_shown[2], min(lim, max(-lim, mp)), min(lim, max(-lim, mq)),
+                        min(lim, max(-lim, mr)), min(lim, max(-lim, m_rate[0])), min(lim, max(-lim, m_rate[1])),
+                        min(lim, max(-lim, m_rate[2])), a[0], a[1], a[2]], dtype=np.float32)
         j = max(self._k - 1, 0)  # the gust of the step just taken (at reset: the one about to act)
         seq = self._seq
         buf = np.array([seq[7][j], seq[8][j], seq[9][j], math.degrees(shown[0]), math.degrees(shown[1]),
@@ -283,6 +301,14 @@ class HeliAttitudeEnv(gym.Env):
         if self._history is not None:
             self._history.append((t, self._att, ref_att, ref_rate, (p, q, r), tuple(buf[0:3].tolist()), self._prev))
         return obs, info
+
+    def _error_terms(self, ref_att, ref_rate, phi, theta, psi, p, q, r):
+        """Attitude error as observed (reference - attitude, wrapped; -attitude for "hold"/"rate") and rate error."""
+        if self.spec_.task.task == "track":
+            shown = (wrap(ref_att[0] - phi), wrap(ref_att[1] - theta), wrap(ref_att[2] - psi))
+        else:  # atan2/asin give [-pi, pi]: wrapping would change nothing
+            shown = (-phi, -theta, -psi)
+        return shown, (ref_rate[0] - p, ref_rate[1] - q, ref_rate[2] - r)
 
     # ---------------------------------------------------------------- render
     def render(self):

@@ -25,7 +25,11 @@ DEFAULT_MODEL_NAME = "default"
 
 
 def default_model_dir() -> Path:
-    """The model directory that ships with the package (see ``heli_env/data/README.md``)."""
+    """The model directory that ships with the package.
+
+    heli-env identified it itself from three synthetic flights of its truth model
+    (``scripts/build_default_model.py``); ``report.md`` beside ``model.json`` tells how.
+    """
     return Path(str(resources.files("heli_env") / "data" / DEFAULT_MODEL_NAME))
 
 

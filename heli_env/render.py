@@ -62,7 +62,7 @@ class Renderer:
         ax = self.ax_a
         ax.clear()
         colors = ("tab:blue", "tab:orange", "tab:green")
-        names = ("roll", "pitch", "yaw")
+        names = ("p (roll)", "q (pitch)", "r (yaw)") if self.task == "rate" else ("roll", "pitch", "yaw")
         if self.task == "rate":
             meas = np.degrees([h[4] for h in recent])
             refs = np.degrees([h[3] for h in recent])
@@ -105,23 +105,28 @@ class Renderer:
         ax.set_aspect("equal")
         ax.axis("off")
         phi, theta, psi = att
+        # As seen from the cockpit: the horizon turns against the aircraft, so a right roll (phi > 0)
+        # turns it anticlockwise (more ground on the right), and nose up (theta > 0) lowers it.
         shift = -theta / math.radians(45.0)  # 45° of pitch fills the dial
-        c, s = math.cos(-phi), math.sin(-phi)
+        c, s = math.cos(phi), math.sin(phi)
         xs = np.array([-3.0, 3.0, 3.0, -3.0])
         ys = np.array([0.0, 0.0, -3.0, -3.0]) + shift
         ax.add_patch(Circle((0, 0), 1.0, color="#87b6e6", zorder=0))
         ground = ax.fill(c * xs - s * ys, s * xs + c * ys, color="#a0744d", zorder=1)[0]
         clip = Circle((0, 0), 1.0, transform=ax.transData)
         ground.set_clip_path(clip)
-        rphi, rtheta = ref_att[0], ref_att[1]
-        rc, rs = math.cos(-rphi), math.sin(-rphi)
-        rshift = -rtheta / math.radians(45.0)
-        line = ax.plot([-rc, rc], [-rs + rshift, rs + rshift], "w--", lw=1.5, zorder=3)[0]
-        line.set_clip_path(clip)
+        heading = f"heading {math.degrees(psi):+.1f}°"
+        if self.task != "rate":  # the rate task has no reference attitude
+            rphi, rtheta = ref_att[0], ref_att[1]
+            rc, rs = math.cos(rphi), math.sin(rphi)
+            rshift = -rtheta / math.radians(45.0)  # the reference horizon, rotated about the dial centre
+            line = ax.plot([-rc - rs * rshift, rc - rs * rshift], [-rs + rc * rshift, rs + rc * rshift], "w--",
+                           lw=1.5, zorder=3)[0]
+            line.set_clip_path(clip)
+            heading += f" (ref {math.degrees(ref_att[2]):+.1f}°)"
         ax.plot([-0.5, -0.15, 0.0, 0.15, 0.5], [0, 0, -0.08, 0, 0], color="yellow", lw=3, zorder=4)
         ax.add_patch(Circle((0, 0), 1.0, fill=False, lw=2, zorder=5))
-        ax.set_title(f"roll {math.degrees(phi):+.1f}°  pitch {math.degrees(theta):+.1f}°\n"
-                     f"heading {math.degrees(psi):+.1f}° (ref {math.degrees(ref_att[2]):+.1f}°)", fontsize=8)
+        ax.set_title(f"roll {math.degrees(phi):+.1f}°  pitch {math.degrees(theta):+.1f}°\n{heading}", fontsize=8)
 
     def close(self):
         if self.plt is not None:

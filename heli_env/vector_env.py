@@ -68,6 +68,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._k = np.zeros(n, dtype=np.int64)
         self._base = np.zeros(n, dtype=np.int64)
         self._last = np.zeros(n, dtype=np.int64)
+        self._nsteps = np.zeros(n, dtype=np.int64)
         self._gust = np.zeros(n)
         self._trace = np.zeros(n, dtype=np.int64)
         self._prev = np.zeros((3, n))
@@ -132,6 +133,8 @@ class HeliAttitudeVectorEnv(VectorEnv):
             stop = min(end, base + s.needed)
             self._base[i] = base
             self._last[i] = len(range(base, stop, s.ratio)) - 1
+            # as the single env: the time limit, or until the replay reaches the trace's last sample
+            self._nsteps[i] = min(s.episode_steps, max(int(self._last[i]), 1))
             self._k[i] = 0
             self._trace[i] = ep.trace
             self._gust[i] = gust_default
@@ -191,7 +194,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
         x = self._x
         terminated = ~((np.abs(phi) <= lim) & (np.abs(theta) <= lim)
                        & np.isfinite(x[0]) & np.isfinite(x[1]) & np.isfinite(x[2]))
-        truncated = ~terminated & ((self._k >= s.episode_steps) | (self._k > self._last))
+        truncated = ~terminated & (self._k >= self._nsteps)
         if restart.any():
             rew = np.where(restart, 0.0, rew)
             terminated &= ~restart
@@ -216,6 +219,15 @@ class HeliAttitudeVectorEnv(VectorEnv):
             return None, val
         return val, der
 
+    def _error_terms(self, ref_att, ref_rate, phi, theta, psi, p, q, r):
+        """Attitude error as observed (reference - attitude, wrapped; -attitude for "hold"/"rate"), rate error."""
+        if ref_att is None:  # atan2/asin give [-pi, pi]: wrapping would change nothing
+            shown = (-phi, -theta, -psi)
+        else:
+            shown = (wrap(ref_att[0] - phi), wrap(ref_att[1] - theta), wrap(ref_att[2] - psi))
+        e_rate = (-p, -q, -r) if ref_rate is None else (ref_rate[0] - p, ref_rate[1] - q, ref_rate[2] - r)
+        return shown, e_rate
+
     def _observe(self):
         s = self.spec_
         x = self._x
@@ -225,24 +237,24 @@ class HeliAttitudeVectorEnv(VectorEnv):
         psi = np.arctan2(2.0 * (q0 * q3 + q1 * q2), 1.0 - 2.0 * (q2 * q2 + q3 * q3))
         self._att = (phi, theta, psi)
         p, q, r = x[0], x[1], x[2]
-        if s.obs_noise[0] or s.obs_noise[1]:
-            noise = np.stack([rng.normal(0.0, 1.0, 6) for rng in self._rngs], axis=1)
-            phi, theta, psi = (phi + s.obs_noise[0] * noise[0], theta + s.obs_noise[0] * noise[1],
-                               psi + s.obs_noise[0] * noise[2])
-            p, q, r = p + s.obs_noise[1] * noise[3], q + s.obs_noise[1] * noise[4], r + s.obs_noise[1] * noise[5]
         t = self._k * s.dt
         ref_att, ref_rate = self._reference(t)
-        if ref_att is None:
-            shown = (-phi, -theta, -psi)  # atan2/asin give [-pi, pi]: wrapping would change nothing
-        else:
-            shown = (wrap(ref_att[0] - phi), wrap(ref_att[1] - theta), wrap(ref_att[2] - psi))
-        e_rate = (-p, -q, -r) if ref_rate is None else (ref_rate[0] - p, ref_rate[1] - q, ref_rate[2] - r)
+        # Reward, termination and info score the true state; only the observation is measured.
         a = self._prev
-        rows = np.stack([shown[0], shown[1], shown[2], p, q, r, e_rate[0], e_rate[1], e_rate[2], a[0], a[1], a[2]])
+        shown, e_rate = self._error_terms(ref_att, ref_rate, phi, theta, psi, p, q, r)
+        rows = np.stack([*shown, p, q, r, *e_rate, a[0], a[1], a[2]])
         self._sums = (0.0 if s.task.task == "rate" else np.einsum("ij,ij->j", rows[0:3], rows[0:3]),
                       np.einsum("ij,ij->j", rows[6:9], rows[6:9]), np.einsum("ij,ij->j", rows[9:12], rows[9:12]))
         deg_att = rows[0:3] * _RAD2DEG
         deg_rate = rows[6:9] * _RAD2DEG
+        if s.obs_noise[0] or s.obs_noise[1]:
+            noise = np.stack([rng.normal(0.0, 1.0, 6) for rng in self._rngs], axis=1)
+            na, nr = s.obs_noise
+            mp, mq, mr = p + nr * noise[3], q + nr * noise[4], r + nr * noise[5]
+            shown, e_rate = self._error_terms(ref_att, ref_rate, phi + na * noise[0], theta + na * noise[1],
+                                              psi + na * noise[2], mp, mq, mr)
+            rows = np.stack([*shown, mp, mq, mr, *e_rate, a[0], a[1], a[2]])
+            rows[0:3] = wrap(rows[0:3])  # noise may cross +-pi
         np.clip(rows[3:9], -MAX_RATE, MAX_RATE, out=rows[3:9])
         obs = rows.T.astype(np.float32)
         ud = self._ud

@@ -1,0 +1,238 @@
+"""Tests of the native vector environment (:class:`heli_env.vector_env.HeliAttitudeVectorEnv`).
+
+The central test runs ``num_envs`` single environments seeded ``seed + i``
+beside one vector environment seeded ``seed`` under the same actions, through
+terminations, truncations and autoresets, and requires the same state bit for
+bit and the same observations, rewards and infos.
+"""
+
+from __future__ import annotations
+
+import gymnasium
+import numpy as np
+import pytest
+from gymnasium.error import ResetNeeded
+from gymnasium.vector import AutoresetMode
+from gymnasium.vector.utils import batch_space
+from numpy.testing import assert_allclose
+
+import heli_env  # noqa: F401  (registers HeliAttitude-v0)
+from heli_env import ActionError, HeliAttitudeEnv
+from heli_env.vector_env import HeliAttitudeVectorEnv
+
+ENV_ID = "HeliAttitude-v0"
+INFO_KEYS = ("time", "disturbance", "attitude_error_deg", "rate_error_deg_s", "trace")
+
+
+def _actions(n_steps, n, seed=0):
+    """Random actions, some beyond [-1, 1]; copy 0 holds full right stick (it terminates), copy 1 full left."""
+    a = np.random.default_rng(seed).uniform(-1.3, 1.3, (n_steps, n, 3)).astype(np.float32)
+    a[:, 0] = (1.0, 0.0, 0.0)
+    a[:, 1] = (-1.0, 0.3, 0.0)
+    return a
+
+
+def _run_side_by_side(kwargs, n=4, n_steps=600, seed=100, options=None):
+    """Step a vector env and n single envs with the same actions; check they agree; return event counts."""
+    venv = HeliAttitudeVectorEnv(n, **kwargs)
+    envs = [HeliAttitudeEnv(**kwargs) for _ in range(n)]
+    vobs, vinfo = venv.reset(seed=seed, options=options)
+    singles = [env.reset(seed=seed + i, options=options) for i, env in enumerate(envs)]
+    _check_same(venv, envs, vobs, vinfo, [o for o, _ in singles], [i for _, i in singles])
+    done = [False] * n
+    counts = {"terminated": 0, "truncated": 0, "autoreset": 0}
+    for actions in _actions(n_steps, n):
+        vobs, vrew, vterm, vtrunc, vinfo = venv.step(actions)
+        obs, infos = [], []
+        for i, env in enumerate(envs):
+            if done[i]:  # NEXT_STEP autoreset: this step resets the copy, reward 0, not done
+                o, info = env.reset()
+                r, te, tr = 0.0, False, False
+                counts["autoreset"] += 1
+            else:
+                o, r, te, tr, info = env.step(actions[i])
+            done[i] = te or tr
+            counts["terminated"] += te
+            counts["truncated"] += tr
+            assert vterm[i] == te and vtrunc[i] == tr
+            assert_allclose(vrew[i], r, rtol=1e-12, atol=1e-12)
+            obs.append(o)
+            infos.append(info)
+        _check_same(venv, envs, vobs, vinfo, obs, infos)
+    return counts
+
+
+def _check_same(venv, envs, vobs, vinfo, obs, infos):
+    x = np.array(venv._x)
+    for i, env in enumerate(envs):
+        assert np.array_equal(np.array(env._x), x[:, i]), f"state of copy {i}"
+        assert_allclose(vobs[i], obs[i], rtol=1e-12, atol=1e-12)
+        for key in INFO_KEYS:
+            assert_allclose(vinfo[key][i], infos[i][key], rtol=1e-12, atol=1e-12, err_msg=key)
+            assert vinfo[f"_{key}"][i]
+
+
+@pytest.mark.parametrize("task", ["hold", "track", "rate"])
+def test_vector_env_reproduces_single_envs_across_autoresets(task):
+    counts = _run_side_by_side({"task": task, "episode_seconds": 2.5})
+    assert counts["terminated"] >= 1 and counts["truncated"] >= 2
+    ends = counts["terminated"] + counts["truncated"]
+    assert ends - 4 <= counts["autoreset"] <= ends  # every episode end but those on the last step
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"task": "track", "reference": "smooth", "obs_noise": (0.01, 0.03), "action_delay": 2},
+        {"task": "rate", "dt": 0.02, "gust_scale": 2.0, "collective": 0.1},
+        {"task": "hold", "init_angle_deg": 0.0, "init_rate_deg": 0.0},
+    ],
+    ids=["noise-delay", "dt-gust-collective", "level"],
+)
+def test_vector_env_reproduces_single_envs_with_other_settings(kwargs):
+    counts = _run_side_by_side({**kwargs, "episode_seconds": 2.0}, n=3, n_steps=300, seed=7)
+    assert counts["autoreset"] >= 1
+
+
+def test_vector_env_reproduces_pinned_traces_running_out():
+    """A pinned offset near the end of a trace: each copy truncates where a single env does."""
+    length = int(HeliAttitudeEnv().model.lengths[2])
+    counts = _run_side_by_side({"task": "hold"}, n=3, n_steps=60, options={"trace": 2, "offset": length - 21})
+    assert counts["truncated"] >= 2
+
+
+def test_autoreset_is_next_step():
+    venv = HeliAttitudeVectorEnv(2, episode_seconds=0.05)
+    assert venv.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP
+    venv.reset(seed=0)
+    zero = np.zeros((2, 3), np.float32)
+    for _ in range(4):
+        _, rew, term, trunc, _ = venv.step(zero)
+        assert not (term.any() or trunc.any())
+    obs, rew, term, trunc, info = venv.step(zero)
+    assert trunc.all() and not term.any()
+    assert np.all(rew != 0.0)
+    obs, rew, term, trunc, info = venv.step(np.ones((2, 3), np.float32))  # ignored: the copies reset
+    assert np.all(rew == 0.0) and not (term.any() or trunc.any())
+    assert np.all(info["time"] == 0.0)
+    assert np.all(obs[:, 9:12] == 0.0)  # no previous action after a reset
+    single = HeliAttitudeEnv(episode_seconds=0.05)
+    single.reset(seed=0)
+    for _ in range(5):
+        single.step(np.zeros(3, np.float32))
+    assert np.array_equal(obs[0], single.reset()[0])  # the reset observation of copy 0's next episode
+
+
+def test_reset_mask_resets_only_the_masked_copies():
+    venv = HeliAttitudeVectorEnv(4)
+    venv.reset(seed=0)
+    for _ in range(30):
+        venv.step(np.full((4, 3), 0.2, np.float32))
+    x_before = np.array(venv._x)
+    mask = np.array([True, False, True, False])
+    obs, info = venv.reset(options={"reset_mask": mask})
+    x_after = np.array(venv._x)
+    assert np.array_equal(x_after[:, ~mask], x_before[:, ~mask])
+    assert not np.any(np.all(x_after[:, mask] == x_before[:, mask], axis=0))
+    assert_allclose(info["time"], [0.0, 0.3, 0.0, 0.3])
+    assert np.all(obs[mask, 9:12] == 0.0) and np.all(obs[~mask, 9:12] == np.float32(0.2))
+    # the reset copies carry on their own random streams: copy 2 now runs the episode after its first
+    single = HeliAttitudeEnv()
+    single.reset(seed=2)
+    single.reset()
+    assert np.array_equal(np.array(single._x), x_after[:, 2])
+
+
+def test_reset_mask_errors():
+    venv = HeliAttitudeVectorEnv(3)
+    with pytest.raises(ResetNeeded, match="first reset must reset every copy"):
+        venv.reset(seed=0, options={"reset_mask": np.array([True, False, True])})
+    venv.reset(seed=0)
+    with pytest.raises(ValueError, match=r"reset_mask must have shape \(3,\)"):
+        venv.reset(options={"reset_mask": np.array([True, False])})
+
+
+def test_seed_list_and_options_apply_per_reset():
+    venv = HeliAttitudeVectorEnv(3)
+    _, info = venv.reset(seed=[5, 6, 7], options={"trace": 1, "gusts": False})
+    assert np.all(info["trace"] == 1)
+    assert np.all(info["disturbance"] == 0.0)
+    same = HeliAttitudeVectorEnv(3)
+    same.reset(seed=5, options={"trace": 1, "gusts": False})
+    assert np.array_equal(np.array(venv._x), np.array(same._x))
+    with pytest.raises(ValueError, match="seed must be an int or 3 seeds"):
+        venv.reset(seed=[1, 2])
+    with pytest.raises(ValueError, match=r"options\['trace'\] must be a trace index"):
+        venv.reset(seed=0, options={"trace": 5})
+    with pytest.raises(ValueError, match=r"options\['gust_scale'\] must be a non-negative number"):
+        venv.reset(seed=0, options={"gust_scale": -1.0})
+
+
+def test_spaces_are_batched_single_spaces():
+    venv = HeliAttitudeVectorEnv(5)
+    single = HeliAttitudeEnv()
+    assert venv.single_observation_space == single.observation_space
+    assert venv.single_action_space == single.action_space
+    assert venv.observation_space == batch_space(single.observation_space, 5)
+    assert venv.action_space == batch_space(single.action_space, 5)
+    obs, _ = venv.reset(seed=0)
+    assert obs.dtype == np.float32 and obs in venv.observation_space
+    for _ in range(50):
+        obs, *_ = venv.step(venv.action_space.sample())
+        assert obs in venv.observation_space
+
+
+@pytest.mark.parametrize("shape", [(3,), (4, 2), (5, 3), (4, 3, 1)])
+def test_actions_of_wrong_shape_raise(shape):
+    venv = HeliAttitudeVectorEnv(4)
+    venv.reset(seed=0)
+    with pytest.raises(ActionError, match=r"actions must have shape \(4, 3\)"):
+        venv.step(np.zeros(shape, np.float32))
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_actions_raise_naming_the_copy(bad):
+    venv = HeliAttitudeVectorEnv(4)
+    venv.reset(seed=0)
+    actions = np.zeros((4, 3), np.float32)
+    actions[2, 1] = bad
+    with pytest.raises(ActionError, match="actions must be finite; copy 2"):
+        venv.step(actions)
+
+
+def test_step_before_reset_raises():
+    with pytest.raises(ResetNeeded, match=r"call reset\(\) before step\(\)"):
+        HeliAttitudeVectorEnv(2).step(np.zeros((2, 3), np.float32))
+
+
+def test_bad_num_envs_and_render_mode_raise():
+    with pytest.raises(ValueError, match="num_envs must be a positive whole number"):
+        HeliAttitudeVectorEnv(0)
+    with pytest.raises(ValueError, match="render_mode must be 'rgb_array' or None"):
+        HeliAttitudeVectorEnv(2, render_mode="human")
+    with pytest.raises(ValueError, match="task must be one of"):
+        HeliAttitudeVectorEnv(2, task="hover")
+
+
+def test_make_vec_passes_arguments_through():
+    envs = gymnasium.make_vec(ENV_ID, num_envs=3, vectorization_mode="vector_entry_point", task="rate",
+                              episode_seconds=1.0)
+    venv = envs.unwrapped
+    assert isinstance(venv, HeliAttitudeVectorEnv)
+    assert venv.spec_.task.task == "rate" and venv.spec_.episode_steps == 100
+    envs.close()
+
+
+def test_vector_render_shows_copy_zero():
+    venv = HeliAttitudeVectorEnv(3, task="track", render_mode="rgb_array")
+    venv.reset(seed=0)
+    for _ in range(20):
+        venv.step(np.zeros((3, 3), np.float32))
+    frame = venv.render()
+    assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
+    single = HeliAttitudeEnv(task="track", render_mode="rgb_array")
+    single.reset(seed=0)
+    for _ in range(20):
+        single.step(np.zeros(3, np.float32))
+    assert np.array_equal(frame, single.render())
+    venv.close()
