@@ -346,6 +346,9 @@ def linear_structure(params: ModelParams):
     A : ndarray (6, 6)
     B : ndarray (6, 8)
     nonlinear : tuple of (axis, expression, coefficient)
+    servo : tuple of 3 (feedthrough, state gain)
+        Per axis, the servo output is ``feedthrough*stick + state_gain*z`` (eq. 31);
+        ``(1, 0)`` where there is no delay.
     """
     A = np.zeros((6, 6))
     B = np.zeros((6, 8))
