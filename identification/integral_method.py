@@ -43,12 +43,13 @@ from functools import lru_cache
 
 import numpy as np
 from scipy import signal
+from scipy.linalg import lapack
 
 from .errors import IdentifiabilityError, NotFittedError
 from .flight import Flight
 from .model import ModelParams, servo_coefficients
 from .preprocess import DEFAULT_PASS_HZ, DEFAULT_STOP_HZ, lowpass_flight
-from .terms import AXES, COUPLED, DECOUPLED, EXTRA_PARAMS, RATE_DEPENDENCE, TERMS, evaluate_features
+from .terms import AXES, COUPLED, DECOUPLED, EXTRA_PARAMS, FEATURE_EXPRESSIONS, FEATURES, RATE_DEPENDENCE, TERMS
 
 MAX_CONDITION = 1e6
 """Largest condition number of the column-normalised regressor matrix accepted."""
@@ -104,22 +105,44 @@ def pade_filter(command: np.ndarray, tau: float, fs: float) -> np.ndarray:
     """
     if tau <= 0:
         return np.asarray(command, dtype=float)
-    d1, n1, n2 = servo_coefficients(tau)
-    b, a = signal.bilinear([-n2, n1], [d1, 1.0], fs=fs)
-    zi = signal.lfilter_zi(b, a) * command[..., :1]
+    b, a, zi_unit = _pade_discrete(float(tau), float(fs))
+    zi = zi_unit * command[..., :1]
     return signal.lfilter(b, a, command, axis=-1, zi=zi)[0]
 
 
-def _windows(values: np.ndarray, starts: np.ndarray, length: int) -> np.ndarray:
-    """values (..., n) -> (..., n_intervals, length + 1) sharing interval end points (a read-only view).
+@lru_cache(maxsize=256)
+def _pade_discrete(tau: float, fs: float):
+    """Bilinear-transform coefficients (b, a) of the Padé delay and the filter state for a unit step.
 
-    ``starts`` must be ``arange(n_intervals) * length`` (equal, adjacent intervals).
+    Cached: scipy's bilinear takes about a millisecond, longer than filtering a whole flight.
     """
-    values = np.ascontiguousarray(values, dtype=float)
-    step = values.strides[-1]
-    shape = values.shape[:-1] + (starts.size, length + 1)
-    strides = values.strides[:-1] + (length * step, step)
-    return np.lib.stride_tricks.as_strided(values, shape=shape, strides=strides, writeable=False)
+    d1, n1, n2 = servo_coefficients(tau)
+    b, a = signal.bilinear([-n2, n1], [d1, 1.0], fs=fs)
+    zi = signal.lfilter_zi(b, a)
+    for arr in (b, a, zi):
+        arr.setflags(write=False)
+    return b, a, zi
+
+
+def _split_intervals(values: np.ndarray, n_int: int, length: int):
+    """values (..., n) -> (inner (..., n_int, length), first (..., n_int)) for adjacent intervals of ``length`` steps.
+
+    Interval i spans samples ``i*length .. (i+1)*length``: ``first`` holds its
+    first sample (the measured initial value of eq. 34) and ``inner`` the
+    remaining ``length``, so an interval's end point is the next one's first
+    sample. Both are views of ``values`` (no copy).
+    """
+    values = np.asarray(values, dtype=float)
+    stop = n_int * length
+    inner = values[..., 1 : stop + 1].reshape(values.shape[:-1] + (n_int, length))
+    return inner, values[..., 0:stop:length]
+
+
+def _pool(parts):
+    """Concatenate per-flight (inner, first) pairs along the interval axis (no copy for one flight)."""
+    if len(parts) == 1:
+        return parts[0]
+    return (np.concatenate([p[0] for p in parts], axis=-2), np.concatenate([p[1] for p in parts], axis=-1))
 
 
 @lru_cache(maxsize=16)
@@ -128,49 +151,119 @@ def _disturbance_basis(N: int, dt: float, order: int):
 
     Returns ``B`` (N, o): integrals t^(j+1)/(j+1) of the torque polynomial t^j;
     ``Q``: orthonormal basis of B; ``B_pinv``; ``Qt`` (N+1, o): orthonormal basis
-    of the polynomials themselves on the N+1 samples of an interval.
+    of the polynomials themselves on the N+1 samples of an interval; ``QB``
+    (N, 2o) = [Q, B_pinv^T], so that one product gives both the projection
+    coefficients and the least-squares polynomial coefficients of a signal.
     """
     tt = np.arange(1, N + 1) * dt
     B = np.stack([tt ** (j + 1) / (j + 1) for j in range(order + 1)], axis=1)
     Q, _ = np.linalg.qr(B)
     Qt, _ = np.linalg.qr(np.vander(np.arange(N + 1) * dt, order + 1))
-    for a in (B, Q, Qt):
-        a.setflags(write=False)
-    return B, Q, np.linalg.pinv(B), Qt
+    B_pinv = np.linalg.pinv(B)
+    QB = np.ascontiguousarray(np.hstack([Q, B_pinv.T]))
+    QT = np.ascontiguousarray(Q.T)
+    for arr in (B, Q, Qt, B_pinv, QB, QT):
+        arr.setflags(write=False)
+    return B, Q, B_pinv, Qt, QB, QT
 
 
-@lru_cache(maxsize=16)
-def _prefix_blocks(N: int):
-    """Block size b (a divisor of N near sqrt(N)) and the triangular matrices of a two-level prefix sum."""
+@lru_cache(maxsize=64)
+def _integral_plan(N: int, diag: float, scale: float):
+    """Block size b (a divisor of N near sqrt(N)) and the matrices of a two-level weighted prefix sum.
+
+    ``inner`` (b, b) maps a block of samples to ``scale`` times its weighted
+    running sums (weight 1 on earlier samples, ``diag`` on the current one);
+    ``outer`` (nb, nb) sums the totals of the earlier blocks.
+    """
     divisors = [b for b in range(4, N // 4 + 1) if N % b == 0]
     if not divisors:
         return None
     b = min(divisors, key=lambda d: abs(d - N**0.5))
-    nb = N // b
-    return b, np.triu(np.ones((b, b))), np.triu(np.ones((nb, nb)), 1)
+    inner = scale * (np.triu(np.ones((b, b)), 1) + diag * np.eye(b))
+    outer = np.triu(np.ones((N // b, N // b)), 1)
+    for arr in (inner, outer):
+        arr.setflags(write=False)
+    return b, inner, outer
 
 
-def _interval_cumsum(D: np.ndarray) -> np.ndarray:
-    """Cumulative sum along the last axis (length N), as two small matrix products.
+def _interval_integral(inner: np.ndarray, first, scale: float, diag: float = 0.5, first_weight: float = 0.5,
+                       out=None) -> np.ndarray:
+    """Running integral over every interval (eq. 36), as small matrix products.
 
-    numpy's cumsum runs at several ns per element; splitting each row into
-    blocks, prefix-summing inside the blocks and adding the exclusive prefix of
-    the block totals turns it into BLAS work, about twice as fast for the
-    interval lengths used here. Exact up to rounding (the same sums, regrouped).
+    For interval samples ``f_0 = first`` and ``f_1..f_N = inner`` (n_int, N)
+    returns, for k = 1..N, ``scale * (first_weight*f_0 + f_1 + ... + f_{k-1} + diag*f_k)``:
+    the trapezium rule times dt when ``scale = dt`` (weights 1/2, 1/2), the left
+    rectangle with ``diag=0, first_weight=1``. ``first=None`` means f_0 = 0.
+    ``out`` must be C-contiguous.
+
+    numpy's cumsum runs at several ns per element; splitting each interval into
+    blocks, prefix-summing inside the blocks (one BLAS product) and adding the
+    prefix of the block totals turns it into BLAS work. Exact up to rounding
+    (the same sums, regrouped).
     """
-    N = D.shape[-1]
-    blocks = _prefix_blocks(N)
-    if blocks is None:
-        return np.cumsum(D, axis=-1)
-    b, inner, outer = blocks
-    P = (D.reshape(-1, b) @ inner).reshape(-1, N // b, b)
-    return (P + (P[..., -1] @ outer)[..., None]).reshape(D.shape)
+    n_int, N = inner.shape
+    if out is None:
+        out = np.empty((n_int, N))
+    plan = _integral_plan(N, float(diag), float(scale))
+    if plan is None:
+        np.cumsum(inner, axis=-1, out=out)
+        if diag != 1.0:
+            out -= (1.0 - diag) * inner
+        out *= scale
+        if first is not None:
+            out += (scale * first_weight) * first[:, None]
+        return out
+    b, inner_m, outer_m = plan
+    nb = N // b
+    blocks = inner.reshape(n_int * nb, b)
+    running = out.reshape(n_int * nb, b)
+    np.matmul(blocks, inner_m, out=running)  # weighted running sums within each block
+    totals = running[:, b - 1] + (scale * (1.0 - diag)) * blocks[:, b - 1]
+    before = totals.reshape(n_int, nb) @ outer_m  # sums of the earlier blocks
+    if first is not None:
+        before += (scale * first_weight) * first[:, None]
+    out.reshape(n_int, nb, b)[...] += before[:, :, None]
+    return out
 
 
-def _project_out(Z: np.ndarray, Q: np.ndarray) -> np.ndarray:
-    """Remove from every interval (last axis) its least-squares fit on the orthonormal columns Q."""
-    flat = Z.reshape(-1, Z.shape[-1])
-    return (flat - (flat @ Q) @ Q.T).reshape(Z.shape)
+_DOT_CHUNK = 8192
+
+
+def _sum_squares(x: np.ndarray) -> float:
+    """``x @ x`` for a contiguous 1-D array, summed over chunks.
+
+    OpenBLAS runs ddot on more than 10000 elements on several threads; when the
+    other cores are busy, the call then waits for them for milliseconds. The
+    chunks stay single-threaded (the sum is the same up to rounding).
+    """
+    if x.size <= _DOT_CHUNK:
+        return float(np.dot(x, x))
+    total = 0.0
+    for i in range(0, x.size, _DOT_CHUNK):
+        part = x[i : i + _DOT_CHUNK]
+        total += float(np.dot(part, part))
+    return total
+
+
+def _eigvalsh(G: np.ndarray) -> np.ndarray:
+    """Eigenvalues of the small symmetric matrix G, ascending (LAPACK dsyevd, as numpy's eigvalsh, less its overhead)."""
+    w, _, info = lapack.dsyevd(G, compute_v=0, lower=1)
+    if info != 0:
+        raise np.linalg.LinAlgError("Eigenvalues did not converge")
+    return w
+
+
+def _solve(G: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Solution of the small system G x = rhs (LAPACK dgesv, as numpy's solve, less its overhead)."""
+    _, _, x, info = lapack.dgesv(G, rhs)
+    if info != 0:
+        raise np.linalg.LinAlgError("Singular matrix")
+    return x
+
+
+def _feature(name: str, rates, cmd, col, shape) -> np.ndarray:
+    """One feature of :data:`identification.terms.FEATURES` (broadcast to ``shape``)."""
+    return np.broadcast_to(FEATURES[name](rates, cmd, col), shape)
 
 
 class IntegralIdentifier:
@@ -321,24 +414,27 @@ class IntegralIdentifier:
         N = int(round(self.interval * fs))
         if N < 2:
             raise IdentifiabilityError(f"interval {self.interval} s holds {N} samples at {fs:.1f} Hz; need at least 2")
-        starts = [np.arange((d.n - 1) // N) * N for d in datas]
-        n_int = sum(s.size for s in starts)
+        counts = [(d.n - 1) // N for d in datas]
+        n_int = sum(counts)
         if n_int < 2:
             raise IdentifiabilityError(
                 f"flight of {sum(d.duration for d in datas):.2f} s holds {n_int} interval(s) of {self.interval} s; "
                 "need at least 2 (use a longer flight or shorter intervals)"
             )
-        Wr = np.concatenate([_windows(d.rates, s, N) for d, s in zip(datas, starts)], axis=1)  # (3, n_int, N+1)
-        Wcol = np.concatenate([_windows(d.sticks[2], s, N) for d, s in zip(datas, starts)], axis=0)
-        start_times = np.concatenate([d.time[s] for d, s in zip(datas, starts)])
+        # Every signal as (samples 1..N of each interval (n_int, N), first sample of each interval (n_int,)).
+        rates = _pool([_split_intervals(d.rates, m, N) for d, m in zip(datas, counts)])
+        col = _pool([_split_intervals(d.sticks[2], m, N) for d, m in zip(datas, counts)])
+        sticks = [_pool([_split_intervals(d.sticks[i], m, N) for d, m in zip(datas, counts)]) for i in (0, 1, 3)]
+        start_times = np.concatenate([d.time[: m * N : N] for d, m in zip(datas, counts)])
 
-        def command_windows(a, tau):
-            out = []
-            for d, s in zip(datas, starts):
-                cmd = d.sticks[[0, 1, 3]].copy()
-                cmd[a] = pade_filter(cmd[a], tau, fs)
-                out.append(_windows(cmd, s, N))
-            return np.concatenate(out, axis=1)
+        def commands(a, tau):
+            """Servo-side commands (eq. 31): the stick of axis ``a`` through the Padé delay ``tau``."""
+            cmd = list(sticks)
+            if tau > 0:
+                i = (0, 1, 3)[a]
+                cmd[a] = _pool([_split_intervals(pade_filter(d.sticks[i], tau, fs), m, N)
+                                for d, m in zip(datas, counts)])
+            return [c[0] for c in cmd], [c[1] for c in cmd]
 
         fits = {}
         values = {}
@@ -355,12 +451,12 @@ class IntegralIdentifier:
             grid = delays[a]
             if grid == "auto":
                 candidates = self.delay_grid if self.delay_grid is not None else np.arange(0.0, 0.501, 0.01)
-                scores = [self._fit_axis(a, axis_params, Wr, command_windows(a, tau), Wcol, dt, start_times,
+                scores = [self._fit_axis(a, axis_params, rates, commands(a, tau), col, dt, start_times,
                                          max_iter=1, check=False).r2 for tau in candidates]
                 tau = float(candidates[int(np.argmax(scores))])
             else:
                 tau = float(grid)
-            fit = self._fit_axis(a, axis_params, Wr, command_windows(a, tau), Wcol, dt, start_times,
+            fit = self._fit_axis(a, axis_params, rates, commands(a, tau), col, dt, start_times,
                                  max_iter=self.max_iter, check=True)
             fit = AxisFit(**{**fit.__dict__, "delay": tau})
             fits[axis_name] = fit
@@ -372,128 +468,197 @@ class IntegralIdentifier:
         self.fit_time_ = _time.perf_counter() - t0
         return self
 
-    def _fit_axis(self, a, axis_params, Wr, Wc, Wcol, dt, start_times, max_iter, check) -> AxisFit:
-        """Eqs. (32)-(40) for one axis on windows (3, n_int, N+1) of rates and commands."""
-        N = Wr.shape[-1] - 1
+    def _fit_axis(self, a, axis_params, rates, cmds, col, dt, start_times, max_iter, check) -> AxisFit:
+        """Eqs. (32)-(40) for one axis.
+
+        ``rates`` (3 rates), ``cmds`` (3 servo-side commands) and ``col`` come as
+        ``(inner, first)``: samples 1..N of every interval, shape (..., n_int, N),
+        and each interval's first sample, shape (..., n_int) (:func:`_split_intervals`).
+
+        Implementation. The regressors of eq. (35), with the per-interval
+        disturbance polynomial projected out (Frisch-Waugh), and the projected
+        increments ``y_p`` are the rows of one array ``A``; its Gram matrix holds
+        the normal equations, and after each solve ``d = A_x beta - y_p`` is
+        ``p_approx - p`` at every sample (eqs. 39-40), whose mean square is the
+        least-squares error of the iteration. The next iteration's integral of
+        ``p_approx`` is the measured rate's integral plus that of ``d`` (for the
+        linear own-rate feature; other features are re-evaluated on p_approx),
+        and only the Gram rows of the own-rate regressors are recomputed. The
+        per-interval disturbance coefficients are obtained for the best iterate
+        only, from each regressor's polynomial coefficients.
+        """
+        Rg, R0 = rates
+        Ug, U0 = cmds
+        Cg, C0 = col
+        n_int, N = Rg.shape[-2:]
+        shape = (n_int, N)
+        size = n_int * N
         terms = [TERMS[p] for p in axis_params]
         feats = [t.feature for t in terms]
         per_interval = self.offsets == "per_interval"
         keep = [j for j, f in enumerate(feats) if not (per_interval and f == "1")]
         kfeats = [feats[j] for j in keep]
-        signs = np.array([terms[j].sign for j in keep])[:, None, None]
+        signs = [terms[j].sign for j in keep]
         input_only = [f not in RATE_DEPENDENCE for f in kfeats]
         own = [a in RATE_DEPENDENCE.get(f, ()) for f in kfeats]  # re-evaluated at each iteration
-        y_meas = Wr[a][:, 1:]
-        p0 = Wr[a][:, :1]
-        y = y_meas - p0  # eq. (37)
-        n_int = y.shape[0]
-        if per_interval:
-            B, Q, B_pinv, Qt = _disturbance_basis(N, dt, self.disturbance_order)
-            yp = _project_out(y, Q)
-        else:
-            yp = y
-        b = yp.ravel()
-        history = []
-        best = None
-        # Integrals of every feature from each interval start (eq. 36), sign of eq. (18)/(21) folded in.
-        F = evaluate_features(kfeats, Wr, Wc, Wcol)  # (m, n_int, N+1)
-        scale_f = (0.5 * dt) * signs
-        X = _interval_cumsum(F[..., 1:] + F[..., :-1]) * scale_f
-        if self.input_hold == "zoh" and any(input_only):
-            X[input_only] = (np.cumsum(F[:, :, :-1], axis=-1) * (dt * signs))[input_only]
+        zoh = self.input_hold == "zoh"
+        y_meas = Rg[a]
+        p0 = R0[a]
+
+        def inner_of(i, rates_inner=Rg):
+            return _feature(kfeats[i], rates_inner, Ug, Cg, shape)
+
+        def first_of(i):
+            return _feature(kfeats[i], R0, U0, C0, (n_int,))
+
+        def command_std():
+            return np.std(np.concatenate([U0[a][:, None], Ug[a]], axis=1))
+
         slow = []
         if per_interval:
+            _, Q, _, Qt, QB, QT = _disturbance_basis(N, dt, self.disturbance_order)
+            o = Q.shape[1]
             # Input features that hardly change within an interval (collective) are all but
             # absorbed by the per-interval disturbance: estimate them between intervals.
-            cand = [i for i in range(len(kfeats)) if input_only[i] and kfeats[i] != "1"]
-            if cand:
-                Fs = F[cand]
-                Fw = _project_out(Fs, Qt)  # the feature less a per-interval polynomial like the disturbance's
-                Fc = Fs - Fs.mean(axis=(1, 2), keepdims=True)
-                within = np.einsum("ijk,ijk->i", Fw, Fw)
-                total = np.einsum("ijk,ijk->i", Fc, Fc)
-                slow = [i for k, i in enumerate(cand) if total[k] > 0 and within[k] < SLOW_FRACTION * total[k]]
-            slow_means = [F[i].mean(axis=1) * signs[i, 0, 0] for i in slow]
+            for i in range(len(kfeats)):
+                if not input_only[i] or kfeats[i] == "1":
+                    continue
+                f_inner, f_first = inner_of(i), first_of(i)
+                centred = np.empty((n_int, N + 1))  # every interval's N+1 samples less the mean of all
+                mean = (f_inner.sum() + f_first.sum()) / centred.size
+                np.subtract(f_first, mean, out=centred[:, 0])
+                np.subtract(f_inner, mean, out=centred[:, 1:])
+                total = _sum_squares(centred.ravel())
+                fit_q = centred @ Qt  # constants lie in span(Qt): the fit of the feature less its mean
+                within = total - _sum_squares(fit_q.ravel())  # what a per-interval polynomial leaves
+                if total > 0 and within < SLOW_FRACTION * total:
+                    slow.append(i)
+            slow_means = [(inner_of(i).sum(axis=1) + first_of(i)) * (signs[i] / (N + 1)) for i in slow]
         fixed = [i for i in range(len(kfeats)) if i not in slow and not own[i]]
         ownu = [i for i in range(len(kfeats)) if i not in slow and own[i]]
         order = fixed + ownu
         if not order:
             raise IdentifiabilityError(f"{AXES[a]}: every regressor is constant within the intervals")
+        nf, k = len(fixed), len(order)
 
-        def projected(Z):
-            if len(Z) == 0:
-                return np.zeros((0, b.size))
-            return (_project_out(Z, Q) if per_interval else Z).reshape(len(Z), -1)  # Frisch-Waugh
+        A = np.empty((k + 1, n_int, N))  # rows: regressors (fixed, then own-rate), then the increments
+        A2 = A.reshape(k + 1, size)
+        scratch = np.empty(shape)
 
-        X_fixed_flat = X[fixed].reshape(len(fixed), b.size)
-        Xp_fixed = projected(X[fixed])
-        G_ff = Xp_fixed @ Xp_fixed.T
-        b_f = Xp_fixed @ b
-        X_own = X[ownu]
+        def project(row):
+            """Remove from every interval of A[row] its least-squares fit on Q; return its coefficients on B."""
+            X = A[row]
+            XQB = X @ QB
+            np.matmul(XQB[:, :o], QT, out=scratch)
+            X -= scratch
+            return XQB[:, o:]
+
+        def integrate(i, rates_inner=Rg, out=None):
+            """Integral of feature i from each interval start (eq. 36), sign of eq. (18)/(21) folded in."""
+            rect = zoh and input_only[i]
+            return _interval_integral(inner_of(i, rates_inner), first_of(i), dt * signs[i],
+                                      diag=0.0 if rect else 0.5, first_weight=1.0 if rect else 0.5, out=out)
+
+        np.subtract(y_meas, p0[:, None], out=A[k])  # eq. (37)
+        coef_y = project(k) if per_interval else None
+        coef_x = [None] * k  # per regressor: coefficients of its per-interval polynomial fit on B
+        for r, i in enumerate(fixed):
+            integrate(i, out=A[r])
+            if per_interval:
+                coef_x[r] = project(r)
+        # The own-rate feature itself is linear in p_approx = p + d: its integral is the measured one plus d's.
+        linear = [FEATURE_EXPRESSIONS[kfeats[i]] == "pqr"[a] for i in ownu]
+        measured = {}
+        for r, i in enumerate(ownu, start=nf):
+            integrate(i, out=A[r])
+            if linear[r - nf]:
+                measured[r] = A[r].copy()
+            if per_interval:
+                coef_x[r] = project(r)
+
+        # Normal equations of eq. (35): Gram of the regressors, right-hand side, |y_p|^2 (two plain
+        # products: numpy's symmetric path for A @ A.T is slow for so few rows).
+        M = np.hstack([A2 @ A2[:k].T, A2 @ A2[k:].T])
+        M = np.triu(M) + np.triu(M, 1).T
+        d = np.empty(size)
+        d2 = d.reshape(shape)
+        coefs = np.empty(k + 1)
+        coefs[k] = -1.0
+        history = []
+        best = None
         for it in range(max(1, max_iter)):
             if it > 0:
-                # eqs. (39)-(40): p_approx replaces the measured own-axis rate in the integrals
-                rates = list(Wr)
-                rates[a] = np.concatenate([p0, approx], axis=1)
-                Fo = evaluate_features([kfeats[i] for i in ownu], rates, Wc, Wcol)
-                X_own = _interval_cumsum(Fo[..., 1:] + Fo[..., :-1]) * scale_f[ownu]
-            Xp_own = projected(X_own)
-            nf = len(fixed)
-            G_raw = np.empty((len(order), len(order)))
-            G_raw[:nf, :nf] = G_ff
-            G_raw[:nf, nf:] = Xp_fixed @ Xp_own.T
-            G_raw[nf:, :nf] = G_raw[:nf, nf:].T
-            G_raw[nf:, nf:] = Xp_own @ Xp_own.T
-            rhs = np.concatenate([b_f, Xp_own @ b])
+                # eqs. (39)-(40): p_approx = p + d replaces the measured own-axis rate in the integrals
+                rates_approx = None
+                for r, i in enumerate(ownu, start=nf):
+                    if linear[r - nf]:
+                        _interval_integral(d2, None, dt * signs[i], out=A[r])
+                        A[r] += measured[r]
+                    else:
+                        if rates_approx is None:
+                            rates_approx = [Rg[0], Rg[1], Rg[2]]
+                            rates_approx[a] = y_meas + d2
+                        integrate(i, rates_approx, out=A[r])
+                    if per_interval:
+                        coef_x[r] = project(r)
+                M_own = A2 @ A2[nf:k].T
+                M[:, nf:k] = M_own
+                M[nf:k, :] = M_own.T
+                if k - nf > 1:
+                    block = M_own[nf:k]
+                    M[nf:k, nf:k] = np.triu(block) + np.triu(block, 1).T
+            G_raw = M[:k, :k].copy()
+            rhs = M[:k, k]
             scale = np.sqrt(np.diag(G_raw))
             if np.any(scale == 0):
                 zero = axis_params[keep[order[int(np.argmin(scale))]]]
                 raise IdentifiabilityError(
                     f"{AXES[a]} axis is not identifiable from this flight: the regressor of {zero} is identically "
-                    f"zero (condition number inf); the input is probably not excited (command std {np.std(Wc[a]):.2g})"
+                    f"zero (condition number inf); the input is probably not excited (command std {command_std():.2g})"
                 )
             G = G_raw / np.outer(scale, scale)
-            ev = np.linalg.eigvalsh(G)
+            ev = _eigvalsh(G)
             cond = float(np.sqrt(ev[-1] / ev[0])) if ev[0] > 0 else float("inf")
             if check and (not np.isfinite(cond) or cond > MAX_CONDITION):
                 raise IdentifiabilityError(
                     f"{AXES[a]} axis is not identifiable from this flight: the normalised least-squares "
                     f"problem (eq. 35) has condition number {cond:.3g} (limit {MAX_CONDITION:.0e}); "
-                    f"the input is probably not excited (command std {np.std(Wc[a]):.2g})"
+                    f"the input is probably not excited (command std {command_std():.2g})"
                 )
-            beta = np.zeros(len(keep))
-            beta[order] = np.linalg.solve(G, rhs / scale) / scale
-            fitted = (beta[fixed] @ X_fixed_flat + beta[ownu] @ X_own.reshape(len(ownu), b.size)).reshape(y.shape)
-            slow_se = None
-            if per_interval:
-                coef = B_pinv @ (y - fitted).T  # (o, n_int): the per-interval disturbance
-                T = N * dt
-                offsets = sum(coef[j] * T**j / (j + 1) for j in range(coef.shape[0]))  # mean torque
-                if slow:
-                    # between-interval regression of the mean torque on the slow features' means
-                    M = np.column_stack([np.ones(n_int)] + slow_means)
-                    c = np.linalg.lstsq(M, offsets, rcond=None)[0]
-                    beta[slow] = c[1:]
-                    r_between = offsets - M @ c
-                    s2 = float(r_between @ r_between) / max(n_int - M.shape[1], 1)
-                    slow_se = np.sqrt(np.clip(np.diag(s2 * np.linalg.pinv(M.T @ M)), 0, None))[1:]
-                    offsets = offsets - M[:, 1:] @ c[1:]
-                approx = p0 + fitted + coef.T @ B.T  # eqs. (39)-(40)
-            else:
-                offsets = np.zeros(0)
-                approx = p0 + fitted
-            d = approx - y_meas
-            err = float(np.einsum("ij,ij->", d, d)) / d.size
+            sol = _solve(G, rhs / scale) / scale
+            coefs[:k] = sol
+            np.matmul(coefs, A2, out=d)  # p_approx - p: the fit less the projected increments
+            sq = _sum_squares(d)
+            err = sq / size
             history.append(err)
             if best is None or err <= best[0]:
-                best = (err, beta, offsets, Xp_own, G_raw, cond, slow_se)
+                best = (err, sol, coef_x[nf:], G_raw, cond, sq)
             if not ownu or (it > 0 and (abs(history[-2] - err) <= self.tol * max(history[-2], 1e-30)
                                         or err > history[-2])):
                 break  # converged, or the Picard step stopped improving: keep the best iterate
-        err, beta, offsets, Xp_own, G_raw, cond, slow_se = best
-        resid = b - beta[fixed] @ Xp_fixed - beta[ownu] @ Xp_own
-        dof = max(b.size - beta.size - (n_int * (self.disturbance_order + 1) if per_interval else 0), 1)
-        sigma2 = float(resid @ resid) / dof
+        err, sol, coef_own, G_raw, cond, sq = best
+        beta = np.zeros(len(keep))
+        beta[order] = sol
+        slow_se = None
+        if per_interval:
+            # the per-interval disturbance of the best iterate: polynomial fit of y - fitted on B
+            coef = coef_y - sum(s * c for s, c in zip(sol, coef_x[:nf] + coef_own))
+            coef = coef.T  # (o, n_int)
+            T = N * dt
+            offsets = np.array([T**j / (j + 1) for j in range(coef.shape[0])]) @ coef  # mean torque
+            if slow:
+                # between-interval regression of the mean torque on the slow features' means
+                Mb = np.column_stack([np.ones(n_int)] + slow_means)
+                c = np.linalg.lstsq(Mb, offsets, rcond=None)[0]
+                beta[slow] = c[1:]
+                r_between = offsets - Mb @ c
+                s2 = float(r_between @ r_between) / max(n_int - Mb.shape[1], 1)
+                slow_se = np.sqrt(np.clip(np.diag(s2 * np.linalg.pinv(Mb.T @ Mb)), 0, None))[1:]
+                offsets = offsets - Mb[:, 1:] @ c[1:]
+        else:
+            offsets = np.zeros(0)
+        dof = max(size - beta.size - (n_int * (self.disturbance_order + 1) if per_interval else 0), 1)
+        sigma2 = sq / dof  # sq: squared norm of the residual b - A_x beta of the best iterate
         se = np.full(beta.size, np.nan)
         try:
             se[order] = np.sqrt(np.clip(np.diag(sigma2 * np.linalg.inv(G_raw)), 0, None))
@@ -505,10 +670,13 @@ class IntegralIdentifier:
         std = {axis_params[j]: float(se[i]) for i, j in enumerate(keep)}
         if per_interval and "1" in feats:
             off_name = axis_params[feats.index("1")]
-            params[off_name] = float(np.mean(offsets))
-            std[off_name] = float(np.std(offsets) / np.sqrt(offsets.size))
-        ss_tot = float(np.sum((b - b.mean()) ** 2)) or 1.0
-        r2 = 1.0 - float(resid @ resid) / ss_tot
+            params[off_name] = float(offsets.mean())
+            spread = offsets - params[off_name]
+            std[off_name] = float(np.sqrt(spread @ spread / offsets.size) / np.sqrt(offsets.size))
+        b = A2[k]
+        centred_b = b - b.mean()
+        ss_tot = _sum_squares(centred_b) or 1.0
+        r2 = 1.0 - sq / ss_tot
         return AxisFit(AXES[a], params, std, 0.0, float(cond), r2, tuple(history), offsets, start_times)
 
     # ----------------------------------------------------------------- use
