@@ -1,0 +1,375 @@
+"""The hover plant under per-axis PD attitude hold, linearised and sampled: stability and error spectra.
+
+The gain sweep (:mod:`controllers.sweep`) needs two things from linear control
+theory for every gain pair (paper Section 4 proposal):
+
+* **stability** — the discrete closed-loop poles (python-control), so unstable
+  pairs are reported as such and never simulated into NaN;
+* **a frequency-domain prediction** of the error distribution — the
+  disturbance spectrum of the library (Welch) passed through the closed-loop
+  transfer function from the equivalent stick ``u_d`` (eq. 42) to the attitude
+  error, the rate error and the stick.
+
+The plant is the package's one physics core (:mod:`identification.model`):
+its right-hand side is differentiated numerically about hover at the trim
+(rates 0, servo settled on the trim sticks, level attitude, the given
+collective), which picks up every term of the model — the decoupled eqs.
+(18), (21), coupling, the Padé servo of eq. (31), collective-scheduled gains —
+and the attitude of eq. (25) is linearised at level flight (Euler rates equal
+body rates). For the decoupled model each axis is ``k·Padé(servo)/(s(s+k_damp))``
+from stick to angle. It is sampled by a zero-order hold at the control
+period (``control.c2d``, the digital autopilot holds its stick over the period,
+as the environments do). The physics core's discrete step integrates the
+attitude with the mean of the start and end rates instead of exactly; the
+difference is of order ``dt²`` and shows in the tests as < 1 % on the error
+standard deviations.
+
+The PD law is the one of :mod:`controllers.pd` (see :func:`pd_command`); for a
+decoupled model the stability verdicts and spectral radii equal those of
+:func:`controllers.pd.loop_analysis` (tested), while the plant here keeps all
+three axes so that coupling terms are included.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from identification.model import _kernel, servo_coefficients, trim_sticks
+
+from .errors import SweepError
+
+AXES = ("roll", "pitch", "yaw")
+"""Axis names; index 0, 1, 2 = roll/lat/k2, pitch/lon/k6, yaw/ped/k10."""
+_STICK_IN_U = (0, 1, 3)  # lat, lon, ped in the core's input (lat, lon, col, ped)
+STABILITY_MARGIN = 1e-9
+"""A gain pair is stable when every discrete closed-loop pole has ``|z| < 1 - STABILITY_MARGIN``
+(a pole on the unit circle, e.g. ``kp = 0``, lets the attitude drift and counts as unstable)."""
+GAUSS_ABS_FACTOR = {50: 0.6744897501960817, 90: 1.6448536269514722, 99: 2.5758293035489004}
+"""Percentiles of ``|e|`` for a zero-mean normal ``e`` of unit standard deviation (``norm.ppf((1 + q)/2)``)."""
+
+
+def axis_index(axis) -> int:
+    """0, 1, 2 for "roll", "pitch", "yaw" (or the index itself)."""
+    if isinstance(axis, (int, np.integer)) and 0 <= int(axis) < 3:
+        return int(axis)
+    if axis in AXES:
+        return AXES.index(axis)
+    raise SweepError(f"axis must be one of {', '.join(AXES)}, got {axis!r}")
+
+
+def pd_command(kp, kd, sign, e_angle, e_rate):
+    """The per-axis PD law: ``u = s·(kp·e_angle + kd·e_rate)``, a stick offset from trim (unclipped).
+
+    Parameters
+    ----------
+    kp : float or ndarray
+        Proportional gain [stick/rad].
+    kd : float or ndarray
+        Derivative gain [stick/(rad/s)].
+    sign : float
+        Sign of the axis' control gain (k2, k6, k10), so that positive gains stabilise.
+    e_angle : float or ndarray
+        Reference minus angle [rad] (the sweep holds level: ``-angle``).
+    e_rate : float or ndarray
+        Reference rate minus body rate [rad/s] (the sweep: ``-rate``).
+
+    Notes
+    -----
+    The law of :class:`controllers.pd.PDController` (``predict``: ``clip(s·(kp·obs[0:3] +
+    kd·obs[6:9]), -1, 1)``), written out here because the sweep steps many gain pairs in one
+    batch while a ``PDController`` holds one gain set; ``tests/test_sweep.py`` checks that the
+    two give the same actions. The caller clips the result to [-1, 1] and adds the trim.
+    """
+    return sign * (kp * e_angle + kd * e_rate)
+
+
+@dataclass(frozen=True, eq=False)
+class HoverPlant:
+    """The linearised hover plant, continuous and sampled (zero-order hold).
+
+    State ``x``: body rates p, q, r [rad/s], the Padé servo states of delayed axes
+    [stick], Euler angles roll, pitch, yaw [rad]. Inputs: stick offsets from trim
+    ``u`` (lat, lon, ped) and the wind as equivalent sticks ``u_d`` (roll, pitch, yaw),
+    entering as the torque ``k·u_d`` (eq. 42).
+
+    Attributes
+    ----------
+    params : ModelParams
+    dt : float
+        Control period [s].
+    collective : float
+        Collective stick the model was linearised at.
+    A, Bu, Bw : ndarray, shapes (n, n), (n, 3), (n, 3)
+        Discrete-time ``x[k+1] = A x[k] + Bu u[k] + Bw u_d[k]``.
+    Ac, Buc, Bwc : ndarray
+        The continuous-time matrices.
+    states : tuple of str
+    rate_idx, angle_idx : ndarray of int, shape (3,)
+        Where the rates and the angles sit in the state.
+    signs : ndarray, shape (3,)
+        Signs of the control gains (k2, k6, k10).
+    """
+
+    params: object
+    dt: float
+    collective: float
+    A: np.ndarray
+    Bu: np.ndarray
+    Bw: np.ndarray
+    Ac: np.ndarray
+    Buc: np.ndarray
+    Bwc: np.ndarray
+    states: tuple
+    rate_idx: np.ndarray
+    angle_idx: np.ndarray
+    signs: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return self.A.shape[0]
+
+
+def hover_plant(params, dt: float, collective: float = 0.0) -> HoverPlant:
+    """Linearise the physics core about hover at the trim and sample it at ``dt`` (zero-order hold).
+
+    The Jacobians of the core's right-hand side (eqs. 18, 21, 31) are taken by
+    central differences (exact for its linear terms, and for products of two
+    variables; ``p|p|`` has zero slope at rest). The attitude rows are the
+    level-flight linearisation of eq. (25): roll', pitch', yaw' = p, q, r.
+    """
+    import control
+
+    gains = params.control_gains
+    if np.any(gains == 0.0):
+        raise SweepError(f"the model has a zero control gain (k2, k6, k10 = {gains.tolist()}); it cannot be controlled")
+    rhs = _kernel(params)[0]["rhs"]
+    trim = [float(v) for v in trim_sticks(params, float(collective))]
+    delayed = [i for i, tau in enumerate(params.taus) if servo_coefficients(tau)[0] != 0.0]
+    x0 = [0.0, 0.0, 0.0, trim[0], trim[1], trim[2], 1.0, 0.0, 0.0, 0.0]
+    u0 = [trim[0], trim[1], float(collective), trim[2]]
+    d0 = [0.0, 0.0, 0.0]
+    state_vars = [0, 1, 2] + [3 + i for i in delayed]  # core state indices kept (rates, delayed servos)
+    rows = state_vars  # derivatives kept
+
+    def jac(kind, index):
+        h = 1e-6
+        out = []
+        for s in (h, -h):
+            x, u, d = list(x0), list(u0), list(d0)
+            {"x": x, "u": u, "d": d}[kind][index] += s
+            out.append(np.array(rhs(tuple(x), tuple(u), tuple(d)), dtype=float))
+        return ((out[0] - out[1]) / (2 * h))[rows]
+
+    m = len(state_vars)
+    n = m + 3
+    Ac = np.zeros((n, n))
+    Buc = np.zeros((n, 3))
+    Bwc = np.zeros((n, 3))
+    for j, v in enumerate(state_vars):
+        Ac[:m, j] = jac("x", v)
+    for i in range(3):
+        Buc[:m, i] = jac("u", _STICK_IN_U[i])
+        Bwc[:m, i] = jac("d", i) * gains[i]  # torque k*u_d per unit equivalent stick, eq. (42)
+        Ac[m + i, i] = 1.0  # level-flight attitude kinematics, eq. (25)
+    Ac[np.abs(Ac) < 1e-9] = 0.0
+    Buc[np.abs(Buc) < 1e-9] = 0.0
+    Bwc[np.abs(Bwc) < 1e-9] = 0.0
+    sysd = control.c2d(control.ss(Ac, np.hstack([Buc, Bwc]), np.eye(n), np.zeros((n, 6))), dt, method="zoh")
+    B = np.asarray(sysd.B)
+    names = ("p", "q", "r") + tuple(f"servo_{AXES[i]}" for i in delayed) + ("roll", "pitch", "yaw")
+    return HoverPlant(params, float(dt), float(collective), np.asarray(sysd.A), B[:, :3], B[:, 3:], Ac, Buc, Bwc,
+                      names, np.arange(3), np.arange(m, m + 3), np.sign(gains))
+
+
+def nominal_gains(plant: HoverPlant, bandwidth: float = 4.0, damping: float = 0.7) -> np.ndarray:
+    """PD gains that hold each axis near hover while another axis is swept, shape (3, 2) = (kp, kd).
+
+    Pole placement on the decoupled plant ``k/(s(s + a))`` (``a`` the axis' damping,
+    ``k`` the control gain): ``kp = ω²/|k|``, ``kd = max(2ζω − a, 0)/|k|`` with
+    ``ω = bandwidth`` [rad/s] and ``ζ = damping``. Checked for stability on the
+    full linear plant by :func:`closed_loop_poles` in the sweep.
+    """
+    a = -np.diag(plant.Ac)[:3]
+    k = np.abs(plant.params.control_gains)
+    kp = bandwidth**2 / k
+    kd = np.maximum(2.0 * damping * bandwidth - a, 0.0) / k
+    return np.column_stack([kp, kd])
+
+
+def gain_matrices(plant: HoverPlant, axis: int, kp, kd, nominal) -> np.ndarray:
+    """State-feedback matrices ``K`` (u = −K x) of the PD law for each gain pair, shape (G, 3, n).
+
+    The swept ``axis`` gets ``kp[g], kd[g]``; the other two axes their ``nominal`` (3, 2) gains.
+    """
+    kp = np.atleast_1d(np.asarray(kp, dtype=float))
+    kd = np.atleast_1d(np.asarray(kd, dtype=float))
+    G = kp.size
+    K = np.zeros((G, 3, plant.n))
+    for i in range(3):
+        p_i, d_i = (kp, kd) if i == axis else (np.full(G, nominal[i][0]), np.full(G, nominal[i][1]))
+        K[:, i, plant.angle_idx[i]] = plant.signs[i] * p_i
+        K[:, i, plant.rate_idx[i]] = plant.signs[i] * d_i
+    return K
+
+
+def _outputs(plant: HoverPlant, axis: int, K: np.ndarray) -> np.ndarray:
+    """Output matrices (G, 3, n): attitude error, rate error, stick offset on ``axis`` (errors = −state)."""
+    C = np.zeros((K.shape[0], 3, plant.n))
+    C[:, 0, plant.angle_idx[axis]] = -1.0
+    C[:, 1, plant.rate_idx[axis]] = -1.0
+    C[:, 2, :] = -K[:, axis, :]
+    return C
+
+
+def closed_loop_system(plant: HoverPlant, axis, kp: float, kd: float, nominal):
+    """The discrete closed loop of one gain pair as a python-control ``StateSpace``.
+
+    Inputs: ``u_d`` roll, pitch, yaw [stick]. Outputs: attitude error [rad], rate
+    error [rad/s] and stick offset from trim (before clipping) on ``axis``.
+    """
+    import control
+
+    ax = axis_index(axis)
+    K = gain_matrices(plant, ax, kp, kd, nominal)
+    A = plant.A - plant.Bu @ K[0]
+    return control.ss(A, plant.Bw, _outputs(plant, ax, K)[0], np.zeros((3, 3)), plant.dt)
+
+
+def closed_loop_poles(plant: HoverPlant, axis, kp, kd, nominal) -> tuple[np.ndarray, np.ndarray]:
+    """Largest closed-loop pole magnitude of each gain pair and whether the loop is stable.
+
+    Poles from python-control (``StateSpace.poles``) of the sampled closed loop.
+
+    Returns
+    -------
+    max_abs : ndarray (G,)
+        Spectral radius of the discrete closed loop.
+    stable : ndarray of bool (G,)
+        ``max_abs < 1 - STABILITY_MARGIN``.
+    """
+    import control
+
+    ax = axis_index(axis)
+    K = gain_matrices(plant, ax, kp, kd, nominal)
+    A_cl = plant.A[None] - plant.Bu[None] @ K
+    max_abs = np.array([np.max(np.abs(control.ss(a, plant.Bw, np.eye(plant.n), 0.0, plant.dt).poles()))
+                        for a in A_cl])
+    return max_abs, max_abs < 1.0 - STABILITY_MARGIN
+
+
+def disturbance_spectrum(env_model, dt: float, nperseg: int = 2048) -> tuple[np.ndarray, np.ndarray]:
+    """One-sided power spectral density of the library's ``u_d`` per axis (Welch), at the control period.
+
+    Each trace is taken every ``dt`` (the samples the replay uses), its mean
+    removed (u_d is zero-mean by definition, eq. 42), its Welch estimate (Hann
+    window, ``nperseg`` samples, half overlap, *no* per-segment detrending, which
+    would remove the gusts slower than a segment and lose ~7 % of the variance of
+    the shipped library) computed, and the traces averaged weighted by their lengths.
+
+    Returns
+    -------
+    freq : ndarray (nf,)
+        [Hz], 0 to the Nyquist frequency of ``dt``.
+    psd : ndarray (3, nf)
+        [stick²/Hz]; ``sum(psd) * df`` is the variance of u_d.
+    """
+    from scipy.signal import welch
+
+    ratio = int(round(dt * env_model.sample_rate))
+    segs = [env_model.ud[:, s:s + n:ratio] for s, n in zip(env_model.starts, env_model.lengths)]
+    nps = int(min(nperseg, min(s.shape[1] for s in segs)))
+    if nps < 16:
+        raise SweepError(f"the disturbance traces are too short for a spectrum ({nps} samples at dt={dt} s)")
+    weights = np.array([s.shape[1] for s in segs], dtype=float)
+    psd = 0.0
+    for w, s in zip(weights, segs):
+        freq, p = welch(s - s.mean(axis=1, keepdims=True), fs=1.0 / dt, nperseg=nps, detrend=False, axis=-1)
+        psd = psd + w * p
+    return freq, psd / weights.sum()
+
+
+def _frequency_grid(freq: np.ndarray, dt: float, n_freq: int) -> tuple[np.ndarray, np.ndarray]:
+    """Integration grid: 0 plus ``n_freq`` geometrically spaced points to Nyquist, trapezoid weights.
+
+    Geometric spacing resolves the narrow resonances of lightly damped loops
+    (relative spacing ~0.3 % for 4096 points) that the Welch grid would step over.
+    """
+    f_lo = min(freq[1] / 10.0, 1e-3)
+    g = np.concatenate([[0.0], np.geomspace(f_lo, 0.5 / dt, n_freq)])
+    w = np.zeros_like(g)
+    dg = np.diff(g)
+    w[:-1] += dg / 2
+    w[1:] += dg / 2
+    return g, w
+
+
+def predict_std(plant: HoverPlant, axis, kp, kd, nominal, freq, psd, n_freq: int = 4096,
+                chunk: int = 16) -> np.ndarray:
+    """Standard deviations predicted in the frequency domain for each gain pair, shape (G, 3).
+
+    ``σ² = Σ_j ∫ |H_j(e^{i2πf·dt})|² S_j(f) df`` over ``0 … 1/(2 dt)``, where ``H_j`` is the
+    closed loop from ``u_d`` on axis ``j`` to the output and ``S_j`` the Welch spectrum
+    of ``u_d`` (:func:`disturbance_spectrum`), interpolated linearly onto a fine
+    geometric grid.
+    The gusts of the three axes are taken as independent (cross-spectra
+    neglected); for a decoupled model only the swept axis' own gust matters.
+    ``H`` is evaluated from the eigen-decomposition of the closed loop (partial
+    fractions; a direct solve for a near-defective pair), the same values as
+    ``control.frequency_response`` a hundred times faster.
+
+    Returns
+    -------
+    ndarray (G, 3)
+        σ of the attitude error [rad], the rate error [rad/s], the stick offset
+        from trim before clipping [stick]. NaN for unstable pairs.
+    """
+    ax = axis_index(axis)
+    K = gain_matrices(plant, ax, kp, kd, nominal)
+    G = K.shape[0]
+    C = _outputs(plant, ax, K)
+    A_cl = plant.A[None] - plant.Bu[None] @ K
+    g, w = _frequency_grid(freq, plant.dt, n_freq)
+    S = np.array([np.interp(g, freq, p) for p in psd])  # (3, F)
+    inputs = [j for j in range(3) if np.any(plant.Bw[:, j] != 0.0) and np.any(S[j] > 0)]
+    Sw = S[inputs] * w[None, :]  # (J, F) spectrum times quadrature weight
+    Bw = plant.Bw[:, inputs]
+    z = np.exp(2j * math.pi * g * plant.dt)
+    out = np.full((G, 3), np.nan)
+    lam, V = np.linalg.eig(A_cl)
+    stable = np.max(np.abs(lam), axis=1) < 1.0 - STABILITY_MARGIN
+    cond = np.linalg.cond(V)
+    # Partial fractions H(z) = sum_i R_i / (z - lam_i), residues R (G, 3 outputs, J inputs, n).
+    VB = np.linalg.solve(V, np.broadcast_to(Bw, (G,) + Bw.shape).astype(complex))  # (G, n, J)
+    R = (C @ V)[:, :, None, :] * VB.transpose(0, 2, 1)[:, None, :, :]
+    # Inputs whose gust never reaches the swept axis (decoupled models) are left out.
+    reach = np.max(np.abs(R), axis=(0, 1, 3))
+    keep = reach > 1e-12 * max(reach.max(), 1e-300)
+    R, Sw, Bw = R[:, :, keep], Sw[keep], Bw[:, keep]
+    J = int(keep.sum())
+    SwT = np.ascontiguousarray(Sw.T)  # (F, J)
+    for start in range(0, G, chunk):
+        idx = np.arange(start, min(G, start + chunk))
+        idx = idx[stable[idx]]
+        if idx.size == 0:
+            continue
+        good = idx[cond[idx] < 1e8]
+        if good.size:
+            # sum over the n modes by hand: tiny batched matmuls through a threaded BLAS stall
+            # badly when the machine is busy
+            Rg = R[good].reshape(good.size, 3 * J, plant.n)
+            lam_g = lam[good]
+            H = np.zeros((good.size, z.size, 3 * J), dtype=complex)
+            for i in range(plant.n):
+                H += (1.0 / (z[None, :] - lam_g[:, i:i + 1]))[:, :, None] * Rg[:, None, :, i]
+            H2 = (H.real**2 + H.imag**2).reshape(good.size, z.size, 3, J)
+            out[good] = (H2 * SwT[None, :, None, :]).sum(axis=(1, 3))
+        for gi in idx[cond[idx] >= 1e8]:  # near-defective: solve (zI - A) X = B directly
+            M = z[:, None, None] * np.eye(plant.n)[None] - A_cl[gi][None]
+            X = np.linalg.solve(M, np.broadcast_to(Bw, (z.size,) + Bw.shape).astype(complex))  # (F, n, J)
+            H = C[gi][None] @ X  # (F, 3, J)
+            out[gi] = (np.abs(H) ** 2 * SwT[:, None, :]).sum(axis=(0, 2))
+    return np.sqrt(out)
+

@@ -1,0 +1,261 @@
+"""Outputs of a gain sweep: CSV, JSON, Markdown report, heat map and histograms (all written atomically)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+
+import numpy as np
+
+from identification.files import save_figure, write_text
+
+from .closed_loop import GAUSS_ABS_FACTOR
+
+
+def _clean(v):
+    """JSON-safe scalar: NaN/inf -> None, numpy -> Python."""
+    if isinstance(v, (np.bool_, bool)):
+        return bool(v)
+    if isinstance(v, (np.integer,)):
+        return int(v)
+    if isinstance(v, (np.floating, float)):
+        return float(v) if math.isfinite(v) else None
+    return v
+
+
+def write_csv(result, path):
+    from .sweep import COLUMNS
+
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(COLUMNS)
+    for row in result.rows():
+        w.writerow([("" if isinstance(v, float) and not math.isfinite(v) else
+                     (f"{v:.6g}" if isinstance(v, float) else v)) for v in (row[c] for c in COLUMNS)])
+    return write_text(path, buf.getvalue())
+
+
+def write_json(result, path):
+    from .sweep import COLUMNS
+
+    doc = {
+        "schema": "heli-env/gain-sweep",
+        "schema_version": 1,
+        "settings": result.settings,
+        "kp_values": result.kp_values.tolist(),
+        "kd_values": result.kd_values.tolist(),
+        "columns": list(COLUMNS),
+        "rows": [{k: _clean(v) for k, v in row.items()} for row in result.rows()],
+        "histogram": {"quantity": "|attitude error| [deg]", "edges": result.hist_edges.tolist(),
+                      "counts": result.hist_counts.tolist(), "overflow": result.hist_overflow.tolist()},
+        "windows": [list(w) for w in result.windows],
+        "disturbance_spectrum": {"freq_hz": result.psd_freq.tolist(),
+                                 "psd_stick2_per_hz": {a: p.tolist() for a, p in
+                                                       zip(("roll", "pitch", "yaw"), result.psd)}},
+    }
+    return write_text(path, json.dumps(doc, indent=1, default=_clean) + "\n")
+
+
+def _fmt(v, spec=".3f"):
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "—"
+    return format(v, spec)
+
+
+def _note(row, duration):
+    notes = []
+    if row["status"] != "stable":
+        return row["status"]
+    if row["disagree"]:
+        if row["saturation"] > 0.005:
+            notes.append(f"saturated {100 * row['saturation']:.1f} % of the time")
+        if row["settle_s"] > 0.25 * duration:
+            notes.append(f"lightly damped: settles in {row['settle_s']:.0f} s, windows are {duration:g} s")
+        if not notes:
+            notes.append("non-Gaussian gusts or non-linear model")
+        notes[0] = "disagree: " + notes[0]
+    return "; ".join(notes)
+
+
+def markdown(result, max_rows: int = 400) -> str:
+    """The sweep report: settings, summary, the side-by-side time/frequency table."""
+    s = result.settings
+    st = result.table["status"]
+    n_unst = int(np.sum(st == "unstable"))
+    n_div = int(np.sum(st == "diverged"))
+    n_dis = int(np.sum(result.table["disagree"]))
+    best = result.best()
+    tol = s["agree_tol"]
+    lines = [
+        f"# Gain sweep — {result.axis}",
+        "",
+        f"Model `{s['model']}` (library v{s['library_version']}), PD attitude hold on **{result.axis}**, "
+        f"{result.n_pairs} gain pairs × {s['n_windows']} gust windows of {s['duration']:g} s at dt = {s['dt']:g} s "
+        f"(seed {s['seed']}). The other axes are held by nominal PD gains "
+        + ", ".join(f"{a}: Kp {g[0]:.3g}, Kd {g[1]:.3g}" for a, g in zip(("roll", "pitch", "yaw"), s["nominal_gains"])
+                    if a != result.axis)
+        + ".",
+        "",
+        "Two independent predictions of the error distribution (paper Section 4): **time domain** — the "
+        "library's gusts replayed through the physics core in closed loop (stick clipping included); **frequency "
+        "domain** — the Welch spectrum of u_d through the linearised closed loop, Gaussian percentiles of |e| "
+        f"(p50 = {GAUSS_ABS_FACTOR[50]:.3f}σ, p90 = {GAUSS_ABS_FACTOR[90]:.3f}σ, p99 = {GAUSS_ABS_FACTOR[99]:.3f}σ). "
+        f"Flagged where the p90s differ by more than {100 * tol:.0f} %.",
+        "",
+        "## Summary",
+        "",
+        f"- stable pairs: {int(np.sum(st == 'stable'))}; unstable (closed-loop poles, not simulated): {n_unst}; "
+        f"diverged in replay: {n_div}",
+        f"- time and frequency domain disagree (p90 > {100 * tol:.0f} %): {n_dis}",
+    ]
+    if best:
+        lines.append(f"- best pair by p90 |attitude error|: **Kp = {best['kp']:.4g}, Kd = {best['kd']:.4g}** — "
+                     f"p90 {best['att_p90_deg']:.3f}° (predicted {best['pred_att_p90_deg']:.3f}°), "
+                     f"p90 |rate error| {best['rate_p90_dps']:.3f}°/s, RMS stick {best['stick_rms']:.3f}")
+    sec = s.get("seconds", {})
+    if sec:
+        lines.append(f"- run time: {sec.get('total', float('nan')):.2f} s (time domain "
+                     f"{sec.get('time_domain', float('nan')):.2f} s, frequency domain "
+                     f"{sec.get('frequency_domain', float('nan')):.2f} s)")
+    lines += [
+        "",
+        "## Per gain pair",
+        "",
+        "|attitude error| [deg] and |rate error| [deg/s]: time domain / frequency domain.",
+        "",
+        "| Kp | Kd | p50 att | p90 att | p99 att | Δp90 att | p90 rate | Δp90 rate | RMS stick | sat. % | note |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+    ]
+    rows = result.rows()
+    for row in rows[:max_rows]:
+        if row["status"] == "unstable":
+            lines.append(f"| {row['kp']:.4g} | {row['kd']:.4g} | — | — | — | — | — | — | — | — | unstable "
+                         f"(max pole {row['max_pole']:.4f}) |")
+            continue
+        note = _note(row, s["duration"])
+        note = f"**{note}**" if row["disagree"] else note
+        lines.append(
+            f"| {row['kp']:.4g} | {row['kd']:.4g} "
+            f"| {_fmt(row['att_p50_deg'])} / {_fmt(row['pred_att_p50_deg'])} "
+            f"| {_fmt(row['att_p90_deg'])} / {_fmt(row['pred_att_p90_deg'])} "
+            f"| {_fmt(row['att_p99_deg'])} / {_fmt(row['pred_att_p99_deg'])} "
+            f"| {_fmt(100 * row['att_p90_rel_diff'], '+.1f')} % "
+            f"| {_fmt(row['rate_p90_dps'])} / {_fmt(row['pred_rate_p90_dps'])} "
+            f"| {_fmt(100 * row['rate_p90_rel_diff'], '+.1f')} % "
+            f"| {_fmt(row['stick_rms'])} / {_fmt(row['pred_stick_rms'])} "
+            f"| {_fmt(100 * row['saturation'], '.1f')} | {note} |")
+    if len(rows) > max_rows:
+        lines.append(f"\n({len(rows) - max_rows} more rows in sweep.csv)")
+    return "\n".join(lines) + "\n"
+
+
+def _edges(values):
+    v = np.asarray(values, dtype=float)
+    if v.size == 1:
+        h = 0.5 * abs(v[0]) or 0.5
+        return np.array([v[0] - h, v[0] + h])
+    mid = 0.5 * (v[1:] + v[:-1])
+    return np.concatenate([[v[0] - (mid[0] - v[0])], mid, [v[-1] + (v[-1] - mid[-1])]])
+
+
+def plot_heatmap(result, path):
+    """p90 |attitude error| over Kp × Kd: time domain and frequency domain side by side."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import LogNorm
+    from matplotlib.patches import Patch, Rectangle
+
+    if not result.is_grid:
+        raise ValueError("a heat map needs a Kp × Kd grid sweep")
+    kp, kd = result.kp_values, result.kd_values
+    td = result.grid("att_p90_deg").astype(float)
+    fd = result.grid("pred_att_p90_deg").astype(float)
+    unstable = result.grid("status") == "unstable"
+    fd = np.where(unstable, np.nan, fd)
+    finite = np.concatenate([td[np.isfinite(td)], fd[np.isfinite(fd)]])
+    norm = None
+    if finite.size and finite.min() > 0 and finite.max() > finite.min():
+        norm = LogNorm(vmin=finite.min(), vmax=finite.max())
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.8), sharey=True, constrained_layout=True)
+    xe, ye = _edges(kd), _edges(kp)
+    best = result.best()
+    for ax, data, title in ((axes[0], td, "time domain (replayed gusts)"),
+                            (axes[1], fd, "frequency domain (Welch × |H|², Gaussian)")):
+        mesh = ax.pcolormesh(xe, ye, np.ma.masked_invalid(data), cmap="viridis", norm=norm, shading="flat")
+        for i, j in zip(*np.nonzero(unstable)):  # hatched cells: not simulated
+            ax.add_patch(Rectangle((xe[j], ye[i]), xe[j + 1] - xe[j], ye[i + 1] - ye[i], facecolor="0.85",
+                                   hatch="xx", edgecolor="0.45", linewidth=0.0))
+        if kp.size > 1 and kd.size > 1:
+            rho = result.grid("max_pole").astype(float)
+            if np.nanmin(rho) < 1.0 < np.nanmax(rho):
+                ax.contour(kd, kp, rho, levels=[1.0], colors="red", linewidths=1.5)
+        if best:
+            ax.plot(best["kd"], best["kp"], marker="*", color="white", markersize=14, markeredgecolor="black")
+        ax.set_title(title)
+        ax.set_xlabel("Kd [stick/(rad/s)]")
+    axes[0].set_ylabel("Kp [stick/rad]")
+    cb = fig.colorbar(mesh, ax=axes, shrink=0.9)
+    cb.set_label(f"p90 |{result.axis} attitude error| [deg]")
+    handles = [Patch(facecolor="0.8", hatch="xx", edgecolor="0.4", label="unstable (closed-loop poles)"),
+               plt.Line2D([], [], color="red", label="stability boundary |z| = 1"),
+               plt.Line2D([], [], marker="*", color="white", markeredgecolor="black", linestyle="",
+                          markersize=12, label="best p90 (time domain)")]
+    fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=8)
+    fig.suptitle(f"PD gain sweep on {result.axis}: p90 |attitude error|")
+    return save_figure(fig, path, dpi=110)
+
+
+def default_pairs(result, n: int = 4) -> list:
+    """The best pair and ``n - 1`` others spread over the stable pairs' p90 ranking."""
+    stable = np.flatnonzero(result.stable & np.isfinite(np.asarray(result.table["att_p90_deg"], dtype=float)))
+    if stable.size == 0:
+        return []
+    order = stable[np.argsort(np.asarray(result.table["att_p90_deg"], dtype=float)[stable])]
+    picks = np.unique(np.round(np.linspace(0, order.size - 1, min(n, order.size))).astype(int))
+    return [(float(result.table["kp"][i]), float(result.table["kd"][i])) for i in order[picks]]
+
+
+def plot_histograms(result, path, pairs=None):
+    """Overlaid |attitude error| histograms (density per decade, log axis) with the half-normal predictions."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    pairs = default_pairs(result) if pairs is None else list(pairs)
+    edges = result.hist_edges[1:]  # geometric part; the [0, edges[1]) bin is left off the log axis
+    dlog = np.diff(np.log10(edges))
+    fine = np.geomspace(edges[0], edges[-1], 400)
+    fig, ax = plt.subplots(figsize=(8, 4.8), constrained_layout=True)
+    lo, hi = np.inf, 0.0
+    for n, (kp, kd) in enumerate(pairs):
+        i = result.index(kp, kd)
+        row = result.row(i)
+        colour = f"C{n % 10}"
+        if row["status"] != "stable":
+            ax.plot([], [], color=colour, label=f"Kp {row['kp']:.3g}, Kd {row['kd']:.3g}: {row['status']}")
+            continue
+        counts = result.hist_counts[i]
+        total = counts.sum() + result.hist_overflow[i]
+        dens = counts[1:] / (total * dlog)
+        ax.stairs(dens, edges, color=colour, linewidth=1.6,
+                  label=f"Kp {row['kp']:.3g}, Kd {row['kd']:.3g}: p90 {row['att_p90_deg']:.2f}° "
+                  f"(pred. {row['pred_att_p90_deg']:.2f}°)")
+        sigma = row["pred_att_rms_deg"]
+        if sigma and math.isfinite(sigma) and sigma > 0:  # half-normal density per decade: pdf(e)·e·ln 10
+            pdf = np.sqrt(2 / np.pi) / sigma * np.exp(-0.5 * (fine / sigma) ** 2) * fine * np.log(10)
+            ax.plot(fine, pdf, color=colour, linestyle="--", linewidth=1.0)
+        lo, hi = min(lo, row["att_p50_deg"] / 30), max(hi, row["att_p99_deg"] * 3)
+    ax.set_xscale("log")
+    if math.isfinite(lo) and hi > 0:
+        ax.set_xlim(max(lo, edges[0]), min(hi, edges[-1]))
+    ax.set_xlabel(f"|{result.axis} attitude error| [deg]")
+    ax.set_ylabel("density per decade")
+    ax.set_title("Error distributions: replayed gusts (solid), frequency-domain half-normal (dashed)")
+    if pairs:
+        ax.legend(fontsize=8, loc="upper left")
+    return save_figure(fig, path, dpi=110)

@@ -1,0 +1,127 @@
+"""``heli sweep``: PD gain sweep → predicted error distributions (paper Section 4), optionally checked by flights."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+DEFAULT_OUT = "sweep"
+
+
+def _positive(text):
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
+    return v
+
+
+def _count(text):
+    try:
+        v = int(text)
+    except ValueError:
+        v = -1
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}")
+    return v
+
+
+def register(sub):
+    p = sub.add_parser(
+        "sweep",
+        help="sweep PD gains against the disturbance library; predict each pair's error distribution",
+        description="Fly every PD gain pair of a Kp x Kd grid on one axis (attitude hold; the other axes held by "
+        "nominal PD gains) against windows of the model's disturbance library, replayed through the physics "
+        "core (time domain), and predict the same error distribution from the library's Welch spectrum through "
+        "the linearised closed loop (frequency domain). Unstable pairs (closed-loop poles) are reported, not "
+        "simulated. Writes DIR/sweep.csv, sweep.json, heatmap.png, histograms.png and sweep.md. With --flights N "
+        "the prediction is checked against N fresh-wind flights of the truth model per chosen pair "
+        "(KS statistics; DIR/flight_tests.json).",
+    )
+    p.add_argument("--model", metavar="DIR", default=None,
+                   help="model directory written by 'heli identify' (default: the model shipped with heli-env)")
+    p.add_argument("--kp", required=True, metavar="A:B:N",
+                   help="N proportional gains from A to B [stick/rad], e.g. 0.5:8:20 (or a single value)")
+    p.add_argument("--kd", required=True, metavar="C:D:M",
+                   help="M derivative gains from C to D [stick/(rad/s)], e.g. 0:3:20 (or a single value)")
+    p.add_argument("--axis", default="roll", choices=("roll", "pitch", "yaw"), help="axis to sweep (default roll)")
+    p.add_argument("--duration", type=_positive, default=60.0, help="seconds per gust window (default 60)")
+    p.add_argument("--dt", type=_positive, default=0.01, help="control period in seconds (default 0.01)")
+    p.add_argument("--windows", type=_count, default=None,
+                   help="number of (trace, offset) gust windows (default one per library trace)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the window offsets and flights (default 0)")
+    p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
+    p.add_argument("--flights", type=_count, default=0, metavar="N",
+                   help="check the prediction with N fresh-wind flights per pair of the truth model (default 0: no)")
+    p.add_argument("--flight-pairs", type=_count, default=4, metavar="K",
+                   help="pairs flown with --flights: the best and K-1 others spread over the stable pairs' p90 "
+                   "ranking (0: every stable pair; default 4)")
+    p.add_argument("--truth", default="model", choices=("model", "paper"),
+                   help="aircraft flown by --flights: the model's own parameters (default) or the paper's values")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from controllers.errors import SweepError
+    from controllers.sweep import parse_range, sweep_gains
+    from controllers.sweep_report import default_pairs
+
+    kp = parse_range(args.kp, "--kp")
+    kd = parse_range(args.kd, "--kd")
+    if args.model is not None and not Path(args.model).is_dir():
+        raise SweepError(f"model directory {args.model!r} does not exist (write one with 'heli identify')")
+    if args.windows == 0:
+        raise SweepError("--windows must be >= 1")
+    result = sweep_gains(args.model, kp, kd, axis=args.axis, duration=args.duration, dt=args.dt, seed=args.seed,
+                         windows=args.windows, progress=not args.no_progress)
+    out = Path(args.out)
+    paths = {
+        "csv": result.to_csv(out / "sweep.csv"),
+        "json": result.to_json(out / "sweep.json"),
+        "heatmap": result.plot_heatmap(out / "heatmap.png"),
+        "histograms": result.plot_histograms(out / "histograms.png"),
+    }
+    report = result.to_markdown()
+    flights = None
+    if args.flights:
+        from controllers.flight_test import validate_against_flights
+
+        if args.flight_pairs == 0:
+            idx = [i for i in range(result.n_pairs) if result.table["status"][i] == "stable"]
+            pairs = [(float(result.table["kp"][i]), float(result.table["kd"][i])) for i in idx]
+        else:
+            pairs = default_pairs(result, args.flight_pairs)
+        if pairs:
+            flights = validate_against_flights(args.model, pairs, axis=args.axis, n_flights=args.flights,
+                                               duration=args.duration, seed=args.seed, truth=args.truth, dt=args.dt,
+                                               progress=not args.no_progress)
+            paths["flights"] = flights.to_json(out / "flight_tests.json")
+            report += "\n" + flights.to_markdown()
+    from identification.files import write_text
+
+    paths["report"] = write_text(out / "sweep.md", report)
+
+    st = result.table["status"]
+    n_unstable = int((st == "unstable").sum())
+    best = result.best()
+    print(f"heli sweep: {result.n_pairs} gain pairs on {result.axis} x {result.settings['n_windows']} gust windows "
+          f"of {result.settings['duration']:g} s in {result.settings['seconds']['total']:.1f} s")
+    print(f"unstable (closed-loop poles, not simulated): {n_unstable}; diverged: {int((st == 'diverged').sum())}; "
+          f"time/frequency domain disagree: {int(result.table['disagree'].sum())}")
+    if best:
+        print(f"best by p90 |attitude error|: Kp = {best['kp']:.4g}, Kd = {best['kd']:.4g}: p90 "
+              f"{best['att_p90_deg']:.3f} deg (frequency domain {best['pred_att_p90_deg']:.3f} deg), "
+              f"p90 |rate error| {best['rate_p90_dps']:.3f} deg/s, RMS stick {best['stick_rms']:.3f}")
+    else:
+        print("no stable gain pair in the grid")
+    if flights is not None:
+        print(f"flight tests ({args.flights} x {args.duration:g} s per pair, {len(pairs)} pairs, truth "
+              f"{args.truth}): largest KS {flights.max_ks:.3f} (target <= 0.1: "
+              f"{'met' if flights.target_met else 'NOT met'})")
+    for path in paths.values():
+        print(f"wrote {path}")
+    return 0

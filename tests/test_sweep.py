@@ -1,0 +1,355 @@
+"""Tests of the gain sweep (:mod:`controllers.sweep`), its linear closed loop (:mod:`controllers.closed_loop`),
+its outputs, the flight-test check (:mod:`controllers.flight_test`) and ``heli sweep``.
+
+They use the model that ships with the package (three traces of 200 s) and a
+copy of it with a servo delay (eq. 31), whose stability boundary lies inside
+small grids. Windows are short where the test allows.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from controllers import closed_loop as cl
+from controllers.errors import SweepError
+from controllers.flight_test import fit_corner, validate_against_flights
+from controllers.sweep import COLUMNS, TD_COLUMNS, parse_range, sweep_gains, sweep_pairs
+from heli_cli.main import main
+from heli_env import HeliAttitudeEnv, load_env_model
+
+
+@pytest.fixture(scope="session")
+def shipped():
+    return load_env_model()
+
+
+@pytest.fixture(scope="session")
+def delayed(shipped):
+    """The shipped model with the flight generator's servo delays: unstable pairs appear at moderate gains."""
+    return dataclasses.replace(shipped, params=shipped.params.with_values(tau_roll=0.08, tau_pitch=0.08,
+                                                                           tau_yaw=0.05))
+
+
+@pytest.fixture(scope="session")
+def small_sweep(delayed):
+    """A 4 x 3 grid across the stability boundary of the delayed model, 3 windows of 10 s."""
+    return sweep_gains(delayed, [0.0, 5.0, 20.0, 40.0], [0.0, 1.0, 3.0], duration=10.0, windows=3, seed=7,
+                       progress=False)
+
+
+def _numeric(result):
+    return {c: np.asarray(result.table[c], dtype=float) for c in COLUMNS if c not in ("status", "disagree")}
+
+
+# ------------------------------------------------------------------------ sweep
+def test_sweep_is_deterministic_for_a_seed(delayed, small_sweep):
+    again = sweep_gains(delayed, [0.0, 5.0, 20.0, 40.0], [0.0, 1.0, 3.0], duration=10.0, windows=3, seed=7,
+                        progress=False)
+    assert again.windows == small_sweep.windows
+    for c, v in _numeric(small_sweep).items():
+        assert_array_equal(_numeric(again)[c], v, err_msg=c)
+    assert_array_equal(again.hist_counts, small_sweep.hist_counts)
+    other = sweep_gains(delayed, [5.0], [1.0], duration=10.0, windows=3, seed=8, progress=False)
+    assert other.windows != small_sweep.windows
+
+
+def test_windows_are_distinct_and_fit_their_traces(shipped):
+    r = sweep_gains(shipped, [2.0], [1.0], duration=60.0, windows=10, seed=0, progress=False)
+    assert len(r.windows) == 10 == len(set(r.windows))
+    assert sorted({t for t, _ in r.windows}) == [0, 1, 2]
+    for t, off in r.windows:
+        assert 0 <= off <= shipped.lengths[t] - 6001
+
+
+def test_unstable_pairs_are_detected_and_not_simulated(delayed, small_sweep):
+    st = small_sweep.table["status"]
+    unstable = st == "unstable"
+    assert unstable.sum() >= 4 and (st == "stable").sum() >= 4
+    # kp = 0 leaves a pole on the unit circle (the attitude drifts); kp = 40, kd = 0 is beyond the boundary
+    assert unstable[small_sweep.index(0.0, 1.0)] and unstable[small_sweep.index(40.0, 0.0)]
+    for c in TD_COLUMNS:
+        col = np.asarray(small_sweep.table[c], dtype=float)
+        assert np.all(np.isnan(col[unstable])), c
+        assert np.all(np.isfinite(col[~unstable])), c
+    assert np.all(np.isnan(small_sweep.table["pred_att_p90_deg"][unstable]))
+    assert np.all(small_sweep.hist_counts[unstable] == 0)
+    # python-control agrees, pair by pair, and so does the PD module's per-axis analysis
+    from controllers.pd import loop_analysis
+
+    plant = cl.hover_plant(delayed.params, 0.01, 0.2)
+    nominal = np.array(small_sweep.settings["nominal_gains"])
+    for i in range(small_sweep.n_pairs):
+        kp, kd = small_sweep.table["kp"][i], small_sweep.table["kd"][i]
+        poles = cl.closed_loop_system(plant, "roll", kp, kd, nominal).poles()
+        assert (np.max(np.abs(poles)) < 1 - cl.STABILITY_MARGIN) == (not unstable[i])
+        if kp > 0:
+            assert loop_analysis(delayed.params, "roll", kp, kd, 0.01).stable == (not unstable[i])
+
+
+def test_statistics_equal_the_shared_error_metrics(shipped):
+    """The sweep's in-place float32 statistics are controllers.metrics.error_metrics of its samples."""
+    from controllers.metrics import error_metrics
+
+    r = sweep_pairs(shipped, [(1.0, 0.0), (6.0, 2.0)], duration=20.0, windows=3, keep_samples=True, progress=False)
+    for i in range(2):
+        m = error_metrics(*r.samples[i], hist_edges=r.hist_edges)
+        for c in ("att_rms_deg", "att_p50_deg", "att_p90_deg", "att_p99_deg", "rate_rms_dps", "rate_p50_dps",
+                  "rate_p90_dps", "rate_p99_dps", "stick_rms", "stick_p99", "saturation"):
+            assert_allclose(r.table[c][i], m[c], rtol=1e-5, atol=1e-9, err_msg=c)
+        assert np.abs(r.hist_counts[i] - m["hist_counts"]).sum() <= 4  # float32 rounding at bin edges
+        assert r.hist_counts[i].sum() + r.hist_overflow[i] == m["n_samples"]
+
+
+def test_pd_command_is_the_pd_controllers_law(shipped):
+    from controllers.pd import PDController, PDGains
+
+    rng = np.random.default_rng(1)
+    obs = rng.uniform(-0.3, 0.3, (50, 12)).astype(np.float32)
+    gains = PDGains(kp=(3.0, 5.0, 1.0), kd=(1.0, 0.5, 0.2))
+    ctrl = PDController.from_model(shipped.params, gains)
+    act, _ = ctrl.predict(obs)
+    signs = np.sign(shipped.params.control_gains)
+    for i in range(3):
+        u = cl.pd_command(gains.kp[i], gains.kd[i], signs[i], obs[:, i].astype(float), obs[:, 6 + i].astype(float))
+        assert_allclose(np.clip(u, -1, 1), act[:, i], atol=1e-6)
+
+
+def test_replay_equals_the_environment_under_the_same_pd_law(shipped):
+    """The sweep's closed loop is the env's: same physics step, trim and stick clipping."""
+    kp, kd = 3.0, 1.0
+    r = sweep_pairs(shipped, [(kp, kd)], duration=5.0, traces=[(1, 1234)], keep_samples=True, progress=False)
+    nominal = np.array(r.settings["nominal_gains"])
+    signs = np.sign(shipped.params.control_gains)
+    env = HeliAttitudeEnv(model=shipped, init_angle_deg=0.0, init_rate_deg=0.0, episode_seconds=5.0)
+    obs, _ = env.reset(seed=0, options={"trace": 1, "offset": 1234})
+    gains = [(kp, kd), tuple(nominal[1]), tuple(nominal[2])]
+    errs = [0.0]
+    for _ in range(499):
+        x = env._x  # the true state (the observation is float32)
+        q0, q1, q2, q3 = x[6:10]
+        ang = cl_euler(q0, q1, q2, q3)
+        a = [cl.pd_command(g[0], g[1], signs[i], -ang[i], -x[i]) for i, g in enumerate(gains)]
+        obs, _, term, trunc, info = env.step(np.array(a))
+        errs.append(info["attitude_error_deg"][0])
+    assert_allclose(r.samples[0][0][:500], errs, atol=1e-9)
+
+
+def cl_euler(q0, q1, q2, q3):
+    return (math.atan2(2 * (q0 * q1 + q2 * q3), 1 - 2 * (q1 * q1 + q2 * q2)),
+            math.asin(max(-1.0, min(1.0, 2 * (q0 * q2 - q3 * q1)))),
+            math.atan2(2 * (q0 * q3 + q1 * q2), 1 - 2 * (q2 * q2 + q3 * q3)))
+
+
+# ------------------------------------------------------------- frequency domain
+def test_linear_plant_matches_the_physics_core(delayed):
+    """The sampled linear plant reproduces the core's discrete step for small inputs (rates exactly)."""
+    from identification.model import _discrete_kernel, trim_sticks
+
+    params, dt = delayed.params, 0.01
+    plant = cl.hover_plant(params, dt, 0.2)
+    dstep = _discrete_kernel(params, dt)[0]
+    trim = trim_sticks(params, 0.2)
+    rng = np.random.default_rng(0)
+    u = 0.02 * rng.standard_normal((200, 3))
+    w = 0.02 * rng.standard_normal((200, 3))
+    x = (0.0, 0.0, 0.0, *trim, 1.0, 0.0, 0.0, 0.0)
+    xl = np.zeros(plant.n)
+    for k in range(200):
+        sticks = (trim[0] + u[k, 0], trim[1] + u[k, 1], 0.2, trim[2] + u[k, 2])
+        x = dstep(x, sticks, tuple(params.control_gains * w[k]))
+        xl = plant.A @ xl + plant.Bu @ u[k] + plant.Bw @ w[k]
+    assert_allclose(xl[plant.rate_idx], x[0:3], atol=1e-9)
+    assert_allclose(xl[plant.angle_idx], cl_euler(*x[6:10]), atol=2e-4)  # O(dt^2) attitude integration
+
+
+def test_frequency_domain_variance_equals_lyapunov_for_white_noise(delayed):
+    """sum |H|^2 S df on the fine grid equals the discrete Lyapunov variance for white u_d (< 0.5 %)."""
+    from scipy.linalg import solve_discrete_lyapunov
+
+    dt, sigma = 0.01, 0.05
+    plant = cl.hover_plant(delayed.params, dt, 0.2)
+    nominal = cl.nominal_gains(plant)
+    freq = np.linspace(0.0, 0.5 / dt, 1025)
+    psd = np.zeros((3, freq.size))
+    psd[0] = 2.0 * dt * sigma**2  # one-sided density of white noise of variance sigma^2
+    kp, kd = np.array([2.0, 10.0, 20.0]), np.array([0.5, 1.0, 0.5])
+    std = cl.predict_std(plant, "roll", kp, kd, nominal, freq, psd)
+    K = cl.gain_matrices(plant, 0, kp, kd, nominal)
+    for g in range(kp.size):
+        A = plant.A - plant.Bu @ K[g]
+        P = solve_discrete_lyapunov(A, sigma**2 * np.outer(plant.Bw[:, 0], plant.Bw[:, 0]))
+        C = np.zeros((3, plant.n))
+        C[0, plant.angle_idx[0]] = 1.0
+        C[1, plant.rate_idx[0]] = 1.0
+        C[2] = K[g, 0]
+        assert_allclose(std[g], np.sqrt(np.diag(C @ P @ C.T)), rtol=5e-3)
+
+
+def test_frequency_response_equals_python_control(delayed):
+    """The partial-fraction evaluation equals control.frequency_response (checked via a line spectrum)."""
+    import control
+
+    dt = 0.01
+    plant = cl.hover_plant(delayed.params, dt, 0.2)
+    nominal = cl.nominal_gains(plant)
+    sysd = cl.closed_loop_system(plant, "roll", 8.0, 1.5, nominal)
+    f0 = 1.3  # a narrow band around f0 picks |H(f0)|^2
+    freq = np.linspace(0.0, 0.5 / dt, 50001)
+    psd = np.zeros((3, freq.size))
+    psd[0] = np.exp(-0.5 * ((freq - f0) / 0.002) ** 2)
+    area = np.trapezoid(psd[0], freq)
+    got = cl.predict_std(plant, "roll", [8.0], [1.5], nominal, freq, psd, n_freq=200000)[0] ** 2 / area
+    mag = control.frequency_response(sysd[:, 0], [2 * math.pi * f0]).magnitude.reshape(3)
+    assert_allclose(got, mag**2, rtol=2e-3)
+
+
+def test_time_and_frequency_domain_agree_for_small_gains(shipped):
+    """Linear regime (no saturation): the two predictions agree within 10 % on RMS and p90 (measured ~3 %)."""
+    r = sweep_pairs(shipped, [(1.0, 0.5), (3.0, 1.0), (8.0, 3.0)], duration=None, progress=False)
+    assert np.all(r.table["saturation"] == 0.0)
+    for td, fd in (("att_rms_deg", "pred_att_rms_deg"), ("att_p90_deg", "pred_att_p90_deg"),
+                   ("rate_rms_dps", "pred_rate_rms_dps"), ("rate_p90_dps", "pred_rate_p90_dps"),
+                   ("stick_rms", "pred_stick_rms")):
+        assert_allclose(r.table[td], r.table[fd], rtol=0.10, err_msg=td)
+    assert not np.any(r.table["disagree"])
+
+
+def test_saturation_is_counted_and_flagged(shipped):
+    """Gusts 15 times the library's saturate the stick: the linear prediction underestimates, and says why."""
+    strong = dataclasses.replace(shipped, ud=shipped.ud * 15.0)
+    r = sweep_pairs(strong, [(10.0, 1.0)], duration=30.0, windows=3, progress=False)
+    assert r.table["saturation"][0] > 0.1
+    assert r.table["disagree"][0] and r.table["att_p90_rel_diff"][0] > 0.2
+    assert "saturated" in r.to_markdown()
+    # twice as strong again: the stick cannot hold the aircraft; reported as diverged, statistics left empty
+    wild = sweep_pairs(dataclasses.replace(shipped, ud=shipped.ud * 30.0), [(3.0, 1.0)], duration=30.0, windows=3,
+                       progress=False)
+    assert wild.table["status"][0] == "diverged" and np.isnan(wild.table["att_p90_deg"][0])
+
+
+def test_welch_spectrum_keeps_the_library_variance_and_the_wind_bandwidth(shipped):
+    freq, psd = cl.disturbance_spectrum(shipped, 0.01)
+    var = np.sum(psd, axis=1) * (freq[1] - freq[0])
+    ud = np.concatenate([shipped.ud[:, s:s + n] - shipped.ud[:, s:s + n].mean(axis=1, keepdims=True)
+                         for s, n in zip(shipped.starts, shipped.lengths)], axis=1)
+    assert_allclose(np.sqrt(var), ud.std(axis=1), rtol=0.03)
+    # the shipped library was identified from wind of a 0.5 Hz corner (the flight generator's)
+    assert 0.3 < fit_corner(freq, psd[0]) < 0.7
+
+
+# ------------------------------------------------------------------ bad inputs
+@pytest.mark.parametrize("text, match", [
+    ("1:0:3", "reversed"), ("0:1:0", "empty"), ("nan:1:3", "finite"), ("0:inf:3", "finite"),
+    ("-1:1:3", ">= 0"), ("a:b:3", "numbers"), ("1:2", "A:B:N"), ("0:1:2.5", "whole"), ("0:1:1", "N = 1"),
+])
+def test_bad_ranges_raise(text, match):
+    with pytest.raises(SweepError, match=match):
+        parse_range(text, "--kp")
+
+
+def test_good_ranges():
+    assert_allclose(parse_range("0:3:4"), [0, 1, 2, 3])
+    assert_allclose(parse_range("2.5"), [2.5])
+    assert_allclose(parse_range("2:2:1"), [2.0])
+
+
+@pytest.mark.parametrize("kp, match", [([], "non-empty"), ([1.0, np.inf], "finite"), ([-1.0], ">= 0"),
+                                       ([[1.0, 2.0]], "1-D")])
+def test_bad_gains_raise(shipped, kp, match):
+    with pytest.raises(SweepError, match=match):
+        sweep_gains(shipped, kp, [1.0], duration=1.0, progress=False)
+
+
+def test_bad_settings_raise(shipped, tmp_path):
+    with pytest.raises(SweepError, match="does not exist"):
+        sweep_gains(tmp_path / "nowhere", [1.0], [1.0], progress=False)
+    with pytest.raises(SweepError, match="axis"):
+        sweep_gains(shipped, [1.0], [1.0], axis="heave", progress=False)
+    with pytest.raises(SweepError, match="does not fit"):
+        sweep_gains(shipped, [1.0], [1.0], duration=500.0, progress=False)
+    with pytest.raises(SweepError, match="whole number"):
+        sweep_gains(shipped, [1.0], [1.0], dt=0.015, progress=False)
+    with pytest.raises(SweepError, match="out of range"):
+        sweep_gains(shipped, [1.0], [1.0], traces=[7], progress=False)
+
+
+# --------------------------------------------------------------------- outputs
+def test_outputs_are_written(small_sweep, tmp_path):
+    paths = [small_sweep.to_csv(tmp_path / "s.csv"), small_sweep.to_json(tmp_path / "s.json"),
+             small_sweep.plot_heatmap(tmp_path / "h.png"), small_sweep.plot_histograms(tmp_path / "g.png")]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["g.png", "h.png", "s.csv", "s.json"]  # no temp files
+    rows = list(csv.DictReader((tmp_path / "s.csv").open()))
+    assert tuple(rows[0]) == COLUMNS and len(rows) == small_sweep.n_pairs
+    doc = json.loads((tmp_path / "s.json").read_text())
+    assert doc["schema"] == "heli-env/gain-sweep" and len(doc["rows"]) == small_sweep.n_pairs
+    unstable = [r for r in doc["rows"] if r["status"] == "unstable"]
+    assert unstable and all(r["att_p90_deg"] is None for r in unstable)
+    assert np.array(doc["histogram"]["counts"]).shape == small_sweep.hist_counts.shape
+    for p in paths[2:]:
+        assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    md = small_sweep.to_markdown()
+    assert "unstable (max pole" in md and "best pair" in md
+
+
+def test_histograms_count_every_sample(small_sweep):
+    stable = small_sweep.stable
+    n = small_sweep.settings["steps"] * small_sweep.settings["n_windows"]
+    assert_array_equal(small_sweep.hist_counts[stable].sum(axis=1) + small_sweep.hist_overflow[stable], n)
+
+
+# ---------------------------------------------------------------- flight tests
+def test_flight_tests_match_the_prediction(shipped):
+    """Fresh-wind flights of the model itself: KS below 0.15 with 5 x 60 s (bench: ~0.05 with 10 x 60 s)."""
+    res = validate_against_flights(shipped, [(3.0, 1.0)], n_flights=5, duration=60.0, seed=3, progress=False)
+    assert res.table["status"][0] == "flown"
+    assert 0.0 < res.table["ks_att"][0] < 0.15
+    assert 0.0 < res.table["ks_rate"][0] < 0.15
+    assert abs(res.table["att_p90_err_td"][0]) < 0.15
+    assert "Prediction checked against flight tests" in res.to_markdown()
+
+
+def test_flight_tests_skip_unstable_pairs(delayed):
+    pred = sweep_pairs(delayed, [(0.0, 1.0), (5.0, 1.0)], duration=10.0, windows=2, keep_samples=True,
+                       progress=False)
+    res = validate_against_flights(delayed, [(0.0, 1.0), (5.0, 1.0)], n_flights=1, duration=5.0, prediction=pred,
+                                   progress=False)
+    assert list(res.table["status"]) == ["unstable", "flown"]
+    assert np.isnan(res.table["ks_att"][0]) and np.isfinite(res.table["ks_att"][1])
+
+
+# ------------------------------------------------------------------------- CLI
+def test_cli_writes_the_outputs(tmp_path, capsys):
+    out = tmp_path / "sw"
+    rc = main(["sweep", "--kp", "1:4:2", "--kd", "0:1:2", "--duration", "5", "--out", str(out), "--no-progress"])
+    assert rc == 0
+    assert sorted(p.name for p in out.iterdir()) == ["heatmap.png", "histograms.png", "sweep.csv", "sweep.json",
+                                                     "sweep.md"]
+    text = capsys.readouterr().out
+    assert "best by p90" in text and "unstable (closed-loop poles, not simulated): 0" in text
+
+
+@pytest.mark.parametrize("argv, match", [
+    (["--kp", "4:1:3", "--kd", "0:1:2"], "reversed"),
+    (["--kp", "1:4:0", "--kd", "0:1:2"], "empty"),
+    (["--kp", "1:4:2", "--kd", "nan:1:2"], "finite"),
+    (["--kp", "1:4:2", "--kd=-1:1:2"], ">= 0"),  # a leading minus needs "="
+    (["--kp", "1:4:2", "--kd", "0:1:2", "--model", "/no/such/model"], "does not exist"),
+])
+def test_cli_errors_exit_2(argv, match, tmp_path, capsys):
+    assert main(["sweep", *argv, "--out", str(tmp_path / "o"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "SweepError" in err and match in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_cli_rejects_a_bad_duration(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["sweep", "--kp", "1", "--kd", "1", "--duration", "-5"])
+    assert e.value.code == 2
