@@ -17,6 +17,9 @@ COMMAND_MODULES = (
     "heli_cli.simulate_flight",
     "heli_cli.identify",
     "heli_cli.compare_methods",
+    "heli_cli.sweep",
+    "heli_cli.train",
+    "heli_cli.evaluate",
 )
 """Modules that register sub-commands, in the order ``heli --help`` lists them."""
 
@@ -35,13 +38,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    from controllers.errors import AgentError, SweepError
+    from heli_env.errors import EnvModelError
     from identification.errors import FlightLogError, IdentifiabilityError, MissingDependency, ModelFileError
 
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (FlightLogError, IdentifiabilityError, ModelFileError, MissingDependency) as e:
+    except (FlightLogError, IdentifiabilityError, ModelFileError, MissingDependency, SweepError,
+            AgentError, EnvModelError) as e:
         print(f"heli {args.command}: error: {type(e).__name__}: {e}", file=sys.stderr)
         return 2
     except FileNotFoundError as e:

@@ -1,0 +1,84 @@
+"""``heli evaluate``: any agent (PD JSON or PPO/SAC zip) on held-out gusts, with the sweep's metrics."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+DEFAULT_OUT = "evaluation"
+
+
+def _whole(text):
+    try:
+        v = int(text)
+    except ValueError:
+        v = 0
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    return v
+
+
+def _positive(text):
+    try:
+        v = float(text)
+    except ValueError:
+        v = float("nan")
+    if not (v > 0 and v < float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
+    return v
+
+
+def register(sub):
+    p = sub.add_parser(
+        "evaluate",
+        help="fly an agent (PD JSON or PPO/SAC zip) on held-out gusts; report the sweep's error metrics",
+        description="Fly any agent on gust windows of the model's disturbance library (attitude hold, start at "
+        "rest) and report per axis the RMS and 50/90/99th percentiles of |attitude error| and |rate error|, "
+        "stick RMS and p99, saturation and a histogram, as 'heli sweep' does for PD gain pairs. The held-out "
+        "traces are those the agent was trained without (recorded in an RL agent's zip), else the default split "
+        "of 'heli train'. Writes DIR/evaluation.json, evaluation.md and episode.png (a representative episode).",
+    )
+    p.add_argument("agent", metavar="AGENT", help="PD controller JSON (PDController.save) or PPO/SAC zip")
+    p.add_argument("--model", metavar="DIR", default=None,
+                   help="model directory written by 'heli identify' (default: the model shipped with heli-env)")
+    p.add_argument("--traces", default="held-out", choices=("held-out", "all", "train"),
+                   help="which library traces to fly (default held-out)")
+    p.add_argument("--episodes-per-trace", type=_whole, default=4, help="episodes per trace (default 4)")
+    p.add_argument("--episode-seconds", type=_positive, default=30.0, help="episode length in s (default 30)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the gust windows (default 0)")
+    p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from controllers.evaluate import describe_agent, evaluate_agent
+    from controllers.rl import agent_metadata, load_agent
+    from controllers.trace_split import TraceSplit, split_traces
+    from heli_env.model_dir import load_env_model
+    from identification.files import write_text
+
+    env_model = load_env_model(args.model)
+    agent = load_agent(args.agent)
+    meta = agent_metadata(args.agent)
+    split, origin = split_traces(env_model.n_traces), "default split"
+    if meta and meta.get("split") and meta["split"].get("n_traces") == env_model.n_traces:
+        split, origin = TraceSplit.from_dict(meta["split"]), "the agent's training split"
+    res = evaluate_agent(agent, env_model, traces=args.traces, episodes_per_trace=args.episodes_per_trace,
+                         episode_seconds=args.episode_seconds, seed=args.seed, split=split,
+                         name=f"{Path(args.agent).name} ({describe_agent(agent)[0]})")
+    out = Path(args.out)
+    paths = [res.to_json(out / "evaluation.json"), write_text(out / "evaluation.md", res.markdown()),
+             res.plot_episode(out / "episode.png")]
+    st = res.settings
+    print(f"heli evaluate: {res.name} on {len(res.episodes)} episodes of {st['episode_seconds']:g} s, "
+          f"{args.traces} traces {', '.join(st['trace_ids_used'])} ({origin})")
+    for ax in ("roll", "pitch", "yaw"):
+        m = res.metrics[ax]
+        print(f"  {ax:5s}: |attitude error| RMS {m['att_rms_deg']:.3f}, p50 {m['att_p50_deg']:.3f}, p90 "
+              f"{m['att_p90_deg']:.3f}, p99 {m['att_p99_deg']:.3f} deg; |rate error| p90 {m['rate_p90_dps']:.3f} "
+              f"deg/s; stick RMS {m['stick_rms']:.3f}, saturated {100 * m['saturation']:.1f} %")
+    print(f"  mean return {res.mean_return:.2f}; episodes ended early: {res.n_terminated}")
+    for path in paths:
+        print(f"wrote {path}")
+    return 0
+

@@ -1,0 +1,105 @@
+"""``heli train``: train a PPO or SAC attitude agent on the training gusts of a model's library."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+
+def _whole(minimum):
+    def parse(text):
+        try:
+            v = int(text)
+        except ValueError:
+            v = minimum - 1
+        if v < minimum:
+            raise argparse.ArgumentTypeError(f"expected a whole number >= {minimum}, got {text!r}")
+        return v
+
+    return parse
+
+
+def _positive(text):
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
+    return v
+
+
+def _fraction(text):
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not 0.0 < v < 1.0:
+        raise argparse.ArgumentTypeError(f"expected a fraction in (0, 1), got {text!r}")
+    return v
+
+
+def register(sub):
+    p = sub.add_parser(
+        "train",
+        help="train a PPO or SAC attitude agent on the model's training gusts (needs the 'rl' extra)",
+        description="Train a stable-baselines3 PPO or SAC agent on the native vector environment (attitude hold "
+        "in replayed gusts). Episodes replay windows of the training traces only; the held-out traces (a "
+        "quarter of the library by default, chosen by --split-seed; a single-trace library is split in time) "
+        "score the agent during training. Writes AGENT.zip (the final agent), and AGENT_training/ with "
+        "training.json, best_model.zip, evaluations.npz and checkpoints/. Ctrl-C saves a checkpoint first. "
+        "Evaluate with 'heli evaluate AGENT.zip'.",
+    )
+    p.add_argument("--algo", required=True, choices=("ppo", "sac"), help="algorithm")
+    p.add_argument("--model", metavar="DIR", default=None,
+                   help="model directory written by 'heli identify' (default: the model shipped with heli-env)")
+    p.add_argument("--timesteps", required=True, type=_whole(1), metavar="N",
+                   help="environment steps to train for (all copies together)")
+    p.add_argument("--out", required=True, metavar="AGENT", help="agent path (.zip is added)")
+    p.add_argument("--seed", type=int, default=0, help="seed of everything (default 0)")
+    p.add_argument("--n-envs", type=_whole(1), default=8, help="environment copies (default 8)")
+    p.add_argument("--minutes", type=_positive, default=None,
+                   help="wall-time budget; training stops at --timesteps or this, whichever comes first")
+    p.add_argument("--eval-freq", type=_whole(0), default=50_000, metavar="N",
+                   help="timesteps between held-out evaluations (0: none; default 50000)")
+    p.add_argument("--eval-episodes", type=_whole(1), default=4, help="held-out episodes per evaluation (default 4)")
+    p.add_argument("--checkpoint-freq", type=_whole(0), default=100_000, metavar="N",
+                   help="timesteps between checkpoints (0: none; default 100000)")
+    p.add_argument("--episode-seconds", type=_positive, default=30.0, help="episode length in s (default 30)")
+    p.add_argument("--held-out-fraction", type=_fraction, default=0.25,
+                   help="fraction of the library's traces held out (default 0.25)")
+    p.add_argument("--split-seed", type=int, default=0, help="seed of the held-out choice (default 0)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from controllers.errors import TrainingInterrupted
+    from controllers.rl import train_agent
+
+    try:
+        res = train_agent(args.algo, args.model, args.timesteps, args.out, seed=args.seed, n_envs=args.n_envs,
+                          eval_freq=args.eval_freq, checkpoint_freq=args.checkpoint_freq,
+                          progress=not args.no_progress, held_out_fraction=args.held_out_fraction,
+                          split_seed=args.split_seed, eval_episodes=args.eval_episodes,
+                          episode_seconds=args.episode_seconds,
+                          max_seconds=None if args.minutes is None else 60.0 * args.minutes)
+    except TrainingInterrupted as e:
+        print(f"heli train: interrupted after {e.timesteps} timesteps; checkpoint saved to {e.checkpoint}",
+              file=sys.stderr)
+        return 130
+    why = " (time budget reached)" if res.stopped_by_time else ""
+    print(f"heli train: {res.algo.upper()} trained for {res.timesteps} timesteps in {res.seconds:.1f} s "
+          f"({res.steps_per_second:.0f} steps/s){why}")
+    if res.evaluations:
+        t, mean, std = res.evaluations[-1]
+        best = max(res.evaluations, key=lambda e: e[1])
+        print(f"held-out return: last {mean:.2f} ± {std:.2f} at {t} steps; best {best[1]:.2f} at {best[0]} steps")
+    print(f"wrote {res.path}")
+    print(f"wrote {res.run_dir / 'training.json'}")
+    if res.best_model is not None:
+        print(f"wrote {res.best_model}")
+    if res.checkpoints:
+        print(f"wrote {len(res.checkpoints)} checkpoints in {res.run_dir / 'checkpoints'}")
+    return 0

@@ -1,0 +1,170 @@
+"""Best PD vs PPO vs SAC on the same held-out gusts (issue 5's comparison report).
+
+1. Splits the model's disturbance library into training and held-out traces
+   (:func:`controllers.rl.split_traces`).
+2. PD: designs per-axis gains with python-control (:func:`controllers.pd.design_gains`),
+   then sweeps a Kp x Kd grid around them on each axis against windows of the
+   *training* traces (:func:`controllers.sweep.sweep_pairs`) and keeps, per axis,
+   the stable pair with the smallest p90 |attitude error| ("best swept PD").
+3. Trains PPO and SAC on the training traces, each for a wall-time budget
+   (``--minutes``) or a number of timesteps, whichever ends first.
+4. Evaluates the designed PD, the best swept PD, PPO and SAC with one evaluator
+   (:func:`controllers.evaluate.evaluate_agent`) on the same held-out windows and
+   initial states; the RL agents compared are the *final* ones (the best
+   checkpoints were picked on the held-out traces).
+5. Writes OUT/comparison.md, comparison.json, episode.png (a representative
+   held-out episode, all agents overlaid) and one episode plot per agent, and
+   prints the timesteps and wall time of training.
+
+The issue's goal is an RL agent matching or beating the best PD gain pair on
+p90 attitude error within 15 minutes of training on 2 cores (``--minutes 15``).
+
+Usage::
+
+    python scripts/train_compare.py --minutes 15 --out compare-out
+    python scripts/train_compare.py --minutes 2 --out /tmp/compare      # a quick look
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from controllers.evaluate import comparison_markdown, evaluate_agent, plot_episode
+from controllers.pd import PDController, PDGains, design_gains, loop_analysis
+from controllers.rl import split_traces, train_agent
+from controllers.sweep import sweep_pairs
+from controllers.trace_split import draw_windows
+from heli_env import load_env_model
+from identification.files import jsonable, write_text
+
+AXES = ("roll", "pitch", "yaw")
+
+
+def swept_gains(env_model, split, design: PDGains, n: int, seconds: float, windows_per_trace: int, seed: int):
+    """Per axis, the stable pair of an n x n grid (0.25 to 8 times the design gains, geometric) with the
+    smallest p90 |attitude error| on windows of the training traces; the design where no pair is stable.
+
+    The grid reaches past the stability boundary (the sweep marks those pairs unstable without simulating
+    them), so the best pair is not an artefact of the grid's edge."""
+    dt = 0.01
+    ratio = int(round(dt * env_model.sample_rate))
+    needed = int(round(seconds / dt)) * ratio + 1
+    wins = draw_windows(env_model, split.train, needed, np.random.default_rng(seed), per_segment=windows_per_trace)
+    kp, kd, rows = list(design.kp), list(design.kd), {}
+    for i, ax in enumerate(AXES):
+        f = np.geomspace(0.25, 8.0, n)
+        KP, KD = np.meshgrid(f * design.kp[i], f * design.kd[i], indexing="ij")
+        res = sweep_pairs(env_model, np.column_stack([KP.ravel(), KD.ravel()]), axis=ax, duration=seconds, dt=dt,
+                          traces=wins, progress=False)
+        best = res.best()
+        margins, edge = None, False
+        if best is not None:
+            kp[i], kd[i] = best["kp"], best["kd"]
+            margins = loop_analysis(env_model.params, ax, kp[i], kd[i], dt).summary()
+            edge = bool(np.isclose(kp[i], KP.max()) or np.isclose(kd[i], KD.max()))
+        rows[ax] = {"best": best, "pairs": res.n_pairs, "stable": int(res.stable.sum()), "at_grid_edge": edge,
+                    "margins": margins, "seconds": res.settings["seconds"]["total"]}
+    return PDGains(kp, kd), rows, wins
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--model", default=None, help="model directory (default: the shipped model)")
+    ap.add_argument("--out", default="compare-out")
+    ap.add_argument("--minutes", type=float, default=15.0, help="wall-time budget per algorithm (default 15)")
+    ap.add_argument("--timesteps", type=int, default=10**9, help="timestep cap per algorithm (default: none)")
+    ap.add_argument("--algos", default="ppo,sac", help="comma-separated algorithms (default ppo,sac)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--n-envs", type=int, default=8)
+    ap.add_argument("--episodes-per-trace", type=int, default=6, help="held-out episodes per trace (default 6)")
+    ap.add_argument("--grid", type=int, default=12, help="PD sweep grid size per axis (default 12 x 12)")
+    ap.add_argument("--no-progress", action="store_true")
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    env_model = load_env_model(args.model)
+    split = split_traces(env_model.n_traces)
+    ids = env_model.trace_ids
+    print(f"library: {env_model.n_traces} traces; training {[ids[s.trace] for s in split.train]}, held out "
+          f"{[ids[s.trace] for s in split.held_out]}" + (" (one trace split in time)" if split.in_time else ""))
+
+    design = design_gains(env_model.params)
+    t0 = time.perf_counter()
+    swept, sweep_rows, sweep_windows = swept_gains(env_model, split, design, args.grid, 30.0, 4, args.seed)
+    print(f"PD sweep ({args.grid} x {args.grid} pairs per axis on {len(sweep_windows)} training windows): "
+          f"{time.perf_counter() - t0:.1f} s")
+    agents = [("PD designed", PDController.from_model(env_model.params, design)),
+              ("PD best swept", PDController.from_model(env_model.params, swept))]
+    agents[0][1].save(out / "pd_designed.json", {"model": str(env_model.path), "how": "design_gains"})
+    agents[1][1].save(out / "pd_swept.json", {"model": str(env_model.path), "how": "per-axis sweep on training "
+                                              "windows", "sweep": sweep_rows})
+
+    training = {}
+    for algo in [a.strip() for a in args.algos.split(",") if a.strip()]:
+        print(f"training {algo.upper()} for at most {args.minutes:g} min ...", flush=True)
+        res = train_agent(algo, env_model, args.timesteps, out / algo, seed=args.seed, n_envs=args.n_envs,
+                          eval_freq=200_000 if algo == "ppo" else 50_000, checkpoint_freq=500_000,
+                          progress=not args.no_progress, max_seconds=60.0 * args.minutes)
+        training[algo] = {"timesteps": res.timesteps, "seconds": res.seconds,
+                          "steps_per_second": res.steps_per_second, "stopped_by_time": res.stopped_by_time,
+                          "evaluations": res.evaluations, "agent": str(res.path)}
+        print(f"  {algo.upper()}: {res.timesteps} timesteps in {res.seconds:.1f} s "
+              f"({res.steps_per_second:.0f} steps/s)")
+        from controllers.rl import load_agent
+
+        agents.append((algo.upper(), load_agent(res.path)))
+
+    results = []
+    for name, agent in agents:
+        r = evaluate_agent(agent, env_model, traces="held-out", split=split,
+                           episodes_per_trace=args.episodes_per_trace, seed=args.seed + 1, name=name)
+        results.append(r)
+    ep = results[1].representative_episode()
+    paths = [plot_episode(results, out / "episode.png", ep)]
+    for r in results:
+        paths.append(r.plot_episode(out / f"episode_{r.name.lower().replace(' ', '_')}.png", ep))
+
+    pd_best = results[1]
+    notes = [f"Training on {os.cpu_count()} cores, one torch thread, {args.n_envs} environment copies, seed "
+             f"{args.seed}; budget {args.minutes:g} min per algorithm:", ""]
+    for algo, t in training.items():
+        notes.append(f"- {algo.upper()}: {t['timesteps']} timesteps in {t['seconds']:.0f} s "
+                     f"({t['steps_per_second']:.0f} steps/s){' (time budget reached)' if t['stopped_by_time'] else ''}")
+    notes += ["", f"PD designed: {agents[0][1]!r}", f"PD best swept (per axis, on training windows): "
+              f"{agents[1][1]!r}", "", "Goal (issue 5): an RL agent with p90 |attitude error| at or below the best "
+              "swept PD's on every axis:", ""]
+    for r in results[2:]:
+        met = all(r.metrics[a]["att_p90_deg"] <= pd_best.metrics[a]["att_p90_deg"] for a in AXES)
+        ratio = " / ".join(f"{r.metrics[a]['att_p90_deg'] / pd_best.metrics[a]['att_p90_deg']:.2f}" for a in AXES)
+        notes.append(f"- {r.name}: {'met' if met else 'NOT met'} (p90 ratio to best swept PD, roll/pitch/yaw: "
+                     f"{ratio})")
+    notes += ["", "Best swept pairs (sweep on training windows; margins of the sampled loop):", ""]
+    for i, (ax, row) in enumerate(sweep_rows.items()):
+        m = row["margins"] or {}
+        gm, pm = m.get("gain_margin_db"), m.get("phase_margin_deg")
+        notes.append(f"- {ax}: {row['stable']} of {row['pairs']} pairs stable; best kp = {swept.kp[i]:.4g}, "
+                     f"kd = {swept.kd[i]:.4g}, gain margin {gm if gm is None else round(gm, 1)} dB, "
+                     f"phase margin {pm if pm is None else round(pm, 1)} deg"
+                     + (" — AT THE GRID'S EDGE: higher gains would score better still (no sensor noise, no "
+                        "servo delay in this model)" if row["at_grid_edge"] else ""))
+    notes += ["", f"Representative episode (median RMS error of the best swept PD): {ep}; `episode.png`."]
+    md = comparison_markdown(results, notes=notes)
+    paths.append(write_text(out / "comparison.md", md))
+    doc = jsonable({"split": split.to_dict(), "training": training, "sweep": sweep_rows,
+                    "sweep_windows": sweep_windows, "representative_episode": ep,
+                    "results": [r.to_dict() for r in results]})
+    paths.append(write_text(out / "comparison.json", json.dumps(doc, indent=1, allow_nan=False) + "\n"))
+    print(md)
+    for p in paths:
+        print(f"wrote {p}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

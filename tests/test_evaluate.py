@@ -1,0 +1,170 @@
+"""Tests of the shared error metrics (:mod:`controllers.metrics`), the agent evaluator
+(:mod:`controllers.evaluate`) and ``heli evaluate``.
+
+The evaluator is held against the gain sweep: a PD controller flown by the
+environment on one gust window must show the sweep's metrics for that pair and
+window (both replay the window through the same physics core from rest).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from controllers.evaluate import comparison_markdown, evaluate_agent, plot_episode
+from controllers.metrics import METRIC_NAMES, error_metrics, histogram_edges
+from controllers.pd import PDController, PDGains, design_gains
+from controllers.sweep import sweep_pairs
+from controllers.trace_split import TraceSegment, split_traces
+from heli_cli.main import main
+from heli_env import load_env_model
+
+
+@pytest.fixture(scope="module")
+def shipped():
+    return load_env_model()
+
+
+@pytest.fixture(scope="module")
+def pd(shipped):
+    return PDController.from_model(shipped.params, design_gains(shipped.params))
+
+
+@pytest.fixture(scope="module")
+def pd_result(shipped, pd):
+    return evaluate_agent(pd, shipped, episodes_per_trace=3, episode_seconds=10.0, seed=5)
+
+
+# -------------------------------------------------------------------------------------------- metrics
+def test_error_metrics_match_numpy():
+    rng = np.random.default_rng(0)
+    att, rate, act = rng.normal(0, 2, 1001), rng.normal(0, 10, 1001), rng.uniform(-1.2, 1.2, 1001)
+    act = np.clip(act, -1, 1)
+    m = error_metrics(att, rate, act)
+    assert_allclose(m["att_rms_deg"], np.sqrt(np.mean(att ** 2)), rtol=1e-12)
+    assert_allclose([m["att_p50_deg"], m["att_p90_deg"], m["att_p99_deg"]], np.percentile(np.abs(att), [50, 90, 99]),
+                    rtol=1e-12)
+    assert_allclose(m["rate_p90_dps"], np.percentile(np.abs(rate), 90), rtol=1e-12)
+    assert_allclose(m["stick_p99"], np.percentile(np.abs(act), 99), rtol=1e-12)
+    assert m["saturation"] == pytest.approx(np.mean(np.abs(act) == 1.0))
+    assert m["hist_counts"].sum() + m["hist_overflow"] == 1001
+    assert m["n_samples"] == 1001 and set(METRIC_NAMES) <= set(m)
+
+
+def test_error_metrics_rows_and_histogram_bins():
+    rng = np.random.default_rng(1)
+    att, rate, act = rng.normal(0, 3, (4, 500)), rng.normal(0, 3, (4, 500)), rng.uniform(-1, 1, (4, 500))
+    rows = error_metrics(att, rate, act)
+    for i in range(4):
+        one = error_metrics(att[i], rate[i], act[i])
+        for k in METRIC_NAMES:
+            assert rows[k][i] == pytest.approx(one[k], rel=1e-12)
+        assert_array_equal(rows["hist_counts"][i], one["hist_counts"])
+    edges = histogram_edges(5.0, 10)
+    m = error_metrics(np.array([0.0, 0.005, 0.01, 4.99, 5.0, 7.0]), np.zeros(6), np.zeros(6), hist_edges=edges)
+    assert m["hist_counts"][0] == 2 and m["hist_counts"][1] == 1 and m["hist_counts"][-1] == 1
+    assert m["hist_overflow"] == 2  # at or above the last edge
+    sat = error_metrics(np.ones(4), np.ones(4), np.zeros(4), saturated=[True, False, False, False])
+    assert sat["saturation"] == 0.25
+
+
+def test_error_metrics_bad_input():
+    with pytest.raises(ValueError, match="share one shape"):
+        error_metrics(np.ones(3), np.ones(4), np.ones(3))
+    with pytest.raises(ValueError, match="at least one sample"):
+        error_metrics(np.ones(0), np.ones(0), np.ones(0))
+    with pytest.raises(ValueError, match="histogram"):
+        histogram_edges(0.001)
+
+
+def test_non_finite_samples_give_nan_metrics():
+    m = error_metrics(np.array([1.0, np.nan]), np.ones(2), np.zeros(2))
+    assert all(np.isnan(m[k]) for k in METRIC_NAMES)
+
+
+# ------------------------------------------------------------------------------------------ evaluator
+def test_same_seed_same_evaluation(shipped, pd, pd_result):
+    again = evaluate_agent(pd, shipped, episodes_per_trace=3, episode_seconds=10.0, seed=5)
+    assert again.summary() == pd_result.summary()
+    assert again.episodes == pd_result.episodes
+    assert_array_equal(again.samples["att_err_deg"], pd_result.samples["att_err_deg"])
+    other = evaluate_agent(pd, shipped, episodes_per_trace=3, episode_seconds=10.0, seed=6)
+    assert [e["offset"] for e in other.episodes] != [e["offset"] for e in pd_result.episodes]
+
+
+def test_evaluation_flies_held_out_traces_only(shipped, pd_result):
+    held = {s.trace for s in split_traces(shipped.n_traces).held_out}
+    assert {e["trace"] for e in pd_result.episodes} == held
+    assert len(pd_result.episodes) == 3 * len(held)
+    assert all(e["steps"] == 1000 and not e["terminated"] for e in pd_result.episodes)
+    assert pd_result.metrics["roll"]["n_samples"] == 1000 * len(pd_result.episodes)
+    assert pd_result.kind == "pd" and pd_result.mean_return < 0
+
+
+def test_evaluator_reports_the_sweeps_metrics(shipped):
+    """One window, roll gains (kp, kd) and the sweep's nominal gains on pitch and yaw: the evaluator's roll
+    metrics equal the sweep's row for that pair (the held axes matter through the attitude kinematics)."""
+    kp, kd = 6.0, 1.2
+    probe = evaluate_agent(PDController(PDGains(1.0, 0.5), (1, -1, 1)), shipped, traces=[0], episodes_per_trace=1,
+                           episode_seconds=20.0, seed=2)
+    window = (probe.episodes[0]["trace"], probe.episodes[0]["offset"])
+    sweep = sweep_pairs(shipped, [(kp, kd)], axis="roll", duration=20.0, traces=[window], progress=False)
+    nominal = np.array(sweep.settings["nominal_gains"])
+    ctrl = PDController.from_model(shipped.params, PDGains([kp, *nominal[1:, 0]], [kd, *nominal[1:, 1]]))
+    res = evaluate_agent(ctrl, shipped, traces=[0], episodes_per_trace=1, episode_seconds=20.0, seed=2)
+    assert (res.episodes[0]["trace"], res.episodes[0]["offset"]) == window
+    row = sweep.row(0)
+    for k in ("att_rms_deg", "att_p50_deg", "att_p90_deg", "att_p99_deg", "rate_rms_dps", "rate_p50_dps",
+              "rate_p90_dps", "rate_p99_dps", "stick_rms", "stick_p99", "saturation"):
+        assert res.metrics["roll"][k] == pytest.approx(row[k], rel=1e-5, abs=1e-9), k  # float32 observations
+
+
+def test_time_split_windows_and_explicit_segments(shipped, pd):
+    res = evaluate_agent(pd, shipped, traces=[TraceSegment(1, 0.5, 1.0)], episodes_per_trace=2,
+                         episode_seconds=5.0, seed=0)
+    assert all(e["trace"] == 1 and e["offset"] >= 10000 for e in res.episodes)
+    with pytest.raises(ValueError, match="shorter than one episode"):
+        evaluate_agent(pd, shipped, traces=[TraceSegment(1, 0.9, 1.0)], episode_seconds=30.0)
+    with pytest.raises(ValueError, match="episodes_per_trace"):
+        evaluate_agent(pd, shipped, episodes_per_trace=0)
+
+
+def test_outputs(pd_result, pd, shipped, tmp_path):
+    doc = json.loads(pd_result.to_json(tmp_path / "e.json").read_text())
+    assert doc["summary"]["axes"]["roll"]["att_p90_deg"] == pytest.approx(pd_result.metrics["roll"]["att_p90_deg"])
+    assert len(doc["histograms"]["pitch"]["counts"]) == len(doc["histograms"]["pitch"]["edges"]) - 1
+    md = pd_result.markdown()
+    assert "| roll |" in md and "ended early" in md
+    assert pd_result.plot_episode(tmp_path / "ep.png").stat().st_size > 10_000
+    other = PDController(PDGains(1.0, 0.3), pd.signs)
+    r2 = evaluate_agent(other, shipped, episodes_per_trace=3, episode_seconds=10.0, seed=5, name="soft PD")
+    assert "soft PD" in comparison_markdown([pd_result, r2])
+    assert plot_episode([pd_result, r2], tmp_path / "both.png").exists()
+    r3 = evaluate_agent(other, shipped, episodes_per_trace=3, episode_seconds=10.0, seed=4)
+    with pytest.raises(ValueError, match="other gust windows"):
+        plot_episode([pd_result, r3], tmp_path / "bad.png")
+
+
+# ------------------------------------------------------------------------------------------------ CLI
+def test_heli_evaluate_pd_json(pd, tmp_path, capsys):
+    agent = pd.save(tmp_path / "pd.json")
+    out = tmp_path / "ev"
+    assert main(["evaluate", str(agent), "--out", str(out), "--episode-seconds", "5",
+                 "--episodes-per-trace", "2"]) == 0
+    text = capsys.readouterr().out
+    assert "held-out traces" in text and "default split" in text
+    assert sorted(p.name for p in out.iterdir()) == ["episode.png", "evaluation.json", "evaluation.md"]
+
+
+def test_heli_evaluate_errors(pd, tmp_path, capsys):
+    agent = pd.save(tmp_path / "pd.json")
+    assert main(["evaluate", str(agent), "--model", str(tmp_path / "missing")]) == 2
+    assert "EnvModelError" in capsys.readouterr().err
+    assert main(["evaluate", str(tmp_path / "nope.json")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    (tmp_path / "bad.json").write_text("[1, 2]")
+    assert main(["evaluate", str(tmp_path / "bad.json")]) == 2
+    assert "AgentError" in capsys.readouterr().err

@@ -1,0 +1,218 @@
+"""Tests of RL training and agent loading (:mod:`controllers.rl`), the trace split and ``heli train``.
+
+Training runs are tiny (a few hundred steps of 1-2 s episodes): they check the
+plumbing (files, seeds, checkpoints, interrupts, loading), not learning.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import zipfile
+
+import numpy as np
+import pytest
+from numpy.testing import assert_array_equal
+
+pytest.importorskip("stable_baselines3")
+
+from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
+
+from controllers.errors import AgentError, TrainingInterrupted  # noqa: E402
+from controllers.pd import PDController, PDGains  # noqa: E402
+from controllers.rl import agent_metadata, load_agent, split_traces, train_agent  # noqa: E402
+from controllers.trace_split import TraceSegment, WindowSampler, draw_windows  # noqa: E402
+from heli_cli.main import main  # noqa: E402
+from heli_env import load_env_model  # noqa: E402
+
+TINY = {"ppo": {"n_steps": 64, "batch_size": 64, "n_epochs": 2},
+        "sac": {"learning_starts": 64, "batch_size": 32, "buffer_size": 1000}}
+
+
+@pytest.fixture(scope="module")
+def shipped():
+    return load_env_model()
+
+
+def _tiny(algo, out, shipped, timesteps=256, **kw):
+    args = dict(model=shipped, timesteps=timesteps, out=out, seed=3, n_envs=2, eval_freq=128, checkpoint_freq=128,
+                progress=False, eval_episodes=2, episode_seconds=1.0, algo_kwargs=TINY[algo])
+    args.update(kw)
+    return train_agent(algo, **args)
+
+
+@pytest.fixture(scope="module")
+def ppo_run(shipped, tmp_path_factory):
+    return _tiny("ppo", tmp_path_factory.mktemp("ppo") / "agents" / "ppo", shipped)
+
+
+# -------------------------------------------------------------------------------------------- split
+def test_split_holds_out_whole_traces_and_keeps_both_sides():
+    for n in (2, 3, 4, 9):
+        s = split_traces(n, 0.25, seed=1)
+        train = {g.trace for g in s.train}
+        held = {g.trace for g in s.held_out}
+        assert train and held and not train & held and train | held == set(range(n))
+        assert all((g.start, g.stop) == (0.0, 1.0) for g in s.train + s.held_out)
+    assert len(split_traces(4, 0.25).held_out) == 1
+    assert len(split_traces(9, 0.5).held_out) == 4  # round half to even
+    assert split_traces(9, 0.5, seed=2) == split_traces(9, 0.5, seed=2)
+    assert split_traces(9, 0.9).train  # at least one training trace
+
+
+def test_split_of_a_single_trace_is_in_time(shipped):
+    s = split_traces(1, 0.25)
+    assert s.in_time
+    assert s.train == (TraceSegment(0, 0.0, 0.75),) and s.held_out == (TraceSegment(0, 0.75, 1.0),)
+    one = dataclasses.replace(shipped, ud=shipped.ud[:, :20001], collective=shipped.collective[:20001],
+                              starts=shipped.starts[:1], lengths=shipped.lengths[:1],
+                              trace_ids=shipped.trace_ids[:1], sources=shipped.sources[:1])
+    needed = 3001
+    rng = np.random.default_rng(0)
+    held = draw_windows(one, s.held_out, needed, rng, per_segment=5)
+    assert all(o >= 15000 and o + needed <= 20001 for _, o in held)
+    sampler = WindowSampler(one, s.train, needed)
+    for _ in range(50):
+        o = sampler(0, rng)["offset"]
+        assert 0 <= o and o + needed <= 15000  # training windows never reach the held-out stretch
+    with pytest.raises(ValueError, match="shorter than one episode"):
+        WindowSampler(one, s.held_out, 6000)
+
+
+@pytest.mark.parametrize("bad, match", [(0, "n_traces"), (2.5, "n_traces")])
+def test_split_bad_count(bad, match):
+    with pytest.raises(ValueError, match=match):
+        split_traces(bad)
+
+
+@pytest.mark.parametrize("frac", [0.0, 1.0, -0.1, float("nan")])
+def test_split_bad_fraction(frac):
+    with pytest.raises(ValueError, match="held_out_fraction"):
+        split_traces(3, frac)
+
+
+# ----------------------------------------------------------------------------------------- training
+def test_tiny_ppo_run_writes_a_loadable_agent(ppo_run, tmp_path):
+    res = ppo_run
+    assert res.path.name == "ppo.zip" and res.path.exists()
+    assert res.timesteps >= 256 and res.algo == "ppo"
+    assert [p.name for p in res.checkpoints] == ["ppo_128_steps.zip", "ppo_256_steps.zip"]
+    assert res.best_model is not None and res.best_model.exists()
+    assert len(res.evaluations) == 2
+    record = json.loads((res.run_dir / "training.json").read_text())
+    assert record["interrupted"] is False and record["timesteps_done"] == res.timesteps
+    meta = agent_metadata(res.path)
+    assert meta["algo"] == "ppo" and meta["seed"] == 3
+    assert {s["trace"] for s in meta["train_segments"]}.isdisjoint({s["trace"] for s in meta["eval_segments"]})
+    agent = load_agent(res.path)
+    obs = np.random.default_rng(0).normal(0, 0.1, (5, 12)).astype(np.float32)
+    assert_array_equal(agent.predict(obs, deterministic=True)[0], res.agent.predict(obs, deterministic=True)[0])
+    assert agent.predict(obs[0], deterministic=True)[0].shape == (3,)
+    assert type(load_agent(res.path.with_suffix(""))).__name__ == "PPO"  # .zip found
+    assert type(load_agent(res.checkpoints[0])).__name__ == "PPO"
+
+
+def test_same_seed_same_agent(ppo_run, shipped, tmp_path):
+    again = _tiny("ppo", tmp_path / "again", shipped)
+    a = ppo_run.agent.policy.state_dict()
+    b = again.agent.policy.state_dict()
+    assert all(np.array_equal(a[k].numpy(), b[k].numpy()) for k in a)
+    other = _tiny("ppo", tmp_path / "other", shipped, seed=4, eval_freq=0, checkpoint_freq=0)
+    c = other.agent.policy.state_dict()
+    assert not all(np.array_equal(a[k].numpy(), c[k].numpy()) for k in a)
+
+
+def test_tiny_sac_run_writes_a_loadable_agent(shipped, tmp_path):
+    res = _tiny("sac", tmp_path / "sac", shipped, timesteps=160, eval_freq=0, checkpoint_freq=0)
+    agent = load_agent(res.path)
+    assert type(agent).__name__ == "SAC"
+    obs = np.zeros((2, 12), np.float32)
+    assert_array_equal(agent.predict(obs, deterministic=True)[0], res.agent.predict(obs, deterministic=True)[0])
+    a = agent.predict(obs, deterministic=True)[0]
+    assert a.shape == (2, 3) and np.all(np.abs(a) <= 1.0)
+
+
+class _Interrupt(BaseCallback):
+    def __init__(self, after_calls):
+        super().__init__()
+        self.after = after_calls
+
+    def _on_step(self):
+        if self.n_calls >= self.after:
+            raise KeyboardInterrupt
+        return True
+
+
+def test_interrupted_training_keeps_its_checkpoints(shipped, tmp_path):
+    with pytest.raises(TrainingInterrupted) as info:
+        _tiny("ppo", tmp_path / "int", shipped, timesteps=10_000, eval_freq=0, checkpoint_freq=100,
+              callbacks=[_Interrupt(100)])
+    assert isinstance(info.value, KeyboardInterrupt)
+    saved = info.value.checkpoint
+    assert saved.name == "int_interrupted_200_steps.zip" and info.value.timesteps == 200
+    run = tmp_path / "int_training"
+    assert sorted(p.name for p in (run / "checkpoints").iterdir()) == [
+        "int_100_steps.zip", "int_200_steps.zip", "int_interrupted_200_steps.zip"]
+    assert not list((run / "checkpoints").glob(".*tmp"))  # nothing half-written
+    assert type(load_agent(saved)).__name__ == "PPO"
+    assert json.loads((run / "training.json").read_text())["interrupted"] is True
+    assert not (tmp_path / "int.zip").exists()  # no final agent from an interrupted run
+
+
+@pytest.mark.parametrize("kw, match", [({"algo": "dqn"}, "algo"), ({"timesteps": 0}, "timesteps"),
+                                       ({"n_envs": 0}, "n_envs"), ({"eval_freq": -1}, "eval_freq"),
+                                       ({"max_seconds": 0.0}, "max_seconds"),
+                                       ({"episode_seconds": 300.0}, "shorter than one episode")])
+def test_bad_training_requests(shipped, tmp_path, kw, match):
+    args = {"algo": "ppo", "model": shipped, "timesteps": 100, "out": tmp_path / "x", "progress": False}
+    args.update(kw)
+    with pytest.raises(AgentError, match=match):
+        train_agent(**args)
+
+
+# -------------------------------------------------------------------------------------------- loading
+def test_pd_round_trip_through_load_agent(tmp_path):
+    pd = PDController(PDGains([2.0, 3.0, 1.0], [0.5, 0.6, 0.2]), [1, -1, 1])
+    path = pd.save(tmp_path / "pd.json")
+    back = load_agent(path)
+    obs = np.random.default_rng(1).normal(0, 0.2, (4, 12))
+    assert isinstance(back, PDController)
+    assert_array_equal(back.predict(obs)[0], pd.predict(obs)[0])
+
+
+def test_load_agent_errors(tmp_path):
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        load_agent(tmp_path / "none.zip")
+    (tmp_path / "x.json").write_text('{"schema": "other"}')
+    with pytest.raises(AgentError, match="neither a PPO/SAC zip nor a PD controller"):
+        load_agent(tmp_path / "x.json")
+    with zipfile.ZipFile(tmp_path / "y.zip", "w") as z:
+        z.writestr("hello.txt", "hi")
+    with pytest.raises(AgentError, match="not a stable-baselines3 agent"):
+        load_agent(tmp_path / "y.zip")
+    with pytest.raises(AgentError, match="is a folder"):
+        load_agent(tmp_path)
+
+
+# ------------------------------------------------------------------------------------------------ CLI
+def test_heli_train_cli(tmp_path, capsys):
+    out = tmp_path / "cli_ppo"
+    assert main(["train", "--algo", "ppo", "--timesteps", "64", "--out", str(out), "--n-envs", "1",
+                 "--episode-seconds", "1", "--eval-freq", "0", "--checkpoint-freq", "0", "--no-progress"]) == 0
+    assert "PPO trained for" in capsys.readouterr().out
+    assert type(load_agent(tmp_path / "cli_ppo.zip")).__name__ == "PPO"
+
+
+def test_heli_train_missing_model_dir(tmp_path, capsys):
+    code = main(["train", "--algo", "sac", "--model", str(tmp_path / "nope"), "--timesteps", "10", "--out",
+                 str(tmp_path / "a")])
+    assert code == 2
+    assert "EnvModelError" in capsys.readouterr().err
+
+
+def test_heli_train_bad_arguments(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["train", "--algo", "ppo", "--timesteps", "0", "--out", "x"])
+    assert e.value.code == 2
+    with pytest.raises(SystemExit):
+        main(["train", "--algo", "a2c", "--timesteps", "10", "--out", "x"])

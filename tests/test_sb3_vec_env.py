@@ -1,0 +1,119 @@
+"""Tests of the SB3 ``VecEnv`` adapter over the native vector env (:mod:`controllers.sb3_vec_env`).
+
+SB3 expects a same-step reset: the step that ends an episode returns ``done``,
+the first observation of the next episode, and the last observation in
+``infos[i]["terminal_observation"]``; ``TimeLimit.truncated`` tells time limits
+from failures. The native env resets on the *next* step instead; these tests
+hold the adapter against it step by step.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numpy.testing import assert_array_equal
+
+pytest.importorskip("stable_baselines3")
+
+from controllers.sb3_vec_env import GymnasiumVecEnv  # noqa: E402
+from controllers.trace_split import TraceSegment, WindowSampler  # noqa: E402
+from heli_env import load_env_model  # noqa: E402
+from heli_env.vector_env import HeliAttitudeVectorEnv  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def shipped():
+    return load_env_model()
+
+
+def _pair(shipped, n=3, seconds=0.05, **kw):
+    return (GymnasiumVecEnv(HeliAttitudeVectorEnv(n, model=shipped, episode_seconds=seconds), **kw),
+            HeliAttitudeVectorEnv(n, model=shipped, episode_seconds=seconds))
+
+
+def test_same_step_reset_and_terminal_observation_against_native_env(shipped):
+    adapter, native = _pair(shipped)
+    adapter.seed(7)
+    obs = adapter.reset()
+    n_obs, _ = native.reset(seed=7)
+    assert_array_equal(obs, n_obs)
+    rng = np.random.default_rng(0)
+    for k in range(1, 6):  # episodes of 5 steps
+        a = rng.uniform(-0.3, 0.3, (3, 3)).astype(np.float32)
+        obs, rew, done, infos = adapter.step(a)
+        n_obs, n_rew, n_term, n_trunc, _ = native.step(a)
+        assert_array_equal(rew, n_rew.astype(np.float32))
+        if k < 5:
+            assert not done.any()
+            assert_array_equal(obs, n_obs)
+            assert all("terminal_observation" not in d and d["TimeLimit.truncated"] is False for d in infos)
+    assert done.all() and n_trunc.all()
+    for i, d in enumerate(infos):
+        assert_array_equal(d["terminal_observation"], n_obs[i])  # the native env's last observation
+        assert d["TimeLimit.truncated"] is True
+        assert d["time"] == pytest.approx(0.05)
+    # the native env resets on its next step (reward 0, action ignored); the adapter already has
+    n_obs, n_rew, n_term, n_trunc, _ = native.step(np.zeros((3, 3)))
+    assert_array_equal(n_rew, 0.0)
+    assert_array_equal(obs, n_obs)
+    assert all(d["time"] == 0.0 for d in adapter.reset_infos)
+    # and the next episode runs on: no step is lost to the reset
+    obs, rew, done, infos = adapter.step(np.zeros((3, 3), np.float32))
+    assert not done.any() and np.all(rew != 0.0)
+    assert all(d["time"] == pytest.approx(0.01) for d in infos)
+
+
+def test_failure_is_not_a_time_limit(shipped):
+    adapter, _ = _pair(shipped, n=2, seconds=20.0)
+    adapter.seed(0)
+    adapter.reset()
+    full_roll = np.tile(np.array([1.0, 0.0, 0.0], np.float32), (2, 1))
+    ended = {}
+    for _ in range(1500):
+        obs, rew, done, infos = adapter.step(full_roll)
+        for i in np.flatnonzero(done):
+            ended.setdefault(int(i), (infos[i], obs[i]))
+        if len(ended) == 2:
+            break
+    assert sorted(ended) == [0, 1]  # both copies roll past 60 degrees at full stick
+    for info, first_obs in ended.values():
+        assert info["TimeLimit.truncated"] is False
+        assert abs(info["terminal_observation"][0]) > np.radians(60.0)
+        assert abs(first_obs[0]) < np.radians(10.0)  # the new episode starts near level
+
+def test_episode_options_pin_training_segments_and_are_seeded(shipped):
+    seg = (TraceSegment(1, 0.0, 0.5),)
+    runs = []
+    for _ in range(2):
+        sampler = WindowSampler(shipped, seg, needed=11)
+        adapter, _ = _pair(shipped, n=4, seconds=0.1, episode_options=sampler)
+        adapter.seed(3)
+        first = adapter.reset()
+        infos_seen = list(adapter.reset_infos)
+        steps = [first]
+        for _ in range(25):
+            obs, _, done, infos = adapter.step(np.zeros((4, 3), np.float32))
+            steps.append(obs)
+            infos_seen += [adapter.reset_infos[i] for i in np.flatnonzero(done)]
+        assert {d["trace"] for d in infos_seen} == {1}
+        runs.append(np.array(steps))
+    assert_array_equal(runs[0], runs[1])
+
+
+def test_fixed_seed_replays_the_same_episodes(shipped):
+    adapter, _ = _pair(shipped, n=2, fixed_seed=11,
+                       episode_options=WindowSampler(shipped, (TraceSegment(0),), needed=6))
+    a = adapter.reset()
+    adapter.step(np.zeros((2, 3), np.float32))
+    b = adapter.reset()
+    assert_array_equal(a, b)
+
+
+def test_rejects_same_step_autoreset():
+    from gymnasium.vector import AutoresetMode
+
+    class Fake:
+        metadata = {"autoreset_mode": AutoresetMode.SAME_STEP}
+
+    with pytest.raises(ValueError, match="NEXT_STEP"):
+        GymnasiumVecEnv(Fake())
