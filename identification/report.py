@@ -44,7 +44,8 @@ class IdentificationRun:
     paths : dict of str to Path
         Files written.
     disturbances : list of DisturbanceProfile
-        One identified wind profile per flight (eqs. 41-47), in flight order.
+        One identified wind profile per flight (eqs. 41-47), in flight order
+        (only the flights named by ``wind_flights``, when given).
     library_version : int or None
         Version of the disturbance library written.
     """
@@ -137,7 +138,7 @@ def fit_table(identifiers: dict) -> str:
 
 def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), identifier_kwargs=None,
                         flight_paths=None, plots: bool = True, disturbances: bool = True,
-                        progress: bool | None = None) -> IdentificationRun:
+                        progress: bool | None = None, wind_flights=None, model_extra=None) -> IdentificationRun:
     """Identify, validate and write ``model.json`` + ``report.md`` (+ figures) into ``out_dir``.
 
     Parameters
@@ -160,6 +161,12 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
         append them to the disturbance library ``out_dir/disturbances``.
     progress : bool, optional
         Progress bar over flights (default: when there are several).
+    wind_flights : sequence of int, optional
+        Indices of the flights whose wind is identified and appended (default
+        all); ``heli refresh`` pools flights already in the library but adds
+        only the new flights' traces.
+    model_extra : dict, optional
+        Further top-level entries of ``model.json`` (e.g. ``"refresh"``).
     """
     flights = [flights] if isinstance(flights, Flight) else list(flights)
     out = Path(out_dir)
@@ -184,7 +191,7 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
         filter_settings=first.metadata.get("prefilter"), identification=settings,
         fit_statistics={"axes": ident.summary(), "validation": validation.to_dict(),
                         "fit_time_s": ident.fit_time_},
-        sources=sources,
+        sources=sources, extra=model_extra,
     )
     paths = {"model": model_path}
     if plots:
@@ -197,8 +204,10 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
         library = DisturbanceLibrary.open(out, create=True)
         model_sha = sha256_of(model_path)
         names = [Path(p).name for p in (flight_paths or [])] or [f"flight {i + 1}" for i in range(len(flights))]
-        show = (len(flights) > 1) if progress is None else progress
-        for i, flight in enumerate(tqdm(flights, desc="disturbance profiles", unit="flight", disable=not show)):
+        chosen_flights = range(len(flights)) if wind_flights is None else [int(i) for i in wind_flights]
+        show = (len(chosen_flights) > 1) if progress is None else progress
+        for i in tqdm(chosen_flights, desc="disturbance profiles", unit="flight", disable=not show):
+            flight = flights[i]
             profile = identify_disturbance(flight, ident.params_)
             profiles.append(profile)
             prefix = f"disturbance_{i + 1}" if len(flights) > 1 else "disturbance"
