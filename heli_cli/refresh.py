@@ -1,0 +1,107 @@
+"""``heli refresh``: new flights in, parameter drift, a refreshed model and a larger disturbance library out."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+
+def _positive_int(text):
+    try:
+        v = int(text)
+    except ValueError:
+        v = 0
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive whole number, got {text!r}")
+    return v
+
+
+def _replicates(text):
+    v = _positive_int(text)
+    if v < 2:
+        raise argparse.ArgumentTypeError(f"expected at least 2 bootstrap replicates, got {text!r}")
+    return v
+
+
+def _alpha(text):
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not 0.0 < v < 1.0:
+        raise argparse.ArgumentTypeError(f"expected a probability in (0, 1), got {text!r}")
+    return v
+
+
+def _fraction(text):
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not 0.0 <= v < math.inf:
+        raise argparse.ArgumentTypeError(f"expected a non-negative fraction (0.05 = 5 %), got {text!r}")
+    return v
+
+
+def register(sub):
+    p = sub.add_parser(
+        "refresh",
+        help="identify new flights, report parameter drift against the current model, refresh it and append "
+        "their wind to the disturbance library",
+        description="Identify NEW_FLIGHTs with the structure and settings of MODEL_DIR/model.json, compare every "
+        "parameter with the current model (interval bootstrap; a change is flagged when |new - old| > "
+        "z*sqrt(se_old^2 + se_new^2), Bonferroni z at family-wise ALPHA), write the refreshed model (previous and "
+        "new flights pooled when the previous flights are at hand and nothing changed, else the new flights "
+        "alone; the replaced model.json is kept under history/), append the new flights' wind to the "
+        "disturbance library as a new version, and write MODEL_DIR/refresh.md and refresh.json.",
+    )
+    p.add_argument("model_dir", metavar="MODEL_DIR", help="directory written by 'heli identify'")
+    p.add_argument("flights", nargs="+", metavar="NEW_FLIGHT.csv", help="canonical CSV flight log(s) new to the model")
+    p.add_argument("--previous-flights", nargs="+", default=[], metavar="FLIGHT.csv",
+                   help="the current model's source flights, when not in MODEL_DIR or beside the new flights "
+                   "(matched by SHA-256)")
+    p.add_argument("--fit", choices=("auto", "pooled", "new"), default="auto",
+                   help="flights of the refreshed model: auto (pooled unless a parameter changed or the previous "
+                   "flights are missing), pooled, or new (default auto)")
+    p.add_argument("--bootstrap", type=_replicates, default=200, metavar="N",
+                   help="bootstrap replicates per data set (default 200)")
+    p.add_argument("--block", type=_positive_int, default=1, metavar="K",
+                   help="consecutive intervals per bootstrap block (default 1)")
+    p.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0; same seed, same table)")
+    p.add_argument("--alpha", type=_alpha, default=0.05,
+                   help="family-wise probability of a false flag over the parameters (default 0.05)")
+    p.add_argument("--min-change", type=_fraction, default=0.0, metavar="FRACTION",
+                   help="smallest relative change that may be flagged, e.g. 0.05 (default 0: any significant change)")
+    p.add_argument("--no-plots", action="store_true", help="do not draw PNG figures")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from identification.errors import DisturbanceError, LibraryError
+    from identification.refresh import refresh_model
+
+    try:
+        result = refresh_model(
+            args.model_dir, args.flights, previous_flights=args.previous_flights, fit=args.fit,
+            n_replicates=args.bootstrap, block=args.block, seed=args.seed, alpha=args.alpha,
+            min_relative=args.min_change, plots=not args.no_plots, progress=True,
+        )
+    except (LibraryError, DisturbanceError) as e:  # heli's main reports the model and flight errors itself
+        print(f"heli {args.command}: error: {type(e).__name__}: {e}", file=sys.stderr)
+        return 2
+    crit = result.criterion
+    print(f"parameter drift (new flights vs current model; flag |Δ| > {crit['z']:.2f}·se of the difference):")
+    for r in result.drift:
+        rel = f"{100 * r.relative:+6.1f} %" if math.isfinite(r.relative) else "     — "
+        print(f"  {r.name:5s} {r.old:10.4f} -> {r.new:10.4f}  Δ {r.delta:+.4f} ({rel})  z {r.z:5.2f}"
+              + ("  CHANGED" if r.flagged else ""))
+    print("changed: " + (", ".join(result.flagged) if result.flagged else "nothing beyond the uncertainty"))
+    print(f"refreshed model: {result.reason}")
+    for note in result.notes:
+        print(f"note: {note}")
+    print(f"disturbance library: {result.paths.get('library')} version {result.library_version}")
+    for key in ("model", "report", "refresh_md", "refresh_json"):
+        if key in result.paths:
+            print(f"wrote {result.paths[key]}")
+    return 0
