@@ -507,11 +507,22 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
         "drift_file": "refresh.json",
         "bootstrap": boot_model.to_dict(),
     }
-    run = identify_and_report(
-        fit_flights, root, coupled=structure == "coupled", sources=sources, identifier_kwargs=kw,
-        flight_paths=fit_paths, plots=plots, disturbances=True, progress=show,
-        wind_flights=range(len(flights)), model_extra={"refresh": record},
-    )
+    old_report = (root / "report.md").read_bytes() if (root / "report.md").is_file() else None
+    try:
+        run = identify_and_report(
+            fit_flights, root, coupled=structure == "coupled", sources=sources, identifier_kwargs=kw,
+            flight_paths=fit_paths, plots=plots, disturbances=True, progress=show,
+            wind_flights=range(len(flights)), model_extra={"refresh": record},
+        )
+    except BaseException:
+        # Stopped before the library gained its version: put the previous model back, so that the
+        # directory stays consistent and the same refresh can be run again (its flights are not yet
+        # sources of model.json). Once the version is written, the new model belongs with it.
+        if DisturbanceLibrary(root).latest_version == previous_version:
+            write_bytes(model_path, old_model_bytes)
+            if old_report is not None:
+                write_bytes(root / "report.md", old_report)
+        raise
     library_version = run.library_version
     paths = dict(run.paths)
     result = RefreshResult(

@@ -231,3 +231,19 @@ def test_refresh_of_a_missing_model_is_one_line(tmp_path, flights, capsys):
     assert main(["refresh", str(tmp_path / "nowhere"), str(flights["f3"])]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "ModelFileError" in err and "does not exist" in err
+
+
+def test_a_refresh_stopped_before_the_library_write_can_be_run_again(model_dir, flights, monkeypatch):
+    before = (model_dir / "model.json").read_bytes()
+
+    def disk_full(*args, **kwargs):
+        raise OSError("No space left on device")
+
+    monkeypatch.setattr(DisturbanceLibrary, "append", disk_full)
+    with pytest.raises(OSError, match="No space left"):
+        refresh_model(model_dir, [flights["f3"]], n_replicates=10, plots=False, progress=False)
+    assert (model_dir / "model.json").read_bytes() == before
+    assert DisturbanceLibrary.open(model_dir).versions() == [1]
+    monkeypatch.undo()
+    r = refresh_model(model_dir, [flights["f3"]], n_replicates=10, plots=False, progress=False)
+    assert r.library_version == 2
