@@ -18,6 +18,11 @@ class AgentError(ValueError):
     than the gust segments)."""
 
 
+class DesignError(ValueError):
+    """A PD design cannot meet the request (bandwidth beyond what the phase margin allows); the message
+    says what is achievable."""
+
+
 class TrainingInterrupted(KeyboardInterrupt):
     """Training was interrupted (Ctrl-C); ``checkpoint`` is the model saved at that moment."""
 

@@ -16,7 +16,9 @@ import sys
 COMMAND_MODULES = (
     "heli_cli.simulate_flight",
     "heli_cli.identify",
+    "heli_cli.refresh",
     "heli_cli.compare_methods",
+    "heli_cli.design",
     "heli_cli.sweep",
     "heli_cli.train",
     "heli_cli.evaluate",
@@ -38,7 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    from controllers.errors import AgentError, SweepError
+    from controllers.errors import AgentError, DesignError, SweepError
     from heli_env.errors import EnvModelError
     from identification.errors import FlightLogError, IdentifiabilityError, MissingDependency, ModelFileError
 
@@ -47,7 +49,7 @@ def main(argv=None) -> int:
     try:
         return int(args.func(args) or 0)
     except (FlightLogError, IdentifiabilityError, ModelFileError, MissingDependency, SweepError,
-            AgentError, EnvModelError) as e:
+            AgentError, DesignError, EnvModelError) as e:
         print(f"heli {args.command}: error: {type(e).__name__}: {e}", file=sys.stderr)
         return 2
     except FileNotFoundError as e:

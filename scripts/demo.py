@@ -1,9 +1,12 @@
-"""End-to-end demo: fly a synthetic helicopter, identify its model, read the report.
+"""End-to-end demo: fly a synthetic helicopter, identify it, design and sweep PD gains, fly them in its gusts.
 
-Runs the data flow of heli-env on data it generates itself::
+Runs the whole data flow of heli-env on data it generates itself::
 
     heli simulate-flight  ->  flight.csv (+ truth, + true wind)
-    heli identify         ->  model.json, report.md, rates.png, attitude.png
+    heli identify         ->  model/ (model.json, report.md, figures, disturbance library)
+    heli design           ->  pd/ (pd.json, design.md, step and Bode figures)
+    heli sweep            ->  sweep/ (error distribution per Kp x Kd pair, heat map, histograms)
+    heli evaluate         ->  evaluation/ (the designed PD in the identified gusts of the environment)
 
 Usage::
 
@@ -30,13 +33,19 @@ def main(argv=None) -> int:
     steps = [
         ["simulate-flight", "--duration", str(args.duration), "--seed", str(args.seed), "--out", str(flight)],
         ["identify", str(flight), "--out", str(out / "model")],
+        ["design", "--model", str(out / "model"), "--out", str(out / "pd")],
+        ["sweep", "--model", str(out / "model"), "--kp", "5:120:8", "--kd", "0:10:8", "--axis", "roll",
+         "--duration", "30", "--out", str(out / "sweep")],
+        ["evaluate", str(out / "pd" / "pd.json"), "--model", str(out / "model"), "--traces", "all",
+         "--out", str(out / "evaluation")],
     ]
     for step in steps:
         print(f"\n$ heli {' '.join(step)}", flush=True)
         code = heli(step)
         if code:
             return code
-    print(f"\nDemo finished: open {out / 'model' / 'report.md'}")
+    print(f"\nDemo finished: open {out / 'model' / 'report.md'}, {out / 'pd' / 'design.md'}, "
+          f"{out / 'sweep' / 'sweep.md'} and {out / 'evaluation' / 'evaluation.md'}")
     return 0
 
 

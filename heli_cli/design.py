@@ -1,0 +1,127 @@
+"""``heli design``: per-axis PD gains designed with python-control on an identified model.
+
+Writes the controller that ``heli evaluate`` flies (``pd.json``), a Markdown table of
+the loop properties of each axis (``design.md``), the closed-loop step responses
+(``step.png``) and one Bode figure per axis (``bode_<axis>.png``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+DEFAULT_OUT = "pd"
+AXES = ("roll", "pitch", "yaw")
+
+
+def _margin(text):
+    try:
+        v = float(text)
+    except ValueError:
+        v = float("nan")
+    if not 0 < v < 180:
+        raise argparse.ArgumentTypeError(f"expected a phase margin in (0, 180) degrees, got {text!r}")
+    return v
+
+
+def _bandwidths(text):
+    """One bandwidth for every axis or three (roll,pitch,yaw), each a positive number in rad/s."""
+    parts = [s for s in str(text).split(",") if s.strip()]
+    try:
+        vals = [float(s) for s in parts]
+    except ValueError:
+        vals = []
+    if len(vals) not in (1, 3) or not all(v > 0 and math.isfinite(v) for v in vals):
+        raise argparse.ArgumentTypeError(
+            f"expected one positive bandwidth in rad/s or three (roll,pitch,yaw), got {text!r}")
+    return vals[0] if len(vals) == 1 else vals
+
+
+def _period(text):
+    try:
+        v = float(text)
+    except ValueError:
+        v = float("nan")
+    if not 0 < v < 1:
+        raise argparse.ArgumentTypeError(f"expected a control period in s, 0 < dt < 1, got {text!r}")
+    return v
+
+
+def register(sub):
+    p = sub.add_parser(
+        "design",
+        help="design per-axis PD attitude gains with python-control; write pd.json for 'heli evaluate'",
+        description="Design per-axis PD attitude controllers on the linear part of an identified model "
+        "(the Padé servo of eq. 31 included when identified), sampled at the control period by zero-order "
+        "hold as the environment runs them: each axis reaches the requested closed-loop bandwidth with at "
+        "least the requested phase margin (default bandwidth: five times the bare airframe's rate pole, or "
+        "half the largest the margin allows). Writes DIR/pd.json (the controller), design.md (margins, "
+        "crossover, bandwidth, closed-loop poles), step.png and bode_<axis>.png.",
+    )
+    p.add_argument("--model", metavar="DIR", default=None,
+                   help="model directory written by 'heli identify' (default: the model shipped with heli-env)")
+    p.add_argument("--phase-margin", type=_margin, default=45.0, help="least phase margin in deg (default 45)")
+    p.add_argument("--bandwidth", type=_bandwidths, default=None, metavar="W[,W,W]",
+                   help="closed-loop -3 dB bandwidth in rad/s, one for all axes or roll,pitch,yaw")
+    p.add_argument("--dt", type=_period, default=0.01, help="control period in s (default 0.01, the env's)")
+    p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
+    p.set_defaults(func=run)
+
+
+def design_markdown(model_path, analyses, phase_margin, bandwidth) -> str:
+    """The design report: one row per axis of :meth:`controllers.pd.LoopAnalysis.summary`."""
+    asked = "default (5 x rate pole)" if bandwidth is None else f"{bandwidth} rad/s"
+    lines = [
+        "# PD attitude controller", "",
+        f"Model: `{model_path}`. Requested phase margin {phase_margin:g} deg, bandwidth {asked}; "
+        "loop analysed in discrete time (zero-order hold at the control period).", "",
+        "| axis | kp [stick/rad] | kd [stick/(rad/s)] | phase margin [deg] | gain margin [dB] | crossover [rad/s] "
+        "| bandwidth [rad/s] | largest pole radius | stable |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for an in analyses:
+        s = an.summary()
+
+        def f(v, spec=".3g"):
+            return "—" if v is None else format(v, spec)
+        lines.append(f"| {an.axis} | {an.kp:.4g} | {an.kd:.4g} | {f(s['phase_margin_deg'], '.1f')} | "
+                     f"{f(s['gain_margin_db'], '.1f')} | {f(s['gain_crossover_rad_s'])} | "
+                     f"{f(s['bandwidth_rad_s'])} | {f(s['max_pole_radius'], '.4f')} | {'yes' if an.stable else 'NO'} |")
+    lines += ["", "Control law per axis: `a = clip(sign(k)·(kp·e_angle + kd·e_rate), −1, 1)` on the "
+              "environment's observation.", "", "![step responses](step.png)", ""]
+    lines += [f"![Bode {an.axis}](bode_{an.axis}.png)" for an in analyses]
+    return "\n".join(lines) + "\n"
+
+
+def run(args) -> int:
+    from controllers.pd import PDController, design_gains, loop_analysis, plot_bode, plot_step_responses
+    from heli_env.model_dir import load_env_model
+    from controllers.errors import DesignError
+    from identification.files import write_text
+
+    env_model = load_env_model(args.model)
+    params = env_model.params
+    try:
+        gains = design_gains(params, bandwidth=args.bandwidth, phase_margin=args.phase_margin, dt=args.dt)
+    except ValueError as e:  # an infeasible request: the message says what is achievable
+        raise DesignError(str(e)) from e
+    analyses = [loop_analysis(params, ax, gains.kp[i], gains.kd[i], args.dt) for i, ax in enumerate(AXES)]
+    out = Path(args.out)
+    pd = PDController.from_model(params, gains)
+    paths = [pd.save(out / "pd.json", {"model": str(env_model.path), "how": "heli design",
+                                       "phase_margin_deg": args.phase_margin, "bandwidth_rad_s": args.bandwidth,
+                                       "dt": args.dt, "analysis": [an.summary() for an in analyses]})]
+    paths.append(plot_step_responses(params, gains, out / "step.png", dt=args.dt))
+    paths += [plot_bode(params, an.axis, an.kp, an.kd, out / f"bode_{an.axis}.png", dt=args.dt) for an in analyses]
+    paths.append(write_text(out / "design.md", design_markdown(env_model.path, analyses, args.phase_margin,
+                                                               args.bandwidth)))
+    for an in analyses:
+        s = an.summary()
+        print(f"  {an.axis:5s}: kp {an.kp:.4g} stick/rad, kd {an.kd:.4g} stick/(rad/s); phase margin "
+              f"{an.phase_margin:.1f} deg, gain margin {an.gain_margin_db:.1f} dB, crossover "
+              f"{an.gain_crossover:.3g} rad/s, bandwidth {an.bandwidth:.3g} rad/s, "
+              f"{'stable' if s['stable'] else 'UNSTABLE'}")
+    for path in paths:
+        print(f"wrote {path}")
+    return 0

@@ -1,0 +1,67 @@
+"""``heli design``: the PD controller a user flies with ``heli evaluate``, its report and figures."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from controllers.pd import PDController, design_gains, loop_analysis
+from heli_cli.main import main
+from heli_env import load_env_model
+
+
+@pytest.fixture(scope="module")
+def designed(tmp_path_factory):
+    out = tmp_path_factory.mktemp("design") / "pd"
+    assert main(["design", "--phase-margin", "50", "--out", str(out)]) == 0
+    return out
+
+
+def test_writes_the_controller_report_and_figures(designed):
+    for name in ("pd.json", "design.md", "step.png", "bode_roll.png", "bode_pitch.png", "bode_yaw.png"):
+        assert (designed / name).stat().st_size > 0, name
+    doc = json.loads((designed / "pd.json").read_text())
+    assert [a["stable"] for a in doc["metadata"]["analysis"]] == [True, True, True]
+    assert "| roll |" in (designed / "design.md").read_text()
+
+
+def test_controller_is_the_python_design_and_meets_the_margin(designed):
+    params = load_env_model().params
+    gains = design_gains(params, phase_margin=50.0)
+    pd = PDController.load(designed / "pd.json")
+    np.testing.assert_allclose(pd.gains.kp, gains.kp, rtol=1e-12)
+    np.testing.assert_allclose(pd.gains.kd, gains.kd, rtol=1e-12)
+    for i, axis in enumerate(("roll", "pitch", "yaw")):
+        an = loop_analysis(params, axis, pd.gains.kp[i], pd.gains.kd[i])
+        assert an.stable and an.phase_margin >= 50.0 - 1e-6
+
+
+def test_designed_controller_flies_in_heli_evaluate(designed, tmp_path, capsys):
+    out = tmp_path / "ev"
+    assert main(["evaluate", str(designed / "pd.json"), "--out", str(out), "--episode-seconds", "5",
+                 "--episodes-per-trace", "1"]) == 0
+    assert "episodes ended early: 0" in capsys.readouterr().out
+
+
+def test_infeasible_request_says_what_is_achievable(tmp_path, capsys):
+    out = tmp_path / "pd"
+    assert main(["design", "--bandwidth", "500", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "DesignError" in err and "the largest bandwidth is" in err
+    assert not out.exists()  # nothing written on failure
+
+
+@pytest.mark.parametrize("args", [["--phase-margin", "0"], ["--phase-margin", "200"], ["--bandwidth", "1,x"],
+                                  ["--bandwidth", "1,2"], ["--bandwidth", "-3"], ["--dt", "0"], ["--dt", "nan"]])
+def test_bad_arguments_exit_2_naming_what_was_expected(args, capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["design", *args])
+    assert e.value.code == 2
+    assert "expected" in capsys.readouterr().err
+
+
+def test_missing_model_directory(tmp_path, capsys):
+    assert main(["design", "--model", str(tmp_path / "nope"), "--out", str(tmp_path / "o")]) == 2
+    assert "EnvModelError" in capsys.readouterr().err
