@@ -78,8 +78,9 @@ class BootstrapResult:
         Intervals in the data.
     block : int
         Consecutive intervals per resampled block.
-    seed : int or None
-        Seed of the generator.
+    seed : int, dict or None
+        Seed of the generator: the integer given, or for a
+        :class:`numpy.random.SeedSequence` its ``entropy`` and ``spawn_key``.
     delays : tuple of float
         Servo delay per axis held fixed in the replicates [s].
     """
@@ -94,7 +95,7 @@ class BootstrapResult:
     n_failed: int
     n_intervals: int
     block: int
-    seed: int | None
+    seed: object
     delays: tuple = field(default=(0.0, 0.0, 0.0))
 
     def to_dict(self) -> dict:
@@ -107,6 +108,12 @@ class BootstrapResult:
             "estimate": dict(self.estimate), "std_errors": dict(self.std_errors),
             "ci": {k: list(v) for k, v in self.ci.items()},
         }
+
+
+def _seed_record(seed):
+    if isinstance(seed, np.random.SeedSequence):
+        return {"entropy": int(seed.entropy), "spawn_key": [int(k) for k in seed.spawn_key]}
+    return None if seed is None else int(seed)
 
 
 def _settings(identifier: IntegralIdentifier) -> dict:
@@ -247,5 +254,5 @@ def interval_bootstrap(flights, identifier: IntegralIdentifier, n_replicates: in
         names, MappingProxyType(estimate), reps, MappingProxyType(dict(zip(names, se.tolist()))),
         MappingProxyType({k: (float(a), float(b)) for k, a, b in zip(names, lo, hi)}), float(level),
         int(n_replicates), failed, int(owner.size), int(block),
-        seed if isinstance(seed, (int, type(None))) else None, tuple(float(t) for t in identifier.params_.taus),
+        _seed_record(seed), tuple(float(t) for t in identifier.params_.taus),
     )

@@ -541,6 +541,7 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
         "new_flights": [s | {"duration_s": f.duration} for s, f in zip(new_sources, flights)],
         "previous_flights": {"found": found, "missing": missing},
         "criterion": result.criterion,
+        "bootstrap_seed": seed,
         "drift": [r.to_dict() for r in drift],
         "flagged": flagged,
         "servo_delay_s": taus,
@@ -598,7 +599,7 @@ def refresh_markdown(result: RefreshResult, doc: dict) -> str:
         f"Old: `{MODEL_FILENAME}` before the refresh (standard error: {result.drift[0].se_old_source if result.drift else '—'}). "
         "New: the same structure and settings identified on the new flights alone. Standard errors and "
         f"{100 * level:.0f} % percentile intervals from a moving-block bootstrap over the integral method's "
-        f"intervals ({b.n_intervals} in the new flights; {b.n_replicates} replicates, blocks of {b.block} interval(s), seed {b.seed}; servo delay held at the "
+        f"intervals ({b.n_intervals} in the new flights; {b.n_replicates} replicates, blocks of {b.block} interval(s), seed {doc['bootstrap_seed']}; servo delay held at the "
         "identified value).",
         "",
         f"Flag: |Δ| > z·√(se_old² + se_new²) with z = {crit['z']:.2f} = Φ⁻¹(1 − α/(2m)), α = {crit['alpha']:g} "

@@ -177,6 +177,14 @@ def test_without_the_previous_flights_the_new_flights_alone_are_used(model_dir, 
     assert r.fit == "new" and "f1.csv missing" in r.reason and r.bootstrap_old is None
     assert {row.se_old_source for row in r.drift} == {"scaled from the new flights"}
     assert any("sqrt(" in n for n in r.notes)  # old interval count from the library's trace durations
+    # the next refresh finds no flights either, and uses the bootstrap this one recorded in model.json
+    recorded = json.loads((model_dir / "model.json").read_text())["refresh"]["bootstrap"]["std_errors"]
+    other = tmp_path / "other"
+    other.mkdir()
+    shutil.copy(flights["f2"], other / "f2.csv")
+    r2 = refresh_model(model_dir, [other / "f2.csv"], n_replicates=30, plots=False, progress=False)
+    assert {row.se_old_source for row in r2.drift} == {"recorded bootstrap"}
+    assert {row.name: row.se_old for row in r2.drift} == recorded
 
 
 # ---------------------------------------------------------------------------------------- the bootstrap
