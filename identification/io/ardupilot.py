@@ -1,0 +1,244 @@
+"""ArduPilot DataFlash (``.bin``) import with :mod:`pymavlink` (``DFReader``).
+
+Streams used (message.field)
+
+===============  ===============================  =========================================================
+quantity         message                          units, signs, mapping
+===============  ===============================  =========================================================
+p, q, r          ``IMU.GyrX, GyrY, GyrZ``         rad/s, body FRD: roll right, nose up, nose right positive
+                                                  (first IMU instance)
+phi, theta, psi  ``ATT.Roll, Pitch, Yaw``         deg -> rad; yaw 0..360 wrapped to (-pi, pi]
+sticks           ``RCIN.C<n>`` with ``RCMAP_*``   PWM normalised by the RC<n>_MIN/TRIM/MAX/REV parameters:
+                                                  roll/pitch/yaw (pwm-trim)/(max-trim) above trim,
+                                                  /(trim-min) below -> -1..1 (pitch PWM up = stick back =
+                                                  nose up = +lon); throttle 2(pwm-min)/(max-min)-1 -> col.
+                                                  PWM 0 (no RC signal yet) lands outside and is clipped.
+controller       ``RATE.ROut, POut, YOut, AOut``  rate-controller outputs: ArduCopter <= 3.3 logs them in
+                                                  motor-mix units (+-5000 roll/pitch, +-4500 yaw, 0..1000
+                                                  throttle), later versions -1..1 / 0..1; scaled to -1..1,
+                                                  col = 2*throttle-1. Sign: a positive output drives a
+                                                  positive rate.
+servos           ``RCOU.C1..C4`` (helicopters)    swash servos 1-3 at -60, 60, 180 deg (ArduPilot's H3-120
+                                                  default H_SV1..3_POS) = u_aile, u_aux, u_elev; servo 4 =
+                                                  u_rudd; converted with eq. (67). Multirotors: not available.
+===============  ===============================  =========================================================
+
+Airborne detection uses ``CTUN.ThrOut`` (``ThO``) as power, the ``IMU``
+accelerometer for vibration and ``CTUN.Alt`` as height. Time is the log's own
+clock (``TimeMS``/``TimeUS`` since boot) in seconds.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import require
+from .errors import LogFormatError, MissingStreamError
+from .raw_log import RawLog, captured_output, check_damage
+from .resample import make_stream
+from .segment import SegmentSignals
+
+DF_HEAD = b"\xa3\x95\x80"
+"""A DataFlash log starts with the header bytes 0xA3 0x95 and the FMT message type 0x80."""
+LEGACY_RP_SCALE = 5000.0
+"""ArduCopter <= 3.3: AC_ATTITUDE_RATE_RP_CONTROLLER_OUT_MAX, roll/pitch rate output limit."""
+LEGACY_YAW_SCALE = 4500.0
+"""ArduCopter <= 3.3: AC_ATTITUDE_RATE_YAW_CONTROLLER_OUT_MAX."""
+LEGACY_THROTTLE_SCALE = 1000.0
+
+_WANTED = {
+    "IMU": ("GyrX", "GyrY", "GyrZ", "AccX", "AccY", "AccZ"),
+    "ATT": ("Roll", "Pitch", "Yaw"),
+    "RATE": ("ROut", "POut", "YOut", "AOut"),
+    "RCIN": tuple(f"C{i}" for i in range(1, 9)),
+    "RCOU": ("C1", "C2", "C3", "C4"),
+    "CTUN": ("ThrOut", "ThO", "Alt"),
+}
+
+
+def is_dataflash(head: bytes) -> bool:
+    """True if the first bytes are a DataFlash FMT message."""
+    return head.startswith(DF_HEAD)
+
+
+def _time_of(m) -> float | None:
+    us = getattr(m, "TimeUS", None)
+    if us is not None:
+        return us * 1e-6
+    ms = getattr(m, "TimeMS", None)
+    return None if ms is None else ms * 1e-3
+
+
+def _read_messages(f) -> tuple[dict, dict, list]:
+    """Columns of the wanted messages (first instance), the parameters and the text messages."""
+    cols: dict = defaultdict(lambda: defaultdict(list))
+    params: dict = {}
+    texts: list = []
+    while True:
+        m = f.recv_match(type=list(_WANTED) + ["PARM", "MSG", "RCOU"])
+        if m is None:
+            break
+        kind = m.get_type()
+        if kind == "PARM":
+            params[m.Name] = float(m.Value)
+            continue
+        if kind == "MSG":
+            texts.append(str(m.Message))
+            continue
+        if getattr(m, "I", 0) not in (0, None) or getattr(m, "Instance", 0) not in (0, None):
+            continue
+        t = _time_of(m)
+        if t is None:
+            continue
+        c = cols[kind]
+        c["t"].append(t)
+        for name in _WANTED[kind]:
+            v = getattr(m, name, None)
+            if v is None and kind == "RCOU":
+                v = getattr(m, "Ch" + name[1:], None)  # ArduCopter 3.3 names RCOU fields Ch1..
+            c[name].append(np.nan if v is None else float(v))
+    return {k: {n: np.asarray(v, dtype=float) for n, v in c.items()} for k, c in cols.items()}, params, texts
+
+
+def _damage(f, printed) -> list[str]:
+    """Truncation (last indexed message runs past the end) and skipped garbage inside the file."""
+    lengths = {t: f.formats[t].len for t in range(len(f.offsets)) if len(f.offsets[t]) and t in f.formats}
+    if not lengths:
+        return []
+    end = max(int(f.offsets[t][-1]) + n for t, n in lengths.items())
+    used = sum(int(f.counts[t]) * n for t, n in lengths.items())
+    damage = []
+    if end > f.data_len:
+        damage.append(f"truncated: its last message runs {end - f.data_len} bytes past the end of the file")
+    skipped = min(end, f.data_len) - used
+    bad = sum(1 for line in printed if "bad header" in line or "unknown msg type" in line)
+    if skipped > 0 and bad:
+        damage.append(f"corrupt: {skipped} bytes inside the file are not DataFlash messages "
+                      f"(pymavlink skipped them: {bad} bad headers)")
+    return damage
+
+
+def _rc_norm(pwm, lo, trim, hi, rev) -> np.ndarray:
+    """Centred RC channel -> -1..1 (ArduPilot's own scaling about the trim)."""
+    x = np.where(pwm >= trim, (pwm - trim) / max(hi - trim, 1.0), (pwm - trim) / max(trim - lo, 1.0))
+    return x * (-1.0 if rev < 0 else 1.0)
+
+
+def load_ardupilot(path, allow_damaged: bool = False) -> RawLog:
+    """Decode an ArduPilot DataFlash log into a :class:`~identification.io.raw_log.RawLog`.
+
+    Raises
+    ------
+    LogFormatError
+        Not a DataFlash log or pymavlink cannot decode it.
+    DamagedLogError
+        Truncated or with corrupt bytes (unless ``allow_damaged``).
+    MissingStreamError
+        No IMU gyro or ATT messages.
+    """
+    path = Path(path)
+    mavlink = require("pymavlink.DFReader", "logs")
+    with open(path, "rb") as fh:
+        head = fh.read(3)
+    if not is_dataflash(head):
+        raise LogFormatError(f"{path}: not an ArduPilot DataFlash log: expected it to start with bytes "
+                             f"{DF_HEAD.hex(' ')}, got {head.hex(' ') or 'an empty file'}")
+    try:
+        with captured_output() as printed:
+            f = mavlink.DFReader_binary(str(path), zero_time_base=False)
+            cols, params, texts = _read_messages(f)
+        damage = _damage(f, printed)
+    except Exception as e:  # the parser's own failure on bad bytes: any exception type
+        raise LogFormatError(f"{path}: pymavlink cannot decode this DataFlash log ({type(e).__name__}: {e})") from e
+    check_damage(damage, path, allow_damaged, "ArduPilot DataFlash")
+
+    imu, att = cols.get("IMU"), cols.get("ATT")
+    if imu is None or "GyrX" not in imu:
+        raise MissingStreamError(f"{path}: no body rates: expected IMU messages with GyrX/GyrY/GyrZ")
+    rates = make_stream(imu["t"], [imu["GyrX"], imu["GyrY"], imu["GyrZ"]], "IMU.Gyr")
+    if rates is None:
+        raise MissingStreamError(f"{path}: fewer than 2 usable IMU samples")
+    attitude = None
+    if att is not None:
+        attitude = make_stream(att["t"], np.radians([att["Roll"], att["Pitch"], att["Yaw"]]), "ATT", angles=True)
+    accel = make_stream(imu["t"], [imu["AccX"], imu["AccY"], imu["AccZ"]], "IMU.Acc")
+
+    firmware = next((t for t in texts if "Copter" in t or "Plane" in t or "Rover" in t), "ArduPilot")
+    heli = ("heli" in firmware.lower() or any(k.startswith(("H_SW", "H_SV", "H_COL")) for k in params)
+            or params.get("FRAME_CLASS") == 6)
+    vehicle = "helicopter" if heli else "multirotor"
+
+    inputs, notes, unavailable = {}, {}, {}
+    rcin = cols.get("RCIN")
+    if rcin is not None:
+        chan = {a: int(params.get(f"RCMAP_{a}", d)) for a, d in
+                (("ROLL", 1), ("PITCH", 2), ("THROTTLE", 3), ("YAW", 4))}
+
+        def rc(axis):
+            n = chan[axis]
+            p = lambda k, d: params.get(f"RC{n}_{k}", d)  # noqa: E731
+            return n, rcin.get(f"C{n}"), p("MIN", 1100.0), p("TRIM", 1500.0), p("MAX", 1900.0), p("REV", 1.0)
+
+        parts = {a: rc(a) for a in chan}
+        if all(v[1] is not None for v in parts.values()):
+            lat = _rc_norm(*parts["ROLL"][1:])
+            lon = _rc_norm(*parts["PITCH"][1:])
+            ped = _rc_norm(*parts["YAW"][1:])
+            n, pwm, lo, _, hi, rev = parts["THROTTLE"]
+            col = 2.0 * (pwm - lo) / max(hi - lo, 1.0) - 1.0
+            inputs["sticks"] = make_stream(rcin["t"], [lat, lon, col, ped], "RCIN")
+            notes["sticks"] = (f"RCIN C{chan['ROLL']}->lat, C{chan['PITCH']}->lon, C{chan['THROTTLE']}->col, "
+                               f"C{chan['YAW']}->ped (RCMAP_*), normalised by RC<n>_MIN/TRIM/MAX/REV to -1..1")
+        else:
+            unavailable["sticks"] = "RCIN lacks the channels RCMAP_* names"
+    else:
+        unavailable["sticks"] = "no RCIN messages"
+    rate = cols.get("RATE")
+    power = None
+    if rate is not None and "ROut" in rate:
+        legacy = np.nanmax(np.abs(np.concatenate([rate["ROut"], rate["POut"]]))) > 1.5
+        s_rp, s_y, s_t = (LEGACY_RP_SCALE, LEGACY_YAW_SCALE, LEGACY_THROTTLE_SCALE) if legacy else (1.0, 1.0, 1.0)
+        thr = rate["AOut"] / s_t
+        inputs["controller"] = make_stream(
+            rate["t"], [rate["ROut"] / s_rp, rate["POut"] / s_rp, 2.0 * thr - 1.0, rate["YOut"] / s_y], "RATE")
+        notes["controller"] = (f"RATE ROut/{s_rp:g}->lat, POut/{s_rp:g}->lon, 2*AOut/{s_t:g}-1->col, "
+                               f"YOut/{s_y:g}->ped (rate-controller outputs"
+                               f"{', ArduCopter <= 3.3 motor-mix units' if legacy else ''})")
+    else:
+        unavailable["controller"] = "no RATE messages (LOG_BITMASK without the rate-controller bit)"
+    ctun = cols.get("CTUN")
+    if ctun is not None:
+        thr = ctun.get("ThO") if "ThO" in ctun and np.isfinite(ctun["ThO"]).any() else ctun.get("ThrOut")
+        if thr is not None and np.isfinite(thr).any():
+            thr = thr / (LEGACY_THROTTLE_SCALE if np.nanmax(thr) > 1.5 else 1.0)
+            power = make_stream(ctun["t"], thr, "CTUN.ThrOut")
+    altitude = make_stream(ctun["t"], ctun["Alt"], "CTUN.Alt") if ctun is not None and "Alt" in ctun else None
+
+    servos = None
+    rcou = cols.get("RCOU")
+    if heli and rcou is not None:
+        servos = make_stream(rcou["t"], [rcou["C1"], rcou["C2"], rcou["C3"], rcou["C4"]], "RCOU.C1-C4")
+    elif not heli:
+        unavailable["servos"] = ("ArduCopter multirotor log: RCOU holds motor outputs, not swash-plate servos of "
+                                 "eqs. 65-67; use inputs='controller' (the rate controller's outputs)")
+    else:
+        unavailable["servos"] = "no RCOU messages"
+    default = "servos" if servos is not None else ("controller" if "controller" in inputs else "sticks")
+    meta = {"firmware": firmware, "frame": params.get("FRAME"), "parser": "pymavlink DFReader"}
+    return RawLog(path=path, format="ardupilot-dataflash", vehicle=vehicle, rates=rates, attitude=attitude,
+                  inputs={k: v for k, v in inputs.items() if v is not None}, input_notes=notes,
+                  unavailable=unavailable, default_input=default, servos=servos,
+                  segment_signals=SegmentSignals(power=power, accel=accel, altitude=altitude,
+                                                 power_name="throttle output"),
+                  metadata=meta, damage=damage)
+
+
+def read_ardupilot(path, inputs=None, segment=None, rate=None, calibration=None, allow_damaged: bool = False):
+    """Read an ArduPilot DataFlash log into a :class:`~identification.flight.Flight` (see ``read_log``)."""
+    from .raw_log import to_flight
+
+    return to_flight(load_ardupilot(path, allow_damaged=allow_damaged), inputs=inputs, segment=segment, rate=rate,
+                     calibration=calibration)

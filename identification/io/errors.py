@@ -1,0 +1,39 @@
+"""Named errors of the log importers (:mod:`identification.io`).
+
+All subclass :class:`~identification.errors.FlightLogError`, so ``heli`` prints
+them as one line and exits with status 2, and a caller catching
+``FlightLogError`` (or ``ValueError``) catches them too. Messages say what was
+expected and what came.
+"""
+
+from __future__ import annotations
+
+from ..errors import FlightLogError
+
+
+class LogFormatError(FlightLogError):
+    """The file is not a log of a supported format, or its parser cannot decode it (corrupt header, garbage)."""
+
+
+class DamagedLogError(LogFormatError):
+    """The log decodes only in part: it is truncated, or some of its messages/frames are corrupt.
+
+    Pass ``allow_damaged=True`` (``heli import --allow-damaged``) to import what
+    decodes; the flight's metadata then records the damage.
+    """
+
+
+class MissingStreamError(LogFormatError):
+    """The log lacks a stream the import needs (body rates, attitude, or the chosen input source)."""
+
+
+class InputSourceError(FlightLogError):
+    """The requested input source does not apply to this log (e.g. ``servos`` on a multirotor)."""
+
+
+class NotAirborneError(FlightLogError):
+    """``segment="auto"`` found no airborne part of the log (it never left the ground)."""
+
+
+class SegmentError(FlightLogError):
+    """An explicit segment ``T0:T1`` lies outside the log or spans a gap in its data."""
