@@ -223,8 +223,9 @@ def detect_airborne(grid: np.ndarray, signals: SegmentSignals, rates: np.ndarray
             f"and roll/pitch activity >= {np.degrees(ACTIVITY_MIN_RAD):.1f} deg"
             f"{' or height >= %.1f m' % ALTITUDE_MIN_M if 'height' in f else ''}; got a longest such run of "
             f"{best:.1f} s (peak {figures['power_name'] or 'power'} {figures['power_max']}, peak vibration "
-            f"{figures['vibration_max_over_quiet']}x motors-off, peak activity {figures['activity_max_deg']} deg, "
-            f"peak height {figures['height_max_m']} m). The log looks like it never left the ground"
+            f"{figures['vibration_max_over_quiet']}x motors-off, peak activity {figures['activity_max_deg']} deg"
+            f"{', peak height %s m' % figures['height_max_m'] if 'height' in f else ''}). "
+            "The log looks like it never left the ground"
         )
     lengths = long[:, 1] - long[:, 0]
     a, b = long[int(np.argmax(lengths))]
