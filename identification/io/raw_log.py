@@ -170,7 +170,7 @@ def check_damage(raw_damage: list, path: Path, allow_damaged: bool, fmt: str) ->
     """Raise :class:`DamagedLogError` for a damaged log unless the caller accepts it."""
     if raw_damage and not allow_damaged:
         raise DamagedLogError(
-            f"{path}: the {fmt} log is damaged: {'; '.join(raw_damage)}. Expected a complete log; "
+            f"{path}: the {fmt} file is damaged: {'; '.join(raw_damage)}. Expected a complete log; "
             "pass allow_damaged=True (heli import --allow-damaged) to import what decodes"
         )
 
