@@ -178,7 +178,9 @@ def load_px4(path, allow_damaged: bool = False) -> RawLog:
         accel = make_stream(t_of(sc), [sc[f"accelerometer_m_s2[{i}]"] for i in range(3)],
                             "sensor_combined.accelerometer_m_s2")
     lp = _topic(ulog, "vehicle_local_position")
-    altitude = make_stream(t_of(lp), -np.asarray(lp["z"], float), "vehicle_local_position.z") if lp is not None else None
+    altitude = None
+    if lp is not None:
+        altitude = make_stream(t_of(lp), -np.asarray(lp["z"], float), "vehicle_local_position.z")
     default = "controller" if "controller" in inputs else "sticks"
     meta = {
         "firmware": f"PX4 {ulog.msg_info_dict.get('ver_sw', '?')}",
