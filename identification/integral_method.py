@@ -83,6 +83,11 @@ class AxisFit:
         Per-interval offsets ū_{d,i} [rad/s^2] (``offsets="per_interval"``), else empty.
     interval_starts : ndarray, shape (n_intervals,)
         Start time of each interval [s].
+    residual : ndarray, shape (n_intervals, N), optional
+        Integral residual ``p_approx - p`` of the best iterate at samples 1..N of
+        every interval (eqs. 39-40), with the per-interval disturbance polynomial
+        removed; its increments are the equation error the residual tests of
+        :mod:`identification.residual_tests` examine.
     """
 
     axis: str
@@ -94,6 +99,7 @@ class AxisFit:
     history: tuple
     interval_offsets: np.ndarray
     interval_starts: np.ndarray
+    residual: np.ndarray | None = None
 
 
 def pade_filter(command: np.ndarray, tau: float, fs: float) -> np.ndarray:
@@ -632,11 +638,11 @@ class IntegralIdentifier:
             err = sq / size
             history.append(err)
             if best is None or err <= best[0]:
-                best = (err, sol, coef_x[nf:], G_raw, cond, sq)
+                best = (err, sol, coef_x[nf:], G_raw, cond, sq, d2.copy())
             if not ownu or (it > 0 and (abs(history[-2] - err) <= self.tol * max(history[-2], 1e-30)
                                         or err > history[-2])):
                 break  # converged, or the Picard step stopped improving: keep the best iterate
-        err, sol, coef_own, G_raw, cond, sq = best
+        err, sol, coef_own, G_raw, cond, sq, residual = best
         beta = np.zeros(len(keep))
         beta[order] = sol
         slow_se = None
@@ -677,7 +683,7 @@ class IntegralIdentifier:
         centred_b = b - b.mean()
         ss_tot = _sum_squares(centred_b) or 1.0
         r2 = 1.0 - sq / ss_tot
-        return AxisFit(AXES[a], params, std, 0.0, float(cond), r2, tuple(history), offsets, start_times)
+        return AxisFit(AXES[a], params, std, 0.0, float(cond), r2, tuple(history), offsets, start_times, residual)
 
     # ----------------------------------------------------------------- use
     def _check_fitted(self):

@@ -105,6 +105,11 @@ class FlightConfig:
         we start lower, 0.3 Hz, to excite the damping).
     sweep_length, rest_length : float
         Length of one sweep and of the hover rest after it [s].
+    sweep_mode : {"sequential", "simultaneous"}
+        One stick at a time (roll → pitch → yaw, the paper's Section 2.1), or
+        all three sticks at once as an aggressive multi-axis manoeuvre (pitch
+        sweeping the band downwards, yaw at a third of the roll frequency), so
+        that products of rates (gyroscopic terms) are excited.
     stick_noise : float
         Standard deviation of the pilot's own stick jitter [stick units].
     collective_trim, collective_wander : float
@@ -131,6 +136,7 @@ class FlightConfig:
     sweep_band: tuple = (0.3, 3.0)
     sweep_length: float = 20.0
     rest_length: float = 8.0
+    sweep_mode: str = "sequential"
     stick_noise: float = 0.01
     collective_trim: float = 0.2
     collective_wander: float = 0.12
@@ -148,12 +154,19 @@ class FlightConfig:
             "wind_corner_hz": self.wind_corner_hz > 0,
             "pilot_bandwidth": self.pilot_bandwidth > 0, "reaction_delay": self.reaction_delay >= 0,
             "substeps": isinstance(self.substeps, (int, np.integer)) and self.substeps >= 1,
+            "sweep_mode": self.sweep_mode in ("sequential", "simultaneous"),
         }
         for name in ("stick_noise", "collective_wander", "gyro_noise", "vibration", "attitude_noise"):
             checks[name] = getattr(self, name) >= 0
         for name, ok in checks.items():
             if not ok:
                 raise ValueError(f"FlightConfig.{name} out of range: {getattr(self, name)!r}")
+
+
+MANOEUVRE_CONFIG = FlightConfig(sweep_amplitude=(0.8, 0.8, 0.25), sweep_mode="simultaneous")
+"""An aggressive pilot: large sweeps on all three sticks at once (rates to about 60 deg/s in roll and
+150 deg/s in yaw). Effects that scale with products or powers of the rates (gyroscopic, non-linear
+damping) are invisible under the gentle one-stick sweeps of the default flight."""
 
 
 @dataclass
@@ -242,7 +255,9 @@ def sweep_schedule(time: np.ndarray, config: FlightConfig) -> np.ndarray:
 
     Sweeps cycle roll → pitch → yaw: a linear chirp over ``sweep_band`` of
     ``sweep_length`` seconds with a raised-cosine taper, then ``rest_length``
-    seconds of hover. The first 5 s are hover.
+    seconds of hover. The first 5 s are hover. With ``sweep_mode="simultaneous"``
+    every sweep moves all three sticks: roll up the band, pitch down it, yaw at
+    a third of the roll frequency.
     """
     out = np.zeros((3, time.size))
     period = config.sweep_length + config.rest_length
@@ -254,6 +269,12 @@ def sweep_schedule(time: np.ndarray, config: FlightConfig) -> np.ndarray:
     f0, f1 = config.sweep_band
     chirp = signal.chirp(tau, f0=f0, t1=config.sweep_length, f1=f1, method="linear")
     taper = np.clip(np.minimum(tau, config.sweep_length - tau) / 1.0, 0.0, 1.0)
+    if config.sweep_mode == "simultaneous":
+        down = signal.chirp(tau, f0=f1, t1=config.sweep_length, f1=f0, method="linear")
+        slow = signal.chirp(tau, f0=f0 / 3, t1=config.sweep_length, f1=f1 / 3, method="linear", phi=90)
+        for i, c in enumerate((chirp, down, slow)):
+            out[i, active] = config.sweep_amplitude[i] * taper[active] * c[active]
+        return out
     for i in range(3):
         m = active & (axis == i)
         out[i, m] = config.sweep_amplitude[i] * taper[m] * chirp[m]
