@@ -121,10 +121,19 @@ class Flight:
             MappingProxyType({k: v[m] for k, v in self.extra.items()}),
         )
 
+    def __reduce__(self):
+        """Pickle (to worker processes, :mod:`identification.backends`) with the read-only mappings as dicts."""
+        return _unpickle_flight, (self.time, self.rates, self.attitude, self.sticks, dict(self.metadata),
+                                  dict(self.extra))
+
     def with_metadata(self, **items) -> "Flight":
         """A copy with metadata items added or replaced."""
         return Flight(self.time, self.rates, self.attitude, self.sticks,
                       MappingProxyType({**self.metadata, **items}), self.extra)
+
+
+def _unpickle_flight(time, rates, attitude, sticks, metadata, extra) -> Flight:
+    return Flight(time, rates, attitude, sticks, MappingProxyType(metadata), MappingProxyType(extra))
 
 
 def _check_finite(name: str, values: np.ndarray, time: np.ndarray | None) -> None:
