@@ -55,3 +55,18 @@ class DisturbanceError(ValueError):
 
 class LibraryError(ValueError):
     """A disturbance library is missing, corrupt, of an unknown version, or its traces do not match the manifest."""
+
+
+class BackendError(ValueError):
+    """A compute backend cannot be made as asked (unknown name, a worker count < 1, bad retry settings)."""
+
+
+class TaskFailed(RuntimeError):
+    """A task of a backend could not finish: its worker died more often than the retries allow.
+
+    ``index`` is the task's position among the mapped items.
+    """
+
+    def __init__(self, message: str, index: int = -1):
+        super().__init__(message)
+        self.index = index
