@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import math
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -147,7 +147,8 @@ def _load(model):
 class _Replay:
     """What the replay needs, checked and gathered once."""
 
-    env_model: object
+    env_model: object  # None in the copy shipped to workers (the replay needs only params)
+    params: object
     axis: int
     dt: float
     ratio: int
@@ -238,7 +239,7 @@ def _prepare(model, axis, duration, dt, seed, traces, windows) -> _Replay:
     if not np.all(np.isfinite(trim)):
         raise SweepError("the model cannot be trimmed (zero control gain on some axis)")
     torque = params.control_gains[:, None, None] * env_model.ud[:, idx]
-    return _Replay(env_model, ax, float(dt), ratio, steps, wins, torque, trim, col)
+    return _Replay(env_model, params, ax, float(dt), ratio, steps, wins, torque, trim, col)
 
 
 # ------------------------------------------------------------------- replay
@@ -256,7 +257,7 @@ def _replay(rp: _Replay, kp, kd, nominal, keep_samples=False, progress=True, max
     The state is a tuple of arrays of shape (pairs in chunk, windows); per-period
     inputs of shape (windows,) broadcast over the pairs.
     """
-    params = rp.env_model.params
+    params = rp.params
     dstep = _discrete_kernel(params, rp.dt)[0]
     ax = rp.axis
     signs = np.sign(params.control_gains)
@@ -317,6 +318,53 @@ def _replay(rp: _Replay, kp, kd, nominal, keep_samples=False, progress=True, max
     for c in TD_COLUMNS:
         stats[c][diverged] = np.nan
     return stats, hist, overflow, diverged, samples
+
+
+TASK_STATES = 1024
+"""Pair × window states per task when a sweep runs on a backend: a task gets
+``max(1, TASK_STATES // n_windows)`` consecutive stable pairs. The split depends on
+the grid and the windows only, never on the number of workers; chunks of 512 to
+4096 states replay at the same cost per state on one core, so 1024 leaves room
+for 4 tasks in a 20 × 20 grid × 10 windows and thousands in a cluster-sized one."""
+
+
+def _chunks(n_pairs: int, n_windows: int, chunk_pairs) -> list:
+    """``[(start, stop), ...]`` of the task split of ``n_pairs`` pairs (see :data:`TASK_STATES`)."""
+    if chunk_pairs is None:
+        size = max(1, TASK_STATES // n_windows)
+    elif isinstance(chunk_pairs, (int, np.integer)) and not isinstance(chunk_pairs, bool) and chunk_pairs >= 1:
+        size = int(chunk_pairs)
+    else:
+        raise SweepError(f"chunk_pairs must be a whole number >= 1, got {chunk_pairs!r}")
+    return [(a, min(n_pairs, a + size)) for a in range(0, n_pairs, size)]
+
+
+def _replay_task(item, shared):
+    """One backend task: :func:`_replay` of a chunk of pairs (module level, so workers import it)."""
+    kp, kd = item
+    rp, nominal, keep_samples, max_batch, edges = shared
+    return _replay(rp, kp, kd, nominal, keep_samples, False, max_batch, edges)
+
+
+def _replay_on(backend, rp: _Replay, kp, kd, nominal, keep_samples, progress, max_batch, edges, chunk_pairs):
+    """:func:`_replay` split into chunks of pairs run as tasks of ``backend``, joined in pair order.
+
+    Every pair's replay is independent of the others in its batch (element-wise
+    numpy over the (pairs, windows) states, per-row statistics), so the joined
+    result equals the single-process one bit for bit (tests check it). The
+    windows' inputs go to the workers once as the backend's shared data, without
+    the library (``env_model``); a task carries only its gains.
+    """
+    bounds = _chunks(kp.size, len(rp.windows), chunk_pairs)
+    shared = (replace(rp, env_model=None), np.asarray(nominal, dtype=float), keep_samples, max_batch, edges)
+    parts = backend.map(_replay_task, [(kp[a:b], kd[a:b]) for a, b in bounds], shared, progress=progress,
+                        desc=f"sweep {AXES[rp.axis]}")
+    stats = {c: np.concatenate([p[0][c] for p in parts]) for c in TD_COLUMNS}
+    hist = np.concatenate([p[1] for p in parts])
+    overflow = np.concatenate([p[2] for p in parts])
+    diverged = np.concatenate([p[3] for p in parts])
+    samples = {a + j: v for (a, _), p in zip(bounds, parts) for j, v in p[4].items()}
+    return stats, hist, overflow, diverged, samples, len(bounds)
 
 
 def _percentiles(data: np.ndarray, qs) -> list:
@@ -513,7 +561,8 @@ def _scalar(v):
 def sweep_gains(model, kp_values, kd_values, axis="roll", duration: float | None = 60.0, dt: float = 0.01,
                 seed: int = 0, traces=None, windows: int | None = None, progress: bool = True, nominal=None,
                 agree_tol: float = 0.2, keep_samples: bool = False, hist_max_deg: float = 30.0,
-                hist_bins: int = 120, max_batch: int = 4096) -> SweepResult:
+                hist_bins: int = 120, max_batch: int = 4096, backend=None, chunk_pairs: int | None = None
+                ) -> SweepResult:
     """Predict the error distribution of every PD gain pair of a Kp × Kd grid (paper Section 4).
 
     Parameters
@@ -553,6 +602,14 @@ def sweep_gains(model, kp_values, kd_values, axis="roll", duration: float | None
         others geometric up to ``hist_max_deg``).
     max_batch : int
         Pair × window states stepped at once (memory: ~12 bytes × steps each).
+    backend : None, {"local", "ray"} or identification.backends.Backend
+        Where the time-domain replay runs. None (default): in this process, as one
+        batch. Otherwise the stable pairs are split into chunks (``chunk_pairs``) run as
+        tasks of the backend (``"local"``: every core of this machine; ``"ray"``:
+        ``RAY_ADDRESS`` or a Ray instance started here, closed after the sweep). The
+        result is the same, bit for bit, on every backend and worker count.
+    chunk_pairs : int, optional
+        Pairs per task with a backend (default :data:`TASK_STATES` // windows).
 
     Returns
     -------
@@ -563,18 +620,24 @@ def sweep_gains(model, kp_values, kd_values, axis="roll", duration: float | None
     SweepError
         Bad gains, axis, dt or duration, windows that do not fit, a missing or corrupt model directory,
         or nominal gains that do not stabilise the held axes.
+    identification.errors.MissingDependency
+        ``backend="ray"`` without the ``cluster`` extra.
+    identification.errors.TaskFailed
+        A backend's worker died more often than its retries allow.
     """
     kp_values = check_gains(kp_values, "kp_values")
     kd_values = check_gains(kd_values, "kd_values")
     KP, KD = np.meshgrid(kp_values, kd_values, indexing="ij")
     return _sweep(model, KP.ravel(), KD.ravel(), kp_values, kd_values, "grid", axis, duration, dt, seed, traces,
-                  windows, progress, nominal, agree_tol, keep_samples, hist_max_deg, hist_bins, max_batch)
+                  windows, progress, nominal, agree_tol, keep_samples, hist_max_deg, hist_bins, max_batch, backend,
+                  chunk_pairs)
 
 
 def sweep_pairs(model, pairs, axis="roll", duration: float | None = 60.0, dt: float = 0.01, seed: int = 0,
                 traces=None, windows: int | None = None, progress: bool = True, nominal=None,
                 agree_tol: float = 0.2, keep_samples: bool = False, hist_max_deg: float = 30.0,
-                hist_bins: int = 120, max_batch: int = 4096) -> SweepResult:
+                hist_bins: int = 120, max_batch: int = 4096, backend=None, chunk_pairs: int | None = None
+                ) -> SweepResult:
     """:func:`sweep_gains` on a list of ``(kp, kd)`` pairs instead of a grid (same arguments).
 
     The table rows follow ``pairs``; ``kp_values``/``kd_values`` hold each pair's
@@ -586,14 +649,30 @@ def sweep_pairs(model, pairs, axis="roll", duration: float | None = 60.0, dt: fl
     kp = check_gains(arr[:, 0], "kp of pairs")
     kd = check_gains(arr[:, 1], "kd of pairs")
     return _sweep(model, kp, kd, kp, kd, "pairs", axis, duration, dt, seed, traces, windows, progress, nominal,
-                  agree_tol, keep_samples, hist_max_deg, hist_bins, max_batch)
+                  agree_tol, keep_samples, hist_max_deg, hist_bins, max_batch, backend, chunk_pairs)
+
+
+def _check_backend(backend):
+    from identification.backends import BACKENDS, Backend
+    from identification.errors import require
+
+    if isinstance(backend, Backend):
+        return
+    if backend not in BACKENDS:
+        raise SweepError(f"backend must be one of {BACKENDS} or a Backend, got {backend!r}")
+    if backend == "ray":
+        require("ray", "cluster")
 
 
 def _sweep(model, kp, kd, kp_values, kd_values, layout, axis, duration, dt, seed, traces, windows, progress,
-           nominal, agree_tol, keep_samples, hist_max_deg, hist_bins, max_batch) -> SweepResult:
+           nominal, agree_tol, keep_samples, hist_max_deg, hist_bins, max_batch, backend=None,
+           chunk_pairs=None) -> SweepResult:
     import time
 
     t_start = time.perf_counter()
+    if backend is not None:  # check before any work
+        _check_backend(backend)
+        _chunks(1, 1, chunk_pairs)
     if not (isinstance(agree_tol, (int, float)) and agree_tol > 0 and math.isfinite(agree_tol)):
         raise SweepError(f"agree_tol must be a positive fraction, got {agree_tol!r}")
     try:
@@ -625,8 +704,21 @@ def _sweep(model, kp, kd, kp_values, kd_values, layout, axis, duration, dt, seed
     idx = np.flatnonzero(stable)
     t0 = time.perf_counter()
     samples = {}
-    if idx.size:
+    where, n_tasks = "in-process", 1
+    if idx.size and backend is None:
         st, h, o, div, smp = _replay(rp, kp[idx], kd[idx], nominal, keep_samples, progress, max_batch, edges)
+    elif idx.size:
+        from identification.backends import make_backend
+
+        be = make_backend(backend)
+        try:
+            st, h, o, div, smp, n_tasks = _replay_on(be, rp, kp[idx], kd[idx], nominal, keep_samples, progress,
+                                                     max_batch, edges, chunk_pairs)
+            where = be.describe()
+        finally:
+            if be is not backend:  # made here from a name: release it
+                be.close()
+    if idx.size:
         for c in TD_COLUMNS:
             table[c][idx] = st[c]
         hist[idx], overflow[idx] = h, o
@@ -654,6 +746,7 @@ def _sweep(model, kp, kd, kp_values, kd_values, layout, axis, duration, dt, seed
         "linearised_at_collective": plant.collective,
         "ud_std": np.sqrt(np.sum(psd, axis=1) * df).tolist(),
         "seconds": {"total": time.perf_counter() - t_start, "time_domain": t_td, "frequency_domain": t_fd},
+        "backend": where, "tasks": n_tasks,
     }
     return SweepResult(AXES[ax], np.asarray(kp_values), np.asarray(kd_values), table, edges, hist, overflow,
                        rp.windows, freq, psd, settings, samples)

@@ -29,6 +29,13 @@ def _count(text):
     return v
 
 
+def backend_from_args(args):
+    """The backend of ``--backend``/``--workers`` (a Ray instance is started or joined on first use)."""
+    from identification.backends import make_backend
+
+    return make_backend(args.backend, workers=args.workers)
+
+
 def register(sub):
     p = sub.add_parser(
         "sweep",
@@ -61,6 +68,11 @@ def register(sub):
                    "ranking (0: every stable pair; default 4)")
     p.add_argument("--truth", default="model", choices=("model", "paper"),
                    help="aircraft flown by --flights: the model's own parameters (default) or the paper's values")
+    p.add_argument("--backend", default="local", choices=("local", "ray"),
+                   help="where the replay runs: 'local' (default) this machine's cores, 'ray' the Ray cluster at "
+                   "RAY_ADDRESS or a Ray instance started here (needs the 'cluster' extra); same result either way")
+    p.add_argument("--workers", type=_count, default=None, metavar="N",
+                   help="local worker processes, or CPUs of a Ray instance started here (default: all cores)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -76,8 +88,14 @@ def run(args) -> int:
         raise SweepError(f"model directory {args.model!r} does not exist (write one with 'heli identify')")
     if args.windows == 0:
         raise SweepError("--windows must be >= 1")
-    result = sweep_gains(args.model, kp, kd, axis=args.axis, duration=args.duration, dt=args.dt, seed=args.seed,
-                         windows=args.windows, progress=not args.no_progress)
+    if args.workers == 0:
+        raise SweepError("--workers must be >= 1")
+    backend = backend_from_args(args)
+    try:
+        result = sweep_gains(args.model, kp, kd, axis=args.axis, duration=args.duration, dt=args.dt,
+                             seed=args.seed, windows=args.windows, progress=not args.no_progress, backend=backend)
+    finally:
+        backend.close()
     out = Path(args.out)
     paths = {
         "csv": result.to_csv(out / "sweep.csv"),
@@ -109,7 +127,8 @@ def run(args) -> int:
     n_unstable = int((st == "unstable").sum())
     best = result.best()
     print(f"heli sweep: {result.n_pairs} gain pairs on {result.axis} x {result.settings['n_windows']} gust windows "
-          f"of {result.settings['duration']:g} s in {result.settings['seconds']['total']:.1f} s")
+          f"of {result.settings['duration']:g} s in {result.settings['seconds']['total']:.1f} s on "
+          f"{result.settings['backend']} ({result.settings['tasks']} tasks)")
     print(f"unstable (closed-loop poles, not simulated): {n_unstable}; diverged: {int((st == 'diverged').sum())}; "
           f"time/frequency domain disagree: {int(result.table['disagree'].sum())}")
     if best:
