@@ -40,6 +40,16 @@ def _fraction(text):
     return v
 
 
+def _seeds(text):
+    try:
+        seeds = [int(v) for v in text.split(",") if v.strip() != ""]
+    except ValueError:
+        seeds = []
+    if not seeds or len(set(seeds)) != len(seeds):
+        raise argparse.ArgumentTypeError(f"expected distinct whole numbers separated by commas, got {text!r}")
+    return seeds
+
+
 def register(sub):
     p = sub.add_parser(
         "train",
@@ -70,14 +80,48 @@ def register(sub):
     p.add_argument("--held-out-fraction", type=_fraction, default=0.25,
                    help="fraction of the library's traces held out (default 0.25)")
     p.add_argument("--split-seed", type=int, default=0, help="seed of the held-out choice (default 0)")
+    p.add_argument("--seeds", type=_seeds, default=None, metavar="S1,S2,...",
+                   help="train one agent per seed, each as a task of --backend (one torch thread each); agents "
+                   "are written to AGENT_seed<S>.zip and AGENT_seed<S>_training/ (overrides --seed)")
+    p.add_argument("--backend", default="local", choices=("local", "ray"),
+                   help="where --seeds train: 'local' (default) this machine's cores, 'ray' the Ray cluster at "
+                   "RAY_ADDRESS or a Ray instance started here (needs the 'cluster' extra)")
+    p.add_argument("--workers", type=_whole(1), default=None, metavar="N",
+                   help="local worker processes for --seeds, or CPUs of a Ray instance started here "
+                   "(default: all cores)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
+
+
+def _run_seeds(args) -> int:
+    from controllers.rl import train_seeds
+    from identification.backends import make_backend
+
+    backend = make_backend(args.backend, workers=args.workers)
+    try:
+        results = train_seeds(args.algo, args.model, args.timesteps, args.out, seeds=args.seeds, backend=backend,
+                              n_envs=args.n_envs, eval_freq=args.eval_freq, checkpoint_freq=args.checkpoint_freq,
+                              progress=not args.no_progress, held_out_fraction=args.held_out_fraction,
+                              split_seed=args.split_seed, eval_episodes=args.eval_episodes,
+                              episode_seconds=args.episode_seconds,
+                              max_seconds=None if args.minutes is None else 60.0 * args.minutes)
+        where = backend.describe()
+    finally:
+        backend.close()
+    print(f"heli train: {args.algo.upper()}, {len(results)} seeds on {where}")
+    for seed, res in results.items():
+        last = f"; held-out return {res.evaluations[-1][1]:.2f}" if res.evaluations else ""
+        why = " (time budget reached)" if res.stopped_by_time else ""
+        print(f"  seed {seed}: {res.timesteps} timesteps in {res.seconds:.1f} s{why}{last}; wrote {res.path}")
+    return 0
 
 
 def run(args) -> int:
     from controllers.errors import TrainingInterrupted
     from controllers.rl import train_agent
 
+    if args.seeds is not None:
+        return _run_seeds(args)
     try:
         res = train_agent(args.algo, args.model, args.timesteps, args.out, seed=args.seed, n_envs=args.n_envs,
                           eval_freq=args.eval_freq, checkpoint_freq=args.checkpoint_freq,
