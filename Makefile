@@ -2,7 +2,7 @@
 PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
-EXTRAS ?= test,rl
+EXTRAS ?= test,rl,cluster
 # On machines that carry the CPU build of torch 2.13.0 in /opt/wheels, pin it so that
 # stable-baselines3 does not pull a multi-GB CUDA build; elsewhere install normally.
 TORCH_PIN := $(if $(wildcard /opt/wheels/torch-2.13.0*),-c constraints/local-cpu-torch.txt,)
