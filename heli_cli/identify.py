@@ -28,6 +28,16 @@ def _interval(text):
     return v
 
 
+def _workers(text):
+    try:
+        v = int(text)
+    except ValueError:
+        v = 0
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    return v
+
+
 def register(sub):
     p = sub.add_parser(
         "identify",
@@ -48,23 +58,35 @@ def register(sub):
     p.add_argument("--no-plots", action="store_true", help="do not draw PNG figures")
     p.add_argument("--no-disturbances", action="store_true",
                    help="do not identify wind profiles nor write the disturbance library")
+    p.add_argument("--backend", default=None, choices=("local", "ray"),
+                   help="identify each flight's wind as one task per flight: 'local' this machine's cores, 'ray' "
+                   "the Ray cluster at RAY_ADDRESS or a Ray instance started here (needs the 'cluster' extra); "
+                   "default: one after the other in this process. Same results either way")
+    p.add_argument("--workers", type=_workers, default=None, metavar="N",
+                   help="local worker processes, or CPUs of a Ray instance started here (default: all cores)")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     from tqdm import tqdm
 
+    from identification.backends import make_backend
     from identification.io import read_flight
     from identification.report import identify_and_report, source_entry
 
     flights = [read_flight(path) for path in tqdm(args.flights, desc="reading flights", unit="flight",
                                                    disable=len(args.flights) < 2)]
     kwargs = {"interval": args.interval, "delay": args.delay, "prefilter": not args.no_filter}
-    run = identify_and_report(
-        flights, args.out, coupled=args.coupled, sources=[source_entry(p) for p in args.flights],
-        identifier_kwargs=kwargs, flight_paths=args.flights, plots=not args.no_plots,
-        disturbances=not args.no_disturbances,
-    )
+    backend = None if args.backend is None else make_backend(args.backend, workers=args.workers)
+    try:
+        run = identify_and_report(
+            flights, args.out, coupled=args.coupled, sources=[source_entry(p) for p in args.flights],
+            identifier_kwargs=kwargs, flight_paths=args.flights, plots=not args.no_plots,
+            disturbances=not args.no_disturbances, backend=backend,
+        )
+    finally:
+        if backend is not None:
+            backend.close()
     params = run.params.values()
     print(f"identified {run.chosen} model from {len(flights)} flight(s):")
     for axis, fit in run.identifiers[run.chosen].axes_.items():

@@ -44,6 +44,16 @@ def _fraction(text):
     return v
 
 
+def _workers(text):
+    try:
+        v = int(text)
+    except ValueError:
+        v = 0
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    return v
+
+
 def register(sub):
     p = sub.add_parser(
         "refresh",
@@ -74,22 +84,33 @@ def register(sub):
     p.add_argument("--min-change", type=_fraction, default=0.0, metavar="FRACTION",
                    help="smallest relative change that may be flagged, e.g. 0.05 (default 0: any significant change)")
     p.add_argument("--no-plots", action="store_true", help="do not draw PNG figures")
+    p.add_argument("--backend", default=None, choices=("local", "ray"),
+                   help="identify each flight's wind as one task per flight: 'local' this machine's cores, 'ray' "
+                   "the Ray cluster at RAY_ADDRESS or a Ray instance started here (needs the 'cluster' extra); "
+                   "default: one after the other in this process. Same results either way")
+    p.add_argument("--workers", type=_workers, default=None, metavar="N",
+                   help="local worker processes, or CPUs of a Ray instance started here (default: all cores)")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     from identification.errors import DisturbanceError, LibraryError
+    from identification.backends import make_backend
     from identification.refresh import refresh_model
 
+    backend = None if args.backend is None else make_backend(args.backend, workers=args.workers)
     try:
         result = refresh_model(
             args.model_dir, args.flights, previous_flights=args.previous_flights, fit=args.fit,
             n_replicates=args.bootstrap, block=args.block, seed=args.seed, alpha=args.alpha,
-            min_relative=args.min_change, plots=not args.no_plots, progress=True,
+            min_relative=args.min_change, plots=not args.no_plots, progress=True, backend=backend,
         )
     except (LibraryError, DisturbanceError) as e:  # heli's main reports the model and flight errors itself
         print(f"heli {args.command}: error: {type(e).__name__}: {e}", file=sys.stderr)
         return 2
+    finally:
+        if backend is not None:
+            backend.close()
     crit = result.criterion
     print(f"parameter drift (new flights vs current model; flag |Δ| > {crit['z']:.2f}·se of the difference):")
     for r in result.drift:

@@ -352,7 +352,8 @@ def _previous_se(doc: dict, names, new: BootstrapResult, library_entries, old_so
 # ------------------------------------------------------------------ the refresh
 def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "auto",
                   n_replicates: int = DEFAULT_REPLICATES, block: int = 1, seed: int = 0, alpha: float = 0.05,
-                  min_relative: float = 0.0, plots: bool = True, progress: bool | None = None) -> RefreshResult:
+                  min_relative: float = 0.0, plots: bool = True, progress: bool | None = None,
+                  backend=None) -> RefreshResult:
     """Refresh the model in ``model_dir`` with new flights (module docstring).
 
     Parameters
@@ -379,6 +380,9 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
         Write the report's PNG figures.
     progress : bool, optional
         Progress bars (default: when there are several flights).
+    backend : None, {"local", "ray"} or identification.backends.Backend
+        Where the new flights' winds are identified, one task per flight
+        (:func:`identification.report.identify_and_report`); None: in this process.
 
     Raises
     ------
@@ -512,7 +516,7 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
         run = identify_and_report(
             fit_flights, root, coupled=structure == "coupled", sources=sources, identifier_kwargs=kw,
             flight_paths=fit_paths, plots=plots, disturbances=True, progress=show,
-            wind_flights=range(len(flights)), model_extra={"refresh": record},
+            wind_flights=range(len(flights)), model_extra={"refresh": record}, backend=backend,
         )
     except BaseException:
         # Stopped before the library gained its version: put the previous model back, so that the

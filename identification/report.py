@@ -138,7 +138,8 @@ def fit_table(identifiers: dict) -> str:
 
 def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), identifier_kwargs=None,
                         flight_paths=None, plots: bool = True, disturbances: bool = True,
-                        progress: bool | None = None, wind_flights=None, model_extra=None) -> IdentificationRun:
+                        progress: bool | None = None, wind_flights=None, model_extra=None,
+                        backend=None) -> IdentificationRun:
     """Identify, validate and write ``model.json`` + ``report.md`` (+ figures) into ``out_dir``.
 
     Parameters
@@ -167,6 +168,10 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
         only the new flights' traces.
     model_extra : dict, optional
         Further top-level entries of ``model.json`` (e.g. ``"refresh"``).
+    backend : None, {"local", "ray"} or identification.backends.Backend
+        Where the flights' winds are identified, one task per flight
+        (:func:`identification.fleet.disturbances_of`; same profiles on every backend).
+        None: one after the other in this process. The pooled fit is one task, here.
     """
     flights = [flights] if isinstance(flights, Flight) else list(flights)
     out = Path(out_dir)
@@ -206,9 +211,16 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
         names = [Path(p).name for p in (flight_paths or [])] or [f"flight {i + 1}" for i in range(len(flights))]
         chosen_flights = range(len(flights)) if wind_flights is None else [int(i) for i in wind_flights]
         show = (len(chosen_flights) > 1) if progress is None else progress
-        for i in tqdm(chosen_flights, desc="disturbance profiles", unit="flight", disable=not show):
+        done = None
+        if backend is not None:
+            from .fleet import disturbances_of
+
+            done = disturbances_of([flights[i] for i in chosen_flights], ident.params_, backend=backend,
+                                   progress=show)
+        for n, i in enumerate(tqdm(chosen_flights, desc="disturbance profiles", unit="flight",
+                                   disable=not show or done is not None)):
             flight = flights[i]
-            profile = identify_disturbance(flight, ident.params_)
+            profile = identify_disturbance(flight, ident.params_) if done is None else done[n]
             profiles.append(profile)
             prefix = f"disturbance_{i + 1}" if len(flights) > 1 else "disturbance"
             section = [f"### {names[i]}", "", profile.markdown()]

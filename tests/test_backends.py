@@ -250,6 +250,23 @@ def test_flights_on_two_local_workers_equal_one(two_flights, fleet_reference):
                                                  simulate=False))
 
 
+def test_cli_identify_backend_gives_the_same_model_and_library(tmp_path, capsys):
+    paths = []
+    for seed in (1, 2):
+        paths.append(str(tmp_path / f"f{seed}.csv"))
+        assert main(["simulate-flight", "--duration", "40", "--seed", str(seed), "--out", paths[-1]]) == 0
+    base = ["identify", *paths, "--no-plots"]
+    assert main(base + ["--out", str(tmp_path / "a")]) == 0
+    assert main(base + ["--out", str(tmp_path / "b"), "--backend", "local", "--workers", "2"]) == 0
+    capsys.readouterr()
+
+    def traces(d):
+        return {p.name: p.read_bytes() for p in sorted((d / "disturbances").rglob("*.npy"))}
+
+    a, b = traces(tmp_path / "a"), traces(tmp_path / "b")
+    assert len(a) == 2 and a == b  # content-addressed: same names, same bytes
+
+
 def test_fleet_rejects_what_is_not_a_flight():
     with pytest.raises(TypeError, match="flight #0 is a str, expected a Flight"):
         identify_each(["flight.csv"], backend=LocalBackend(1))
