@@ -16,6 +16,9 @@ Sections (``--only NAME`` runs one):
 * ``sweep`` — a 20 x 20 PD gain grid x 10 gust windows x 60 s at 100 Hz through
   ``controllers.sweep.sweep_gains`` (target <= 10 s on 2 cores, issue #5), and its
   prediction checked against fresh-wind flights (KS statistic, target <= 0.1).
+* ``backends`` — the same sweep on ``local`` with 1 and 2 workers and on ``ray``
+  with 2 (issue 8): scaling, Ray overhead, and a projection (stated as such) for
+  a 64-core cluster.
 
 Usage::
 
@@ -200,7 +203,117 @@ def bench_sweep(repeats: int) -> dict:
     return out
 
 
-SECTIONS = {"identification": bench_identification, "physics": bench_physics, "env": bench_env, "sweep": bench_sweep}
+def _noop(item, shared):
+    return item
+
+
+def bench_backends(repeats: int) -> dict:
+    """Backends (issue 8): the ``sweep`` section's sweep on ``local`` with 1 and 2 workers and on ``ray`` with 2.
+
+    The 20 x 20 grid x 10 windows x 60 s sweep splits into 4 tasks of 1024 pair-window
+    states (``controllers.sweep.TASK_STATES``), whatever the backend. Figures are medians
+    of the repeats, the backends interleaved so that machine noise hits them alike; the
+    first call of each (pool or Ray start-up) is reported apart. The per-task overhead
+    is the median cost of an empty task in a map of 64. The 64-core figures are a
+    projection from these measurements, not a measurement.
+    """
+    import math
+    import os
+    import pickle
+
+    from controllers.sweep import TASK_STATES, _chunks, sweep_gains
+    from identification.backends import LocalBackend, RayBackend
+
+    kp, kd = np.linspace(0.5, 10.0, 20), np.linspace(0.0, 3.0, 20)
+    n_rep = max(3, repeats // 10)
+
+    def run(backend):
+        return sweep_gains(None, kp, kd, duration=60.0, dt=0.01, windows=10, seed=0, progress=False, backend=backend)
+
+    ref = run(None)  # warm-up and the reference table
+    ray_be = RayBackend(num_cpus=2)
+    t0 = time.perf_counter()
+    ray_be.workers  # starts the local Ray instance
+    ray_start = time.perf_counter() - t0
+    backends = {"local, 1 worker": LocalBackend(1), "local, 2 workers": LocalBackend(2), "ray, 2 workers": ray_be}
+    first, totals, td = {}, {k: [] for k in backends}, {k: [] for k in backends}
+    try:
+        for name, be in backends.items():
+            t0 = time.perf_counter()
+            res = run(be)
+            first[name] = time.perf_counter() - t0
+            same = all(np.array_equal(np.asarray(ref.table[c]), np.asarray(res.table[c]),
+                                      equal_nan=np.asarray(ref.table[c]).dtype.kind == "f") for c in ref.table)
+            if not (same and np.array_equal(ref.hist_counts, res.hist_counts)):
+                raise AssertionError(f"{name}: the sweep differs from the single-process one")
+        for _ in range(n_rep):
+            for name, be in backends.items():
+                t0 = time.perf_counter()
+                res = run(be)
+                totals[name].append(time.perf_counter() - t0)
+                td[name].append(res.settings["seconds"]["time_domain"])
+        overhead = {}
+        for name in ("local, 2 workers", "ray, 2 workers"):
+            be = backends[name]
+            be.map(_noop, range(64))  # warm
+            times = []
+            for _ in range(n_rep):
+                t0 = time.perf_counter()
+                be.map(_noop, range(64))
+                times.append((time.perf_counter() - t0) / 64)
+            overhead[name] = statistics.median(times)
+    finally:
+        ray_be.close()
+    med = {k: statistics.median(v) for k, v in totals.items()}
+    med_td = {k: statistics.median(v) for k, v in td.items()}
+    fd = ref.settings["seconds"]["frequency_domain"]
+    n_tasks = len(_chunks(int(ref.stable.sum()), ref.settings["n_windows"], None))
+    from controllers.sweep import _prepare
+
+    rp = _prepare(None, "roll", 60.0, 0.01, 0, None, 10)
+    import dataclasses
+
+    shared_mb = len(pickle.dumps(dataclasses.replace(rp, env_model=None))) / 1e6
+    one, two, ray2 = med["local, 1 worker"], med["local, 2 workers"], med["ray, 2 workers"]
+    out = {
+        "cpus": os.cpu_count(),
+        "sweep": f"{kp.size} x {kd.size} pairs x {ref.settings['n_windows']} windows x 60 s at 100 Hz, "
+                 f"{n_tasks} tasks of <= {TASK_STATES} pair-window states; results equal the single-process "
+                 "sweep bit for bit on every backend (checked)",
+        "data shared once per worker (windows' torque, trim, collective) [MB]": shared_mb,
+        f"medians of {n_rep} interleaved runs": "",
+    }
+    for name in backends:
+        out[f"  {name}: total [s]"] = med[name]
+        out[f"  {name}: time domain (the distributed part) [s]"] = med_td[name]
+        out[f"  {name}: first call (pool / workers start) [s]"] = first[name]
+    out["frequency domain, on the driver for every backend [s]"] = fd
+    out["Ray instance start-up, once per session [s]"] = ray_start
+    out["speed-up local 2 workers vs 1 (total)"] = one / two
+    out["speed-up local 2 workers vs 1 (time domain)"] = med_td["local, 1 worker"] / med_td["local, 2 workers"]
+    out["Ray overhead: ray 2 / local 2 workers (total, ratio)"] = ray2 / two
+    out["Ray overhead: ray 2 - local 2 workers (total) [s]"] = ray2 - two
+    out["per-task overhead, empty task, local 2 workers [ms]"] = 1e3 * overhead["local, 2 workers"]
+    out["per-task overhead, empty task, ray 2 workers [ms]"] = 1e3 * overhead["ray, 2 workers"]
+    # Projection (stated as such): cores like these, the measured per-task overhead, the
+    # shared data sent to each of 8 nodes once (1 Gbit/s), the frequency domain serial on the driver.
+    t_task = med_td["local, 1 worker"] / n_tasks
+    over = overhead["ray, 2 workers"]
+    for label, scale in (("this sweep", 1), ("a 64x larger grid (160 x 160 pairs, 256 tasks)", 64)):
+        tasks = n_tasks * scale
+        serial = fd * scale + med_td["local, 1 worker"] * scale
+        waves = math.ceil(tasks / 64)
+        proj = fd * scale + waves * t_task + tasks * over / 64 + 8 * shared_mb * 8 / 1e3
+        out[f"PROJECTION, 64 cores (8 nodes x 8), ray: {label} [s]"] = proj
+        out[f"PROJECTION, 64 cores: {label}, speed-up vs 1 core"] = serial / proj
+    out["PROJECTION note"] = ("this sweep has only 4 tasks, so 64 cores cannot beat 4; a grid with >= 64 tasks "
+                              "keeps them busy and the serial frequency-domain part on the driver "
+                              f"({1e3 * fd / ref.n_pairs:.2f} ms per pair) becomes the limit (Amdahl)")
+    return out
+
+
+SECTIONS = {"identification": bench_identification, "physics": bench_physics, "env": bench_env, "sweep": bench_sweep,
+            "backends": bench_backends}
 
 
 def main(argv=None):
@@ -222,5 +335,5 @@ def main(argv=None):
             print(f"- {key}: {value:.3f}" if isinstance(value, float) else f"- {key}: {value}")
 
 
-if __name__ == "__main__":
+if __name__ == "__main__":  # the guard the local backend's worker processes need
     main()
