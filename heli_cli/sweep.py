@@ -128,7 +128,7 @@ def run(args) -> int:
     best = result.best()
     print(f"heli sweep: {result.n_pairs} gain pairs on {result.axis} x {result.settings['n_windows']} gust windows "
           f"of {result.settings['duration']:g} s in {result.settings['seconds']['total']:.1f} s on "
-          f"{result.settings['backend']} ({result.settings['tasks']} tasks)")
+          f"{result.settings['backend']} ({result.settings['tasks']} task{'s' if result.settings['tasks'] != 1 else ''})")
     print(f"unstable (closed-loop poles, not simulated): {n_unstable}; diverged: {int((st == 'diverged').sum())}; "
           f"time/frequency domain disagree: {int(result.table['disagree'].sum())}")
     if best:
