@@ -9,9 +9,9 @@ TORCH_PIN := $(if $(wildcard /opt/wheels/torch-2.13.0*),-c constraints/local-cpu
 
 .PHONY: setup logs test test-slow demo bench clean
 
+comma := ,
 setup: $(VENV)/.installed-$(subst $(comma),_,$(EXTRAS))
 
-comma := ,
 $(VENV)/.installed-%: pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --upgrade pip >/dev/null

@@ -16,12 +16,14 @@ import sys
 COMMAND_MODULES = (
     "heli_cli.simulate_flight",
     "heli_cli.identify",
+    "heli_cli.import_log",
     "heli_cli.refresh",
     "heli_cli.compare_methods",
     "heli_cli.design",
     "heli_cli.sweep",
     "heli_cli.train",
     "heli_cli.evaluate",
+    "heli_cli.diagnose",
 )
 """Modules that register sub-commands, in the order ``heli --help`` lists them."""
 
@@ -42,14 +44,15 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     from controllers.errors import AgentError, DesignError, SweepError
     from heli_env.errors import EnvModelError
-    from identification.errors import FlightLogError, IdentifiabilityError, MissingDependency, ModelFileError
+    from identification.errors import (BackendError, DisturbanceError, FlightLogError, IdentifiabilityError,
+                                       LibraryError, MissingDependency, ModelFileError, TaskFailed)
 
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (FlightLogError, IdentifiabilityError, ModelFileError, MissingDependency, SweepError,
-            AgentError, DesignError, EnvModelError) as e:
+    except (FlightLogError, IdentifiabilityError, ModelFileError, MissingDependency, DisturbanceError, LibraryError,
+            BackendError, TaskFailed, SweepError, AgentError, DesignError, EnvModelError) as e:
         print(f"heli {args.command}: error: {type(e).__name__}: {e}", file=sys.stderr)
         return 2
     except FileNotFoundError as e:
