@@ -424,15 +424,6 @@ def _chunk_stats(att, rate, act, sat, omax, n, sl, stats, hist, overflow, diverg
     stats["stick_p99"][sl] = _percentiles(U, (99,))[0]
     stats["saturation"][sl] = sat.mean(axis=1) / n
     stats["other_axes_max_deg"][sl] = omax.max(axis=1) * _DEG
-    nb = edges.size - 1
-    lo = np.float32(edges[1])
-    inv_step = np.float32(1.0 / math.log(edges[2] / edges[1]))
-    for j in range(g):  # bin 0 is [0, edges[1]); then geometric bins by index; slot nb counts the overflow
-        with np.errstate(divide="ignore"):
-            b = np.floor(np.log(A[j] / lo) * inv_step) + np.float32(1.0)
-        counts = np.bincount(np.clip(b, 0, nb).astype(np.intp), minlength=nb + 1)
-        hist[sl.start + j] = counts[:nb]
-        overflow[sl.start + j] = counts[nb]
 
 
 # ------------------------------------------------------------------- result
