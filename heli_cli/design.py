@@ -11,18 +11,10 @@ import argparse
 import math
 from pathlib import Path
 
+from .argtypes import number
+
 DEFAULT_OUT = "pd"
 AXES = ("roll", "pitch", "yaw")
-
-
-def _margin(text):
-    try:
-        v = float(text)
-    except ValueError:
-        v = float("nan")
-    if not 0 < v < 180:
-        raise argparse.ArgumentTypeError(f"expected a phase margin in (0, 180) degrees, got {text!r}")
-    return v
 
 
 def _bandwidths(text):
@@ -38,16 +30,6 @@ def _bandwidths(text):
     return vals[0] if len(vals) == 1 else vals
 
 
-def _period(text):
-    try:
-        v = float(text)
-    except ValueError:
-        v = float("nan")
-    if not 0 < v < 1:
-        raise argparse.ArgumentTypeError(f"expected a control period in s, 0 < dt < 1, got {text!r}")
-    return v
-
-
 def register(sub):
     p = sub.add_parser(
         "design",
@@ -61,10 +43,12 @@ def register(sub):
     )
     p.add_argument("--model", metavar="DIR", default=None,
                    help="model directory written by 'heli identify' (default: the model shipped with heli-env)")
-    p.add_argument("--phase-margin", type=_margin, default=45.0, help="least phase margin in deg (default 45)")
+    p.add_argument("--phase-margin", type=number("a phase margin in (0, 180) degrees", 0.0, 180.0), default=45.0,
+                   help="least phase margin in deg (default 45)")
     p.add_argument("--bandwidth", type=_bandwidths, default=None, metavar="W[,W,W]",
                    help="closed-loop -3 dB bandwidth in rad/s, one for all axes or roll,pitch,yaw")
-    p.add_argument("--dt", type=_period, default=0.01, help="control period in s (default 0.01, the env's)")
+    p.add_argument("--dt", type=number("a control period in s, 0 < dt < 1", 0.0, 1.0),
+                   default=0.01, help="control period in s (default 0.01, the env's)")
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
     p.set_defaults(func=run)
 

@@ -2,28 +2,7 @@
 
 from __future__ import annotations
 
-import argparse
-import math
-
-
-def _fraction(text):
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not 0.0 < v < 1.0:
-        raise argparse.ArgumentTypeError(f"expected a number in (0, 1), got {text!r}")
-    return v
-
-
-def _positive(text):
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not 0.0 < v < math.inf:
-        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
-    return v
+from .argtypes import number
 
 
 def register(sub):
@@ -43,9 +22,11 @@ def register(sub):
                    help="model whose structure is diagnosed (default: the paper's decoupled model)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--folds", type=int, default=5, help="cross-validation blocks (default 5)")
-    p.add_argument("--window", type=_positive, default=4.0, help="held-out simulation window in s (default 4)")
-    p.add_argument("--alpha", type=_fraction, default=None, help="family-wise significance per axis (default 0.05)")
-    p.add_argument("--min-gain", type=_fraction, default=None,
+    p.add_argument("--window", type=number("a positive number of seconds", 0.0),
+                   default=4.0, help="held-out simulation window in s (default 4)")
+    p.add_argument("--alpha", type=number("a number in (0, 1)", 0.0, 1.0), default=None,
+                   help="family-wise significance per axis (default 0.05)")
+    p.add_argument("--min-gain", type=number("a number in (0, 1)", 0.0, 1.0), default=None,
                    help="smallest held-out improvement accepted, as a fraction (default 0.05)")
     p.add_argument("--no-plots", action="store_true", help="do not draw PNG figures")
     p.set_defaults(func=run)

@@ -2,30 +2,11 @@
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
+from .argtypes import number, whole
+
 DEFAULT_OUT = "evaluation"
-
-
-def _whole(text):
-    try:
-        v = int(text)
-    except ValueError:
-        v = 0
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
-    return v
-
-
-def _positive(text):
-    try:
-        v = float(text)
-    except ValueError:
-        v = float("nan")
-    if not (v > 0 and v < float("inf")):
-        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
-    return v
 
 
 def register(sub):
@@ -43,8 +24,9 @@ def register(sub):
                    help="model directory written by 'heli identify' (default: the model shipped with heli-env)")
     p.add_argument("--traces", default="held-out", choices=("held-out", "all", "train"),
                    help="which library traces to fly (default held-out)")
-    p.add_argument("--episodes-per-trace", type=_whole, default=4, help="episodes per trace (default 4)")
-    p.add_argument("--episode-seconds", type=_positive, default=30.0, help="episode length in s (default 30)")
+    p.add_argument("--episodes-per-trace", type=whole(1), default=4, help="episodes per trace (default 4)")
+    p.add_argument("--episode-seconds", type=number("a finite number > 0", 0.0),
+                   default=30.0, help="episode length in s (default 30)")
     p.add_argument("--seed", type=int, default=0, help="seed of the gust windows (default 0)")
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
     p.set_defaults(func=run)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import math
 
+from .argtypes import number, whole
+
 
 def _delay(text):
     if text is None or text == "auto":
@@ -15,26 +17,6 @@ def _delay(text):
         v = math.nan
     if not 0.0 <= v <= 2.0:  # the range ModelParams accepts for a servo delay; NaN fails too
         raise argparse.ArgumentTypeError(f"expected 'auto' or a delay in seconds in [0, 2], got {text!r}")
-    return v
-
-
-def _interval(text):
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not 0.0 < v < math.inf:
-        raise argparse.ArgumentTypeError(f"expected a positive interval in seconds, got {text!r}")
-    return v
-
-
-def _workers(text):
-    try:
-        v = int(text)
-    except ValueError:
-        v = 0
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
     return v
 
 
@@ -51,7 +33,8 @@ def register(sub):
     p.add_argument("flights", nargs="+", metavar="FLIGHT.csv", help="canonical CSV flight log(s)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--coupled", action="store_true", help="write the coupled model (k1..k12) instead of the decoupled one")
-    p.add_argument("--interval", type=_interval, default=1.0, help="integration interval T_i - T_(i-1) in s (default 1.0)")
+    p.add_argument("--interval", type=number("a positive interval in seconds", 0.0),
+                   default=1.0, help="integration interval T_i - T_(i-1) in s (default 1.0)")
     p.add_argument("--delay", type=_delay, default=None,
                    help="servo delay: 'auto' (searched, eq. 31) or seconds (default: none)")
     p.add_argument("--no-filter", action="store_true", help="skip the 4/8 Hz zero-phase FIR prefilter (Section 3.1)")
@@ -62,7 +45,7 @@ def register(sub):
                    help="identify each flight's wind as one task per flight: 'local' this machine's cores, 'ray' "
                    "the Ray cluster at RAY_ADDRESS or a Ray instance started here (needs the 'cluster' extra); "
                    "default: one after the other in this process. Same results either way")
-    p.add_argument("--workers", type=_workers, default=None, metavar="N",
+    p.add_argument("--workers", type=whole(1), default=None, metavar="N",
                    help="local worker processes, or CPUs of a Ray instance started here (default: all cores)")
     p.set_defaults(func=run)
 

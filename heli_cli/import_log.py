@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import math
 
+from .argtypes import number
+
 
 def _segment(text):
     if text in ("auto", "all"):
@@ -16,16 +18,6 @@ def _segment(text):
     if not (math.isfinite(a) and math.isfinite(b) and b > a):
         raise argparse.ArgumentTypeError(f"expected 'auto', 'all' or T0:T1 in seconds with T0 < T1, got {text!r}")
     return (a, b)
-
-
-def _rate(text):
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not 0.0 < v < math.inf:
-        raise argparse.ArgumentTypeError(f"expected a positive rate in Hz, got {text!r}")
-    return v
 
 
 def register(sub):
@@ -47,7 +39,7 @@ def register(sub):
                    help="input source: pilot sticks, rate-controller outputs, or swash servos through eq. 67 "
                    "(default: the one closest to the bare airframe: controller for multirotors; servos, else "
                    "the stabilised mixer input, for helicopters)")
-    p.add_argument("--rate", type=_rate, default=None, metavar="HZ",
+    p.add_argument("--rate", type=number("a positive rate in Hz", 0.0), default=None, metavar="HZ",
                    help="grid rate (default: the gyro stream's rate, at most 200 Hz)")
     p.add_argument("--calibration", metavar="JSON", default=None,
                    help="servo mixing {\"G\": 4x4, \"U_trim\": 4} of eq. 66 for --inputs servos "

@@ -2,26 +2,10 @@
 
 from __future__ import annotations
 
-import argparse
-import math
 
 from identification.synthetic import EFFECT_ALIASES, EFFECTS
 
-
-def _number(minimum: float, strict: bool):
-    """An argparse type: a finite float above ``minimum`` (``strict``) or at least ``minimum``."""
-    what = f"a finite number {'>' if strict else '>='} {minimum:g}"
-
-    def parse(text):
-        try:
-            v = float(text)
-        except ValueError:
-            v = math.nan
-        if not math.isfinite(v) or v < minimum or (strict and v == minimum):
-            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
-        return v
-
-    return parse
+from .argtypes import number
 
 
 def register(sub):
@@ -31,13 +15,14 @@ def register(sub):
         description="Write a realistic synthetic hover flight (canonical CSV) plus its truth: "
         "<stem>.truth.json (parameters, seed, settings) and <stem>.wind.csv (the true wind u_d).",
     )
-    p.add_argument("--duration", type=_number(0.0, strict=True), default=300.0, help="flight length in seconds (default 300)")
+    p.add_argument("--duration", type=number("a finite number > 0", 0.0),
+                   default=300.0, help="flight length in seconds (default 300)")
     p.add_argument("--seed", type=int, default=1, help="random seed: same seed, same flight (default 1)")
     p.add_argument("--out", required=True, help="output CSV path, e.g. flight.csv")
     p.add_argument("--effect", action="append", default=[], metavar="NAME",
                    choices=sorted(list(EFFECTS) + list(EFFECT_ALIASES)),
                    help=f"switch on a hidden physical effect (repeatable): {', '.join(EFFECTS)}")
-    p.add_argument("--wind", type=_number(0.0, strict=False), default=None,
+    p.add_argument("--wind", type=number("a finite number >= 0", 0.0, low_open=False), default=None,
                    help="half-width of the 90%% interval of the cyclic wind u_d (default 0.09, the paper's level)")
     p.set_defaults(func=run)
 

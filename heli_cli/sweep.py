@@ -2,31 +2,11 @@
 
 from __future__ import annotations
 
-import argparse
-import math
 from pathlib import Path
 
+from .argtypes import number, whole
+
 DEFAULT_OUT = "sweep"
-
-
-def _positive(text):
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
-    return v
-
-
-def _count(text):
-    try:
-        v = int(text)
-    except ValueError:
-        v = -1
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}")
-    return v
 
 
 def backend_from_args(args):
@@ -55,15 +35,17 @@ def register(sub):
     p.add_argument("--kd", required=True, metavar="C:D:M",
                    help="M derivative gains from C to D [stick/(rad/s)], e.g. 0:3:20 (or a single value)")
     p.add_argument("--axis", default="roll", choices=("roll", "pitch", "yaw"), help="axis to sweep (default roll)")
-    p.add_argument("--duration", type=_positive, default=60.0, help="seconds per gust window (default 60)")
-    p.add_argument("--dt", type=_positive, default=0.01, help="control period in seconds (default 0.01)")
-    p.add_argument("--windows", type=_count, default=None,
+    p.add_argument("--duration", type=number("a finite number > 0", 0.0),
+                   default=60.0, help="seconds per gust window (default 60)")
+    p.add_argument("--dt", type=number("a finite number > 0", 0.0),
+                   default=0.01, help="control period in seconds (default 0.01)")
+    p.add_argument("--windows", type=whole(1), default=None,
                    help="number of (trace, offset) gust windows (default one per library trace)")
     p.add_argument("--seed", type=int, default=0, help="seed of the window offsets and flights (default 0)")
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
-    p.add_argument("--flights", type=_count, default=0, metavar="N",
+    p.add_argument("--flights", type=whole(0), default=0, metavar="N",
                    help="check the prediction with N fresh-wind flights per pair of the truth model (default 0: no)")
-    p.add_argument("--flight-pairs", type=_count, default=4, metavar="K",
+    p.add_argument("--flight-pairs", type=whole(0), default=4, metavar="K",
                    help="pairs flown with --flights: the best and K-1 others spread over the stable pairs' p90 "
                    "ranking (0: every stable pair; default 4)")
     p.add_argument("--truth", default="model", choices=("model", "paper"),
@@ -71,7 +53,7 @@ def register(sub):
     p.add_argument("--backend", default="local", choices=("local", "ray"),
                    help="where the replay runs: 'local' (default) this machine's cores, 'ray' the Ray cluster at "
                    "RAY_ADDRESS or a Ray instance started here (needs the 'cluster' extra); same result either way")
-    p.add_argument("--workers", type=_count, default=None, metavar="N",
+    p.add_argument("--workers", type=whole(1), default=None, metavar="N",
                    help="local worker processes, or CPUs of a Ray instance started here (default: all cores)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -86,10 +68,6 @@ def run(args) -> int:
     kd = parse_range(args.kd, "--kd")
     if args.model is not None and not Path(args.model).is_dir():
         raise SweepError(f"model directory {args.model!r} does not exist (write one with 'heli identify')")
-    if args.windows == 0:
-        raise SweepError("--windows must be >= 1")
-    if args.workers == 0:
-        raise SweepError("--workers must be >= 1")
     backend = backend_from_args(args)
     try:
         result = sweep_gains(args.model, kp, kd, axis=args.axis, duration=args.duration, dt=args.dt,

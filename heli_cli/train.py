@@ -3,41 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 
-
-def _whole(minimum):
-    def parse(text):
-        try:
-            v = int(text)
-        except ValueError:
-            v = minimum - 1
-        if v < minimum:
-            raise argparse.ArgumentTypeError(f"expected a whole number >= {minimum}, got {text!r}")
-        return v
-
-    return parse
-
-
-def _positive(text):
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text!r}")
-    return v
-
-
-def _fraction(text):
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not 0.0 < v < 1.0:
-        raise argparse.ArgumentTypeError(f"expected a fraction in (0, 1), got {text!r}")
-    return v
+from .argtypes import number, whole
 
 
 def _seeds(text):
@@ -64,20 +32,21 @@ def register(sub):
     p.add_argument("--algo", required=True, choices=("ppo", "sac"), help="algorithm")
     p.add_argument("--model", metavar="DIR", default=None,
                    help="model directory written by 'heli identify' (default: the model shipped with heli-env)")
-    p.add_argument("--timesteps", required=True, type=_whole(1), metavar="N",
+    p.add_argument("--timesteps", required=True, type=whole(1), metavar="N",
                    help="environment steps to train for (all copies together)")
     p.add_argument("--out", required=True, metavar="AGENT", help="agent path (.zip is added)")
     p.add_argument("--seed", type=int, default=0, help="seed of everything (default 0)")
-    p.add_argument("--n-envs", type=_whole(1), default=8, help="environment copies (default 8)")
-    p.add_argument("--minutes", type=_positive, default=None,
+    p.add_argument("--n-envs", type=whole(1), default=8, help="environment copies (default 8)")
+    p.add_argument("--minutes", type=number("a finite number > 0", 0.0), default=None,
                    help="wall-time budget; training stops at --timesteps or this, whichever comes first")
-    p.add_argument("--eval-freq", type=_whole(0), default=50_000, metavar="N",
+    p.add_argument("--eval-freq", type=whole(0), default=50_000, metavar="N",
                    help="timesteps between held-out evaluations (0: none; default 50000)")
-    p.add_argument("--eval-episodes", type=_whole(1), default=4, help="held-out episodes per evaluation (default 4)")
-    p.add_argument("--checkpoint-freq", type=_whole(0), default=100_000, metavar="N",
+    p.add_argument("--eval-episodes", type=whole(1), default=4, help="held-out episodes per evaluation (default 4)")
+    p.add_argument("--checkpoint-freq", type=whole(0), default=100_000, metavar="N",
                    help="timesteps between checkpoints (0: none; default 100000)")
-    p.add_argument("--episode-seconds", type=_positive, default=30.0, help="episode length in s (default 30)")
-    p.add_argument("--held-out-fraction", type=_fraction, default=0.25,
+    p.add_argument("--episode-seconds", type=number("a finite number > 0", 0.0), default=30.0,
+                   help="episode length in s (default 30)")
+    p.add_argument("--held-out-fraction", type=number("a fraction in (0, 1)", 0.0, 1.0), default=0.25,
                    help="fraction of the library's traces held out (default 0.25)")
     p.add_argument("--split-seed", type=int, default=0, help="seed of the held-out choice (default 0)")
     p.add_argument("--seeds", type=_seeds, default=None, metavar="S1,S2,...",
@@ -86,7 +55,7 @@ def register(sub):
     p.add_argument("--backend", default="local", choices=("local", "ray"),
                    help="where --seeds train: 'local' (default) this machine's cores, 'ray' the Ray cluster at "
                    "RAY_ADDRESS or a Ray instance started here (needs the 'cluster' extra)")
-    p.add_argument("--workers", type=_whole(1), default=None, metavar="N",
+    p.add_argument("--workers", type=whole(1), default=None, metavar="N",
                    help="local worker processes for --seeds, or CPUs of a Ray instance started here "
                    "(default: all cores)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
