@@ -60,6 +60,21 @@ def write_bytes(path, data: bytes) -> Path:
     return Path(path)
 
 
+def keep_copy(path) -> Path:
+    """Copy the file at ``path`` to ``history/<stem>-<sha256[:12]><suffix>`` beside it; returns the copy's path.
+
+    The copy is named by the file's content, so keeping the same content twice writes it once; an
+    existing copy is left as it is. Outputs about to be replaced go through here, so that nothing the
+    user had is lost.
+    """
+    path = Path(path)
+    data = path.read_bytes()
+    backup = path.parent / "history" / f"{path.stem}-{hashlib.sha256(data).hexdigest()[:12]}{path.suffix}"
+    if not backup.exists():
+        write_bytes(backup, data)
+    return backup
+
+
 def save_figure(fig, path, **kwargs) -> Path:
     """Save a matplotlib figure atomically and close it."""
     import matplotlib.pyplot as plt

@@ -24,12 +24,11 @@ eq. 21: ``-k12*col``). Files are written atomically.
 from __future__ import annotations
 
 import datetime as _dt
-import hashlib
 import json
 from pathlib import Path
 
 from .errors import ModelFileError
-from .files import jsonable, write_bytes, write_text
+from .files import jsonable, keep_copy, write_text
 from .model import ModelParams
 from .terms import AXES, BASE_PARAMS, EXTRA_PARAMS, TERMS
 
@@ -84,12 +83,7 @@ def save_model(path, params: ModelParams, **kwargs) -> Path:
     if path.suffix != ".json":
         path = path / MODEL_FILENAME
     if path.exists():
-        # nothing the user had is lost: the model being replaced is kept under history/
-        old = path.read_bytes()
-        digest = hashlib.sha256(old).hexdigest()[:12]
-        backup = path.parent / "history" / f"{path.stem}-{digest}.json"
-        if not backup.exists():
-            write_bytes(backup, old)
+        keep_copy(path)  # nothing the user had is lost: the model being replaced is kept under history/
     doc = jsonable(model_document(params, **kwargs))
     write_text(path, json.dumps(doc, indent=2, allow_nan=False, default=_unstorable) + "\n")
     return path

@@ -58,7 +58,7 @@ import numpy as np
 from .bootstrap import DEFAULT_REPLICATES, BootstrapResult, interval_bootstrap
 from .disturbance_library import DisturbanceLibrary
 from .errors import LibraryError, ModelFileError
-from .files import jsonable, sha256_of, write_bytes, write_text
+from .files import jsonable, keep_copy, sha256_of, write_bytes, write_text
 from .integral_method import IntegralIdentifier
 from .model_file import MODEL_FILENAME, load_model
 from .terms import AXES, TERMS
@@ -280,18 +280,9 @@ def _check_new_flights(paths, digests, model_sources, library_entries) -> None:
 
 
 def _keep_in_history(root: Path) -> list[Path]:
-    """Copy the files a refresh replaces to ``history/<stem>-<sha256[:12]><suffix>``; returns the copies."""
-    kept = []
+    """Copy the files a refresh replaces to ``history/`` (see :func:`.files.keep_copy`); returns the copies."""
     files = [root / n for n in KEPT_FILES] + sorted(root.glob("*.png"))
-    for path in files:
-        if not path.is_file():
-            continue
-        data = path.read_bytes()
-        backup = root / "history" / f"{path.stem}-{hashlib.sha256(data).hexdigest()[:12]}{path.suffix}"
-        if not backup.exists():
-            write_bytes(backup, data)
-        kept.append(backup)
-    return kept
+    return [keep_copy(path) for path in files if path.is_file()]
 
 
 def critical_z(alpha: float, m: int) -> float:
