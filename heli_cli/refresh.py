@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 
 
 def _positive_int(text):
@@ -94,7 +93,6 @@ def register(sub):
 
 
 def run(args) -> int:
-    from identification.errors import DisturbanceError, LibraryError
     from identification.backends import make_backend
     from identification.refresh import refresh_model
 
@@ -105,9 +103,6 @@ def run(args) -> int:
             n_replicates=args.bootstrap, block=args.block, seed=args.seed, alpha=args.alpha,
             min_relative=args.min_change, plots=not args.no_plots, progress=True, backend=backend,
         )
-    except (LibraryError, DisturbanceError) as e:  # heli's main reports the model and flight errors itself
-        print(f"heli {args.command}: error: {type(e).__name__}: {e}", file=sys.stderr)
-        return 2
     finally:
         if backend is not None:
             backend.close()
