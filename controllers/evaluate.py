@@ -34,6 +34,7 @@ import numpy as np
 
 from identification.files import jsonable, save_figure, write_text
 
+from .errors import AgentError
 from .metrics import METRIC_NAMES, error_metrics
 from .trace_split import as_segments, draw_windows, split_traces
 
@@ -175,25 +176,34 @@ def evaluate_agent(agent, model=None, traces=None, episodes_per_trace: int = 2, 
     Returns
     -------
     EvaluationResult
+
+    Raises
+    ------
+    AgentError
+        Bad ``episodes_per_trace``, traces, task or episode length, or episodes
+        longer than a gust segment.
+    heli_env.errors.EnvModelError
+        Missing or corrupt model directory.
     """
     from heli_env.model_dir import EnvModel, load_env_model
     from heli_env.vector_env import HeliAttitudeVectorEnv
 
     if int(episodes_per_trace) != episodes_per_trace or episodes_per_trace < 1:
-        raise ValueError(f"episodes_per_trace must be a whole number >= 1, got {episodes_per_trace!r}")
+        raise AgentError(f"episodes_per_trace must be a whole number >= 1, got {episodes_per_trace!r}")
     t0 = time.perf_counter()
     env_model = model if isinstance(model, EnvModel) else load_env_model(model)
-    split = split_traces(env_model.n_traces) if split is None else split
-    segments = as_segments(traces, split, "held-out")
     label = traces if isinstance(traces, str) else ("held-out" if traces is None else "chosen")
     kind, desc = describe_agent(agent)
-    env = HeliAttitudeVectorEnv(1, model=env_model, task=task, episode_seconds=episode_seconds,
-                                init_angle_deg=init_angle_deg, init_rate_deg=init_rate_deg)
-    windows = draw_windows(env_model, segments, env.spec_.needed, np.random.default_rng(seed),
-                           per_segment=int(episodes_per_trace))
-    E = len(windows)
-    env = HeliAttitudeVectorEnv(E, model=env_model, task=task, episode_seconds=episode_seconds,
-                                init_angle_deg=init_angle_deg, init_rate_deg=init_rate_deg)
+    try:
+        split = split_traces(env_model.n_traces) if split is None else split
+        segments = as_segments(traces, split, "held-out")
+        E = len(segments) * int(episodes_per_trace)  # draw_windows(per_segment=) gives that many, in order
+        env = HeliAttitudeVectorEnv(E, model=env_model, task=task, episode_seconds=episode_seconds,
+                                    init_angle_deg=init_angle_deg, init_rate_deg=init_rate_deg)
+        windows = draw_windows(env_model, segments, env.spec_.needed, np.random.default_rng(seed),
+                               per_segment=int(episodes_per_trace))
+    except ValueError as e:  # bad traces, task or episode length; episodes longer than the segments
+        raise AgentError(str(e)) from e
     obs, info = env.reset(seed=seed)
     for i, (trace, offset) in enumerate(windows):
         mask = np.zeros(E, dtype=bool)

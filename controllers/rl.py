@@ -5,16 +5,17 @@
 ``VecEnv`` API (:class:`controllers.sb3_vec_env.GymnasiumVecEnv`). Episodes
 replay gust windows of the *training* traces only (:func:`split_traces`); an
 ``EvalCallback`` scores the deterministic policy on fixed windows of the
-*held-out* traces during training. Checkpoints are written atomically, and an
-interrupt (Ctrl-C) saves one more before it propagates
+*held-out* traces during training. Every file below is written atomically
+(checkpoints, best model and evaluation log included), and an interrupt (Ctrl-C)
+saves one more checkpoint before it propagates
 (:class:`controllers.errors.TrainingInterrupted`).
 
 Files written for ``out="agents/ppo"``::
 
-    agents/ppo.zip                     the final agent (SB3 zip + heli_agent.json: algo, split, settings)
-    agents/ppo_training/training.json  settings, timing, evaluation history, checkpoints
-    agents/ppo_training/best_model.zip the best agent on the held-out evaluations (SB3 EvalCallback)
-    agents/ppo_training/evaluations.npz
+    agents/ppo.zip                      the final agent (SB3 zip + heli_agent.json: algo, split, settings)
+    agents/ppo_training/training.json   settings, timing, evaluation history, checkpoints
+    agents/ppo_training/best_model.zip  the best agent on the held-out evaluations (+ heli_agent.json)
+    agents/ppo_training/evaluations.npz SB3's evaluation log (timesteps, results, ep_lengths)
     agents/ppo_training/checkpoints/ppo_<timesteps>_steps.zip
 
 The final agent, not the best one, is what a comparison should use: the best
@@ -199,7 +200,8 @@ def train_agent(algo: str = "ppo", model=None, timesteps: int = 200_000, out="ag
     Raises
     ------
     AgentError
-        Unknown algorithm, bad counts, or episodes longer than the gust segments.
+        Unknown algorithm, bad counts, split, traces, task or episode length, or
+        episodes longer than the gust segments.
     heli_env.errors.EnvModelError
         Missing or corrupt model directory.
     TrainingInterrupted
@@ -221,8 +223,8 @@ def train_agent(algo: str = "ppo", model=None, timesteps: int = 200_000, out="ag
     from heli_env.model_dir import EnvModel, load_env_model
 
     env_model = model if isinstance(model, EnvModel) else load_env_model(model)
-    split = split_traces(env_model.n_traces, held_out_fraction, split_seed)
     try:
+        split = split_traces(env_model.n_traces, held_out_fraction, split_seed)
         train_seg = as_segments(train_traces, split, "train")
         eval_seg = as_segments(eval_traces, split, "held-out")
     except ValueError as e:
@@ -248,28 +250,28 @@ def _train(algo, env_model, timesteps, path, run_dir, name, seed, n_envs, eval_f
            split, train_seg, eval_seg, eval_episodes, episode_seconds, task, max_seconds, algo_kwargs,
            normalize_reward, callbacks, verbose) -> TrainingResult:
     sb3 = _sb3()
-    from stable_baselines3.common.callbacks import CallbackList, EvalCallback
+    from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
     from heli_env.vector_env import HeliAttitudeVectorEnv
 
-    from .sb3_training import AtomicCheckpoint, ObservationScaler, ProgressBar, WallClockLimit, save_atomically
+    from .sb3_training import (AtomicCheckpoint, AtomicEvalCallback, ObservationScaler, ProgressBar, WallClockLimit,
+                               save_atomically)
     from .sb3_vec_env import GymnasiumVecEnv
 
     set_random_seed(seed)
-    venv = HeliAttitudeVectorEnv(n_envs, model=env_model, task=task, episode_seconds=episode_seconds)
-    needed = venv.spec_.needed
-    try:
+    try:  # bad task or episode length; episodes longer than the gust segments
+        venv = HeliAttitudeVectorEnv(n_envs, model=env_model, task=task, episode_seconds=episode_seconds)
+        needed = venv.spec_.needed
         train_sampler = WindowSampler(env_model, train_seg, needed)
         eval_sampler = WindowSampler(env_model, eval_seg, needed)
+        eval_venv = HeliAttitudeVectorEnv(eval_episodes, model=env_model, task=task, episode_seconds=episode_seconds)
     except ValueError as e:
         raise AgentError(str(e)) from e
     gamma = (algo_kwargs or {}).get("gamma", DEFAULT_KWARGS[algo]["gamma"])
     env = VecMonitor(GymnasiumVecEnv(venv, episode_options=train_sampler))  # monitors the raw returns
-    eval_env = VecMonitor(GymnasiumVecEnv(
-        HeliAttitudeVectorEnv(eval_episodes, model=env_model, task=task, episode_seconds=episode_seconds),
-        episode_options=eval_sampler, fixed_seed=seed + 1000))
+    eval_env = VecMonitor(GymnasiumVecEnv(eval_venv, episode_options=eval_sampler, fixed_seed=seed + 1000))
     if normalize_reward:  # the eval env is wrapped alike (EvalCallback syncs wrappers) but left raw
         env = VecNormalize(env, norm_obs=False, norm_reward=True, gamma=gamma)
         eval_env = VecNormalize(eval_env, training=False, norm_obs=False, norm_reward=False)
@@ -293,9 +295,8 @@ def _train(algo, env_model, timesteps, path, run_dir, name, seed, n_envs, eval_f
     eval_cb = None
     cbs = []
     if eval_freq:
-        eval_cb = EvalCallback(eval_env, n_eval_episodes=eval_episodes, eval_freq=max(eval_freq // n_envs, 1),
-                               best_model_save_path=str(run_dir), log_path=str(run_dir), deterministic=True,
-                               verbose=0, warn=False)
+        eval_cb = AtomicEvalCallback(eval_env, run_dir, metadata, n_eval_episodes=eval_episodes,
+                                     eval_freq=max(eval_freq // n_envs, 1), deterministic=True, verbose=0, warn=False)
         cbs.append(eval_cb)
     ckpt = AtomicCheckpoint(checkpoint_freq or 2 ** 62, run_dir / "checkpoints", name, metadata)
     bar = ProgressBar(timesteps, progress, eval_cb, desc=f"{algo} {name}")
@@ -478,14 +479,40 @@ def _place(res: TrainingResult, tmp: str, files: dict, folder: Path) -> Training
 
 # ------------------------------------------------------------------------ loading
 def agent_metadata(path) -> dict | None:
-    """The ``heli_agent.json`` an RL agent zip carries (algo, split, settings), or None."""
+    """The ``heli_agent.json`` an RL agent zip carries (algo, split, settings), or None.
+
+    Raises
+    ------
+    AgentError
+        The entry is not a JSON object, or its ``split`` is not a trace split
+        (:meth:`TraceSplit.from_dict`).
+    """
     path = _resolve(path)
     if not zipfile.is_zipfile(path):
         return None
     with zipfile.ZipFile(path) as z:
         if METADATA_FILE not in z.namelist():
             return None
-        return json.loads(z.read(METADATA_FILE))
+        meta = _zip_json(z, METADATA_FILE, path, "the agent's metadata (algo, split, settings)")
+    if meta.get("split"):
+        try:
+            TraceSplit.from_dict(meta["split"])
+        except ValueError as e:
+            raise AgentError(f"{path}: {METADATA_FILE} entry 'split' is not a trace split ({e})") from e
+    return meta
+
+
+def _zip_json(z: zipfile.ZipFile, entry: str, path: Path, expected: str) -> dict:
+    """The JSON object in entry ``entry`` of an open zip; AgentError naming the file if it is anything else."""
+    try:
+        doc = json.loads(z.read(entry))
+    except (ValueError, zipfile.BadZipFile) as e:  # JSONDecodeError, UnicodeDecodeError, a corrupt member
+        raise AgentError(f"{path}: zip entry {entry!r} should be a JSON object holding {expected}; "
+                         f"it cannot be read as JSON ({e})") from e
+    if not isinstance(doc, dict):
+        raise AgentError(f"{path}: zip entry {entry!r} should be a JSON object holding {expected}; "
+                         f"got a JSON {type(doc).__name__}")
+    return doc
 
 
 def _resolve(path) -> Path:
@@ -504,13 +531,14 @@ def _zip_algo(path: Path) -> str:
     with zipfile.ZipFile(path) as z:
         names = z.namelist()
         if METADATA_FILE in names:
-            algo = json.loads(z.read(METADATA_FILE)).get("algo")
+            algo = _zip_json(z, METADATA_FILE, path, "the agent's metadata (algo, split, settings)").get("algo")
             if algo in ALGOS:
                 return algo
         if "data" not in names:
             raise AgentError(f"{path}: a zip file but not a stable-baselines3 agent (no 'data' entry)")
-        data = json.loads(z.read("data"))
-    module = str((data.get("policy_class") or {}).get("__module__", ""))
+        data = _zip_json(z, "data", path, "stable-baselines3's saved model data")
+    policy_class = data.get("policy_class")
+    module = str(policy_class.get("__module__", "")) if isinstance(policy_class, dict) else ""
     if ".sac." in module or "actor.optimizer.pth" in names:
         return "sac"
     if "policy.optimizer.pth" in names and ("common.policies" in module or ".ppo." in module):
@@ -535,7 +563,8 @@ def load_agent(path):
     FileNotFoundError
         No such file.
     AgentError
-        Neither kind, or an SB3 agent of another algorithm.
+        Neither kind, an agent zip whose metadata or model data is not readable JSON, or
+        an SB3 agent of another algorithm.
     """
     path = _resolve(path)
     if zipfile.is_zipfile(path):

@@ -1,4 +1,5 @@
-"""stable-baselines3 pieces of RL training: observation scaling, progress, time budget, atomic checkpoints.
+"""stable-baselines3 pieces of RL training: observation scaling, progress, time budget, atomic checkpoints
+and evaluations.
 
 Imported by :mod:`controllers.rl` only when an agent is trained or loaded
 (stable-baselines3 and torch are the ``rl`` extra). Agents saved by
@@ -9,6 +10,7 @@ module's path, so it must stay importable under this name.
 from __future__ import annotations
 
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -16,7 +18,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import torch
-from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
 from identification.files import atomic_path
@@ -155,3 +157,62 @@ class AtomicCheckpoint(BaseCallback):
         save_atomically(self.model, path, self.metadata)
         self.paths.append(path)
         return path
+
+
+class SaveBest(BaseCallback):
+    """``callback_on_new_best`` of an ``EvalCallback``: saves the model to ``path`` atomically."""
+
+    def __init__(self, path, metadata: dict | None = None):
+        super().__init__()
+        self.path, self.metadata = Path(path), metadata
+
+    def _on_step(self) -> bool:
+        save_atomically(self.model, self.path, self.metadata)
+        return True
+
+
+class AtomicEvalCallback(EvalCallback):
+    """SB3's ``EvalCallback`` writing ``folder/best_model.zip`` and ``folder/evaluations.npz`` atomically.
+
+    SB3 saves both in place (``model.save``, ``np.savez``), so an interrupt mid-write
+    would leave them corrupt. Here the best model goes through :func:`save_atomically`
+    (with ``metadata`` as ``heli_agent.json``), and SB3's ``np.savez`` of the
+    evaluations is pointed at a temporary file in ``folder`` that is moved over
+    ``evaluations.npz`` once complete. The files' names and the npz's arrays
+    (``timesteps``, ``results``, ``ep_lengths``) are SB3's. SB3 fills
+    ``evaluations_timesteps`` / ``evaluations_results`` / ``evaluations_length`` only
+    when it has a log path, hence the redirection rather than ``log_path=None``.
+
+    Parameters
+    ----------
+    eval_env : VecEnv
+    folder : str or Path
+        Where the two files go.
+    metadata : dict, optional
+        Added to the best model's zip.
+    **kwargs
+        Further ``EvalCallback`` arguments (not ``log_path``, ``best_model_save_path``
+        or ``callback_on_new_best``).
+    """
+
+    def __init__(self, eval_env, folder, metadata: dict | None = None, **kwargs):
+        folder = Path(folder)
+        super().__init__(eval_env, callback_on_new_best=SaveBest(folder / "best_model.zip", metadata),
+                         log_path=str(folder), best_model_save_path=None, **kwargs)
+        self.npz_path = folder / "evaluations.npz"
+        self.log_path = str(folder / f".evaluations.npz.{os.getpid()}.tmp")  # np.savez appends ".npz"
+        self._tmp = Path(self.log_path + ".npz")
+
+    def _on_step(self) -> bool:
+        n = len(self.evaluations_timesteps)
+        try:
+            go_on = super()._on_step()
+        except BaseException:
+            if len(self.evaluations_timesteps) > n:  # np.savez may have been cut short
+                self._tmp.unlink(missing_ok=True)
+            raise
+        if len(self.evaluations_timesteps) > n:
+            with open(self._tmp, "rb+") as fh:
+                os.fsync(fh.fileno())
+            os.replace(self._tmp, self.npz_path)
+        return go_on

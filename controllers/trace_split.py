@@ -93,8 +93,8 @@ class TraceSplit:
             return cls(tuple(TraceSegment(**s) for s in doc["train"]),
                        tuple(TraceSegment(**s) for s in doc["held_out"]), int(doc["n_traces"]),
                        float(doc["held_out_fraction"]), int(doc["seed"]), bool(doc.get("in_time", False)))
-        except (KeyError, TypeError) as e:
-            raise ValueError(f"not a trace split: {e}") from e
+        except (KeyError, TypeError, OverflowError) as e:
+            raise ValueError(f"not a trace split: {e!r}") from e
 
 
 def split_traces(n_traces: int, held_out_fraction: float = 0.25, seed: int = 0) -> TraceSplit:

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
+from controllers.errors import AgentError
 from controllers.evaluate import comparison_markdown, evaluate_agent, plot_episode
 from controllers.metrics import METRIC_NAMES, error_metrics, histogram_edges
 from controllers.pd import PDController, PDGains, design_gains
@@ -132,6 +133,31 @@ def test_time_split_windows_and_explicit_segments(shipped, pd):
         evaluate_agent(pd, shipped, episodes_per_trace=0)
 
 
+@pytest.mark.parametrize("kw, match", [({"episode_seconds": 300.0}, "shorter than one episode"),
+                                       ({"traces": "sideways"}, "split side"),
+                                       ({"traces": [99]}, "the library holds"),
+                                       ({"task": "flip"}, "task must be one of"),
+                                       ({"episodes_per_trace": 1.5}, "episodes_per_trace")])
+def test_bad_evaluation_requests(shipped, pd, kw, match):
+    with pytest.raises(AgentError, match=match):
+        evaluate_agent(pd, shipped, **kw)
+
+
+def test_evaluation_builds_one_environment(shipped, pd, monkeypatch):
+    import heli_env.vector_env as vector_env
+
+    built = []
+
+    class Counted(vector_env.HeliAttitudeVectorEnv):
+        def __init__(self, num_envs=1, *args, **kwargs):
+            built.append(num_envs)
+            super().__init__(num_envs, *args, **kwargs)
+
+    monkeypatch.setattr(vector_env, "HeliAttitudeVectorEnv", Counted)
+    res = evaluate_agent(pd, shipped, traces=[0, 2], episodes_per_trace=3, episode_seconds=2.0, seed=1)
+    assert built == [6] and len(res.episodes) == 6
+
+
 def test_outputs(pd_result, pd, shipped, tmp_path):
     doc = json.loads(pd_result.to_json(tmp_path / "e.json").read_text())
     assert doc["summary"]["axes"]["roll"]["att_p90_deg"] == pytest.approx(pd_result.metrics["roll"]["att_p90_deg"])
@@ -168,3 +194,7 @@ def test_heli_evaluate_errors(pd, tmp_path, capsys):
     (tmp_path / "bad.json").write_text("[1, 2]")
     assert main(["evaluate", str(tmp_path / "bad.json")]) == 2
     assert "AgentError" in capsys.readouterr().err
+    assert main(["evaluate", str(agent), "--episode-seconds", "300", "--out", str(tmp_path / "ev")]) == 2
+    err = capsys.readouterr().err
+    assert "AgentError" in err and "shorter than one episode" in err and "Traceback" not in err
+    assert not (tmp_path / "ev").exists()

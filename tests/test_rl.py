@@ -112,6 +112,19 @@ def test_tiny_ppo_run_writes_a_loadable_agent(ppo_run, tmp_path):
     assert type(load_agent(res.checkpoints[0])).__name__ == "PPO"
 
 
+def test_best_model_and_evaluations_are_written_whole(ppo_run):
+    res = ppo_run
+    best = res.run_dir / "best_model.zip"
+    assert res.best_model == best and type(load_agent(best)).__name__ == "PPO"
+    assert agent_metadata(best)["algo"] == "ppo"  # saved through save_atomically, with the agent's metadata
+    with np.load(res.run_dir / "evaluations.npz") as npz:
+        assert sorted(npz.files) == ["ep_lengths", "results", "timesteps"]  # SB3's EvalCallback log
+        assert_array_equal(npz["timesteps"], [128, 256])
+        assert npz["results"].shape == npz["ep_lengths"].shape == (2, 2)  # 2 evaluations x 2 episodes
+        assert [m for _, m, _ in res.evaluations] == pytest.approx(npz["results"].mean(axis=1).tolist())
+    assert not [p.name for p in res.run_dir.iterdir() if p.name.startswith(".")]  # no temporary file left
+
+
 def test_same_seed_same_agent(ppo_run, shipped, tmp_path):
     again = _tiny("ppo", tmp_path / "again", shipped)
     a = ppo_run.agent.policy.state_dict()
@@ -162,7 +175,10 @@ def test_interrupted_training_keeps_its_checkpoints(shipped, tmp_path):
 @pytest.mark.parametrize("kw, match", [({"algo": "dqn"}, "algo"), ({"timesteps": 0}, "timesteps"),
                                        ({"n_envs": 0}, "n_envs"), ({"eval_freq": -1}, "eval_freq"),
                                        ({"max_seconds": 0.0}, "max_seconds"),
-                                       ({"episode_seconds": 300.0}, "shorter than one episode")])
+                                       ({"episode_seconds": 300.0}, "shorter than one episode"),
+                                       ({"held_out_fraction": 1.5}, "held_out_fraction"),
+                                       ({"train_traces": "sideways"}, "split side"),
+                                       ({"task": "flip"}, "task must be one of")])
 def test_bad_training_requests(shipped, tmp_path, kw, match):
     args = {"algo": "ppo", "model": shipped, "timesteps": 100, "out": tmp_path / "x", "progress": False}
     args.update(kw)
@@ -192,6 +208,43 @@ def test_load_agent_errors(tmp_path):
         load_agent(tmp_path / "y.zip")
     with pytest.raises(AgentError, match="is a folder"):
         load_agent(tmp_path)
+
+
+def _copy_zip(src, dst, **replace):
+    """``src`` copied to ``dst`` with the entries named in ``replace`` (str or bytes) swapped."""
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dst, "w") as zout:
+        for name in zin.namelist():
+            zout.writestr(name, replace.get(name, zin.read(name)))
+    return dst
+
+
+@pytest.mark.parametrize("entry, content, match", [
+    ("heli_agent.json", "{not json", "'heli_agent.json' should be a JSON object.*cannot be read as JSON"),
+    ("heli_agent.json", b"\xff\xfe\x00", "'heli_agent.json' should be a JSON object.*cannot be read as JSON"),
+    ("heli_agent.json", "[1, 2]", "'heli_agent.json' should be a JSON object.*got a JSON list"),
+    ("data", "{not json", "'data' should be a JSON object.*stable-baselines3"),
+])
+def test_corrupt_agent_zip(ppo_run, tmp_path, entry, content, match):
+    replace = {entry: content}
+    if entry == "data":  # without readable metadata, the algorithm comes from SB3's data
+        replace["heli_agent.json"] = json.dumps({"schema": "heli-env/rl-agent"})
+    bad = _copy_zip(ppo_run.path, tmp_path / "bad.zip", **replace)
+    with pytest.raises(AgentError, match=match):
+        load_agent(bad)
+    if entry == "heli_agent.json":
+        with pytest.raises(AgentError, match=match):
+            agent_metadata(bad)
+
+
+def test_agent_metadata_with_a_corrupt_split(ppo_run, tmp_path, capsys):
+    meta = agent_metadata(ppo_run.path)
+    bad = _copy_zip(ppo_run.path, tmp_path / "bad_split.zip",
+                    **{"heli_agent.json": json.dumps({**meta, "split": {**meta["split"], "train": [{"trace": -1}]}})})
+    with pytest.raises(AgentError, match="bad_split.zip: heli_agent.json entry 'split' is not a trace split"):
+        agent_metadata(bad)
+    assert main(["evaluate", str(bad), "--episode-seconds", "1", "--episodes-per-trace", "1", "--out",
+                 str(tmp_path / "ev")]) == 2
+    assert "AgentError" in capsys.readouterr().err
 
 
 # ------------------------------------------------------------------------------------------------ CLI
