@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from identification.files import write_text
-from identification.model import ModelParams, _kernel, trim_sticks
+from identification.model import ModelParams, _kernel, euler_from_quaternion, trim_sticks
 from identification.synthetic import PAPER_PARAMS, FlightConfig, coloured_noise
 
 from .closed_loop import AXES, axis_index, disturbance_spectrum, pd_command
@@ -201,6 +201,30 @@ class FlightTestResult:
         return write_text(path, json.dumps(doc, indent=1, default=_clean) + "\n")
 
 
+def _prediction_rows(prediction, axis: str, dt: float, kp, kd) -> list:
+    """Row of ``prediction`` for each pair ``(kp[g], kd[g])``, checked to be a sweep of ``axis`` at ``dt``.
+
+    :meth:`~controllers.sweep.SweepResult.index` finds the *nearest* row, so without these checks a
+    sweep of another axis, control period or gains would be compared with the flights without a word.
+    :class:`SweepError` unless the axis and dt are the flight test's and every pair is a row.
+    """
+    if prediction.axis != axis:
+        raise SweepError(f"prediction must be a sweep of the flight test's axis ({axis}), got a sweep of "
+                         f"{prediction.axis}")
+    pred_dt = float(prediction.settings["dt"])
+    if not math.isclose(pred_dt, dt, rel_tol=1e-9, abs_tol=0.0):
+        raise SweepError(f"prediction must be run at the flight test's dt = {dt:g} s, got dt = {pred_dt:g} s")
+    table_kp, table_kd = np.asarray(prediction.table["kp"], float), np.asarray(prediction.table["kd"], float)
+    rows = []
+    for k, d in zip(kp, kd):
+        i = prediction.index(k, d)
+        if not np.allclose((table_kp[i], table_kd[i]), (k, d), rtol=1e-9, atol=1e-12):
+            raise SweepError(f"prediction has no row for the pair (kp, kd) = ({k:g}, {d:g}) (its nearest is "
+                             f"({table_kp[i]:g}, {table_kd[i]:g})); sweep the flight test's pairs")
+        rows.append(i)
+    return rows
+
+
 def validate_against_flights(model, pairs, axis="roll", n_flights: int = 10, duration: float = 60.0, seed: int = 0,
                              truth="model", dt: float = 0.01, sensors: bool = True, substeps: int | None = None,
                              prediction=None, progress: bool = True, max_batch: int = 4096) -> FlightTestResult:
@@ -228,13 +252,20 @@ def validate_against_flights(model, pairs, axis="roll", n_flights: int = 10, dur
     substeps : int, optional
         RK4 sub-steps per period (default the flight generator's, 4).
     prediction : SweepResult, optional
-        A :func:`controllers.sweep.sweep_pairs` result for ``pairs`` with ``keep_samples=True``;
+        A :func:`controllers.sweep.sweep_pairs` result for ``pairs`` on ``axis`` at ``dt`` with
+        ``keep_samples=True`` (its nominal gains hold the other axes);
         default: the whole library replayed (each trace from its start, full length).
     progress : bool
 
     Returns
     -------
     FlightTestResult
+
+    Raises
+    ------
+    SweepError
+        Bad pairs, flights or duration, a missing or corrupt model directory, or a ``prediction``
+        of another axis, another dt, without samples or without one of ``pairs``.
     """
     from scipy import stats as sps
 
@@ -261,9 +292,9 @@ def validate_against_flights(model, pairs, axis="roll", n_flights: int = 10, dur
                                  progress=progress)
     elif not prediction.samples:
         raise SweepError("prediction must be run with keep_samples=True")
+    pred_idx = _prediction_rows(prediction, AXES[ax], dt, kp_all, kd_all)
     nominal = np.asarray(prediction.settings["nominal_gains"])
-    pred_rows = [prediction.row(prediction.index(k, d)) for k, d in zip(kp_all, kd_all)]
-    pred_idx = [prediction.index(k, d) for k, d in zip(kp_all, kd_all)]
+    pred_rows = [prediction.row(i) for i in pred_idx]
     flyable = np.array([r["status"] == "stable" for r in pred_rows])
 
     wind = wind_statistics(env_model, dt)
@@ -311,10 +342,7 @@ def validate_against_flights(model, pairs, axis="roll", n_flights: int = 10, dur
             z = np.zeros((g, F))
             x = (z, z, z, z + trim[0, 0], z + trim[1, 0], z + trim[2, 0], z + 1.0, z, z, z)
             for k in range(n):
-                q0, q1, q2, q3 = x[6], x[7], x[8], x[9]
-                ang = (np.arctan2(2.0 * (q0 * q1 + q2 * q3), 1.0 - 2.0 * (q1 * q1 + q2 * q2)),
-                       np.arcsin(np.clip(2.0 * (q0 * q2 - q3 * q1), -1.0, 1.0)),
-                       np.arctan2(2.0 * (q0 * q3 + q1 * q2), 1.0 - 2.0 * (q2 * q2 + q3 * q3)))
+                ang = euler_from_quaternion(x[6:10])
                 att[sl, k] = -ang[ax]
                 rate[sl, k] = -x[ax]
                 sticks = []

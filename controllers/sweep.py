@@ -44,7 +44,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from identification.model import _discrete_kernel, trim_sticks
+from identification.model import _discrete_kernel, euler_from_quaternion, trim_sticks
 
 from .closed_loop import (
     AXES,
@@ -159,28 +159,46 @@ class _Replay:
     col: np.ndarray  # (steps, W)
 
 
-def _windows(env_model, traces, windows, steps, ratio, seed):
-    """(trace, offset) windows: explicit, or drawn with ``Generator(seed)`` over the selected traces."""
+def _explicit(traces) -> bool:
+    """Whether ``traces`` lists explicit (trace, offset) windows rather than trace indices."""
+    return traces is not None and len(traces) > 0 and np.ndim(traces[0]) == 1
+
+
+def _explicit_windows(env_model, traces, needed) -> tuple:
+    """Explicit (trace, offset) windows as ints, each checked to hold ``needed`` samples from its offset."""
     n_tr = env_model.n_traces
     lengths = env_model.lengths
-    needed = steps * ratio + 1
-    if traces is not None and len(traces) and np.ndim(traces[0]) == 1:  # explicit (trace, offset) pairs
-        out = []
-        for t, off in traces:
-            t, off = int(t), int(off)
-            if not 0 <= t < n_tr:
-                raise SweepError(f"trace index {t} out of range: the library holds {n_tr} traces")
-            if not 0 <= off <= lengths[t] - needed:
-                raise SweepError(f"window ({t}, {off}) does not fit: trace {t} has {int(lengths[t])} samples, "
-                                 f"a window needs {needed} from its offset")
-            out.append((t, off))
-        return tuple(out)
+    out = []
+    for t, off in traces:
+        t, off = int(t), int(off)
+        if not 0 <= t < n_tr:
+            raise SweepError(f"trace index {t} out of range: the library holds {n_tr} traces")
+        if not 0 <= off <= lengths[t] - needed:
+            raise SweepError(f"window ({t}, {off}) does not fit: trace {t} has {int(lengths[t])} samples, "
+                             f"a window needs {needed} from its offset")
+        out.append((t, off))
+    return tuple(out)
+
+
+def _trace_list(env_model, traces) -> list:
+    """Selected trace indices as ints (default all), each checked to be in the library."""
+    n_tr = env_model.n_traces
     sel = list(range(n_tr)) if traces is None else [int(t) for t in traces]
     if not sel:
         raise SweepError("traces must name at least one library trace")
     for t in sel:
         if not 0 <= t < n_tr:
             raise SweepError(f"trace index {t} out of range: the library holds {n_tr} traces")
+    return sel
+
+
+def _windows(env_model, traces, windows, steps, ratio, seed):
+    """(trace, offset) windows: explicit, or drawn with ``Generator(seed)`` over the selected traces."""
+    lengths = env_model.lengths
+    needed = steps * ratio + 1
+    if _explicit(traces):
+        return _explicit_windows(env_model, traces, needed)
+    sel = _trace_list(env_model, traces)
     n_win = len(sel) if windows is None else int(windows)
     if n_win < 1:
         raise SweepError(f"windows must be >= 1, got {windows!r}")
@@ -218,10 +236,13 @@ def _prepare(model, axis, duration, dt, seed, traces, windows) -> _Replay:
     if ratio < 1 or abs(ratio_f - ratio) > 1e-6:
         raise SweepError(f"dt={dt} s must be a whole number of the traces' sample periods "
                          f"({1.0 / env_model.sample_rate:g} s)")
-    if duration is None:
-        sel = range(env_model.n_traces) if traces is None else [int(t) for t in traces]
+    if duration is None and _explicit(traces):  # each window from its offset, for the shortest remainder
+        wins = _explicit_windows(env_model, traces, ratio + 1)
+        steps = min((int(env_model.lengths[t]) - off - 1) // ratio for t, off in wins)
+    elif duration is None:  # each trace from its start, for the length of the shortest
+        sel = _trace_list(env_model, traces)
         steps = int((min(int(env_model.lengths[t]) for t in sel) - 1) // ratio)
-        wins = tuple((int(t), 0) for t in sel) if windows is None else None
+        wins = tuple((t, 0) for t in sel) if windows is None else None
     else:
         if not (isinstance(duration, (int, float)) and duration > 0 and math.isfinite(duration)):
             raise SweepError(f"duration must be a positive number of seconds, got {duration!r}")
@@ -290,10 +311,7 @@ def _replay(rp: _Replay, kp, kd, nominal, keep_samples=False, progress=True, max
             omax = np.zeros((g, W))
             others = [i for i in range(3) if i != ax]
             for k in range(n):
-                q0, q1, q2, q3 = x[6], x[7], x[8], x[9]
-                ang = (np.arctan2(2.0 * (q0 * q1 + q2 * q3), 1.0 - 2.0 * (q1 * q1 + q2 * q2)),
-                       np.arcsin(clip(2.0 * (q0 * q2 - q3 * q1), -1.0, 1.0)),
-                       np.arctan2(2.0 * (q0 * q3 + q1 * q2), 1.0 - 2.0 * (q2 * q2 + q3 * q3)))
+                ang = euler_from_quaternion(x[6:10])
                 sticks = []
                 for i in range(3):
                     u = pd_command(gains[i][0], gains[i][1], signs[i], -ang[i], -x[i])
@@ -328,14 +346,17 @@ the grid and the windows only, never on the number of workers; chunks of 512 to
 for 4 tasks in a 20 × 20 grid × 10 windows and thousands in a cluster-sized one."""
 
 
+def _check_chunk_pairs(chunk_pairs) -> None:
+    """:class:`SweepError` unless ``chunk_pairs`` is None or a whole number >= 1."""
+    if chunk_pairs is not None and not (isinstance(chunk_pairs, (int, np.integer))
+                                        and not isinstance(chunk_pairs, bool) and chunk_pairs >= 1):
+        raise SweepError(f"chunk_pairs must be a whole number >= 1, got {chunk_pairs!r}")
+
+
 def _chunks(n_pairs: int, n_windows: int, chunk_pairs) -> list:
     """``[(start, stop), ...]`` of the task split of ``n_pairs`` pairs (see :data:`TASK_STATES`)."""
-    if chunk_pairs is None:
-        size = max(1, TASK_STATES // n_windows)
-    elif isinstance(chunk_pairs, (int, np.integer)) and not isinstance(chunk_pairs, bool) and chunk_pairs >= 1:
-        size = int(chunk_pairs)
-    else:
-        raise SweepError(f"chunk_pairs must be a whole number >= 1, got {chunk_pairs!r}")
+    _check_chunk_pairs(chunk_pairs)
+    size = max(1, TASK_STATES // n_windows) if chunk_pairs is None else int(chunk_pairs)
     return [(a, min(n_pairs, a + size)) for a in range(0, n_pairs, size)]
 
 
@@ -569,7 +590,8 @@ def sweep_gains(model, kp_values, kd_values, axis="roll", duration: float | None
         Axis swept; the other two are held by ``nominal`` gains.
     duration : float or None
         Length of each replayed window [s]; None replays each selected trace whole
-        (from its start, for the length of the shortest).
+        (from its start, for the length of the shortest), or each explicit window
+        from its offset to the end of its trace (for the length of the shortest).
     dt : float
         Control period [s], a whole number of the traces' sample periods.
     seed : int
@@ -643,16 +665,19 @@ def sweep_pairs(model, pairs, axis="roll", duration: float | None = 60.0, dt: fl
                   agree_tol, keep_samples, hist_max_deg, hist_bins, max_batch, backend, chunk_pairs)
 
 
-def _check_backend(backend):
-    from identification.backends import BACKENDS, Backend
-    from identification.errors import require
+def _make_backend(backend):
+    """:func:`identification.backends.make_backend`, an unknown name reported as a :class:`SweepError`.
 
-    if isinstance(backend, Backend):
-        return
-    if backend not in BACKENDS:
-        raise SweepError(f"backend must be one of {BACKENDS} or a Backend, got {backend!r}")
-    if backend == "ray":
-        require("ray", "cluster")
+    Making a backend starts nothing (no processes, no Ray instance) until its first ``map``;
+    ``"ray"`` without the ``cluster`` extra raises :class:`~identification.errors.MissingDependency`.
+    """
+    from identification.backends import make_backend
+    from identification.errors import BackendError
+
+    try:
+        return make_backend(backend)
+    except BackendError as e:
+        raise SweepError(str(e)) from e
 
 
 def _sweep(model, kp, kd, kp_values, kd_values, layout, axis, duration, dt, seed, traces, windows, progress,
@@ -661,83 +686,80 @@ def _sweep(model, kp, kd, kp_values, kd_values, layout, axis, duration, dt, seed
     import time
 
     t_start = time.perf_counter()
-    if backend is not None:  # check before any work
-        _check_backend(backend)
-        _chunks(1, 1, chunk_pairs)
-    if not (isinstance(agree_tol, (int, float)) and agree_tol > 0 and math.isfinite(agree_tol)):
-        raise SweepError(f"agree_tol must be a positive fraction, got {agree_tol!r}")
+    be = None if backend is None else _make_backend(backend)  # check before any work
     try:
-        edges = histogram_edges(float(hist_max_deg), int(hist_bins))
-    except ValueError as e:
-        raise SweepError(str(e)) from e
-    rp = _prepare(model, axis, duration, dt, seed, traces, windows)
-    env_model = rp.env_model
-    plant = hover_plant(env_model.params, rp.dt, float(np.mean(env_model.collective)))
-    nominal = nominal_gains(plant) if nominal is None else np.asarray(nominal, dtype=float).reshape(3, 2)
-    ax = rp.axis
-    _, nominal_ok = closed_loop_poles(plant, ax, [nominal[ax][0]], [nominal[ax][1]], nominal)
-    if not nominal_ok[0]:
-        raise SweepError(f"the nominal gains {nominal.tolist()} do not stabilise the model; pass nominal=")
-    G = kp.size
-    t0 = time.perf_counter()
-    max_pole, stable = closed_loop_poles(plant, ax, kp, kd, nominal)
-    freq, psd = disturbance_spectrum(env_model, rp.dt)
-    sigma = predict_std(plant, ax, kp, kd, nominal, freq, psd)
-    t_fd = time.perf_counter() - t0
-
-    with np.errstate(divide="ignore", invalid="ignore"):
-        settle = np.where(stable, -4.0 * rp.dt / np.log(np.minimum(max_pole, 1.0)), np.inf)
-    table = {"kp": kp, "kd": kd, "max_pole": max_pole, "settle_s": settle}
-    table.update({c: np.full(G, np.nan) for c in TD_COLUMNS})
-    hist = np.zeros((G, edges.size - 1), dtype=np.int64)
-    overflow = np.zeros(G, dtype=np.int64)
-    status = np.where(stable, "stable", "unstable").astype(object)
-    idx = np.flatnonzero(stable)
-    t0 = time.perf_counter()
-    samples = {}
-    where, n_tasks = "in-process", 1
-    if idx.size and backend is None:
-        st, h, o, div, smp = _replay(rp, kp[idx], kd[idx], nominal, keep_samples, progress, max_batch, edges)
-    elif idx.size:
-        from identification.backends import make_backend
-
-        be = make_backend(backend)
+        if be is not None:
+            _check_chunk_pairs(chunk_pairs)
+        if not (isinstance(agree_tol, (int, float)) and agree_tol > 0 and math.isfinite(agree_tol)):
+            raise SweepError(f"agree_tol must be a positive fraction, got {agree_tol!r}")
         try:
+            edges = histogram_edges(float(hist_max_deg), int(hist_bins))
+        except ValueError as e:
+            raise SweepError(str(e)) from e
+        rp = _prepare(model, axis, duration, dt, seed, traces, windows)
+        env_model = rp.env_model
+        plant = hover_plant(env_model.params, rp.dt, float(np.mean(env_model.collective)))
+        nominal = nominal_gains(plant) if nominal is None else np.asarray(nominal, dtype=float).reshape(3, 2)
+        ax = rp.axis
+        _, nominal_ok = closed_loop_poles(plant, ax, [nominal[ax][0]], [nominal[ax][1]], nominal)
+        if not nominal_ok[0]:
+            raise SweepError(f"the nominal gains {nominal.tolist()} do not stabilise the model; pass nominal=")
+        G = kp.size
+        t0 = time.perf_counter()
+        max_pole, stable = closed_loop_poles(plant, ax, kp, kd, nominal)
+        freq, psd = disturbance_spectrum(env_model, rp.dt)
+        sigma = predict_std(plant, ax, kp, kd, nominal, freq, psd)
+        t_fd = time.perf_counter() - t0
+
+        with np.errstate(divide="ignore", invalid="ignore"):
+            settle = np.where(stable, -4.0 * rp.dt / np.log(np.minimum(max_pole, 1.0)), np.inf)
+        table = {"kp": kp, "kd": kd, "max_pole": max_pole, "settle_s": settle}
+        table.update({c: np.full(G, np.nan) for c in TD_COLUMNS})
+        hist = np.zeros((G, edges.size - 1), dtype=np.int64)
+        overflow = np.zeros(G, dtype=np.int64)
+        status = np.where(stable, "stable", "unstable").astype(object)
+        idx = np.flatnonzero(stable)
+        t0 = time.perf_counter()
+        samples = {}
+        where, n_tasks = "in-process", 1
+        if idx.size and backend is None:
+            st, h, o, div, smp = _replay(rp, kp[idx], kd[idx], nominal, keep_samples, progress, max_batch, edges)
+        elif idx.size:
             st, h, o, div, smp, n_tasks = _replay_on(be, rp, kp[idx], kd[idx], nominal, keep_samples, progress,
                                                      max_batch, edges, chunk_pairs)
             where = be.describe()
-        finally:
-            if be is not backend:  # made here from a name: release it
-                be.close()
-    if idx.size:
-        for c in TD_COLUMNS:
-            table[c][idx] = st[c]
-        hist[idx], overflow[idx] = h, o
-        status[idx[div]] = "diverged"
-        samples = {int(idx[j]): v for j, v in smp.items()}
-    t_td = time.perf_counter() - t0
+        if idx.size:
+            for c in TD_COLUMNS:
+                table[c][idx] = st[c]
+            hist[idx], overflow[idx] = h, o
+            status[idx[div]] = "diverged"
+            samples = {int(idx[j]): v for j, v in smp.items()}
+        t_td = time.perf_counter() - t0
 
-    s_att, s_rate, s_stick = (sigma[:, 0] * _DEG, sigma[:, 1] * _DEG, sigma[:, 2])
-    table["pred_att_rms_deg"], table["pred_rate_rms_dps"], table["pred_stick_rms"] = s_att, s_rate, s_stick
-    for q, f in GAUSS_ABS_FACTOR.items():
-        table[f"pred_att_p{q}_deg"] = f * s_att
-        table[f"pred_rate_p{q}_dps"] = f * s_rate
-    with np.errstate(invalid="ignore", divide="ignore"):
-        table["att_p90_rel_diff"] = table["att_p90_deg"] / table["pred_att_p90_deg"] - 1.0
-        table["rate_p90_rel_diff"] = table["rate_p90_dps"] / table["pred_rate_p90_dps"] - 1.0
-    table["disagree"] = (np.abs(np.nan_to_num(table["att_p90_rel_diff"])) > agree_tol) | (
-        np.abs(np.nan_to_num(table["rate_p90_rel_diff"])) > agree_tol)
-    table["status"] = status
-    df = freq[1] - freq[0]
-    settings = {
-        "model": str(env_model.path), "library_version": env_model.library_version,
-        "trace_ids": list(env_model.trace_ids), "axis": AXES[ax], "layout": layout, "dt": rp.dt,
-        "duration": rp.steps * rp.dt, "steps": rp.steps, "seed": int(seed), "n_windows": len(rp.windows),
-        "nominal_gains": nominal.tolist(), "agree_tol": float(agree_tol),
-        "linearised_at_collective": plant.collective,
-        "ud_std": np.sqrt(np.sum(psd, axis=1) * df).tolist(),
-        "seconds": {"total": time.perf_counter() - t_start, "time_domain": t_td, "frequency_domain": t_fd},
-        "backend": where, "tasks": n_tasks,
-    }
-    return SweepResult(AXES[ax], np.asarray(kp_values), np.asarray(kd_values), table, edges, hist, overflow,
-                       rp.windows, freq, psd, settings, samples)
+        s_att, s_rate, s_stick = (sigma[:, 0] * _DEG, sigma[:, 1] * _DEG, sigma[:, 2])
+        table["pred_att_rms_deg"], table["pred_rate_rms_dps"], table["pred_stick_rms"] = s_att, s_rate, s_stick
+        for q, f in GAUSS_ABS_FACTOR.items():
+            table[f"pred_att_p{q}_deg"] = f * s_att
+            table[f"pred_rate_p{q}_dps"] = f * s_rate
+        with np.errstate(invalid="ignore", divide="ignore"):
+            table["att_p90_rel_diff"] = table["att_p90_deg"] / table["pred_att_p90_deg"] - 1.0
+            table["rate_p90_rel_diff"] = table["rate_p90_dps"] / table["pred_rate_p90_dps"] - 1.0
+        table["disagree"] = (np.abs(np.nan_to_num(table["att_p90_rel_diff"])) > agree_tol) | (
+            np.abs(np.nan_to_num(table["rate_p90_rel_diff"])) > agree_tol)
+        table["status"] = status
+        df = freq[1] - freq[0]
+        settings = {
+            "model": str(env_model.path), "library_version": env_model.library_version,
+            "trace_ids": list(env_model.trace_ids), "axis": AXES[ax], "layout": layout, "dt": rp.dt,
+            "duration": rp.steps * rp.dt, "steps": rp.steps, "seed": int(seed), "n_windows": len(rp.windows),
+            "nominal_gains": nominal.tolist(), "agree_tol": float(agree_tol),
+            "linearised_at_collective": plant.collective,
+            "ud_std": np.sqrt(np.sum(psd, axis=1) * df).tolist(),
+            "seconds": {"total": time.perf_counter() - t_start, "time_domain": t_td, "frequency_domain": t_fd},
+            "backend": where, "tasks": n_tasks,
+        }
+        return SweepResult(AXES[ax], np.asarray(kp_values), np.asarray(kd_values), table, edges, hist, overflow,
+                           rp.windows, freq, psd, settings, samples)
+    finally:
+        if be is not backend:  # made here from a name: release it
+            be.close()

@@ -280,6 +280,60 @@ def test_bad_settings_raise(shipped, tmp_path):
         sweep_gains(shipped, [1.0], [1.0], traces=[7], progress=False)
 
 
+@pytest.mark.parametrize("traces, match", [
+    ([7], "trace index 7 out of range"), ([-1], "trace index -1 out of range"), ([], "at least one"),
+    ([(3, 0)], "trace index 3 out of range"), ([(0, -5)], r"window \(0, -5\) does not fit"),
+    ([(0, 20000)], r"window \(0, 20000\) does not fit"),
+])
+def test_bad_traces_of_whole_trace_replays_raise(shipped, traces, match):
+    """duration=None checks ``traces`` as a fixed duration does (no IndexError, no silent other trace)."""
+    with pytest.raises(SweepError, match=match):
+        sweep_gains(shipped, [1.0], [1.0], duration=None, traces=traces, progress=False)
+
+
+def test_whole_trace_replay_of_explicit_windows_runs_to_the_shortest_end(shipped):
+    """duration=None with (trace, offset) windows: each from its offset, for the shortest remainder."""
+    n = int(shipped.lengths[1])
+    r = sweep_pairs(shipped, [(3.0, 1.0)], duration=None, traces=[(1, n - 501), (2, n - 801)], progress=False)
+    assert r.windows == ((1, n - 501), (2, n - 801))
+    assert r.settings["steps"] == 500
+    fixed = sweep_pairs(shipped, [(3.0, 1.0)], duration=5.0, traces=[(1, n - 501), (2, n - 801)], progress=False)
+    for c, v in _numeric(fixed).items():
+        assert_array_equal(_numeric(r)[c], v, err_msg=c)
+
+
+class _SpyBackend:
+    """Stands in for the backend a sweep makes from a name; records whether the sweep closed it."""
+
+    def __init__(self):
+        from identification.backends import LocalBackend
+
+        self.inner, self.closed = LocalBackend(1), False
+
+    def map(self, *args, **kwargs):
+        return self.inner.map(*args, **kwargs)
+
+    def describe(self):
+        return self.inner.describe()
+
+    def close(self):
+        self.closed = True
+
+
+def test_a_backend_made_from_a_name_is_closed_after_the_sweep(shipped, monkeypatch):
+    import identification.backends as backends
+
+    made = []
+    monkeypatch.setattr(backends, "make_backend", lambda name: made.append(_SpyBackend()) or made[-1])
+    r = sweep_gains(shipped, [3.0], [1.0], duration=2.0, windows=1, progress=False, backend="local")
+    assert r.settings["backend"] == "local, 1 worker" and made[-1].closed
+    with pytest.raises(SweepError, match="out of range"):  # a sweep that fails before the replay closes it too
+        sweep_gains(shipped, [3.0], [1.0], duration=2.0, traces=[7], progress=False, backend="local")
+    with pytest.raises(SweepError, match="chunk_pairs"):
+        sweep_gains(shipped, [3.0], [1.0], duration=2.0, progress=False, backend="local", chunk_pairs=0)
+    assert all(b.closed for b in made)  # every backend made from a name, whether or not the sweep ran
+
+
 # --------------------------------------------------------------------- outputs
 def test_outputs_are_written(small_sweep, tmp_path):
     paths = [small_sweep.to_csv(tmp_path / "s.csv"), small_sweep.to_json(tmp_path / "s.json"),
@@ -322,6 +376,40 @@ def test_flight_tests_skip_unstable_pairs(delayed):
                                    progress=False)
     assert list(res.table["status"]) == ["unstable", "flown"]
     assert np.isnan(res.table["ks_att"][0]) and np.isfinite(res.table["ks_att"][1])
+
+
+@pytest.fixture(scope="module")
+def short_prediction(shipped):
+    """Roll, dt = 0.01 s, pairs (3, 1) and (5, 1), with samples: what the mismatch tests vary."""
+    return sweep_pairs(shipped, [(3.0, 1.0), (5.0, 1.0)], duration=2.0, windows=1, keep_samples=True,
+                       progress=False)
+
+
+@pytest.mark.parametrize("kwargs, pairs, match", [
+    ({"axis": "pitch"}, [(3.0, 1.0)], r"axis \(pitch\), got a sweep of roll"),
+    ({"dt": 0.02}, [(3.0, 1.0)], r"dt = 0.02 s, got dt = 0.01 s"),
+    ({}, [(3.0, 1.0), (4.0, 1.0)], r"no row for the pair \(kp, kd\) = \(4, 1\) \(its nearest is \(3, 1\)\)"),
+    ({}, [(5.5, 1.0)], r"no row for the pair \(kp, kd\) = \(5.5, 1\) \(its nearest is \(5, 1\)\)"),
+])
+def test_flight_tests_reject_a_prediction_of_other_flights(shipped, short_prediction, kwargs, pairs, match):
+    """A prediction of another axis, dt or pairs is refused, not matched to its nearest row."""
+    with pytest.raises(SweepError, match=match):
+        validate_against_flights(shipped, pairs, n_flights=1, duration=1.0, prediction=short_prediction,
+                                 progress=False, **kwargs)
+
+
+def test_flight_tests_reject_a_prediction_without_samples(shipped):
+    pred = sweep_pairs(shipped, [(3.0, 1.0)], duration=2.0, windows=1, progress=False)
+    with pytest.raises(SweepError, match="keep_samples=True"):
+        validate_against_flights(shipped, [(3.0, 1.0)], n_flights=1, duration=1.0, prediction=pred, progress=False)
+
+
+def test_flight_tests_use_the_rows_of_a_matching_prediction(shipped, short_prediction):
+    """Pairs in another order than the sweep's each get their own row's prediction."""
+    res = validate_against_flights(shipped, [(5.0, 1.0), (3.0, 1.0)], n_flights=1, duration=2.0,
+                                   prediction=short_prediction, progress=False)
+    assert list(res.table["status"]) == ["flown", "flown"]
+    assert_array_equal(res.table["pred_td_att_p90_deg"], short_prediction.table["att_p90_deg"][::-1])
 
 
 # ------------------------------------------------------------------------- CLI
