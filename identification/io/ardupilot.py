@@ -234,11 +234,3 @@ def load_ardupilot(path, allow_damaged: bool = False) -> RawLog:
                   segment_signals=SegmentSignals(power=power, accel=accel, altitude=altitude,
                                                  power_name="throttle output"),
                   metadata=meta, damage=damage)
-
-
-def read_ardupilot(path, inputs=None, segment=None, rate=None, calibration=None, allow_damaged: bool = False):
-    """Read an ArduPilot DataFlash log into a :class:`~identification.flight.Flight` (see ``read_log``)."""
-    from .raw_log import to_flight
-
-    return to_flight(load_ardupilot(path, allow_damaged=allow_damaged), inputs=inputs, segment=segment, rate=rate,
-                     calibration=calibration)

@@ -222,11 +222,3 @@ def load_blackbox(path, allow_damaged: bool = False) -> RawLog:
                   unavailable=unavailable, default_input=default, servos=servos,
                   segment_signals=SegmentSignals(power=power, accel=accel, altitude=altitude, power_name=power_name),
                   metadata=meta, damage=damage)
-
-
-def read_blackbox(path, inputs=None, segment=None, rate=None, calibration=None, allow_damaged: bool = False):
-    """Read a Betaflight/Rotorflight blackbox log into a :class:`~identification.flight.Flight` (see ``read_log``)."""
-    from .raw_log import to_flight
-
-    return to_flight(load_blackbox(path, allow_damaged=allow_damaged), inputs=inputs, segment=segment, rate=rate,
-                     calibration=calibration)

@@ -192,10 +192,3 @@ def load_px4(path, allow_damaged: bool = False) -> RawLog:
                   segment_signals=SegmentSignals(power=power, accel=accel, altitude=altitude,
                                                  power_name="thrust demand"),
                   metadata=meta, damage=damage)
-
-
-def read_px4(path, inputs=None, segment=None, rate=None, allow_damaged: bool = False):
-    """Read a PX4 ULog into a :class:`~identification.flight.Flight` (see :func:`identification.io.read_log`)."""
-    from .raw_log import to_flight
-
-    return to_flight(load_px4(path, allow_damaged=allow_damaged), inputs=inputs, segment=segment, rate=rate)
