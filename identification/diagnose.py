@@ -102,8 +102,6 @@ class Candidate:
     t: float
     p_value: float
 
-    base_mse: np.ndarray | None = None
-
     def row(self) -> dict:
         return {"effect": self.effect, "axis": AXES[self.axis], "gain": self.gain, "t": self.t,
                 "p_value": self.p_value, "r2": float(self.score.r2()[self.axis])}
@@ -292,7 +290,7 @@ class Diagnoser:
         except IdentifiabilityError:
             return None  # the effect cannot be fitted from these data (e.g. collinear): not a candidate
         t, p = paired_log_test(base.mse[axis], score.mse[axis])
-        return Candidate(effect, axis, cand_spec, score, score.gain_over(base, axis), t, p, base.mse[axis])
+        return Candidate(effect, axis, cand_spec, score, score.gain_over(base, axis), t, p)
 
     # ------------------------------------------------------------------- fit
     def fit(self, flight: Flight, model: ModelParams | None = None) -> "Diagnoser":
@@ -341,7 +339,7 @@ class Diagnoser:
             self.spec_ = spec
             self.held_ = None
             self.baseline_score_ = self.final_score_ = None
-            self._finish(fl, spec)
+            self._finish(self.baseline_identifier_)
             return self
         held = HeldOut(fl, self.folds, self.window, interval=self.interval)
         self.held_ = held
@@ -350,6 +348,7 @@ class Diagnoser:
         axes = list(range(3))
         best_r2 = base.r2().copy()
         undecided = {}
+        whole_fit = self.baseline_identifier_  # the whole-flight fit of ``spec``, kept as the spec grows
         for rnd in range(1, self.max_rounds + 1):
             todo = self._candidates(spec, axes, names)
             if not todo:
@@ -385,9 +384,9 @@ class Diagnoser:
                     self._aligned.add(a)
                 new_spec = (new_spec.with_alignment(a, best.spec.alignment[a]) if CATALOGUE[best.effect].is_alignment
                             else new_spec.with_terms(a, CATALOGUE[best.effect].terms_on(a)))
-            whole = HeldOut.fit_whole(fl, new_spec, self.interval).params_
+            whole_fit = HeldOut.fit_whole(fl, new_spec, self.interval)
             for best, runner, threshold in winners:
-                self.steps_.append(self._step(rnd, best, runner, threshold, base, whole))
+                self.steps_.append(self._step(rnd, best, runner, threshold, base, whole_fit.params_))
             spec = new_spec
             base = held.score(spec)
             axes = sorted({best.axis for best, _, _ in winners})
@@ -405,7 +404,7 @@ class Diagnoser:
             self.evidence_["reason"] = "; ".join(f"{k}: {v['reason']}" for k, v in undecided.items())
         else:
             self.verdict_ = NONE
-        self._finish(fl, spec)
+        self._finish(whole_fit)
         return self
 
     def _poor_excitation(self, axis: int, cand: Candidate | None, r2: float) -> dict:
@@ -439,8 +438,9 @@ class Diagnoser:
                     threshold, runner.effect if runner else None, runner.gain if runner else None, margin, margin_p,
                     bool(margin_p is not None and margin_p <= self.alpha), eff.description)
 
-    def _finish(self, fl: Flight, spec: Spec):
-        self.identifier_ = HeldOut.fit_whole(fl, spec, self.interval)
+    def _finish(self, identifier):
+        """Keep ``identifier``, the final spec's fit on the whole flight, and test its residuals."""
+        self.identifier_ = identifier
         self.params_ = self.identifier_.params_
         self.effects_found_ = [(s.effect, s.axis) for s in self.steps_]
         self.residual_tests_ = {

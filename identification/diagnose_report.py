@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .diagnose import ALPHA, Diagnoser, heldout_stats
+from .diagnose import Diagnoser, heldout_stats
 from .effects import CATALOGUE, alignment_parts, shift_inputs
 from .files import jsonable, save_figure, sha256_of, write_text
 from .flight import Flight
@@ -318,7 +318,7 @@ def _write_model(d: Diagnoser, flight: Flight, out: Path, model_document, source
         out, params, structure="custom", sample_rate=d.flight_.sample_rate,
         filter_settings=d.flight_.metadata.get("prefilter"),
         identification={"method": "integral (Fig. 5) after heli diagnose", "interval": d.interval,
-                        "structure": d.spec_.to_dict(), "alpha": ALPHA if d.alpha is None else d.alpha},
+                        "structure": d.spec_.to_dict(), "alpha": d.alpha},
         fit_statistics={"axes": ident.summary(), "heldout_after": heldout_stats(d.final_score_)},
         sources=sources, extra={"diagnosis": diagnosis},
     )

@@ -100,11 +100,6 @@ CATALOGUE: dict[str, Effect] = _catalogue()
 """Every effect a diagnosis can name, by name (``none`` and ``undecided`` are verdicts, not effects)."""
 
 
-def effect_of_term(param: str) -> str:
-    """The effect a term belongs to (its tag in :data:`identification.terms.TERMS`)."""
-    return TERMS[param].effect
-
-
 def shift_inputs(flight: Flight, shifts) -> Flight:
     """Shift the cyclic and pedal stick columns of a flight in time.
 

@@ -89,20 +89,12 @@ class Spec:
         align[axis] = float(seconds)
         return Spec(self.terms, tuple(align))
 
-    @property
-    def delays(self) -> tuple:
-        """Padé servo delays fitted by the integral method [s]: none, the alignment is a shift of the input."""
-        return (0.0, 0.0, 0.0)
-
-    @property
-    def shifts(self) -> tuple:
-        """Input shifts (roll, pitch, yaw) [s], the alignments."""
-        return self.alignment
-
     def identifier(self, **kwargs) -> IntegralIdentifier:
-        """The integral-method estimator of this structure (inputs already aligned and prefiltered)."""
-        return IntegralIdentifier(structure={a: self.terms[a] for a in range(3)}, delay=list(self.delays),
-                                  prefilter=False, **kwargs)
+        """The integral-method estimator of this structure (inputs already aligned and prefiltered).
+
+        It fits no Padé servo delay: the alignment is applied beforehand as a shift of the input.
+        """
+        return IntegralIdentifier(structure={a: self.terms[a] for a in range(3)}, prefilter=False, **kwargs)
 
     def to_dict(self) -> dict:
         return {"terms": {AXES[a]: list(self.terms[a]) for a in range(3)},
@@ -237,32 +229,36 @@ class HeldOut:
             w = np.flatnonzero(self.fold_of == k)
             lo, hi = t[self.starts[w[0]]] - guard, t[self.starts[w[-1]] + self.length] + guard
             self._train.append([(a, b) for a, b in ((t[0], lo), (hi, t[-1])) if b - a >= 2 * self.interval])
-        self._shifted = {}
+        self._last_aligned = (None, None)  # (shifts, flight): the last alignment scored, kept for its next fit
 
     @property
     def n_windows(self) -> int:
         return int(self.starts.size)
 
     def aligned(self, shifts) -> Flight:
-        """The flight with its inputs advanced by the spec's (non-positive) shifts; cached."""
-        key = tuple(float(v) for v in shifts)
-        if key not in self._shifted:
-            self._shifted[key] = shift_inputs(self.flight, key)
-        return self._shifted[key]
+        """The flight with its inputs shifted by ``shifts`` (:func:`~identification.effects.shift_inputs`).
 
-    def training(self, fold: int, shifts) -> list[Flight]:
-        """The training segments of ``fold`` (everything but the held-out block and its guards)."""
-        f = self.aligned(shifts)
-        return [f.segment(a, b) for a, b in self._train[fold]]
+        Only the last alignment is kept: the specs scored one after the other mostly share it, and a
+        shifted copy of a long flight is large.
+        """
+        key = tuple(float(v) for v in shifts)
+        if self._last_aligned[0] != key:
+            self._last_aligned = (key, shift_inputs(self.flight, key))
+        return self._last_aligned[1]
+
+    def training(self, fold: int, flight: Flight) -> list[Flight]:
+        """The training segments of ``fold`` in ``flight`` (everything but the held-out block and its guards)."""
+        return [flight.segment(a, b) for a, b in self._train[fold]]
 
     @staticmethod
     def fit_whole(flight: Flight, spec: Spec, interval: float = 1.0) -> IntegralIdentifier:
         """Fit ``spec`` on a whole (prefiltered) flight, its inputs aligned first."""
-        return spec.identifier(interval=interval).fit(shift_inputs(flight, spec.shifts))
+        return spec.identifier(interval=interval).fit(shift_inputs(flight, spec.alignment))
 
     def fit(self, spec: Spec, fold: int | None = None, **kwargs) -> IntegralIdentifier:
         """Fit ``spec`` with the integral method on a fold's training data (``None``: the whole flight)."""
-        data = self.aligned(spec.shifts) if fold is None else self.training(fold, spec.shifts)
+        flight = self.aligned(spec.alignment)
+        data = flight if fold is None else self.training(fold, flight)
         return spec.identifier(interval=self.interval, **kwargs).fit(data)
 
     def score(self, spec: Spec, fold_specs=None) -> Score:
@@ -275,7 +271,7 @@ class HeldOut:
         sim = np.empty((3, self.n_windows, self.length))
         params = []
         for k in range(self.folds):
-            flight = self.aligned(specs[k].shifts)
+            flight = self.aligned(specs[k].alignment)
             p = self.fit(specs[k], k).params_
             params.append(p)
             w = self.fold_of == k
@@ -290,15 +286,16 @@ class HeldOut:
         """Integral-fit R² of ``axis`` for each candidate alignment (the servo-delay search, eq. 31).
 
         Each alignment replaces the axis' alignment in ``spec``; the fit uses one
-        iteration of Fig. 5 on the fold's training data (or the whole flight).
+        iteration of Fig. 5 on the fold's training data (or the whole flight). The shifted flights
+        of the search are not kept (:meth:`aligned`).
         """
         names = {axis: spec.terms[axis]}
         out = []
         for s in seconds:
-            trial = spec.with_alignment(axis, s)
-            data = self.aligned(trial.shifts) if fold is None else self.training(fold, trial.shifts)
-            ident = IntegralIdentifier(structure=names, delay=list(trial.delays), prefilter=False,
-                                       interval=self.interval, axes=(AXES[axis],), max_iter=1)
+            flight = shift_inputs(self.flight, spec.with_alignment(axis, s).alignment)
+            data = flight if fold is None else self.training(fold, flight)
+            ident = IntegralIdentifier(structure=names, prefilter=False, interval=self.interval,
+                                       axes=(AXES[axis],), max_iter=1)
             try:
                 out.append(ident.fit(data).axes_[AXES[axis]].r2)
             except IdentifiabilityError:
