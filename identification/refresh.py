@@ -490,7 +490,7 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
     # -- write: history first, then model + report + library (identify_and_report), then the drift files
     kept = _keep_in_history(root)
     old_digest = hashlib.sha256(old_model_bytes).hexdigest()
-    new_sources = [source_entry(p) for p in new_paths]
+    new_sources = [source_entry(p, sha) for p, sha in zip(new_paths, digests)]
     sources = new_sources + (old_sources if mode == "pooled" else [])
     created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     record = {

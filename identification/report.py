@@ -278,7 +278,7 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
     return IdentificationRun(identifiers, chosen, validation, truth, paths, profiles, library_version)
 
 
-def source_entry(path) -> dict:
-    """Provenance entry of a flight file."""
+def source_entry(path, sha256: str | None = None) -> dict:
+    """Provenance entry of a flight file; ``sha256`` when its digest is already known."""
     p = Path(path)
-    return {"file": p.name, "sha256": sha256_of(p)}
+    return {"file": p.name, "sha256": sha256 or sha256_of(p)}
