@@ -43,7 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from identification.files import write_text
+from identification.files import jsonable, write_text
 from identification.model import ModelParams, _kernel, euler_from_quaternion, trim_sticks
 from identification.synthetic import PAPER_PARAMS, FlightConfig, coloured_noise
 
@@ -191,14 +191,12 @@ class FlightTestResult:
         return "\n".join(lines) + "\n"
 
     def to_json(self, path):
-        from .sweep_report import _clean
+        import json
 
         doc = {"schema": "heli-env/flight-test", "schema_version": 1, "axis": self.axis,
                "settings": self.settings, "ks_target": KS_TARGET, "target_met": self.target_met,
-               "rows": [{k: _clean(v) for k, v in r.items()} for r in self.rows()]}
-        import json
-
-        return write_text(path, json.dumps(doc, indent=1, default=_clean) + "\n")
+               "rows": self.rows()}
+        return write_text(path, json.dumps(jsonable(doc), indent=1, allow_nan=False) + "\n")
 
 
 def _prediction_rows(prediction, axis: str, dt: float, kp, kd) -> list:

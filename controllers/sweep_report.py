@@ -9,20 +9,9 @@ import math
 
 import numpy as np
 
-from identification.files import save_figure, write_text
+from identification.files import jsonable, save_figure, write_text
 
 from .closed_loop import GAUSS_ABS_FACTOR
-
-
-def _clean(v):
-    """JSON-safe scalar: NaN/inf -> None, numpy -> Python."""
-    if isinstance(v, (np.bool_, bool)):
-        return bool(v)
-    if isinstance(v, (np.integer,)):
-        return int(v)
-    if isinstance(v, (np.floating, float)):
-        return float(v) if math.isfinite(v) else None
-    return v
 
 
 def write_csv(result, path):
@@ -47,7 +36,7 @@ def write_json(result, path):
         "kp_values": result.kp_values.tolist(),
         "kd_values": result.kd_values.tolist(),
         "columns": list(COLUMNS),
-        "rows": [{k: _clean(v) for k, v in row.items()} for row in result.rows()],
+        "rows": result.rows(),
         "histogram": {"quantity": "|attitude error| [deg]", "edges": result.hist_edges.tolist(),
                       "counts": result.hist_counts.tolist(), "overflow": result.hist_overflow.tolist()},
         "windows": [list(w) for w in result.windows],
@@ -55,7 +44,7 @@ def write_json(result, path):
                                  "psd_stick2_per_hz": {a: p.tolist() for a, p in
                                                        zip(("roll", "pitch", "yaw"), result.psd)}},
     }
-    return write_text(path, json.dumps(doc, indent=1, default=_clean) + "\n")
+    return write_text(path, json.dumps(jsonable(doc), indent=1, allow_nan=False) + "\n")
 
 
 def _fmt(v, spec=".3f"):
