@@ -2,55 +2,9 @@
 
 from __future__ import annotations
 
-import argparse
 import math
 
-
-def _positive_int(text):
-    try:
-        v = int(text)
-    except ValueError:
-        v = 0
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive whole number, got {text!r}")
-    return v
-
-
-def _replicates(text):
-    v = _positive_int(text)
-    if v < 2:
-        raise argparse.ArgumentTypeError(f"expected at least 2 bootstrap replicates, got {text!r}")
-    return v
-
-
-def _alpha(text):
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not 0.0 < v < 1.0:
-        raise argparse.ArgumentTypeError(f"expected a probability in (0, 1), got {text!r}")
-    return v
-
-
-def _fraction(text):
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not 0.0 <= v < math.inf:
-        raise argparse.ArgumentTypeError(f"expected a non-negative fraction (0.05 = 5 %), got {text!r}")
-    return v
-
-
-def _workers(text):
-    try:
-        v = int(text)
-    except ValueError:
-        v = 0
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
-    return v
+from .argtypes import number, whole
 
 
 def register(sub):
@@ -73,21 +27,22 @@ def register(sub):
     p.add_argument("--fit", choices=("auto", "pooled", "new"), default="auto",
                    help="flights of the refreshed model: auto (pooled unless a parameter changed or the previous "
                    "flights are missing), pooled, or new (default auto)")
-    p.add_argument("--bootstrap", type=_replicates, default=200, metavar="N",
+    p.add_argument("--bootstrap", type=whole(2), default=200, metavar="N",
                    help="bootstrap replicates per data set (default 200)")
-    p.add_argument("--block", type=_positive_int, default=1, metavar="K",
+    p.add_argument("--block", type=whole(1), default=1, metavar="K",
                    help="consecutive intervals per bootstrap block (default 1)")
     p.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0; same seed, same table)")
-    p.add_argument("--alpha", type=_alpha, default=0.05,
+    p.add_argument("--alpha", type=number("a probability in (0, 1)", 0.0, 1.0), default=0.05,
                    help="family-wise probability of a false flag over the parameters (default 0.05)")
-    p.add_argument("--min-change", type=_fraction, default=0.0, metavar="FRACTION",
+    p.add_argument("--min-change", type=number("a non-negative fraction (0.05 = 5 %)", 0.0, low_open=False),
+                   default=0.0, metavar="FRACTION",
                    help="smallest relative change that may be flagged, e.g. 0.05 (default 0: any significant change)")
     p.add_argument("--no-plots", action="store_true", help="do not draw PNG figures")
     p.add_argument("--backend", default=None, choices=("local", "ray"),
                    help="identify each flight's wind as one task per flight: 'local' this machine's cores, 'ray' "
                    "the Ray cluster at RAY_ADDRESS or a Ray instance started here (needs the 'cluster' extra); "
                    "default: one after the other in this process. Same results either way")
-    p.add_argument("--workers", type=_workers, default=None, metavar="N",
+    p.add_argument("--workers", type=whole(1), default=None, metavar="N",
                    help="local worker processes, or CPUs of a Ray instance started here (default: all cores)")
     p.set_defaults(func=run)
 

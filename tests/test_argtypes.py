@@ -43,7 +43,10 @@ def test_whole(minimum, text, ok):
                                   ["identify", "x.csv", "--out", "y", "--interval", "0"],
                                   ["import", "x", "--out", "y", "--rate", "-3"],
                                   ["diagnose", "x", "--out", "y", "--alpha", "2"],
-                                  ["evaluate", "x", "--episodes-per-trace", "0"]])
+                                  ["evaluate", "x", "--episodes-per-trace", "0"],
+                                  ["refresh", "m", "f.csv", "--bootstrap", "1"],
+                                  ["refresh", "m", "f.csv", "--min-change", "-0.1"],
+                                  ["design", "--phase-margin", "180"]])
 def test_commands_reject_bad_numbers_with_exit_2(argv, capsys):
     with pytest.raises(SystemExit) as e:
         main(argv)
