@@ -20,6 +20,24 @@ def _delay(text):
     return v
 
 
+def add_flight_backend_options(p):
+    """``--backend`` and ``--workers`` of the commands that identify each flight's wind as one task
+    (``heli identify``, ``heli refresh``); :func:`flight_backend` makes the backend from them."""
+    p.add_argument("--backend", default=None, choices=("local", "ray"),
+                   help="identify each flight's wind as one task per flight: 'local' this machine's cores, 'ray' "
+                   "the Ray cluster at RAY_ADDRESS or a Ray instance started here (needs the 'cluster' extra); "
+                   "default: one after the other in this process. Same results either way")
+    p.add_argument("--workers", type=whole(1), default=None, metavar="N",
+                   help="local worker processes, or CPUs of a Ray instance started here (default: all cores)")
+
+
+def flight_backend(args):
+    """The backend of :func:`add_flight_backend_options`, or None (in this process) without ``--backend``."""
+    from identification.backends import make_backend
+
+    return None if args.backend is None else make_backend(args.backend, workers=args.workers)
+
+
 def register(sub):
     p = sub.add_parser(
         "identify",
@@ -41,26 +59,20 @@ def register(sub):
     p.add_argument("--no-plots", action="store_true", help="do not draw PNG figures")
     p.add_argument("--no-disturbances", action="store_true",
                    help="do not identify wind profiles nor write the disturbance library")
-    p.add_argument("--backend", default=None, choices=("local", "ray"),
-                   help="identify each flight's wind as one task per flight: 'local' this machine's cores, 'ray' "
-                   "the Ray cluster at RAY_ADDRESS or a Ray instance started here (needs the 'cluster' extra); "
-                   "default: one after the other in this process. Same results either way")
-    p.add_argument("--workers", type=whole(1), default=None, metavar="N",
-                   help="local worker processes, or CPUs of a Ray instance started here (default: all cores)")
+    add_flight_backend_options(p)
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
     from tqdm import tqdm
 
-    from identification.backends import make_backend
     from identification.io import read_flight
     from identification.report import identify_and_report, source_entry
 
     flights = [read_flight(path) for path in tqdm(args.flights, desc="reading flights", unit="flight",
                                                    disable=len(args.flights) < 2)]
     kwargs = {"interval": args.interval, "delay": args.delay, "prefilter": not args.no_filter}
-    backend = None if args.backend is None else make_backend(args.backend, workers=args.workers)
+    backend = flight_backend(args)
     try:
         run = identify_and_report(
             flights, args.out, coupled=args.coupled, sources=[source_entry(p) for p in args.flights],

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 from .argtypes import number, whole
+from .identify import add_flight_backend_options, flight_backend
 
 
 def register(sub):
@@ -38,20 +39,14 @@ def register(sub):
                    default=0.0, metavar="FRACTION",
                    help="smallest relative change that may be flagged, e.g. 0.05 (default 0: any significant change)")
     p.add_argument("--no-plots", action="store_true", help="do not draw PNG figures")
-    p.add_argument("--backend", default=None, choices=("local", "ray"),
-                   help="identify each flight's wind as one task per flight: 'local' this machine's cores, 'ray' "
-                   "the Ray cluster at RAY_ADDRESS or a Ray instance started here (needs the 'cluster' extra); "
-                   "default: one after the other in this process. Same results either way")
-    p.add_argument("--workers", type=whole(1), default=None, metavar="N",
-                   help="local worker processes, or CPUs of a Ray instance started here (default: all cores)")
+    add_flight_backend_options(p)
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from identification.backends import make_backend
     from identification.refresh import refresh_model
 
-    backend = None if args.backend is None else make_backend(args.backend, workers=args.workers)
+    backend = flight_backend(args)
     try:
         result = refresh_model(
             args.model_dir, args.flights, previous_flights=args.previous_flights, fit=args.fit,
