@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from .argtypes import number
+from .argtypes import number, whole
 
 
 def register(sub):
@@ -21,7 +21,7 @@ def register(sub):
     p.add_argument("--model", metavar="DIR/model.json", default=None,
                    help="model whose structure is diagnosed (default: the paper's decoupled model)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
-    p.add_argument("--folds", type=int, default=5, help="cross-validation blocks (default 5)")
+    p.add_argument("--folds", type=whole(2), default=5, help="cross-validation blocks (default 5)")
     p.add_argument("--window", type=number("a positive number of seconds", 0.0),
                    default=4.0, help="held-out simulation window in s (default 4)")
     p.add_argument("--alpha", type=number("a number in (0, 1)", 0.0, 1.0), default=None,

@@ -43,6 +43,7 @@ def test_whole(minimum, text, ok):
                                   ["identify", "x.csv", "--out", "y", "--interval", "0"],
                                   ["import", "x", "--out", "y", "--rate", "-3"],
                                   ["diagnose", "x", "--out", "y", "--alpha", "2"],
+                                  ["diagnose", "x", "--out", "y", "--folds", "1"],
                                   ["evaluate", "x", "--episodes-per-trace", "0"],
                                   ["refresh", "m", "f.csv", "--bootstrap", "1"],
                                   ["refresh", "m", "f.csv", "--min-change", "-0.1"],
