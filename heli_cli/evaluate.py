@@ -27,7 +27,7 @@ def register(sub):
     p.add_argument("--episodes-per-trace", type=whole(1), default=4, help="episodes per trace (default 4)")
     p.add_argument("--episode-seconds", type=number("a finite number > 0", 0.0),
                    default=30.0, help="episode length in s (default 30)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the gust windows (default 0)")
+    p.add_argument("--seed", type=whole(0), default=0, help="seed of the gust windows (default 0)")
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
     p.set_defaults(func=run)
 

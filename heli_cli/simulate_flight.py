@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from identification.synthetic import EFFECT_ALIASES, EFFECTS
 
-from .argtypes import number
+from .argtypes import number, whole
 
 
 def register(sub):
@@ -17,7 +17,7 @@ def register(sub):
     )
     p.add_argument("--duration", type=number("a finite number > 0", 0.0),
                    default=300.0, help="flight length in seconds (default 300)")
-    p.add_argument("--seed", type=int, default=1, help="random seed: same seed, same flight (default 1)")
+    p.add_argument("--seed", type=whole(0), default=1, help="random seed: same seed, same flight (default 1)")
     p.add_argument("--out", required=True, help="output CSV path, e.g. flight.csv")
     p.add_argument("--effect", action="append", default=[], metavar="NAME",
                    choices=sorted(list(EFFECTS) + list(EFFECT_ALIASES)),

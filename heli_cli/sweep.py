@@ -41,7 +41,7 @@ def register(sub):
                    default=0.01, help="control period in seconds (default 0.01)")
     p.add_argument("--windows", type=whole(1), default=None,
                    help="number of (trace, offset) gust windows (default one per library trace)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the window offsets and flights (default 0)")
+    p.add_argument("--seed", type=whole(0), default=0, help="seed of the window offsets and flights (default 0)")
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
     p.add_argument("--flights", type=whole(0), default=0, metavar="N",
                    help="check the prediction with N fresh-wind flights per pair of the truth model (default 0: no)")

@@ -35,7 +35,7 @@ def register(sub):
     p.add_argument("--timesteps", required=True, type=whole(1), metavar="N",
                    help="environment steps to train for (all copies together)")
     p.add_argument("--out", required=True, metavar="AGENT", help="agent path (.zip is added)")
-    p.add_argument("--seed", type=int, default=0, help="seed of everything (default 0)")
+    p.add_argument("--seed", type=whole(0), default=0, help="seed of everything (default 0)")
     p.add_argument("--n-envs", type=whole(1), default=8, help="environment copies (default 8)")
     p.add_argument("--minutes", type=number("a finite number > 0", 0.0), default=None,
                    help="wall-time budget; training stops at --timesteps or this, whichever comes first")
@@ -48,7 +48,7 @@ def register(sub):
                    help="episode length in s (default 30)")
     p.add_argument("--held-out-fraction", type=number("a fraction in (0, 1)", 0.0, 1.0), default=0.25,
                    help="fraction of the library's traces held out (default 0.25)")
-    p.add_argument("--split-seed", type=int, default=0, help="seed of the held-out choice (default 0)")
+    p.add_argument("--split-seed", type=whole(0), default=0, help="seed of the held-out choice (default 0)")
     p.add_argument("--seeds", type=_seeds, default=None, metavar="S1,S2,...",
                    help="train one agent per seed, each as a task of --backend (one torch thread each); agents "
                    "are written to AGENT_seed<S>.zip and AGENT_seed<S>_training/ (overrides --seed)")

@@ -47,7 +47,9 @@ def test_whole(minimum, text, ok):
                                   ["evaluate", "x", "--episodes-per-trace", "0"],
                                   ["refresh", "m", "f.csv", "--bootstrap", "1"],
                                   ["refresh", "m", "f.csv", "--min-change", "-0.1"],
-                                  ["design", "--phase-margin", "180"]])
+                                  ["design", "--phase-margin", "180"],
+                                  ["simulate-flight", "--seed", "-1", "--out", "x.csv"],
+                                  ["sweep", "--kp", "1", "--kd", "1", "--seed", "-1"]])
 def test_commands_reject_bad_numbers_with_exit_2(argv, capsys):
     with pytest.raises(SystemExit) as e:
         main(argv)
