@@ -158,13 +158,20 @@ def wrap(angle):
     return angle - TWO_PI * np.round(angle / TWO_PI)
 
 
+def reward_coefficients(cfg: TaskConfig) -> tuple[float, float, float]:
+    """Weights of the squared attitude error [1/rad^2], rate error [s^2/rad^2] and action in the reward."""
+    wa, wr, wu = cfg.weights
+    return wa / (cfg.attitude_scale * cfg.attitude_scale), wr / (cfg.rate_scale * cfg.rate_scale), wu
+
+
 def reward_from_sums(cfg: TaskConfig, att2, rate2, effort2):
     """Reward of one step from the sums of squares of the errors and the action.
 
     ``-(w_att * att2/attitude_scale^2 + w_rate * rate2/rate_scale^2 + w_u * effort2)``
     with ``att2 = sum(e_att^2)`` [rad^2], ``rate2 = sum(e_rate^2)`` [(rad/s)^2] and
-    ``effort2 = sum(a^2)`` [stick^2]; floats or arrays over copies.
+    ``effort2 = sum(a^2)`` [stick^2]; floats or arrays over copies. The vector
+    environment's loop (:func:`heli_env.kernels.observe`) evaluates the same
+    expression with :func:`reward_coefficients`.
     """
-    wa, wr, wu = cfg.weights
-    return -(wa / (cfg.attitude_scale * cfg.attitude_scale) * att2
-             + wr / (cfg.rate_scale * cfg.rate_scale) * rate2 + wu * effort2)
+    ca, cr, cu = reward_coefficients(cfg)
+    return -(ca * att2 + cr * rate2 + cu * effort2)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 from gymnasium.error import ResetNeeded
 from gymnasium.utils import seeding
@@ -14,20 +15,22 @@ from identification.model import N_STATE, quaternion_from_euler
 
 from .env import OBS_DIM, action_space, observation_space
 from .errors import ActionError
+from .kernels import ROW_PAD, advance_kernel, batch_rows, clip_actions, euler_arguments_kernel, observe_kernel
 from .spec import MAX_RATE, build_spec
-from .tasks import N_SINES, draw_episode, reward_from_sums, wrap
+from .tasks import N_SINES, draw_episode, reward_coefficients
 
-_RAD2DEG = 180.0 / math.pi
 
 
 class HeliAttitudeVectorEnv(VectorEnv):
     """``num_envs`` copies of :class:`heli_env.env.HeliAttitudeEnv`, batched in numpy.
 
     Same arguments, spaces, rewards, episode ends and info as the single
-    environment (see its docstring), plus ``num_envs``. The state is held as an
-    array of shape ``(N_STATE, num_envs)`` and stepped by the same generated
-    physics core (:func:`identification.model.discrete_step`) as the single
-    environment; every episode is drawn by the same function from a per-copy
+    environment (see its docstring), plus ``num_envs`` and ``threads``. The
+    state is held as an array of shape ``(N_STATE, num_envs)`` and stepped by
+    a fused numba loop compiled from the same statements as the single
+    environment's physics core (:func:`identification.model.discrete_step_statements`,
+    :mod:`heli_env.kernels`). ``threads`` (default: numba's, all cores) is how
+    many threads share the copies; results do not depend on it. Every episode is drawn by the same function from a per-copy
     random generator seeded ``seed + i``, so copy ``i`` reproduces a single
     environment reset with ``seed + i`` under the same actions (the dynamics
     bit for bit, observations to float rounding of ``atan2``/``sin``).
@@ -47,9 +50,13 @@ class HeliAttitudeVectorEnv(VectorEnv):
     def __init__(self, num_envs: int = 1, model=None, task="hold", reference="mixed", dt: float = 0.01,
                  episode_seconds: float = 30.0, collective="trace", gust_scale: float = 1.0, obs_noise=0.0,
                  action_delay: int = 0, init_angle_deg: float = 5.0, init_rate_deg: float = 5.0,
-                 library_version=None, render_mode: str | None = None):
+                 library_version=None, render_mode: str | None = None, threads: int | None = None):
         if int(num_envs) != num_envs or num_envs < 1:
             raise ValueError(f"num_envs must be a positive whole number, got {num_envs!r}")
+        most = numba.config.NUMBA_NUM_THREADS
+        if threads is not None and (int(threads) != threads or not 1 <= threads <= most):
+            raise ValueError(f"threads must be a whole number from 1 to {most} (numba's thread pool), got {threads!r}")
+        self._threads = most if threads is None else int(threads)
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be 'rgb_array' or None for the vector env, got {render_mode!r}")
         self.spec_ = s = build_spec(model, task, reference, dt, episode_seconds, collective, gust_scale, obs_noise,
@@ -63,7 +70,15 @@ class HeliAttitudeVectorEnv(VectorEnv):
         # Library columns gathered once per step, one row per sample so that a gather reads
         # contiguous memory: trims (3), collective, gust torque (3), u_d (3).
         self._table = np.ascontiguousarray(np.vstack([s.trim, s.col[None, :], s.torque, s.model.ud]).T)
-        self._x = None
+        self._x = None  # (N_STATE, n) once reset
+        self._advance = advance_kernel(s.model.params, s.dt)
+        self._euler_arguments = euler_arguments_kernel()
+        self._observe_loop = observe_kernel(s.task.task, bool(s.obs_noise[0] or s.obs_noise[1]))
+        self._trig = batch_rows(5, n)  # arguments of atan2 / asin / atan2 (eqs. 27-29)
+        self._att = batch_rows(3, n)  # roll, pitch, yaw [rad]
+        self._coef = np.array(reward_coefficients(s.task))
+        self._no_ref = np.zeros((3, n))
+        self._no_meas = np.zeros((3, 0))
         self._rngs = [None] * n
         self._k = np.zeros(n, dtype=np.int64)
         self._base = np.zeros(n, dtype=np.int64)
@@ -71,9 +86,9 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._nsteps = np.zeros(n, dtype=np.int64)
         self._gust = np.zeros(n)
         self._trace = np.zeros(n, dtype=np.int64)
-        self._prev = np.zeros((3, n))
+        self._prev = batch_rows(3, n)
         self._done = np.zeros(n, dtype=bool)
-        self._queue = np.zeros((s.action_delay, 3, n)) if s.action_delay else None
+        self._queue = np.zeros((s.action_delay, 3, n + ROW_PAD))[..., :n] if s.action_delay else None
         n_seg = int(s.episode_steps * s.dt // s.task.step_period) + 1
         self._smooth = np.zeros(n, dtype=bool)
         self._steps = np.zeros((3, n_seg, n))
@@ -111,11 +126,15 @@ class HeliAttitudeVectorEnv(VectorEnv):
         if self._x is None:
             if not mask.all():
                 raise ResetNeeded("the first reset must reset every copy (no reset_mask)")
-            self._x = [np.zeros(n) for _ in range(N_STATE)]  # rows of the (N_STATE, n) state
-        self._reset_envs(np.flatnonzero(mask), options)
+            self._x = batch_rows(N_STATE, n)
+        which = np.flatnonzero(mask)
+        self._reset_envs(which, options)
+        self._euler_arguments(self._x, self._trig, which)
         j = self._base + np.minimum(self._k, self._last) * s.ratio
-        self._ud = np.take(self._table, j, axis=0).T[7:10] * self._gust  # the gust about to act
-        obs, info = self._observe()
+        self._ud = batch_rows(3, n, fill=None)
+        np.multiply(np.take(self._table, j, axis=0).T[7:10], self._gust, out=self._ud)  # the gust about to act
+        numba.set_num_threads(self._threads)
+        obs, info, _, _, _ = self._observe()
         return obs, info
 
     def _reset_envs(self, which, options):
@@ -159,44 +178,30 @@ class HeliAttitudeVectorEnv(VectorEnv):
             raise ResetNeeded("call reset() before step()")
         s = self.spec_
         n = self.num_envs
-        a = np.asarray(actions, dtype=np.float64)
+        a = actions if isinstance(actions, np.ndarray) else np.asarray(actions, dtype=np.float64)
         if a.shape != (n, 3):
             raise ActionError(f"actions must have shape ({n}, 3) (lat, lon, ped per copy), got {a.shape}")
-        if not np.isfinite(a).all():
-            bad = int(np.argmax(~np.isfinite(a).all(axis=1)))
-            raise ActionError(f"actions must be finite; copy {bad} got {a[bad].tolist()}")
-        a = np.clip(a.T, -1.0, 1.0)  # (3, n)
         restart = self._done.copy()
+        applied = self._prev  # the action that acts in this step, observed after it
         if self._queue is not None:
-            applied = self._queue[0].copy()
+            applied[:] = self._queue[0]
             self._queue[:-1] = self._queue[1:]
-            self._queue[-1] = a
-        else:
-            applied = a
-        idx = self._base + np.minimum(self._k, self._last) * s.ratio
-        row = np.take(self._table, idx, axis=0).T  # (10, n)
-        g = self._gust
-        sticks = (np.clip(row[0] + applied[0], -1.0, 1.0), np.clip(row[1] + applied[1], -1.0, 1.0), row[3],
-                  np.clip(row[2] + applied[2], -1.0, 1.0))
-        self._x = list(s.dstep(self._x, sticks, (g * row[4], g * row[5], g * row[6])))
-        self._ud = row[7:10] * g  # the gust of this step, reported in info
-        self._k += 1
-        self._prev = applied
+        bad = clip_actions(a, applied if self._queue is None else self._queue[-1])
+        numba.set_num_threads(self._threads)
+        if bad >= 0:
+            raise ActionError(f"actions must be finite; copy {bad} got {a[bad].tolist()}")
+        self._ud = ud = batch_rows(3, n, fill=None)  # the gust of this step, reported in info
+        self._advance(self._table, self._base, self._k, self._last, s.ratio, applied, self._gust, self._x, ud,
+                      self._trig)
         if restart.any():
             which = np.flatnonzero(restart)
             self._reset_envs(which, {})
+            self._euler_arguments(self._x, self._trig, which)
             j = self._base[which]
-            self._ud[:, which] = self._table[j, 7:10].T * self._gust[which]
-        obs, info = self._observe()
-        rew = reward_from_sums(s.task, *self._sums)
-        phi, theta = self._att[0], self._att[1]
-        lim = s.task.max_angle
-        x = self._x
-        terminated = ~((np.abs(phi) <= lim) & (np.abs(theta) <= lim)
-                       & np.isfinite(x[0]) & np.isfinite(x[1]) & np.isfinite(x[2]))
-        truncated = ~terminated & (self._k >= self._nsteps)
+            ud[:, which] = self._table[j, 7:10].T * self._gust[which]
+        obs, info, rew, terminated, truncated = self._observe()
         if restart.any():
-            rew = np.where(restart, 0.0, rew)
+            rew[restart] = 0.0
             terminated &= ~restart
             truncated &= ~restart
         self._done = terminated | truncated
@@ -219,57 +224,47 @@ class HeliAttitudeVectorEnv(VectorEnv):
             return None, val
         return val, der
 
-    def _error_terms(self, ref_att, ref_rate, phi, theta, psi, p, q, r):
-        """Attitude error as observed (reference - attitude, wrapped; -attitude for "hold"/"rate"), rate error."""
-        if ref_att is None:  # atan2/asin give [-pi, pi]: wrapping would change nothing
-            shown = (-phi, -theta, -psi)
-        else:
-            shown = (wrap(ref_att[0] - phi), wrap(ref_att[1] - theta), wrap(ref_att[2] - psi))
-        e_rate = (-p, -q, -r) if ref_rate is None else (ref_rate[0] - p, ref_rate[1] - q, ref_rate[2] - r)
-        return shown, e_rate
-
     def _observe(self):
         s = self.spec_
+        n = self.num_envs
         x = self._x
-        q0, q1, q2, q3 = x[6], x[7], x[8], x[9]
-        phi = np.arctan2(2.0 * (q0 * q1 + q2 * q3), 1.0 - 2.0 * (q1 * q1 + q2 * q2))
-        theta = np.arcsin(np.clip(2.0 * (q0 * q2 - q3 * q1), -1.0, 1.0))
-        psi = np.arctan2(2.0 * (q0 * q3 + q1 * q2), 1.0 - 2.0 * (q2 * q2 + q3 * q3))
-        self._att = (phi, theta, psi)
-        p, q, r = x[0], x[1], x[2]
+        att = self._att
+        trig = self._trig
+        np.arctan2(trig[0], trig[1], out=att[0])
+        np.arcsin(trig[2], out=att[1])
+        np.arctan2(trig[3], trig[4], out=att[2])
         t = self._k * s.dt
         ref_att, ref_rate = self._reference(t)
         # Reward, termination and info score the true state; only the observation is measured.
-        a = self._prev
-        shown, e_rate = self._error_terms(ref_att, ref_rate, phi, theta, psi, p, q, r)
-        rows = np.stack([*shown, p, q, r, *e_rate, a[0], a[1], a[2]])
-        self._sums = (0.0 if s.task.task == "rate" else np.einsum("ij,ij->j", rows[0:3], rows[0:3]),
-                      np.einsum("ij,ij->j", rows[6:9], rows[6:9]), np.einsum("ij,ij->j", rows[9:12], rows[9:12]))
-        deg_att = rows[0:3] * _RAD2DEG
-        deg_rate = rows[6:9] * _RAD2DEG
+        meas_att = meas_rate = self._no_meas
         if s.obs_noise[0] or s.obs_noise[1]:
             noise = np.stack([rng.normal(0.0, 1.0, 6) for rng in self._rngs], axis=1)
             na, nr = s.obs_noise
-            mp, mq, mr = p + nr * noise[3], q + nr * noise[4], r + nr * noise[5]
-            shown, e_rate = self._error_terms(ref_att, ref_rate, phi + na * noise[0], theta + na * noise[1],
-                                              psi + na * noise[2], mp, mq, mr)
-            rows = np.stack([*shown, mp, mq, mr, *e_rate, a[0], a[1], a[2]])
-            rows[0:3] = wrap(rows[0:3])  # noise may cross +-pi
-        np.clip(rows[3:9], -MAX_RATE, MAX_RATE, out=rows[3:9])
-        obs = rows.T.astype(np.float32)
+            meas_att = att + na * noise[0:3]
+            meas_rate = x[0:3] + nr * noise[3:6]
+        obs = np.empty((n, OBS_DIM), dtype=np.float32)
+        deg_att = batch_rows(3, n, fill=None)
+        deg_rate = batch_rows(3, n, fill=None)
+        reward = np.empty(n)
+        terminated = np.empty(n, dtype=bool)
+        truncated = np.empty(n, dtype=bool)
+        self._observe_loop(att, x, self._no_ref if ref_att is None else ref_att,
+                           self._no_ref if ref_rate is None else ref_rate, meas_att, meas_rate, self._prev, MAX_RATE,
+                           s.task.max_angle, self._coef, self._k, self._nsteps, obs, deg_att, deg_rate, reward,
+                           terminated, truncated)
         ud = self._ud
         m = self._ones
         info = {"time": t, "_time": m, "disturbance": ud.T, "_disturbance": m,
                 "attitude_error_deg": deg_att.T, "_attitude_error_deg": m,
                 "rate_error_deg_s": deg_rate.T, "_rate_error_deg_s": m, "trace": self._trace.copy(), "_trace": m}
         if self.render_mode is not None:
+            a = self._prev
             ra = (0.0, 0.0, 0.0) if ref_att is None else tuple(float(v[0]) for v in ref_att)
             rr = (0.0, 0.0, 0.0) if ref_rate is None else tuple(float(v[0]) for v in ref_rate)
-            self._history.append((float(t[0]), (float(phi[0]), float(theta[0]), float(psi[0])), ra, rr,
-                                  (float(p[0]), float(q[0]), float(r[0])), tuple(ud[:, 0].tolist()),
-                                  tuple(a[:, 0].tolist())))
+            self._history.append((float(t[0]), tuple(att[:, 0].tolist()), ra, rr, tuple(x[0:3, 0].tolist()),
+                                  tuple(ud[:, 0].tolist()), tuple(a[:, 0].tolist())))
             self._history = self._history[-2000:]
-        return obs, info
+        return obs, info, reward, terminated, truncated
 
     def render(self):
         """An RGB frame of copy 0 (``render_mode="rgb_array"``)."""

@@ -383,17 +383,29 @@ def linear_structure(params: ModelParams):
     return A, B, tuple(nonlinear), tuple(servo)
 
 
+DISCRETE_INPUTS = ("p", "q", "r", "z0", "z1", "z2", "q0", "q1", "q2", "q3", "lat", "lon", "col", "ped", "d0", "d1", "d2")
+"""Names the statements of :func:`discrete_step_statements` read: state, sticks, disturbance torque."""
+
+DISCRETE_OUTPUTS = ("pn", "qn", "rn", "z0n", "z1n", "z2n", "b0", "b1", "b2", "b3")
+"""Names of the new state they assign: rates, servo states and the unit quaternion."""
+
+
 @lru_cache(maxsize=64)
-def _discrete_kernel(params: ModelParams, dt: float):
-    """Generate ``dstep(x, u, d)``: one control period of length ``dt`` with u and d held.
+def discrete_step_statements(params: ModelParams, dt: float) -> tuple[str, ...]:
+    """One control period of length ``dt`` with u and d held, as straight-line statements.
 
     The linear part is discretised exactly for a zero-order hold (matrix
     exponential of the augmented system, ``scipy.linalg.expm``); the remaining
     products of rates are held over the step and integrated through the same
     exponential (exponential Euler); the attitude turns by the rotation of the
-    mean of the start and end rates (eq. 25, quaternion renormalised as eq. 26).
-    Like :func:`_kernel`, the source uses arithmetic only and serves floats and
-    numpy batches alike.
+    mean of the start and end rates (eq. 25) and is renormalised (eq. 26; one
+    division and four products, the division being the slowest operation of
+    the step). The statements read
+    :data:`DISCRETE_INPUTS` and assign :data:`DISCRETE_OUTPUTS`; they use
+    arithmetic and ``abs`` only, so the one text is compiled into the
+    float/numpy step of :func:`_discrete_kernel` and into the fused numba loop
+    of the vector environment (:mod:`heli_env.kernels`), which therefore agree
+    bit for bit.
     """
     from scipy.linalg import expm
 
@@ -405,37 +417,53 @@ def _discrete_kernel(params: ModelParams, dt: float):
     Ad, Bd = E[:6, :6], E[:6, 6:]
     names_s = ("p", "q", "r", "z0", "z1", "z2")
     names_v = ("lat", "lon", "col", "ped", "1.0", "e0", "e1", "e2")
+    lines = []
+    for i, (feed, gain) in enumerate(servo):
+        stick = ("lat", "lon", "ped")[i]
+        lines.append(f"c{i} = {stick}" if gain == 0.0 else f"c{i} = {_fmt(feed)}*{stick} + {_fmt(gain)}*z{i}")
+    for i in range(3):
+        extra = "".join(f" + {_fmt(c)}*({expr})" for axis, expr, c in nonlinear if axis == i)
+        lines.append(f"e{i} = d{i}{extra}")
+    for row in range(6):
+        if row >= 3 and servo[row - 3][1] == 0.0:
+            lines.append(f"{names_s[row]}n = {names_s[row]}")  # no servo delay: the state is unused
+            continue
+        terms = [f"{_fmt(Ad[row, j])}*{names_s[j]}" for j in range(6) if Ad[row, j] != 0.0]
+        terms += [f"{_fmt(Bd[row, j])}*{names_v[j]}" if names_v[j] != "1.0" else _fmt(Bd[row, j])
+                  for j in range(8) if Bd[row, j] != 0.0]
+        lines.append(f"{names_s[row]}n = " + (" + ".join(terms) if terms else f"0.0*{names_s[row]}"))
+    hdt = 0.25 * dt  # half the step times the mean of two rates
+    lines += [
+        f"wx = {_fmt(hdt)}*(p + pn)",
+        f"wy = {_fmt(hdt)}*(q + qn)",
+        f"wz = {_fmt(hdt)}*(r + rn)",
+        "a0 = q0 - q1*wx - q2*wy - q3*wz",
+        "a1 = q1 + q0*wx + q2*wz - q3*wy",
+        "a2 = q2 + q0*wy + q3*wx - q1*wz",
+        "a3 = q3 + q0*wz + q1*wy - q2*wx",
+        "s = 1.0/(a0*a0 + a1*a1 + a2*a2 + a3*a3)**0.5",
+        "b0 = a0*s",
+        "b1 = a1*s",
+        "b2 = a2*s",
+        "b3 = a3*s",
+    ]
+    return tuple(lines)
+
+
+@lru_cache(maxsize=64)
+def _discrete_kernel(params: ModelParams, dt: float):
+    """Compile :func:`discrete_step_statements` into ``dstep(x, u, d)`` for floats and numpy batches.
+
+    Returns the function and its source.
+    """
     lines = [
         "def dstep(x, u, d):",
         '    """One control period, zero-order hold: exact linear part, exponential Euler for products."""',
         "    p, q, r, z0, z1, z2, q0, q1, q2, q3 = x",
         "    lat, lon, col, ped = u",
-    ]
-    for i, (feed, gain) in enumerate(servo):
-        stick = ("lat", "lon", "ped")[i]
-        lines.append(f"    c{i} = {stick}" if gain == 0.0 else f"    c{i} = {_fmt(feed)}*{stick} + {_fmt(gain)}*z{i}")
-    for i in range(3):
-        extra = "".join(f" + {_fmt(c)}*({expr})" for axis, expr, c in nonlinear if axis == i)
-        lines.append(f"    e{i} = d[{i}]{extra}")
-    for row in range(6):
-        if row >= 3 and servo[row - 3][1] == 0.0:
-            lines.append(f"    {names_s[row]}n = {names_s[row]}")  # no servo delay: the state is unused
-            continue
-        terms = [f"{_fmt(Ad[row, j])}*{names_s[j]}" for j in range(6) if Ad[row, j] != 0.0]
-        terms += [f"{_fmt(Bd[row, j])}*{names_v[j]}" if names_v[j] != "1.0" else _fmt(Bd[row, j])
-                  for j in range(8) if Bd[row, j] != 0.0]
-        lines.append(f"    {names_s[row]}n = " + (" + ".join(terms) if terms else f"0.0*{names_s[row]}"))
-    hdt = 0.25 * dt  # half the step times the mean of two rates
-    lines += [
-        f"    wx = {_fmt(hdt)}*(p + pn)",
-        f"    wy = {_fmt(hdt)}*(q + qn)",
-        f"    wz = {_fmt(hdt)}*(r + rn)",
-        "    a0 = q0 - q1*wx - q2*wy - q3*wz",
-        "    a1 = q1 + q0*wx + q2*wz - q3*wy",
-        "    a2 = q2 + q0*wy + q3*wx - q1*wz",
-        "    a3 = q3 + q0*wz + q1*wy - q2*wx",
-        "    n = (a0*a0 + a1*a1 + a2*a2 + a3*a3)**0.5",
-        "    return (pn, qn, rn, z0n, z1n, z2n, a0/n, a1/n, a2/n, a3/n)",
+        "    d0, d1, d2 = d",
+        *("    " + line for line in discrete_step_statements(params, dt)),
+        f"    return ({', '.join(DISCRETE_OUTPUTS)})",
     ]
     source = "\n".join(lines) + "\n"
     namespace = {"abs": abs}

@@ -236,3 +236,44 @@ def test_vector_render_shows_copy_zero():
         single.step(np.zeros(3, np.float32))
     assert np.array_equal(frame, single.render())
     venv.close()
+
+
+def test_thread_count_does_not_change_results():
+    """The copies are split among numba's threads; one thread and all threads give identical episodes."""
+    import numba
+
+    most = numba.config.NUMBA_NUM_THREADS
+    runs = []
+    for threads in sorted({1, most}):
+        venv = HeliAttitudeVectorEnv(64, task="track", episode_seconds=1.0, threads=threads)
+        obs, _ = venv.reset(seed=3)
+        trail = [obs]
+        for actions in _actions(150, 64, seed=4):
+            obs, rew, term, trunc, info = venv.step(actions)
+            trail += [obs, rew, term, trunc, info["attitude_error_deg"], info["disturbance"]]
+        runs.append((np.array(venv._x), trail))
+    x0, trail0 = runs[0]
+    for x, trail in runs[1:]:
+        assert np.array_equal(x, x0)
+        assert all(np.array_equal(a, b) for a, b in zip(trail, trail0))
+
+
+@pytest.mark.parametrize("threads", [0, 1.5, 10_000])
+def test_bad_thread_count_raises(threads):
+    with pytest.raises(ValueError, match="threads must be a whole number from 1 to"):
+        HeliAttitudeVectorEnv(2, threads=threads)
+
+
+def test_returned_arrays_are_not_overwritten_by_the_next_step():
+    """Observations and infos are fresh arrays each step: keeping them (as a replay buffer does) is safe."""
+    venv = HeliAttitudeVectorEnv(4)
+    obs, _ = venv.reset(seed=0)
+    kept_obs, kept = obs.copy(), []
+    first = venv.step(np.zeros((4, 3), np.float32))
+    kept = [first[0].copy(), first[4]["disturbance"].copy(), first[4]["attitude_error_deg"].copy(), first[1].copy()]
+    for _ in range(5):
+        venv.step(np.full((4, 3), 0.5, np.float32))
+    assert np.array_equal(obs, kept_obs)
+    assert np.array_equal(first[0], kept[0]) and np.array_equal(first[1], kept[3])
+    assert np.array_equal(first[4]["disturbance"], kept[1])
+    assert np.array_equal(first[4]["attitude_error_deg"], kept[2])
