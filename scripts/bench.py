@@ -12,7 +12,8 @@ Sections (``--only NAME`` runs one):
 * ``env`` — ``HeliAttitude-v0`` steps/s through ``gym.make`` against
   ``Pendulum-v1`` (target ratio >= 1.0), and the native vector env's
   env-steps/s at 4096 copies against Gymnasium's ``CartPoleVectorEnv``
-  (target ratio >= 1.0); the two of each pair are timed interleaved.
+  (target ratio >= 1.0), with numba's default thread count (all cores) and
+  with ``threads=1``; the envs of each comparison are timed interleaved.
 * ``sweep`` — a 20 x 20 PD gain grid x 10 gust windows x 60 s at 100 Hz through
   ``controllers.sweep.sweep_gains`` (target <= 10 s on 2 cores, issue #5), and its
   prediction checked against fresh-wind flights (KS statistic, target <= 0.1).
@@ -125,20 +126,28 @@ def bench_env(repeats: int) -> dict:
     out["single env steps/s, Pendulum-v1 via gym.make"] = p
     out["single env ratio heli / Pendulum (target >= 1.0)"] = h / p
     n = 4096
+    import numba
+
+    threads = numba.config.NUMBA_NUM_THREADS
     venv = gym.make_vec("HeliAttitude-v0", num_envs=n, vectorization_mode="vector_entry_point")
+    venv1 = gym.make_vec("HeliAttitude-v0", num_envs=n, vectorization_mode="vector_entry_point", threads=1)
     cart = CartPoleVectorEnv(num_envs=n)
     venv.reset(seed=0)
+    venv1.reset(seed=0)
     cart.reset(seed=0)
     a_v = np.zeros((n, 3), dtype=np.float32)
     a_c = np.zeros(n, dtype=np.int64)
-    v_rates, c_rates = [], []
-    for _ in range(max(5, repeats // 3)):
+    v_rates, v1_rates, c_rates = [], [], []
+    for _ in range(max(9, repeats // 3)):
         v_rates.append(n * _steps_per_second(venv, a_v, 100, 1, vector=True))
         c_rates.append(n * _steps_per_second(cart, a_c, 100, 1, vector=True))
-    v, c = statistics.median(v_rates), statistics.median(c_rates)
-    out[f"vector env-steps/s at {n} envs, HeliAttitude-v0 native vector env"] = v
-    out[f"vector env-steps/s at {n} envs, CartPoleVectorEnv"] = c
+        v1_rates.append(n * _steps_per_second(venv1, a_v, 100, 1, vector=True))
+    v, v1, c = statistics.median(v_rates), statistics.median(v1_rates), statistics.median(c_rates)
+    out[f"vector env-steps/s at {n} envs, HeliAttitude-v0 native vector env ({threads} threads, default)"] = v
+    out[f"vector env-steps/s at {n} envs, HeliAttitude-v0 native vector env (threads=1)"] = v1
+    out[f"vector env-steps/s at {n} envs, CartPoleVectorEnv (numpy, 1 thread)"] = c
     out["vector ratio heli / CartPole (target >= 1.0)"] = v / c
+    out["vector ratio heli threads=1 / CartPole"] = v1 / c
     return out
 
 

@@ -277,3 +277,33 @@ def test_returned_arrays_are_not_overwritten_by_the_next_step():
     assert np.array_equal(first[0], kept[0]) and np.array_equal(first[1], kept[3])
     assert np.array_equal(first[4]["disturbance"], kept[1])
     assert np.array_equal(first[4]["attitude_error_deg"], kept[2])
+
+
+def _tiny_loop(marker: float):
+    from heli_env.kernels import _compile
+
+    return _compile(["def tiny(x):", "    for i in prange(x.shape[0]):", f"        x[i] = x[i] * {marker!r}"],
+                    "tiny", "test")
+
+
+def test_compiled_loops_are_kept_in_the_cache_folder(tmp_path, monkeypatch):
+    """A generated loop is written once, as a module named by its source, and reused by the next process."""
+    monkeypatch.setenv("HELI_ENV_CACHE_DIR", str(tmp_path / "kernels"))
+    loop = _tiny_loop(2.5)
+    x = np.ones(4)
+    loop(x)
+    assert np.array_equal(x, np.full(4, 2.5))
+    modules = list((tmp_path / "kernels").glob("tiny_*.py"))
+    assert len(modules) == 1 and "prange" in modules[0].read_text()
+    stamp = modules[0].stat().st_mtime_ns
+    _tiny_loop(2.5)
+    assert modules[0].stat().st_mtime_ns == stamp  # not rewritten
+
+
+def test_an_unwritable_cache_folder_compiles_in_memory(tmp_path, monkeypatch):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    monkeypatch.setenv("HELI_ENV_CACHE_DIR", str(blocker / "kernels"))
+    x = np.ones(3)
+    _tiny_loop(-1.5)(x)
+    assert np.array_equal(x, np.full(3, -1.5))
