@@ -99,7 +99,8 @@ class TrainingResult:
     stopped_by_time : bool
         The time budget ended training before ``timesteps`` were reached.
     run_dir : Path
-        Folder of the training record, best model, evaluations and checkpoints.
+        Folder of the training record, SB3's training statistics (``progress.csv``),
+        best model, evaluations and checkpoints.
     checkpoints : list of Path
     best_model : Path or None
     evaluations : list of (timesteps, mean return, std return)
@@ -281,6 +282,11 @@ def _train(algo, env_model, timesteps, path, run_dir, name, seed, n_envs, eval_f
         kwargs[k] = {**kwargs.get(k, {}), **v} if k == "policy_kwargs" else v
     kwargs["policy_kwargs"].setdefault("features_extractor_class", ObservationScaler)
     agent = _algo_class(algo)("MlpPolicy", env, seed=seed, device="cpu", verbose=verbose, **kwargs)
+    # SB3's own logger would make an empty SB3-<date> folder in the system's temp folder on
+    # every run; its training statistics go to the run folder instead (progress.csv).
+    from stable_baselines3.common.logger import configure
+
+    agent.set_logger(configure(str(run_dir), ["csv"] + (["stdout"] if verbose else [])))
 
     metadata = jsonable({
         "schema": AGENT_SCHEMA, "schema_version": AGENT_SCHEMA_VERSION, "algo": algo, "seed": seed,

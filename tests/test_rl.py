@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -41,9 +42,24 @@ def _tiny(algo, out, shipped, timesteps=256, **kw):
     return train_agent(algo, **args)
 
 
+def _sb3_temp_folders():
+    import tempfile
+
+    return set(Path(tempfile.gettempdir()).glob("SB3-*"))
+
+
 @pytest.fixture(scope="module")
 def ppo_run(shipped, tmp_path_factory):
-    return _tiny("ppo", tmp_path_factory.mktemp("ppo") / "agents" / "ppo", shipped)
+    before = _sb3_temp_folders()
+    res = _tiny("ppo", tmp_path_factory.mktemp("ppo") / "agents" / "ppo", shipped)
+    res.temp_folders_made = _sb3_temp_folders() - before
+    return res
+
+
+def test_training_statistics_go_to_the_run_folder_not_the_temp_folder(ppo_run):
+    assert ppo_run.temp_folders_made == set()
+    header = (ppo_run.run_dir / "progress.csv").read_text().splitlines()[0]
+    assert "time/total_timesteps" in header
 
 
 # -------------------------------------------------------------------------------------------- split
