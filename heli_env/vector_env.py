@@ -178,7 +178,8 @@ class HeliAttitudeVectorEnv(VectorEnv):
             raise ResetNeeded("call reset() before step()")
         s = self.spec_
         n = self.num_envs
-        a = actions if isinstance(actions, np.ndarray) else np.asarray(actions, dtype=np.float64)
+        native = isinstance(actions, np.ndarray) and actions.dtype in (np.float32, np.float64)
+        a = actions if native else np.asarray(actions, dtype=np.float64)  # the loop reads float32 or float64
         if a.shape != (n, 3):
             raise ActionError(f"actions must have shape ({n}, 3) (lat, lon, ped per copy), got {a.shape}")
         restart = self._done.copy()

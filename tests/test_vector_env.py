@@ -307,3 +307,16 @@ def test_an_unwritable_cache_folder_compiles_in_memory(tmp_path, monkeypatch):
     x = np.ones(3)
     _tiny_loop(-1.5)(x)
     assert np.array_equal(x, np.full(3, -1.5))
+
+
+@pytest.mark.parametrize("convert", [lambda a: a.tolist(), lambda a: a.astype(np.float16), lambda a: a.astype(np.int64),
+                                     lambda a: np.asfortranarray(a.astype(np.float64))],
+                         ids=["list", "float16", "int64", "fortran-float64"])
+def test_actions_of_any_numeric_kind_step_alike(convert):
+    a = np.array([[1.0, -1.0, 0.0], [0.0, 2.0, -3.0]], dtype=np.float32)
+    runs = []
+    for actions in (a, convert(a)):
+        venv = HeliAttitudeVectorEnv(2)
+        venv.reset(seed=5)
+        runs.append(venv.step(actions)[0])
+    assert np.array_equal(runs[0], runs[1])
