@@ -20,7 +20,6 @@ from .spec import MAX_RATE, build_spec
 from .tasks import N_SINES, draw_episode, reward_coefficients
 
 
-
 class HeliAttitudeVectorEnv(VectorEnv):
     """``num_envs`` copies of :class:`heli_env.env.HeliAttitudeEnv`, batched in numpy.
 
@@ -30,8 +29,9 @@ class HeliAttitudeVectorEnv(VectorEnv):
     a fused numba loop compiled from the same statements as the single
     environment's physics core (:func:`identification.model.discrete_step_statements`,
     :mod:`heli_env.kernels`). ``threads`` (default: numba's, all cores) is how
-    many threads share the copies; results do not depend on it. Every episode is drawn by the same function from a per-copy
-    random generator seeded ``seed + i``, so copy ``i`` reproduces a single
+    many threads share the copies; results do not depend on it. Every episode
+    is drawn by the same function from a per-copy random generator seeded
+    ``seed + i``, so copy ``i`` reproduces a single
     environment reset with ``seed + i`` under the same actions (the dynamics
     bit for bit, observations to float rounding of ``atan2``/``sin``).
 
@@ -87,6 +87,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._gust = np.zeros(n)
         self._trace = np.zeros(n, dtype=np.int64)
         self._prev = batch_rows(3, n)
+        self._incoming = batch_rows(3, n)  # this step's actions, clipped, before they are accepted
         self._done = np.zeros(n, dtype=bool)
         self._queue = np.zeros((s.action_delay, 3, n + ROW_PAD))[..., :n] if s.action_delay else None
         n_seg = int(s.episode_steps * s.dt // s.task.step_period) + 1
@@ -182,15 +183,19 @@ class HeliAttitudeVectorEnv(VectorEnv):
         a = actions if native else np.asarray(actions, dtype=np.float64)  # the loop reads float32 or float64
         if a.shape != (n, 3):
             raise ActionError(f"actions must have shape ({n}, 3) (lat, lon, ped per copy), got {a.shape}")
-        restart = self._done.copy()
-        applied = self._prev  # the action that acts in this step, observed after it
-        if self._queue is not None:
-            applied[:] = self._queue[0]
-            self._queue[:-1] = self._queue[1:]
-        bad = clip_actions(a, applied if self._queue is None else self._queue[-1])
-        numba.set_num_threads(self._threads)
-        if bad >= 0:
+        incoming = self._incoming
+        bad = clip_actions(a, incoming)
+        if bad >= 0:  # nothing has changed yet
             raise ActionError(f"actions must be finite; copy {bad} got {a[bad].tolist()}")
+        restart = self._done.copy()
+        if self._queue is not None:
+            self._prev[:] = self._queue[0]
+            self._queue[:-1] = self._queue[1:]
+            self._queue[-1] = incoming
+        else:
+            self._prev, self._incoming = incoming, self._prev
+        applied = self._prev  # the action that acts in this step, observed after it
+        numba.set_num_threads(self._threads)
         self._ud = ud = batch_rows(3, n, fill=None)  # the gust of this step, reported in info
         self._advance(self._table, self._base, self._k, self._last, s.ratio, applied, self._gust, self._x, ud,
                       self._trig)

@@ -320,3 +320,21 @@ def test_actions_of_any_numeric_kind_step_alike(convert):
         venv.reset(seed=5)
         runs.append(venv.step(actions)[0])
     assert np.array_equal(runs[0], runs[1])
+
+
+@pytest.mark.parametrize("delay", [0, 2])
+def test_a_rejected_action_changes_nothing(delay):
+    """After an ActionError the env goes on exactly as one that never saw the bad actions."""
+    clean, hit = HeliAttitudeVectorEnv(3, action_delay=delay), HeliAttitudeVectorEnv(3, action_delay=delay)
+    clean.reset(seed=1)
+    hit.reset(seed=1)
+    actions = _actions(6, 3, seed=2)
+    bad = actions[0].copy()
+    bad[2, 1] = np.nan
+    for k, a in enumerate(actions):
+        if k == 3:
+            with pytest.raises(ActionError, match="copy 2"):
+                hit.step(bad)
+        want, got = clean.step(a), hit.step(a)
+        assert np.array_equal(want[0], got[0]) and np.array_equal(want[1], got[1])
+    assert np.array_equal(np.array(clean._x), np.array(hit._x))
