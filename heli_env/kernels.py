@@ -39,7 +39,7 @@ import numba
 import numpy as np
 
 from identification.files import write_text
-from identification.model import DISCRETE_OUTPUTS, ModelParams, discrete_step_statements
+from identification.model import DISCRETE_INPUTS, DISCRETE_OUTPUTS, ModelParams, discrete_step_statements
 
 ROW_PAD = 8
 """Extra columns per row of the batched arrays. Rows of exactly 4096 float64 lie 32 KiB
@@ -162,8 +162,7 @@ def advance_kernel(params: ModelParams, dt: float):
         "        d0 = g * table[j, 4]",
         "        d1 = g * table[j, 5]",
         "        d2 = g * table[j, 6]",
-        "        p = x[0, i]; q = x[1, i]; r = x[2, i]; z0 = x[3, i]; z1 = x[4, i]; z2 = x[5, i]",
-        "        q0 = x[6, i]; q1 = x[7, i]; q2 = x[8, i]; q3 = x[9, i]",
+        *(f"        {name} = x[{row}, i]" for row, name in enumerate(DISCRETE_INPUTS[:10])),
         *("        " + line for line in discrete_step_statements(params, float(dt))),
         *(f"        x[{row}, i] = {name}" for row, name in enumerate(DISCRETE_OUTPUTS)),
         "        ud[0, i] = g * table[j, 7]; ud[1, i] = g * table[j, 8]; ud[2, i] = g * table[j, 9]",

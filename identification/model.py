@@ -398,10 +398,9 @@ def discrete_step_statements(params: ModelParams, dt: float) -> tuple[str, ...]:
     exponential of the augmented system, ``scipy.linalg.expm``); the remaining
     products of rates are held over the step and integrated through the same
     exponential (exponential Euler); the attitude turns by the rotation of the
-    mean of the start and end rates (eq. 25) and is renormalised (eq. 26; one
-    division and four products, the division being the slowest operation of
-    the step). The statements read
-    :data:`DISCRETE_INPUTS` and assign :data:`DISCRETE_OUTPUTS`; they use
+    mean of the start and end rates (eq. 25) and is renormalised (eq. 26).
+    The statements read :data:`DISCRETE_INPUTS` and assign
+    :data:`DISCRETE_OUTPUTS`; they use
     arithmetic and ``abs`` only, so the one text is compiled into the
     float/numpy step of :func:`_discrete_kernel` and into the fused numba loop
     of the vector environment (:mod:`heli_env.kernels`), which therefore agree
@@ -441,11 +440,11 @@ def discrete_step_statements(params: ModelParams, dt: float) -> tuple[str, ...]:
         "a1 = q1 + q0*wx + q2*wz - q3*wy",
         "a2 = q2 + q0*wy + q3*wx - q1*wz",
         "a3 = q3 + q0*wz + q1*wy - q2*wx",
-        "s = 1.0/(a0*a0 + a1*a1 + a2*a2 + a3*a3)**0.5",
-        "b0 = a0*s",
-        "b1 = a1*s",
-        "b2 = a2*s",
-        "b3 = a3*s",
+        "n = (a0*a0 + a1*a1 + a2*a2 + a3*a3)**0.5",
+        "b0 = a0/n",
+        "b1 = a1/n",
+        "b2 = a2/n",
+        "b3 = a3/n",
     ]
     return tuple(lines)
 
@@ -459,9 +458,9 @@ def _discrete_kernel(params: ModelParams, dt: float):
     lines = [
         "def dstep(x, u, d):",
         '    """One control period, zero-order hold: exact linear part, exponential Euler for products."""',
-        "    p, q, r, z0, z1, z2, q0, q1, q2, q3 = x",
-        "    lat, lon, col, ped = u",
-        "    d0, d1, d2 = d",
+        f"    {', '.join(DISCRETE_INPUTS[:10])} = x",
+        f"    {', '.join(DISCRETE_INPUTS[10:14])} = u",
+        f"    {', '.join(DISCRETE_INPUTS[14:])} = d",
         *("    " + line for line in discrete_step_statements(params, dt)),
         f"    return ({', '.join(DISCRETE_OUTPUTS)})",
     ]
