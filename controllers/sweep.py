@@ -259,7 +259,7 @@ def _prepare(model, axis, duration, dt, seed, traces, windows) -> _Replay:
     trim = np.array(trim_sticks(params, col))
     if not np.all(np.isfinite(trim)):
         raise SweepError("the model cannot be trimmed (zero control gain on some axis)")
-    torque = params.control_gains[:, None, None] * env_model.ud[:, idx]
+    torque = env_model.torque[:, idx]  # each trace's u_d with the gains it was identified with
     return _Replay(env_model, params, ax, float(dt), ratio, steps, wins, torque, trim, col)
 
 

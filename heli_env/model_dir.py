@@ -9,6 +9,7 @@ traces into flat arrays the environments index without copying.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from importlib import resources
 from pathlib import Path
 
@@ -46,6 +47,9 @@ class EnvModel:
         The model file's JSON document.
     ud : ndarray, shape (3, total)
         u_d of every trace, concatenated [stick units].
+    gains : ndarray, shape (3, n_traces)
+        Control gains (k2, k6, k10) of the model each trace was identified with
+        (the library records them; the current model's where it does not).
     collective : ndarray, shape (total,)
         Recorded collective of every trace, concatenated [-1, 1].
     starts, lengths : ndarray of int, shape (n_traces,)
@@ -63,6 +67,7 @@ class EnvModel:
     path: Path
     document: dict
     ud: np.ndarray
+    gains: np.ndarray
     collective: np.ndarray
     starts: np.ndarray
     lengths: np.ndarray
@@ -74,6 +79,19 @@ class EnvModel:
     @property
     def n_traces(self) -> int:
         return int(self.starts.size)
+
+    @cached_property
+    def torque(self) -> np.ndarray:
+        """The gust torque per inertia the environments replay, shape (3, total) [rad/s^2].
+
+        Each trace's u_d times the gains it was identified with: the identified
+        torque is ``k * u_d`` with the identifying model's ``k`` (eq. 42), so a
+        trace from an earlier flight keeps the torque the aircraft met when the
+        model is refreshed and its gains move.
+        """
+        torque = np.repeat(self.gains, self.lengths, axis=1) * self.ud
+        torque.setflags(write=False)
+        return torque
 
 
 def load_env_model(path=None, library_version: int | None = None) -> EnvModel:
@@ -121,9 +139,25 @@ def load_env_model(path=None, library_version: int | None = None) -> EnvModel:
     lengths = np.array([t.n for t in traces], dtype=np.int64)
     starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
     ud = np.ascontiguousarray(np.concatenate([t.ud for t in traces], axis=1))
+    gains = np.column_stack([_trace_gains(t.metadata, params, lib_dir) for t in traces])
     col = np.ascontiguousarray(np.concatenate([t.collective for t in traces]))
-    for a in (ud, col, starts, lengths):
+    for a in (ud, gains, col, starts, lengths):
         a.setflags(write=False)
     ids = tuple(str(t.metadata.get("id", i)) for i, t in enumerate(traces))
     sources = tuple(str((t.metadata.get("source") or {}).get("name", "")) for t in traces)
-    return EnvModel(params, root, doc, ud, col, starts, lengths, float(rates[0]), ids, sources, int(version))
+    return EnvModel(params, root, doc, ud, gains, col, starts, lengths, float(rates[0]), ids, sources, int(version))
+
+
+def _trace_gains(entry: dict, params: ModelParams, lib_dir: Path) -> np.ndarray:
+    """(k2, k6, k10) a trace's u_d was scaled with: its library entry's ``control_gains``, else the model's."""
+    recorded = entry.get("control_gains")
+    if not recorded:
+        return params.control_gains
+    try:
+        gains = np.array([float(recorded[axis]) for axis in ("roll", "pitch", "yaw")])
+    except (KeyError, TypeError, ValueError) as e:
+        raise EnvModelError(f"{lib_dir}: trace {entry.get('id')!r} records control_gains {recorded!r}; expected "
+                            "numbers for roll, pitch and yaw") from e
+    if not np.all(np.isfinite(gains)):
+        raise EnvModelError(f"{lib_dir}: trace {entry.get('id')!r} records non-finite control_gains {recorded!r}")
+    return gains

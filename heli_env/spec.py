@@ -3,7 +3,8 @@
 :func:`build_spec` checks the constructor arguments once and precomputes what
 every step needs: the model's discrete-time step (:func:`identification.model.discrete_step`
 generated for the control period), the gust torque ``k*u_d`` of every library
-sample, and the trim sticks for every recorded collective.
+sample (:attr:`heli_env.model_dir.EnvModel.torque`), and the trim sticks for
+every recorded collective.
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ class EnvSpec:
     init_angle: float
     init_rate: float
     dstep: object
-    torque: np.ndarray  # (3, total) k * u_d
+    torque: np.ndarray  # (3, total) k * u_d, each trace with the gains it was identified with
     trim: np.ndarray  # (3, total) trim lat, lon, ped at each recorded collective
     col: np.ndarray  # (total,) collective applied at each library sample
 
@@ -80,7 +81,7 @@ def build_spec(model=None, task="hold", reference="mixed", dt: float = 0.01, epi
     trim = np.array(trim_sticks(params, col))
     if not np.all(np.isfinite(trim)):
         raise ValueError("the model has a zero control gain on some axis; it cannot be trimmed")
-    torque = params.control_gains[:, None] * env_model.ud
+    torque = env_model.torque
     for a in (trim, torque, col):
         a.setflags(write=False)
     return EnvSpec(

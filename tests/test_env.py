@@ -682,3 +682,42 @@ def test_human_mode_draws_each_step():
             assert env.render() is None
             env.step(np.zeros(3, np.float32))
     env.close()
+
+
+def _model_copy_with_moved_gains(tmp_path, default_model):
+    """The shipped model directory with k2 and k10 changed in model.json (as a refresh may do)."""
+    from identification.model_file import save_model
+
+    d = tmp_path / "model"
+    shutil.copytree(default_model_dir(), d)
+    p = default_model.params
+    save_model(d, p.with_values(k2=p.k2 * 1.3, k10=p.k10 * 0.8))
+    return d
+
+
+def test_traces_replay_the_torque_they_were_identified_with_after_the_gains_move(tmp_path, default_model):
+    """eq. 42: the identified gust torque is k * u_d with the identifying model's k; a refreshed model's
+    new gains must not rescale the gusts of earlier flights."""
+    moved = load_env_model(_model_copy_with_moved_gains(tmp_path, default_model))
+    assert moved.params.k2 == pytest.approx(default_model.params.k2 * 1.3)
+    assert np.array_equal(moved.gains, default_model.gains)
+    assert np.array_equal(moved.torque, default_model.torque)
+    assert np.array_equal(HeliAttitudeEnv(model=moved).spec_.torque, default_model.torque)
+    assert np.array_equal(default_model.gains, np.repeat(default_model.params.control_gains[:, None], 3, axis=1))
+
+
+def test_a_trace_without_recorded_gains_takes_the_model_s(tmp_path, default_model):
+    import json
+
+    d = _model_copy_with_moved_gains(tmp_path, default_model)
+    manifest = d / "disturbances" / "manifest-v0001.json"
+    doc = json.loads(manifest.read_text())
+    doc["traces"][1]["control_gains"] = None
+    manifest.write_text(json.dumps(doc))
+    moved = load_env_model(d)
+    assert np.array_equal(moved.gains[:, 1], moved.params.control_gains)
+    assert np.array_equal(moved.gains[:, [0, 2]], default_model.gains[:, [0, 2]])
+    doc["traces"][2]["control_gains"] = {"roll": "stiff", "pitch": 1.0, "yaw": 1.0}
+    manifest.write_text(json.dumps(doc))
+    with pytest.raises(EnvModelError, match=r"records control_gains .*expected numbers for roll, pitch and yaw"):
+        load_env_model(d)
