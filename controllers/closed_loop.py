@@ -263,7 +263,8 @@ def closed_loop_poles(plant: HoverPlant, axis, kp, kd, nominal) -> tuple[np.ndar
 def disturbance_spectrum(env_model, dt: float, nperseg: int = 2048) -> tuple[np.ndarray, np.ndarray]:
     """One-sided power spectral density of the library's ``u_d`` per axis (Welch), at the control period.
 
-    Each trace is taken every ``dt`` (the samples the replay uses), its mean
+    The u_d is the replayed gust in this model's stick units
+    (:attr:`heli_env.model_dir.EnvModel.replay_ud`). Each trace is taken every ``dt`` (the samples the replay uses), its mean
     removed (u_d is zero-mean by definition, eq. 42), its Welch estimate (Hann
     window, ``nperseg`` samples, half overlap, *no* per-segment detrending, which
     would remove the gusts slower than a segment and lose ~7 % of the variance of
@@ -279,7 +280,7 @@ def disturbance_spectrum(env_model, dt: float, nperseg: int = 2048) -> tuple[np.
     from scipy.signal import welch
 
     ratio = int(round(dt * env_model.sample_rate))
-    segs = [env_model.ud[:, s:s + n:ratio] for s, n in zip(env_model.starts, env_model.lengths)]
+    segs = [env_model.replay_ud[:, s:s + n:ratio] for s, n in zip(env_model.starts, env_model.lengths)]
     nps = int(min(nperseg, min(s.shape[1] for s in segs)))
     if nps < 16:
         raise SweepError(f"the disturbance traces are too short for a spectrum ({nps} samples at dt={dt} s)")

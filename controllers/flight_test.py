@@ -79,7 +79,8 @@ def fit_corner(freq: np.ndarray, psd: np.ndarray, floor: float = 1e-3) -> float:
 def wind_statistics(env_model, dt: float) -> dict:
     """Level and bandwidth of the library's gusts per axis, and its collective's mean and spread.
 
-    ``std`` is the standard deviation of u_d (each trace's mean removed, eq. 42)
+    ``std`` is the standard deviation of the replayed u_d (:attr:`heli_env.model_dir.EnvModel.replay_ud`;
+    each trace's mean removed, eq. 42)
     at the control period; ``corner_hz`` the fitted Butterworth corner of its
     Welch spectrum (:func:`fit_corner`).
     """
@@ -87,7 +88,7 @@ def wind_statistics(env_model, dt: float) -> dict:
     var = np.zeros(3)
     n = 0
     for s, m in zip(env_model.starts, env_model.lengths):
-        seg = env_model.ud[:, s:s + m:ratio]
+        seg = env_model.replay_ud[:, s:s + m:ratio]
         var += seg.var(axis=1) * seg.shape[1]
         n += seg.shape[1]
     freq, psd = disturbance_spectrum(env_model, dt)

@@ -93,6 +93,16 @@ class EnvModel:
         torque.setflags(write=False)
         return torque
 
+    @cached_property
+    def replay_ud(self) -> np.ndarray:
+        """:attr:`torque` in the current model's stick units, shape (3, total): the u_d this
+        model would need to feel the replayed gusts (equal to ``ud`` where a trace's gains are
+        the model's). What spectra and gust statistics of the replayed wind are taken from."""
+        scale = self.gains / self.params.control_gains[:, None]
+        ud = np.repeat(scale, self.lengths, axis=1) * self.ud
+        ud.setflags(write=False)
+        return ud
+
 
 def load_env_model(path=None, library_version: int | None = None) -> EnvModel:
     """Read ``model.json`` and the disturbance library of a model directory.

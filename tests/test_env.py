@@ -721,3 +721,13 @@ def test_a_trace_without_recorded_gains_takes_the_model_s(tmp_path, default_mode
     manifest.write_text(json.dumps(doc))
     with pytest.raises(EnvModelError, match=r"records control_gains .*expected numbers for roll, pitch and yaw"):
         load_env_model(d)
+
+
+def test_replayed_gusts_in_the_model_s_stick_units(tmp_path, default_model):
+    """Spectra and gust statistics see the replayed torque over the current gains: unchanged ud where the
+    gains are the model's, rescaled by k_trace / k_model after the gains move."""
+    assert np.array_equal(default_model.replay_ud, default_model.ud)
+    moved = load_env_model(_model_copy_with_moved_gains(tmp_path, default_model))
+    assert_allclose(moved.replay_ud * moved.params.control_gains[:, None], default_model.torque, rtol=1e-14)
+    assert_allclose(moved.replay_ud[0], default_model.ud[0] / 1.3, rtol=1e-14)
+    assert np.array_equal(moved.replay_ud[1], default_model.ud[1])
