@@ -20,7 +20,7 @@ arithmetic in one pass per copy:
   the info arrays in degrees and the episode ends.
 
 The two long loops run over the copies with ``numba.prange`` on numba's thread
-pool (all cores by default; ``HeliAttitudeVectorEnv(threads=...)`` or
+pool (all cores from 256 copies by default; ``HeliAttitudeVectorEnv(threads=...)`` or
 ``NUMBA_NUM_THREADS`` limit it). Copies are independent, so the results are the
 same for any number of threads.
 """

@@ -338,3 +338,13 @@ def test_a_rejected_action_changes_nothing(delay):
         want, got = clean.step(a), hit.step(a)
         assert np.array_equal(want[0], got[0]) and np.array_equal(want[1], got[1])
     assert np.array_equal(np.array(clean._x), np.array(hit._x))
+
+
+def test_default_thread_count_follows_the_batch_size():
+    import numba
+
+    from heli_env.vector_env import THREADED_FROM
+
+    assert HeliAttitudeVectorEnv(8)._threads == 1
+    assert HeliAttitudeVectorEnv(THREADED_FROM)._threads == numba.config.NUMBA_NUM_THREADS
+    assert HeliAttitudeVectorEnv(8, threads=numba.config.NUMBA_NUM_THREADS)._threads == numba.config.NUMBA_NUM_THREADS
