@@ -41,6 +41,8 @@ import numpy as np
 from identification.files import write_text
 from identification.model import DISCRETE_INPUTS, DISCRETE_OUTPUTS, ModelParams, discrete_step_statements
 
+from .tasks import TWO_PI
+
 ROW_PAD = 8
 """Extra columns per row of the batched arrays. Rows of exactly 4096 float64 lie 32 KiB
 apart and fall into the same cache sets; a loop that reads and writes a dozen such rows
@@ -213,9 +215,9 @@ def observe_kernel(task: str, noisy: bool):
     environment's ``_observe`` and :func:`heli_env.tasks.reward_from_sums`,
     written out per axis.
     """
-    two_pi = repr(2.0 * math.pi)
+    two_pi = repr(TWO_PI)
 
-    def wrap(v):
+    def wrap(v):  # heli_env.tasks.wrap
         return f"({v}) - {two_pi} * np.round(({v}) / {two_pi})"
 
     def bound(v):
