@@ -264,8 +264,9 @@ def disturbance_spectrum(env_model, dt: float, nperseg: int = 2048) -> tuple[np.
     """One-sided power spectral density of the library's ``u_d`` per axis (Welch), at the control period.
 
     The u_d is the replayed gust in this model's stick units
-    (:attr:`heli_env.model_dir.EnvModel.replay_ud`). Each trace is taken every ``dt`` (the samples the replay uses), its mean
-    removed (u_d is zero-mean by definition, eq. 42), its Welch estimate (Hann
+    (:attr:`heli_env.model_dir.EnvModel.replay_ud`). Each trace is taken every
+    ``dt`` (the samples the replay uses), its mean removed (u_d is zero-mean by
+    definition, eq. 42), its Welch estimate (Hann
     window, ``nperseg`` samples, half overlap, *no* per-segment detrending, which
     would remove the gusts slower than a segment and lose ~7 % of the variance of
     the shipped library) computed, and the traces averaged weighted by their lengths.

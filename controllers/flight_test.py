@@ -79,9 +79,9 @@ def fit_corner(freq: np.ndarray, psd: np.ndarray, floor: float = 1e-3) -> float:
 def wind_statistics(env_model, dt: float) -> dict:
     """Level and bandwidth of the library's gusts per axis, and its collective's mean and spread.
 
-    ``std`` is the standard deviation of the replayed u_d (:attr:`heli_env.model_dir.EnvModel.replay_ud`;
-    each trace's mean removed, eq. 42)
-    at the control period; ``corner_hz`` the fitted Butterworth corner of its
+    ``std`` is the standard deviation of the replayed u_d
+    (:attr:`heli_env.model_dir.EnvModel.replay_ud`; each trace's mean removed,
+    eq. 42) at the control period; ``corner_hz`` the fitted Butterworth corner of its
     Welch spectrum (:func:`fit_corner`).
     """
     ratio = int(round(dt * env_model.sample_rate))
