@@ -153,33 +153,37 @@ class HeliAttitudeVectorEnv(VectorEnv):
             gust_default = 0.0
         if not (gust_default >= 0 and math.isfinite(gust_default)):
             raise ValueError(f"options['gust_scale'] must be a non-negative number, got {gust_default!r}")
-        for i in which.tolist():
-            ep = draw_episode(self._rngs[i], s.task, s.model.n_traces, s.model.lengths, s.needed, s.episode_steps,
-                              s.dt, s.init_angle, s.init_rate, options)
-            base = int(s.model.starts[ep.trace]) + ep.offset
-            end = int(s.model.starts[ep.trace] + s.model.lengths[ep.trace])
-            stop = min(end, base + s.needed)
-            self._base[i] = base
-            self._last[i] = len(range(base, stop, s.ratio)) - 1
-            # as the single env: the time limit, or until the replay reaches the trace's last sample
-            self._nsteps[i] = min(s.episode_steps, max(int(self._last[i]), 1))
-            self._k[i] = 0
-            self._trace[i] = ep.trace
-            self._gust[i] = gust_default
-            trim = s.trim[:, base]
-            values = (ep.rates[0], ep.rates[1], ep.rates[2], trim[0], trim[1], trim[2],
-                      *quaternion_from_euler(ep.angles[0], ep.angles[1], 0.0))
-            for row, v in zip(self._x, values):
-                row[i] = v
-            self._prev[:, i] = 0.0
-            if self._queue is not None:
-                self._queue[:, :, i] = 0.0
-            self._smooth[i] = ep.smooth
-            self._steps[:, :, i] = ep.steps
-            self._amp[:, :, i] = ep.amp
-            self._freq[:, :, i] = ep.freq
-            self._phase[:, :, i] = ep.phase
-            self._done[i] = False
+        # Every copy draws its episode from its own generator (as a single env seeded seed + i would);
+        # the state is then written for all of them at once, and only once every draw has succeeded.
+        eps = [draw_episode(self._rngs[i], s.task, s.model.n_traces, s.model.lengths, s.needed, s.episode_steps,
+                            s.dt, s.init_angle, s.init_rate, options) for i in which.tolist()]
+        if not eps:
+            return
+        traces = np.array([ep.trace for ep in eps], dtype=np.int64)
+        base = s.model.starts[traces] + np.array([ep.offset for ep in eps], dtype=np.int64)
+        stop = np.minimum(s.model.starts[traces] + s.model.lengths[traces], base + s.needed)
+        last = (stop - base + s.ratio - 1) // s.ratio - 1  # len(range(base, stop, ratio)) - 1
+        self._base[which] = base
+        self._last[which] = last
+        # as the single env: the time limit, or until the replay reaches the trace's last sample
+        self._nsteps[which] = np.minimum(s.episode_steps, np.maximum(last, 1))
+        self._k[which] = 0
+        self._trace[which] = traces
+        self._gust[which] = gust_default
+        angles = np.array([ep.angles for ep in eps]).T
+        x = self._x
+        x[0:3, which] = np.array([ep.rates for ep in eps]).T
+        x[3:6, which] = s.trim[:, base]
+        x[6:10, which] = quaternion_from_euler(angles[0], angles[1], 0.0)  # elementwise as on one copy
+        self._prev[:, which] = 0.0
+        if self._queue is not None:
+            self._queue[:, :, which] = 0.0
+        self._smooth[which] = [ep.smooth for ep in eps]
+        self._steps[:, :, which] = np.stack([ep.steps for ep in eps], axis=-1)
+        self._amp[:, :, which] = np.stack([ep.amp for ep in eps], axis=-1)
+        self._freq[:, :, which] = np.stack([ep.freq for ep in eps], axis=-1)
+        self._phase[:, :, which] = np.stack([ep.phase for ep in eps], axis=-1)
+        self._done[which] = False
 
     # ------------------------------------------------------------------- step
     def step(self, actions):
