@@ -383,7 +383,9 @@ def linear_structure(params: ModelParams):
     return A, B, tuple(nonlinear), tuple(servo)
 
 
-DISCRETE_INPUTS = ("p", "q", "r", "z0", "z1", "z2", "q0", "q1", "q2", "q3", "lat", "lon", "col", "ped", "d0", "d1", "d2")
+DISCRETE_INPUTS = ("p", "q", "r", "z0", "z1", "z2", "q0", "q1", "q2", "q3",  # state
+                   "lat", "lon", "col", "ped",  # sticks
+                   "d0", "d1", "d2")  # disturbance torque
 """Names the statements of :func:`discrete_step_statements` read: state, sticks, disturbance torque."""
 
 DISCRETE_OUTPUTS = ("pn", "qn", "rn", "z0n", "z1n", "z2n", "b0", "b1", "b2", "b3")
