@@ -25,7 +25,11 @@ items are resubmitted (up to ``max_retries`` times). An exception *raised* by
 ``fn`` (a :class:`~identification.errors.FlightLogError`, a ``SweepError``) is
 the caller's to see: it is re-raised as itself, with no retry, unless a
 :class:`RayBackend` is told otherwise with ``retry_exceptions``. When retries run
-out :class:`~identification.errors.TaskFailed` names the item.
+out :class:`~identification.errors.TaskFailed` names the item. After a task
+raises, no further task is submitted; tasks already running are left to finish
+and their results are dropped (a :class:`RayBackend` keeps a bounded window of
+tasks in flight and never calls :func:`ray.cancel`, whose race with a task's
+reply aborts the driver process in Ray 2.x).
 
 The module sits in :mod:`identification`, the lowest layer, because
 identification of many flights uses it and ``identification`` must not import
@@ -329,27 +333,37 @@ class RayBackend(Backend):
         return f"ray, {self.workers} CPUs on {nodes} node{'s' if nodes != 1 else ''}"
 
     def map(self, fn, items, shared=None, *, progress: bool = False, desc: str = "tasks") -> list:
+        """Run ``fn(item, shared)`` on the cluster; results in item order.
+
+        At most :attr:`in_flight` tasks are submitted at a time, and a task that
+        raises stops further submission. Tasks already running are left to finish
+        (their results are dropped): :func:`ray.cancel` of a task whose reply is
+        arriving aborts the driver process in Ray 2.x ("Tried to complete task
+        that was not pending", ray-project/ray#54846), so it is never called.
+        """
         ray = self._connect()
         items = list(items)
         if not items:
             return []
         fn_ref, shared_ref = ray.put(fn), ray.put(shared)  # into the object store once
-        refs = {self._remote.remote(fn_ref, item, shared_ref): i for i, item in enumerate(items)}
-        results = {}
+        window = self.in_flight
+        refs, results, nxt = {}, {}, 0
         with _progress(len(items), progress, desc) as bar:
-            try:
-                pending = list(refs)
-                while pending:
-                    done, pending = ray.wait(pending, num_returns=1)
-                    for ref in done:
-                        results[refs[ref]] = self._get(ray, ref, refs[ref], items)
-                        bar.update(1)
-            finally:
-                if len(results) < len(items):
-                    for ref, i in refs.items():
-                        if i not in results:
-                            ray.cancel(ref)
+            while len(results) < len(items):
+                while nxt < len(items) and len(refs) < window:
+                    refs[self._remote.remote(fn_ref, items[nxt], shared_ref)] = nxt
+                    nxt += 1
+                done, _ = ray.wait(list(refs), num_returns=1)
+                for ref in done:
+                    index = refs.pop(ref)
+                    results[index] = self._get(ray, ref, index, items)
+                    bar.update(1)
         return [results[i] for i in range(len(items))]
+
+    @property
+    def in_flight(self) -> int:
+        """Tasks submitted at once: twice the cluster's task slots, so no worker waits for the next one."""
+        return max(2, 2 * int(self.workers / self.cpus_per_task))
 
     def _get(self, ray, ref, index, items):
         try:

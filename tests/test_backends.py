@@ -43,6 +43,18 @@ def _raise_on_three(item, shared):
     return item
 
 
+def _note_then_fail_first(item, shared):
+    """Leaves a file per task started (in the folder ``shared``); item 0 raises, the others take 0.2 s."""
+    import time
+    from pathlib import Path
+
+    Path(shared, str(item)).touch()
+    if item == 0:
+        raise SweepError("item 0 is bad")
+    time.sleep(0.2)
+    return item
+
+
 def _always_die(item, shared):
     if item == 1:
         os.kill(os.getpid(), signal.SIGKILL)
@@ -367,6 +379,15 @@ def test_ray_task_errors_and_exhausted_retries(ray_backend):
         ray_backend.map(_raise_on_three, range(5))
     with pytest.raises(TaskFailed, match="Ray task #1 of 2 failed after 0 retries"):
         RayBackend(max_retries=0).map(_always_die, range(2))
+
+
+def test_ray_stops_submitting_after_a_task_raises(ray_backend, tmp_path):
+    # a bounded window of tasks in flight, and no ray.cancel (it races with task replies and aborts
+    # the driver in Ray 2.x, which is how a CI run once died without a word)
+    assert ray_backend.in_flight == 4
+    with pytest.raises(SweepError, match="item 0 is bad"):
+        ray_backend.map(_note_then_fail_first, range(40), str(tmp_path))
+    assert 1 <= len(list(tmp_path.iterdir())) <= 2 * ray_backend.in_flight
 
 
 def test_ray_seeds_equal_the_local_backend(ray_backend, seeds_local, tmp_path):
