@@ -840,11 +840,15 @@ class PDController:
         state
             ``state`` unchanged.
         """
+        return np.clip(self.command(observation), -1.0, 1.0).astype(np.float32), state
+
+    def command(self, observation) -> np.ndarray:
+        """The unclipped command ``sign * (kp * attitude_error + kd * rate_error)`` [stick], float64,
+        shape (3,) or (n, 3); :meth:`predict` clips it (a residual agent adds to it first)."""
         obs = np.asarray(observation, dtype=np.float64)
         if obs.ndim not in (1, 2) or obs.shape[-1] != OBS_DIM:
             raise ValueError(f"observation must have shape ({OBS_DIM},) or (n, {OBS_DIM}), got {obs.shape}")
-        act = self._kp * obs[..., 0:3] + self._kd * obs[..., 6:9]
-        return np.clip(act, -1.0, 1.0).astype(np.float32), state
+        return self._kp * obs[..., 0:3] + self._kd * obs[..., 6:9]
 
     def document(self, metadata=None) -> dict:
         """The JSON document :meth:`save` writes."""

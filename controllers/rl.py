@@ -46,6 +46,7 @@ from identification.errors import require
 from identification.files import jsonable, write_text
 
 from .errors import AgentError, TrainingInterrupted
+from .residual import RESIDUAL_INIT_DEG, RESIDUAL_SCALE, residual_from_metadata, residual_metadata
 from .trace_split import TraceSegment, TraceSplit, WindowSampler, as_segments, split_traces  # noqa: F401
 
 ALGOS = ("ppo", "sac")
@@ -140,7 +141,9 @@ def train_agent(algo: str = "ppo", model=None, timesteps: int = 200_000, out="ag
                 train_traces=None, eval_traces=None, held_out_fraction: float = 0.25, split_seed: int = 0,
                 eval_episodes: int = 4, episode_seconds: float = 30.0, task="hold", max_seconds: float | None = None,
                 algo_kwargs: dict | None = None, normalize_reward: bool | None = None, callbacks=(),
-                torch_threads: int | None = 1, verbose: int = 0) -> TrainingResult:
+                torch_threads: int | None = 1, verbose: int = 0, residual=None,
+                residual_scale: float = RESIDUAL_SCALE, init_angle_deg: float | None = None,
+                init_rate_deg: float | None = None) -> TrainingResult:
     """Train a PPO or SAC attitude agent on the training traces of a model's disturbance library.
 
     Parameters
@@ -193,6 +196,19 @@ def train_agent(algo: str = "ppo", model=None, timesteps: int = 200_000, out="ag
         fixed count keeps results reproducible.
     verbose : int
         SB3 verbosity.
+    residual : PDController or path of a PD controller JSON, optional
+        Train a residual on this PD instead of a whole policy
+        (:mod:`controllers.residual`): the env receives
+        ``clip(PD(obs) + residual_scale * action, -1, 1)``. Unless given, the task's
+        reward scales, the observation scales (``policy_kwargs``'
+        ``features_extractor_kwargs``) and the initial ranges follow the PD's own
+        error level on the training gusts; the saved agent carries the PD and
+        :func:`load_agent` returns a :class:`controllers.residual.ResidualAgent`.
+    residual_scale : float
+        Bound of the residual [stick] (default 0.05).
+    init_angle_deg, init_rate_deg : float, optional
+        Initial roll/pitch range [deg] and rate range [deg/s] of training and
+        evaluation episodes. Default 5 and 5 (the env's), 0.5 and 0.5 with ``residual``.
 
     Returns
     -------
@@ -201,8 +217,8 @@ def train_agent(algo: str = "ppo", model=None, timesteps: int = 200_000, out="ag
     Raises
     ------
     AgentError
-        Unknown algorithm, bad counts, split, traces, task or episode length, or
-        episodes longer than the gust segments.
+        Unknown algorithm, bad counts, split, traces, task or episode length,
+        episodes longer than the gust segments, or a bad residual base or scale.
     heli_env.errors.EnvModelError
         Missing or corrupt model directory.
     TrainingInterrupted
@@ -220,6 +236,15 @@ def train_agent(algo: str = "ppo", model=None, timesteps: int = 200_000, out="ag
         torch_threads = _check_count(torch_threads, "torch_threads")
     if max_seconds is not None and not (max_seconds > 0 and math.isfinite(max_seconds)):
         raise AgentError(f"max_seconds must be a positive number of seconds, got {max_seconds!r}")
+    base = None
+    if residual is not None:
+        from .residual import as_base, check_scale
+
+        base, residual_scale = as_base(residual), check_scale(residual_scale)
+    init = RESIDUAL_INIT_DEG if base is not None else 5.0
+    init = tuple(init if v is None else v for v in (init_angle_deg, init_rate_deg))
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v < 90 for v in init):
+        raise AgentError(f"init_angle_deg and init_rate_deg must be numbers in [0, 90), got {init!r}")
 
     from heli_env.model_dir import EnvModel, load_env_model
 
@@ -242,19 +267,20 @@ def train_agent(algo: str = "ppo", model=None, timesteps: int = 200_000, out="ag
         return _train(algo, env_model, timesteps, path, run_dir, name, seed, n_envs, eval_freq, checkpoint_freq,
                       progress, split, train_seg, eval_seg, eval_episodes, episode_seconds, task, max_seconds,
                       algo_kwargs, algo == "ppo" if normalize_reward is None else bool(normalize_reward), callbacks,
-                      verbose)
+                      verbose, (base, residual_scale), init)
     finally:
         torch.set_num_threads(threads_before)
 
 
 def _train(algo, env_model, timesteps, path, run_dir, name, seed, n_envs, eval_freq, checkpoint_freq, progress,
            split, train_seg, eval_seg, eval_episodes, episode_seconds, task, max_seconds, algo_kwargs,
-           normalize_reward, callbacks, verbose) -> TrainingResult:
+           normalize_reward, callbacks, verbose, residual, init) -> TrainingResult:
     sb3 = _sb3()
     from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
+    from heli_env.tasks import TaskConfig
     from heli_env.vector_env import HeliAttitudeVectorEnv
 
     from .sb3_training import (AtomicCheckpoint, AtomicEvalCallback, ObservationScaler, ProgressBar, WallClockLimit,
@@ -262,17 +288,33 @@ def _train(algo, env_model, timesteps, path, run_dir, name, seed, n_envs, eval_f
     from .sb3_vec_env import GymnasiumVecEnv
 
     set_random_seed(seed)
+    base, residual_scale = residual
+    setup = None
+    if base is not None:
+        from .residual import residual_env, residual_setup
+
+        setup = residual_setup(base, env_model, train_seg, seed)
+        if isinstance(task, str):
+            try:
+                task = TaskConfig(task=task, attitude_scale=setup["attitude_scale"], rate_scale=setup["rate_scale"])
+            except ValueError as e:
+                raise AgentError(str(e)) from e
     try:  # bad task or episode length; episodes longer than the gust segments
-        venv = HeliAttitudeVectorEnv(n_envs, model=env_model, task=task, episode_seconds=episode_seconds)
+        kw = dict(model=env_model, task=task, episode_seconds=episode_seconds, init_angle_deg=init[0],
+                  init_rate_deg=init[1])
+        venv = HeliAttitudeVectorEnv(n_envs, **kw)
         needed = venv.spec_.needed
         train_sampler = WindowSampler(env_model, train_seg, needed)
         eval_sampler = WindowSampler(env_model, eval_seg, needed)
-        eval_venv = HeliAttitudeVectorEnv(eval_episodes, model=env_model, task=task, episode_seconds=episode_seconds)
+        eval_venv = HeliAttitudeVectorEnv(eval_episodes, **kw)
     except ValueError as e:
         raise AgentError(str(e)) from e
     gamma = (algo_kwargs or {}).get("gamma", DEFAULT_KWARGS[algo]["gamma"])
-    env = VecMonitor(GymnasiumVecEnv(venv, episode_options=train_sampler))  # monitors the raw returns
-    eval_env = VecMonitor(GymnasiumVecEnv(eval_venv, episode_options=eval_sampler, fixed_seed=seed + 1000))
+    env = GymnasiumVecEnv(venv, episode_options=train_sampler)
+    eval_env = GymnasiumVecEnv(eval_venv, episode_options=eval_sampler, fixed_seed=seed + 1000)
+    if base is not None:
+        env, eval_env = residual_env(env, base, residual_scale), residual_env(eval_env, base, residual_scale)
+    env, eval_env = VecMonitor(env), VecMonitor(eval_env)  # monitors the raw returns
     if normalize_reward:  # the eval env is wrapped alike (EvalCallback syncs wrappers) but left raw
         env = VecNormalize(env, norm_obs=False, norm_reward=True, gamma=gamma)
         eval_env = VecNormalize(eval_env, training=False, norm_obs=False, norm_reward=False)
@@ -281,6 +323,8 @@ def _train(algo, env_model, timesteps, path, run_dir, name, seed, n_envs, eval_f
     for k, v in (algo_kwargs or {}).items():
         kwargs[k] = {**kwargs.get(k, {}), **v} if k == "policy_kwargs" else v
     kwargs["policy_kwargs"].setdefault("features_extractor_class", ObservationScaler)
+    if setup is not None and kwargs["policy_kwargs"]["features_extractor_class"] is ObservationScaler:
+        kwargs["policy_kwargs"].setdefault("features_extractor_kwargs", {"scale": setup["obs_scale"]})
     agent = _algo_class(algo)("MlpPolicy", env, seed=seed, device="cpu", verbose=verbose, **kwargs)
     # SB3's own logger would make an empty SB3-<date> folder in the system's temp folder on
     # every run; its training statistics go to the run folder instead (progress.csv).
@@ -295,6 +339,8 @@ def _train(algo, env_model, timesteps, path, run_dir, name, seed, n_envs, eval_f
         "train_segments": [s.to_dict() for s in train_seg], "eval_segments": [s.to_dict() for s in eval_seg],
         "task": task if isinstance(task, str) else dataclasses.asdict(task), "episode_seconds": episode_seconds,
         "dt": venv.spec_.dt, "n_envs": n_envs, "normalize_reward": normalize_reward,
+        "init_angle_deg": init[0], "init_rate_deg": init[1],
+        "residual": None if base is None else residual_metadata(base, residual_scale, setup),
         "hyperparameters": _plain(kwargs),
         "versions": {"stable_baselines3": sb3.__version__, "torch": _torch_version()},
     })
@@ -561,7 +607,7 @@ def load_agent(path):
 
     Returns
     -------
-    PDController or stable_baselines3 PPO / SAC
+    PDController, stable_baselines3 PPO / SAC, or ResidualAgent (a PPO / SAC residual on a PD)
         Each has ``predict(observation, state=None, episode_start=None, deterministic=False)``.
 
     Raises
@@ -576,9 +622,11 @@ def load_agent(path):
     if zipfile.is_zipfile(path):
         algo = _zip_algo(path)
         try:
-            return _algo_class(algo).load(path, device="cpu")
+            policy = _algo_class(algo).load(path, device="cpu")
         except (ValueError, KeyError, RuntimeError) as e:
             raise AgentError(f"{path}: cannot load the {algo.upper()} agent: {e}") from e
+        meta = agent_metadata(path) or {}
+        return residual_from_metadata(meta, policy, path) if meta.get("residual") else policy
     from .pd import PDController
 
     try:

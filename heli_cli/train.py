@@ -58,8 +58,24 @@ def register(sub):
     p.add_argument("--workers", type=whole(1), default=None, metavar="N",
                    help="local worker processes for --seeds, or CPUs of a Ray instance started here "
                    "(default: all cores)")
+    p.add_argument("--residual", metavar="PD.json", default=None,
+                   help="train a residual on this PD controller (from 'heli design' or a sweep): the env receives "
+                   "the PD's command plus --residual-scale times the agent's action; reward and observation scales "
+                   "follow the PD's own errors on the training gusts")
+    p.add_argument("--residual-scale", type=number("a number in (0, 2]", 0.0, 2.0, high_open=False), default=0.05,
+                   metavar="STICK",
+                   help="bound of the residual in stick units (default 0.05)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
+
+
+def _residual(args) -> dict:
+    """train_agent's residual arguments; the PD file is read here so a bad one fails before any work."""
+    if args.residual is None:
+        return {}
+    from controllers.residual import as_base
+
+    return {"residual": as_base(args.residual), "residual_scale": args.residual_scale}
 
 
 def _run_seeds(args) -> int:
@@ -72,7 +88,7 @@ def _run_seeds(args) -> int:
                               n_envs=args.n_envs, eval_freq=args.eval_freq, checkpoint_freq=args.checkpoint_freq,
                               progress=not args.no_progress, held_out_fraction=args.held_out_fraction,
                               split_seed=args.split_seed, eval_episodes=args.eval_episodes,
-                              episode_seconds=args.episode_seconds,
+                              episode_seconds=args.episode_seconds, **_residual(args),
                               max_seconds=None if args.minutes is None else 60.0 * args.minutes)
         where = backend.describe()
     finally:
@@ -96,7 +112,7 @@ def run(args) -> int:
                           eval_freq=args.eval_freq, checkpoint_freq=args.checkpoint_freq,
                           progress=not args.no_progress, held_out_fraction=args.held_out_fraction,
                           split_seed=args.split_seed, eval_episodes=args.eval_episodes,
-                          episode_seconds=args.episode_seconds,
+                          episode_seconds=args.episode_seconds, **_residual(args),
                           max_seconds=None if args.minutes is None else 60.0 * args.minutes)
     except TrainingInterrupted as e:
         print(f"heli train: interrupted after {e.timesteps} timesteps; checkpoint saved to {e.checkpoint}",

@@ -7,8 +7,12 @@
    *training* traces (:func:`controllers.sweep.sweep_pairs`) and keeps, per axis,
    the stable pair with the smallest p90 |attitude error| ("best swept PD").
 3. Trains PPO and SAC on the training traces, each for a wall-time budget
-   (``--minutes``) or a number of timesteps, whichever ends first.
-4. Evaluates the designed PD, the best swept PD, PPO and SAC with one evaluator
+   (``--minutes``) or a number of timesteps, whichever ends first, and a PPO
+   residual on the best swept PD (:mod:`controllers.residual`: the agent's
+   action is the PD's command plus a learnt correction of at most 0.05 stick),
+   with the same budget. The residual's wall time does not include the sweep that
+   found its base.
+4. Evaluates the designed PD, the best swept PD and the RL agents with one evaluator
    (:func:`controllers.evaluate.evaluate_agent`) on the same held-out windows and
    initial states; the RL agents compared are the *final* ones (the best
    checkpoints were picked on the held-out traces).
@@ -80,7 +84,9 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="compare-out")
     ap.add_argument("--minutes", type=float, default=15.0, help="wall-time budget per algorithm (default 15)")
     ap.add_argument("--timesteps", type=int, default=10**9, help="timestep cap per algorithm (default: none)")
-    ap.add_argument("--algos", default="ppo,sac", help="comma-separated algorithms (default ppo,sac)")
+    ap.add_argument("--algos", default="ppo,sac,ppo-residual",
+                    help="comma-separated algorithms: ppo, sac, and ppo-residual / sac-residual, a residual on the "
+                    "best swept PD (default ppo,sac,ppo-residual)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--n-envs", type=int, default=8)
     ap.add_argument("--episodes-per-trace", type=int, default=6, help="held-out episodes per trace (default 6)")
@@ -107,10 +113,14 @@ def main(argv=None) -> int:
 
     training = {}
     for algo in [a.strip() for a in args.algos.split(",") if a.strip()]:
+        base, _, residual = algo.partition("-")
+        if base not in ("ppo", "sac") or residual not in ("", "residual"):
+            ap.error(f"--algos: unknown algorithm {algo!r}")
         print(f"training {algo.upper()} for at most {args.minutes:g} min ...", flush=True)
-        res = train_agent(algo, env_model, args.timesteps, out / algo, seed=args.seed, n_envs=args.n_envs,
-                          eval_freq=200_000 if algo == "ppo" else 50_000, checkpoint_freq=500_000,
-                          progress=not args.no_progress, max_seconds=60.0 * args.minutes)
+        res = train_agent(base, env_model, args.timesteps, out / algo, seed=args.seed, n_envs=args.n_envs,
+                          eval_freq=200_000 if base == "ppo" else 50_000, checkpoint_freq=500_000,
+                          progress=not args.no_progress, max_seconds=60.0 * args.minutes,
+                          residual=agents[1][1] if residual else None)
         training[algo] = {"timesteps": res.timesteps, "seconds": res.seconds,
                           "steps_per_second": res.steps_per_second, "stopped_by_time": res.stopped_by_time,
                           "evaluations": res.evaluations, "agent": str(res.path)}

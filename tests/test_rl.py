@@ -285,3 +285,91 @@ def test_heli_train_bad_arguments(capsys):
     assert e.value.code == 2
     with pytest.raises(SystemExit):
         main(["train", "--algo", "a2c", "--timesteps", "10", "--out", "x"])
+
+
+# ------------------------------------------------------------------------------------------- residual
+BEST_PD = PDController(PDGains([360.0, 539.0, 66.0], [26.2, 39.4, 3.65]), [1, -1, 1])  # ~ the best swept pairs
+
+
+@pytest.fixture(scope="module")
+def residual_run(shipped, tmp_path_factory):
+    return _tiny("ppo", tmp_path_factory.mktemp("res") / "res", shipped, residual=BEST_PD, residual_scale=0.05)
+
+
+def test_residual_agent_is_the_pd_plus_a_bounded_correction(residual_run):
+    from controllers.residual import ResidualAgent
+
+    agent = load_agent(residual_run.path)
+    assert isinstance(agent, ResidualAgent) and agent.scale == 0.05
+    assert agent.base.gains == BEST_PD.gains and agent.base.signs == BEST_PD.signs
+    obs = np.random.default_rng(2).normal(0, 2e-4, (64, 12)).astype(np.float32)
+    act, _ = agent.predict(obs, deterministic=True)
+    pd_act, _ = BEST_PD.predict(obs)
+    assert np.all(np.abs(act - pd_act) <= 0.05 + 1e-6)
+    residual, _ = residual_run.agent.predict(obs, deterministic=True)
+    assert_array_equal(act, np.clip(BEST_PD.command(obs) + 0.05 * residual, -1, 1).astype(np.float32))
+    assert isinstance(load_agent(residual_run.best_model), ResidualAgent)  # the best model carries its base too
+
+
+def test_residual_training_scales_follow_the_pd_errors(residual_run):
+    meta = agent_metadata(residual_run.path)
+    setup = meta["residual"]["setup"]
+    # the best PD holds the shipped model's gusts to a few hundredths of a degree
+    assert 0.005 < setup["error_deg"] < 0.1
+    assert meta["task"]["attitude_scale"] == pytest.approx(2 * np.radians(setup["error_deg"]))
+    assert meta["task"]["rate_scale"] == pytest.approx(meta["task"]["attitude_scale"] * setup["corner_rad_s"])
+    assert setup["corner_rad_s"] == pytest.approx(max(360.0 / 26.2, 539.0 / 39.4, 66.0 / 3.65))  # the largest kp/kd
+    assert (meta["init_angle_deg"], meta["init_rate_deg"]) == (0.5, 0.5)
+
+
+def test_a_zero_residual_flies_the_pd(shipped):
+    from controllers.residual import residual_env
+    from controllers.sb3_vec_env import GymnasiumVecEnv
+    from heli_env.vector_env import HeliAttitudeVectorEnv
+
+    def env():
+        return GymnasiumVecEnv(HeliAttitudeVectorEnv(3, model=shipped, episode_seconds=2.0), fixed_seed=5)
+
+    wrapped, plain = residual_env(env(), BEST_PD, 0.05), env()
+    obs_w, obs_p = wrapped.reset(), plain.reset()
+    for _ in range(150):
+        obs_w, *_ = wrapped.step(np.zeros((3, 3), np.float32))
+        obs_p, *_ = plain.step(BEST_PD.predict(obs_p)[0])
+        assert_array_equal(obs_w, obs_p)
+
+
+@pytest.mark.parametrize("kw, exc, match", [
+    ({"residual": 42}, AgentError, "PDController or the path"),
+    ({"residual": BEST_PD, "residual_scale": 0.0}, AgentError, "residual_scale"),
+    ({"residual": BEST_PD, "residual_scale": float("nan")}, AgentError, "residual_scale"),
+    ({"residual": BEST_PD, "init_angle_deg": -1.0}, AgentError, "init_angle_deg"),
+    ({"residual": "no-such-pd.json"}, FileNotFoundError, "no-such-pd.json"),
+])
+def test_bad_residual_requests(shipped, tmp_path, kw, exc, match):
+    with pytest.raises(exc, match=match):
+        train_agent("ppo", shipped, 100, tmp_path / "x", progress=False, **kw)
+    (tmp_path / "other.json").write_text('{"schema": "other"}')
+    with pytest.raises(AgentError, match="residual's base must be a PD controller JSON"):
+        train_agent("ppo", shipped, 100, tmp_path / "x", progress=False, residual=tmp_path / "other.json")
+
+
+def test_corrupt_residual_metadata(residual_run, tmp_path):
+    meta = agent_metadata(residual_run.path)
+    bad = _copy_zip(residual_run.path, tmp_path / "bad_res.zip",
+                    **{"heli_agent.json": json.dumps({**meta, "residual": {"scale": 0.05}})})
+    with pytest.raises(AgentError, match="bad_res.zip: the residual entry of its metadata"):
+        load_agent(bad)
+
+
+def test_heli_train_residual_cli(tmp_path, capsys):
+    pd = BEST_PD.save(tmp_path / "pd.json")
+    out = tmp_path / "cli_res"
+    assert main(["train", "--algo", "ppo", "--timesteps", "64", "--out", str(out), "--n-envs", "1",
+                 "--episode-seconds", "1", "--eval-freq", "0", "--checkpoint-freq", "0", "--no-progress",
+                 "--residual", str(pd), "--residual-scale", "0.1"]) == 0
+    assert type(load_agent(tmp_path / "cli_res.zip")).__name__ == "ResidualAgent"
+    assert main(["evaluate", str(out) + ".zip", "--episode-seconds", "1", "--episodes-per-trace", "1", "--out",
+                 str(tmp_path / "ev")]) == 0
+    with pytest.raises(SystemExit):
+        main(["train", "--algo", "ppo", "--timesteps", "10", "--out", "x", "--residual", str(pd),
+              "--residual-scale", "3"])
