@@ -182,5 +182,5 @@ def residual_from_metadata(meta: dict, policy, path) -> ResidualAgent:
         raise AgentError(f"{path}: the residual entry of its metadata is not a base PD and a scale ({e!r})") from e
 
 
-__all__ = ["RESIDUAL_SCALE", "RESIDUAL_INIT_DEG", "ResidualAgent", "as_base", "check_scale",
-           "residual_env", "residual_setup", "residual_metadata", "residual_from_metadata"]
+__all__ = ["RESIDUAL_INIT_DEG", "RESIDUAL_SCALE", "ResidualAgent", "as_base", "check_scale", "residual_env",
+           "residual_from_metadata", "residual_metadata", "residual_setup"]

@@ -300,8 +300,8 @@ def _train(algo, env_model, timesteps, path, run_dir, name, seed, n_envs, eval_f
             except ValueError as e:
                 raise AgentError(str(e)) from e
     try:  # bad task or episode length; episodes longer than the gust segments
-        kw = dict(model=env_model, task=task, episode_seconds=episode_seconds, init_angle_deg=init[0],
-                  init_rate_deg=init[1])
+        kw = {"model": env_model, "task": task, "episode_seconds": episode_seconds, "init_angle_deg": init[0],
+              "init_rate_deg": init[1]}
         venv = HeliAttitudeVectorEnv(n_envs, **kw)
         needed = venv.spec_.needed
         train_sampler = WindowSampler(env_model, train_seg, needed)
