@@ -13,7 +13,7 @@ from gymnasium.error import ResetNeeded
 from identification.model import quaternion_from_euler
 
 from .errors import ActionError
-from .spec import MAX_RATE, EnvSpec, build_spec
+from .spec import MAX_RATE, build_spec
 from .tasks import draw_episode, reward_from_sums, wrap
 
 OBS_DIM = 12

@@ -42,12 +42,12 @@ identified at all.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
 
-from .effects import CATALOGUE, MAX_ALIGNMENT, NONE, SERVO_DELAY, UNDECIDED
+from .effects import CATALOGUE, MAX_ALIGNMENT, NONE, UNDECIDED
 from .errors import IdentifiabilityError, NotFittedError
 from .flight import Flight
 from .heldout import HeldOut, Score, Spec

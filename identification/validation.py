@@ -19,7 +19,6 @@ every array going in is in radians (rad/s for rates).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
