@@ -43,13 +43,18 @@ SCHEMA = "heli-env/agent-evaluation"
 
 
 def describe_agent(agent) -> tuple[str, str]:
-    """(kind, description) of an agent: ("pd", "PD kp=.. kd=.."), ("ppo", "PPO"), ..."""
+    """(kind, description) of an agent: ("pd", "PD kp=.. kd=.."), ("ppo", "PPO"),
+    ("ppo-residual", "PPO ±0.05 stick on PD kp=.. kd=.."), ..."""
     from .pd import PDController
+    from .residual import ResidualAgent
 
     if isinstance(agent, PDController):
         kp = ", ".join(f"{v:.3g}" for v in agent.gains.kp)
         kd = ", ".join(f"{v:.3g}" for v in agent.gains.kd)
         return "pd", f"PD kp=({kp}) kd=({kd})"
+    if isinstance(agent, ResidualAgent):
+        kind, desc = describe_agent(agent.policy)
+        return f"{kind}-residual", f"{desc} ±{agent.scale:g} stick on {describe_agent(agent.base)[1]}"
     kind = type(agent).__name__.lower()
     return kind, type(agent).__name__
 

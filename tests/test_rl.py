@@ -368,8 +368,10 @@ def test_heli_train_residual_cli(tmp_path, capsys):
                  "--episode-seconds", "1", "--eval-freq", "0", "--checkpoint-freq", "0", "--no-progress",
                  "--residual", str(pd), "--residual-scale", "0.1"]) == 0
     assert type(load_agent(tmp_path / "cli_res.zip")).__name__ == "ResidualAgent"
+    capsys.readouterr()
     assert main(["evaluate", str(out) + ".zip", "--episode-seconds", "1", "--episodes-per-trace", "1", "--out",
                  str(tmp_path / "ev")]) == 0
+    assert "cli_res.zip (ppo-residual)" in capsys.readouterr().out
     with pytest.raises(SystemExit):
         main(["train", "--algo", "ppo", "--timesteps", "10", "--out", "x", "--residual", str(pd),
               "--residual-scale", "3"])
