@@ -21,6 +21,10 @@ Files written for ``out="agents/ppo"``::
 The final agent, not the best one, is what a comparison should use: the best
 was chosen on the held-out traces it would be compared on.
 
+With ``residual=`` a PD controller, the agent learns a bounded correction on top
+of that PD rather than the whole law (:mod:`controllers.residual`); the zip then
+carries the PD and :func:`load_agent` returns the combined agent.
+
 Reproducibility: one ``seed`` seeds Python, numpy and torch
 (``set_random_seed``), the network initialisation, the environments (copy
 ``i`` gets ``seed + i``) and the draw of gust windows, so the same seed, library,
