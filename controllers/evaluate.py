@@ -278,7 +278,7 @@ def _fly(agent, env, obs, info) -> dict:
 
 
 # ------------------------------------------------------------------------ reports
-def _fmt(v, spec=".3f"):
+def _fmt(v, spec=".3g"):  # three significant digits: errors range from 1e-4 to 10 degrees
     return "—" if v is None or not math.isfinite(v) else format(v, spec)
 
 
