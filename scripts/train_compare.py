@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -69,7 +70,8 @@ def _robust_best(env_model, ax, results, dt):
                     if r.stable[j] and np.isfinite(r.table["att_p90_deg"][j])), key=lambda row: row["att_p90_deg"])
     for row in cands:
         m = loop_analysis(env_model.params, ax, row["kp"], row["kd"], dt).summary()
-        if (m["gain_margin_db"] or 0.0) >= MIN_GAIN_MARGIN_DB and (m["phase_margin_deg"] or 0.0) >= MIN_PHASE_MARGIN_DEG:
+        gm, pm = (math.inf if v is None else v for v in (m["gain_margin_db"], m["phase_margin_deg"]))  # None: no crossing
+        if gm >= MIN_GAIN_MARGIN_DB and pm >= MIN_PHASE_MARGIN_DEG:
             return row, m
     return None, None
 
