@@ -70,7 +70,8 @@ def _robust_best(env_model, ax, results, dt):
                     if r.stable[j] and np.isfinite(r.table["att_p90_deg"][j])), key=lambda row: row["att_p90_deg"])
     for row in cands:
         m = loop_analysis(env_model.params, ax, row["kp"], row["kd"], dt).summary()
-        gm, pm = (math.inf if v is None else v for v in (m["gain_margin_db"], m["phase_margin_deg"]))  # None: no crossing
+        # None: the loop never crosses, an infinite margin
+        gm, pm = (math.inf if v is None else v for v in (m["gain_margin_db"], m["phase_margin_deg"]))
         if gm >= MIN_GAIN_MARGIN_DB and pm >= MIN_PHASE_MARGIN_DEG:
             return row, m
     return None, None
