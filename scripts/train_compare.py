@@ -10,9 +10,10 @@
    :func:`swept_gains`).
 3. Trains PPO and SAC on the training traces, each for a wall-time budget
    (``--minutes``) or a number of timesteps, whichever ends first, and a PPO
-   residual on the best swept PD (:mod:`controllers.residual`: the agent's
-   action is the PD's command plus a learnt correction of at most 0.05 stick),
-   with the same budget. The residual's wall time does not include the sweep that
+   residual on a swept PD (:mod:`controllers.residual`: the agent's action is
+   the PD's command plus a learnt correction of at most ``--residual-scale``
+   stick; ``--residual-on robust``, the default, takes the best pair that keeps
+   6 dB of gain margin and 45° of phase margin), with the same budget. The residual's wall time does not include the sweep that
    found its base.
 4. Evaluates the designed PD, the best swept PD and the RL agents with one evaluator
    (:func:`controllers.evaluate.evaluate_agent`) on the same held-out windows and
@@ -133,6 +134,9 @@ def main(argv=None) -> int:
     ap.add_argument("--episodes-per-trace", type=int, default=6, help="held-out episodes per trace (default 6)")
     ap.add_argument("--grid", type=int, default=13, help="coarse PD sweep grid size per axis (default 13 x 13; "
                     "a 9 x 9 refinement follows)")
+    ap.add_argument("--residual-on", choices=("robust", "best"), default="robust",
+                    help="the swept PD a residual trains on (default robust: the best pair with 6 dB / 45 deg margins)")
+    ap.add_argument("--residual-scale", type=float, default=0.05, help="bound of the residual in stick (default 0.05)")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
     out = Path(args.out)
@@ -166,7 +170,8 @@ def main(argv=None) -> int:
         res = train_agent(base, env_model, args.timesteps, out / algo, seed=args.seed, n_envs=args.n_envs,
                           eval_freq=200_000 if base == "ppo" else 50_000, checkpoint_freq=500_000,
                           progress=not args.no_progress, max_seconds=60.0 * args.minutes,
-                          residual=agents[2][1] if residual else None)
+                          residual=agents[2 if args.residual_on == "robust" else 1][1] if residual else None,
+                          residual_scale=args.residual_scale)
         training[algo] = {"timesteps": res.timesteps, "seconds": res.seconds,
                           "steps_per_second": res.steps_per_second, "stopped_by_time": res.stopped_by_time,
                           "evaluations": res.evaluations, "agent": str(res.path)}
