@@ -4,15 +4,15 @@ Residual policy learning (Silver et al. 2018, "Residual Policy Learning";
 Johannink et al. 2019, "Residual Reinforcement Learning for Robot Control"): the
 agent learns a bounded correction on top of a working controller instead of the
 whole control law. Here the base is a :class:`controllers.pd.PDController`,
-typically the best pair of a gain sweep, and the policy is a PPO or SAC network
+typically a pair from a gain sweep, and the policy is a PPO or SAC network
 whose action in [-1, 1] is scaled to ±``scale`` stick.
 
-Why it is needed here: the best swept PD of the shipped model holds attitude to
-about 0.01–0.02° (p90) with gains of several hundred stick/rad. A policy learnt
-from scratch has to reproduce that law to a few per cent before it can improve on
-it, which PPO does not reach in 15 minutes on 2 cores (0.2–0.8° p90). A residual
-starts at the PD (the policy's output layer starts near zero) and only has to
-learn what the PD lacks; the observation carries the previous action, so a
+Why it is needed here: swept PDs of the shipped model hold attitude to a few
+thousandths of a degree (p90) with gains of hundreds to thousands of stick/rad.
+A policy learnt from scratch has to reproduce such a law closely before it can
+improve on it, which PPO does not reach in 15 minutes on 2 cores (0.2–1.1° p90).
+A residual starts at the PD (the policy's output layer starts near zero) and only
+has to learn what the PD lacks; the observation carries the previous action, so a
 correction that behaves like integral action is within its reach.
 
 The scales of training follow the base's own error level, measured by flying it
