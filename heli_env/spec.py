@@ -81,8 +81,8 @@ def build_spec(model=None, task="hold", reference="mixed", dt: float = 0.01, epi
     trim = np.array(trim_sticks(params, col))
     if not np.all(np.isfinite(trim)):
         raise ValueError("the model has a zero control gain on some axis; it cannot be trimmed")
-    torque = env_model.torque
-    for a in (trim, torque, col):
+    torque = env_model.torque  # read-only already (EnvModel caches it)
+    for a in (trim, col):
         a.setflags(write=False)
     return EnvSpec(
         model=env_model, task=cfg, dt=float(dt), ratio=ratio, episode_steps=episode_steps,
