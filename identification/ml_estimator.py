@@ -1,0 +1,763 @@
+"""Maximum-likelihood identification with a stochastic wind state (filter-error method).
+
+The integral method of Fig. 5 (:mod:`identification.integral_method`) treats the
+wind as piecewise-smooth offsets and is biased when a pilot fights broadband
+turbulence: the stick is correlated with the part of the gust the offsets
+cannot follow. This estimator models the gust instead. Per axis, e.g. roll
+(eq. 18 with the wind of eqs. 41-42 as a random process)::
+
+    p'  = -k3 p + k2 c_lat + sum_j s_j theta_j f_j + kd1 + w_slow + w_fast
+    w_i' = -w_i / T_i + nu_i,         E[w_i^2] = sigma_i^2   (first-order Gauss-Markov)
+    y_k = p(t_k) + v_k,               E[v_k^2] = R           (white gyro noise)
+
+``c_lat`` is the command after the servo delay (the Padé model of eq. 31),
+``f_j`` the other features of the axis' terms (:mod:`identification.terms`;
+rates of the other axes enter as measured, causally, never filtered), and the
+damping term (the feature equal to the axis' own rate) sits in the state
+matrix. The model is discretised exactly (matrix exponential; the inputs
+either linearly interpolated between samples, a pilot's hand, or held, a
+digital controller; the process noise by Van Loan's method), the steady-state
+Kalman filter (discrete algebraic Riccati equation) gives the one-step
+prediction errors (innovations), and the likelihood, with the noise scale
+concentrated out, is minimised over the damping and the wind model
+(``scipy.optimize.least_squares``) while the parameters that enter linearly
+(control gain, offsets, couplings, added terms) are solved exactly at every
+step (variable projection). The innovations are computed by linear filters
+(``scipy.signal.lfilter``), never by a Python loop over samples.
+
+The result is consistent under closed-loop piloting: the pilot's stick may
+depend on past gusts, because the filter predicts the gust from the past
+rates, and what is left is white. Standard errors come from the Fisher
+information of the innovations (Gauss-Newton approximation). The servo delay is
+chosen by profiling the likelihood over a grid of delays. The Rauch-Tung-Striebel
+smoother of the fitted model estimates the wind torque at every sample
+(:meth:`MaximumLikelihoodIdentifier.wind_torque`), the disturbance the library
+stores and the environment replays.
+
+Several flights share the aircraft's parameters; each flight keeps its own
+offset ``kd`` (the trim and the day's mean wind) and its own filter start.
+"""
+
+from __future__ import annotations
+
+import time as _time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import optimize, signal
+from scipy.linalg import expm, solve_discrete_are
+from threadpoolctl import threadpool_limits
+
+from .errors import IdentifiabilityError, NotFittedError
+from .flight import Flight
+from .integral_method import IntegralIdentifier, pade_filter
+from .model import ModelParams
+from .terms import AXES, COUPLED, DECOUPLED, EXTRA_PARAMS, FEATURES, TERMS
+
+OWN_RATE = ("p", "q", "r")
+"""The feature that is each axis' own rate: its term is the damping, a state coefficient."""
+
+STICK_ROW = (0, 1, 3)
+"""Row of ``Flight.sticks`` driving roll, pitch, yaw (lat, lon, ped)."""
+
+BURN_IN = 1.0
+"""Seconds at the start of each flight left out of the likelihood while the filter settles."""
+
+DEFAULT_DELAY_GRID = np.round(np.arange(0.0, 0.5001, 0.02), 4)
+"""Delays profiled by ``delay="auto"`` [s]; the best is refined to 5 ms."""
+
+TIME_CONSTANT_BOUNDS = ((0.8, 120.0), (0.02, 0.8))
+"""Bounds of the slow and the fast gust time constants [s]."""
+
+
+# ------------------------------------------------------------------ discretisation
+WIND_MODELS = ("gm2", "gm_so")
+"""Gust models: ``"gm2"`` a slow plus a fast first-order Gauss-Markov process (a
+Dryden-like spectrum falling as 1/f^2 above each corner); ``"gm_so"`` a slow
+first-order process plus a fast second-order one (two cascaded first-order
+stages of one time constant, falling as 1/f^4: smooth gusts)."""
+
+
+def _wind_block(kind: str, t_slow: float, t_fast: float):
+    """The gust states of one wind model.
+
+    Returns ``Aw`` (m, m), the row ``cw`` (m,) summing the states into the
+    torque, and per noise channel its input column (m,) scaled so that the
+    channel's torque component has unit stationary variance.
+    """
+    if kind == "gm2":
+        Aw = np.diag([-1.0 / t_slow, -1.0 / t_fast])
+        cw = np.array([1.0, 1.0])
+        # x' = -x/T + sqrt(2/T) n  has unit variance
+        cols = [np.array([np.sqrt(2.0 / t_slow), 0.0]), np.array([0.0, np.sqrt(2.0 / t_fast)])]
+        return Aw, cw, cols
+    if kind == "gm_so":
+        Aw = np.array([[-1.0 / t_slow, 0.0, 0.0], [0.0, -1.0 / t_fast, 1.0 / t_fast], [0.0, 0.0, -1.0 / t_fast]])
+        cw = np.array([1.0, 1.0, 0.0])
+        # w2 = w3 through 1/(1 + T s), w3' = -w3/T + b n: var(w2) = b^2 T / 4 for unit-intensity n
+        return Aw, cw, [np.array([np.sqrt(2.0 / t_slow), 0.0, 0.0]), np.array([0.0, 0.0, 2.0 / np.sqrt(t_fast)])]
+    raise ValueError(f"wind model must be one of {WIND_MODELS}, got {kind!r}")
+
+
+def _discrete_model(damping: float, t_slow: float, t_fast: float, q_slow: float, q_fast: float, dt: float,
+                    hold: str, kind: str = "gm2"):
+    """Exact discretisation of the axis model over one sample.
+
+    State ``(rate, gust states...)``. Returns ``Ad``, the input vectors ``g0``,
+    ``g1`` such that ``x[k+1] = Ad x[k] + g0 u[k] + g1 u[k+1]`` (``g1 = 0`` for a
+    held input) and the process-noise covariance ``Qd`` by Van Loan's method,
+    for stationary gust-torque variances ``q_slow``, ``q_fast``.
+    """
+    Aw, cw, cols = _wind_block(kind, t_slow, t_fast)
+    m = Aw.shape[0] + 1
+    A = np.zeros((m, m))
+    A[0, 0] = -damping
+    A[0, 1:] = cw
+    A[1:, 1:] = Aw
+    M = np.zeros((m + 2, m + 2))
+    M[:m, :m] = A * dt
+    M[0, m] = dt
+    M[m, m + 1] = 1.0
+    E = expm(M)
+    Ad = E[:m, :m]
+    ga, gb = E[:m, m], E[:m, m + 1]
+    if hold == "linear":  # u(t) = u_k + (u_{k+1} - u_k) (t - t_k)/dt
+        g0, g1 = ga - gb, gb
+    else:
+        g0, g1 = ga, np.zeros(m)
+    Qd = np.zeros((m, m))
+    for q, col in zip((q_slow, q_fast), cols):  # unit intensities keep expm well scaled
+        b = np.concatenate([[0.0], col])
+        V = np.zeros((2 * m, 2 * m))
+        V[:m, :m] = -A * dt
+        V[:m, m:] = np.outer(b, b) * dt
+        V[m:, m:] = A.T * dt
+        F = expm(V)
+        Qd += q * (F[m:, m:].T @ F[:m, m:])
+    return Ad, g0, g1, 0.5 * (Qd + Qd.T)
+
+
+def _kalman(Ad, Qd, R: float = 1.0):
+    """Steady-state Kalman filter of a rate (the first state) measured with white noise of variance ``R``.
+
+    Returns the predicted covariance ``P`` (m, m), the filter gain ``L`` (m,)
+    (``x_{k|k} = x_{k|k-1} + L e_k``) and the innovation variance ``S``.
+    """
+    m = Ad.shape[0]
+    C = np.zeros((m, 1))
+    C[0, 0] = 1.0
+    P = solve_discrete_are(Ad.T, C, Qd, np.array([[R]]))
+    S = float(P[0, 0] + R)
+    L = P[:, 0] / S
+    return P, L, S
+
+
+def _strictly_proper_tf(A, b):
+    """Numerator and denominator (in z^-1) of ``e0' (zI - A)^-1 b``: the rate's response to input ``b``."""
+    c = np.zeros((1, A.shape[0]))
+    c[0, 0] = 1.0
+    num, den = signal.ss2tf(A, b[:, None], c, np.zeros((1, 1)))
+    return num[0], den
+
+
+def _innovation_filters(Ad, g0, g1, L):
+    """Linear filters giving the innovations from the measurements and each input.
+
+    With ``Phi = Ad (I - L e0')`` the predictor is
+    ``x_{k+1|k} = Phi x_{k|k-1} + Ad L y_k + g0 u_k + g1 u_{k+1}``, so
+    ``e = y - H_y(z) y - H_u(z) u`` with the returned ``(b_y, b_u, a)``.
+    """
+    Phi = Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0])
+    b_y, a = _strictly_proper_tf(Phi, Ad @ L)
+    b0, _ = _strictly_proper_tf(Phi, g0)
+    b1, _ = _strictly_proper_tf(Phi, g1)
+    b_u = b0.copy()
+    b_u[:-1] += b1[1:]  # z * (strictly proper): the u_{k+1} path
+    return b_y, b_u, a
+
+
+# ------------------------------------------------------------------ one axis
+N_NONLINEAR = 5
+"""Parameters searched by the optimiser: damping, log T_slow, log T_fast, log(var_slow/R), log(var_fast/R)."""
+
+
+@dataclass
+class _AxisData:
+    """Signals of one axis over one or more flights, as the likelihood needs them."""
+
+    y: list           # measured rate per flight (n_f,)
+    regressors: list  # per flight (m, n_f): sign * feature, one offset column per flight
+    names: tuple      # parameter names of the regressors (offsets as "kd1@0", "kd1@1", ...)
+    dt: float
+    hold: str
+    burn: int
+    wind_model: str = "gm2"
+
+
+class _AxisLikelihood:
+    """The concentrated innovation likelihood of one axis, with the linear parameters projected out."""
+
+    def __init__(self, data: _AxisData):
+        self.data = data
+
+    @staticmethod
+    def unpack(x):
+        """(damping, T_slow, T_fast, var_slow/R, var_fast/R) from the search vector."""
+        damping, lts, ltf, lqs, lqf = x
+        return float(damping), float(np.exp(lts)), float(np.exp(ltf)), float(np.exp(lqs)), float(np.exp(lqf))
+
+    def discrete(self, x):
+        return _discrete_model(*self.unpack(x), self.data.dt, self.data.hold, self.data.wind_model)
+
+    def filtered(self, x):
+        """Innovation-domain measurements ``y~`` (n,) and regressors ``Z`` (m, n), burn-in removed, and ``S``."""
+        d = self.data
+        Ad, g0, g1, Qd = self.discrete(x)
+        _, L, S = _kalman(Ad, Qd)
+        b_y, b_u, a = _innovation_filters(Ad, g0, g1, L)
+        ys, zs = [], []
+        for y, X in zip(d.y, d.regressors):
+            ys.append((y - signal.lfilter(b_y, a, y))[d.burn:])
+            zs.append(signal.lfilter(b_u, a, X, axis=-1)[:, d.burn:])
+        return np.concatenate(ys), np.concatenate(zs, axis=1), S
+
+    def solve_linear(self, x):
+        """Innovations ``e``, the linear parameters ``theta`` minimising them at the nonlinear ``x``, and ``S``."""
+        yt, Z, S = self.filtered(x)
+        scale = np.sqrt(np.maximum(np.einsum("ij,ij->i", Z, Z), 1e-300))
+        theta = np.linalg.lstsq(Z.T / scale, yt, rcond=None)[0] / scale
+        return yt - theta @ Z, theta, S
+
+    def residual(self, x):
+        return self.solve_linear(x)[0]
+
+    def residual_at(self, x, theta):
+        """Innovations at ``x`` with the linear parameters held at ``theta``."""
+        yt, Z, _ = self.filtered(x)
+        return yt - theta @ Z
+
+
+@dataclass(frozen=True)
+class MLAxisFit:
+    """What the maximum-likelihood fit learned about one axis.
+
+    Attributes
+    ----------
+    axis : str
+    params : dict of str to float
+        Identified parameters; the offset is the mean of the flights' offsets.
+    std_errors : dict of str to float
+        Standard errors from the Fisher information of the innovations.
+    delay : float
+        Servo delay used [s] (eq. 31).
+    condition : float
+        Condition number of the column-normalised Fisher information.
+    r2 : float
+        Share of the rate's variance the model explains from the sticks alone
+        (simulation without wind, over the flights).
+    history : tuple of float
+        Mean squared innovation at the start and at the end of the search [(rad/s)^2].
+    wind : dict
+        ``time_constants_s`` (slow, fast), ``torque_std`` (slow, fast) [rad/s^2],
+        ``ud_std`` (slow, fast) [stick units: torque over the control gain] and
+        their standard errors.
+    noise_std : float
+        Gyro white-noise standard deviation [rad/s].
+    nll : float
+        Negative log-likelihood of the innovations (constants included).
+    n_samples : int
+        Samples in the likelihood.
+    flight_offsets : tuple of float
+        Offset kd of each flight [rad/s^2] (trim plus that day's mean wind).
+    prediction_r2 : float
+        Share of the rate's variance the one-step prediction explains.
+    delay_profile : tuple of (float, float)
+        ``(delay, nll)`` pairs when the delay was profiled, else empty.
+    """
+
+    axis: str
+    params: dict
+    std_errors: dict
+    delay: float
+    condition: float
+    r2: float
+    history: tuple
+    wind: dict
+    noise_std: float
+    nll: float
+    n_samples: int
+    flight_offsets: tuple
+    prediction_r2: float
+    delay_profile: tuple = ()
+    interval_offsets: np.ndarray = field(default_factory=lambda: np.empty(0))
+    interval_starts: np.ndarray = field(default_factory=lambda: np.empty(0))
+    residual: np.ndarray | None = None
+    state: np.ndarray = field(default_factory=lambda: np.empty(0), repr=False)
+
+
+class MaximumLikelihoodIdentifier:
+    """Identify the attitude model by maximum likelihood with a stochastic wind state.
+
+    Scikit-learn style: the constructor stores the settings, :meth:`fit`
+    returns ``self`` and sets the attributes ending in ``_``.
+
+    Parameters
+    ----------
+    structure : {"decoupled", "coupled"} or dict
+        Parameters to fit, as for :class:`~identification.integral_method.IntegralIdentifier`.
+    extra_terms : sequence of str
+        Catalogue terms fitted in addition (:data:`identification.terms.EXTRA_PARAMS`).
+    input_hold : {"linear", "zoh"}
+        Sticks between samples: linearly interpolated (a pilot's hand) or held
+        (a digital controller's commands).
+    delay : None, float, sequence of 3 float, or "auto"
+        Servo delay per axis [s] (Padé, eq. 31); "auto" profiles the likelihood
+        over ``delay_grid`` and refines the best to 5 ms.
+    delay_grid : sequence of float, optional
+        Candidate delays for ``delay="auto"`` [s] (default 0 to 0.5 s in 20 ms).
+    wind_model : {"auto", "gm2", "gm_so"}
+        Gust model (:data:`WIND_MODELS`); "auto" fits both and keeps the one of
+        higher likelihood per axis (they have the same number of parameters).
+    remove_vibration : bool
+        Remove narrow spectral lines above ``vibration_min_hz`` (rotor
+        vibration) from the gyro by regression on their sinusoids before the fit.
+    vibration_min_hz : float
+        Lowest frequency treated as vibration [Hz].
+    axes : sequence of str
+        Axes to identify.
+    max_nfev : int
+        Largest number of likelihood evaluations per search.
+
+    Attributes
+    ----------
+    params_ : ModelParams
+    axes_ : dict of str to MLAxisFit
+    flights_ : list of Flight
+        The flights as fitted (vibration lines removed).
+    fit_time_ : float
+        Wall time of ``fit`` [s].
+    vibration_lines_ : list of list of dict
+        Lines removed, per flight (axis, frequency [Hz], amplitude [rad/s]).
+    """
+
+    method = "maximum likelihood (filter error, Gauss-Markov wind)"
+
+    def __init__(self, structure="decoupled", extra_terms=(), input_hold: str = "linear", delay=None,
+                 delay_grid=None, wind_model: str = "auto", remove_vibration: bool = True,
+                 vibration_min_hz: float = 8.0, axes=AXES, max_nfev: int = 100):
+        self.structure = structure
+        self.extra_terms = extra_terms
+        self.input_hold = input_hold
+        self.delay = delay
+        self.delay_grid = delay_grid
+        self.wind_model = wind_model
+        self.remove_vibration = remove_vibration
+        self.vibration_min_hz = vibration_min_hz
+        self.axes = axes
+        self.max_nfev = max_nfev
+
+    # ----------------------------------------------------------------- set-up
+    def _param_names(self) -> dict[int, tuple[str, ...]]:
+        return IntegralIdentifier(structure=self.structure, extra_terms=self.extra_terms)._param_names()
+
+    def _delays(self) -> list:
+        return IntegralIdentifier(delay=self.delay)._delays()
+
+    def _check_settings(self):
+        if self.input_hold not in ("linear", "zoh"):
+            raise ValueError(f"input_hold must be 'linear' or 'zoh', got {self.input_hold!r}")
+        if self.wind_model not in ("auto",) + WIND_MODELS:
+            raise ValueError(f"wind_model must be 'auto' or one of {WIND_MODELS}, got {self.wind_model!r}")
+        if not (isinstance(self.max_nfev, (int, np.integer)) and self.max_nfev >= 5):
+            raise ValueError(f"max_nfev must be a whole number >= 5, got {self.max_nfev!r}")
+        if not self.vibration_min_hz > 0:
+            raise ValueError(f"vibration_min_hz must be > 0 Hz, got {self.vibration_min_hz!r}")
+
+    def _clean(self, flight: Flight) -> tuple[Flight, list]:
+        if not self.remove_vibration:
+            return flight, []
+        rates, found = remove_vibration_lines(flight.rates, flight.sample_rate, self.vibration_min_hz)
+        meta = type(flight.metadata)({**flight.metadata, "vibration_lines": found})
+        return Flight(flight.time, rates, flight.attitude, flight.sticks, meta, flight.extra), found
+
+    # ------------------------------------------------------------------- fit
+    def fit(self, flight) -> "MaximumLikelihoodIdentifier":
+        """Identify every requested axis from one flight or several (shared parameters, own offsets).
+
+        Raises
+        ------
+        IdentifiabilityError
+            Flights of different sample rates, a flight too short, or an axis whose
+            regressors are not excited.
+        """
+        t0 = _time.perf_counter()
+        self._check_settings()
+        # The likelihood works on 3x3 to 4x4 matrices and long 1-D filters: BLAS threads only cost here.
+        with threadpool_limits(limits=1, user_api="blas"):
+            self._fit(flight)
+        self.fit_time_ = _time.perf_counter() - t0
+        return self
+
+    def _fit(self, flight):
+        flights = [flight] if isinstance(flight, Flight) else list(flight)
+        if not flights:
+            raise ValueError("fit needs at least one flight")
+        fs = flights[0].sample_rate
+        for f in flights[1:]:
+            if abs(f.sample_rate - fs) > 1e-3 * fs:
+                raise IdentifiabilityError(
+                    f"flights must share one sample rate to be pooled; got {fs:.3f} Hz and {f.sample_rate:.3f} Hz")
+        burn = int(round(BURN_IN * fs))
+        for f in flights:
+            if f.n < 4 * burn + 50:
+                raise IdentifiabilityError(
+                    f"flight of {f.duration:.2f} s is too short for the likelihood fit; need at least "
+                    f"{(4 * burn + 50) / fs:.1f} s")
+        cleaned = [self._clean(f) for f in flights]
+        flights = [c[0] for c in cleaned]
+        names = self._param_names()
+        # The integral method (Fig. 5) on the same structure is the starting point.
+        start = IntegralIdentifier(structure=names, delay=0.0, axes=self.axes).fit(flights)
+        delays = self._delays()
+        fits, values = {}, {}
+        for axis_name in self.axes:
+            a = AXES.index(axis_name)
+            if not names.get(a):
+                continue
+            fit = self._fit_axis(a, names[a], flights, burn, start.params_, delays[a])
+            fits[axis_name] = fit
+            values.update(fit.params)
+            values[f"tau_{axis_name}"] = fit.delay
+        self.axes_ = fits
+        self.params_ = ModelParams().with_values(**values)
+        self.flights_ = flights
+        self.vibration_lines_ = [c[1] for c in cleaned]
+
+    def _axis_data(self, a: int, axis_params, flights, burn: int, tau: float, wind_model: str = "gm2"):
+        """The likelihood's data for axis ``a`` at servo delay ``tau``, and the name of its damping term."""
+        damping_name = next((p for p in axis_params if TERMS[p].feature == OWN_RATE[a]), None)
+        linear = [p for p in axis_params if p != damping_name and TERMS[p].feature != "1"]
+        offset = next((p for p in axis_params if TERMS[p].feature == "1"), None)
+        ys, Xs = [], []
+        for i, f in enumerate(flights):
+            cmd = np.array([f.sticks[r] for r in STICK_ROW])
+            if tau > 0:
+                cmd[a] = pade_filter(f.sticks[STICK_ROW[a]], tau, f.sample_rate)
+            rows = [TERMS[p].sign * np.broadcast_to(FEATURES[TERMS[p].feature](f.rates, cmd, f.sticks[2]), (f.n,))
+                    for p in linear]
+            if offset is not None:
+                rows += [np.full(f.n, float(j == i)) for j in range(len(flights))]
+            ys.append(np.asarray(f.rates[a], dtype=float))
+            Xs.append(np.array(rows, dtype=float).reshape(len(rows), f.n))
+        reg_names = tuple(linear) + (tuple(f"{offset}@{j}" for j in range(len(flights))) if offset else ())
+        return _AxisData(ys, Xs, reg_names, flights[0].dt, self.input_hold, burn, wind_model), damping_name
+
+    def _search(self, like: _AxisLikelihood, x0, free_damping: bool):
+        lo = np.array([-2.0, np.log(TIME_CONSTANT_BOUNDS[0][0]), np.log(TIME_CONSTANT_BOUNDS[1][0]),
+                       np.log(1e-4), np.log(1e-4)])
+        hi = np.array([200.0, np.log(TIME_CONSTANT_BOUNDS[0][1]), np.log(TIME_CONSTANT_BOUNDS[1][1]),
+                       np.log(1e9), np.log(1e9)])
+        x0 = np.clip(np.asarray(x0, dtype=float), lo + 1e-9, hi - 1e-9)
+        if free_damping:
+            return optimize.least_squares(like.residual, x0, bounds=(lo, hi), x_scale="jac",
+                                          max_nfev=self.max_nfev, xtol=1e-8, ftol=1e-10)
+        # no damping term in the structure: the damping stays at zero
+        res = optimize.least_squares(lambda z: like.residual(np.concatenate([[0.0], z])), x0[1:],
+                                     bounds=(lo[1:], hi[1:]), x_scale="jac", max_nfev=self.max_nfev,
+                                     xtol=1e-8, ftol=1e-10)
+        res.x = np.concatenate([[0.0], res.x])
+        return res
+
+    def _best(self, a, axis_params, flights, burn, tau, x0, models, free):
+        """Search every wind model at delay ``tau``; the best ``(cost, x, model)``."""
+        best = None
+        for kind in models:
+            like = _AxisLikelihood(self._axis_data(a, axis_params, flights, burn, tau, kind)[0])
+            res = self._search(like, x0, free)
+            if best is None or res.cost < best[0]:
+                best = (float(res.cost), res.x, kind)
+        return best
+
+    def _fit_axis(self, a, axis_params, flights, burn, start_params, delay) -> MLAxisFit:
+        _, damping_name = self._axis_data(a, axis_params, flights[:1], burn, 0.0)
+        free = damping_name is not None
+        damping0 = float(-TERMS[damping_name].sign * start_params.get(damping_name)) if free else 0.0
+        x0 = np.array([max(damping0, 0.1) if free else 0.0, np.log(4.0), np.log(0.3), np.log(100.0), np.log(100.0)])
+        models = WIND_MODELS if self.wind_model == "auto" else (self.wind_model,)
+        profile = []
+        if delay == "auto":
+            grid = np.asarray(self.delay_grid if self.delay_grid is not None else DEFAULT_DELAY_GRID, dtype=float)
+            x = x0
+            for tau in grid:  # warm-started along the grid, the first wind model only
+                cost, x, _ = self._best(a, axis_params, flights, burn, float(tau), x, models[:1], free)
+                profile.append((float(tau), cost, x))
+            tau_best, _, x_best = min(profile, key=lambda p: p[1])
+            step = float(np.min(np.diff(grid))) if grid.size > 1 else 0.0
+            for tau in np.arange(max(0.0, tau_best - step + 0.005), tau_best + step - 1e-9, 0.005):
+                if all(abs(tau - t) > 1e-9 for t, _, _ in profile):
+                    cost, x, _ = self._best(a, axis_params, flights, burn, float(tau), x_best, models[:1], free)
+                    profile.append((float(tau), cost, x))
+            profile.sort(key=lambda p: p[0])
+            tau, _, x0 = min(profile, key=lambda p: p[1])
+        else:
+            tau = float(delay)
+        cost, x, kind = self._best(a, axis_params, flights, burn, tau, x0, models, free)
+        data, _ = self._axis_data(a, axis_params, flights, burn, tau, kind)
+        like = _AxisLikelihood(data)
+        e, theta, S = like.solve_linear(x)
+        n_burnt = int(sum(len(y) - burn for y in data.y))
+        return self._result(a, axis_params, like, x, theta, e, S, damping_name, float(tau), kind,
+                            tuple((t, float(n_burnt / 2 * np.log(2 * np.pi * np.e * 2 * c / n_burnt)))
+                                  for t, c, _ in profile))
+
+    def _result(self, a, axis_params, like, x, theta, e, S, damping_name, tau, kind, profile) -> MLAxisFit:
+        """Standard errors, wind levels and fit statistics of the optimum."""
+        data = like.data
+        n = e.size
+        mse = float(np.mean(e ** 2))
+        # Fisher information (Gauss-Newton): de/dx by central differences, de/dtheta = -Z.
+        _, Z, _ = like.filtered(x)
+        J = np.empty((n, N_NONLINEAR + Z.shape[0]))
+        for j in range(N_NONLINEAR):
+            h = 1e-5 * max(1.0, abs(x[j]))
+            xp, xm = x.copy(), x.copy()
+            xp[j] += h
+            xm[j] -= h
+            J[:, j] = (like.residual_at(xp, theta) - like.residual_at(xm, theta)) / (2 * h)
+        J[:, N_NONLINEAR:] = -Z.T
+        if damping_name is None:
+            J[:, 0] = 0.0
+        F = J.T @ J
+        dscale = np.sqrt(np.maximum(np.diag(F), 1e-300))
+        Fn = F / np.outer(dscale, dscale)
+        w = np.linalg.eigvalsh(Fn)
+        cond = float(w[-1] / max(w[0], 1e-300))
+        se = np.sqrt(np.maximum(np.diag(np.linalg.pinv(Fn)) * mse, 0.0)) / dscale
+        damping, ts, tf, qs, qf = like.unpack(x)
+        R = mse / S
+        params, std = {}, {}
+        if damping_name is not None:
+            params[damping_name] = float(-damping / TERMS[damping_name].sign)
+            std[damping_name] = float(se[0])
+        k_off = [i for i, nm in enumerate(data.names) if "@" in nm]
+        for i, nm in enumerate(data.names):
+            if "@" not in nm:
+                params[nm] = float(theta[i])
+                std[nm] = float(se[N_NONLINEAR + i])
+        offs = ()
+        if k_off:
+            off_name = data.names[k_off[0]].split("@")[0]
+            offs = tuple(float(theta[i]) for i in k_off)
+            weights = np.array([len(y) - data.burn for y in data.y], dtype=float)
+            weights /= weights.sum()
+            params[off_name] = float(weights @ np.array(offs))
+            within = float(np.sqrt(np.sum(weights ** 2 * se[[N_NONLINEAR + i for i in k_off]] ** 2)))
+            spread = float(np.std(offs, ddof=1) / np.sqrt(len(offs))) if len(offs) > 1 else 0.0
+            std[off_name] = float(np.hypot(within, spread))
+        gain_name = next((p for p in axis_params if TERMS[p].effect == "control"), None)
+        gain = abs(params.get(gain_name, 0.0)) if gain_name else 0.0
+        sd = np.sqrt([qs * R, qf * R])
+        wind = {
+            "model": kind,
+            "time_constants_s": [ts, tf],
+            "time_constants_se_s": [float(ts * se[1]), float(tf * se[2])],
+            "torque_std": [float(sd[0]), float(sd[1])],
+            "torque_std_se": [float(0.5 * sd[0] * se[3]), float(0.5 * sd[1] * se[4])],
+            "ud_std": [float(s / gain) if gain else None for s in sd],
+            "total_torque_std": float(np.hypot(*sd)),
+        }
+        yall = np.concatenate([y[data.burn:] for y in data.y])
+        ss = float(np.sum((yall - yall.mean()) ** 2)) or 1.0
+        return MLAxisFit(
+            AXES[a], params, std, tau, cond, _simulation_r2(data, damping, theta),
+            (float(np.mean(like.residual(np.asarray(x)) ** 2)), mse), wind, float(np.sqrt(R)),
+            float(0.5 * n * (np.log(2 * np.pi * mse) + 1.0)), int(n), offs, 1.0 - float(e @ e) / ss,
+            profile, state=np.asarray(x, dtype=float))
+
+    # ----------------------------------------------------------------- use
+    def _check_fitted(self):
+        if not hasattr(self, "params_"):
+            raise NotFittedError("this MaximumLikelihoodIdentifier is not fitted yet; call fit(flight) first")
+
+    def predict(self, flight: Flight) -> np.ndarray:
+        """Forward-simulate the identified model with the flight's sticks; rates (3, n) [rad/s]."""
+        self._check_fitted()
+        from .model import initial_state, simulate
+
+        x0 = initial_state(rates=flight.rates[:, 0], euler=flight.attitude[:, 0], sticks=flight.sticks[[0, 1, 3], 0])
+        return simulate(self.params_, flight.time, flight.sticks, x0=x0)[:3]
+
+    def wind_torque(self, flight: Flight | int = 0) -> np.ndarray:
+        """The smoother's estimate of the wind torque at every sample, shape (3, n) [rad/s^2].
+
+        The Rauch-Tung-Striebel smoother of the fitted model runs over the flight
+        (an index into the fitted flights, or a new flight, whose vibration lines are
+        removed first) and returns the gust states' sum plus the flight's offset
+        less the model's: the disturbance torque of eq. (41) about the model's
+        offset ``kd``. Rows of axes not identified are zero.
+        """
+        self._check_fitted()
+        names = self._param_names()
+        if isinstance(flight, Flight):
+            flight, index = self._clean(flight)[0], None
+        else:
+            index = int(flight)
+            flight = self.flights_[index]
+        out = np.zeros((3, flight.n))
+        for axis_name, fit in self.axes_.items():
+            a = AXES.index(axis_name)
+            data, _ = self._axis_data(a, names[a], [flight], 0, fit.delay, fit.wind["model"])
+            own = [n for n in data.names if "@" not in n]
+            off_name = next((n.split("@")[0] for n in data.names if "@" in n), None)
+            theta = np.array([fit.params[n] for n in own])
+            drive = theta @ data.regressors[0][:len(own)]
+            shift = 0.0
+            if off_name is not None:
+                if index is not None:
+                    shift = fit.flight_offsets[index] - fit.params[off_name]
+                drive = drive + fit.params[off_name] + shift
+            states = rts_smooth(data.y[0], drive, *_AxisLikelihood.unpack(fit.state), data.dt, data.hold,
+                                fit.wind["model"])
+            _, cw, _ = _wind_block(fit.wind["model"], 1.0, 1.0)
+            out[a] = cw @ states[1:] + shift
+        return out
+
+    def summary(self) -> dict:
+        """JSON-ready fit statistics per axis."""
+        self._check_fitted()
+        return {
+            name: {
+                "params": f.params, "std_errors": f.std_errors, "delay_s": f.delay,
+                "condition_number": f.condition, "r2": f.r2, "prediction_r2": f.prediction_r2,
+                "wind": f.wind, "noise_std": f.noise_std, "nll": f.nll, "n_samples": f.n_samples,
+                "flight_offsets": list(f.flight_offsets),
+                "delay_profile": [list(p) for p in f.delay_profile],
+                "mean_square_innovation": list(f.history),
+            }
+            for name, f in self.axes_.items()
+        }
+
+
+def _simulation_r2(data: _AxisData, damping: float, theta) -> float:
+    """R^2 of the wind- and noise-free response to the inputs, each flight started at its first sample."""
+    dt = data.dt
+    ad = float(np.exp(-damping * dt))
+    if abs(damping) > 1e-9:
+        g = (1.0 - ad) / damping
+        g1 = (dt - g) / (damping * dt) if data.hold == "linear" else 0.0
+    else:
+        g, g1 = dt, (dt / 2 if data.hold == "linear" else 0.0)
+    g0 = g - g1
+    num = den = 0.0
+    for y, X in zip(data.y, data.regressors):
+        u = theta @ X
+        sim = np.empty_like(y)
+        sim[0] = y[0]
+        sim[1:] = signal.lfilter([1.0], [1.0, -ad], g0 * u[:-1] + g1 * u[1:], zi=[ad * y[0]])[0]
+        err = (y - sim)[data.burn:]
+        yc = y[data.burn:] - np.mean(y[data.burn:])
+        num += float(err @ err)
+        den += float(yc @ yc)
+    return 1.0 - num / (den or 1.0)
+
+
+# ------------------------------------------------------------------ smoother
+def _lti_apply(A, B, C, D, u) -> np.ndarray:
+    """Output of ``x[k+1] = A x[k] + B u[k]``, ``y = C x + D u`` from rest, by transfer functions (lfilter)."""
+    y = np.zeros((C.shape[0], u.shape[1]))
+    for i in range(B.shape[1]):
+        num, den = signal.ss2tf(A, B, C, D, input=i)
+        y += np.array([signal.lfilter(row, den, u[i]) for row in np.atleast_2d(num)])
+    return y
+
+
+def rts_smooth(y, drive, damping, t_slow, t_fast, q_slow, q_fast, dt, hold="linear", wind_model="gm2") -> np.ndarray:
+    """Steady-state Rauch-Tung-Striebel smoother of one axis: the states (rate, gust states...), shape (m, n).
+
+    ``y`` is the measured rate (n,), ``drive`` the known torque from the inputs
+    (the linear terms and the offset, n). Forward: the steady-state Kalman filter
+    started at the first measurement; backward:
+    ``x_{k|n} = x_{k|k} + G (x_{k+1|n} - x_{k+1|k})`` with the constant smoother gain
+    ``G = P_f Ad' P^-1``. Both passes are linear filters (no loop over samples).
+    """
+    Ad, g0, g1, Qd = _discrete_model(damping, t_slow, t_fast, q_slow, q_fast, dt, hold, wind_model)
+    P, L, S = _kalman(Ad, Qd)
+    m = Ad.shape[0]
+    I = np.eye(m)
+    Phi = Ad - np.outer(Ad @ L, I[0])
+    n = y.size
+    u_next = np.append(drive[1:], drive[-1])
+    x0 = np.zeros(m)
+    x0[0] = y[0]
+    # predicted states x_{k|k-1}; the initial state enters as an impulse one step before the record
+    U = np.vstack([np.concatenate([[0.0], y]), np.concatenate([[0.0], drive]), np.concatenate([[0.0], u_next]),
+                   np.concatenate([[1.0], np.zeros(n)])])
+    B = np.column_stack([Ad @ L, g0, g1, x0])
+    pred = _lti_apply(Phi, B, I, np.zeros((m, 4)), U)[:, 1:]
+    e = y - pred[0]
+    filt = pred + np.outer(L, e)
+    Pf = P - np.outer(P[:, 0], P[0, :]) / S
+    G = Pf @ Ad.T @ np.linalg.inv(P)
+    pred_next = np.hstack([pred[:, 1:], np.zeros((m, 1))])  # the last smoothed state is the filtered one
+    g = (filt - G @ pred_next)[:, ::-1]
+    # backward in reversed time: z_j = G z_{j-1} + g_j, i.e. w_{j+1} = G w_j + G g_j, z_j = w_j + g_j
+    return _lti_apply(G, G, I, I, g)[:, ::-1]
+
+
+# ------------------------------------------------------------------ vibration
+def remove_vibration_lines(rates, fs: float, min_hz: float = 8.0, max_lines: int = 4, prominence: float = 30.0):
+    """Remove narrow spectral lines (rotor vibration) from gyro signals by regression on their sinusoids.
+
+    For each axis, the periodogram (zero-padded 4x, Hann window) is searched above
+    ``min_hz`` for peaks standing ``prominence`` times above the median power of
+    their neighbourhood (±2 Hz); each line's frequency is refined by parabolic
+    interpolation, its amplitude and phase fitted by least squares over the whole
+    record, and the sinusoid subtracted. A low-pass would also delay the rate
+    (every 10 ms of lag costs about 20 % of damping); the regression does not.
+
+    Parameters
+    ----------
+    rates : ndarray, shape (3, n)
+    fs : float
+        Sample rate [Hz].
+
+    Returns
+    -------
+    cleaned : ndarray, shape (3, n)
+    lines : list of dict
+        ``axis``, ``frequency_hz``, ``amplitude`` [rad/s] of each line removed.
+    """
+    rates = np.array(rates, dtype=float, copy=True)
+    n = rates.shape[1]
+    if min_hz >= fs / 2 or n < 64:
+        return rates, []
+    t = np.arange(n) / fs
+    nfft = 1 << int(np.ceil(np.log2(4 * n)))
+    freqs = np.fft.rfftfreq(nfft, 1.0 / fs)
+    win = np.hanning(n)
+    df = freqs[1]
+    half = max(3, int(round(2.0 / df)))
+    found = []
+    for a in range(rates.shape[0]):
+        for _ in range(max_lines):
+            x = rates[a] - np.mean(rates[a])
+            power = np.abs(np.fft.rfft(x * win, nfft)) ** 2
+            band = np.where(freqs >= min_hz)[0]
+            band = band[band < power.size - 1]
+            if band.size < 2 * half:
+                break
+            k = band[np.argmax(power[band])]
+            lo, hi = max(0, k - half), min(power.size, k + half + 1)
+            neighbourhood = np.concatenate([power[lo:max(lo, k - 8)], power[min(hi, k + 9):hi]])
+            if neighbourhood.size == 0 or power[k] < prominence * np.median(neighbourhood):
+                break
+            y0, y1, y2 = np.log(power[k - 1:k + 2] + 1e-300)
+            denom = y0 - 2 * y1 + y2
+            shift = 0.5 * (y0 - y2) / denom if denom != 0 else 0.0
+            f0 = float(freqs[k] + np.clip(shift, -0.5, 0.5) * df)
+            basis = np.vstack([np.cos(2 * np.pi * f0 * t), np.sin(2 * np.pi * f0 * t)])
+            coef = np.linalg.lstsq(basis.T, x, rcond=None)[0]
+            rates[a] -= coef @ basis
+            found.append({"axis": AXES[a] if rates.shape[0] == 3 else a, "frequency_hz": f0,
+                          "amplitude": float(np.hypot(*coef))})
+    return rates, found

@@ -1,0 +1,142 @@
+"""The maximum-likelihood estimator with a stochastic wind state (identification.ml_estimator)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from identification.errors import IdentifiabilityError, NotFittedError
+from identification.flight import make_flight
+from identification.ml_estimator import MaximumLikelihoodIdentifier, remove_vibration_lines
+from identification.synthetic import simulate_flight
+
+
+@pytest.fixture(scope="module")
+def flight180():
+    return simulate_flight(180, seed=4)
+
+
+@pytest.fixture(scope="module")
+def fitted(flight180):
+    return MaximumLikelihoodIdentifier().fit(flight180.flight)
+
+
+def _rel(ident, truth, name):
+    return (ident.params_.get(name) - truth.get(name)) / truth.get(name)
+
+
+def test_recovers_gains_and_damping_within_their_standard_errors(fitted, flight180):
+    truth = flight180.truth
+    for name in ("k2", "k6", "k10"):
+        assert abs(_rel(fitted, truth, name)) < 0.02, name
+    for axis, name in (("roll", "k3"), ("pitch", "k7"), ("yaw", "k11")):
+        se = fitted.axes_[axis].std_errors[name]
+        assert abs(fitted.params_.get(name) - truth.get(name)) < 3.5 * se, (name, fitted.params_.get(name), se)
+        assert se / truth.get(name) < 0.05
+
+
+def test_noise_and_wind_levels_are_identified(fitted, flight180):
+    cfg = flight180.config
+    for axis, fit in fitted.axes_.items():
+        np.testing.assert_allclose(fit.noise_std, cfg.gyro_noise, rtol=0.05)
+        i = ("roll", "pitch", "yaw").index(axis)
+        true_torque_std = float(np.std(flight180.wind_torque[i]))
+        assert 0.7 < fit.wind["total_torque_std"] / true_torque_std < 1.4, axis
+        assert fit.wind["model"] in ("gm2", "gm_so")
+
+
+def test_vibration_lines_of_the_rotor_are_removed(fitted):
+    lines = fitted.vibration_lines_[0]
+    freqs = sorted({round(line["frequency_hz"]) for line in lines})
+    assert 30 in freqs  # 1/rev of the synthetic rotor (30 Hz); 2/rev aliases to 40 Hz at 100 Hz sampling
+    assert all(line["frequency_hz"] >= 8.0 for line in lines)
+
+
+def test_smoother_wind_follows_the_true_wind(fitted, flight180):
+    wind = fitted.wind_torque(0)
+    assert wind.shape == (3, flight180.flight.n)
+    for i in range(3):
+        assert np.corrcoef(wind[i], flight180.wind_torque[i])[0, 1] > 0.95
+
+
+def test_same_flight_same_result(flight180, fitted):
+    again = MaximumLikelihoodIdentifier().fit(flight180.flight)
+    assert again.params_ == fitted.params_
+    np.testing.assert_array_equal(again.wind_torque(0), fitted.wind_torque(0))
+
+
+def test_several_flights_share_parameters_and_keep_their_own_offsets(flight180):
+    other = simulate_flight(120, seed=5)
+    ident = MaximumLikelihoodIdentifier(axes=("roll",)).fit([flight180.flight, other.flight])
+    fit = ident.axes_["roll"]
+    assert len(fit.flight_offsets) == 2
+    weights = [flight180.flight.n - 100, other.flight.n - 100]  # samples after the 1 s burn-in
+    assert fit.params["kd1"] == pytest.approx(np.average(fit.flight_offsets, weights=weights), rel=1e-9)
+    assert abs(_rel(ident, flight180.truth, "k3")) < 0.1
+
+
+def test_servo_delay_is_found_by_the_likelihood_profile():
+    sf = simulate_flight(150, seed=2, effects=("servo_delay",))
+    ident = MaximumLikelihoodIdentifier(delay="auto", axes=("roll",), delay_grid=np.arange(0.0, 0.2001, 0.04)).fit(
+        sf.flight)
+    fit = ident.axes_["roll"]
+    assert abs(fit.delay - sf.truth.tau_roll) <= 0.015
+    taus = [t for t, _ in fit.delay_profile]
+    assert taus == sorted(taus) and 0.0 in taus
+    assert min(fit.delay_profile, key=lambda p: p[1])[0] == fit.delay
+
+
+def test_coupled_structure_recovers_cross_coupling():
+    sf = simulate_flight(150, seed=3, effects=("cross_coupling",))
+    ident = MaximumLikelihoodIdentifier(structure="coupled", axes=("roll", "pitch")).fit(sf.flight)
+    for name, axis in (("k4", "roll"), ("k8", "pitch")):
+        se = ident.axes_[axis].std_errors[name]
+        assert abs(ident.params_.get(name) - sf.truth.get(name)) < 3.5 * se, name
+
+
+def test_remove_vibration_lines_finds_a_line_and_leaves_the_rest():
+    fs = 100.0
+    t = np.arange(20000) / fs
+    rng = np.random.default_rng(0)
+    slow = np.sin(2 * np.pi * 0.7 * t)
+    x = np.vstack([slow + 0.05 * np.sin(2 * np.pi * 27.0 * t + 0.3) + 0.01 * rng.standard_normal(t.size)] * 3)
+    cleaned, lines = remove_vibration_lines(x, fs)
+    assert len(lines) == 3
+    assert all(abs(line["frequency_hz"] - 27.0) < 0.01 for line in lines)
+    assert all(abs(line["amplitude"] - 0.05) < 0.002 for line in lines)
+    assert np.std(cleaned[0] - slow) < 0.012
+
+
+def test_errors_say_what_was_expected(flight180):
+    with pytest.raises(NotFittedError, match="not fitted"):
+        MaximumLikelihoodIdentifier().predict(flight180.flight)
+    with pytest.raises(ValueError, match="input_hold"):
+        MaximumLikelihoodIdentifier(input_hold="cubic").fit(flight180.flight)
+    with pytest.raises(ValueError, match="wind_model"):
+        MaximumLikelihoodIdentifier(wind_model="dryden").fit(flight180.flight)
+    short = flight180.flight.segment(0.0, 2.0)
+    with pytest.raises(IdentifiabilityError, match="too short"):
+        MaximumLikelihoodIdentifier().fit(short)
+    f = flight180.flight
+    slow = make_flight(f.time[::2], f.rates[:, ::2], f.sticks[:, ::2], attitude=f.attitude[:, ::2])
+    with pytest.raises(IdentifiabilityError, match="one sample rate"):
+        MaximumLikelihoodIdentifier().fit([f, slow])
+
+
+def test_heli_identify_uses_maximum_likelihood_by_default(tmp_path, flight180):
+    from heli_cli.main import main
+
+    path = tmp_path / "flight.csv"
+    flight180.save(path)
+    assert main(["identify", str(path), "--out", str(tmp_path / "ml"), "--no-plots"]) == 0
+    doc = json.loads((tmp_path / "ml" / "model.json").read_text())
+    assert doc["identification"]["estimator"] == "ml"
+    assert doc["fit_statistics"]["axes"]["roll"]["wind"]["model"] in ("gm2", "gm_so")
+    manifest = json.loads((tmp_path / "ml" / "disturbances" / "manifest-v0001.json").read_text())
+    assert manifest["traces"][0]["trace_source"] == "smoother"
+    assert main(["identify", str(path), "--out", str(tmp_path / "int"), "--no-plots", "--method", "integral",
+                 "--no-disturbances"]) == 0
+    doc = json.loads((tmp_path / "int" / "model.json").read_text())
+    assert doc["identification"]["estimator"] == "integral"
