@@ -188,6 +188,12 @@ class DisturbanceProfile:
     simulation : ValidationResult or None
         The model simulated without and with the identified disturbance
         (Section 3.4), labels :data:`MODEL_LABELS`.
+    trace_source : {"eq46", "smoother"}
+        What ``trace`` and ``kd`` hold: the smoothed eq. (46) profile, or the wind
+        torque the maximum-likelihood model's Rauch-Tung-Striebel smoother
+        estimated at every sample (:meth:`identification.ml_estimator.MaximumLikelihoodIdentifier.wind_torque`),
+        over the control gain. The eq. (46) quantities (``torque``, ``ud_raw``,
+        ``ud``) are kept either way, for the paper's comparison.
     """
 
     axes: tuple
@@ -212,6 +218,7 @@ class DisturbanceProfile:
     prefilter: dict | None
     source: dict
     simulation: ValidationResult | None = field(default=None)
+    trace_source: str = "eq46"
 
     @property
     def n_intervals(self) -> int:
@@ -278,6 +285,19 @@ class DisturbanceProfile:
             "The paper's rule matches the fitted normal of u_d to that of the stick (minus its mean); the KS test "
             "compares the two samples (a small p-value says they differ).\n",
         ]
+        if self.trace_source == "smoother":
+            rows = [[a.capitalize(), f"{self.kd[AXES.index(a)]:.4f}", f"{self.statistics[a]['smoother_ud_std']:.4f}",
+                     "[{:.4f}, {:.4f}]".format(*self.statistics[a]["smoother_ud_interval90"]),
+                     f"{self.statistics[a]['ud_std']:.4f}",
+                     f"{self.statistics[a]['smoother_vs_eq46_correlation']:.3f}"] for a in self.axes]
+            text += [
+                "**Stored trace: the smoother's wind.** The library stores (and the environment replays) the wind "
+                "torque that the Rauch-Tung-Striebel smoother of the maximum-likelihood model estimated at every "
+                "sample, over the control gain; kd is the model's offset plus the flight's mean wind. The eq. (46) "
+                "profile above is kept for the paper's comparison.\n",
+                _md_table(["Axis", "kd (rad/s²)", "std u_d (smoother)", "90 % interval u_d (smoother)",
+                           "std u_d (eq. 46, smoothed)", "correlation smoother vs eq. 46"], rows) + "\n",
+            ]
         if self.simulation is not None:
             rows = []
             for a in self.axes:
@@ -379,7 +399,7 @@ def _check_smoothing(smoothing):
 # -------------------------------------------------------------- identification
 def identify_disturbance(flight: Flight, params: ModelParams, interval: float | None = None,
                          prefilter: bool = True, smoothing=DEFAULT_SMOOTHING, axes=AXES,
-                         simulate: bool = True) -> DisturbanceProfile:
+                         simulate: bool = True, wind_torque=None) -> DisturbanceProfile:
     """Identify the piecewise-constant wind disturbance of a flight, eqs. (41)-(47).
 
     Parameters
@@ -405,6 +425,13 @@ def identify_disturbance(flight: Flight, params: ModelParams, interval: float | 
     simulate : bool
         Simulate the model without and with the disturbance (Section 3.4) and
         keep the comparison in ``simulation``.
+    wind_torque : array_like, shape (3, n), optional
+        The wind torque at every sample about the model's offsets [rad/s^2], as
+        the maximum-likelihood model's smoother estimates it. When given, it is
+        the profile's ``trace`` (over the control gain, zero-mean) and ``kd``
+        (the model's offset plus its mean): the disturbance the library stores
+        and the environment replays; the eq. (46) profile is still computed and
+        reported beside it.
 
     Returns
     -------
@@ -486,6 +513,21 @@ def identify_disturbance(flight: Flight, params: ModelParams, interval: float | 
     which = np.minimum(np.arange(n) // N, n_int - 1)
     trace = ud[:, which]
 
+    source = "eq46"
+    smoother_ud = None
+    if wind_torque is not None:
+        wt = np.asarray(wind_torque, dtype=float)
+        if wt.shape != (3, n) or not np.all(np.isfinite(wt[idx])):
+            raise DisturbanceError(f"wind_torque must be finite with shape (3, {n}) (roll, pitch, yaw by sample), "
+                                   f"got shape {wt.shape}")
+        source = "smoother"
+        base_kd = np.array([params.get(name) for name in OFFSET])
+        trace = np.zeros((3, n))
+        for i in idx:
+            kd[i] = base_kd[i] + wt[i].mean()
+            trace[i] = (wt[i] - wt[i].mean()) / gains[i]
+        smoother_ud = trace
+
     statistics = {}
     for a, i in zip(axes, idx):
         ks = stats.ks_2samp(ud[i], stick[i] - stick[i].mean())
@@ -503,13 +545,20 @@ def identify_disturbance(flight: Flight, params: ModelParams, interval: float | 
             "ks_statistic": float(ks.statistic),
             "ks_pvalue": float(ks.pvalue),
         }
+        if smoother_ud is not None:
+            statistics[a].update({
+                "trace_source": "smoother",
+                "smoother_ud_std": float(smoother_ud[i].std()),
+                "smoother_ud_interval90": _interval90(smoother_ud[i]),
+                "smoother_vs_eq46_correlation": float(np.corrcoef(smoother_ud[i], ud[i, which])[0, 1]),
+            })
     prefilter_meta = dict(data.metadata.get("prefilter", {})) if prefilter else None
     profile = DisturbanceProfile(
         axes=axes, interval=round(width, 12), samples_per_interval=N, sample_rate=round(float(fs), 9), time=np.asarray(flight.time),
         interval_starts=data.time[starts], torque=torque, kd=kd, control_gains=gains, ud_raw=ud_raw, ud=ud,
         trace=trace, collective=np.asarray(data.sticks[2], dtype=float), sticks=stick,
         passes=tuple(int(p) for p in passes), smoothing=smoothing, smoothing_cost=cost, statistics=statistics,
-        params=params, prefilter=prefilter_meta, source=_source_of(flight),
+        params=params, prefilter=prefilter_meta, source=_source_of(flight), trace_source=source,
     )
     if simulate:
         profile.simulation = simulate_with_disturbance(profile, data)

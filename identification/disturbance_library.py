@@ -225,6 +225,7 @@ class Trace:
                 "servo_delay_s": {a: params.taus[i] for i, a in enumerate(AXES)},
             },
             "axes": list(p.axes),
+            "trace_source": p.trace_source,
             "identification": ident,
         }
         if metadata:

@@ -80,14 +80,16 @@ def identify_each(flights, backend=None, progress: bool = False, **identifier_kw
     return _map(backend, _identify_task, _flights(flights), dict(identifier_kwargs), progress, "identify flights")
 
 
-def _disturbance_task(flight, shared):
+def _disturbance_task(item, shared):
     from .disturbance import identify_disturbance
 
     params, kwargs = shared
-    return identify_disturbance(flight, params, **kwargs)
+    flight, wind = item
+    return identify_disturbance(flight, params, wind_torque=wind, **kwargs)
 
 
-def disturbances_of(flights, params, backend=None, progress: bool = False, **disturbance_kwargs) -> list:
+def disturbances_of(flights, params, backend=None, progress: bool = False, wind_torques=None,
+                    **disturbance_kwargs) -> list:
     """Each flight's wind disturbance (eqs. 41-47) with fixed intrinsic parameters, one task per flight.
 
     Parameters
@@ -99,6 +101,9 @@ def disturbances_of(flights, params, backend=None, progress: bool = False, **dis
         Where the tasks run (None: the local cores).
     progress : bool
         Progress bar of finished flights.
+    wind_torques : sequence of ndarray (3, n), optional
+        Per flight, the smoother's wind torque to store as the trace (the
+        ``wind_torque`` of :func:`~identification.disturbance.identify_disturbance`).
     **disturbance_kwargs
         :func:`~identification.disturbance.identify_disturbance` settings (``interval``,
         ``smoothing``, ``simulate``, ...).
@@ -108,5 +113,9 @@ def disturbances_of(flights, params, backend=None, progress: bool = False, **dis
     list of DisturbanceProfile
         In the order of ``flights``.
     """
-    return _map(backend, _disturbance_task, _flights(flights), (params, dict(disturbance_kwargs)), progress,
-                "disturbance profiles")
+    flights = _flights(flights)
+    winds = [None] * len(flights) if wind_torques is None else list(wind_torques)
+    if len(winds) != len(flights):
+        raise ValueError(f"wind_torques holds {len(winds)} traces for {len(flights)} flights")
+    return _map(backend, _disturbance_task, list(zip(flights, winds)), (params, dict(disturbance_kwargs)),
+                progress, "disturbance profiles")
