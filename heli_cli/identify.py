@@ -41,21 +41,34 @@ def flight_backend(args):
 def register(sub):
     p = sub.add_parser(
         "identify",
-        help="identify the roll/pitch/yaw models (integral method) and the wind; write model.json, report.md "
-        "and the disturbance library",
+        help="identify the roll/pitch/yaw models (maximum likelihood with a wind state, or the integral method) "
+        "and the wind; write model.json, report.md and the disturbance library",
         description="Identify the minimal attitude models (paper eqs. 18, 21) from one or more canonical CSV "
-        "flights with the integral method (Fig. 5), then each flight's wind as a piecewise torque profile (eqs. "
-        "41-47). Writes DIR/model.json, DIR/report.md, figures, and appends the profiles to the disturbance "
-        "library DIR/disturbances (a new version; earlier versions are kept).",
+        "flights, by default with the maximum-likelihood filter-error method (a slow and a fast Gauss-Markov gust "
+        "state, white gyro noise; unbiased when the pilot fights turbulence), or with the integral method (Fig. 5, "
+        "--method integral); then each flight's wind: the smoother's estimate (maximum likelihood) or the "
+        "piecewise torque profile of eqs. 41-47 (integral). Writes DIR/model.json, DIR/report.md, figures, and "
+        "appends the winds to the disturbance library DIR/disturbances (a new version; earlier versions are kept).",
     )
     p.add_argument("flights", nargs="+", metavar="FLIGHT.csv", help="canonical CSV flight log(s)")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--coupled", action="store_true", help="write the coupled model (k1..k12) instead of the decoupled one")
-    p.add_argument("--interval", type=number("a positive interval in seconds", 0.0),
-                   default=1.0, help="integration interval T_i - T_(i-1) in s (default 1.0)")
+    p.add_argument("--method", choices=("ml", "integral"), default="ml",
+                   help="estimator: 'ml' maximum likelihood with a stochastic wind state (default), 'integral' the "
+                   "integral method of Fig. 5")
     p.add_argument("--delay", type=_delay, default=None,
-                   help="servo delay: 'auto' (searched, eq. 31) or seconds (default: none)")
-    p.add_argument("--no-filter", action="store_true", help="skip the 4/8 Hz zero-phase FIR prefilter (Section 3.1)")
+                   help="servo delay: 'auto' (the likelihood, or the integral fit, profiled over 0-0.5 s; eq. 31) "
+                   "or seconds (default: none)")
+    p.add_argument("--input-hold", choices=("linear", "zoh"), default="linear",
+                   help="sticks between samples: 'linear' (a pilot's hand, default) or 'zoh' (commands a flight "
+                   "controller holds over each sample)")
+    p.add_argument("--wind-model", choices=("auto", "gm2", "gm_so"), default="auto",
+                   help="ml: gust model per axis, 'gm2' two first-order Gauss-Markov processes, 'gm_so' a slow "
+                   "first-order and a fast second-order one, 'auto' the more likely (default)")
+    p.add_argument("--interval", type=number("a positive interval in seconds", 0.0),
+                   default=1.0, help="integral method: integration interval T_i - T_(i-1) in s (default 1.0)")
+    p.add_argument("--no-filter", action="store_true",
+                   help="integral method: skip the 4/8 Hz zero-phase FIR prefilter (Section 3.1)")
     p.add_argument("--no-plots", action="store_true", help="do not draw PNG figures")
     p.add_argument("--no-disturbances", action="store_true",
                    help="do not identify wind profiles nor write the disturbance library")
@@ -71,19 +84,24 @@ def run(args) -> int:
 
     flights = [read_flight(path) for path in tqdm(args.flights, desc="reading flights", unit="flight",
                                                    disable=len(args.flights) < 2)]
-    kwargs = {"interval": args.interval, "delay": args.delay, "prefilter": not args.no_filter}
+    if args.method == "ml":
+        kwargs = {"delay": args.delay, "input_hold": args.input_hold, "wind_model": args.wind_model}
+    else:
+        kwargs = {"interval": args.interval, "delay": args.delay, "prefilter": not args.no_filter,
+                  "input_hold": args.input_hold}
     backend = flight_backend(args)
     try:
         run = identify_and_report(
             flights, args.out, coupled=args.coupled, sources=[source_entry(p) for p in args.flights],
             identifier_kwargs=kwargs, flight_paths=args.flights, plots=not args.no_plots,
-            disturbances=not args.no_disturbances, backend=backend,
+            disturbances=not args.no_disturbances, backend=backend, method=args.method,
         )
     finally:
         if backend is not None:
             backend.close()
     params = run.params.values()
-    print(f"identified {run.chosen} model from {len(flights)} flight(s):")
+    print(f"identified {run.chosen} model from {len(flights)} flight(s) by "
+          f"{'maximum likelihood' if args.method == 'ml' else 'the integral method'}:")
     for axis, fit in run.identifiers[run.chosen].axes_.items():
         vals = ", ".join(f"{k}={params[k]:.4f}" for k in fit.params)
         delay = f", delay {fit.delay:.3f} s" if fit.delay else ""

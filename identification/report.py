@@ -128,18 +128,91 @@ def parameter_table(identifiers: dict, truth: ModelParams | None) -> str:
 
 def fit_table(identifiers: dict) -> str:
     """Markdown table of fit statistics per model and axis."""
-    lines = ["| Model | Axis | R² (integral fit) | Condition number | Iterations | Servo delay (s) |",
-             "|---|---|---|---|---|---|"]
+    lines = ["| Model | Axis | R² | R² of | Condition number | Servo delay (s) |", "|---|---|---|---|---|---|"]
     for lab, ident in identifiers.items():
+        what = ("the sticks-only simulation" if getattr(ident, "method", "").startswith("maximum")
+                else f"the integral fit ({len(next(iter(ident.axes_.values())).history)} iterations)")
         for axis, fit in ident.axes_.items():
-            lines.append(f"| {lab} | {axis} | {fit.r2:.4f} | {fit.condition:.3g} | {len(fit.history)} | {fit.delay:.3f} |")
+            lines.append(f"| {lab} | {axis} | {fit.r2:.4f} | {what} | {fit.condition:.3g} | {fit.delay:.3f} |")
+    return "\n".join(lines)
+
+
+METHODS = ("ml", "integral")
+"""Estimators ``heli identify`` offers: the maximum-likelihood filter-error fit with a stochastic wind
+(:class:`~identification.ml_estimator.MaximumLikelihoodIdentifier`, the default) and the integral method
+of Fig. 5 (:class:`~identification.integral_method.IntegralIdentifier`)."""
+
+
+def make_identifier(method: str, structure: str, **kwargs):
+    """An unfitted identifier of ``method`` (:data:`METHODS`) and ``structure`` with its settings."""
+    if method == "ml":
+        from .ml_estimator import MaximumLikelihoodIdentifier
+
+        return MaximumLikelihoodIdentifier(structure=structure, **kwargs)
+    if method == "integral":
+        return IntegralIdentifier(structure=structure, **kwargs)
+    raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+
+
+def identification_settings(ident) -> dict:
+    """The settings of a fitted identifier as ``model.json`` records them (``method`` first)."""
+    from .ml_estimator import MaximumLikelihoodIdentifier
+
+    if isinstance(ident, MaximumLikelihoodIdentifier):
+        settings = {"method": ident.method, "estimator": "ml"}
+        settings.update({k: getattr(ident, k) for k in ("input_hold", "wind_model", "remove_vibration",
+                                                         "vibration_min_hz", "max_nfev")})
+    else:
+        settings = {"method": "integral (Fig. 5)", "estimator": "integral"}
+        settings.update({k: getattr(ident, k) for k in ("interval", "offsets", "disturbance_order", "input_hold",
+                                                         "prefilter", "max_iter", "tol")})
+    settings["delay"] = ident.delay if not isinstance(ident.delay, np.ndarray) else ident.delay.tolist()
+    return settings
+
+
+def method_sentence(ident) -> str:
+    """One sentence of the report saying how the model was identified."""
+    from .ml_estimator import MaximumLikelihoodIdentifier
+
+    if isinstance(ident, MaximumLikelihoodIdentifier):
+        winds = ", ".join(f"{a} {f.wind['model']}" for a, f in ident.axes_.items())
+        return ("Method: maximum likelihood (filter-error / prediction-error method): per axis the rate, a slow and "
+                "a fast Gauss-Markov gust entering as torque, white gyro noise; exact discretisation with the "
+                f"sticks {'linearly interpolated' if ident.input_hold == 'linear' else 'held'} between samples, "
+                "steady-state Kalman filter, innovations minimised over the damping and the wind model with the "
+                f"linear parameters projected out; gust models chosen by likelihood ({winds}); standard errors "
+                "from the Fisher information; no prefilter (vibration lines removed by regression on their "
+                "sinusoids). The integral method of Fig. 5 is its starting point and is shown for comparison.")
+    return ("Method: integral-based identification (paper Section 2.5.2, Fig. 5) with "
+            f"{ident.interval:g} s intervals, per-interval initial values (eq. 34), "
+            + ("a per-interval polynomial disturbance of degree "
+               f"{ident.disturbance_order} (generalising eq. 43)" if ident.offsets == "per_interval"
+               else "one constant offset")
+            + (f", zero-phase FIR prefilter {ident.pass_hz:g}/{ident.stop_hz:g} Hz (Section 3.1)"
+               if ident.prefilter else "") + ".")
+
+
+def wind_table(ident) -> str:
+    """Markdown table of the maximum-likelihood wind model and noise per axis (empty for the integral method)."""
+    if not hasattr(ident, "axes_") or not all(hasattr(f, "wind") for f in ident.axes_.values()):
+        return ""
+    lines = ["| Axis | gust model | T slow (s) | T fast (s) | torque std slow / fast (rad/s²) | u_d std slow / fast "
+             "| gyro noise (deg/s) | one-step R² |", "|---|---|---|---|---|---|---|---|"]
+    for axis, f in ident.axes_.items():
+        w = f.wind
+        ud = " / ".join("—" if v is None else f"{v:.4f}" for v in w["ud_std"])
+        lines.append(
+            f"| {axis} | {w['model']} | {w['time_constants_s'][0]:.2f} ± {w['time_constants_se_s'][0]:.2f} "
+            f"| {w['time_constants_s'][1]:.3f} ± {w['time_constants_se_s'][1]:.3f} "
+            f"| {w['torque_std'][0]:.4f} / {w['torque_std'][1]:.4f} | {ud} | {np.degrees(f.noise_std):.3f} "
+            f"| {f.prediction_r2:.4f} |")
     return "\n".join(lines)
 
 
 def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), identifier_kwargs=None,
                         flight_paths=None, plots: bool = True, disturbances: bool = True,
                         progress: bool | None = None, wind_flights=None, model_extra=None,
-                        backend=None) -> IdentificationRun:
+                        backend=None, method: str = "ml") -> IdentificationRun:
     """Identify, validate and write ``model.json`` + ``report.md`` (+ figures) into ``out_dir``.
 
     Parameters
@@ -152,7 +225,7 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
     sources : sequence of dict
         Provenance entries (``{"file": ..., "sha256": ...}``).
     identifier_kwargs : dict, optional
-        Settings passed to :class:`IntegralIdentifier` (interval, delay, ...).
+        Settings passed to the identifier of ``method`` (delay, input_hold, ...; interval for the integral method).
     flight_paths : list of path, optional
         Where the flights came from (to find a synthetic flight's truth).
     plots : bool
@@ -172,14 +245,17 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
         Where the flights' winds are identified, one task per flight
         (:func:`identification.fleet.disturbances_of`; same profiles on every backend).
         None: one after the other in this process. The pooled fit is one task, here.
+    method : {"ml", "integral"}
+        The estimator (:data:`METHODS`): maximum likelihood with a wind state (default; the library then
+        stores the smoother's wind) or the integral method of Fig. 5 (the library stores eq. 46's profile).
     """
     flights = [flights] if isinstance(flights, Flight) else list(flights)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     kw = dict(identifier_kwargs or {})
     identifiers = {
-        "decoupled": IntegralIdentifier(structure="decoupled", **kw).fit(flights),
-        "coupled": IntegralIdentifier(structure="coupled", **kw).fit(flights),
+        "decoupled": make_identifier(method, "decoupled", **kw).fit(flights),
+        "coupled": make_identifier(method, "coupled", **kw).fit(flights),
     }
     chosen = "coupled" if coupled else "decoupled"
     first = identifiers[chosen].flights_[0]  # filtered as identified
@@ -187,10 +263,7 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
     truth = _truth_of(flights[0], (flight_paths or [None])[0])
 
     ident = identifiers[chosen]
-    settings = {k: getattr(ident, k) for k in ("interval", "offsets", "disturbance_order", "input_hold",
-                                               "prefilter", "max_iter", "tol")}
-    settings["method"] = "integral (Fig. 5)"
-    settings["delay"] = ident.delay if not isinstance(ident.delay, np.ndarray) else ident.delay.tolist()
+    settings = identification_settings(ident)
     model_path = save_model(
         out, ident.params_, structure=chosen, sample_rate=first.sample_rate,
         filter_settings=first.metadata.get("prefilter"), identification=settings,
@@ -212,15 +285,17 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
         chosen_flights = range(len(flights)) if wind_flights is None else [int(i) for i in wind_flights]
         show = (len(chosen_flights) > 1) if progress is None else progress
         done = None
+        winds = {i: ident.wind_torque(i) for i in chosen_flights} if hasattr(ident, "wind_torque") else {}
         if backend is not None:
             from .fleet import disturbances_of
 
             done = disturbances_of([flights[i] for i in chosen_flights], ident.params_, backend=backend,
-                                   progress=show)
+                                   progress=show, wind_torques=[winds.get(i) for i in chosen_flights])
         for n, i in enumerate(tqdm(chosen_flights, desc="disturbance profiles", unit="flight",
                                    disable=not show or done is not None)):
             flight = flights[i]
-            profile = identify_disturbance(flight, ident.params_) if done is None else done[n]
+            profile = (identify_disturbance(flight, ident.params_, wind_torque=winds.get(i)) if done is None
+                       else done[n])
             profiles.append(profile)
             prefix = f"disturbance_{i + 1}" if len(flights) > 1 else "disturbance"
             section = [f"### {names[i]}", "", profile.markdown()]
@@ -249,17 +324,20 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
         "",
         src_lines,
         "",
-        "Method: integral-based identification (paper Section 2.5.2, Fig. 5) with "
-        f"{ident.interval:g} s intervals, per-interval initial values (eq. 34), "
-        + ("a per-interval polynomial disturbance of degree "
-           f"{ident.disturbance_order} (generalising eq. 43)" if ident.offsets == "per_interval" else "one constant offset")
-        + (f", zero-phase FIR prefilter {ident.pass_hz:g}/{ident.stop_hz:g} Hz (Section 3.1)" if ident.prefilter else "")
-        + ".",
+        method_sentence(ident),
         "",
         "## Identified parameters",
         "",
         parameter_table(identifiers, truth),
         "",
+    ]
+    if method == "ml":
+        wind_md = wind_table(ident)
+        reference = IntegralIdentifier(structure=chosen).fit(flights)
+        md += ["## Wind model and sensor noise (maximum likelihood)", "", wind_md, "",
+               "## The integral method (Fig. 5) on the same flights, for comparison", "",
+               parameter_table({f"integral ({chosen})": reference}, truth), ""]
+    md += [
         "## Fit statistics",
         "",
         fit_table(identifiers),

@@ -149,7 +149,7 @@ def test_identify_several_flights_pools_them(flight_csv, tmp_path):
 def test_identify_prints_a_summary(flight_csv, capsys, tmp_path):
     assert main(["identify", str(flight_csv), "--out", str(tmp_path), "--no-plots", "--interval", "2"]) == 0
     out = capsys.readouterr().out
-    assert out.startswith("identified decoupled model from 1 flight(s):")
+    assert out.startswith("identified decoupled model from 1 flight(s) by maximum likelihood:")
     assert f"wrote {tmp_path / 'model.json'}" in out
 
 
