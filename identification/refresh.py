@@ -59,7 +59,6 @@ from .bootstrap import DEFAULT_REPLICATES, BootstrapResult, interval_bootstrap
 from .disturbance_library import DisturbanceLibrary
 from .errors import LibraryError, ModelFileError
 from .files import jsonable, keep_copy, sha256_of, write_bytes, write_text
-from .integral_method import IntegralIdentifier
 from .model_file import MODEL_FILENAME, load_model
 from .terms import AXES, TERMS
 
@@ -171,13 +170,68 @@ class RefreshResult:
 
 
 # ------------------------------------------------------------------ helpers
+def estimator_of(doc: dict, where: str = "model.json") -> str:
+    """Which estimator identified a model: ``"ml"`` (maximum likelihood) or ``"integral"`` (Fig. 5).
+
+    Models written before the maximum-likelihood estimator existed record only ``method``
+    ("integral (Fig. 5)"), or nothing: they are integral-method models.
+    """
+    ident = doc.get("identification") or {}
+    est = ident.get("estimator")
+    method = str(ident.get("method", "integral"))
+    if est is None:
+        est = "ml" if method.startswith("maximum") else ("integral" if method.startswith("integral") else None)
+    if est not in ("ml", "integral"):
+        raise RefreshError(f"{where}: identified by {method!r}; refresh re-identifies with the maximum-likelihood "
+                           "or the integral method only")
+    return est
+
+
+def fisher_result(identifier, names) -> BootstrapResult:
+    """The maximum-likelihood fit's uncertainty in the drift table's form: Fisher standard errors, 95 % normal intervals."""
+    from scipy import stats
+
+    est, se = {}, {}
+    for fit in identifier.axes_.values():
+        est.update(fit.params)
+        se.update(fit.std_errors)
+    z = float(stats.norm.ppf(0.975))
+    n = sum(int(round(f.duration)) for f in identifier.flights_)
+    return FisherResult(tuple(names), {k: est[k] for k in names}, np.empty((0, len(names))),
+                        {k: se[k] for k in names}, {k: (est[k] - z * se[k], est[k] + z * se[k]) for k in names},
+                        0.95, 0, 0, n, 0, None, tuple(identifier.params_.taus))
+
+
+class FisherResult(BootstrapResult):
+    """Uncertainty from the Fisher information of a maximum-likelihood fit (no replicates)."""
+
+    def to_dict(self) -> dict:
+        out = super().to_dict()
+        out["method"] = "Fisher information of the innovations (maximum likelihood)"
+        for k in ("n_replicates", "n_failed", "block_intervals", "seed"):
+            out.pop(k)
+        out["n_seconds"] = out.pop("n_intervals")
+        return out
+
+
+def compared_parameters(identifier, estimator: str) -> list[str]:
+    """Parameters the drift table compares: every fitted one, less the offsets kd of a maximum-likelihood fit.
+
+    With a wind state in the model the offsets are each flight's trim plus that day's mean wind
+    (:attr:`identification.ml_estimator.MLAxisFit.flight_offsets`): they change from flight to flight
+    without the aircraft changing, so they are reported per flight and not flagged.
+    """
+    names = [k for fit in identifier.axes_.values() for k in fit.params]
+    return [k for k in names if not (estimator == "ml" and TERMS[k].effect == "offset")]
+
+
 def identifier_settings(doc: dict, where: str = "model.json") -> tuple[str, dict]:
-    """Structure and :class:`IntegralIdentifier` keyword arguments the model was identified with.
+    """Structure and identifier keyword arguments the model was identified with (see :func:`estimator_of`).
 
     Raises
     ------
     RefreshError
-        A structure ``heli identify`` does not write (``"custom"``), or a method other than the integral method.
+        A structure ``heli identify`` does not write (``"custom"``), or an unknown method.
     """
     structure = doc.get("structure")
     if structure not in ("decoupled", "coupled"):
@@ -186,16 +240,15 @@ def identifier_settings(doc: dict, where: str = "model.json") -> tuple[str, dict
             "(a model written by 'heli identify')"
         )
     ident = doc.get("identification") or {}
-    method = str(ident.get("method", "integral"))
-    if not method.startswith("integral"):
-        raise RefreshError(f"{where}: identified by {method!r}; refresh re-identifies with the integral method only")
-    kw = {k: ident[k] for k in ("interval", "offsets", "disturbance_order", "input_hold", "prefilter", "max_iter", "tol")
-          if ident.get(k) is not None}
+    estimator = estimator_of(doc, where)
+    keys = (("input_hold", "wind_model", "remove_vibration", "vibration_min_hz", "max_nfev") if estimator == "ml"
+            else ("interval", "offsets", "disturbance_order", "input_hold", "prefilter", "max_iter", "tol"))
+    kw = {k: ident[k] for k in keys if ident.get(k) is not None}
     if "delay" in ident:
         kw["delay"] = ident["delay"]
     filt = doc.get("filter") or {}
     for k in ("pass_hz", "stop_hz"):
-        if filt.get(k) is not None:
+        if filt.get(k) is not None and estimator == "integral":
             kw[k] = float(filt[k])
     extra = tuple((doc.get("added_terms") or {}).keys())
     if extra:
@@ -318,9 +371,18 @@ def drift_table(old_values: dict, new: BootstrapResult, se_old: dict, se_old_sou
 
 def _previous_se(doc: dict, names, new: BootstrapResult, library_entries, old_sources):
     """Standard errors of the current model when its flights are not at hand (module docstring, step 3)."""
-    recorded = ((doc.get("refresh") or {}).get("bootstrap") or {}).get("std_errors") or {}
+    record = (doc.get("refresh") or {}).get("bootstrap") or {}
+    recorded = record.get("std_errors") or {}
     if all(isinstance(recorded.get(k), (int, float)) for k in names):
-        return {k: float(recorded[k]) for k in names}, "recorded bootstrap", None
+        label = "recorded Fisher information" if str(record.get("method", "")).startswith("Fisher") else \
+            "recorded bootstrap"
+        return {k: float(recorded[k]) for k in names}, label, None
+    if estimator_of(doc) == "ml":  # the fit's own Fisher errors, recorded by heli identify
+        fisher = {}
+        for axis in ((doc.get("fit_statistics") or {}).get("axes") or {}).values():
+            fisher.update(axis.get("std_errors") or {})
+        if all(isinstance(fisher.get(k), (int, float)) for k in names):
+            return {k: float(fisher[k]) for k in names}, "Fisher information recorded in model.json", None
     durations = {}
     for e in library_entries:
         sha = (e.get("source") or {}).get("sha256")
@@ -392,7 +454,7 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
     from tqdm import tqdm
 
     from .io import read_flight
-    from .report import identify_and_report, source_entry
+    from .report import identify_and_report, make_identifier, source_entry
 
     if fit not in FIT_CHOICES:
         raise RefreshError(f"fit must be one of {FIT_CHOICES}, got {fit!r}")
@@ -428,9 +490,18 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
 
     # -- uncertainty: the new flights alone, and the previous flights when at hand
     seeds = np.random.SeedSequence(seed).spawn(3)
-    new_ident = IntegralIdentifier(structure=structure, **kw).fit(flights)
-    boot_new = interval_bootstrap(flights, new_ident, n_replicates, block, seeds[0], progress=bool(show),
-                                  desc="bootstrap (new flights)")
+    estimator = estimator_of(doc, str(model_path))
+
+    def identifier():
+        return make_identifier(estimator, structure, **kw)
+
+    def uncertainty(fitted, fit_flights, seq, desc):
+        if estimator == "ml":
+            return fisher_result(fitted, compared_parameters(fitted, estimator))
+        return interval_bootstrap(fit_flights, fitted, n_replicates, block, seq, progress=bool(show), desc=desc)
+
+    new_ident = identifier().fit(flights)
+    boot_new = uncertainty(new_ident, flights, seeds[0], "bootstrap (new flights)")
     names = list(boot_new.names)
     search = [root] + list(dict.fromkeys(p.resolve().parent for p in new_paths))
     found, missing = find_source_flights(old_sources, search, previous_flights)
@@ -440,15 +511,15 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
     if have_old:
         old_flights = [read_flight(s["path"]) for s in tqdm(found, desc="reading previous flights", unit="flight",
                                                             disable=not show)]
-        old_ident = IntegralIdentifier(structure=structure, **kw).fit(old_flights)
-        boot_old = interval_bootstrap(old_flights, old_ident, n_replicates, block, seeds[1], progress=bool(show),
-                                      desc="bootstrap (previous flights)")
+        old_ident = identifier().fit(old_flights)
+        boot_old = uncertainty(old_ident, old_flights, seeds[1], "bootstrap (previous flights)")
         diff = max((abs(old_ident.params_.get(k) - old_params.get(k)) / max(abs(old_params.get(k)), 1e-12)
                     for k in names), default=0.0)
         if diff > REPRODUCE_RTOL:
             notes.append(f"refitting the previous flights gives parameters up to {diff:.2g} (relative) away from "
                          "model.json; the table compares against model.json and takes its uncertainty from the refit")
-        se_old, se_source, ci_old = dict(boot_old.std_errors), "bootstrap", dict(boot_old.ci)
+        se_old, se_source, ci_old = (dict(boot_old.std_errors), "bootstrap" if estimator == "integral" else "Fisher",
+                                     dict(boot_old.ci))
     else:
         se_old, se_source, note = _previous_se(doc, names, boot_new, entries, old_sources)
         ci_old = None
@@ -484,8 +555,8 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
     fit_paths = [str(p) for p in new_paths] + ([s["path"] for s in found] if mode == "pooled" else [])
     boot_model = boot_new
     if mode == "pooled":
-        boot_model = interval_bootstrap(fit_flights, IntegralIdentifier(structure=structure, **kw), n_replicates,
-                                        block, seeds[2], progress=bool(show), desc="bootstrap (refreshed model)")
+        pooled = identifier() if estimator == "integral" else identifier().fit(fit_flights)
+        boot_model = uncertainty(pooled, fit_flights, seeds[2], "bootstrap (refreshed model)")
 
     # -- write: history first, then model + report + library (identify_and_report), then the drift files
     kept = _keep_in_history(root)
@@ -507,7 +578,7 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
         run = identify_and_report(
             fit_flights, root, coupled=structure == "coupled", sources=sources, identifier_kwargs=kw,
             flight_paths=fit_paths, plots=plots, disturbances=True, progress=show,
-            wind_flights=range(len(flights)), model_extra={"refresh": record}, backend=backend,
+            wind_flights=range(len(flights)), model_extra={"refresh": record}, backend=backend, method=estimator,
         )
     except BaseException:
         # Stopped before the library gained its version: put the previous model back, so that the
@@ -542,6 +613,9 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
         "servo_delay_s": taus,
         "fit": mode, "reason": reason,
         "refreshed_parameters": {k: run.params.get(k) for k in names},
+        "estimator": estimator,
+        "flight_offsets": ({a: {"new flights": list(f.flight_offsets)} for a, f in new_ident.axes_.items()}
+                           if estimator == "ml" else None),
         "bootstrap": {"new": boot_new.to_dict(), "previous": boot_old.to_dict() if boot_old else None,
                       "refreshed": boot_model.to_dict()},
         "library": {"previous_version": previous_version, "version": library_version,
@@ -592,10 +666,15 @@ def refresh_markdown(result: RefreshResult, doc: dict) -> str:
         "## Parameter drift",
         "",
         f"Old: `{MODEL_FILENAME}` before the refresh (standard error: {result.drift[0].se_old_source if result.drift else '—'}). "
-        "New: the same structure and settings identified on the new flights alone. Standard errors and "
-        f"{100 * level:.0f} % percentile intervals from a moving-block bootstrap over the integral method's "
-        f"intervals ({b.n_intervals} in the new flights; {b.n_replicates} replicates, blocks of {b.block} interval(s), seed {doc['bootstrap_seed']}; servo delay held at the "
-        "identified value).",
+        "New: the same structure and settings identified on the new flights alone. "
+        + (f"Standard errors and {100 * level:.0f} % percentile intervals from a moving-block bootstrap over the "
+           f"integral method's intervals ({b.n_intervals} in the new flights; {b.n_replicates} replicates, blocks "
+           f"of {b.block} interval(s), seed {doc['bootstrap_seed']}; servo delay held at the identified value)."
+           if doc.get("estimator", "integral") == "integral" else
+           "Standard errors from the Fisher information of the maximum-likelihood fit, 95 % normal intervals. "
+           "The offsets kd are not compared: with a wind state in the model they are each flight's trim plus "
+           "that day's mean wind, and differ between flights of an unchanged aircraft (per-flight values in "
+           "`refresh.json` under `flight_offsets`)."),
         "",
         f"Flag: |Δ| > z·√(se_old² + se_new²) with z = {crit['z']:.2f} = Φ⁻¹(1 − α/(2m)), α = {crit['alpha']:g} "
         f"family-wise over m = {crit['n_parameters']} parameters (Bonferroni)"
@@ -618,7 +697,8 @@ def refresh_markdown(result: RefreshResult, doc: dict) -> str:
         "## The refreshed model",
         "",
         f"Fitted on {'the previous and the new flights pooled' if result.fit == 'pooled' else 'the new flights alone'}"
-        f" — {result.reason}. Its parameters and validation are in `report.md`; the bootstrap standard errors are "
+        f" — {result.reason}. Its parameters and validation are in `report.md`; the "
+        f"{'bootstrap' if doc.get('estimator', 'integral') == 'integral' else 'Fisher'} standard errors are "
         f"recorded in `{MODEL_FILENAME}` under `refresh.bootstrap`.",
         "",
         "| Parameter | Refreshed | se |",

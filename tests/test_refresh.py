@@ -88,12 +88,15 @@ def test_changed_damping_is_flagged_and_nothing_else(refreshed):
     assert_allclose(k3["new"], PAPER_PARAMS.k3 * K3_CHANGE, rtol=0.05)
     assert_allclose(k3["old"], PAPER_PARAMS.k3, rtol=0.05)
     assert_allclose(k3["delta"], k3["new"] - k3["old"])
-    # uncertainty from the bootstrap of both data sets (the previous flight lies beside the new one)
-    assert k3["se_old_source"] == "bootstrap" and doc["previous_flights"]["missing"] == []
+    # uncertainty from the Fisher information of both maximum-likelihood fits (the previous flight lies
+    # beside the new one); the offsets kd are per-flight trim values and are not compared
+    assert k3["se_old_source"] == "Fisher" and doc["previous_flights"]["missing"] == []
     assert k3["ci_new"][0] < k3["new"] < k3["ci_new"][1]
     z = doc["criterion"]["z"]
-    assert doc["criterion"]["n_parameters"] == len(rows) == 10
-    assert_allclose(z, 2.807, atol=1e-3)  # Bonferroni, alpha 0.05 over 10 parameters
+    assert doc["criterion"]["n_parameters"] == len(rows) == 7
+    assert not any(name.startswith("kd") for name in rows)
+    assert set(doc["flight_offsets"]) == {"roll", "pitch", "yaw"}
+    assert_allclose(z, 2.690, atol=1e-3)  # Bonferroni, alpha 0.05 over 7 parameters
     for r in rows.values():
         assert_allclose(r["z"], abs(r["delta"]) / np.hypot(r["se_old"], r["se_new"]), rtol=1e-12)
 
@@ -167,7 +170,31 @@ def test_unchanged_aircraft_is_pooled_without_flags(model_dir, flights):
         assert r.bootstrap_model.std_errors[k] < r.bootstrap_new.std_errors[k]
 
 
-def test_without_the_previous_flights_the_new_flights_alone_are_used(model_dir, flights, tmp_path):
+def test_without_the_previous_flights_ml_uses_the_recorded_fisher_errors(model_dir, flights, tmp_path):
+    lone = tmp_path / "elsewhere"
+    lone.mkdir()
+    shutil.copy(flights["f3"], lone / "f3.csv")
+    r = refresh_model(model_dir, [lone / "f3.csv"], plots=False, progress=False)
+    assert r.fit == "new" and "f1.csv missing" in r.reason and r.bootstrap_old is None
+    assert {row.se_old_source for row in r.drift} == {"Fisher information recorded in model.json"}
+    recorded = json.loads((model_dir / "model.json").read_text())["refresh"]["bootstrap"]["std_errors"]
+    other = tmp_path / "other"
+    other.mkdir()
+    shutil.copy(flights["f2"], other / "f2.csv")
+    r2 = refresh_model(model_dir, [other / "f2.csv"], plots=False, progress=False)
+    assert {row.se_old_source for row in r2.drift} == {"recorded Fisher information"}
+    assert {row.name: row.se_old for row in r2.drift} == recorded
+
+
+@pytest.fixture
+def integral_model_dir(flights, tmp_path):
+    out = tmp_path / "INT"
+    assert main(["identify", str(flights["f1"]), "--out", str(out), "--no-plots", "--method", "integral"]) == 0
+    return out
+
+
+def test_without_the_previous_flights_the_new_flights_alone_are_used(integral_model_dir, flights, tmp_path):
+    model_dir = integral_model_dir
     lone = tmp_path / "elsewhere"
     lone.mkdir()
     shutil.copy(flights["f3"], lone / "f3.csv")
