@@ -51,11 +51,14 @@ from threadpoolctl import threadpool_limits
 from .errors import IdentifiabilityError, NotFittedError
 from .flight import Flight
 from .integral_method import IntegralIdentifier, pade_filter
-from .model import ModelParams
+from .model import ModelParams, servo_coefficients
 from .terms import AXES, COUPLED, DECOUPLED, EXTRA_PARAMS, FEATURES, TERMS
 
 OWN_RATE = ("p", "q", "r")
 """The feature that is each axis' own rate: its term is the damping, a state coefficient."""
+
+COMMAND_FEATURE = ("u_lat", "u_lon", "u_ped")
+"""The feature that is each axis' own servo-side command: its term goes through the servo model exactly."""
 
 STICK_ROW = (0, 1, 3)
 """Row of ``Flight.sticks`` driving roll, pitch, yaw (lat, lon, ped)."""
@@ -63,8 +66,17 @@ STICK_ROW = (0, 1, 3)
 BURN_IN = 1.0
 """Seconds at the start of each flight left out of the likelihood while the filter settles."""
 
-DEFAULT_DELAY_GRID = np.round(np.arange(0.0, 0.5001, 0.02), 4)
-"""Delays profiled by ``delay="auto"`` [s]; the best is refined to 5 ms."""
+DEFAULT_DELAY_GRID = np.round(np.arange(0.0, 0.5001, 0.025), 4)
+"""Delays profiled by ``delay="auto"`` [s]; the best is then refined continuously (:data:`DELAY_TOLERANCE`)."""
+
+DELAY_TOLERANCE = 0.001
+"""Tolerance of the continuous refinement of the servo delay [s]."""
+
+GRID_NFEV = 25
+"""Likelihood evaluations per grid delay (warm-started from the previous delay's optimum)."""
+
+REFINE_NFEV = 40
+"""Likelihood evaluations per wind model and delay in the continuous refinement (warm-started)."""
 
 TIME_CONSTANT_BOUNDS = ((0.8, 120.0), (0.02, 0.8))
 """Bounds of the slow and the fast gust time constants [s]."""
@@ -74,11 +86,15 @@ TIME_CONSTANT_BOUNDS = ((0.8, 120.0), (0.02, 0.8))
 WIND_MODELS = ("gm2", "gm_so")
 """Gust models: ``"gm2"`` a slow plus a fast first-order Gauss-Markov process (a
 Dryden-like spectrum falling as 1/f^2 above each corner); ``"gm_so"`` a slow
-first-order process plus a fast second-order one (two cascaded first-order
-stages of one time constant, falling as 1/f^4: smooth gusts)."""
+first-order process plus a fast second-order one of natural period ``T_fast`` and
+damping ratio ``zeta`` (falling as 1/f^4: smooth gusts; a Butterworth low-pass at
+zeta = 0.71, two cascaded first-order stages at zeta = 1)."""
+
+ZETA_BOUNDS = (0.2, 3.0)
+"""Bounds of the fast second-order gust's damping ratio."""
 
 
-def _wind_block(kind: str, t_slow: float, t_fast: float):
+def _wind_block(kind: str, t_slow: float, t_fast: float, zeta: float = 1.0):
     """The gust states of one wind model.
 
     Returns ``Aw`` (m, m), the row ``cw`` (m,) summing the states into the
@@ -92,15 +108,16 @@ def _wind_block(kind: str, t_slow: float, t_fast: float):
         cols = [np.array([np.sqrt(2.0 / t_slow), 0.0]), np.array([0.0, np.sqrt(2.0 / t_fast)])]
         return Aw, cw, cols
     if kind == "gm_so":
-        Aw = np.array([[-1.0 / t_slow, 0.0, 0.0], [0.0, -1.0 / t_fast, 1.0 / t_fast], [0.0, 0.0, -1.0 / t_fast]])
         cw = np.array([1.0, 1.0, 0.0])
-        # w2 = w3 through 1/(1 + T s), w3' = -w3/T + b n: var(w2) = b^2 T / 4 for unit-intensity n
-        return Aw, cw, [np.array([np.sqrt(2.0 / t_slow), 0.0, 0.0]), np.array([0.0, 0.0, 2.0 / np.sqrt(t_fast)])]
+        # w'' + 2 zeta w w' + w^2 w = b n (w = 1/T_fast): var(w) = b^2 / (4 zeta w^3) for unit-intensity n
+        om = 1.0 / t_fast
+        Aw = np.array([[-1.0 / t_slow, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -om * om, -2.0 * zeta * om]])
+        return Aw, cw, [np.array([np.sqrt(2.0 / t_slow), 0.0, 0.0]), np.array([0.0, 0.0, np.sqrt(4 * zeta * om ** 3)])]
     raise ValueError(f"wind model must be one of {WIND_MODELS}, got {kind!r}")
 
 
-def _discrete_model(damping: float, t_slow: float, t_fast: float, q_slow: float, q_fast: float, dt: float,
-                    hold: str, kind: str = "gm2"):
+def _discrete_model(damping: float, t_slow: float, t_fast: float, q_slow: float, q_fast: float, zeta: float,
+                    dt: float, hold: str, kind: str = "gm2"):
     """Exact discretisation of the axis model over one sample.
 
     State ``(rate, gust states...)``. Returns ``Ad``, the input vectors ``g0``,
@@ -108,7 +125,7 @@ def _discrete_model(damping: float, t_slow: float, t_fast: float, q_slow: float,
     held input) and the process-noise covariance ``Qd`` by Van Loan's method,
     for stationary gust-torque variances ``q_slow``, ``q_fast``.
     """
-    Aw, cw, cols = _wind_block(kind, t_slow, t_fast)
+    Aw, cw, cols = _wind_block(kind, t_slow, t_fast, zeta)
     m = Aw.shape[0] + 1
     A = np.zeros((m, m))
     A[0, 0] = -damping
@@ -177,8 +194,9 @@ def _innovation_filters(Ad, g0, g1, L):
 
 
 # ------------------------------------------------------------------ one axis
-N_NONLINEAR = 5
-"""Parameters searched by the optimiser: damping, log T_slow, log T_fast, log(var_slow/R), log(var_fast/R)."""
+N_NONLINEAR = {"gm2": 5, "gm_so": 6}
+"""Parameters searched by the optimiser: damping, log T_slow, log T_fast, log(var_slow/R), log(var_fast/R),
+and for ``"gm_so"`` log zeta."""
 
 
 @dataclass
@@ -192,6 +210,37 @@ class _AxisData:
     hold: str
     burn: int
     wind_model: str = "gm2"
+    servo_row: int | None = None  # regressor driven through the servo (eq. 31), or None
+    servo_sticks: list | None = None  # the raw stick per flight for that regressor (sign applied)
+    tau: float = 0.0
+
+
+def _servo_increments(sticks, damping: float, tau: float, dt: float, hold: str) -> np.ndarray:
+    """The command's exact contribution to the rate over each sample, through the servo of eq. (31).
+
+    The continuous system ``rate' = -damping*rate + f*u + g*z``, ``z' = (u - z)/d1``
+    (the Padé servo split into feed-through ``f`` and state ``g``, :func:`identification.model.servo_coefficients`)
+    is discretised exactly with the stick held or linearly interpolated; returns
+    ``v[k]``, the rate's increment from ``k`` to ``k+1`` due to the command (per unit
+    control gain), so that the rate sees ``k2*v[k]`` as a one-sample input. The
+    servo state starts settled on the first stick.
+    """
+    d1, n1, n2 = servo_coefficients(tau)
+    f, g = -n2 / d1, n1 + n2 / d1
+    M = np.zeros((4, 4))
+    M[:2, :2] = np.array([[-damping, g], [0.0, -1.0 / d1]]) * dt
+    M[:2, 2] = np.array([f, 1.0 / d1]) * dt
+    M[2, 3] = 1.0
+    E = expm(M)
+    ga, gb = E[:2, 2], E[:2, 3]
+    h0, h1 = (ga - gb, gb) if hold == "linear" else (ga, np.zeros(2))
+    u = np.asarray(sticks, dtype=float)
+    u_next = np.append(u[1:], u[-1])
+    w = h0[1] * u + h1[1] * u_next
+    z = np.empty_like(u)
+    z[0] = u[0]
+    z[1:] = signal.lfilter([1.0], [1.0, -E[1, 1]], w[:-1], zi=[E[1, 1] * u[0]])[0]
+    return E[0, 1] * z + h0[0] * u + h1[0] * u_next
 
 
 class _AxisLikelihood:
@@ -202,9 +251,11 @@ class _AxisLikelihood:
 
     @staticmethod
     def unpack(x):
-        """(damping, T_slow, T_fast, var_slow/R, var_fast/R) from the search vector."""
-        damping, lts, ltf, lqs, lqf = x
-        return float(damping), float(np.exp(lts)), float(np.exp(ltf)), float(np.exp(lqs)), float(np.exp(lqf))
+        """(damping, T_slow, T_fast, var_slow/R, var_fast/R, zeta) from the search vector."""
+        damping, lts, ltf, lqs, lqf = x[:5]
+        zeta = float(np.exp(x[5])) if len(x) > 5 else 1.0
+        return (float(damping), float(np.exp(lts)), float(np.exp(ltf)), float(np.exp(lqs)), float(np.exp(lqf)),
+                zeta)
 
     def discrete(self, x):
         return _discrete_model(*self.unpack(x), self.data.dt, self.data.hold, self.data.wind_model)
@@ -215,10 +266,17 @@ class _AxisLikelihood:
         Ad, g0, g1, Qd = self.discrete(x)
         _, L, S = _kalman(Ad, Qd)
         b_y, b_u, a = _innovation_filters(Ad, g0, g1, L)
+        servo = d.servo_row is not None and d.tau > 0
+        if servo:
+            b_v, _ = _strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), np.eye(Ad.shape[0])[0])
         ys, zs = [], []
-        for y, X in zip(d.y, d.regressors):
+        for i, (y, X) in enumerate(zip(d.y, d.regressors)):
             ys.append((y - signal.lfilter(b_y, a, y))[d.burn:])
-            zs.append(signal.lfilter(b_u, a, X, axis=-1)[:, d.burn:])
+            Z = signal.lfilter(b_u, a, X, axis=-1)
+            if servo:
+                v = _servo_increments(d.servo_sticks[i], x[0], d.tau, d.dt, d.hold)
+                Z[d.servo_row] = signal.lfilter(b_v, a, v)
+            zs.append(Z[:, d.burn:])
         return np.concatenate(ys), np.concatenate(zs, axis=1), S
 
     def solve_linear(self, x):
@@ -272,7 +330,8 @@ class MLAxisFit:
     prediction_r2 : float
         Share of the rate's variance the one-step prediction explains.
     delay_profile : tuple of (float, float)
-        ``(delay, nll)`` pairs when the delay was profiled, else empty.
+        ``(delay, nll)`` pairs when the delay was profiled (the grid and the refinement's
+        evaluations, sorted by delay), else empty.
     """
 
     axis: str
@@ -312,9 +371,9 @@ class MaximumLikelihoodIdentifier:
         (a digital controller's commands).
     delay : None, float, sequence of 3 float, or "auto"
         Servo delay per axis [s] (Padé, eq. 31); "auto" profiles the likelihood
-        over ``delay_grid`` and refines the best to 5 ms.
+        over ``delay_grid`` and refines the best continuously (bounded scalar search to 1 ms).
     delay_grid : sequence of float, optional
-        Candidate delays for ``delay="auto"`` [s] (default 0 to 0.5 s in 20 ms).
+        Candidate delays for ``delay="auto"`` [s] (default 0 to 0.5 s in 25 ms).
     wind_model : {"auto", "gm2", "gm_so"}
         Gust model (:data:`WIND_MODELS`); "auto" fits both and keeps the one of
         higher likelihood per axis (they have the same number of parameters).
@@ -450,33 +509,47 @@ class MaximumLikelihoodIdentifier:
             ys.append(np.asarray(f.rates[a], dtype=float))
             Xs.append(np.array(rows, dtype=float).reshape(len(rows), f.n))
         reg_names = tuple(linear) + (tuple(f"{offset}@{j}" for j in range(len(flights))) if offset else ())
-        return _AxisData(ys, Xs, reg_names, flights[0].dt, self.input_hold, burn, wind_model), damping_name
+        command = next((j for j, p in enumerate(linear) if TERMS[p].feature == COMMAND_FEATURE[a]), None)
+        servo_sticks = None
+        if command is not None:
+            sign = TERMS[linear[command]].sign
+            servo_sticks = [sign * np.asarray(f.sticks[STICK_ROW[a]], dtype=float) for f in flights]
+        return _AxisData(ys, Xs, reg_names, flights[0].dt, self.input_hold, burn, wind_model, command,
+                         servo_sticks, float(tau)), damping_name
 
-    def _search(self, like: _AxisLikelihood, x0, free_damping: bool):
+    def _search(self, like: _AxisLikelihood, x0, free_damping: bool, max_nfev=None):
         lo = np.array([-2.0, np.log(TIME_CONSTANT_BOUNDS[0][0]), np.log(TIME_CONSTANT_BOUNDS[1][0]),
-                       np.log(1e-4), np.log(1e-4)])
+                       np.log(1e-4), np.log(1e-4), np.log(ZETA_BOUNDS[0])])
         hi = np.array([200.0, np.log(TIME_CONSTANT_BOUNDS[0][1]), np.log(TIME_CONSTANT_BOUNDS[1][1]),
-                       np.log(1e9), np.log(1e9)])
-        x0 = np.clip(np.asarray(x0, dtype=float), lo + 1e-9, hi - 1e-9)
+                       np.log(1e9), np.log(1e9), np.log(ZETA_BOUNDS[1])])
+        nx = N_NONLINEAR[like.data.wind_model]
+        x0 = np.asarray(x0, dtype=float)[:5]
+        if nx > 5:
+            x0 = np.append(x0, np.log(0.8))
+        lo, hi = lo[:nx], hi[:nx]
+        x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
         if free_damping:
             return optimize.least_squares(like.residual, x0, bounds=(lo, hi), x_scale="jac",
-                                          max_nfev=self.max_nfev, xtol=1e-8, ftol=1e-10)
+                                          max_nfev=max_nfev or self.max_nfev, xtol=1e-8, ftol=1e-10)
         # no damping term in the structure: the damping stays at zero
         res = optimize.least_squares(lambda z: like.residual(np.concatenate([[0.0], z])), x0[1:],
-                                     bounds=(lo[1:], hi[1:]), x_scale="jac", max_nfev=self.max_nfev,
+                                     bounds=(lo[1:], hi[1:]), x_scale="jac", max_nfev=max_nfev or self.max_nfev,
                                      xtol=1e-8, ftol=1e-10)
         res.x = np.concatenate([[0.0], res.x])
         return res
 
-    def _best(self, a, axis_params, flights, burn, tau, x0, models, free):
+    def _best(self, a, axis_params, flights, burn, tau, x0, models, free, max_nfev=None):
         """Search every wind model at delay ``tau``; the best ``(cost, x, model)``."""
         best = None
         for kind in models:
             like = _AxisLikelihood(self._axis_data(a, axis_params, flights, burn, tau, kind)[0])
-            res = self._search(like, x0, free)
-            if best is None or res.cost < best[0]:
-                best = (float(res.cost), res.x, kind)
-        return best
+            res = self._search(like, x0, free, max_nfev)
+            n = sum(len(y) - like.data.burn for y in like.data.y)
+            # Akaike: the concentrated NLL is n/2 log(2 cost / n) + const; one parameter more costs 1
+            aic = 0.5 * n * np.log(2.0 * res.cost / n) + N_NONLINEAR[kind]
+            if best is None or aic < best[3]:
+                best = (float(res.cost), res.x, kind, aic)
+        return best[:3]
 
     def _fit_axis(self, a, axis_params, flights, burn, start_params, delay) -> MLAxisFit:
         _, damping_name = self._axis_data(a, axis_params, flights[:1], burn, 0.0)
@@ -488,15 +561,23 @@ class MaximumLikelihoodIdentifier:
         if delay == "auto":
             grid = np.asarray(self.delay_grid if self.delay_grid is not None else DEFAULT_DELAY_GRID, dtype=float)
             x = x0
-            for tau in grid:  # warm-started along the grid, the first wind model only
-                cost, x, _ = self._best(a, axis_params, flights, burn, float(tau), x, models[:1], free)
+            coarse = max(5, min(self.max_nfev, GRID_NFEV))
+            for tau in grid:  # warm-started along the grid, the first wind model, a short search each
+                cost, x, _ = self._best(a, axis_params, flights, burn, float(tau), x, models[:1], free, coarse)
                 profile.append((float(tau), cost, x))
             tau_best, _, x_best = min(profile, key=lambda p: p[1])
             step = float(np.min(np.diff(grid))) if grid.size > 1 else 0.0
-            for tau in np.arange(max(0.0, tau_best - step + 0.005), tau_best + step - 1e-9, 0.005):
-                if all(abs(tau - t) > 1e-9 for t, _, _ in profile):
-                    cost, x, _ = self._best(a, axis_params, flights, burn, float(tau), x_best, models[:1], free)
-                    profile.append((float(tau), cost, x))
+            if step > 0:  # the delay is continuous: every 10 ms of timing error costs about 20 % of damping
+
+                def cost_at(tau):
+                    c, xt, _ = self._best(a, axis_params, flights, burn, float(tau), x_best, models, free,
+                                          REFINE_NFEV)
+                    profile.append((float(tau), c, xt))
+                    return c
+
+                lo, hi = max(0.0, tau_best - step), tau_best + step
+                optimize.minimize_scalar(cost_at, bounds=(lo, hi), method="bounded",
+                                         options={"xatol": DELAY_TOLERANCE})
             profile.sort(key=lambda p: p[0])
             tau, _, x0 = min(profile, key=lambda p: p[1])
         else:
@@ -517,14 +598,15 @@ class MaximumLikelihoodIdentifier:
         mse = float(np.mean(e ** 2))
         # Fisher information (Gauss-Newton): de/dx by central differences, de/dtheta = -Z.
         _, Z, _ = like.filtered(x)
-        J = np.empty((n, N_NONLINEAR + Z.shape[0]))
-        for j in range(N_NONLINEAR):
+        nx = len(x)
+        J = np.empty((n, nx + Z.shape[0]))
+        for j in range(nx):
             h = 1e-5 * max(1.0, abs(x[j]))
             xp, xm = x.copy(), x.copy()
             xp[j] += h
             xm[j] -= h
             J[:, j] = (like.residual_at(xp, theta) - like.residual_at(xm, theta)) / (2 * h)
-        J[:, N_NONLINEAR:] = -Z.T
+        J[:, nx:] = -Z.T
         if damping_name is None:
             J[:, 0] = 0.0
         F = J.T @ J
@@ -533,7 +615,7 @@ class MaximumLikelihoodIdentifier:
         w = np.linalg.eigvalsh(Fn)
         cond = float(w[-1] / max(w[0], 1e-300))
         se = np.sqrt(np.maximum(np.diag(np.linalg.pinv(Fn)) * mse, 0.0)) / dscale
-        damping, ts, tf, qs, qf = like.unpack(x)
+        damping, ts, tf, qs, qf, zeta = like.unpack(x)
         R = mse / S
         params, std = {}, {}
         if damping_name is not None:
@@ -543,7 +625,7 @@ class MaximumLikelihoodIdentifier:
         for i, nm in enumerate(data.names):
             if "@" not in nm:
                 params[nm] = float(theta[i])
-                std[nm] = float(se[N_NONLINEAR + i])
+                std[nm] = float(se[nx + i])
         offs = ()
         if k_off:
             off_name = data.names[k_off[0]].split("@")[0]
@@ -551,7 +633,7 @@ class MaximumLikelihoodIdentifier:
             weights = np.array([len(y) - data.burn for y in data.y], dtype=float)
             weights /= weights.sum()
             params[off_name] = float(weights @ np.array(offs))
-            within = float(np.sqrt(np.sum(weights ** 2 * se[[N_NONLINEAR + i for i in k_off]] ** 2)))
+            within = float(np.sqrt(np.sum(weights ** 2 * se[[nx + i for i in k_off]] ** 2)))
             spread = float(np.std(offs, ddof=1) / np.sqrt(len(offs))) if len(offs) > 1 else 0.0
             std[off_name] = float(np.hypot(within, spread))
         gain_name = next((p for p in axis_params if TERMS[p].effect == "control"), None)
@@ -561,6 +643,7 @@ class MaximumLikelihoodIdentifier:
             "model": kind,
             "time_constants_s": [ts, tf],
             "time_constants_se_s": [float(ts * se[1]), float(tf * se[2])],
+            "damping_ratio": zeta if kind == "gm_so" else None,
             "torque_std": [float(sd[0]), float(sd[1])],
             "torque_std_se": [float(0.5 * sd[0] * se[3]), float(0.5 * sd[1] * se[4])],
             "ud_std": [float(s / gain) if gain else None for s in sd],
@@ -618,7 +701,7 @@ class MaximumLikelihoodIdentifier:
                 drive = drive + fit.params[off_name] + shift
             states = rts_smooth(data.y[0], drive, *_AxisLikelihood.unpack(fit.state), data.dt, data.hold,
                                 fit.wind["model"])
-            _, cw, _ = _wind_block(fit.wind["model"], 1.0, 1.0)
+            _, cw, _ = _wind_block(fit.wind["model"], 1.0, 1.0)  # the same sum for every T, zeta
             out[a] = cw @ states[1:] + shift
         return out
 
@@ -671,7 +754,8 @@ def _lti_apply(A, B, C, D, u) -> np.ndarray:
     return y
 
 
-def rts_smooth(y, drive, damping, t_slow, t_fast, q_slow, q_fast, dt, hold="linear", wind_model="gm2") -> np.ndarray:
+def rts_smooth(y, drive, damping, t_slow, t_fast, q_slow, q_fast, zeta, dt, hold="linear",
+               wind_model="gm2") -> np.ndarray:
     """Steady-state Rauch-Tung-Striebel smoother of one axis: the states (rate, gust states...), shape (m, n).
 
     ``y`` is the measured rate (n,), ``drive`` the known torque from the inputs
@@ -680,7 +764,7 @@ def rts_smooth(y, drive, damping, t_slow, t_fast, q_slow, q_fast, dt, hold="line
     ``x_{k|n} = x_{k|k} + G (x_{k+1|n} - x_{k+1|k})`` with the constant smoother gain
     ``G = P_f Ad' P^-1``. Both passes are linear filters (no loop over samples).
     """
-    Ad, g0, g1, Qd = _discrete_model(damping, t_slow, t_fast, q_slow, q_fast, dt, hold, wind_model)
+    Ad, g0, g1, Qd = _discrete_model(damping, t_slow, t_fast, q_slow, q_fast, zeta, dt, hold, wind_model)
     P, L, S = _kalman(Ad, Qd)
     m = Ad.shape[0]
     I = np.eye(m)
