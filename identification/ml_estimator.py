@@ -52,7 +52,7 @@ from .errors import IdentifiabilityError, NotFittedError
 from .flight import Flight
 from .integral_method import IntegralIdentifier, pade_filter
 from .model import ModelParams, servo_coefficients
-from .terms import AXES, COUPLED, DECOUPLED, EXTRA_PARAMS, FEATURES, TERMS
+from .terms import AXES, FEATURES, RATE_DEPENDENCE, TERMS
 
 OWN_RATE = ("p", "q", "r")
 """The feature that is each axis' own rate: its term is the damping, a state coefficient."""
@@ -213,6 +213,7 @@ class _AxisData:
     servo_row: int | None = None  # regressor driven through the servo (eq. 31), or None
     servo_sticks: list | None = None  # the raw stick per flight for that regressor (sign applied)
     tau: float = 0.0
+    causal_rows: tuple = ()  # regressors made of measured rates: held over the sample, never interpolated
 
 
 def _servo_increments(sticks, damping: float, tau: float, dt: float, hold: str) -> np.ndarray:
@@ -266,6 +267,8 @@ class _AxisLikelihood:
         Ad, g0, g1, Qd = self.discrete(x)
         _, L, S = _kalman(Ad, Qd)
         b_y, b_u, a = _innovation_filters(Ad, g0, g1, L)
+        if d.causal_rows:  # a measured rate at k+1 carries the noise of y[k+1]: only u[k] may predict y[k+1]
+            b_c, _ = _strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), g0 + g1)
         servo = d.servo_row is not None and d.tau > 0
         if servo:
             b_v, _ = _strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), np.eye(Ad.shape[0])[0])
@@ -273,6 +276,8 @@ class _AxisLikelihood:
         for i, (y, X) in enumerate(zip(d.y, d.regressors)):
             ys.append((y - signal.lfilter(b_y, a, y))[d.burn:])
             Z = signal.lfilter(b_u, a, X, axis=-1)
+            for r in d.causal_rows:
+                Z[r] = signal.lfilter(b_c, a, X[r])
             if servo:
                 v = _servo_increments(d.servo_sticks[i], x[0], d.tau, d.dt, d.hold)
                 Z[d.servo_row] = signal.lfilter(b_v, a, v)
@@ -514,8 +519,9 @@ class MaximumLikelihoodIdentifier:
         if command is not None:
             sign = TERMS[linear[command]].sign
             servo_sticks = [sign * np.asarray(f.sticks[STICK_ROW[a]], dtype=float) for f in flights]
+        causal = tuple(j for j, p in enumerate(linear) if TERMS[p].feature in RATE_DEPENDENCE)
         return _AxisData(ys, Xs, reg_names, flights[0].dt, self.input_hold, burn, wind_model, command,
-                         servo_sticks, float(tau)), damping_name
+                         servo_sticks, float(tau), causal), damping_name
 
     def _search(self, like: _AxisLikelihood, x0, free_damping: bool, max_nfev=None):
         lo = np.array([-2.0, np.log(TIME_CONSTANT_BOUNDS[0][0]), np.log(TIME_CONSTANT_BOUNDS[1][0]),
