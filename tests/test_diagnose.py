@@ -130,7 +130,7 @@ def test_cli_writes_diagnosis_and_a_model_the_env_and_pd_accept(tmp_path):
     sim = simulate_flight(DURATION, seed=1, effects=("cross_coupling",), config=MANOEUVRE_CONFIG)
     sim.save(tmp_path / "flight.csv")
     out = tmp_path / "diag"
-    assert main(["diagnose", str(tmp_path / "flight.csv"), "--out", str(out)]) == 0
+    assert main(["diagnose", str(tmp_path / "flight.csv"), "--out", str(out), "--method", "integral"]) == 0
     doc = json.loads((out / "diagnosis.json").read_text())
     assert doc["verdict"] == "found" and doc["steps"]
     for step in doc["steps"]:

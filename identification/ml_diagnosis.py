@@ -1,0 +1,403 @@
+"""Diagnosis by likelihood: which physical effect the model misses, from the innovations of the wind-state model.
+
+:class:`LikelihoodDiagnoser` is the maximum-likelihood counterpart of
+:class:`identification.diagnose.Diagnoser`. Per axis it fits the current structure
+with the filter-error estimator (:mod:`identification.ml_estimator`: a slow and a fast
+stochastic gust, white gyro noise, the linear parameters projected out), then every
+candidate of the catalogue (:mod:`identification.effects`) on that axis: its terms
+added (cross-coupling k4·q, gyroscopic k1·q·r, collective torque, quadratic damping
+p|p|, gain scheduling u·δo) or, for ``servo_delay``, the command/response alignment
+profiled from ``-MAX_ALIGNMENT`` to +0.5 s (a positive value is the Padé servo delay
+of eq. 31, a negative one a log whose input column lags the response). Each candidate
+is scored by the likelihood-ratio statistic ``LR = 2 (NLL_base - NLL_candidate)``
+and accepted when ``LR`` exceeds the chi-square quantile of its number of added
+parameters at ``1 - alpha/m`` (Bonferroni over the ``m`` candidates tried on the axis)
+**and** when ``LR`` per added parameter is at least ``min_lr_per_parameter`` (the
+floor calibrated on flights without a missing effect, where the model is
+misspecified in small ways the chi-square law does not know). Because the gust is a
+state of the model, a pilot who fights it does not bias the comparison: the
+innovations are white whether the loop is open or closed.
+
+The best accepted candidate per axis is added, the axes that changed are fitted
+again, and the search repeats until nothing more is accepted (at most ``max_rounds``).
+Each step reports the statistic, the runner-up and its statistic, and the one-step,
+0.5 s-ahead and simulation (sticks only) R² before and after. Each axis also reports
+how much of its stick the past attitude and rate explain (the share closed by the
+pilot or a flight controller); the estimator is consistent either way, and the
+report says so instead of reading feedback as a physical effect.
+
+The verdict is ``undecided`` when the flight is shorter than ``min_duration``.
+"""
+
+from __future__ import annotations
+
+import time as _time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import optimize, stats
+
+from .effects import CATALOGUE, MAX_ALIGNMENT, NONE, SERVO_DELAY, UNDECIDED, shift_inputs
+from .errors import NotFittedError
+from .flight import Flight
+from threadpoolctl import threadpool_limits
+
+from .ml_estimator import BURN_IN, MaximumLikelihoodIdentifier, _AxisLikelihood, _kalman, _lti_apply
+from .model import ModelParams
+from .terms import AXES, DECOUPLED, TERMS
+
+ALPHA = 0.01
+"""Family-wise level of the likelihood-ratio test per axis and round (Bonferroni over the candidates)."""
+MIN_LR_PER_PARAMETER = 20.0
+"""Smallest likelihood-ratio statistic per added parameter accepted (calibrated on effect-free flights)."""
+MIN_DURATION = 60.0
+"""Shortest flight a diagnosis decides on [s]."""
+AHEAD_S = 0.5
+"""Horizon of the multi-step prediction R² reported per step [s]."""
+ALIGNMENT_GRID = np.round(np.arange(-MAX_ALIGNMENT, 0.5001, 0.025), 4)
+"""Alignments the ``servo_delay`` candidate profiles [s]; the best is refined to 1 ms."""
+NFEV = 12
+"""Likelihood searches' evaluation budget per candidate (warm-started from the axis' current fit; each
+Jacobian costs one evaluation per nonlinear parameter more)."""
+
+
+@dataclass
+class AxisScore:
+    """One fitted structure on one axis: its likelihood and how well it predicts."""
+
+    names: tuple
+    alignment: float
+    nll: float
+    x: np.ndarray
+    kind: str
+    params: dict = field(default_factory=dict)
+    r2: dict = field(default_factory=dict)
+
+
+@dataclass
+class LikelihoodStep:
+    """One accepted effect: the statistic, the runner-up and the R² before and after."""
+
+    round: int
+    axis: str
+    effect: str
+    parameters: dict
+    lr: float
+    threshold: float
+    runner_up: str | None
+    runner_up_lr: float | None
+    r2_before: dict
+    r2_after: dict
+
+    def to_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+def closed_loop_share(flight: Flight, axis: int, lags=(0.1, 0.2, 0.3, 0.5)) -> float:
+    """Share of an axis' stick variance explained by the attitude and rate seen ``lags`` seconds before.
+
+    A pilot or a flight controller holding the attitude makes the stick a function of
+    the past response; sweeps and jitter are what it does not explain.
+    """
+    fs = flight.sample_rate
+    k = [int(round(s * fs)) for s in lags]
+    kmax = max(k)
+    stick = flight.sticks[(0, 1, 3)[axis]][kmax:]
+    cols = [np.ones(stick.size)]
+    for lag in k:
+        cols.append(flight.attitude[axis][kmax - lag:flight.n - lag])
+        cols.append(flight.rates[axis][kmax - lag:flight.n - lag])
+    X = np.array(cols).T
+    coef = np.linalg.lstsq(X, stick, rcond=None)[0]
+    resid = stick - X @ coef
+    var = float(np.var(stick))
+    return float(1.0 - np.var(resid) / var) if var > 0 else 0.0
+
+
+def ahead_r2(like: _AxisLikelihood, x, theta, horizon: int) -> float:
+    """R² of the model's prediction ``horizon`` samples ahead from the Kalman-filtered state (one flight).
+
+    ``x_{k+h|k} = Ad^h (x_{k|k} - F_k) + F_{k+h}`` with ``F`` the response from rest
+    to the known inputs: the gust estimate decays as the wind model says.
+    """
+    d = like.data
+    Ad, g0, g1, Qd = like.discrete(x)
+    _, L, _ = _kalman(Ad, Qd)
+    m = Ad.shape[0]
+    eye = np.eye(m)
+    Phi = Ad - np.outer(Ad @ L, eye[0])
+    num = den = 0.0
+    for y, X in zip(d.y, d.regressors):
+        u = theta @ X
+        un = np.append(u[1:], u[-1])
+        n = y.size
+        pred = _lti_apply(Phi, np.column_stack([Ad @ L, g0, g1]), eye, np.zeros((m, 3)), np.vstack([y, u, un]))
+        filt = pred + np.outer(L, y - pred[0])
+        F = _lti_apply(Ad, np.column_stack([g0, g1]), eye, np.zeros((m, 2)), np.vstack([u, un]))
+        row = np.linalg.matrix_power(Ad, horizon)[0]
+        p = row @ (filt[:, :n - horizon] - F[:, :n - horizon]) + F[0, horizon:]
+        target = y[horizon:]
+        keep = slice(d.burn, None)
+        num += float(np.sum((target - p)[keep] ** 2))
+        den += float(np.sum((target[keep] - target[keep].mean()) ** 2))
+    return 1.0 - num / (den or 1.0)
+
+
+class LikelihoodDiagnoser:
+    """Name the physical effect a model misses by the likelihood of the wind-state model (module docstring).
+
+    Parameters
+    ----------
+    alpha : float
+        Family-wise level per axis and round, Bonferroni-divided among the candidates.
+    min_lr_per_parameter : float
+        Floor on the likelihood-ratio statistic per added parameter.
+    max_rounds : int
+        Largest number of add-and-refit rounds.
+    min_duration : float
+        Shortest flight decided on [s].
+    input_hold : {"linear", "zoh"}
+        Sticks between samples (see :class:`~identification.ml_estimator.MaximumLikelihoodIdentifier`).
+    axes : sequence of str
+        Axes diagnosed.
+
+    Attributes
+    ----------
+    verdict_ : str
+        ``"none"``, ``"undecided"`` or ``"found"``.
+    effects_found_ : list of (str, str)
+        (effect, axis) added.
+    steps_ : list of LikelihoodStep
+    rounds_ : list of list of dict
+        Every candidate's statistic per round.
+    closed_loop_ : dict of str to float
+        Per axis, the share of the stick explained by the past attitude and rate.
+    baseline_ : dict of str to AxisScore
+    final_ : dict of str to AxisScore
+    params_ : ModelParams
+        The final model (terms added, delays as servo delays), fitted on the flight.
+    alignment_ : tuple of 3 float
+        Final alignment per axis [s] (> 0 servo delay, < 0 input shift of the log).
+    evidence_ : dict
+    fit_time_ : float
+    """
+
+    def __init__(self, alpha: float = ALPHA, min_lr_per_parameter: float = MIN_LR_PER_PARAMETER,
+                 max_rounds: int = 3, min_duration: float = MIN_DURATION, input_hold: str = "linear", axes=AXES):
+        self.alpha = alpha
+        self.min_lr_per_parameter = min_lr_per_parameter
+        self.max_rounds = max_rounds
+        self.min_duration = min_duration
+        self.input_hold = input_hold
+        self.axes = axes
+
+    def _check(self):
+        if not 0.0 < self.alpha < 1.0:
+            raise ValueError(f"alpha must lie in (0, 1), got {self.alpha!r}")
+        if not self.min_lr_per_parameter >= 0.0:
+            raise ValueError(f"min_lr_per_parameter must be >= 0, got {self.min_lr_per_parameter!r}")
+        if not (isinstance(self.max_rounds, (int, np.integer)) and self.max_rounds >= 1):
+            raise ValueError(f"max_rounds must be a whole number >= 1, got {self.max_rounds!r}")
+        bad = [a for a in self.axes if a not in AXES]
+        if bad or not self.axes:
+            raise ValueError(f"axes must be a non-empty subset of {AXES}, got {self.axes!r}")
+
+    # ------------------------------------------------------------------ fitting pieces
+    def _data(self, a, names, alignment, kind):
+        flight = self._shifted(a, alignment)
+        tau = max(alignment, 0.0)
+        return self._ident._axis_data(a, names, [flight], self._burn, tau, kind)[0]
+
+    def _shifted(self, a, alignment) -> Flight:
+        if alignment >= 0:
+            return self._flight
+        key = (a, round(alignment, 6))
+        if key not in self._shift_cache:
+            shifts = [0.0, 0.0, 0.0]
+            shifts[a] = alignment
+            self._shift_cache[key] = shift_inputs(self._flight, shifts)
+        return self._shift_cache[key]
+
+    def _score(self, a, names, alignment, x0, kinds, nfev, free_tau=False) -> AxisScore:
+        """The likelihood of a structure and alignment: searched from ``x0`` (``nfev`` evaluations; with
+        ``free_tau`` a positive alignment, the servo delay, is searched too), or at ``x0`` itself with only
+        the linear parameters solved when ``nfev`` is 0."""
+        flight = self._shifted(a, alignment)
+        n = flight.n - self._burn
+        if nfev == 0:
+            like = _AxisLikelihood(self._data(a, names, alignment, kinds[0]))
+            e = like.residual(np.asarray(x0))
+            cost, x, kind = 0.5 * float(e @ e), np.asarray(x0), kinds[0]
+        else:
+            cost, x, kind, tau = self._ident._best(a, tuple(names), [flight], self._burn, max(alignment, 0.0), x0,
+                                                   kinds, True, nfev, free_tau)
+            if free_tau:
+                alignment = tau
+        nll = 0.5 * n * (np.log(2.0 * np.pi * 2.0 * cost / n) + 1.0)
+        return AxisScore(tuple(names), float(alignment), float(nll), np.asarray(x), kind)
+
+    def _describe(self, a, score: AxisScore) -> AxisScore:
+        """Parameters and R² (one step, 0.5 s ahead, sticks-only simulation) of a score."""
+        data = self._data(a, score.names, score.alignment, score.kind)
+        like = _AxisLikelihood(data)
+        e, theta, S = like.solve_linear(score.x)
+        fit = self._ident._result(a, score.names, like, np.array(score.x), theta, e, S,
+                                  next((p for p in score.names if TERMS[p].feature == "pqr"[a]), None),
+                                  max(score.alignment, 0.0), score.kind, ())
+        score.params = dict(fit.params)
+        score.r2 = {"one_step": fit.prediction_r2,
+                    "ahead_0.5s": ahead_r2(like, np.array(score.x), theta, int(round(AHEAD_S * self._fs))),
+                    "simulation": fit.r2}
+        return score
+
+    def _alignment_candidate(self, a, base: AxisScore) -> AxisScore:
+        """The best alignment: a scan with the wind and damping held (linear parameters solved), then a
+        bounded search around the best with every parameter free."""
+        kinds = (base.kind,)
+        scan = [self._score(a, base.names, float(s), base.x, kinds, 0) for s in ALIGNMENT_GRID
+                if abs(s - base.alignment) > 1e-9]
+        best = min(scan, key=lambda sc: sc.nll)
+        if best.alignment >= 0:  # a servo delay: searched jointly with the damping and the wind
+            return self._score(a, base.names, best.alignment, base.x, kinds, 3 * NFEV, free_tau=True)
+        best = self._score(a, base.names, best.alignment, base.x, kinds, NFEV)
+        lo, hi = max(-MAX_ALIGNMENT, best.alignment - 0.025), min(0.0, best.alignment + 0.025)
+        res = optimize.minimize_scalar(lambda s: self._score(a, base.names, float(s), best.x, kinds, 5).nll,
+                                       bounds=(lo, hi), method="bounded", options={"xatol": 0.002})
+        refined = self._score(a, base.names, float(res.x), best.x, kinds, NFEV)
+        return refined if refined.nll < best.nll else best
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, flight: Flight, model: ModelParams | None = None) -> "LikelihoodDiagnoser":
+        """Diagnose ``model``'s structure (default: the paper's decoupled model) against ``flight``."""
+        t0 = _time.perf_counter()
+        self._check()
+        with threadpool_limits(limits=1, user_api="blas"):  # small matrices, long 1-D filters
+            self._fit(flight, model)
+        self.fit_time_ = _time.perf_counter() - t0
+        return self
+
+    def _fit(self, flight: Flight, model: ModelParams | None):
+        self.steps_, self.rounds_, self.effects_found_ = [], [], []
+        self.evidence_ = {}
+        self._ident = MaximumLikelihoodIdentifier(input_hold=self.input_hold)
+        cleaned, _ = self._ident._clean(flight)
+        self._flight = cleaned
+        self._fs = flight.sample_rate
+        self._burn = int(round(BURN_IN * self._fs))
+        self._shift_cache = {}
+        structure = {a: tuple(DECOUPLED[a]) for a in range(3)}
+        alignment = [0.0, 0.0, 0.0]
+        if model is not None:
+            values = model.values()
+            for a in range(3):
+                names = tuple(p for p, v in values.items() if TERMS[p].axis == a and (v != 0.0 or p in DECOUPLED[a]))
+                structure[a] = names
+            alignment = list(model.taus)
+        self.closed_loop_ = {AXES[a]: closed_loop_share(flight, a) for a in range(3)}
+        if flight.duration < self.min_duration:
+            self.verdict_ = UNDECIDED
+            self.evidence_ = {"reason": f"flight of {flight.duration:.1f} s is shorter than {self.min_duration:g} s"}
+            self.baseline_ = self.final_ = {}
+            self.params_ = model or ModelParams()
+            self.alignment_ = tuple(alignment)
+            return
+        start = self._ident.__class__(input_hold=self.input_hold, structure=structure, delay=[max(v, 0.0) for v in
+                                      alignment], axes=self.axes, wind_model="auto")
+        start.remove_vibration = False  # cleaned above
+        start._fit([cleaned] if min(alignment) >= 0 else [shift_inputs(cleaned, [min(v, 0.0) for v in alignment])])
+        current = {}
+        for axis in self.axes:
+            a = AXES.index(axis)
+            fit = start.axes_[axis]  # the same likelihood as the candidates': evaluated here, on the same data
+            current[axis] = self._score(a, structure[a], alignment[a], fit.state, (fit.wind["model"],), 0)
+        self.baseline_ = dict(current)
+        todo = list(self.axes)
+        for rnd in range(1, self.max_rounds + 1):
+            rows, changed = [], []
+            for axis in todo:
+                a = AXES.index(axis)
+                base = current[axis]
+                # the base searched with the candidates' budget too, so that a candidate gains only by its terms
+                again = self._score(a, base.names, base.alignment, base.x, (base.kind,), NFEV)
+                base = current[axis] = self._describe(a, again if again.nll < base.nll else base)
+                cands = []
+                for name, effect in CATALOGUE.items():
+                    if effect.is_alignment:
+                        if (name, axis) in self.effects_found_:
+                            continue  # found in an earlier round: refined in the final fit, not added twice
+                        sc = self._alignment_candidate(a, base)
+                        k = 1
+                    else:
+                        add = tuple(p for p in effect.terms_on(a) if p not in base.names)
+                        if not add:
+                            continue
+                        sc = self._score(a, base.names + add, base.alignment, base.x, (base.kind,), NFEV)
+                        k = len(add)
+                    cands.append((name, k, sc, 2.0 * (base.nll - sc.nll)))
+                m = max(len(cands), 1)
+                scored = []
+                for name, k, sc, lr in cands:
+                    thr = self.threshold(m, k)
+                    scored.append((lr / thr, name, k, sc, lr, thr))
+                    rows.append({"round": rnd, "axis": axis, "effect": name, "lr": float(lr), "threshold": thr,
+                                 "n_parameters": k, "alignment_s": sc.alignment, "accepted": bool(lr > thr)})
+                scored.sort(key=lambda r: -r[0])
+                if not scored or scored[0][0] <= 1.0:
+                    continue
+                _, name, k, sc, lr, thr = scored[0]
+                runner = scored[1] if len(scored) > 1 else None
+                after = self._describe(a, sc)
+                added = {p: v for p, v in after.params.items() if p not in base.names}
+                if name == SERVO_DELAY:
+                    added = {"alignment_s": after.alignment}
+                self.steps_.append(LikelihoodStep(rnd, axis, name, added, float(lr), thr,
+                                                  runner[1] if runner else None,
+                                                  float(runner[4]) if runner else None, dict(base.r2),
+                                                  dict(after.r2)))
+                self.effects_found_.append((name, axis))
+                current[axis] = after
+                changed.append(axis)
+            self.rounds_.append(rows)
+            todo = changed
+            if not todo:
+                break
+        self.final_ = current
+        self.alignment_ = tuple(current[a].alignment if a in current else alignment[i] for i, a in enumerate(AXES))
+        # the final structure fitted in full (every search to convergence) on the aligned flight
+        final = MaximumLikelihoodIdentifier(structure={AXES.index(a): sc.names for a, sc in current.items()},
+                                            delay=[max(v, 0.0) for v in self.alignment_], axes=tuple(current),
+                                            input_hold=self.input_hold, remove_vibration=False)
+        # (a delay found here stays as found: searching it again would change the structure's meaning)
+        shifts = [min(v, 0.0) for v in self.alignment_]
+        final._fit([shift_inputs(cleaned, shifts) if min(shifts) < 0 else cleaned])
+        self.identifier_ = final
+        self.params_ = final.params_
+        self.verdict_ = "found" if self.steps_ else NONE
+
+    def threshold(self, m: int, k: int) -> float:
+        """Acceptance threshold of a candidate adding ``k`` parameters among ``m`` tried on the axis."""
+        return max(float(stats.chi2.ppf(1.0 - self.alpha / m, k)), self.min_lr_per_parameter * k)
+
+    def _check_fitted(self):
+        if not hasattr(self, "verdict_"):
+            raise NotFittedError("this LikelihoodDiagnoser is not fitted yet; call fit(flight) first")
+
+    def summary(self) -> dict:
+        """JSON-ready verdict, steps, candidates per round, closed-loop shares and R² per axis."""
+        self._check_fitted()
+        return {
+            "verdict": self.verdict_,
+            "effects_found": [{"effect": e, "axis": a} for e, a in self.effects_found_],
+            "steps": [s.to_dict() for s in self.steps_],
+            "rounds": self.rounds_,
+            "closed_loop_share": self.closed_loop_,
+            "alignment_s": dict(zip(AXES, self.alignment_)),
+            "r2_before": {a: s.r2 for a, s in self.baseline_.items()},
+            "r2_after": {a: s.r2 for a, s in self.final_.items()},
+            "evidence": self.evidence_,
+            "criterion": {"alpha": self.alpha, "min_lr_per_parameter": self.min_lr_per_parameter,
+                          "rule": "LR = 2 (NLL_base - NLL_candidate) > max(chi2_k(1 - alpha/m), "
+                                  "min_lr_per_parameter * k)"},
+            "fit_time_s": self.fit_time_,
+        }
+

@@ -1,0 +1,181 @@
+"""What ``heli diagnose`` (by likelihood, the default) writes: ``diagnosis.json``, ``diagnosis.md``, a figure,
+and the new model version.
+
+:func:`diagnose_by_likelihood` runs :class:`identification.ml_diagnosis.LikelihoodDiagnoser` and writes,
+each file atomically (:mod:`identification.files`):
+
+* ``diagnosis.json`` — verdict, per step the axis, effect, parameters, likelihood-ratio statistic and
+  threshold, runner-up, R² (one step, 0.5 s ahead, sticks-only simulation) before and after; every
+  candidate's statistic per round; the share of each stick the pilot's or controller's loop explains;
+* ``diagnosis.md`` — the same as tables, with ``diagnosis_likelihood.png`` (each candidate's statistic
+  over its threshold, per axis and round);
+* when an effect was found, ``model.json`` (a new version, the replaced one in ``history/``) fitted by
+  maximum likelihood with the effect added (``added_terms``, ``"diagnosis"``), and this flight's wind (the
+  smoother's) appended to the disturbance library, so that the directory is a model the environment and the
+  controllers load.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .diagnose_report import DiagnosisRun
+from .effects import CATALOGUE, alignment_parts, describe, shift_inputs
+from .files import jsonable, save_figure, sha256_of, write_text
+from .flight import Flight
+from .ml_diagnosis import AHEAD_S, LikelihoodDiagnoser
+from .model import ModelParams
+from .model_file import save_model
+from .terms import AXES
+
+SCHEMA = "heli-env/diagnosis"
+SCHEMA_VERSION = 2
+
+
+def criterion_text(d: LikelihoodDiagnoser) -> str:
+    """The acceptance rule, in words, with the settings used."""
+    return (
+        "Each axis is fitted by maximum likelihood with a stochastic wind (a slow and a fast Gauss-Markov gust, "
+        "white gyro noise), then with each candidate effect added. A candidate is accepted when the "
+        "likelihood-ratio statistic LR = 2 (NLL before - NLL after) exceeds both the chi-square quantile of its k "
+        f"added parameters at 1 - {d.alpha:g}/m (m candidates on the axis, Bonferroni) and "
+        f"{d.min_lr_per_parameter:g}·k (the floor calibrated on flights without a missing effect). The best "
+        "accepted candidate per axis (largest LR over its threshold) is added and the search repeats on the axes "
+        f"that changed (at most {d.max_rounds} rounds). Undecided: a flight shorter than {d.min_duration:g} s."
+    )
+
+
+def diagnosis_document(d: LikelihoodDiagnoser, source: dict | None = None, model_path=None) -> dict:
+    """The content of ``diagnosis.json``."""
+    out = {"schema": SCHEMA, "schema_version": SCHEMA_VERSION, "method": "likelihood",
+           "source": source or {"name": str(d._flight.metadata.get("source", "flight"))}}
+    out.update(d.summary())
+    out["criterion"]["text"] = criterion_text(d)
+    out["parameters_after"] = d.params_.values() | {f"tau_{a}": d.params_.taus[i] for i, a in enumerate(AXES)}
+    out["model_written"] = str(model_path) if model_path else None
+    return jsonable(out)
+
+
+def _table(header, rows) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * len(header)) + "|"]
+    return "\n".join(lines + ["| " + " | ".join(str(c) for c in r) + " |" for r in rows])
+
+
+def _r2(r: dict) -> str:
+    return f"{r.get('one_step', float('nan')):.4f} / {r.get('ahead_0.5s', float('nan')):.3f} / " \
+           f"{r.get('simulation', float('nan')):.3f}"
+
+
+def diagnosis_markdown(d: LikelihoodDiagnoser, figure: Path | None) -> str:
+    """``diagnosis.md``: verdict, closed-loop shares, the steps, and every candidate per round."""
+    found = ", ".join(f"`{e}` on {a}" for e, a in d.effects_found_)
+    md = ["# Diagnosis (likelihood)", "", f"**Verdict: {d.verdict_}**" + (f" — added {found}." if found else "."), ""]
+    if d.verdict_ == "undecided":
+        md += [f"Evidence: {d.evidence_.get('reason', '')}", ""]
+    md += [criterion_text(d), ""]
+    md += ["## Who closes the loop", "",
+           "Share of each stick explained by the attitude and rate 0.1–0.5 s before (a pilot or a flight controller "
+           "holding the attitude). The estimator models the gust as a state, so a closed loop does not bias it; a "
+           "large share means the stick mirrors the response and the effects below are judged on what the "
+           "pilot's corrections leave.", "",
+           _table(["Axis", "closed-loop share of the stick"],
+                  [[a, f"{100 * v:.0f} %"] for a, v in d.closed_loop_.items()]), ""]
+    if d.steps_:
+        md += ["## Effects added", "",
+               f"R² columns: one-step prediction / {AHEAD_S:g} s ahead / simulation from the sticks alone.", "",
+               _table(["Round", "Axis", "Effect", "Parameters", "LR", "threshold", "runner-up (LR)", "R² before",
+                       "R² after"],
+                      [[s.round, s.axis, describe(s.effect, AXES.index(s.axis)),
+                        ", ".join(f"{k} = {v:.4g}" for k, v in s.parameters.items()), f"{s.lr:.1f}",
+                        f"{s.threshold:.1f}", f"{s.runner_up} ({s.runner_up_lr:.1f})" if s.runner_up else "—",
+                        _r2(s.r2_before), _r2(s.r2_after)] for s in d.steps_]), ""]
+    for i, rows in enumerate(d.rounds_, start=1):
+        md += [f"## Candidates, round {i}", "",
+               _table(["Axis", "Effect", "k", "LR", "threshold", "alignment (s)", "accepted"],
+                      [[r["axis"], r["effect"], r["n_parameters"], f"{r['lr']:.1f}", f"{r['threshold']:.1f}",
+                        f"{r['alignment_s']:+.3f}" if r["effect"] == "servo_delay" else "—",
+                        "**yes**" if r["accepted"] else "no"] for r in rows]), ""]
+    if figure is not None:
+        md += [f"![Likelihood-ratio statistics]({figure.name})", ""]
+    return "\n".join(md)
+
+
+def plot_statistics(d: LikelihoodDiagnoser, path) -> Path | None:
+    """Bar chart: each candidate's LR over its threshold per axis (round 1; 1 = the acceptance line)."""
+    if not d.rounds_:
+        return None
+    from .validation import _pyplot
+
+    plt = _pyplot()
+    rows = d.rounds_[0]
+    effects = list(CATALOGUE)
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.6), sharey=True)
+    for ax, axis in zip(axes, AXES):
+        vals = [next((r["lr"] / r["threshold"] for r in rows if r["axis"] == axis and r["effect"] == e), np.nan)
+                for e in effects]
+        colors = ["tab:red" if v > 1 else "tab:gray" for v in vals]
+        ax.barh(range(len(effects)), np.clip(np.nan_to_num(vals, nan=0.0), 1e-3, None), color=colors)
+        ax.axvline(1.0, color="k", lw=1, ls="--")
+        ax.set_xscale("log")
+        ax.set_title(axis)
+        ax.set_xlabel("LR / threshold")
+        ax.set_yticks(range(len(effects)))
+        ax.set_yticklabels(effects)
+    fig.suptitle("Likelihood-ratio statistic of each candidate effect, round 1 (right of the line: accepted)")
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def diagnose_by_likelihood(flight: Flight, out_dir, *, model: ModelParams | None = None, model_document=None,
+                           source: dict | None = None, plots: bool = True,
+                           diagnoser: LikelihoodDiagnoser | None = None) -> DiagnosisRun:
+    """Diagnose ``flight`` by likelihood and write the outputs into ``out_dir`` (module docstring)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    d = (diagnoser or LikelihoodDiagnoser()).fit(flight, model=model)
+    paths = {}
+    model_path = None
+    if d.steps_:
+        model_path = _write_model(d, flight, out, model_document, source)
+        paths["model"] = model_path
+        paths["library"] = out / "disturbances"
+    doc = diagnosis_document(d, source, model_path)
+    figure = plot_statistics(d, out / "diagnosis_likelihood.png") if plots else None
+    if figure is not None:
+        paths["likelihood_png"] = figure
+    paths["json"] = write_text(out / "diagnosis.json", json.dumps(doc, indent=2, allow_nan=False) + "\n")
+    paths["markdown"] = write_text(out / "diagnosis.md", diagnosis_markdown(d, figure))
+    return DiagnosisRun(d, doc, paths)
+
+
+def _write_model(d: LikelihoodDiagnoser, flight: Flight, out: Path, model_document, source) -> Path:
+    """The model with the added effects as a new ``model.json`` version, and this flight's wind."""
+    from .disturbance import identify_disturbance
+    from .disturbance_library import DisturbanceLibrary
+    from .report import identification_settings
+
+    delays, log_shift = alignment_parts(d.alignment_)
+    ident = d.identifier_
+    diagnosis = {
+        "method": "likelihood",
+        "added": [{"round": s.round, "axis": s.axis, "effect": s.effect, "parameters": s.parameters, "lr": s.lr,
+                   "threshold": s.threshold} for s in d.steps_],
+        "input_alignment_s": {a: log_shift[i] for i, a in enumerate(AXES)},
+        "note": "A positive alignment is the servo delay of eq. (31) (first-order Padé). input_alignment_s < 0: "
+                "the log's input column lags the response; advance it by this much "
+                "(identification.effects.shift_inputs) before comparing this model with the log.",
+        "criterion": criterion_text(d),
+    }
+    sources = list((model_document or {}).get("provenance", {}).get("sources", [])) + ([source] if source else [])
+    settings = identification_settings(ident)
+    settings["method"] += " after heli diagnose"
+    path = save_model(out, d.params_, structure="custom", sample_rate=flight.sample_rate,
+                      identification=settings, fit_statistics={"axes": ident.summary()}, sources=sources,
+                      extra={"diagnosis": diagnosis})
+    aligned = shift_inputs(flight, log_shift) if min(log_shift) < 0 else flight
+    profile = identify_disturbance(aligned, d.params_, wind_torque=ident.wind_torque(0))
+    DisturbanceLibrary.open(out, create=True).append([profile], model_sha256=sha256_of(path))
+    return path

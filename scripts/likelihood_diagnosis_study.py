@@ -1,0 +1,137 @@
+"""How often the likelihood diagnosis names a hidden effect, and how often it names one that is not there.
+
+For every case (a hidden effect of :data:`identification.synthetic.EFFECTS` at the size of the
+README's study, a time-misaligned log, or no effect) and every seed, flies a default synthetic
+flight (the closed-loop pilot of ``heli simulate-flight``, one-stick sweeps, the paper's wind; or a
+bench cell with ``--cell``), runs :class:`identification.ml_diagnosis.LikelihoodDiagnoser` without
+telling it the truth, and counts per case:
+
+* **named**: the true effect named on every axis it acts on (a delay within 15 ms), and nothing else;
+* **partly**: the true effect named on some of its axes, nothing else;
+* **wrong**: any effect named that is not the truth (on a no-effect flight: any effect at all).
+
+Usage::
+
+    python scripts/likelihood_diagnosis_study.py [--seeds 20] [--duration 180] [--workers 2] [--cell NAME]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+
+from identification.synthetic import EFFECTS
+
+CASES = {
+    "none": {},
+    "servo_delay": {"effects": ("servo_delay",)},
+    "log input lags 0.3 s": {"shift": 0.3},
+    "cross_coupling": {"effects": ("cross_coupling",)},
+    "gyroscopic": {"effects": ("gyroscopic",)},
+    "collective_torque": {"effects": ("collective_torque",)},
+    "gain_scheduling": {"effects": ("gain_scheduling",)},
+    "nonlinear_damping (5x)": {"truth": {k: 5 * v for k, v in EFFECTS["nonlinear_damping"].items()}},
+}
+TRUE_AXES = {
+    "servo_delay": {"servo_delay": ("roll", "pitch", "yaw")},
+    "log input lags 0.3 s": {"servo_delay": ("roll", "pitch", "yaw")},
+    "cross_coupling": {"cross_coupling": ("roll", "pitch")},
+    "gyroscopic": {"gyroscopic": ("roll", "pitch", "yaw")},
+    "collective_torque": {"collective_torque": ("roll", "pitch")},
+    "gain_scheduling": {"gain_scheduling": ("roll", "pitch", "yaw")},
+    "nonlinear_damping (5x)": {"nonlinear_damping": ("roll", "pitch", "yaw")},
+}
+
+
+def _flight(name, seed, duration, cell):
+    from identification.effects import shift_inputs
+    from identification.synthetic import PAPER_PARAMS, simulate_flight
+
+    case = CASES[name]
+    truth = PAPER_PARAMS.with_values(**case["truth"]) if "truth" in case else None
+    config = None
+    if cell is not None:
+        from identification.bench import BENCH_CELLS
+
+        config = BENCH_CELLS[cell]
+    sim = simulate_flight(duration, seed=seed, effects=case.get("effects", ()), truth=truth, config=config)
+    flight = sim.flight
+    if "shift" in case:  # the log's input column lags the response: the sticks are recorded late
+        flight = shift_inputs(flight, (case["shift"],) * 3)
+    return sim, flight
+
+
+def _one(job):
+    from threadpoolctl import threadpool_limits
+
+    from identification.ml_diagnosis import LikelihoodDiagnoser
+
+    name, seed, duration, cell = job
+    with threadpool_limits(limits=1, user_api="blas"):
+        sim, flight = _flight(name, seed, duration, cell)
+        hold = "zoh" if getattr(sim.config, "pilot", "pid") == "autopilot" else "linear"
+        t0 = time.perf_counter()
+        d = LikelihoodDiagnoser(input_hold=hold).fit(flight)
+        seconds = time.perf_counter() - t0
+    found = {}
+    for s in d.steps_:
+        found.setdefault(s.effect, {})[s.axis] = s.parameters.get("alignment_s")
+    truth = TRUE_AXES.get(name, {})
+    wrong = [e for e in found if e not in truth]
+    ok_axes = []
+    for effect, axes in truth.items():
+        for axis in axes:
+            if axis in found.get(effect, {}):
+                value = found[effect][axis]
+                if effect == "servo_delay":
+                    want = -CASES[name]["shift"] if "shift" in CASES[name] else sim.truth.taus[("roll", "pitch",
+                                                                                                "yaw").index(axis)]
+                    if abs(value - want) > 0.015:
+                        continue
+                ok_axes.append(axis)
+    n_true = sum(len(v) for v in truth.values())
+    return {"case": name, "seed": seed, "found": {e: sorted(v) for e, v in found.items()},
+            "named": bool(truth) and not wrong and len(ok_axes) == n_true,
+            "partly": bool(truth) and not wrong and 0 < len(ok_axes) < n_true,
+            "wrong": bool(wrong), "seconds": seconds,
+            "max_lr": max((r["lr"] / r["threshold"] for rows in d.rounds_[:1] for r in rows), default=0.0)}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--duration", type=float, default=180.0)
+    ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES), metavar="CASE")
+    ap.add_argument("--cell", default=None, help="a bench cell (identification.bench) instead of the default flight")
+    args = ap.parse_args(argv)
+    jobs = [(c, s, args.duration, args.cell) for c in args.cases for s in range(1, args.seeds + 1)]
+    from tqdm import tqdm
+
+    with ProcessPoolExecutor(args.workers) as pool:
+        rows = list(tqdm(pool.map(_one, jobs), total=len(jobs), desc="flights", unit="flight"))
+    print(f"\nLikelihood diagnosis, {args.seeds} seeds per case, {args.duration:g} s flights"
+          + (f", bench cell {args.cell}" if args.cell else ", default heli simulate-flight pilot")
+          + f". Command: python scripts/likelihood_diagnosis_study.py --seeds {args.seeds} --duration "
+          f"{args.duration:g}" + (f" --cell {args.cell}" if args.cell else ""))
+    print("\n| case | named (all true axes) | partly | wrong effect | median s | what was named, most often |")
+    print("|---|---|---|---|---|---|")
+    for c in args.cases:
+        rs = [r for r in rows if r["case"] == c]
+        n = len(rs)
+        common = {}
+        for r in rs:
+            key = "; ".join(f"{e} ({', '.join(a)})" for e, a in sorted(r["found"].items())) or "none"
+            common[key] = common.get(key, 0) + 1
+        top = sorted(common.items(), key=lambda kv: -kv[1])[:2]
+        print(f"| {c} | {sum(r['named'] for r in rs)}/{n} | {sum(r['partly'] for r in rs)}/{n} "
+              f"| {sum(r['wrong'] for r in rs)}/{n} | {np.median([r['seconds'] for r in rs]):.1f} | "
+              + "; ".join(f"{k} ×{v}" for k, v in top) + " |")
+
+
+if __name__ == "__main__":
+    main()

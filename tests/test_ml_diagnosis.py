@@ -1,0 +1,86 @@
+"""Diagnosis by likelihood (identification.ml_diagnosis) and ``heli diagnose``'s default method."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from identification.errors import NotFittedError
+from identification.ml_diagnosis import LikelihoodDiagnoser, closed_loop_share
+from identification.synthetic import simulate_flight
+
+
+@pytest.fixture(scope="module")
+def coupled_flight():
+    return simulate_flight(150, seed=3, effects=("cross_coupling",))
+
+
+def test_no_missing_effect_names_none():
+    d = LikelihoodDiagnoser().fit(simulate_flight(150, seed=6).flight)
+    assert d.verdict_ == "none" and d.steps_ == []
+    assert all(not r["accepted"] for r in d.rounds_[0])
+    assert len(d.rounds_[0]) == 16  # 6 candidates on roll and pitch, 4 on yaw (k12 is in yaw's base)
+
+
+def test_hidden_cross_coupling_is_named_on_its_axes(coupled_flight):
+    d = LikelihoodDiagnoser().fit(coupled_flight.flight)
+    assert d.verdict_ == "found"
+    assert sorted(d.effects_found_) == [("cross_coupling", "pitch"), ("cross_coupling", "roll")]
+    for s in d.steps_:
+        assert s.lr > s.threshold and s.runner_up is not None and s.runner_up_lr < s.threshold
+        assert s.r2_after["ahead_0.5s"] >= s.r2_before["ahead_0.5s"] - 0.01
+    truth = coupled_flight.truth
+    se = d.identifier_.axes_["pitch"].std_errors["k8"]
+    assert abs(d.params_.get("k8") - truth.k8) < 4 * se
+
+
+def test_servo_delay_is_named_with_its_value():
+    sf = simulate_flight(150, seed=2, effects=("servo_delay",))
+    d = LikelihoodDiagnoser(axes=("roll",)).fit(sf.flight)
+    assert d.effects_found_ == [("servo_delay", "roll")]
+    assert abs(d.alignment_[0] - sf.truth.tau_roll) < 0.015
+    assert d.params_.tau_roll == pytest.approx(d.alignment_[0])
+
+
+def test_short_flight_is_undecided_and_errors_are_named():
+    d = LikelihoodDiagnoser().fit(simulate_flight(40, seed=1).flight)
+    assert d.verdict_ == "undecided" and "shorter" in d.evidence_["reason"]
+    with pytest.raises(NotFittedError, match="not fitted"):
+        LikelihoodDiagnoser().summary()
+    with pytest.raises(ValueError, match="alpha"):
+        LikelihoodDiagnoser(alpha=2.0).fit(simulate_flight(40, seed=1).flight)
+
+
+def test_closed_loop_share_of_a_pilot_and_of_open_sweeps(coupled_flight):
+    shares = [closed_loop_share(coupled_flight.flight, a) for a in range(3)]
+    assert all(0.1 < s < 0.9 for s in shares)
+
+
+def test_heli_diagnose_by_likelihood_writes_the_model(tmp_path, coupled_flight):
+    from heli_cli.main import main
+
+    path = tmp_path / "cc.csv"
+    coupled_flight.save(path)
+    assert main(["diagnose", str(path), "--out", str(tmp_path / "d"), "--no-plots"]) == 0
+    doc = json.loads((tmp_path / "d" / "diagnosis.json").read_text())
+    assert doc["method"] == "likelihood" and doc["verdict"] == "found"
+    model = json.loads((tmp_path / "d" / "model.json").read_text())
+    assert model["identification"]["estimator"] == "ml"
+    assert model["parameters"]["k4"] != 0.0 and model["parameters"]["k8"] != 0.0
+    assert (tmp_path / "d" / "disturbances" / "manifest-v0001.json").is_file()
+    assert "Who closes the loop" in (tmp_path / "d" / "diagnosis.md").read_text()
+    # the directory is a model the environment and the PD design load
+    import gymnasium as gym
+    import numpy as np
+
+    import heli_env  # noqa: F401 - registers the env
+    from controllers.pd import design_gains
+
+    env = gym.make("HeliAttitude-v0", model=str(tmp_path / "d"))
+    env.reset(seed=0)
+    env.step(np.zeros(3, dtype=np.float32))
+    from identification.model_file import load_model
+
+    params, _ = load_model(tmp_path / "d")
+    assert len(design_gains(params).kp) == 3
