@@ -41,7 +41,7 @@ offset ``kd`` (the trim and the day's mean wind) and its own filter start.
 from __future__ import annotations
 
 import time as _time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import optimize, signal
@@ -52,7 +52,7 @@ from .errors import IdentifiabilityError, NotFittedError
 from .flight import Flight
 from .integral_method import IntegralIdentifier, pade_filter
 from .model import ModelParams, servo_coefficients
-from .terms import AXES, FEATURES, RATE_DEPENDENCE, TERMS
+from .terms import AXES, DECOUPLED, FEATURES, RATE_DEPENDENCE, TERMS
 
 OWN_RATE = ("p", "q", "r")
 """The feature that is each axis' own rate: its term is the damping, a state coefficient."""
@@ -66,17 +66,18 @@ STICK_ROW = (0, 1, 3)
 BURN_IN = 1.0
 """Seconds at the start of each flight left out of the likelihood while the filter settles."""
 
-DEFAULT_DELAY_GRID = np.round(np.arange(0.0, 0.5001, 0.025), 4)
-"""Delays profiled by ``delay="auto"`` [s]; the best is then refined continuously (:data:`DELAY_TOLERANCE`)."""
+DEFAULT_DELAY_GRID = np.round(np.arange(0.0, 0.5001, 0.01), 4)
+"""Delays profiled by ``delay="auto"`` [s]; from the best, the delay is searched jointly with the rest."""
 
-DELAY_TOLERANCE = 0.001
-"""Tolerance of the continuous refinement of the servo delay [s]."""
+MAX_DELAY = 0.6
+"""Largest servo delay searched [s]."""
 
-GRID_NFEV = 25
-"""Likelihood evaluations per grid delay (warm-started from the previous delay's optimum)."""
+MIN_SERVO_DELAY = 1e-4
+"""Delays below this are no delay (the Padé servo of eq. 31 degenerates at zero) [s]."""
 
-REFINE_NFEV = 40
-"""Likelihood evaluations per wind model and delay in the continuous refinement (warm-started)."""
+SUPPORT_Z = 3.0
+"""With ``select_terms``: a term beyond the decoupled model is kept when ``|value| >= SUPPORT_Z * se``
+(two-sided 0.3 % level, about Bonferroni 1 % over the coupled model's five extra terms)."""
 
 TIME_CONSTANT_BOUNDS = ((0.8, 120.0), (0.02, 0.8))
 """Bounds of the slow and the fast gust time constants [s]."""
@@ -247,16 +248,22 @@ def _servo_increments(sticks, damping: float, tau: float, dt: float, hold: str) 
 class _AxisLikelihood:
     """The concentrated innovation likelihood of one axis, with the linear parameters projected out."""
 
-    def __init__(self, data: _AxisData):
+    def __init__(self, data: _AxisData, free_tau: bool = False):
         self.data = data
+        self.free_tau = free_tau
+        self.nw = N_NONLINEAR[data.wind_model]
+        """Length of the damping-and-wind part of the search vector; the servo delay follows when ``free_tau``."""
 
-    @staticmethod
-    def unpack(x):
+    def unpack(self, x):
         """(damping, T_slow, T_fast, var_slow/R, var_fast/R, zeta) from the search vector."""
         damping, lts, ltf, lqs, lqf = x[:5]
-        zeta = float(np.exp(x[5])) if len(x) > 5 else 1.0
+        zeta = float(np.exp(x[5])) if self.nw > 5 else 1.0
         return (float(damping), float(np.exp(lts)), float(np.exp(ltf)), float(np.exp(lqs)), float(np.exp(lqf)),
                 zeta)
+
+    def tau_of(self, x) -> float:
+        """The servo delay at ``x`` [s]: searched with the rest when ``free_tau``, else the data's."""
+        return float(x[self.nw]) if self.free_tau else self.data.tau
 
     def discrete(self, x):
         return _discrete_model(*self.unpack(x), self.data.dt, self.data.hold, self.data.wind_model)
@@ -269,7 +276,8 @@ class _AxisLikelihood:
         b_y, b_u, a = _innovation_filters(Ad, g0, g1, L)
         if d.causal_rows:  # a measured rate at k+1 carries the noise of y[k+1]: only u[k] may predict y[k+1]
             b_c, _ = _strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), g0 + g1)
-        servo = d.servo_row is not None and d.tau > 0
+        tau = self.tau_of(x)
+        servo = d.servo_row is not None and tau > MIN_SERVO_DELAY
         if servo:
             b_v, _ = _strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), np.eye(Ad.shape[0])[0])
         ys, zs = [], []
@@ -279,7 +287,7 @@ class _AxisLikelihood:
             for r in d.causal_rows:
                 Z[r] = signal.lfilter(b_c, a, X[r])
             if servo:
-                v = _servo_increments(d.servo_sticks[i], x[0], d.tau, d.dt, d.hold)
+                v = _servo_increments(d.servo_sticks[i], x[0], tau, d.dt, d.hold)
                 Z[d.servo_row] = signal.lfilter(b_v, a, v)
             zs.append(Z[:, d.burn:])
         return np.concatenate(ys), np.concatenate(zs, axis=1), S
@@ -334,9 +342,11 @@ class MLAxisFit:
         Offset kd of each flight [rad/s^2] (trim plus that day's mean wind).
     prediction_r2 : float
         Share of the rate's variance the one-step prediction explains.
+    dropped : tuple of str
+        Terms left out because the data did not support them (``select_terms``).
     delay_profile : tuple of (float, float)
-        ``(delay, nll)`` pairs when the delay was profiled (the grid and the refinement's
-        evaluations, sorted by delay), else empty.
+        ``(delay, nll)`` over the grid when the delay was profiled (damping and wind held at the
+        undelayed fit, linear parameters solved), else empty.
     """
 
     axis: str
@@ -353,6 +363,7 @@ class MLAxisFit:
     flight_offsets: tuple
     prediction_r2: float
     delay_profile: tuple = ()
+    dropped: tuple = ()
     interval_offsets: np.ndarray = field(default_factory=lambda: np.empty(0))
     interval_starts: np.ndarray = field(default_factory=lambda: np.empty(0))
     residual: np.ndarray | None = None
@@ -376,9 +387,10 @@ class MaximumLikelihoodIdentifier:
         (a digital controller's commands).
     delay : None, float, sequence of 3 float, or "auto"
         Servo delay per axis [s] (Padé, eq. 31); "auto" profiles the likelihood
-        over ``delay_grid`` and refines the best continuously (bounded scalar search to 1 ms).
+        over ``delay_grid`` (damping and wind held at the undelayed fit), then searches the delay jointly
+        with every other parameter from the best; its standard error is reported as ``tau_<axis>``.
     delay_grid : sequence of float, optional
-        Candidate delays for ``delay="auto"`` [s] (default 0 to 0.5 s in 25 ms).
+        Candidate delays for ``delay="auto"`` [s] (default 0 to 0.5 s in 10 ms).
     wind_model : {"auto", "gm2", "gm_so"}
         Gust model (:data:`WIND_MODELS`); "auto" fits both and keeps the one of
         higher likelihood per axis (they have the same number of parameters).
@@ -391,6 +403,9 @@ class MaximumLikelihoodIdentifier:
         Axes to identify.
     max_nfev : int
         Largest number of likelihood evaluations per search.
+    select_terms : bool
+        Keep a term beyond the decoupled model (k1, k4, k5, k8, k9, catalogue terms) only where the data
+        support it: terms with ``|value| < SUPPORT_Z * se`` are dropped, weakest first, refitting each time.
 
     Attributes
     ----------
@@ -408,7 +423,7 @@ class MaximumLikelihoodIdentifier:
 
     def __init__(self, structure="decoupled", extra_terms=(), input_hold: str = "linear", delay=None,
                  delay_grid=None, wind_model: str = "auto", remove_vibration: bool = True,
-                 vibration_min_hz: float = 8.0, axes=AXES, max_nfev: int = 100):
+                 vibration_min_hz: float = 8.0, axes=AXES, max_nfev: int = 100, select_terms: bool = False):
         self.structure = structure
         self.extra_terms = extra_terms
         self.input_hold = input_hold
@@ -419,6 +434,7 @@ class MaximumLikelihoodIdentifier:
         self.vibration_min_hz = vibration_min_hz
         self.axes = axes
         self.max_nfev = max_nfev
+        self.select_terms = select_terms
 
     # ----------------------------------------------------------------- set-up
     def _param_names(self) -> dict[int, tuple[str, ...]]:
@@ -489,6 +505,8 @@ class MaximumLikelihoodIdentifier:
             if not names.get(a):
                 continue
             fit = self._fit_axis(a, names[a], flights, burn, start.params_, delays[a])
+            if self.select_terms:
+                fit = self._supported(a, names[a], fit, flights, burn, start.params_)
             fits[axis_name] = fit
             values.update(fit.params)
             values[f"tau_{axis_name}"] = fit.delay
@@ -496,6 +514,20 @@ class MaximumLikelihoodIdentifier:
         self.params_ = ModelParams().with_values(**values)
         self.flights_ = flights
         self.vibration_lines_ = [c[1] for c in cleaned]
+
+    def _supported(self, a, axis_params, fit, flights, burn, start_params):
+        """Drop, one at a time, the terms beyond the decoupled model whose ``|value / se|`` is below
+        :data:`SUPPORT_Z`, refitting the axis after each; the dropped terms are listed in ``fit.dropped``."""
+        names, dropped = tuple(axis_params), []
+        while True:
+            extra = [p for p in names if p not in DECOUPLED[a]]
+            z = {p: abs(fit.params[p]) / fit.std_errors[p] if fit.std_errors[p] > 0 else np.inf for p in extra}
+            weakest = min(z, key=z.get, default=None)
+            if weakest is None or z[weakest] >= SUPPORT_Z:
+                return replace(fit, dropped=tuple(dropped))
+            names = tuple(p for p in names if p != weakest)
+            dropped.append(weakest)
+            fit = self._fit_axis(a, names, flights, burn, start_params, fit.delay if self.delay != "auto" else "auto")
 
     def _axis_data(self, a: int, axis_params, flights, burn: int, tau: float, wind_model: str = "gm2"):
         """The likelihood's data for axis ``a`` at servo delay ``tau``, and the name of its damping term."""
@@ -523,17 +555,24 @@ class MaximumLikelihoodIdentifier:
         return _AxisData(ys, Xs, reg_names, flights[0].dt, self.input_hold, burn, wind_model, command,
                          servo_sticks, float(tau), causal), damping_name
 
-    def _search(self, like: _AxisLikelihood, x0, free_damping: bool, max_nfev=None):
+    def _search(self, like: _AxisLikelihood, x0, free_damping: bool, max_nfev=None, tau0: float = 0.0):
+        """Search the damping and the wind model (and the delay when ``like.free_tau``) from ``x0``, the
+        damping-and-wind part of a search vector (of either wind model) and ``tau0``."""
         lo = np.array([-2.0, np.log(TIME_CONSTANT_BOUNDS[0][0]), np.log(TIME_CONSTANT_BOUNDS[1][0]),
                        np.log(1e-4), np.log(1e-4), np.log(ZETA_BOUNDS[0])])
         hi = np.array([200.0, np.log(TIME_CONSTANT_BOUNDS[0][1]), np.log(TIME_CONSTANT_BOUNDS[1][1]),
                        np.log(1e9), np.log(1e9), np.log(ZETA_BOUNDS[1])])
-        nx = N_NONLINEAR[like.data.wind_model]
-        x0 = np.asarray(x0, dtype=float)[:5]
-        if nx > 5:
-            x0 = np.append(x0, np.log(0.8))
-        lo, hi = lo[:nx], hi[:nx]
-        x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
+        x0 = np.asarray(x0, dtype=float)
+        start = list(x0[:5])
+        if like.nw > 5:
+            start.append(x0[5] if x0.size > 5 else np.log(0.8))
+        lo, hi = list(lo[:like.nw]), list(hi[:like.nw])
+        if like.free_tau:
+            start.append(tau0)
+            lo.append(0.0)
+            hi.append(MAX_DELAY)
+        lo, hi = np.array(lo), np.array(hi)
+        x0 = np.clip(np.array(start), lo + 1e-9, hi - 1e-9)
         if free_damping:
             return optimize.least_squares(like.residual, x0, bounds=(lo, hi), x_scale="jac",
                                           max_nfev=max_nfev or self.max_nfev, xtol=1e-8, ftol=1e-10)
@@ -544,18 +583,21 @@ class MaximumLikelihoodIdentifier:
         res.x = np.concatenate([[0.0], res.x])
         return res
 
-    def _best(self, a, axis_params, flights, burn, tau, x0, models, free, max_nfev=None):
-        """Search every wind model at delay ``tau``; the best ``(cost, x, model)``."""
+    def _best(self, a, axis_params, flights, burn, tau, x0, models, free, max_nfev=None, free_tau=False):
+        """Search every wind model from delay ``tau`` (held, or searched too with ``free_tau``).
+
+        Returns ``(cost, x, model, tau)``: ``x`` the damping-and-wind part of the search vector.
+        """
         best = None
         for kind in models:
-            like = _AxisLikelihood(self._axis_data(a, axis_params, flights, burn, tau, kind)[0])
-            res = self._search(like, x0, free, max_nfev)
+            like = _AxisLikelihood(self._axis_data(a, axis_params, flights, burn, tau, kind)[0], free_tau)
+            res = self._search(like, x0, free, max_nfev, tau)
             n = sum(len(y) - like.data.burn for y in like.data.y)
             # Akaike: the concentrated NLL is n/2 log(2 cost / n) + const; one parameter more costs 1
             aic = 0.5 * n * np.log(2.0 * res.cost / n) + N_NONLINEAR[kind]
-            if best is None or aic < best[3]:
-                best = (float(res.cost), res.x, kind, aic)
-        return best[:3]
+            if best is None or aic < best[4]:
+                best = (float(res.cost), res.x[:like.nw], kind, like.tau_of(res.x), aic)
+        return best[:4]
 
     def _fit_axis(self, a, axis_params, flights, burn, start_params, delay) -> MLAxisFit:
         _, damping_name = self._axis_data(a, axis_params, flights[:1], burn, 0.0)
@@ -565,37 +607,27 @@ class MaximumLikelihoodIdentifier:
         models = WIND_MODELS if self.wind_model == "auto" else (self.wind_model,)
         profile = []
         if delay == "auto":
+            # the likelihood over a grid of delays with the damping and wind of the undelayed fit held (the
+            # linear parameters solved at each), then every parameter and the delay searched from the best
             grid = np.asarray(self.delay_grid if self.delay_grid is not None else DEFAULT_DELAY_GRID, dtype=float)
-            x = x0
-            coarse = max(5, min(self.max_nfev, GRID_NFEV))
-            for tau in grid:  # warm-started along the grid, the first wind model, a short search each
-                cost, x, _ = self._best(a, axis_params, flights, burn, float(tau), x, models[:1], free, coarse)
-                profile.append((float(tau), cost, x))
-            tau_best, _, x_best = min(profile, key=lambda p: p[1])
-            step = float(np.min(np.diff(grid))) if grid.size > 1 else 0.0
-            if step > 0:  # the delay is continuous: every 10 ms of timing error costs about 20 % of damping
-
-                def cost_at(tau):
-                    c, xt, _ = self._best(a, axis_params, flights, burn, float(tau), x_best, models, free,
-                                          REFINE_NFEV)
-                    profile.append((float(tau), c, xt))
-                    return c
-
-                lo, hi = max(0.0, tau_best - step), tau_best + step
-                optimize.minimize_scalar(cost_at, bounds=(lo, hi), method="bounded",
-                                         options={"xatol": DELAY_TOLERANCE})
-            profile.sort(key=lambda p: p[0])
-            tau, _, x0 = min(profile, key=lambda p: p[1])
+            _, xb, kind, _ = self._best(a, axis_params, flights, burn, 0.0, x0, models, free)
+            for tau in grid:
+                like = _AxisLikelihood(self._axis_data(a, axis_params, flights, burn, float(tau), kind)[0])
+                e = like.residual(xb)
+                profile.append((float(tau), 0.5 * float(e @ e)))
+            tau0 = min(profile, key=lambda p: p[1])[0]
+            cost, x, kind, tau = self._best(a, axis_params, flights, burn, tau0, xb, models, free, free_tau=True)
         else:
-            tau = float(delay)
-        cost, x, kind = self._best(a, axis_params, flights, burn, tau, x0, models, free)
+            cost, x, kind, tau = self._best(a, axis_params, flights, burn, float(delay), x0, models, free)
         data, _ = self._axis_data(a, axis_params, flights, burn, tau, kind)
-        like = _AxisLikelihood(data)
+        free_tau = delay == "auto"
+        like = _AxisLikelihood(data, free_tau)
+        x = np.append(x, tau) if free_tau else x
         e, theta, S = like.solve_linear(x)
         n_burnt = int(sum(len(y) - burn for y in data.y))
         return self._result(a, axis_params, like, x, theta, e, S, damping_name, float(tau), kind,
                             tuple((t, float(n_burnt / 2 * np.log(2 * np.pi * np.e * 2 * c / n_burnt)))
-                                  for t, c, _ in profile))
+                                  for t, c in profile))
 
     def _result(self, a, axis_params, like, x, theta, e, S, damping_name, tau, kind, profile) -> MLAxisFit:
         """Standard errors, wind levels and fit statistics of the optimum."""
@@ -624,6 +656,8 @@ class MaximumLikelihoodIdentifier:
         damping, ts, tf, qs, qf, zeta = like.unpack(x)
         R = mse / S
         params, std = {}, {}
+        if like.free_tau:
+            std[f"tau_{AXES[a]}"] = float(se[like.nw])
         if damping_name is not None:
             params[damping_name] = float(-damping / TERMS[damping_name].sign)
             std[damping_name] = float(se[0])
@@ -661,7 +695,7 @@ class MaximumLikelihoodIdentifier:
             AXES[a], params, std, tau, cond, _simulation_r2(data, damping, theta),
             (float(np.mean(like.residual(np.asarray(x)) ** 2)), mse), wind, float(np.sqrt(R)),
             float(0.5 * n * (np.log(2 * np.pi * mse) + 1.0)), int(n), offs, 1.0 - float(e @ e) / ss,
-            profile, state=np.asarray(x, dtype=float))
+            profile, state=np.asarray(x[:like.nw], dtype=float))
 
     # ----------------------------------------------------------------- use
     def _check_fitted(self):
@@ -705,7 +739,7 @@ class MaximumLikelihoodIdentifier:
                 if index is not None:
                     shift = fit.flight_offsets[index] - fit.params[off_name]
                 drive = drive + fit.params[off_name] + shift
-            states = rts_smooth(data.y[0], drive, *_AxisLikelihood.unpack(fit.state), data.dt, data.hold,
+            states = rts_smooth(data.y[0], drive, *_AxisLikelihood(data).unpack(fit.state), data.dt, data.hold,
                                 fit.wind["model"])
             _, cw, _ = _wind_block(fit.wind["model"], 1.0, 1.0)  # the same sum for every T, zeta
             out[a] = cw @ states[1:] + shift
@@ -720,6 +754,7 @@ class MaximumLikelihoodIdentifier:
                 "condition_number": f.condition, "r2": f.r2, "prediction_r2": f.prediction_r2,
                 "wind": f.wind, "noise_std": f.noise_std, "nll": f.nll, "n_samples": f.n_samples,
                 "flight_offsets": list(f.flight_offsets),
+                "dropped_terms": list(f.dropped),
                 "delay_profile": [list(p) for p in f.delay_profile],
                 "mean_square_innovation": list(f.history),
             }

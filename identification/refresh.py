@@ -241,7 +241,8 @@ def identifier_settings(doc: dict, where: str = "model.json") -> tuple[str, dict
         )
     ident = doc.get("identification") or {}
     estimator = estimator_of(doc, where)
-    keys = (("input_hold", "wind_model", "remove_vibration", "vibration_min_hz", "max_nfev") if estimator == "ml"
+    keys = (("input_hold", "wind_model", "remove_vibration", "vibration_min_hz", "max_nfev", "select_terms")
+            if estimator == "ml"
             else ("interval", "offsets", "disturbance_order", "input_hold", "prefilter", "max_iter", "tol"))
     kw = {k: ident[k] for k in keys if ident.get(k) is not None}
     if "delay" in ident:
@@ -493,7 +494,8 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
     estimator = estimator_of(doc, str(model_path))
 
     def identifier():
-        return make_identifier(estimator, structure, **kw)
+        # the drift table compares the same parameters on both sides: no term selection there
+        return make_identifier(estimator, structure, **{k: v for k, v in kw.items() if k != "select_terms"})
 
     def uncertainty(fitted, fit_flights, seq, desc):
         if estimator == "ml":

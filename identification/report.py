@@ -161,7 +161,7 @@ def identification_settings(ident) -> dict:
     if isinstance(ident, MaximumLikelihoodIdentifier):
         settings = {"method": ident.method, "estimator": "ml"}
         settings.update({k: getattr(ident, k) for k in ("input_hold", "wind_model", "remove_vibration",
-                                                         "vibration_min_hz", "max_nfev")})
+                                                         "vibration_min_hz", "max_nfev", "select_terms")})
     else:
         settings = {"method": "integral (Fig. 5)", "estimator": "integral"}
         settings.update({k: getattr(ident, k) for k in ("interval", "offsets", "disturbance_order", "input_hold",
@@ -255,7 +255,8 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
     kw = dict(identifier_kwargs or {})
     identifiers = {
         "decoupled": make_identifier(method, "decoupled", **kw).fit(flights),
-        "coupled": make_identifier(method, "coupled", **kw).fit(flights),
+        "coupled": make_identifier(method, "coupled", **({**kw, "select_terms": True} if method == "ml" else kw)
+                                   ).fit(flights),
     }
     chosen = "coupled" if coupled else "decoupled"
     first = identifiers[chosen].flights_[0]  # filtered as identified
@@ -332,6 +333,10 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
         "",
     ]
     if method == "ml":
+        dropped = [p for f in identifiers["coupled"].axes_.values() for p in f.dropped]
+        if dropped:
+            md += [f"Coupled model: {', '.join(dropped)} left out (—): the data do not support them "
+                   "(|value| < 3 standard errors; each dropped in turn, weakest first, and the axis refitted).", ""]
         wind_md = wind_table(ident)
         reference = IntegralIdentifier(structure=chosen).fit(flights)
         md += ["## Wind model and sensor noise (maximum likelihood)", "", wind_md, "",

@@ -140,3 +140,13 @@ def test_heli_identify_uses_maximum_likelihood_by_default(tmp_path, flight180):
                  "--no-disturbances"]) == 0
     doc = json.loads((tmp_path / "int" / "model.json").read_text())
     assert doc["identification"]["estimator"] == "integral"
+
+
+def test_coupled_fit_keeps_only_the_terms_the_data_support(flight180):
+    ident = MaximumLikelihoodIdentifier(structure="coupled", select_terms=True).fit(flight180.flight)
+    dropped = {p for f in ident.axes_.values() for p in f.dropped}
+    assert dropped == {"k1", "k4", "k5", "k8", "k9"}  # the truth has no coupling
+    assert ident.params_.k1 == ident.params_.k9 == 0.0
+    sf = simulate_flight(150, seed=3, effects=("cross_coupling",))
+    kept = MaximumLikelihoodIdentifier(structure="coupled", select_terms=True, axes=("pitch",)).fit(sf.flight)
+    assert "k8" in kept.axes_["pitch"].params and "k8" not in kept.axes_["pitch"].dropped
