@@ -12,6 +12,13 @@ class FlightLogError(ValueError):
     """A flight log or in-memory flight is malformed (columns, NaNs, time base, units, ranges)."""
 
 
+class UnitError(FlightLogError):
+    """A column is in another unit than the canonical one (deg/s for rad/s, ms for s, PWM us for [-1, 1]).
+
+    The message names the suspected unit and the conversion that fixes it.
+    """
+
+
 class IdentifiabilityError(ValueError):
     """The data cannot determine the requested parameters (too short, no excitation, ill-conditioned)."""
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from identification.errors import FlightLogError
+from identification.errors import FlightLogError, UnitError
 from identification.flight import CSV_COLUMNS, make_flight
 from identification.io import read_csv_flight, read_flight, read_servo_csv, sticks_from_servos, write_csv_flight
 from identification.model import QUAT, ModelParams, euler_from_quaternion, simulate
@@ -332,3 +332,49 @@ def test_servo_log_problems_name_the_servo_column(tmp_path):
     bad = _write(tmp_path / "three.csv", header, np.zeros((3, 7)))
     with pytest.raises(FlightLogError, match=r"missing column\(s\) \['u_rudd'\]; a servo log needs time,p,q,r,u_aile,u_aux,u_elev,u_rudd"):
         read_servo_csv(bad, {"G": G_MIX.tolist(), "U_trim": U_TRIM.tolist()})
+
+
+# ------------------------------------------------------------------------------- units of a CSV
+
+
+@pytest.fixture(scope="module")
+def synthetic_csv_flight():
+    """One of our own synthetic flights (60 s, seed 3)."""
+    from identification.synthetic import simulate_flight
+
+    return simulate_flight(60.0, seed=3).flight
+
+
+@pytest.mark.parametrize("with_attitude", [True, False], ids=["with-attitude", "without-attitude"])
+def test_rates_in_deg_per_s_are_refused_naming_deg_per_s(tmp_path, synthetic_csv_flight, with_attitude):
+    f = synthetic_csv_flight
+    cols = [f.time, *np.degrees(f.rates)] + ([*f.attitude] if with_attitude else []) + [*f.sticks]
+    header = HEADER if with_attitude else "time,p,q,r,lat,lon,col,ped"
+    path = _write(tmp_path / "deg.csv", header, np.column_stack(cols))
+    with pytest.raises(UnitError, match=rf"^{re.escape(str(path))}: .*look like deg/s.*expected rad/s"):
+        read_csv_flight(path)
+
+
+def test_heli_identify_refuses_a_deg_per_s_flight_with_exit_2(tmp_path, synthetic_csv_flight, capsys):
+    from heli_cli.main import main
+
+    f = synthetic_csv_flight
+    path = _write(tmp_path / "deg.csv", HEADER, np.column_stack([f.time, *np.degrees(f.rates), *f.attitude,
+                                                                 *f.sticks]))
+    assert main(["identify", str(path), "--out", str(tmp_path / "model"), "--no-plots"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "UnitError" in err[0] and "deg/s" in err[0]
+    assert not (tmp_path / "model").exists()
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda d: d.__setitem__((slice(None), 0), d[:, 0] * 1e3), r"it looks like milliseconds \(a 100 Hz log\)"),
+    (lambda d: d.__setitem__((slice(None), 7), 1500 + 500 * d[:, 7]), r"they look like PWM pulse widths in us"),
+    (lambda d: d.__setitem__((slice(None), 10), 500 * np.sin(d[:, 0])), r"Betaflight rcCommand units \(\+-500\)"),
+], ids=["time-ms", "sticks-pwm", "sticks-rccommand"])
+def test_other_units_in_a_csv_are_named(tmp_path, edit, message):
+    data = _canonical()
+    edit(data)
+    path = _write(tmp_path / "units.csv", HEADER, data)
+    with pytest.raises(UnitError, match=message):
+        read_csv_flight(path)

@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from identification.errors import FlightLogError
-from identification.flight import Flight, make_flight
+from identification.errors import FlightLogError, UnitError
+from identification.flight import HOVER_RATE_RMS_MAX, Flight, make_flight, rate_attitude_ratio
 from identification.model import QUAT, ModelParams, euler_from_quaternion, simulate
+from identification.synthetic import MANOEUVRE_CONFIG, simulate_flight
 
 DT = 0.01
 N = 400
@@ -100,7 +101,8 @@ def test_with_metadata_adds_items_and_keeps_data():
     t, rates, sticks, att = _arrays()
     f = make_flight(t, rates, sticks, attitude=att, metadata={"a": 1})
     g = f.with_metadata(b=2, a=3)
-    assert dict(g.metadata) == {"a": 3, "b": 2, "attitude_source": "measured"}
+    assert {k: v for k, v in g.metadata.items() if k != "units_check"} == {"a": 3, "b": 2,
+                                                                          "attitude_source": "measured"}
     assert f.metadata["a"] == 1
     assert g.rates is f.rates
 
@@ -205,15 +207,16 @@ def test_rates_in_deg_per_s_beyond_any_gyro_range():
         make_flight(t, rates, sticks)  # the rule holds without attitude too
 
 
-def test_rates_in_deg_per_s_against_the_attitude_derivative():
-    """Attitude rule: p about 57x d(phi)/dt means deg/s, even when small enough to pass the magnitude rule."""
+def test_rates_in_deg_per_s_against_the_attitude():
+    """Attitude rule: the integrated rates 57x the attitude change mean deg/s, even below the magnitude rule."""
     t, rates, sticks, att = _arrays()
     rates_deg = np.degrees(rates)
     assert np.abs(rates_deg).max() < 35.0
     with pytest.raises(
-        FlightLogError,
-        match=r"column 'p' is about 57x the rate of change of 'phi' \(slope 0\.017\d*, correlation 1\.00\): "
-              r"it looks like deg/s; expected rad/s",
+        UnitError,
+        match=r"the integrated rates are 5\d\.\d+x the change of the attitude \(roll 5\d\.\d, pitch 5\d\.\d; "
+              r"correlation 1\.00\): "
+              r"the rates look like deg/s .*; expected rad/s: multiply p, q, r by pi/180",
     ):
         make_flight(t, rates_deg, sticks, attitude=att)
 
@@ -228,6 +231,87 @@ def test_sticks_outside_unit_range():
               r"\(t=0\.77 s\); expected sticks normalised to \[-1, 1\]",
     ):
         make_flight(t, rates, sticks, attitude=att)
+
+
+# -------------------------------------------------------------------------------- units by physics
+
+
+@pytest.fixture(scope="module")
+def synthetic_flights():
+    """Our own synthetic flights, gentle and aggressive (MANOEUVRE_CONFIG: ~60 deg/s roll, 150 deg/s yaw)."""
+    return [simulate_flight(30.0, seed=seed, config=cfg).flight
+            for seed in (1, 2, 3, 4) for cfg in (None, MANOEUVRE_CONFIG)]
+
+
+def test_our_synthetic_flights_pass_with_and_without_attitude(synthetic_flights):
+    for f in synthetic_flights:
+        assert_allclose(f.metadata["units_check"]["ratio"], 1.0, atol=0.05)
+        g = make_flight(f.time, f.rates, f.sticks)  # no attitude: the hover range decides
+        assert g.metadata["units_check"]["roll_pitch_rms_rad_s"] < 0.2 * HOVER_RATE_RMS_MAX
+
+
+def test_our_synthetic_flights_in_deg_per_s_are_refused_with_and_without_attitude(synthetic_flights):
+    for f in synthetic_flights:
+        deg = np.degrees(f.rates)
+        # the aggressive flights' yaw passes 35 "rad/s" (the gyro range) first; the gentle ones need the physics
+        with pytest.raises(UnitError, match=r"(the rates look|it looks) like deg/s"):
+            make_flight(f.time, deg, f.sticks, attitude=f.attitude)
+        with pytest.raises(UnitError, match=r"(RMS of \d\.\d+ .*they|it) looks? like deg/s; expected rad/s"):
+            make_flight(f.time, deg, f.sticks)
+
+
+def test_rate_attitude_ratio_is_one_for_a_noisy_flight(synthetic_flights):
+    found = rate_attitude_ratio(synthetic_flights[0].time, synthetic_flights[0].rates, synthetic_flights[0].attitude)
+    assert_allclose(found["ratio"], 1.0, atol=0.03)
+    assert set(found["counted"]) == {"roll", "pitch", "yaw"}
+    assert min(a["correlation"] for a in found["axes"].values()) > 0.95
+
+
+def test_units_declared_by_a_format_skip_the_hover_range():
+    """An importer declares its units: an aggressive flight without attitude is not refused for its RMS."""
+    t, rates, sticks, _ = _arrays()
+    fast = 3.0 * HOVER_RATE_RMS_MAX * np.sign(np.sin(2 * np.pi * 0.5 * t)) * np.ones((3, 1))
+    with pytest.raises(UnitError, match="hovering helicopter"):
+        make_flight(t, fast, sticks)
+    f = make_flight(t, fast, sticks, units_from="betaflight-blackbox log")
+    assert "declared by the betaflight-blackbox log" in f.metadata["units_check"]["rates"]
+    with pytest.raises(UnitError, match="as read from the test log, beyond any gyro's range"):
+        make_flight(t, 40.0 * np.ones((3, t.size)), sticks, units_from="test log")
+
+
+@pytest.mark.parametrize("scale, unit", [(1e3, "milliseconds"), (1e6, "microseconds"), (1e9, "nanoseconds")])
+def test_time_in_another_unit_is_named(scale, unit):
+    t, rates, sticks, att = _arrays()
+    with pytest.raises(UnitError, match=rf"time: the median sample interval is .*; it looks like {unit} "
+                                        rf"\(a 100 Hz log\); expected seconds"):
+        make_flight(t * scale, rates, sticks, attitude=att)
+
+
+def test_too_slow_a_log_is_refused():
+    t, rates, sticks, att = _arrays()
+    with pytest.raises(UnitError, match=r"too slow for attitude dynamics"):
+        make_flight(t * 1e13, rates, sticks)
+
+
+def test_attitude_in_degrees_is_named():
+    t, rates, sticks, att = _arrays()
+    with pytest.raises(UnitError, match=r"column 'theta' reaches 4\.58.*looks like degrees; expected rad"):
+        make_flight(t, rates, sticks, attitude=np.degrees(att))
+    small = att * 0.3  # pitch within +-1.57 "degrees": the ratio tells
+    with pytest.raises(UnitError, match=r"the attitude looks like degrees"):
+        make_flight(t, rates * 0.3, sticks, attitude=np.degrees(small))
+
+
+@pytest.mark.parametrize("transform, unit", [
+    (lambda s: 1500.0 + 500.0 * s, r"PWM pulse widths in us \(1000\.\.2000, centre 1500\): normalise as"),
+    (lambda s: 500.0 * s, r"Betaflight rcCommand units \(\+-500\): divide by 500"),
+    (lambda s: 100.0 * s, r"percent \(\+-100\): divide by 100"),
+], ids=["pwm", "rccommand", "percent"])
+def test_sticks_in_another_unit_are_named(transform, unit):
+    t, rates, sticks, att = _arrays()
+    with pytest.raises(UnitError, match=rf"stick column 'lat' has \d+ values outside \[-1, 1\] .*; they look like "
+                                        rf"{unit}"):
+        make_flight(t, rates, transform(sticks), attitude=att)
 
 
 @pytest.mark.parametrize(

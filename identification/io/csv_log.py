@@ -86,7 +86,7 @@ def read_csv_flight(path) -> Flight:
             attitude=attitude, metadata=meta, extra=extra,
         )
     except FlightLogError as e:
-        raise FlightLogError(f"{path}: {e}") from None
+        raise type(e)(f"{path}: {e}") from None
 
 
 def write_csv_flight(flight: Flight, path, extra: bool = True) -> Path:
@@ -166,7 +166,7 @@ def read_servo_csv(path, calibration) -> Flight:
         for name in SERVO_COLUMNS:
             _check_finite(name, get[name], get["time"])
     except FlightLogError as e:
-        raise FlightLogError(f"{path}: {e}") from None
+        raise type(e)(f"{path}: {e}") from None
     sticks = sticks_from_servos(servos, calibration["G"], calibration["U_trim"])
     att = _attitude_columns(path, header, get)
     meta = {"source": path.name, "sha256": sha256_of(path), "format": "servo-csv",
@@ -176,4 +176,4 @@ def read_servo_csv(path, calibration) -> Flight:
         return make_flight(get["time"], np.array([get[c] for c in RATE_COLUMNS]), sticks, attitude=att,
                            metadata=meta, extra=extra)
     except FlightLogError as e:
-        raise FlightLogError(f"{path}: {e}") from None
+        raise type(e)(f"{path}: {e}") from None
