@@ -1,11 +1,19 @@
-"""``heli import``: a flight-controller log in, a canonical CSV flight (and its metadata) out."""
+"""``heli import``: a flight-controller log in, a canonical CSV flight (and its metadata) out.
+
+Nothing is written for a refused log: the log is read and validated completely before
+the CSV and its ``.meta.json`` are written (each atomically). What the import tolerated
+(a cut last message, padding, a clock restart, no attitude stream, another log of a
+flash dump) is printed as one warning line each and kept in the metadata
+(``import_warnings``).
+"""
 
 from __future__ import annotations
 
 import argparse
 import math
+import sys
 
-from .argtypes import number
+from .argtypes import number, whole
 
 
 def _segment(text):
@@ -31,7 +39,13 @@ def register(sub):
         "resampling, segment detection).",
     )
     p.add_argument("log", metavar="LOG", help="PX4 .ulg, ArduPilot .bin, Betaflight/Rotorflight blackbox, or CSV")
-    p.add_argument("--out", required=True, metavar="FLIGHT.csv", help="canonical CSV to write")
+    p.add_argument("--out", metavar="FLIGHT.csv", help="canonical CSV to write (required unless --list)")
+    p.add_argument("--list", action="store_true",
+                   help="list the logs in the file (a blackbox flash dump holds several) with their length and "
+                   "airborne time, and write nothing")
+    p.add_argument("--log", dest="log_n", type=whole(1), default=None, metavar="N",
+                   help="which log of a file holding several (from 1, as --list numbers them; default: the one "
+                   "with the longest airborne segment)")
     p.add_argument("--segment", type=_segment, default=None, metavar="auto|all|T0:T1",
                    help="airborne segment found automatically (default for flight-controller logs), the whole log "
                    "('all', the longest stretch without a logging gap), or T0:T1 on the log's own clock [s]")
@@ -45,7 +59,8 @@ def register(sub):
                    help="servo mixing {\"G\": 4x4, \"U_trim\": 4} of eq. 66 for --inputs servos "
                    "(default: the documented H3-120 mixing)")
     p.add_argument("--allow-damaged", action="store_true",
-                   help="import what decodes from a truncated or corrupt log instead of failing")
+                   help="import what decodes from a log damaged in the middle (corrupt frames or messages) instead "
+                   "of failing; a log whose last message is cut needs no flag")
     p.set_defaults(func=run)
 
 
@@ -57,6 +72,22 @@ def meta_path(out):
     return out.with_name(out.stem + ".meta.json")
 
 
+def _print_list(path, allow_damaged) -> int:
+    from identification.io import list_logs
+
+    rows = list_logs(path, allow_damaged=allow_damaged)
+    print(f"{path}: {len(rows)} log{'s' if len(rows) != 1 else ''}")
+    print(f"{'log':>4}  {'start s':>9}  {'length s':>9}  {'airborne s':>10}  attitude  status")
+    for r in rows:
+        def num(v):
+            return "-" if v is None else f"{float(v):.1f}"
+
+        att = "-" if r.get("attitude") is None else ("yes" if r["attitude"] else "no")
+        print(f"{r['log']:>4}  {num(r.get('start_s')):>9}  {num(r.get('duration_s')):>9}  "
+              f"{num(r.get('airborne_s')):>10}  {att:>8}  {r['status']}")
+    return 0
+
+
 def run(args) -> int:
     import json
 
@@ -64,19 +95,32 @@ def run(args) -> int:
     from identification.io import read_log, write_csv_flight
     from identification.io.raw_log import rate_attitude_agreement
 
+    if args.list:
+        return _print_list(args.log, args.allow_damaged)
+    if not args.out:
+        print("heli import: error: --out FLIGHT.csv is required (or --list to see the logs in the file)",
+              file=sys.stderr)
+        return 2
     flight = read_log(args.log, inputs=args.inputs, segment=args.segment, rate=args.rate,
-                      calibration=args.calibration, allow_damaged=args.allow_damaged)
-    agreement = rate_attitude_agreement(flight)
+                      calibration=args.calibration, allow_damaged=args.allow_damaged, log=args.log_n)
+    measured = flight.metadata.get("attitude_source") == "measured"
+    agreement = rate_attitude_agreement(flight) if measured else None
     meta = {**dict(flight.metadata), "rate_attitude_correlation": agreement}
     write_csv_flight(flight, args.out)
     mpath = meta_path(args.out)
     write_text(mpath, json.dumps(jsonable(meta), indent=2, sort_keys=True) + "\n")
     m = flight.metadata
-    print(f"{m.get('format', 'csv')} log ({m.get('vehicle', 'flight')}), inputs: {m.get('input_source')}")
+    for line in m.get("import_warnings") or ():
+        print(f"heli import: warning: {line}", file=sys.stderr)
+    log_note = f", log {m['log_index']} of {m['logs_in_file']}" if m.get("logs_in_file", 1) > 1 else ""
+    print(f"{m.get('format', 'csv')} log ({m.get('vehicle', 'flight')}{log_note}), inputs: {m.get('input_source')}")
     print(f"segment {flight.time[0]:.3f}..{flight.time[-1]:.3f} s ({flight.duration:.1f} s, "
           f"{m.get('segment_mode', 'given')}), {flight.n} samples at {flight.sample_rate:.1f} Hz")
-    print("attitude-derivative vs rate correlation: "
-          + ", ".join(f"{a} {'n/a' if c is None else f'{c:.3f}'}" for a, c in agreement.items()))
+    if agreement is None:
+        print("attitude: reconstructed from the rates (eqs. 25-29); the log has no attitude stream")
+    else:
+        print("attitude-derivative vs rate correlation: "
+              + ", ".join(f"{a} {'n/a' if c is None else f'{c:.3f}'}" for a, c in agreement.items()))
     clipped = {k: v for k, v in (m.get("inputs_clipped") or {}).items() if v}
     if clipped:
         print("inputs clipped to [-1, 1] (samples): " + ", ".join(f"{k} {v}" for k, v in clipped.items()))

@@ -1,9 +1,15 @@
 """Tests of the log importers (:mod:`identification.io` px4 / ardupilot / blackbox) against real logs.
 
-The logs live outside the repository, in ``../shared/fixtures/logs/`` (see its
-README); the real-log tests skip with a reason when the folder or a parser of the
-``logs`` extra is absent. Each log is decoded once per module (``raw`` fixture);
-the options are then exercised on the decoded streams, which is cheap.
+The logs live outside the repository: in the folder ``$HELI_FIXTURES`` names, else
+in ``../shared/fixtures/logs/`` beside the repository (see its README); the
+real-log tests skip with a reason naming both when neither exists, or when a
+parser of the ``logs`` extra is absent. Each log is decoded once per module
+(``raw`` fixture); the options are then exercised on the decoded streams, which
+is cheap.
+
+The corpus tests read every fixture as it comes and check each one imports or is
+refused with a named error whose message says what to try next; truncated and
+padded copies (made in ``tmp_path``) must do the same.
 
 Figures worth reading (attitude-derivative vs rate correlation, detected
 segment, identified control gain and R² per axis) are printed; run with ``-s``.
@@ -12,6 +18,8 @@ segment, identified control gain and R² per axis) are printed; run with ``-s``.
 from __future__ import annotations
 
 import json
+import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -20,14 +28,34 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from identification.errors import FlightLogError
 from identification.io import (
-    DamagedLogError, InputSourceError, LogFormatError, NotAirborneError, SegmentError, detect_format, read_csv_flight,
-    read_log, sticks_from_servos, write_csv_flight,
+    DamagedLogError, InputSourceError, LogFormatError, LogSelectionError, MissingStreamError, NotAirborneError,
+    SegmentError, detect_format, list_logs, read_csv_flight, read_log, sticks_from_servos, write_csv_flight,
 )
+from identification.io.clock import UINT32_US_PERIOD_S, continue_clock
+from identification.io.container import PAD_MIN, locate_bytes
 from identification.io.raw_log import RawLog, h3_120_calibration, rate_attitude_agreement, to_flight
 from identification.io.resample import make_stream, resample_stream, uniform_grid, valid_on_grid
 from identification.io.segment import SegmentSignals
 
-LOGS = Path(__file__).resolve().parents[2] / "shared" / "fixtures" / "logs"
+DEFAULT_LOGS = Path(__file__).resolve().parents[2] / "shared" / "fixtures" / "logs"
+"""Where the fixture logs sit beside the repository (``../shared/fixtures/logs``)."""
+
+
+def fixture_dir() -> Path | None:
+    """The fixture logs: the folder ``$HELI_FIXTURES`` names if it exists, else ``../shared/fixtures/logs``."""
+    env = os.environ.get("HELI_FIXTURES")
+    for candidate in ([Path(env)] if env else []) + [DEFAULT_LOGS]:
+        if candidate.is_dir():
+            return candidate
+    return None
+
+
+def _logs_dir() -> Path:
+    folder = fixture_dir()
+    if folder is None:
+        pytest.skip(f"real flight logs not found: set HELI_FIXTURES to their folder (now "
+                    f"{os.environ.get('HELI_FIXTURES')!r}) or provide {DEFAULT_LOGS} (they sit outside the repository)")
+    return folder
 
 # name: (file, parser module, loader, expected default input, vehicle)
 CASES = {
@@ -43,12 +71,16 @@ GAIN = {"roll": "k2", "pitch": "k6", "yaw": "k10"}
 
 
 def _log_path(name: str) -> Path:
-    if not LOGS.is_dir():
-        pytest.skip(f"real flight logs not found at {LOGS} (they sit outside the repository, in shared/fixtures)")
-    path = LOGS / CASES[name][0]
+    return _fixture(CASES[name][0], CASES[name][1])
+
+
+def _fixture(filename: str, parser: str) -> Path:
+    """A fixture log by file name (skip, naming where it was looked for, when absent)."""
+    folder = _logs_dir()
+    path = folder / filename
     if not path.exists():
-        pytest.skip(f"fixture log {path.name} missing from {LOGS}")
-    pytest.importorskip(CASES[name][1], reason=f"parser {CASES[name][1]!r} of the 'logs' extra is not installed")
+        pytest.skip(f"fixture log {filename} missing from {folder}")
+    pytest.importorskip(parser, reason=f"parser {parser!r} of the 'logs' extra is not installed")
     return path
 
 
@@ -211,46 +243,248 @@ def test_content_sniffing_not_extension(tmp_path):
         read_log(empty)
 
 
-# ----------------------------------------------------------- damaged copies
-def _damaged_copies(path: Path, tmp_path: Path):
-    data = path.read_bytes()
-    rng = np.random.default_rng(7)
-    copies = {
-        "cut-early": data[: max(int(len(data) * 0.002), 40)],
-        "cut-30%": data[: int(len(data) * 0.3)],
-    }
-    for where in (0.001, 0.5):
-        b = bytearray(data)
-        i = int(len(b) * where)
-        b[i:i + 2000] = rng.integers(0, 256, 2000, dtype=np.uint8).tobytes()
-        copies[f"garbled-at-{where:.1%}"] = bytes(b)
-    out = {}
-    for label, content in copies.items():
-        p = tmp_path / f"{label}-{path.name}"
-        p.write_bytes(content)
-        out[label] = p
-    return out
+# ------------------------------------------------------------ the corpus as it comes
+PARSER = {".ulg": "pyulog", ".bin": "pymavlink"}
+HINT = re.compile(r"--segment|--inputs|--allow-damaged|--log ")
+"""Every refusal of a real log says what to try next."""
+
+# file: (options, expected) -- expected "import" or (error class, pattern of the message)
+CORPUS = {
+    "px4_sample_log_small.ulg": ({}, (NotAirborneError, r"thrust demand \(actuator_controls_0\.control\[3\] "
+                                                         r"\(instance 0\)\).*armed for .*--segment all")),
+    "px4_tagged_default_params.ulg": ({}, (NotAirborneError, r"never armed \(actuator_armed\.armed \(instance 0\) is "
+                                                             r"0 throughout\).*--segment all")),
+    "ardupilot_copter_log171.bin": ({}, "import"),
+    "ardupilot_plane_v3.8.bin": ({}, (NotAirborneError, r"holds 0\.\d+ s of continuous data.*--segment all")),
+    "betaflight_quad_btfl_035.bbl": ({}, "import"),
+    "betaflight_multi_btfl_all.bbl": ({}, "import"),
+    "betaflight_gps_rescue.bbl": ({}, (NotAirborneError, r"holds 1\.\d+ s of continuous data.*--segment all")),
+    "blackbox_LOG00037.BFL": ({}, "import"),
+    "blackbox_error_recovery.bbl": ({}, (DamagedLogError, r"3 of 13 frames invalid.*--allow-damaged")),
+    "rotorflight_k110_LOG246.TXT": ({}, (NotAirborneError, r"never left the ground.*--segment all")),
+}
+# ... and what the advice of each refusal leads to
+ADVICE = {
+    "px4_sample_log_small.ulg": {"segment": "all"},
+    "px4_tagged_default_params.ulg": {"segment": "all"},
+    "ardupilot_plane_v3.8.bin": {"segment": "all"},
+    "betaflight_gps_rescue.bbl": {"segment": "all"},
+    "blackbox_error_recovery.bbl": {"segment": "all", "allow_damaged": True},
+    "rotorflight_k110_LOG246.TXT": {"segment": "all"},
+}
 
 
-@pytest.mark.parametrize("name", list(CASES))
-def test_damaged_copies_raise_a_named_error(name, tmp_path):
-    path = _log_path(name)
-    for label, copy in _damaged_copies(path, tmp_path).items():
-        with pytest.raises(LogFormatError) as info:
-            _loader(name)(copy)
-        msg = str(info.value)
-        assert copy.name in msg, f"{label}: the message names the file: {msg}"
-        print(f"\n{name} {label}: {type(info.value).__name__}: {msg[:160]}")
+def _corpus_path(filename: str) -> Path:
+    return _fixture(filename, PARSER.get(Path(filename).suffix.lower(), "orangebox"))
 
 
-def test_allow_damaged_imports_what_decodes(tmp_path):
-    path = _log_path("betaflight")
-    cut = tmp_path / "cut.bbl"
-    cut.write_bytes(path.read_bytes()[: int(path.stat().st_size * 0.6)])
-    with pytest.raises(DamagedLogError, match="allow_damaged=True"):
-        read_log(cut)
-    flight = read_log(cut, allow_damaged=True, segment="all")
-    assert flight.metadata["damage"] and flight.duration > 10.0
+_READ_CACHE: dict = {}
+
+
+def _read_default(filename: str):
+    """read_log of a corpus file with the default options, once per module (the flash dump decodes 44 logs)."""
+    if filename not in _READ_CACHE:
+        _READ_CACHE[filename] = read_log(_corpus_path(filename))
+    return _READ_CACHE[filename]
+
+
+@pytest.mark.parametrize("filename", list(CORPUS))
+def test_every_fixture_imports_or_says_why_and_what_to_try(filename):
+    path = _corpus_path(filename)
+    options, expected = CORPUS[filename]
+    if expected == "import":
+        flight = _read_default(filename) if not options else read_log(path, **options)
+        m = flight.metadata
+        print(f"\n{filename}: {flight.duration:.1f} s at {flight.sample_rate:.0f} Hz, segment {m['segment']}, "
+              f"attitude {m['attitude_source']}; warnings {m.get('import_warnings')}")
+        assert flight.duration > 10.0 and m["segment_mode"] == "auto"
+        return
+    cls, pattern = expected
+    with pytest.raises(cls, match=pattern) as info:
+        read_log(path, **options)
+    assert HINT.search(str(info.value)), f"the refusal says what to try next: {info.value}"
+    if filename in ADVICE:
+        flight = read_log(path, **ADVICE[filename])
+        print(f"\n{filename} with {ADVICE[filename]}: {flight.duration:.2f} s; warnings "
+              f"{flight.metadata.get('import_warnings')}")
+        assert flight.n >= 2
+
+
+def test_a_cut_last_message_is_dropped_and_recorded():
+    """ArduPlane 3.8: the last message (AHR2) is cut 24 bytes in; the log imports, and says so."""
+    flight = read_log(_corpus_path("ardupilot_plane_v3.8.bin"), segment="all")
+    cut = flight.metadata["cut_last_message"]
+    assert cut == {"message": "AHR2", "bytes_present": 24, "message_bytes": 45}
+    assert any("ends 24 bytes into its last message" in w for w in flight.metadata["import_warnings"])
+    assert flight.metadata["vehicle"] == "fixed-wing"
+    assert any("not a rotorcraft" in w for w in flight.metadata["import_warnings"])
+
+
+def test_logs_without_attitude_reconstruct_it_and_say_so():
+    flight = _read_default("blackbox_LOG00037.BFL")
+    m = flight.metadata
+    assert m["attitude_source"] == "reconstructed"
+    assert any("no attitude stream" in w for w in m["import_warnings"])
+    assert m["airborne_detection"]["activity_source"].startswith("rates integrated")
+    assert m["airborne_detection"]["upright_source"] == "accelerometer"
+    assert 12.0 < flight.duration < 17.0
+
+
+def test_the_longest_airborne_log_of_a_flash_dump_is_the_default():
+    path = _corpus_path("betaflight_multi_btfl_all.bbl")
+    flight = _read_default("betaflight_multi_btfl_all.bbl")
+    m = flight.metadata
+    assert (m["log_index"], m["logs_in_file"]) == (4, 44)
+    assert "longest airborne segment" in m["log_choice"]
+    assert m["import_warnings"][0].startswith("the file holds 44 logs (7 with flight data): imported log 4")
+    with pytest.raises(MissingStreamError, match=r"\(log 2 of 44\): .*0 decodable frames.*--log N"):
+        read_log(path, log=2)
+    with pytest.raises(LogSelectionError, match="holds 44 blackbox logs; there is no log 45"):
+        read_log(path, log=45)
+    with pytest.raises(LogSelectionError, match="holds one log; there is no log 2"):
+        read_log(_corpus_path("ardupilot_plane_v3.8.bin"), log=2)
+
+
+def _heads(path: Path, limit: int = 200_000) -> bytes:
+    """A fixture's bytes, at most its first ``limit`` (a big log's head stands in for it, to keep tests fast)."""
+    return path.read_bytes()[:limit]
+
+
+def _outcome(path: Path, **options):
+    """(flight, None) or (None, the named error) of read_log; any other exception propagates."""
+    try:
+        return read_log(path, **options), None
+    except FlightLogError as e:
+        return None, e
+
+
+@pytest.mark.parametrize("filename", list(CORPUS))
+def test_padded_copies_import_exactly_like_the_original(filename, tmp_path):
+    """Leading 0xFF (a flash dump), trailing 0xFF or 0x00 padding: the same flight, the padding recorded."""
+    data = _heads(_corpus_path(filename))
+    base = tmp_path / filename
+    base.write_bytes(data)
+    options = {"segment": "all"}
+    ref, ref_error = _outcome(base, **options)
+    for label, content in {"lead-ff": b"\xff" * 4096 + data, "trail-ff": data + b"\xff" * 8192,
+                           "trail-00": data + b"\x00" * 8192, "both": b"\xff" * 100 + data + b"\xff" * 3000}.items():
+        copy = tmp_path / label / filename
+        copy.parent.mkdir()
+        copy.write_bytes(content)
+        got, error = _outcome(copy, **options)
+        if ref is None:
+            assert type(error) is type(ref_error), f"{label}: {error!r} vs {ref_error!r}"
+            continue
+        assert got is not None, f"{label}: {error}"
+        assert_array_equal(got.time, ref.time)
+        assert_array_equal(got.rates, ref.rates)
+        assert_array_equal(got.sticks, ref.sticks)
+        if got.metadata.get("log_index", 1) == 1 or label != "lead-ff":  # leading padding is log 1's
+            assert any("padding" in w for w in got.metadata["import_warnings"]), label
+
+
+@pytest.mark.parametrize("filename", list(CORPUS))
+def test_cut_copies_import_what_is_there_or_say_why(filename, tmp_path):
+    """Cut mid-log (battery unplugged), alone or followed by erased flash: import, recording the cut, or refuse
+    with a named error that says what to try."""
+    data = _heads(_corpus_path(filename))
+    for label, content in {"cut-60%": data[: int(0.6 * len(data))],
+                           "cut-60%-then-erased": data[: int(0.6 * len(data))] + b"\xff" * 4096,
+                           "cut-87%": data[: int(0.87 * len(data)) + 3]}.items():
+        copy = tmp_path / label / filename
+        copy.parent.mkdir()
+        copy.write_bytes(content)
+        flight, error = _outcome(copy, segment="all")
+        if flight is None:
+            print(f"\n{filename} {label}: {type(error).__name__}: {str(error)[:200]}")
+            assert isinstance(error, (NotAirborneError, MissingStreamError, DamagedLogError, LogFormatError))
+            assert copy.name in str(error)
+            continue
+        m = flight.metadata
+        print(f"\n{filename} {label}: imported {flight.duration:.1f} s; {m.get('import_warnings')}")
+        notes = " ".join(m.get("import_warnings", []))
+        assert "cut_last_message" in m or "unreadable bytes" in notes or "padding" in notes or \
+            filename == "blackbox_error_recovery.bbl", notes
+
+
+def test_damage_in_the_middle_is_refused_unless_allowed(tmp_path):
+    for name in ("px4", "ardupilot", "betaflight", "rotorflight"):
+        data = bytearray(_heads(_log_path(name)))
+        i = len(data) // 2
+        data[i:i + 2000] = np.random.default_rng(7).integers(0, 256, 2000, dtype=np.uint8).tobytes()
+        copy = tmp_path / f"garbled-{name}"
+        copy.write_bytes(bytes(data))
+        with pytest.raises(DamagedLogError, match=r"damaged in the middle.*--allow-damaged") as info:
+            read_log(copy, segment="all")
+        assert copy.name in str(info.value)
+        flight, error = _outcome(copy, segment="all", allow_damaged=True)
+        print(f"\n{name} garbled at 50%: {str(info.value)[:160]}; with allow_damaged: "
+              f"{'imported %.1f s' % flight.duration if flight else type(error).__name__}")
+        if flight is not None:
+            assert flight.metadata["damage"]
+
+
+def test_several_logs_in_one_file_are_listed_and_chosen(tmp_path):
+    """Two blackbox logs in one file, padded with erased flash between: --list shows both; the default is the
+    airborne one; --log picks the other."""
+    short = _corpus_path("betaflight_gps_rescue.bbl").read_bytes()
+    flying = _corpus_path("blackbox_LOG00037.BFL").read_bytes()
+    dump = tmp_path / "LOG00001.TXT"
+    dump.write_bytes(b"\xff" * 16 + short + b"\xff" * 3000 + flying + b"\xff" * 2000)
+    rows = list_logs(dump)
+    assert [r["log"] for r in rows] == [1, 2]
+    assert rows[0]["airborne_s"] == 0.0 and rows[1]["airborne_s"] > 10.0 and rows[1]["attitude"] is False
+    assert read_log(dump).metadata["log_index"] == 2
+    one = read_log(dump, log=1, segment="all")
+    assert one.metadata["log_index"] == 1 and one.duration < 2.0
+    assert detect_format(dump) == "blackbox"
+
+
+def test_a_clock_restart_is_continued_and_never_spanned(tmp_path):
+    """A DataFlash file holding the same log twice (the clock restarts at the second FMT): continued, recorded."""
+    from pymavlink.DFReader import DFReader_binary
+
+    path = _log_path("ardupilot")
+    head = path.read_bytes()[:700_000]
+    (tmp_path / "head.bin").write_bytes(head)
+    f = DFReader_binary(str(tmp_path / "head.bin"), zero_time_base=False)
+    boundary = max(int(o) for o in f.offsets[f.name_to_id["IMU"]] if int(o) < 600_000)  # a message start
+    twice = tmp_path / "twice.bin"
+    twice.write_bytes(head[:boundary] + head[:boundary])
+    flight = read_log(twice, segment="all")
+    clock = flight.metadata["clock"]
+    assert len(clock) == 1 and clock[0]["kind"] == "restart" and clock[0]["first_after_s"] < clock[0]["last_before_s"]
+    assert any("clock is not monotonic" in w for w in flight.metadata["import_warnings"])
+    assert np.all(np.diff(flight.time) > 0)
+
+
+def test_continue_clock_undoes_wrap_around_restart_and_glitch():
+    t = np.arange(0.0, 10.0, 0.01)
+    wrapped = np.concatenate([UINT32_US_PERIOD_S - 2.0 + t[:200], t[200:] - 2.0])
+    fixed, keep, events = continue_clock(wrapped)
+    assert keep.all() and events[0]["kind"] == "wrap-around"
+    assert_allclose(np.diff(fixed), 0.01, atol=1e-6)
+    restarted = np.concatenate([100.0 + t, t])
+    fixed, _, events = continue_clock(restarted)
+    assert events[0]["kind"] == "restart" and np.all(np.diff(fixed) > 0)
+    assert fixed[1000] - fixed[999] == pytest.approx(1.0, abs=1e-9)  # RESTART_GAP_S: a gap no segment spans
+    glitch = t.copy()
+    glitch[500] = 1e9
+    fixed, keep, events = continue_clock(glitch)
+    assert not events and not keep[500] and keep.sum() == t.size - 1
+
+
+def test_format_is_found_inside_padding_and_logs_are_split():
+    ulog = b"ULog\x01\x12\x35" + b"\x01" * 200
+    located = locate_bytes(b"\xff" * 10 + ulog + b"\x00" * PAD_MIN)
+    assert located.format == "px4-ulog"
+    assert (located.logs[0].start, located.logs[0].lead, located.logs[0].trail) == (10, 10, PAD_MIN)
+    short_tail = locate_bytes(ulog + b"\x00" * (PAD_MIN - 1))  # a message may end in zeros: not padding
+    assert short_tail.logs[0].stop == len(ulog) + PAD_MIN - 1
+    with pytest.raises(LogFormatError, match="only 0xFF/0x00 bytes"):
+        locate_bytes(b"\xff" * 1000)
+    with pytest.raises(LogFormatError, match=r"unknown log format \(first bytes after 3 bytes of 0xFF/0x00"):
+        locate_bytes(b"\xff\xff\xffGARBAGE")
 
 
 # ------------------------------------------------------------- CLI
@@ -274,8 +508,54 @@ def test_cli_ground_log_is_one_line_exit_2(tmp_path, capsys):
     path = _log_path("rotorflight")
     assert main(["import", str(path), "--out", str(tmp_path / "f.csv")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "NotAirborneError" in err[0]
+    assert len(err) == 1 and "NotAirborneError" in err[0] and "--segment all" in err[0]
+    assert not list(tmp_path.iterdir()), "nothing is written for a refused log"
+
+
+def test_cli_warns_one_line_each_and_records_the_cut(tmp_path, capsys):
+    from heli_cli.main import main
+
+    out = tmp_path / "plane.csv"
+    assert main(["import", str(_corpus_path("ardupilot_plane_v3.8.bin")), "--out", str(out), "--segment", "all"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert all(line.startswith("heli import: warning: ") for line in err)
+    assert any("last message (AHR2" in line for line in err)
+    meta = json.loads((tmp_path / "plane.meta.json").read_text())
+    assert meta["cut_last_message"]["message"] == "AHR2" and meta["import_warnings"]
+
+
+def test_cli_damaged_log_writes_nothing_and_names_the_flag(tmp_path, capsys):
+    from heli_cli.main import main
+
+    path = _corpus_path("blackbox_error_recovery.bbl")
+    assert main(["import", str(path), "--out", str(tmp_path / "f.csv")]) == 2
+    assert "--allow-damaged" in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())
+    assert main(["import", str(path), "--out", str(tmp_path / "f.csv"), "--allow-damaged", "--segment", "all"]) == 0
+    assert json.loads((tmp_path / "f.meta.json").read_text())["damage"]
+
+
+def test_cli_list_and_log(tmp_path, capsys):
+    from heli_cli.main import main
+
+    dump = tmp_path / "LOG00002.TXT"
+    dump.write_bytes(_corpus_path("betaflight_gps_rescue.bbl").read_bytes() + b"\xff" * 700
+                     + _corpus_path("betaflight_gps_rescue.bbl").read_bytes())
+    assert main(["import", str(dump), "--list"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].endswith("2 logs") and len(out) == 4
     assert not (tmp_path / "f.csv").exists()
+    assert main(["import", str(dump), "--log", "2", "--segment", "all", "--out", str(tmp_path / "f.csv")]) == 0
+    assert "log 2 of 2" in capsys.readouterr().out
+    assert main(["import", str(dump)]) == 2
+    assert "--out FLIGHT.csv is required" in capsys.readouterr().err
+
+
+def test_fixture_folder_from_the_environment(tmp_path, monkeypatch):
+    monkeypatch.setenv("HELI_FIXTURES", str(tmp_path))
+    assert fixture_dir() == tmp_path
+    monkeypatch.setenv("HELI_FIXTURES", str(tmp_path / "absent"))
+    assert fixture_dir() in (None, DEFAULT_LOGS)
 
 
 # ------------------------------------------------- synthetic: no real log needed

@@ -3,7 +3,19 @@
 :func:`read_log` reads any supported file, recognised by its content (not its
 name): the canonical CSV, PX4 ULog, ArduPilot DataFlash ``.bin`` and
 Betaflight/Rotorflight blackbox logs. The flight-controller formats need the
-``logs`` extra (pyulog, pymavlink, orangebox), imported only when used.
+``logs`` extra (pyulog, pymavlink, orangebox), imported only when used. What each
+format must contain, and how padding and several logs in one file are handled, is
+listed in :mod:`identification.io.container`.
+
+Logs are read as they come from real loggers: a last message cut short (power
+lost while logging) is dropped, 0xFF/0x00 padding is skipped, a clock that restarts
+is continued, a log without attitude gets its attitude reconstructed from the
+rates; each of these is recorded in ``flight.metadata["import_warnings"]`` (one
+line each). Damage in the *middle* of a log is refused unless ``allow_damaged``.
+Every refusal is an error of :mod:`identification.io.errors` (a
+:class:`~identification.errors.FlightLogError`) or
+:class:`~identification.errors.MissingDependency`; a parser's own exception never
+escapes.
 """
 
 from __future__ import annotations
@@ -12,13 +24,14 @@ from pathlib import Path
 
 from .csv_log import SERVO_COLUMNS, read_csv_flight, read_servo_csv, sticks_from_servos, write_csv_flight
 from .errors import (
-    DamagedLogError, InputSourceError, LogFormatError, MissingStreamError, NotAirborneError, SegmentError,
+    DamagedLogError, InputSourceError, LogFormatError, LogSelectionError, MissingStreamError, NotAirborneError,
+    SegmentError,
 )
 
 __all__ = [
     "read_csv_flight", "read_servo_csv", "sticks_from_servos", "write_csv_flight", "read_flight", "read_log",
-    "detect_format", "LogFormatError", "DamagedLogError", "MissingStreamError", "InputSourceError",
-    "NotAirborneError", "SegmentError", "FORMATS",
+    "detect_format", "list_logs", "LogFormatError", "DamagedLogError", "MissingStreamError", "InputSourceError",
+    "LogSelectionError", "NotAirborneError", "SegmentError", "FORMATS",
 ]
 
 FORMATS = ("csv", "px4-ulog", "ardupilot-dataflash", "blackbox")
@@ -26,7 +39,7 @@ FORMATS = ("csv", "px4-ulog", "ardupilot-dataflash", "blackbox")
 
 
 def detect_format(path) -> str:
-    """The format of a log file, from its first bytes.
+    """The format of a log file, from its content (robust to 0xFF/0x00 padding; :mod:`.container`).
 
     Returns
     -------
@@ -36,31 +49,12 @@ def detect_format(path) -> str:
     Raises
     ------
     LogFormatError
-        Empty, or none of the known signatures.
+        Empty, only padding, or none of the known signatures.
     FileNotFoundError
     """
-    from .ardupilot import is_dataflash
-    from .blackbox import is_blackbox
-    from .px4 import is_ulog
+    from .container import locate
 
-    path = Path(path)
-    with open(path, "rb") as fh:
-        head = fh.read(256)
-    if not head:
-        raise LogFormatError(f"{path}: empty file; expected a CSV, ULog, DataFlash or blackbox log")
-    if is_ulog(head):
-        return "px4-ulog"
-    if is_dataflash(head):
-        return "ardupilot-dataflash"
-    if is_blackbox(head):
-        return "blackbox"
-    first = head.split(b"\n", 1)[0].lstrip(b"\xef\xbb\xbf").decode("ascii", "replace")
-    if "," in first and "time" in [c.strip() for c in first.split(",")]:
-        return "csv"
-    raise LogFormatError(
-        f"{path}: unknown log format (first bytes {head[:16]!r}); expected a canonical CSV (header with 'time'), "
-        "a PX4 ULog, an ArduPilot DataFlash .bin or a Betaflight/Rotorflight blackbox log"
-    )
+    return locate(path).format
 
 
 def _read_csv(path, inputs, segment, calibration):
@@ -91,7 +85,7 @@ def _read_csv(path, inputs, segment, calibration):
 
 
 def read_log(path, inputs: str | None = None, segment=None, rate: float | None = None, calibration=None,
-             allow_damaged: bool = False):
+             allow_damaged: bool = False, log: int | None = None):
     """Read a flight log of any supported format into a validated :class:`~identification.flight.Flight`.
 
     Parameters
@@ -114,37 +108,96 @@ def read_log(path, inputs: str | None = None, segment=None, rate: float | None =
         Servo mixing ``{"G": 4x4, "U_trim": 4}`` of eq. (66) for ``inputs="servos"``; default the
         documented H3-120 mixing (:func:`identification.io.raw_log.h3_120_calibration`).
     allow_damaged : bool
-        Import what decodes from a truncated or corrupt log instead of raising ``DamagedLogError``.
+        Import what decodes from a log damaged in the middle instead of raising ``DamagedLogError``
+        (a cut last message never needs it).
+    log : int, optional
+        Which log of a blackbox file holding several (from 1, as :func:`list_logs` numbers them);
+        default the one with the longest airborne segment. Other formats hold one log.
 
     Raises
     ------
     LogFormatError, DamagedLogError, MissingStreamError
-        The file cannot be read as a log, is damaged, or lacks a needed stream.
+        The file cannot be read as a log, is damaged in the middle, or lacks a needed stream.
+    LogSelectionError
+        ``log`` names no log of the file.
     InputSourceError
         The input source does not apply (e.g. ``servos`` on a multirotor).
     NotAirborneError
         ``segment="auto"`` and the log never leaves the ground.
     SegmentError
         A segment outside the log or across a gap in its data.
+    UnitError
+        Time, rates, attitude or sticks in another unit (:func:`~identification.flight.make_flight`).
     MissingDependency
         The parser of the format (extra ``logs``) is not installed.
     """
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"flight log {str(path)!r} does not exist")
-    fmt = detect_format(path)
+    from .container import locate
+
+    where = locate(path)
+    fmt = where.format
+    if log is not None and fmt != "blackbox" and int(log) != 1:
+        raise LogSelectionError(f"{path}: a {fmt} file holds one log; there is no log {log} "
+                                "(only blackbox flash dumps hold several)")
     if fmt == "csv":
         return _read_csv(path, inputs, segment, calibration)
     from .raw_log import to_flight
 
     if fmt == "px4-ulog":
-        from .px4 import load_px4 as load
+        from .px4 import load_px4
+
+        raw = load_px4(path, allow_damaged=allow_damaged)
     elif fmt == "ardupilot-dataflash":
-        from .ardupilot import load_ardupilot as load
+        from .ardupilot import load_ardupilot
+
+        raw = load_ardupilot(path, allow_damaged=allow_damaged)
     else:
-        from .blackbox import load_blackbox as load
-    raw = load(path, allow_damaged=allow_damaged)
+        from .blackbox import load_blackbox
+
+        raw = load_blackbox(path, allow_damaged=allow_damaged, log=log)
     return to_flight(raw, inputs=inputs, segment=segment, rate=rate, calibration=calibration)
+
+
+def list_logs(path, allow_damaged: bool = False) -> list[dict]:
+    """The logs a file holds, as ``heli import --list`` shows them.
+
+    Returns
+    -------
+    list of dict
+        One per log: ``{"log": N, "format", "firmware", "start_s", "duration_s", "attitude": bool,
+        "airborne_s": length of the airborne segment [s] (0 when it never flies) or None, "status":
+        "ok" or why it cannot be imported}``. A blackbox flash dump lists each of its logs; other
+        formats hold one.
+    """
+    from ..errors import FlightLogError
+    from .container import locate
+    from .errors import NotAirborneError
+
+    path = Path(path)
+    fmt = locate(path).format
+    if fmt == "blackbox":
+        from .blackbox import blackbox_log_summaries
+
+        return [{"format": "blackbox", **row} for row in blackbox_log_summaries(path, allow_damaged)]
+    row = {"log": 1, "format": fmt, "firmware": None, "start_s": None, "duration_s": None, "attitude": None,
+           "airborne_s": None, "status": "ok"}
+    try:
+        whole = read_log(path, segment="all", allow_damaged=allow_damaged)
+    except FlightLogError as e:
+        row["status"] = f"{type(e).__name__}: {str(e).split(': ', 1)[-1]}"
+        return [row]
+    row.update(firmware=whole.metadata.get("firmware"), start_s=round(float(whole.time[0]), 3),
+               duration_s=round(whole.duration, 3), attitude=whole.metadata.get("attitude_source") == "measured")
+    if fmt != "csv":
+        try:
+            row["airborne_s"] = round(read_log(path, allow_damaged=allow_damaged).duration, 3)
+        except NotAirborneError:
+            row["airborne_s"] = 0.0
+        except FlightLogError as e:
+            row["status"] = f"{type(e).__name__}: {str(e).split(': ', 1)[-1]}"
+    return [row]
 
 
 def read_flight(path):

@@ -25,7 +25,15 @@ servos           ``RCOU.C1..C4`` (helicopters)    swash servos 1-3 at -60, 60, 1
 
 Airborne detection uses ``CTUN.ThrOut`` (``ThO``) as power, the ``IMU``
 accelerometer for vibration and ``CTUN.Alt`` as height. Time is the log's own
-clock (``TimeMS``/``TimeUS`` since boot) in seconds.
+clock (``TimeMS``/``TimeUS`` since boot) in seconds, continued across a restart of
+that clock (:mod:`.clock`; ``metadata["clock"]``).
+
+The file is read as MAVExplorer reads it: a last message cut short (the battery
+unplugged while logging) is dropped with a note, 0xFF/0x00 padding before and after
+the log is skipped, and a few unreadable bytes at the very end are dropped.
+Bytes in the middle of the log that are not DataFlash messages, or an index that
+stops early, are damage (``allow_damaged``). The vehicle is named from the
+firmware string (ArduCopter, ArduCopter heli frames, ArduPlane, Rover).
 """
 
 from __future__ import annotations
@@ -36,13 +44,15 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import require
+from .clock import continue_clock, describe
+from .container import DF_HEAD, PAD, locate, span_file
 from .errors import LogFormatError, MissingStreamError
 from .raw_log import RawLog, captured_output, check_damage
 from .resample import make_stream
 from .segment import SegmentSignals
 
-DF_HEAD = b"\xa3\x95\x80"
-"""A DataFlash log starts with the header bytes 0xA3 0x95 and the FMT message type 0x80."""
+TAIL_GARBAGE_MAX = 528
+"""bytes: pymavlink's own tolerance for garbage at the end of a log (block-based logs end in a partial page)."""
 LEGACY_RP_SCALE = 5000.0
 """ArduCopter <= 3.3: AC_ATTITUDE_RATE_RP_CONTROLLER_OUT_MAX, roll/pitch rate output limit."""
 LEGACY_YAW_SCALE = 4500.0
@@ -60,8 +70,8 @@ _WANTED = {
 
 
 def is_dataflash(head: bytes) -> bool:
-    """True if the first bytes are a DataFlash FMT message."""
-    return head.startswith(DF_HEAD)
+    """True if the first bytes (after any 0xFF/0x00 padding) are a DataFlash FMT message."""
+    return head.lstrip(PAD).startswith(DF_HEAD)
 
 
 def _time_of(m) -> float | None:
@@ -72,9 +82,12 @@ def _time_of(m) -> float | None:
     return None if ms is None else ms * 1e-3
 
 
-def _read_messages(f) -> tuple[dict, dict, list]:
-    """Columns of the wanted messages (first instance), the parameters and the text messages."""
-    cols: dict = defaultdict(lambda: defaultdict(list))
+def _read_messages(f) -> tuple[dict, dict, list, list]:
+    """Columns of the wanted messages (first instance) on a continued clock, the parameters, the texts, and
+    the clock events (:func:`~identification.io.clock.continue_clock` over all messages in file order)."""
+    rows: dict = defaultdict(lambda: defaultdict(list))
+    order: dict = defaultdict(list)
+    times: list = []
     params: dict = {}
     texts: list = []
     while True:
@@ -83,7 +96,7 @@ def _read_messages(f) -> tuple[dict, dict, list]:
             break
         kind = m.get_type()
         if kind == "PARM":
-            params[m.Name] = float(m.Value)
+            params[str(m.Name)] = float(m.Value)
             continue
         if kind == "MSG":
             texts.append(str(m.Message))
@@ -93,32 +106,60 @@ def _read_messages(f) -> tuple[dict, dict, list]:
         t = _time_of(m)
         if t is None:
             continue
-        c = cols[kind]
-        c["t"].append(t)
+        c = rows[kind]
+        order[kind].append(len(times))
+        times.append(float(t))
         for name in _WANTED[kind]:
             v = getattr(m, name, None)
             if v is None and kind == "RCOU":
                 v = getattr(m, "Ch" + name[1:], None)  # ArduCopter 3.3 names RCOU fields Ch1..
             c[name].append(np.nan if v is None else float(v))
-    return {k: {n: np.asarray(v, dtype=float) for n, v in c.items()} for k, c in cols.items()}, params, texts
+    clock, keep, events = continue_clock(times)
+    fixed = np.full(len(times), np.nan)
+    fixed[keep] = clock
+    cols = {}
+    for kind, c in rows.items():
+        idx = np.asarray(order[kind], dtype=int)
+        cols[kind] = {"t": fixed[idx], **{n: np.asarray(v, dtype=float) for n, v in c.items()}}
+    return cols, params, texts, events
 
 
-def _damage(f, printed) -> list[str]:
-    """Truncation (last indexed message runs past the end) and skipped garbage inside the file."""
+def _end_of_log(f) -> tuple[list, list, dict]:
+    """How the log ends and whether its middle is sound, from pymavlink's index: (notes, damage, metadata).
+
+    A last message running past the end of the data is a cut last message (pymavlink drops it); bytes
+    between indexed messages are garbage inside the log; an index that stops well before the end
+    (pymavlink stops at an unknown message type) loses the rest of the log.
+    """
+    notes, damage, meta = [], [], {}
     lengths = {t: f.formats[t].len for t in range(len(f.offsets)) if len(f.offsets[t]) and t in f.formats}
     if not lengths:
-        return []
-    end = max(int(f.offsets[t][-1]) + n for t, n in lengths.items())
+        return notes, ["no DataFlash message could be indexed"], meta
+    last_type = max(lengths, key=lambda t: int(f.offsets[t][-1]))
+    last = int(f.offsets[last_type][-1])
+    end = last + lengths[last_type]
     used = sum(int(f.counts[t]) * n for t, n in lengths.items())
-    damage = []
     if end > f.data_len:
-        damage.append(f"truncated: its last message runs {end - f.data_len} bytes past the end of the file")
-    skipped = min(end, f.data_len) - used
-    bad = sum(1 for line in printed if "bad header" in line or "unknown msg type" in line)
-    if skipped > 0 and bad:
-        damage.append(f"corrupt: {skipped} bytes inside the file are not DataFlash messages "
-                      f"(pymavlink skipped them: {bad} bad headers)")
-    return damage
+        name = getattr(f.formats[last_type], "name", "?")
+        notes.append(f"the log ends {f.data_len - last} bytes into its last message ({name}, {lengths[last_type]} "
+                     "bytes; logging stopped mid-write, e.g. power lost): dropped it")
+        meta["cut_last_message"] = {"message": name, "bytes_present": f.data_len - last,
+                                    "message_bytes": lengths[last_type]}
+    elif f.data_len - end > TAIL_GARBAGE_MAX:
+        damage.append(f"decoding stops at byte {end} of {f.data_len}: the {f.data_len - end} bytes after it are not "
+                      "DataFlash messages pymavlink can index")
+    elif f.data_len > end:
+        notes.append(f"dropped {f.data_len - end} unreadable bytes after the last complete message")
+        meta["unreadable_tail_bytes"] = f.data_len - end
+    skipped = min(end, f.data_len) - used + (lengths[last_type] - (f.data_len - last) if end > f.data_len else 0)
+    if skipped > 0:
+        damage.append(f"corrupt: {skipped} bytes inside the log are not DataFlash messages (pymavlink skips them)")
+    return notes, damage, meta
+
+
+def _channel(value, default: int) -> int:
+    """An RCMAP_* parameter as a channel number 1..16 (the default for a missing or garbled value)."""
+    return int(value) if value is not None and np.isfinite(value) and 1 <= value <= 16 else default
 
 
 def _rc_norm(pwm, lo, trim, hi, rev) -> np.ndarray:
@@ -141,19 +182,28 @@ def load_ardupilot(path, allow_damaged: bool = False) -> RawLog:
     """
     path = Path(path)
     mavlink = require("pymavlink.DFReader", "logs")
-    with open(path, "rb") as fh:
-        head = fh.read(3)
-    if not is_dataflash(head):
+    where = locate(path)
+    if where.format != "ardupilot-dataflash":
+        with open(path, "rb") as fh:
+            head = fh.read(3)
         raise LogFormatError(f"{path}: not an ArduPilot DataFlash log: expected it to start with bytes "
                              f"{DF_HEAD.hex(' ')}, got {head.hex(' ') or 'an empty file'}")
+    span = where.logs[0]
     try:
-        with captured_output() as printed:
-            f = mavlink.DFReader_binary(str(path), zero_time_base=False)
-            cols, params, texts = _read_messages(f)
-        damage = _damage(f, printed)
+        with span_file(path, span, where.size) as src, captured_output():
+            f = mavlink.DFReader_binary(str(src), zero_time_base=False)
+            cols, params, texts, clock = _read_messages(f)
+            tolerated, damage, meta_end = _end_of_log(f)
+            f.filehandle.close()
     except Exception as e:  # the parser's own failure on bad bytes: any exception type
         raise LogFormatError(f"{path}: pymavlink cannot decode this DataFlash log ({type(e).__name__}: {e})") from e
     check_damage(damage, path, allow_damaged, "ArduPilot DataFlash")
+    if span.padding_note():
+        tolerated.insert(0, span.padding_note())
+        meta_end["padding"] = {"before": span.lead, "after": span.trail}
+    if clock:
+        tolerated.append(describe(clock))
+        meta_end["clock"] = clock
 
     imu, att = cols.get("IMU"), cols.get("ATT")
     if imu is None or "GyrX" not in imu:
@@ -169,12 +219,16 @@ def load_ardupilot(path, allow_damaged: bool = False) -> RawLog:
     firmware = next((t for t in texts if "Copter" in t or "Plane" in t or "Rover" in t), "ArduPilot")
     heli = ("heli" in firmware.lower() or any(k.startswith(("H_SW", "H_SV", "H_COL")) for k in params)
             or params.get("FRAME_CLASS") == 6)
-    vehicle = "helicopter" if heli else "multirotor"
+    vehicle = ("helicopter" if heli else "fixed-wing" if "Plane" in firmware
+               else "ground vehicle" if "Rover" in firmware else "multirotor")
+    if vehicle in ("fixed-wing", "ground vehicle"):
+        tolerated.append(f"{firmware}: a {vehicle}, not a rotorcraft; the attitude models of this package describe "
+                         "hovering helicopters, so read identification results of this log with care")
 
     inputs, notes, unavailable = {}, {}, {}
     rcin = cols.get("RCIN")
     if rcin is not None:
-        chan = {a: int(params.get(f"RCMAP_{a}", d)) for a, d in
+        chan = {a: _channel(params.get(f"RCMAP_{a}"), d) for a, d in
                 (("ROLL", 1), ("PITCH", 2), ("THROTTLE", 3), ("YAW", 4))}
 
         def rc(axis):
@@ -222,15 +276,20 @@ def load_ardupilot(path, allow_damaged: bool = False) -> RawLog:
     if heli and rcou is not None:
         servos = make_stream(rcou["t"], [rcou["C1"], rcou["C2"], rcou["C3"], rcou["C4"]], "RCOU.C1-C4")
     elif not heli:
-        unavailable["servos"] = ("ArduCopter multirotor log: RCOU holds motor outputs, not swash-plate servos of "
-                                 "eqs. 65-67; use inputs='controller' (the rate controller's outputs)")
+        outputs = "control-surface servos" if vehicle == "fixed-wing" else "motor outputs"
+        unavailable["servos"] = (f"{firmware} {vehicle} log: RCOU holds {outputs}, not swash-plate servos of "
+                                 "eqs. 65-67; use inputs='controller' (the rate controller's outputs) or 'sticks'")
     else:
         unavailable["servos"] = "no RCOU messages"
+    inputs = {k: v for k, v in inputs.items() if v is not None}
+    if not inputs and servos is None:
+        raise MissingStreamError(f"{path}: no input stream: expected RATE (controller), RCIN (sticks) or, on a "
+                                 "helicopter, RCOU (servos) messages with at least 2 samples")
     default = "servos" if servos is not None else ("controller" if "controller" in inputs else "sticks")
-    meta = {"firmware": firmware, "frame": params.get("FRAME"), "parser": "pymavlink DFReader"}
+    meta = {"firmware": firmware, "frame": params.get("FRAME"), "parser": "pymavlink DFReader", **meta_end}
     return RawLog(path=path, format="ardupilot-dataflash", vehicle=vehicle, rates=rates, attitude=attitude,
-                  inputs={k: v for k, v in inputs.items() if v is not None}, input_notes=notes,
-                  unavailable=unavailable, default_input=default, servos=servos,
+                  inputs=inputs, input_notes=notes, unavailable=unavailable, default_input=default, servos=servos,
                   segment_signals=SegmentSignals(power=power, accel=accel, altitude=altitude,
-                                                 power_name="throttle output"),
-                  metadata=meta, damage=damage)
+                                                 power_name=f"throttle output ({power.name})" if power else
+                                                 "throttle output"),
+                  metadata=meta, damage=damage, notes=tolerated)

@@ -16,15 +16,21 @@ class LogFormatError(FlightLogError):
 
 
 class DamagedLogError(LogFormatError):
-    """The log decodes only in part: it is truncated, or some of its messages/frames are corrupt.
+    """The log is damaged in the middle: some of its messages/frames are corrupt or the decoder loses them.
 
-    Pass ``allow_damaged=True`` (``heli import --allow-damaged``) to import what
-    decodes; the flight's metadata then records the damage.
+    A log whose *last* message is cut (logging stopped mid-write) is not damaged:
+    the partial message is dropped with a note. Pass ``allow_damaged=True``
+    (``heli import --allow-damaged``) to import what decodes; the flight's metadata
+    then records the damage.
     """
 
 
 class MissingStreamError(LogFormatError):
     """The log lacks a stream the import needs (body rates, attitude, or the chosen input source)."""
+
+
+class LogSelectionError(FlightLogError):
+    """``log=N`` names no log of the file (a blackbox flash dump holds several; ``heli import --list``)."""
 
 
 class InputSourceError(FlightLogError):

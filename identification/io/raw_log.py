@@ -106,7 +106,11 @@ class RawLog:
         Streams the airborne detector uses.
     metadata : dict
     damage : list of str
-        What was found truncated or corrupt (empty for a sound log).
+        What was found corrupt inside the log (empty for a sound log); refused unless ``allow_damaged``.
+    notes : list of str
+        What a real logger writes and the import tolerated, one line each: a cut last message that
+        was dropped, padding, a clock restart, frames of unknown type skipped. Kept in
+        ``metadata["import_warnings"]`` and printed by ``heli import``.
     """
 
     path: Path
@@ -122,6 +126,7 @@ class RawLog:
     servos: Stream | None = None
     metadata: dict = field(default_factory=dict)
     damage: list = field(default_factory=list)
+    notes: list = field(default_factory=list)
 
 
 @contextlib.contextmanager
@@ -166,12 +171,12 @@ class _FdText:
         pass
 
 
-def check_damage(raw_damage: list, path: Path, allow_damaged: bool, fmt: str) -> None:
-    """Raise :class:`DamagedLogError` for a damaged log unless the caller accepts it."""
+def check_damage(raw_damage: list, path, allow_damaged: bool, fmt: str) -> None:
+    """Raise :class:`DamagedLogError` for a log damaged in the middle unless the caller accepts it."""
     if raw_damage and not allow_damaged:
         raise DamagedLogError(
-            f"{path}: the {fmt} file is damaged: {'; '.join(raw_damage)}. Expected a complete log; "
-            "pass allow_damaged=True (heli import --allow-damaged) to import what decodes"
+            f"{path}: the {fmt} log is damaged in the middle: {'; '.join(raw_damage)}. Expected a log that decodes "
+            "throughout; pass allow_damaged=True (heli import --allow-damaged) to import what decodes"
         )
 
 
@@ -201,11 +206,13 @@ def _choose_input(raw: RawLog, inputs: str | None, calibration) -> tuple[str, St
     source = raw.default_input if inputs is None else inputs
     if source not in INPUT_SOURCES:
         raise InputSourceError(f"input source must be one of {', '.join(INPUT_SOURCES)}, got {source!r}")
+    offered = sorted(set(raw.inputs) | ({"servos"} if raw.servos is not None else set()))
+    hint = f"; this log offers --inputs {'|'.join(offered)}" if offered else ""
     meta: dict = {}
     if source == "servos":
         if raw.servos is None:
             reason = raw.unavailable.get("servos", "the log holds no servo outputs")
-            raise InputSourceError(f"{raw.path}: input source 'servos' does not apply: {reason}")
+            raise InputSourceError(f"{raw.path}: input source 'servos' does not apply: {reason}{hint}")
         cal = _load_calibration(calibration) if calibration is not None else h3_120_calibration()
         sticks = sticks_from_servos(raw.servos.values, cal["G"], cal["U_trim"])
         stream = Stream(raw.servos.time, sticks, raw.servos.name + " via eq. (67)", dropped=raw.servos.dropped)
@@ -215,7 +222,7 @@ def _choose_input(raw: RawLog, inputs: str | None, calibration) -> tuple[str, St
         raise InputSourceError(f"a servo calibration applies to inputs='servos' only, not {source!r}")
     if source not in raw.inputs:
         reason = raw.unavailable.get(source, "the log lacks its streams")
-        raise InputSourceError(f"{raw.path}: input source {source!r} is not available: {reason}")
+        raise InputSourceError(f"{raw.path}: input source {source!r} is not available: {reason}{hint}")
     return source, raw.inputs[source], meta
 
 
@@ -237,6 +244,19 @@ def _load_calibration(calibration) -> dict:
     return cal
 
 
+MAX_SPAN_FACTOR = 20.0
+"""A log whose streams span more than this many times the time its gyro stream covers (plus an hour) has a
+corrupt clock: building a grid over it would only fill memory with gaps."""
+
+
+def _covered_s(stream: Stream) -> float:
+    """Time [s] a stream covers without gaps."""
+    from .resample import gap_threshold
+
+    dt = np.diff(stream.time)
+    return float(dt[dt <= gap_threshold(stream)].sum())
+
+
 def to_flight(raw: RawLog, inputs: str | None = None, segment=None, rate: float | None = None,
               calibration=None) -> Flight:
     """Resample a decoded log onto a uniform grid, pick the segment and build the :class:`Flight`.
@@ -255,33 +275,51 @@ def to_flight(raw: RawLog, inputs: str | None = None, segment=None, rate: float 
     calibration : dict or path, optional
         Servo mixing ``{"G": 4x4, "U_trim": 4}`` for ``inputs="servos"`` (default: H3-120).
 
+    Without an attitude stream the flight's attitude is reconstructed from the rates
+    (eqs. 25-29, :func:`~identification.flight.make_flight`) and a warning says so.
+
     Raises
     ------
-    InputSourceError, MissingStreamError, NotAirborneError, SegmentError
+    InputSourceError, MissingStreamError, NotAirborneError, SegmentError, DamagedLogError
     """
     mode, span = _parse_segment(segment)
     source, input_stream, extra_meta = _choose_input(raw, inputs, calibration)
-    if raw.attitude is None:
-        raise MissingStreamError(f"{raw.path}: no attitude stream in the {raw.format} log")
-    used = [raw.rates, raw.attitude, input_stream]
+    warnings = list(raw.notes)
+    used = [raw.rates, input_stream] + ([raw.attitude] if raw.attitude is not None else [])
+    what = f"rates, {'attitude and ' if raw.attitude is not None else ''}{source}"
     t0 = max(s.time[0] for s in used)
     t1 = min(s.time[-1] for s in used)
     grid_rate = float(rate) if rate is not None else min(raw.rates.rate, DEFAULT_MAX_RATE)
     if not (np.isfinite(grid_rate) and grid_rate > 0):
         raise SegmentError(f"grid rate must be a positive number of Hz, got {rate!r}")
     if t1 - t0 < 2.0 / grid_rate:
+        spans = ", ".join(f"{s.name} {s.span[0]:.3f}..{s.span[1]:.3f} s" for s in used)
+        others = [k for k in raw.inputs if k != source]
+        hint = f"; another input source may cover more (--inputs {'|'.join(others)})" if others else ""
         raise MissingStreamError(
-            f"{raw.path}: the rate, attitude and {source} streams overlap for {max(t1 - t0, 0.0):.3f} s only "
-            f"(rates {raw.rates.span}, attitude {raw.attitude.span}, {source} {input_stream.span} s)"
+            f"{raw.path}: the {what} streams overlap for {max(t1 - t0, 0.0):.3f} s only ({spans}){hint}"
+        )
+    if mode == "range":  # only the asked-for part of the clock is gridded
+        t0, t1 = max(t0, span[0] - 1.0 / grid_rate), min(t1, span[1] + 1.0 / grid_rate)
+        if t1 - t0 < 2.0 / grid_rate:
+            raise SegmentError(
+                f"{raw.path}: segment {span[0]}:{span[1]} s lies outside the log's data, which spans "
+                f"{max(s.time[0] for s in used):.3f}:{min(s.time[-1] for s in used):.3f} s (the log's own clock); "
+                "pass --segment all for the whole log"
+            )
+    elif (t1 - t0) > MAX_SPAN_FACTOR * _covered_s(raw.rates) + 3600.0:
+        raise DamagedLogError(
+            f"{raw.path}: the log's time stamps span {t1 - t0:.4g} s but its gyro stream ({raw.rates.name}) covers "
+            f"only {_covered_s(raw.rates):.4g} s of it: the clock is corrupt; choose a stretch with --segment T0:T1"
         )
     grid = uniform_grid(t0, t1, grid_rate)
     valid = np.ones(grid.size, dtype=bool)
     for s in used:
         valid &= valid_on_grid(grid, s)
     if not valid.any():
-        raise SegmentError(f"{raw.path}: no stretch of the log holds all of rates, attitude and {source}")
+        raise SegmentError(f"{raw.path}: no stretch of the log holds all of {what} without a gap")
     rates = resample_stream(raw.rates, grid)
-    att = resample_stream(raw.attitude, grid)
+    att = resample_stream(raw.attitude, grid) if raw.attitude is not None else None
     sticks = resample_stream(input_stream, grid)
 
     detection = None
@@ -290,15 +328,13 @@ def to_flight(raw: RawLog, inputs: str | None = None, segment=None, rate: float 
         i0, i1 = detection.start, detection.stop
     elif mode == "all":
         runs = valid_runs(valid)
-        if not runs.size:
-            raise SegmentError(f"{raw.path}: no stretch of the log holds all of rates, attitude and {source}")
         i0, i1 = runs[np.argmax(runs[:, 1] - runs[:, 0])]
     else:
         a, b = span
-        if a < grid[0] - 1e-9 or b > grid[-1] + 1e-9:
+        if a < grid[0] - 1.5 / grid_rate or b > grid[-1] + 1.5 / grid_rate:
             raise SegmentError(
                 f"{raw.path}: segment {a}:{b} s lies outside the log's data, which spans "
-                f"{grid[0]:.3f}:{grid[-1]:.3f} s (the log's own clock)"
+                f"{grid[0]:.3f}:{grid[-1]:.3f} s (the log's own clock); pass --segment all for the whole log"
             )
         i0 = int(np.searchsorted(grid, a - 1e-9))
         i1 = int(np.searchsorted(grid, b + 1e-9))
@@ -306,15 +342,19 @@ def to_flight(raw: RawLog, inputs: str | None = None, segment=None, rate: float 
             bad = i0 + int(np.argmin(valid[i0:i1]))
             raise SegmentError(
                 f"{raw.path}: segment {a}:{b} s spans a gap in the logged data at t={grid[bad]:.3f} s; "
-                "choose a segment inside one continuous stretch"
+                "choose a segment inside one continuous stretch (--segment all takes the longest)"
             )
     sl = slice(int(i0), int(i1))
     if i1 - i0 < 2:
-        raise SegmentError(f"{raw.path}: the chosen segment holds {i1 - i0} samples")
+        raise SegmentError(f"{raw.path}: the chosen segment holds {i1 - i0} samples; pass --segment all or a "
+                           "longer T0:T1")
     sticks = sticks[:, sl]
     # Count what is really out of range; the anti-alias filter's ringing at a step (< 0.1 %) is clipped silently.
     clipped = {name: int((np.abs(sticks[i]) > 1.0 + CLIP_TOLERANCE).sum()) for i, name in enumerate(STICK_COLUMNS)}
     sticks = np.clip(sticks, -1.0, 1.0)
+    if att is None:
+        warnings.append("the log has no attitude stream (older firmware): the attitude is reconstructed from the "
+                        "rates (eqs. 25-29), starting level")
 
     meta = {
         "source": raw.path.name,
@@ -341,7 +381,10 @@ def to_flight(raw: RawLog, inputs: str | None = None, segment=None, rate: float 
         meta["airborne_detection"] = detection.summary()
     if raw.damage:
         meta["damage"] = list(raw.damage)
-    return make_flight(grid[sl], rates[:, sl], sticks, attitude=att[:, sl], metadata=meta)
+    if warnings:
+        meta["import_warnings"] = warnings
+    return make_flight(grid[sl], rates[:, sl], sticks, attitude=None if att is None else att[:, sl], metadata=meta,
+                       units_from=f"{raw.format} log")
 
 
 def rate_attitude_agreement(flight: Flight, cutoff_hz: float = 2.0) -> dict:

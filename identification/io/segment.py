@@ -31,7 +31,16 @@ its motors still running must not count, nor the tumble before it). Holes shorte
 runs shorter than ``MIN_AIRBORNE_S`` discarded, and the longest remaining run,
 trimmed by ``TRIM_S`` at both ends (take-off and touch-down transients), is the
 segment. Finding none raises :class:`~identification.io.errors.NotAirborneError`
-with the figures that decided it.
+with the figures that decided it, whether the vehicle was ever armed (when the log
+says), and what to try next (``--segment all`` or ``T0:T1``).
+
+Without an attitude stream (older Betaflight), the activity is the windowed
+standard deviation of the roll and pitch angles integrated from the high-passed
+rates (the gyro bias drops out), and upright comes from the accelerometer: the
+low-passed specific force must point within ``UPRIGHT_MAX_RAD`` of the body's -z
+axis (thrust keeps it there in flight; a craft lying on its side or back with the
+motors running fails). Without an accelerometer either, upright is not checked and
+the figures say so.
 """
 
 from __future__ import annotations
@@ -79,13 +88,16 @@ class SegmentSignals:
         (3, n) specific force [m/s^2].
     altitude : Stream or None
         (1, n) height [m], up positive, any datum.
+    armed : Stream or None
+        (1, n) 1 while the vehicle is armed, 0 otherwise (for messages only: a log never armed says so).
     power_name : str
-        What ``power`` is, for messages.
+        What ``power`` is, for messages (name the topic/message and instance it came from).
     """
 
     power: Stream | None = None
     accel: Stream | None = None
     altitude: Stream | None = None
+    armed: Stream | None = None
     power_name: str = "throttle"
 
 
@@ -125,9 +137,19 @@ def _close_holes(mask: np.ndarray, n_hole: int) -> np.ndarray:
     return out
 
 
-def airborne_features(grid: np.ndarray, signals: SegmentSignals, rates: np.ndarray, attitude: np.ndarray,
+def _activity_from_rates(rates: np.ndarray, valid: np.ndarray, fs: float, w: int) -> np.ndarray:
+    """Windowed std of roll/pitch angles integrated from high-passed rates (no attitude stream)."""
+    pq = np.where(valid, rates[:2], 0.0)
+    pq = pq - _moving(pq, w)  # the slowly varying gyro bias drops out
+    angle = np.cumsum(pq, axis=1) / fs
+    return _moving_std(angle, w).max(axis=0)
+
+
+def airborne_features(grid: np.ndarray, signals: SegmentSignals, rates: np.ndarray, attitude: np.ndarray | None,
                       valid: np.ndarray) -> dict:
     """The per-sample evidence on the grid: power, vibration (and its motors-off level), activity, height.
+
+    ``attitude`` may be None (no attitude stream): the activity then comes from the integrated rates.
 
     Returns
     -------
@@ -151,8 +173,12 @@ def airborne_features(grid: np.ndarray, signals: SegmentSignals, rates: np.ndarr
     feats["vibration_source"] = src
     off = valid & (feats["power"] < POWER_OFF) if "power" in feats else valid
     feats["vibration_quiet"] = float(np.percentile(vib[off], 5)) if off.sum() >= QUIET_MIN_S * fs else None
-    roll_pitch = np.unwrap(attitude[:2], axis=1)
-    feats["activity"] = _moving_std(roll_pitch, w).max(axis=0)
+    if attitude is not None:
+        feats["activity"] = _moving_std(np.unwrap(attitude[:2], axis=1), w).max(axis=0)
+    else:
+        feats["activity"] = _activity_from_rates(rates, valid, fs, w)
+    if signals.accel is not None:
+        feats["specific_force"] = acc
     if signals.altitude is not None:
         alt = resample_stream(signals.altitude, grid)[0]
         ok = valid_on_grid(grid, signals.altitude)
@@ -161,7 +187,18 @@ def airborne_features(grid: np.ndarray, signals: SegmentSignals, rates: np.ndarr
     return feats
 
 
-def detect_airborne(grid: np.ndarray, signals: SegmentSignals, rates: np.ndarray, attitude: np.ndarray,
+def _upright(attitude: np.ndarray | None, feats: dict, fs: float) -> tuple[np.ndarray | None, str]:
+    """Per-sample "not tilted beyond UPRIGHT_MAX_RAD", from the attitude or else the accelerometer."""
+    if attitude is not None:
+        return (np.abs(attitude[0]) <= UPRIGHT_MAX_RAD) & (np.abs(attitude[1]) <= UPRIGHT_MAX_RAD), "attitude"
+    if "specific_force" in feats:
+        f = _moving(feats["specific_force"], max(int(round(0.5 * fs)), 1))
+        norm = np.sqrt((f * f).sum(axis=0))
+        return -f[2] >= np.cos(UPRIGHT_MAX_RAD) * np.maximum(norm, 1e-9), "accelerometer"
+    return None, "not checked (no attitude, no accelerometer)"
+
+
+def detect_airborne(grid: np.ndarray, signals: SegmentSignals, rates: np.ndarray, attitude: np.ndarray | None,
                     valid: np.ndarray, source: str = "log") -> Detection:
     """Find the longest airborne run of a log on its uniform grid (method in the module docstring).
 
@@ -172,8 +209,8 @@ def detect_airborne(grid: np.ndarray, signals: SegmentSignals, rates: np.ndarray
     signals : SegmentSignals
     rates : ndarray, shape (3, m)
         p, q, r on the grid [rad/s].
-    attitude : ndarray, shape (3, m)
-        phi, theta, psi on the grid [rad].
+    attitude : ndarray, shape (3, m), or None
+        phi, theta, psi on the grid [rad]; None when the log has no attitude stream.
     valid : ndarray of bool, shape (m,)
         Grid points where every stream of the flight has data (runs never cross a False).
     source : str
@@ -196,9 +233,10 @@ def detect_airborne(grid: np.ndarray, signals: SegmentSignals, rates: np.ndarray
     if "height" in f:
         moving = moving | (f["height"] >= ALTITUDE_MIN_M)
     crit["attitude_or_height"] = moving
-    tilted = (np.abs(attitude[0]) > UPRIGHT_MAX_RAD) | (np.abs(attitude[1]) > UPRIGHT_MAX_RAD)
-    margin = int(round(UPRIGHT_MARGIN_S * fs))
-    crit["upright"] = ~(_moving(tilted.astype(float), 2 * margin + 1) > 1e-9)
+    upright, upright_source = _upright(attitude, f, fs)
+    if upright is not None:
+        margin = int(round(UPRIGHT_MARGIN_S * fs))
+        crit["upright"] = ~(_moving((~upright).astype(float), 2 * margin + 1) > 1e-9)
     air = valid.copy()
     for c in crit.values():
         air &= c
@@ -212,21 +250,12 @@ def detect_airborne(grid: np.ndarray, signals: SegmentSignals, rates: np.ndarray
         "vibration_max_over_quiet": round(float(f["vibration"][valid].max() / quiet), 2) if quiet else None,
         "activity_max_deg": round(float(np.degrees(f["activity"][valid].max())), 3),
         "height_max_m": round(float(f["height"][valid].max()), 2) if "height" in f else None,
+        "activity_source": "attitude" if attitude is not None else "rates integrated (no attitude stream)",
+        "upright_source": upright_source,
         "criteria_share": {k: round(float(v.mean()), 4) for k, v in crit.items()},
     }
     if not len(long):
-        best = float((runs[:, 1] - runs[:, 0]).max() / fs) if runs.size else 0.0
-        raise NotAirborneError(
-            f"{source}: found no airborne segment: expected at least {MIN_AIRBORNE_S:.0f} s with "
-            f"{'power >= %.2f, ' % POWER_MIN if 'power' in f else ''}"
-            f"{'vibration >= %gx the motors-off level, ' % VIBRATION_FACTOR if quiet else ''}upright, "
-            f"and roll/pitch activity >= {np.degrees(ACTIVITY_MIN_RAD):.1f} deg"
-            f"{' or height >= %.1f m' % ALTITUDE_MIN_M if 'height' in f else ''}; got a longest such run of "
-            f"{best:.1f} s (peak {figures['power_name'] or 'power'} {figures['power_max']}, peak vibration "
-            f"{figures['vibration_max_over_quiet']}x motors-off, peak activity {figures['activity_max_deg']} deg"
-            f"{', peak height %s m' % figures['height_max_m'] if 'height' in f else ''}). "
-            "The log looks like it never left the ground"
-        )
+        raise NotAirborneError(_not_airborne_message(source, grid, valid, runs, fs, f, figures, signals, quiet))
     lengths = long[:, 1] - long[:, 0]
     a, b = long[int(np.argmax(lengths))]
     trim = int(round(TRIM_S * fs))
@@ -236,4 +265,38 @@ def detect_airborne(grid: np.ndarray, signals: SegmentSignals, rates: np.ndarray
         airborne_s=round(float(lengths.sum() / fs), 3),
         runs=[[round(float(grid[i]), 3), round(float(grid[j - 1]), 3)] for i, j in long],
         figures=figures,
+    )
+
+
+def _armed_note(signals: SegmentSignals, grid: np.ndarray) -> str:
+    """What the log says about arming, for the not-airborne message ('' if it says nothing)."""
+    armed = signals.armed
+    if armed is None:
+        return ""
+    on = armed.values[0] > 0.5
+    if not on.any():
+        return f"; the vehicle was never armed ({armed.name} is 0 throughout)"
+    dt = np.diff(armed.time, append=armed.time[-1])
+    return f"; armed for {float(dt[on].sum()):.1f} s ({armed.name})"
+
+
+def _not_airborne_message(source, grid, valid, runs, fs, f, figures, signals, quiet) -> str:
+    best = float((runs[:, 1] - runs[:, 0]).max() / fs) if runs.size else 0.0
+    longest_data = float((valid_runs(valid)[:, 1] - valid_runs(valid)[:, 0]).max() / fs)
+    if longest_data < MIN_AIRBORNE_S:
+        return (f"{source}: found no airborne segment: the log holds {longest_data:.2f} s of continuous data "
+                f"({grid[0]:.3f}..{grid[-1]:.3f} s on its clock), less than the {MIN_AIRBORNE_S:.0f} s the airborne "
+                f"detector needs{_armed_note(signals, grid)}. To import it as it is, pass segment='all' "
+                "(heli import --segment all)")
+    return (
+        f"{source}: found no airborne segment: expected at least {MIN_AIRBORNE_S:.0f} s with "
+        f"{'power >= %.2f, ' % POWER_MIN if 'power' in f else ''}"
+        f"{'vibration >= %gx the motors-off level, ' % VIBRATION_FACTOR if quiet else ''}upright, "
+        f"and roll/pitch activity >= {np.degrees(ACTIVITY_MIN_RAD):.1f} deg"
+        f"{' or height >= %.1f m' % ALTITUDE_MIN_M if 'height' in f else ''}; got a longest such run of "
+        f"{best:.1f} s (peak {figures['power_name'] or 'power'} {figures['power_max']}, peak vibration "
+        f"{figures['vibration_max_over_quiet']}x motors-off, peak activity {figures['activity_max_deg']} deg"
+        f"{', peak height %s m' % figures['height_max_m'] if 'height' in f else ''}){_armed_note(signals, grid)}. "
+        "The log looks like it never left the ground. To import it anyway, pass segment='all' "
+        "(heli import --segment all) or a stretch T0:T1 of the log's clock (--segment T0:T1)"
     )
