@@ -1,0 +1,101 @@
+"""Warnings about an identification the data cannot support well: weak fits, short flights, unexcited axes.
+
+An identifier returns numbers for any data it is given; whether they mean anything
+depends on the data. :func:`fit_warnings` looks at the flights and the per-axis fit
+quality and returns one line per concern, for the terminal and the report:
+
+* **Weak fit** -- the model explains less than :data:`MIN_R2` of an axis' rate
+  variance (R², the share of variance explained). A real ArduCopter log fitted at
+  2 % is a model of noise: the input source (``--inputs``), the segment or the
+  logging rate is usually the cause.
+* **Short flight** -- a flight shorter than :data:`MIN_DURATION_S`: too few
+  independent gusts and manoeuvres for the parameters (and the wind statistics of
+  eqs. 41-47) to settle.
+* **Barely excited axis** -- the axis' stick moves with a standard deviation below
+  :data:`MIN_STICK_STD` (half a percent of the [-1, 1] range) or its rate below
+  :data:`MIN_RATE_STD` (half a degree per second): the control gain and damping of
+  that axis are then not identifiable from the data, whatever R² says.
+
+The function is pure: it reads the flights and the figures and returns strings.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+
+import numpy as np
+
+AXES = ("roll", "pitch", "yaw")
+"""Axes in the order of the rates p, q, r."""
+AXIS_STICK = {"roll": ("lat", 0), "pitch": ("lon", 1), "yaw": ("ped", 3)}
+"""The stick driving each axis and its row in ``Flight.sticks``."""
+MIN_R2 = 0.30
+"""Least share of an axis' rate variance a fit should explain."""
+MIN_DURATION_S = 60.0
+"""s: least length of a flight."""
+MIN_STICK_STD = 0.01
+"""Least standard deviation of an axis' stick (the range is [-1, 1])."""
+MIN_RATE_STD = math.radians(0.5)
+"""rad/s: least standard deviation of an axis' rate."""
+
+
+def _name(flight, k: int, n: int) -> str:
+    meta = getattr(flight, "metadata", {}) or {}
+    source = meta.get("source")
+    label = f"'{source}'" if source else (f"{k + 1} of {n}" if n > 1 else "")
+    return f"flight {label}".strip()
+
+
+def fit_warnings(flights, r2: Mapping | None = None, *, min_r2: float = MIN_R2,
+                 min_duration_s: float = MIN_DURATION_S, min_stick_std: float = MIN_STICK_STD,
+                 min_rate_std: float = MIN_RATE_STD) -> list[str]:
+    """One-line warnings about what the flights and the fit quality cannot support (module docstring).
+
+    Parameters
+    ----------
+    flights : Flight or iterable of Flight
+        The flights identified from (anything with ``time`` (n,), ``rates`` (3, n), ``sticks`` (4, n) and
+        ``metadata``).
+    r2 : mapping of str to float, optional
+        Share of variance explained per axis (``"roll"``, ``"pitch"``, ``"yaw"``), e.g. each axis fit's
+        R²; None or NaN for an axis that was not fitted. Without it only the data are checked.
+    min_r2, min_duration_s, min_stick_std, min_rate_std : float
+        Thresholds (defaults :data:`MIN_R2`, :data:`MIN_DURATION_S`, :data:`MIN_STICK_STD` [stick],
+        :data:`MIN_RATE_STD` [rad/s]).
+
+    Returns
+    -------
+    list of str
+        Flights first (in order), then per axis (roll, pitch, yaw) excitation and fit; empty when all is well.
+    """
+    if hasattr(flights, "time"):
+        flights = [flights]
+    flights = list(flights) if isinstance(flights, Iterable) else [flights]
+    out: list[str] = []
+    for k, f in enumerate(flights):
+        duration = float(f.time[-1] - f.time[0]) if len(f.time) > 1 else 0.0
+        if duration < min_duration_s:
+            out.append(f"{_name(f, k, len(flights))} lasts {duration:.1f} s, shorter than {min_duration_s:.0f} s: "
+                       "too short for the parameters and the wind statistics to settle; identify from a longer "
+                       "flight or several flights")
+    if flights:
+        sticks = np.concatenate([np.asarray(f.sticks, dtype=float) for f in flights], axis=1)
+        rates = np.concatenate([np.asarray(f.rates, dtype=float) for f in flights], axis=1)
+        for i, axis in enumerate(AXES):
+            stick, row = AXIS_STICK[axis]
+            s_std, r_std = float(np.std(sticks[row])), float(np.std(rates[i]))
+            if s_std < min_stick_std or r_std < min_rate_std:
+                out.append(f"{axis} is barely excited: the {stick} stick varies by {s_std:.3g} (std; "
+                           f"{100 * s_std / 2:.2g} % of its [-1, 1] range) and the {axis} rate by "
+                           f"{math.degrees(r_std):.2g} deg/s (std); its gain and damping are not identifiable "
+                           f"from these data (fly sweeps on {stick}, or check the input source with --inputs)")
+    for axis in AXES:
+        value = None if r2 is None else r2.get(axis)
+        if value is None or not np.isfinite(value):
+            continue
+        if value < min_r2:
+            out.append(f"{axis}: the fit explains {100 * max(value, 0.0):.0f} % of the rate variance (R² "
+                       f"{value:.2f}), below {100 * min_r2:.0f} %: the model says little about this axis; check "
+                       "the input source (--inputs), the segment and the logging rate")
+    return out
