@@ -257,11 +257,23 @@ class LikelihoodDiagnoser:
         scan = [self._score(a, base.names, float(s), base.x, kinds, 0) for s in ALIGNMENT_GRID
                 if abs(s - base.alignment) > 1e-9]
         best = min(scan, key=lambda sc: sc.nll)
-        if best.alignment >= 0:  # a servo delay: searched jointly with the damping and the wind
-            return self._score(a, base.names, best.alignment, base.x, kinds, 3 * NFEV, free_tau=True)
-        best = self._score(a, base.names, best.alignment, base.x, kinds, NFEV)
-        lo, hi = max(-MAX_ALIGNMENT, best.alignment - 0.025), min(0.0, best.alignment + 0.025)
-        res = optimize.minimize_scalar(lambda s: self._score(a, base.names, float(s), best.x, kinds, 5).nll,
+        if best.alignment >= 0:  # a servo delay: searched jointly with the damping and the wind, from the
+            # base fit and from a fresh start (the likelihood in the delay is multimodal)
+            fresh = np.array([max(base.x[0], 0.5), np.log(4.0), np.log(0.3), np.log(100.0), np.log(100.0)])
+            tries = [self._score(a, base.names, best.alignment, start, kinds, 3 * NFEV, free_tau=True)
+                     for start in (base.x, fresh)]
+            return min(tries, key=lambda sc: sc.nll)
+        # an input shift of the log: the scan held the undelayed fit's damping and wind, which a large shift
+        # makes wrong, so profile around its best with every parameter searched, then refine
+        x, profile = base.x, []
+        for shift in np.arange(max(-MAX_ALIGNMENT, best.alignment - 0.1), min(0.0, best.alignment + 0.1) + 1e-9,
+                               0.025):
+            sc = self._score(a, base.names, float(shift), x, kinds, NFEV)
+            x = sc.x
+            profile.append(sc)
+        best = min(profile, key=lambda sc: sc.nll)
+        lo, hi = max(-MAX_ALIGNMENT, best.alignment - 0.0125), min(0.0, best.alignment + 0.0125)
+        res = optimize.minimize_scalar(lambda s: self._score(a, base.names, float(s), best.x, kinds, NFEV).nll,
                                        bounds=(lo, hi), method="bounded", options={"xatol": 0.002})
         refined = self._score(a, base.names, float(res.x), best.x, kinds, NFEV)
         return refined if refined.nll < best.nll else best
@@ -317,8 +329,10 @@ class LikelihoodDiagnoser:
             for axis in todo:
                 a = AXES.index(axis)
                 base = current[axis]
-                # the base searched with the candidates' budget too, so that a candidate gains only by its terms
-                again = self._score(a, base.names, base.alignment, base.x, (base.kind,), NFEV)
+                # the base searched with the candidates' budget too, so that a candidate gains only by its terms;
+                # a servo delay found earlier is searched again with the rest (and with every candidate)
+                free_tau = (SERVO_DELAY, axis) in self.effects_found_ and base.alignment > 0
+                again = self._score(a, base.names, base.alignment, base.x, (base.kind,), NFEV, free_tau)
                 base = current[axis] = self._describe(a, again if again.nll < base.nll else base)
                 cands = []
                 for name, effect in CATALOGUE.items():
@@ -331,7 +345,7 @@ class LikelihoodDiagnoser:
                         add = tuple(p for p in effect.terms_on(a) if p not in base.names)
                         if not add:
                             continue
-                        sc = self._score(a, base.names + add, base.alignment, base.x, (base.kind,), NFEV)
+                        sc = self._score(a, base.names + add, base.alignment, base.x, (base.kind,), NFEV, free_tau)
                         k = len(add)
                     cands.append((name, k, sc, 2.0 * (base.nll - sc.nll)))
                 m = max(len(cands), 1)

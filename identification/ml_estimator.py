@@ -583,21 +583,28 @@ class MaximumLikelihoodIdentifier:
         res.x = np.concatenate([[0.0], res.x])
         return res
 
-    def _best(self, a, axis_params, flights, burn, tau, x0, models, free, max_nfev=None, free_tau=False):
-        """Search every wind model from delay ``tau`` (held, or searched too with ``free_tau``).
+    def _per_kind(self, a, axis_params, flights, burn, tau, x0, models, free, max_nfev=None, free_tau=False):
+        """Search each wind model from delay ``tau`` (held, or searched too with ``free_tau``) and from ``x0``
+        (one start for all, or a dict of starts by wind model).
 
-        Returns ``(cost, x, model, tau)``: ``x`` the damping-and-wind part of the search vector.
+        Returns ``{model: (cost, x, tau, aic)}``, ``x`` the damping-and-wind part of the search vector.
         """
-        best = None
+        out = {}
         for kind in models:
             like = _AxisLikelihood(self._axis_data(a, axis_params, flights, burn, tau, kind)[0], free_tau)
-            res = self._search(like, x0, free, max_nfev, tau)
+            res = self._search(like, x0[kind] if isinstance(x0, dict) else x0, free, max_nfev, tau)
             n = sum(len(y) - like.data.burn for y in like.data.y)
             # Akaike: the concentrated NLL is n/2 log(2 cost / n) + const; one parameter more costs 1
             aic = 0.5 * n * np.log(2.0 * res.cost / n) + N_NONLINEAR[kind]
-            if best is None or aic < best[4]:
-                best = (float(res.cost), res.x[:like.nw], kind, like.tau_of(res.x), aic)
-        return best[:4]
+            out[kind] = (float(res.cost), res.x[:like.nw], like.tau_of(res.x), aic)
+        return out
+
+    def _best(self, a, axis_params, flights, burn, tau, x0, models, free, max_nfev=None, free_tau=False):
+        """The wind model of :meth:`_per_kind` with the lowest Akaike criterion: ``(cost, x, model, tau)``."""
+        fits = self._per_kind(a, axis_params, flights, burn, tau, x0, models, free, max_nfev, free_tau)
+        kind = min(fits, key=lambda k: fits[k][3])
+        cost, x, tau, _ = fits[kind]
+        return cost, x, kind, tau
 
     def _fit_axis(self, a, axis_params, flights, burn, start_params, delay) -> MLAxisFit:
         _, damping_name = self._axis_data(a, axis_params, flights[:1], burn, 0.0)
@@ -610,13 +617,24 @@ class MaximumLikelihoodIdentifier:
             # the likelihood over a grid of delays with the damping and wind of the undelayed fit held (the
             # linear parameters solved at each), then every parameter and the delay searched from the best
             grid = np.asarray(self.delay_grid if self.delay_grid is not None else DEFAULT_DELAY_GRID, dtype=float)
-            _, xb, kind, _ = self._best(a, axis_params, flights, burn, 0.0, x0, models, free)
+            undelayed = self._per_kind(a, axis_params, flights, burn, 0.0, x0, models, free)
+            kind = min(undelayed, key=lambda k: undelayed[k][3])
+            xb = undelayed[kind][1]
             for tau in grid:
                 like = _AxisLikelihood(self._axis_data(a, axis_params, flights, burn, float(tau), kind)[0])
                 e = like.residual(xb)
                 profile.append((float(tau), 0.5 * float(e @ e)))
             tau0 = min(profile, key=lambda p: p[1])[0]
-            cost, x, kind, tau = self._best(a, axis_params, flights, burn, tau0, xb, models, free, free_tau=True)
+            # the held damping biases the grid's best: every wind model is searched from it together with the
+            # delay, each from its own undelayed fit (a second-order gust started from a first-order one stalls)
+            fits = {}
+            for start in ({k: v[1] for k, v in undelayed.items()}, x0):  # two starts: the likelihood is multimodal
+                for k, v in self._per_kind(a, axis_params, flights, burn, tau0, start, models, free,
+                                           free_tau=True).items():
+                    if k not in fits or v[3] < fits[k][3]:
+                        fits[k] = v
+            kind = min(fits, key=lambda k: fits[k][3])
+            cost, x, tau, _ = fits[kind]
         else:
             cost, x, kind, tau = self._best(a, axis_params, flights, burn, float(delay), x0, models, free)
         data, _ = self._axis_data(a, axis_params, flights, burn, tau, kind)

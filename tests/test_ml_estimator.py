@@ -85,7 +85,7 @@ def test_servo_delay_is_found_by_the_likelihood_profile():
     assert abs(fit.delay - sf.truth.tau_roll) <= 0.015
     taus = [t for t, _ in fit.delay_profile]
     assert taus == sorted(taus) and 0.0 in taus
-    assert min(fit.delay_profile, key=lambda p: p[1])[0] == fit.delay
+    assert 0 < fit.std_errors["tau_roll"] < 0.01  # the delay's own standard error (searched with the rest)
 
 
 def test_coupled_structure_recovers_cross_coupling():
