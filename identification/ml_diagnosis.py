@@ -42,7 +42,8 @@ from .errors import NotFittedError
 from .flight import Flight
 from threadpoolctl import threadpool_limits
 
-from .ml_estimator import BURN_IN, MaximumLikelihoodIdentifier, _AxisLikelihood, _kalman, _lti_apply
+from .ml_estimator import BURN_IN, MaximumLikelihoodIdentifier, _AxisLikelihood
+from .state_space import kalman, lti_apply
 from .model import ModelParams
 from .terms import AXES, DECOUPLED, TERMS
 
@@ -122,7 +123,7 @@ def ahead_r2(like: _AxisLikelihood, x, theta, horizon: int) -> float:
     """
     d = like.data
     Ad, g0, g1, Qd = like.discrete(x)
-    _, L, _ = _kalman(Ad, Qd)
+    _, L, _ = kalman(Ad, Qd)
     m = Ad.shape[0]
     eye = np.eye(m)
     Phi = Ad - np.outer(Ad @ L, eye[0])
@@ -131,9 +132,9 @@ def ahead_r2(like: _AxisLikelihood, x, theta, horizon: int) -> float:
         u = theta @ X
         un = np.append(u[1:], u[-1])
         n = y.size
-        pred = _lti_apply(Phi, np.column_stack([Ad @ L, g0, g1]), eye, np.zeros((m, 3)), np.vstack([y, u, un]))
+        pred = lti_apply(Phi, np.column_stack([Ad @ L, g0, g1]), eye, np.zeros((m, 3)), np.vstack([y, u, un]))
         filt = pred + np.outer(L, y - pred[0])
-        F = _lti_apply(Ad, np.column_stack([g0, g1]), eye, np.zeros((m, 2)), np.vstack([u, un]))
+        F = lti_apply(Ad, np.column_stack([g0, g1]), eye, np.zeros((m, 2)), np.vstack([u, un]))
         row = np.linalg.matrix_power(Ad, horizon)[0]
         p = row @ (filt[:, :n - horizon] - F[:, :n - horizon]) + F[0, horizon:]
         target = y[horizon:]

@@ -45,13 +45,15 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import optimize, signal
-from scipy.linalg import expm, solve_discrete_are
 from threadpoolctl import threadpool_limits
 
 from .errors import IdentifiabilityError, NotFittedError
 from .flight import Flight
 from .integral_method import IntegralIdentifier, pade_filter
-from .model import ModelParams, servo_coefficients
+from .model import ModelParams
+from .state_space import (N_NONLINEAR, WIND_MODELS, ZETA_BOUNDS, discrete_model, innovation_filters, kalman,
+                          rts_smooth, servo_increments, strictly_proper_tf, wind_block)
+from .vibration import remove_vibration_lines
 from .terms import AXES, DECOUPLED, FEATURES, RATE_DEPENDENCE, TERMS
 
 OWN_RATE = ("p", "q", "r")
@@ -83,123 +85,7 @@ TIME_CONSTANT_BOUNDS = ((0.8, 120.0), (0.02, 0.8))
 """Bounds of the slow and the fast gust time constants [s]."""
 
 
-# ------------------------------------------------------------------ discretisation
-WIND_MODELS = ("gm2", "gm_so")
-"""Gust models: ``"gm2"`` a slow plus a fast first-order Gauss-Markov process (a
-Dryden-like spectrum falling as 1/f^2 above each corner); ``"gm_so"`` a slow
-first-order process plus a fast second-order one of natural period ``T_fast`` and
-damping ratio ``zeta`` (falling as 1/f^4: smooth gusts; a Butterworth low-pass at
-zeta = 0.71, two cascaded first-order stages at zeta = 1)."""
-
-ZETA_BOUNDS = (0.2, 3.0)
-"""Bounds of the fast second-order gust's damping ratio."""
-
-
-def _wind_block(kind: str, t_slow: float, t_fast: float, zeta: float = 1.0):
-    """The gust states of one wind model.
-
-    Returns ``Aw`` (m, m), the row ``cw`` (m,) summing the states into the
-    torque, and per noise channel its input column (m,) scaled so that the
-    channel's torque component has unit stationary variance.
-    """
-    if kind == "gm2":
-        Aw = np.diag([-1.0 / t_slow, -1.0 / t_fast])
-        cw = np.array([1.0, 1.0])
-        # x' = -x/T + sqrt(2/T) n  has unit variance
-        cols = [np.array([np.sqrt(2.0 / t_slow), 0.0]), np.array([0.0, np.sqrt(2.0 / t_fast)])]
-        return Aw, cw, cols
-    if kind == "gm_so":
-        cw = np.array([1.0, 1.0, 0.0])
-        # w'' + 2 zeta w w' + w^2 w = b n (w = 1/T_fast): var(w) = b^2 / (4 zeta w^3) for unit-intensity n
-        om = 1.0 / t_fast
-        Aw = np.array([[-1.0 / t_slow, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -om * om, -2.0 * zeta * om]])
-        return Aw, cw, [np.array([np.sqrt(2.0 / t_slow), 0.0, 0.0]), np.array([0.0, 0.0, np.sqrt(4 * zeta * om ** 3)])]
-    raise ValueError(f"wind model must be one of {WIND_MODELS}, got {kind!r}")
-
-
-def _discrete_model(damping: float, t_slow: float, t_fast: float, q_slow: float, q_fast: float, zeta: float,
-                    dt: float, hold: str, kind: str = "gm2"):
-    """Exact discretisation of the axis model over one sample.
-
-    State ``(rate, gust states...)``. Returns ``Ad``, the input vectors ``g0``,
-    ``g1`` such that ``x[k+1] = Ad x[k] + g0 u[k] + g1 u[k+1]`` (``g1 = 0`` for a
-    held input) and the process-noise covariance ``Qd`` by Van Loan's method,
-    for stationary gust-torque variances ``q_slow``, ``q_fast``.
-    """
-    Aw, cw, cols = _wind_block(kind, t_slow, t_fast, zeta)
-    m = Aw.shape[0] + 1
-    A = np.zeros((m, m))
-    A[0, 0] = -damping
-    A[0, 1:] = cw
-    A[1:, 1:] = Aw
-    M = np.zeros((m + 2, m + 2))
-    M[:m, :m] = A * dt
-    M[0, m] = dt
-    M[m, m + 1] = 1.0
-    E = expm(M)
-    Ad = E[:m, :m]
-    ga, gb = E[:m, m], E[:m, m + 1]
-    if hold == "linear":  # u(t) = u_k + (u_{k+1} - u_k) (t - t_k)/dt
-        g0, g1 = ga - gb, gb
-    else:
-        g0, g1 = ga, np.zeros(m)
-    Qd = np.zeros((m, m))
-    for q, col in zip((q_slow, q_fast), cols):  # unit intensities keep expm well scaled
-        b = np.concatenate([[0.0], col])
-        V = np.zeros((2 * m, 2 * m))
-        V[:m, :m] = -A * dt
-        V[:m, m:] = np.outer(b, b) * dt
-        V[m:, m:] = A.T * dt
-        F = expm(V)
-        Qd += q * (F[m:, m:].T @ F[:m, m:])
-    return Ad, g0, g1, 0.5 * (Qd + Qd.T)
-
-
-def _kalman(Ad, Qd, R: float = 1.0):
-    """Steady-state Kalman filter of a rate (the first state) measured with white noise of variance ``R``.
-
-    Returns the predicted covariance ``P`` (m, m), the filter gain ``L`` (m,)
-    (``x_{k|k} = x_{k|k-1} + L e_k``) and the innovation variance ``S``.
-    """
-    m = Ad.shape[0]
-    C = np.zeros((m, 1))
-    C[0, 0] = 1.0
-    P = solve_discrete_are(Ad.T, C, Qd, np.array([[R]]))
-    S = float(P[0, 0] + R)
-    L = P[:, 0] / S
-    return P, L, S
-
-
-def _strictly_proper_tf(A, b):
-    """Numerator and denominator (in z^-1) of ``e0' (zI - A)^-1 b``: the rate's response to input ``b``."""
-    c = np.zeros((1, A.shape[0]))
-    c[0, 0] = 1.0
-    num, den = signal.ss2tf(A, b[:, None], c, np.zeros((1, 1)))
-    return num[0], den
-
-
-def _innovation_filters(Ad, g0, g1, L):
-    """Linear filters giving the innovations from the measurements and each input.
-
-    With ``Phi = Ad (I - L e0')`` the predictor is
-    ``x_{k+1|k} = Phi x_{k|k-1} + Ad L y_k + g0 u_k + g1 u_{k+1}``, so
-    ``e = y - H_y(z) y - H_u(z) u`` with the returned ``(b_y, b_u, a)``.
-    """
-    Phi = Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0])
-    b_y, a = _strictly_proper_tf(Phi, Ad @ L)
-    b0, _ = _strictly_proper_tf(Phi, g0)
-    b1, _ = _strictly_proper_tf(Phi, g1)
-    b_u = b0.copy()
-    b_u[:-1] += b1[1:]  # z * (strictly proper): the u_{k+1} path
-    return b_y, b_u, a
-
-
 # ------------------------------------------------------------------ one axis
-N_NONLINEAR = {"gm2": 5, "gm_so": 6}
-"""Parameters searched by the optimiser: damping, log T_slow, log T_fast, log(var_slow/R), log(var_fast/R),
-and for ``"gm_so"`` log zeta."""
-
-
 @dataclass
 class _AxisData:
     """Signals of one axis over one or more flights, as the likelihood needs them."""
@@ -215,34 +101,6 @@ class _AxisData:
     servo_sticks: list | None = None  # the raw stick per flight for that regressor (sign applied)
     tau: float = 0.0
     causal_rows: tuple = ()  # regressors made of measured rates: held over the sample, never interpolated
-
-
-def _servo_increments(sticks, damping: float, tau: float, dt: float, hold: str) -> np.ndarray:
-    """The command's exact contribution to the rate over each sample, through the servo of eq. (31).
-
-    The continuous system ``rate' = -damping*rate + f*u + g*z``, ``z' = (u - z)/d1``
-    (the Padé servo split into feed-through ``f`` and state ``g``, :func:`identification.model.servo_coefficients`)
-    is discretised exactly with the stick held or linearly interpolated; returns
-    ``v[k]``, the rate's increment from ``k`` to ``k+1`` due to the command (per unit
-    control gain), so that the rate sees ``k2*v[k]`` as a one-sample input. The
-    servo state starts settled on the first stick.
-    """
-    d1, n1, n2 = servo_coefficients(tau)
-    f, g = -n2 / d1, n1 + n2 / d1
-    M = np.zeros((4, 4))
-    M[:2, :2] = np.array([[-damping, g], [0.0, -1.0 / d1]]) * dt
-    M[:2, 2] = np.array([f, 1.0 / d1]) * dt
-    M[2, 3] = 1.0
-    E = expm(M)
-    ga, gb = E[:2, 2], E[:2, 3]
-    h0, h1 = (ga - gb, gb) if hold == "linear" else (ga, np.zeros(2))
-    u = np.asarray(sticks, dtype=float)
-    u_next = np.append(u[1:], u[-1])
-    w = h0[1] * u + h1[1] * u_next
-    z = np.empty_like(u)
-    z[0] = u[0]
-    z[1:] = signal.lfilter([1.0], [1.0, -E[1, 1]], w[:-1], zi=[E[1, 1] * u[0]])[0]
-    return E[0, 1] * z + h0[0] * u + h1[0] * u_next
 
 
 class _AxisLikelihood:
@@ -266,20 +124,20 @@ class _AxisLikelihood:
         return float(x[self.nw]) if self.free_tau else self.data.tau
 
     def discrete(self, x):
-        return _discrete_model(*self.unpack(x), self.data.dt, self.data.hold, self.data.wind_model)
+        return discrete_model(*self.unpack(x), self.data.dt, self.data.hold, self.data.wind_model)
 
     def filtered(self, x):
         """Innovation-domain measurements ``y~`` (n,) and regressors ``Z`` (m, n), burn-in removed, and ``S``."""
         d = self.data
         Ad, g0, g1, Qd = self.discrete(x)
-        _, L, S = _kalman(Ad, Qd)
-        b_y, b_u, a = _innovation_filters(Ad, g0, g1, L)
+        _, L, S = kalman(Ad, Qd)
+        b_y, b_u, a = innovation_filters(Ad, g0, g1, L)
         if d.causal_rows:  # a measured rate at k+1 carries the noise of y[k+1]: only u[k] may predict y[k+1]
-            b_c, _ = _strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), g0 + g1)
+            b_c, _ = strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), g0 + g1)
         tau = self.tau_of(x)
         servo = d.servo_row is not None and tau > MIN_SERVO_DELAY
         if servo:
-            b_v, _ = _strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), np.eye(Ad.shape[0])[0])
+            b_v, _ = strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), np.eye(Ad.shape[0])[0])
         ys, zs = [], []
         for i, (y, X) in enumerate(zip(d.y, d.regressors)):
             ys.append((y - signal.lfilter(b_y, a, y))[d.burn:])
@@ -287,7 +145,7 @@ class _AxisLikelihood:
             for r in d.causal_rows:
                 Z[r] = signal.lfilter(b_c, a, X[r])
             if servo:
-                v = _servo_increments(d.servo_sticks[i], x[0], tau, d.dt, d.hold)
+                v = servo_increments(d.servo_sticks[i], x[0], tau, d.dt, d.hold)
                 Z[d.servo_row] = signal.lfilter(b_v, a, v)
             zs.append(Z[:, d.burn:])
         return np.concatenate(ys), np.concatenate(zs, axis=1), S
@@ -759,7 +617,7 @@ class MaximumLikelihoodIdentifier:
                 drive = drive + fit.params[off_name] + shift
             states = rts_smooth(data.y[0], drive, *_AxisLikelihood(data).unpack(fit.state), data.dt, data.hold,
                                 fit.wind["model"])
-            _, cw, _ = _wind_block(fit.wind["model"], 1.0, 1.0)  # the same sum for every T, zeta
+            _, cw, _ = wind_block(fit.wind["model"], 1.0, 1.0)  # the same sum for every T, zeta
             out[a] = cw @ states[1:] + shift
         return out
 
@@ -804,103 +662,3 @@ def _simulation_r2(data: _AxisData, damping: float, theta) -> float:
 
 
 # ------------------------------------------------------------------ smoother
-def _lti_apply(A, B, C, D, u) -> np.ndarray:
-    """Output of ``x[k+1] = A x[k] + B u[k]``, ``y = C x + D u`` from rest, by transfer functions (lfilter)."""
-    y = np.zeros((C.shape[0], u.shape[1]))
-    for i in range(B.shape[1]):
-        num, den = signal.ss2tf(A, B, C, D, input=i)
-        y += np.array([signal.lfilter(row, den, u[i]) for row in np.atleast_2d(num)])
-    return y
-
-
-def rts_smooth(y, drive, damping, t_slow, t_fast, q_slow, q_fast, zeta, dt, hold="linear",
-               wind_model="gm2") -> np.ndarray:
-    """Steady-state Rauch-Tung-Striebel smoother of one axis: the states (rate, gust states...), shape (m, n).
-
-    ``y`` is the measured rate (n,), ``drive`` the known torque from the inputs
-    (the linear terms and the offset, n). Forward: the steady-state Kalman filter
-    started at the first measurement; backward:
-    ``x_{k|n} = x_{k|k} + G (x_{k+1|n} - x_{k+1|k})`` with the constant smoother gain
-    ``G = P_f Ad' P^-1``. Both passes are linear filters (no loop over samples).
-    """
-    Ad, g0, g1, Qd = _discrete_model(damping, t_slow, t_fast, q_slow, q_fast, zeta, dt, hold, wind_model)
-    P, L, S = _kalman(Ad, Qd)
-    m = Ad.shape[0]
-    I = np.eye(m)
-    Phi = Ad - np.outer(Ad @ L, I[0])
-    n = y.size
-    u_next = np.append(drive[1:], drive[-1])
-    x0 = np.zeros(m)
-    x0[0] = y[0]
-    # predicted states x_{k|k-1}; the initial state enters as an impulse one step before the record
-    U = np.vstack([np.concatenate([[0.0], y]), np.concatenate([[0.0], drive]), np.concatenate([[0.0], u_next]),
-                   np.concatenate([[1.0], np.zeros(n)])])
-    B = np.column_stack([Ad @ L, g0, g1, x0])
-    pred = _lti_apply(Phi, B, I, np.zeros((m, 4)), U)[:, 1:]
-    e = y - pred[0]
-    filt = pred + np.outer(L, e)
-    Pf = P - np.outer(P[:, 0], P[0, :]) / S
-    G = Pf @ Ad.T @ np.linalg.inv(P)
-    pred_next = np.hstack([pred[:, 1:], np.zeros((m, 1))])  # the last smoothed state is the filtered one
-    g = (filt - G @ pred_next)[:, ::-1]
-    # backward in reversed time: z_j = G z_{j-1} + g_j, i.e. w_{j+1} = G w_j + G g_j, z_j = w_j + g_j
-    return _lti_apply(G, G, I, I, g)[:, ::-1]
-
-
-# ------------------------------------------------------------------ vibration
-def remove_vibration_lines(rates, fs: float, min_hz: float = 8.0, max_lines: int = 4, prominence: float = 30.0):
-    """Remove narrow spectral lines (rotor vibration) from gyro signals by regression on their sinusoids.
-
-    For each axis, the periodogram (zero-padded 4x, Hann window) is searched above
-    ``min_hz`` for peaks standing ``prominence`` times above the median power of
-    their neighbourhood (±2 Hz); each line's frequency is refined by parabolic
-    interpolation, its amplitude and phase fitted by least squares over the whole
-    record, and the sinusoid subtracted. A low-pass would also delay the rate
-    (every 10 ms of lag costs about 20 % of damping); the regression does not.
-
-    Parameters
-    ----------
-    rates : ndarray, shape (3, n)
-    fs : float
-        Sample rate [Hz].
-
-    Returns
-    -------
-    cleaned : ndarray, shape (3, n)
-    lines : list of dict
-        ``axis``, ``frequency_hz``, ``amplitude`` [rad/s] of each line removed.
-    """
-    rates = np.array(rates, dtype=float, copy=True)
-    n = rates.shape[1]
-    if min_hz >= fs / 2 or n < 64:
-        return rates, []
-    t = np.arange(n) / fs
-    nfft = 1 << int(np.ceil(np.log2(4 * n)))
-    freqs = np.fft.rfftfreq(nfft, 1.0 / fs)
-    win = np.hanning(n)
-    df = freqs[1]
-    half = max(3, int(round(2.0 / df)))
-    found = []
-    for a in range(rates.shape[0]):
-        for _ in range(max_lines):
-            x = rates[a] - np.mean(rates[a])
-            power = np.abs(np.fft.rfft(x * win, nfft)) ** 2
-            band = np.where(freqs >= min_hz)[0]
-            band = band[band < power.size - 1]
-            if band.size < 2 * half:
-                break
-            k = band[np.argmax(power[band])]
-            lo, hi = max(0, k - half), min(power.size, k + half + 1)
-            neighbourhood = np.concatenate([power[lo:max(lo, k - 8)], power[min(hi, k + 9):hi]])
-            if neighbourhood.size == 0 or power[k] < prominence * np.median(neighbourhood):
-                break
-            y0, y1, y2 = np.log(power[k - 1:k + 2] + 1e-300)
-            denom = y0 - 2 * y1 + y2
-            shift = 0.5 * (y0 - y2) / denom if denom != 0 else 0.0
-            f0 = float(freqs[k] + np.clip(shift, -0.5, 0.5) * df)
-            basis = np.vstack([np.cos(2 * np.pi * f0 * t), np.sin(2 * np.pi * f0 * t)])
-            coef = np.linalg.lstsq(basis.T, x, rcond=None)[0]
-            rates[a] -= coef @ basis
-            found.append({"axis": AXES[a] if rates.shape[0] == 3 else a, "frequency_hz": f0,
-                          "amplitude": float(np.hypot(*coef))})
-    return rates, found

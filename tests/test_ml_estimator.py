@@ -9,7 +9,8 @@ import pytest
 
 from identification.errors import IdentifiabilityError, NotFittedError
 from identification.flight import make_flight
-from identification.ml_estimator import MaximumLikelihoodIdentifier, remove_vibration_lines
+from identification.ml_estimator import MaximumLikelihoodIdentifier
+from identification.vibration import remove_vibration_lines
 from identification.synthetic import simulate_flight
 
 
