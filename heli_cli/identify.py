@@ -114,6 +114,8 @@ def run(args) -> int:
             label = list(mae)[-1]
             print(f"with its identified wind ({profile.source.get('name', 'flight')}): MAE (deg/s) "
                   + ", ".join(f"{a} {mae[label][a]['mae_deg_s']:.3f}" for a in mae[label]))
+    for warning in run.warnings:
+        print(f"warning: {warning}")
     if run.library_version is not None:
         print(f"disturbance library: {run.paths['library']} version {run.library_version}")
     for key, path in run.paths.items():

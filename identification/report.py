@@ -19,6 +19,7 @@ from .disturbance import compare_with_truth, identify_disturbance, save_figures
 from .disturbance_library import DisturbanceLibrary
 from .files import sha256_of, write_text
 from .flight import Flight
+from .fit_warnings import fit_warnings
 from .integral_method import IntegralIdentifier
 from .model import ModelParams
 from .model_file import save_model
@@ -48,6 +49,9 @@ class IdentificationRun:
         (only the flights named by ``wind_flights``, when given).
     library_version : int or None
         Version of the disturbance library written.
+    warnings : list of str
+        What the data cannot support well (:func:`identification.fit_warnings.fit_warnings`): weak
+        fits, short flights, barely excited axes; also in ``report.md``.
     """
 
     identifiers: dict
@@ -57,6 +61,7 @@ class IdentificationRun:
     paths: dict = field(default_factory=dict)
     disturbances: list = field(default_factory=list)
     library_version: int | None = None
+    warnings: list = field(default_factory=list)
 
     @property
     def params(self) -> ModelParams:
@@ -260,6 +265,8 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
     }
     chosen = "coupled" if coupled else "decoupled"
     first = identifiers[chosen].flights_[0]  # filtered as identified
+    # the share of each axis' rate the sticks explain: the ML fit's simulation, the integral fit's R²
+    warnings = fit_warnings(flights, {a: f.r2 for a, f in identifiers[chosen].axes_.items()})
     validation = validate_models(first, {lab: ident.params_ for lab, ident in identifiers.items()})
     truth = _truth_of(flights[0], (flight_paths or [None])[0])
 
@@ -327,6 +334,10 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
         "",
         method_sentence(ident),
         "",
+    ]
+    if warnings:
+        md += ["## Warnings", ""] + [f"- {w}" for w in warnings] + [""]
+    md += [
         "## Identified parameters",
         "",
         parameter_table(identifiers, truth),
@@ -358,7 +369,7 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
                f"Identified with the {chosen} model and appended to the disturbance library "
                f"`disturbances/` as version {library_version}.", ""] + dist_md
     paths["report"] = write_text(out / "report.md", "\n".join(md) + "\n")
-    return IdentificationRun(identifiers, chosen, validation, truth, paths, profiles, library_version)
+    return IdentificationRun(identifiers, chosen, validation, truth, paths, profiles, library_version, warnings)
 
 
 def source_entry(path, sha256: str | None = None) -> dict:
