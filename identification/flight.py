@@ -330,6 +330,9 @@ def _check_rates_units(rates: np.ndarray, attitude: np.ndarray | None, time: np.
             )
     if attitude is not None:
         theta_peak = float(np.abs(attitude[1]).max())
+        if theta_peak > np.pi / 2 + 1e-3 and units_from:
+            raise UnitError(f"column 'theta' reaches {theta_peak:.4g} rad as read from the {units_from}, beyond "
+                            "pi/2 where no ZYX pitch angle lies: the attitude data is corrupt")
         if theta_peak > np.pi / 2 + 1e-3:
             raise UnitError(
                 f"column 'theta' reaches {theta_peak:.4g}, beyond pi/2: a ZYX pitch angle in rad lies within "

@@ -277,6 +277,10 @@ def test_units_declared_by_a_format_skip_the_hover_range():
     assert "declared by the betaflight-blackbox log" in f.metadata["units_check"]["rates"]
     with pytest.raises(UnitError, match="as read from the test log, beyond any gyro's range"):
         make_flight(t, 40.0 * np.ones((3, t.size)), sticks, units_from="test log")
+    bad = np.array(_arrays()[3])
+    bad[1, 7] = 2.0
+    with pytest.raises(UnitError, match=r"'theta' reaches 2 rad as read from the test log.*attitude data is corrupt"):
+        make_flight(t, rates, sticks, attitude=bad, units_from="test log")
 
 
 @pytest.mark.parametrize("scale, unit", [(1e3, "milliseconds"), (1e6, "microseconds"), (1e9, "nanoseconds")])

@@ -346,6 +346,9 @@ def to_flight(raw: RawLog, inputs: str | None = None, segment=None, rate: float 
             )
     sl = slice(int(i0), int(i1))
     if i1 - i0 < 2:
+        if mode == "all":
+            raise SegmentError(f"{raw.path}: the longest stretch of the log without a gap holds {i1 - i0} sample(s) "
+                               f"at {grid_rate:g} Hz; there is no flight to import")
         raise SegmentError(f"{raw.path}: the chosen segment holds {i1 - i0} samples; pass --segment all or a "
                            "longer T0:T1")
     sticks = sticks[:, sl]
