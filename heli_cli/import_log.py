@@ -36,7 +36,10 @@ def register(sub):
         "and the chosen input source to the canonical flight (rad/s, rad, inputs in [-1, 1]; roll right, nose up, "
         "nose right positive), resample it onto a uniform grid, cut the airborne segment, and write OUT (CSV) "
         "plus OUT's metadata beside it (.meta.json: format, input source and mapping, clipped inputs, "
-        "resampling, segment detection).",
+        "resampling, segment detection). Logs import as real loggers write them: a cut last message is dropped, "
+        "0xFF/0x00 padding skipped, a restarted clock continued, a missing attitude reconstructed from the rates, "
+        "each printed as a one-line warning and kept in the metadata; damage in the middle of a log needs "
+        "--allow-damaged. Nothing is written for a refused log.",
     )
     p.add_argument("log", metavar="LOG", help="PX4 .ulg, ArduPilot .bin, Betaflight/Rotorflight blackbox, or CSV")
     p.add_argument("--out", metavar="FLIGHT.csv", help="canonical CSV to write (required unless --list)")
