@@ -84,6 +84,9 @@ def run(args) -> int:
 
     flights = [read_flight(path) for path in tqdm(args.flights, desc="reading flights", unit="flight",
                                                    disable=len(args.flights) < 2)]
+    for path, flight in zip(args.flights, flights):
+        for warning in flight.metadata.get("import_warnings") or ():
+            print(f"warning: {path}: {warning}")
     if args.method == "ml":
         kwargs = {"delay": args.delay, "input_hold": args.input_hold, "wind_model": args.wind_model}
     else:
