@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 
+from identification.bench import BENCH_CELLS
 from identification.synthetic import EFFECT_ALIASES, EFFECTS
 
 from .argtypes import number, whole
@@ -24,17 +25,55 @@ def register(sub):
                    help=f"switch on a hidden physical effect (repeatable): {', '.join(EFFECTS)}")
     p.add_argument("--wind", type=number("a finite number >= 0", 0.0, low_open=False), default=None,
                    help="half-width of the 90%% interval of the cyclic wind u_d (default 0.09, the paper's level)")
+    p.add_argument("--cell", default=None, choices=sorted(BENCH_CELLS), metavar="NAME",
+                   help="start from a test-bench condition (identification/bench.py): "
+                   + ", ".join(BENCH_CELLS) + "; the options below change it further")
+    p.add_argument("--wind-scale", type=number("a number > 0", 0.0), default=None,
+                   help="multiply the wind level (0.5 to 2 spans calm to twice the paper's)")
+    p.add_argument("--wind-model", choices=("lowpass", "gauss_markov", "dryden"), default=None,
+                   help="gust spectrum: 'lowpass' (2nd-order, default), 'gauss_markov' (1st-order, broadband), "
+                   "'dryden' (lateral Dryden form)")
+    p.add_argument("--wind-corner", type=number("a frequency in Hz > 0", 0.0), default=None,
+                   help="corner of the lowpass/Dryden gusts in Hz (0.2 to 2 typical; default 0.5)")
+    p.add_argument("--slow-gusts", type=number("a fraction in [0, 1)", 0.0, 1.0, low_open=False), default=None,
+                   help="share of the wind's variance in slow gusts (first-order, 4 s)")
+    p.add_argument("--pilot", choices=("pid", "pd", "autopilot"), default=None,
+                   help="'pid' the default human pilot, 'pd' a pilot fighting gusts with a PD on attitude and rate, "
+                   "'autopilot' a flight controller holding its commands between samples")
+    p.add_argument("--reaction-delay", type=number("seconds >= 0", 0.0, low_open=False), default=None,
+                   help="the pilot's reaction delay in s (0.1-0.25 typical; default 0.2)")
+    p.add_argument("--gyro-noise", type=number("rad/s >= 0", 0.0, low_open=False), default=None,
+                   help="gyro white-noise standard deviation in rad/s (default 0.01)")
+    p.add_argument("--vibration-line", action="append", default=[], type=_line, metavar="HZ:AMP",
+                   help="an extra vibration line on every gyro axis, e.g. 27:0.03 (Hz : rad/s; repeatable)")
+    p.add_argument("--input-shift", type=number("seconds", None), default=None,
+                   help="shift the logged sticks in s: > 0 the log's inputs lag the response, < 0 they lead")
     p.set_defaults(func=run)
 
 
+def _line(text):
+    import argparse
+    import math
+
+    try:
+        hz, amp = (float(v) for v in text.split(":"))
+    except ValueError:
+        hz = amp = math.nan
+    if not (0 < hz < math.inf and 0 <= amp < math.inf):
+        raise argparse.ArgumentTypeError(f"expected HZ:AMP with HZ > 0 and AMP >= 0 (rad/s), e.g. 27:0.03; got {text!r}")
+    return (hz, amp)
+
+
 def run(args) -> int:
-    from dataclasses import replace
+    from identification.synthetic import simulate_flight
 
-    from identification.synthetic import FlightConfig, simulate_flight
+    try:
+        cfg = _config(args)
+    except ValueError as e:  # a combination the single options cannot check (e.g. a shift longer than the flight)
+        import sys
 
-    cfg = FlightConfig(duration=args.duration)
-    if args.wind is not None:
-        cfg = replace(cfg, wind_level=(args.wind, args.wind, args.wind / 3.0))
+        print(f"heli simulate-flight: error: {e}", file=sys.stderr)
+        return 2
     result = simulate_flight(args.duration, seed=args.seed, effects=tuple(args.effect), config=cfg)
     paths = result.save(args.out)
     f = result.flight
@@ -43,3 +82,23 @@ def run(args) -> int:
     if args.effect:
         print(f"hidden effects: {', '.join(args.effect)}")
     return 0
+
+
+def _config(args):
+    """The flight's settings from a bench cell (or the default) and the options that change it."""
+    from dataclasses import replace
+
+    from identification.synthetic import FlightConfig
+
+    cfg = replace(BENCH_CELLS[args.cell], duration=args.duration) if args.cell else FlightConfig(duration=args.duration)
+    if args.wind is not None:
+        cfg = replace(cfg, wind_level=(args.wind, args.wind, args.wind / 3.0))
+    changes = {"wind_model": args.wind_model, "wind_corner_hz": args.wind_corner, "pilot": args.pilot,
+               "wind_slow_fraction": args.slow_gusts, "reaction_delay": args.reaction_delay,
+               "gyro_noise": args.gyro_noise, "input_shift": args.input_shift}
+    cfg = replace(cfg, **{k: v for k, v in changes.items() if v is not None})
+    if args.wind_scale is not None:
+        cfg = replace(cfg, wind_level=tuple(args.wind_scale * w for w in cfg.wind_level))
+    if args.vibration_line:
+        cfg = replace(cfg, vibration_lines=tuple(cfg.vibration_lines) + tuple(args.vibration_line))
+    return cfg

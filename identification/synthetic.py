@@ -124,6 +124,27 @@ class FlightConfig:
         Attitude-sensor noise standard deviation [rad].
     substeps : int
         RK4 sub-steps of the truth simulation per sample.
+    wind_model : {"lowpass", "gauss_markov", "dryden"}
+        Shape of the gust spectrum: ``"lowpass"`` white noise through a second-order Butterworth at
+        ``wind_corner_hz`` (falls as 1/f^4); ``"gauss_markov"`` a first-order Gauss-Markov process of time
+        constant ``wind_fast_tau`` (falls as 1/f^2, broadband); ``"dryden"`` the lateral Dryden form
+        ``(1 + sqrt(3) s/w)/(1 + s/w)^2`` with ``w = 2 pi wind_corner_hz`` (a zero and a double pole).
+        Whatever the model, the total u_d is scaled to ``wind_level``.
+    wind_fast_tau : float
+        Time constant of the ``"gauss_markov"`` gusts [s].
+    wind_slow_fraction : float
+        Share of the wind's variance in a slow first-order Gauss-Markov part added to the model's (0..1).
+    wind_slow_tau : float
+        Its time constant [s].
+    pilot : {"pid", "pd", "autopilot"}
+        ``"pid"`` the human pilot above; ``"pd"`` a pilot who fights gusts with a PD on the attitude and the
+        rate seen ``reaction_delay`` ago (no integral; he knows the trim); ``"autopilot"`` a digital flight
+        controller: PD on attitude and rate one sample old, the commands held between samples.
+    vibration_lines : tuple of (float, float)
+        Extra sinusoidal lines on every gyro axis: (frequency [Hz], amplitude [rad/s]).
+    input_shift : float
+        The logged sticks are shifted by this many seconds (whole samples): > 0 the log's input column lags
+        the true input (recorded late), < 0 it leads.
     """
 
     duration: float = 300.0
@@ -145,6 +166,13 @@ class FlightConfig:
     rotor_hz: float = 30.0
     attitude_noise: float = 0.003
     substeps: int = 4
+    wind_model: str = "lowpass"
+    wind_fast_tau: float = 0.35
+    wind_slow_fraction: float = 0.0
+    wind_slow_tau: float = 4.0
+    pilot: str = "pid"
+    vibration_lines: tuple = ()
+    input_shift: float = 0.0
 
     def __post_init__(self):
         wind = np.asarray(self.wind_level, dtype=float)
@@ -155,12 +183,61 @@ class FlightConfig:
             "pilot_bandwidth": self.pilot_bandwidth > 0, "reaction_delay": self.reaction_delay >= 0,
             "substeps": isinstance(self.substeps, (int, np.integer)) and self.substeps >= 1,
             "sweep_mode": self.sweep_mode in ("sequential", "simultaneous"),
+            "wind_model": self.wind_model in WIND_MODELS,
+            "wind_fast_tau": 0 < self.wind_fast_tau < math.inf,
+            "wind_slow_fraction": 0.0 <= self.wind_slow_fraction <= 1.0,
+            "wind_slow_tau": 0 < self.wind_slow_tau < math.inf,
+            "pilot": self.pilot in PILOTS,
+            "vibration_lines": all(len(line) == 2 and 0 < float(line[0]) < math.inf and float(line[1]) >= 0
+                                   for line in self.vibration_lines),
+            "input_shift": abs(self.input_shift) < self.duration / 2,
         }
         for name in ("stick_noise", "collective_wander", "gyro_noise", "vibration", "attitude_noise"):
             checks[name] = getattr(self, name) >= 0
+        expected = {"wind_model": f"one of {WIND_MODELS}", "pilot": f"one of {PILOTS}",
+                    "wind_slow_fraction": "a fraction in [0, 1]", "input_shift": "|shift| < half the duration",
+                    "vibration_lines": "(frequency Hz > 0, amplitude rad/s >= 0) pairs"}
         for name, ok in checks.items():
             if not ok:
-                raise ValueError(f"FlightConfig.{name} out of range: {getattr(self, name)!r}")
+                hint = f"; expected {expected[name]}" if name in expected else ""
+                raise ValueError(f"FlightConfig.{name} out of range: {getattr(self, name)!r}{hint}")
+
+
+WIND_MODELS = ("lowpass", "gauss_markov", "dryden")
+"""Gust spectra of :class:`FlightConfig` (``wind_model``)."""
+PILOTS = ("pid", "pd", "autopilot")
+"""Pilots of :class:`FlightConfig` (``pilot``)."""
+
+
+def gust_trace(rng: np.random.Generator, n: int, fs: float, config: "FlightConfig", std: float) -> np.ndarray:
+    """One axis' zero-mean gust of standard deviation ``std`` with the spectrum of ``config.wind_model``,
+    plus the slow Gauss-Markov part of ``config.wind_slow_fraction`` (module docstring)."""
+    if std == 0:
+        return np.zeros(n)
+    if config.wind_model == "lowpass":
+        fast = coloured_noise(rng, n, fs, config.wind_corner_hz, 1.0)
+    elif config.wind_model == "gauss_markov":
+        fast = _first_order(rng, n, fs, config.wind_fast_tau)
+    else:  # lateral Dryden, discretised by the bilinear transform at the sample rate
+        w = 2 * np.pi * config.wind_corner_hz
+        b, a = signal.bilinear([np.sqrt(3.0) / w, 1.0], [1.0 / w ** 2, 2.0 / w, 1.0], fs)
+        warm = int(10 * fs / config.wind_corner_hz)
+        fast = signal.lfilter(b, a, rng.standard_normal(n + warm))[warm:]
+        fast = (fast - fast.mean()) / fast.std()
+    out = fast
+    if config.wind_slow_fraction > 0:
+        slow = _first_order(rng, n, fs, config.wind_slow_tau)
+        out = np.sqrt(1 - config.wind_slow_fraction) * fast + np.sqrt(config.wind_slow_fraction) * slow
+    out = out - out.mean()
+    return out * (std / out.std())
+
+
+def _first_order(rng, n, fs, tau):
+    """Unit-variance first-order Gauss-Markov process of time constant ``tau`` (exact AR(1))."""
+    a = np.exp(-1.0 / (fs * tau))
+    warm = int(5 * tau * fs)
+    x = signal.lfilter([np.sqrt(1 - a * a)], [1.0, -a], rng.standard_normal(n + warm))[warm:]
+    return (x - x.mean()) / x.std()
 
 
 MANOEUVRE_CONFIG = FlightConfig(sweep_amplitude=(0.8, 0.8, 0.25), sweep_mode="simultaneous")
@@ -315,7 +392,10 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
 
     gains = params.control_gains
     level = np.broadcast_to(np.asarray(cfg.wind_level, dtype=float), (3,))
-    wind = np.array([coloured_noise(rng, n, fs, cfg.wind_corner_hz, lv / 1.6449) for lv in level])
+    if cfg.wind_model == "lowpass" and cfg.wind_slow_fraction == 0:  # today's flights, draw for draw
+        wind = np.array([coloured_noise(rng, n, fs, cfg.wind_corner_hz, lv / 1.6449) for lv in level])
+    else:
+        wind = np.array([gust_trace(rng, n, fs, cfg, lv / 1.6449) for lv in level])
     torque = gains[:, None] * wind
 
     # Collective: slow wander plus occasional climbs, kept inside the stick range.
@@ -327,10 +407,12 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
     # Pilot: PID on the delayed angle, scaled by the control gain he has learnt.
     wn = cfg.pilot_bandwidth
     kp, kdr, ki = wn**2, 1.4 * wn, 0.3 * wn**3
+    if cfg.pilot != "pid":  # PD on attitude and rate; the trim is known, not integrated
+        ki = 0.0
     inv_gain = [1.0 / g for g in gains]
     trim = [-(params.kd1) / gains[0], -(params.kd2) / gains[1],
             -(params.kd3 - params.k12 * cfg.collective_trim) / gains[2]]
-    delay = max(1, int(round(cfg.reaction_delay * fs)))
+    delay = 1 if cfg.pilot == "autopilot" else max(1, int(round(cfg.reaction_delay * fs)))
 
     rk4 = _kernel(params)[0]["rk4"]
     x = tuple(float(v) for v in initial_state(sticks=trim))
@@ -340,6 +422,7 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
     hist_ang = [[0.0, 0.0, 0.0]] * (delay + 2)
     hist_rate = [[0.0, 0.0, 0.0]] * (delay + 2)
     integ = [trim[i] / (-ki * inv_gain[i]) if ki else 0.0 for i in range(3)]
+    pd_trim = [0.0, 0.0, 0.0] if ki else trim
     sweeps_l = sweeps.T.tolist()
     jitter_l = jitter.T.tolist()
     col_l = col.tolist()
@@ -351,7 +434,7 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
         u3 = []
         for i in range(3):
             integ[i] += seen_ang[i] * dt
-            cmd = -inv_gain[i] * (kp * seen_ang[i] + kdr * seen_rate[i] + ki * integ[i])
+            cmd = -inv_gain[i] * (kp * seen_ang[i] + kdr * seen_rate[i] + ki * integ[i]) + pd_trim[i]
             u3.append(max(-1.0, min(1.0, cmd + sweeps_l[k][i] + jitter_l[k][i])))
         return [u3[0], u3[1], col_l[k], u3[2]]
 
@@ -360,6 +443,7 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
     # sub-step). A zero-order hold at the log rate would be a digital autopilot,
     # not a pilot, and would look like a half-sample lead to any identifier.
     u_next = None
+    hold = cfg.pilot == "autopilot"  # a flight controller holds its commands over the sample
     for k in range(n):
         q0, q1, q2, q3 = x[6], x[7], x[8], x[9]
         ang = [
@@ -376,7 +460,7 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
             break
         u_next = _pilot(k + 1, 1)
         for j in range(cfg.substeps):
-            w = (j + 0.5) / cfg.substeps
+            w = 0.0 if hold else (j + 0.5) / cfg.substeps
             uj = [a + w * (b - a) for a, b in zip(u, u_next)]
             x = rk4(x, uj, torque_l[k], h)
         if len(hist_ang) > 4 * (delay + 2):
@@ -393,6 +477,8 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
     )
     rates = true_rates + cfg.gyro_noise * rng.standard_normal((3, n)) + vib
     att = true_att + cfg.attitude_noise * rng.standard_normal((3, n))
+    for hz, amp in cfg.vibration_lines:  # drawn after today's sensor noise: default flights unchanged
+        rates = rates + amp * np.sin(2 * np.pi * float(hz) * time[None, :] + rng.uniform(0, 2 * np.pi, (3, 1)))
     att[2] = np.angle(np.exp(1j * att[2]))
     meta = {
         "source": f"synthetic seed={seed}",
@@ -401,5 +487,11 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
         "effects": list(effects),
         "input_source": "pilot sticks",
     }
-    flight = make_flight(time, rates, np.ascontiguousarray(sticks.T), attitude=att, metadata=meta)
+    logged = np.ascontiguousarray(sticks.T)
+    shift = int(round(cfg.input_shift * fs))
+    if shift:  # the log's stick column recorded late (> 0) or early (< 0), edges held
+        idx = np.clip(np.arange(n) - shift, 0, n - 1)
+        logged = np.ascontiguousarray(logged[:, idx])
+        meta["input_shift_s"] = shift / fs
+    flight = make_flight(time, rates, logged, attitude=att, metadata=meta)
     return SyntheticFlight(flight, params, wind, torque, true_rates, cfg, int(seed), tuple(effects))
