@@ -605,7 +605,8 @@ class MaximumLikelihoodIdentifier:
         out = np.zeros((3, flight.n))
         for axis_name, fit in self.axes_.items():
             a = AXES.index(axis_name)
-            data, _ = self._axis_data(a, names[a], [flight], 0, fit.delay, fit.wind["model"])
+            kept = tuple(p for p in names[a] if p not in fit.dropped)
+            data, _ = self._axis_data(a, kept, [flight], 0, fit.delay, fit.wind["model"])
             own = [n for n in data.names if "@" not in n]
             off_name = next((n.split("@")[0] for n in data.names if "@" in n), None)
             theta = np.array([fit.params[n] for n in own])

@@ -151,3 +151,10 @@ def test_coupled_fit_keeps_only_the_terms_the_data_support(flight180):
     sf = simulate_flight(150, seed=3, effects=("cross_coupling",))
     kept = MaximumLikelihoodIdentifier(structure="coupled", select_terms=True, axes=("pitch",)).fit(sf.flight)
     assert "k8" in kept.axes_["pitch"].params and "k8" not in kept.axes_["pitch"].dropped
+
+
+def test_smoother_wind_of_a_coupled_fit_with_dropped_terms(flight180):
+    ident = MaximumLikelihoodIdentifier(structure="coupled", select_terms=True, axes=("roll",)).fit(flight180.flight)
+    assert ident.axes_["roll"].dropped
+    wind = ident.wind_torque(0)
+    assert np.corrcoef(wind[0], flight180.wind_torque[0])[0, 1] > 0.95
