@@ -111,12 +111,18 @@ def kalman(Ad, Qd, R: float = 1.0):
     return P, L, S
 
 
-def strictly_proper_tf(A, b):
-    """Numerator and denominator (in z^-1) of ``e0' (zI - A)^-1 b``: the rate's response to input ``b``."""
-    c = np.zeros((1, A.shape[0]))
-    c[0, 0] = 1.0
-    num, den = signal.ss2tf(A, b[:, None], c, np.zeros((1, 1)))
-    return num[0], den
+def strictly_proper_tf(A, b, den=None):
+    """Numerator and denominator (in z^-1) of ``e0' (zI - A)^-1 b``: the rate's response to input ``b``.
+
+    ``e0' adj(zI - A) b = det(zI - A + b e0') - det(zI - A)`` (the determinant lemma), so the numerator
+    is the difference of two characteristic polynomials; ``den`` (``np.poly(A)``) may be passed when it
+    is shared by several inputs.
+    """
+    if den is None:
+        den = np.poly(A)
+    shifted = A.copy()
+    shifted[:, 0] -= b
+    return np.real(np.poly(shifted) - den), np.real(den)
 
 
 def innovation_filters(Ad, g0, g1, L):
@@ -127,9 +133,10 @@ def innovation_filters(Ad, g0, g1, L):
     ``e = y - H_y(z) y - H_u(z) u`` with the returned ``(b_y, b_u, a)``.
     """
     Phi = Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0])
-    b_y, a = strictly_proper_tf(Phi, Ad @ L)
-    b0, _ = strictly_proper_tf(Phi, g0)
-    b1, _ = strictly_proper_tf(Phi, g1)
+    den = np.poly(Phi)
+    b_y, a = strictly_proper_tf(Phi, Ad @ L, den)
+    b0, _ = strictly_proper_tf(Phi, g0, den)
+    b1, _ = strictly_proper_tf(Phi, g1, den)
     b_u = b0.copy()
     b_u[:-1] += b1[1:]  # z * (strictly proper): the u_{k+1} path
     return b_y, b_u, a
