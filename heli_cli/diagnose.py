@@ -59,15 +59,24 @@ def run(args) -> int:
                           min_gain=MIN_GAIN if args.min_gain is None else args.min_gain, progress=True)
     run_ = diagnose_and_report(flight, args.out, model=model, model_document=document,
                                source=source_entry(args.flight), plots=not args.no_plots, diagnoser=diagnoser)
+    return _print_run(run_, lambda s: (
+        f"held-out MAE {s.gap_before['mae_deg_s']:.3f} -> {s.gap_after['mae_deg_s']:.3f} deg/s, gain "
+        f"{100 * s.gain:.1f} %, p {s.p_value:.2g}; "
+        + (f"runner-up {s.runner_up} by {100 * s.margin:.1f} %" if s.runner_up else "no runner-up")))
+
+
+def _print_run(run_, evidence) -> int:
+    """The verdict, one line per step (its parameters and ``evidence(step)``), and the files written."""
     d = run_.diagnoser
     print(f"verdict: {d.verdict_}")
     if d.verdict_ == "undecided":
         print(f"  {d.evidence_.get('reason', '')}")
     for s in d.steps_:
         params = ", ".join(f"{k}={v:.4g}" for k, v in s.parameters.items())
-        runner = f"runner-up {s.runner_up} by {100 * s.margin:.1f} %" if s.runner_up else "no runner-up"
-        print(f"  round {s.round}: {s.axis:5s} {s.effect} ({params}); held-out MAE {s.gap_before['mae_deg_s']:.3f} "
-              f"-> {s.gap_after['mae_deg_s']:.3f} deg/s, gain {100 * s.gain:.1f} %, p {s.p_value:.2g}; {runner}")
+        print(f"  round {s.round}: {s.axis:5s} {s.effect} ({params}); {evidence(s)}")
+    if hasattr(d, "closed_loop_"):
+        print("stick share closed by the pilot/controller: "
+              + ", ".join(f"{a} {100 * v:.0f} %" for a, v in d.closed_loop_.items()))
     for key, path in run_.paths.items():
         print(f"wrote {path}")
     return 0
@@ -83,17 +92,7 @@ def _run_ml(args, flight, model, document, source) -> int:
                                     input_hold=args.input_hold)
     run_ = diagnose_by_likelihood(flight, args.out, model=model, model_document=document, source=source,
                                   plots=not args.no_plots, diagnoser=diagnoser)
-    d = run_.diagnoser
-    print(f"verdict: {d.verdict_}")
-    if d.verdict_ == "undecided":
-        print(f"  {d.evidence_.get('reason', '')}")
-    for s in d.steps_:
-        params = ", ".join(f"{k}={v:.4g}" for k, v in s.parameters.items())
-        runner = f"runner-up {s.runner_up} (LR {s.runner_up_lr:.1f})" if s.runner_up else "no runner-up"
-        print(f"  round {s.round}: {s.axis:5s} {s.effect} ({params}); LR {s.lr:.1f} > {s.threshold:.1f}; "
-              f"0.5 s-ahead R² {s.r2_before['ahead_0.5s']:.3f} -> {s.r2_after['ahead_0.5s']:.3f}; {runner}")
-    loops = ", ".join(f"{a} {100 * v:.0f} %" for a, v in d.closed_loop_.items())
-    print(f"stick share closed by the pilot/controller: {loops}")
-    for key, path in run_.paths.items():
-        print(f"wrote {path}")
-    return 0
+    return _print_run(run_, lambda s: (
+        f"LR {s.lr:.1f} > {s.threshold:.1f}; 0.5 s-ahead R² {s.r2_before['ahead_0.5s']:.3f} -> "
+        f"{s.r2_after['ahead_0.5s']:.3f}; "
+        + (f"runner-up {s.runner_up} (LR {s.runner_up_lr:.1f})" if s.runner_up else "no runner-up")))

@@ -587,10 +587,9 @@ class MaximumLikelihoodIdentifier:
     def predict(self, flight: Flight) -> np.ndarray:
         """Forward-simulate the identified model with the flight's sticks; rates (3, n) [rad/s]."""
         self._check_fitted()
-        from .model import initial_state, simulate
+        from .model import forward_rates
 
-        x0 = initial_state(rates=flight.rates[:, 0], euler=flight.attitude[:, 0], sticks=flight.sticks[[0, 1, 3], 0])
-        return simulate(self.params_, flight.time, flight.sticks, x0=x0)[:3]
+        return forward_rates(self.params_, flight)
 
     def wind_torque(self, flight: Flight | int = 0) -> np.ndarray:
         """The smoother's estimate of the wind torque at every sample, shape (3, n) [rad/s^2].

@@ -595,3 +595,13 @@ def simulate(params: ModelParams, time, sticks, disturbance=None, x0=None, subst
             break
         out[k + 1] = x
     return out.T
+
+
+def forward_rates(params: ModelParams, flight) -> np.ndarray:
+    """Body rates (3, n) [rad/s] of ``params`` driven by a flight's sticks from its first measured state.
+
+    What an identifier's ``predict`` returns: the model simulated (RK4, no wind) from the flight's first
+    rates, attitude and sticks.
+    """
+    x0 = initial_state(rates=flight.rates[:, 0], euler=flight.attitude[:, 0], sticks=flight.sticks[list(_CMD_INPUT), 0])
+    return simulate(params, flight.time, flight.sticks, x0=x0)[:3]
