@@ -35,7 +35,7 @@ import time as _time
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import stats
 
 from .effects import CATALOGUE, MAX_ALIGNMENT, NONE, SERVO_DELAY, UNDECIDED, shift_inputs
 from .errors import NotFittedError
@@ -223,15 +223,16 @@ class LikelihoodDiagnoser:
         """The likelihood of a structure and alignment: searched from ``x0`` (``nfev`` evaluations; with
         ``free_tau`` a positive alignment, the servo delay, is searched too), or at ``x0`` itself with only
         the linear parameters solved when ``nfev`` is 0."""
-        flight = self._shifted(a, alignment)
+        flight = self._flight if free_tau else self._shifted(a, alignment)
         n = flight.n - self._burn
         if nfev == 0:
             like = _AxisLikelihood(self._data(a, names, alignment, kinds[0]))
             e = like.residual(np.asarray(x0))
             cost, x, kind = 0.5 * float(e @ e), np.asarray(x0), kinds[0]
         else:
-            cost, x, kind, tau = self._ident._best(a, tuple(names), [flight], self._burn, max(alignment, 0.0), x0,
-                                                   kinds, True, nfev, free_tau)
+            start = alignment if free_tau else max(alignment, 0.0)
+            cost, x, kind, tau = self._ident._best(a, tuple(names), [flight], self._burn, start, x0, kinds, True,
+                                                   nfev, free_tau)
             if free_tau:
                 alignment = tau
         nll = 0.5 * n * (np.log(2.0 * np.pi * 2.0 * cost / n) + 1.0)
@@ -258,26 +259,13 @@ class LikelihoodDiagnoser:
         scan = [self._score(a, base.names, float(s), base.x, kinds, 0) for s in ALIGNMENT_GRID
                 if abs(s - base.alignment) > 1e-9]
         best = min(scan, key=lambda sc: sc.nll)
-        if best.alignment >= 0:  # a servo delay: searched jointly with the damping and the wind, from the
-            # base fit and from a fresh start (the likelihood in the delay is multimodal)
-            fresh = np.array([max(base.x[0], 0.5), np.log(4.0), np.log(0.3), np.log(100.0), np.log(100.0)])
-            tries = [self._score(a, base.names, best.alignment, start, kinds, 3 * NFEV, free_tau=True)
-                     for start in (base.x, fresh)]
-            return min(tries, key=lambda sc: sc.nll)
-        # an input shift of the log: the scan held the undelayed fit's damping and wind, which a large shift
-        # makes wrong, so profile around its best with every parameter searched, then refine
-        x, profile = base.x, []
-        for shift in np.arange(max(-MAX_ALIGNMENT, best.alignment - 0.1), min(0.0, best.alignment + 0.1) + 1e-9,
-                               0.025):
-            sc = self._score(a, base.names, float(shift), x, kinds, NFEV)
-            x = sc.x
-            profile.append(sc)
-        best = min(profile, key=lambda sc: sc.nll)
-        lo, hi = max(-MAX_ALIGNMENT, best.alignment - 0.0125), min(0.0, best.alignment + 0.0125)
-        res = optimize.minimize_scalar(lambda s: self._score(a, base.names, float(s), best.x, kinds, NFEV).nll,
-                                       bounds=(lo, hi), method="bounded", options={"xatol": 0.002})
-        refined = self._score(a, base.names, float(res.x), best.x, kinds, NFEV)
-        return refined if refined.nll < best.nll else best
+        # the scan held the undelayed fit's damping and wind, which a large alignment makes wrong: the
+        # alignment (a servo delay, or a shift of the log's input) is then searched with the rest, from the
+        # base fit and from a fresh start (the likelihood in the alignment is multimodal)
+        fresh = np.array([max(base.x[0], 0.5), np.log(4.0), np.log(0.3), np.log(100.0), np.log(100.0)])
+        tries = [self._score(a, base.names, best.alignment, start, kinds, 3 * NFEV, free_tau=True)
+                 for start in (base.x, fresh)]
+        return min(tries, key=lambda sc: sc.nll)
 
     # ------------------------------------------------------------------ fit
     def fit(self, flight: Flight, model: ModelParams | None = None) -> "LikelihoodDiagnoser":
@@ -293,6 +281,7 @@ class LikelihoodDiagnoser:
         self.steps_, self.rounds_, self.effects_found_ = [], [], []
         self.evidence_ = {}
         self._ident = MaximumLikelihoodIdentifier(input_hold=self.input_hold)
+        self._ident.allow_shift = True  # alignments below zero: a log whose input column lags
         cleaned, _ = self._ident._clean(flight)
         self._flight = cleaned
         self._fs = flight.sample_rate
@@ -332,7 +321,7 @@ class LikelihoodDiagnoser:
                 base = current[axis]
                 # the base searched with the candidates' budget too, so that a candidate gains only by its terms;
                 # a servo delay found earlier is searched again with the rest (and with every candidate)
-                free_tau = (SERVO_DELAY, axis) in self.effects_found_ and base.alignment > 0
+                free_tau = (SERVO_DELAY, axis) in self.effects_found_
                 again = self._score(a, base.names, base.alignment, base.x, (base.kind,), NFEV, free_tau)
                 base = current[axis] = self._describe(a, again if again.nll < base.nll else base)
                 cands = []

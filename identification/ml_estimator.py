@@ -78,6 +78,9 @@ log-likelihood of about 1e-4 on a 300 s flight, far below any difference a test 
 MAX_DELAY = 0.6
 """Largest servo delay searched [s]."""
 
+MAX_SHIFT = 0.6
+"""Largest input shift (a log whose input column lags the response) searched [s]."""
+
 MIN_SERVO_DELAY = 1e-4
 """Delays below this are no delay (the Padé servo of eq. 31 degenerates at zero) [s]."""
 
@@ -105,6 +108,7 @@ class _AxisData:
     servo_sticks: list | None = None  # the raw stick per flight for that regressor (sign applied)
     tau: float = 0.0
     causal_rows: tuple = ()  # regressors made of measured rates: held over the sample, never interpolated
+    rebuild: object = None  # shift (s, < 0: the log's input lags) -> regressors with the axis' stick advanced
 
 
 class _AxisLikelihood:
@@ -124,7 +128,11 @@ class _AxisLikelihood:
                 zeta)
 
     def tau_of(self, x) -> float:
-        """The servo delay at ``x`` [s]: searched with the rest when ``free_tau``, else the data's."""
+        """The alignment at ``x`` [s]: searched with the rest when ``free_tau``, else the data's servo delay.
+
+        A positive alignment is the Padé servo delay of eq. (31); a negative one (searched only) a log whose
+        input column lags the response, corrected by advancing the axis' stick.
+        """
         return float(x[self.nw]) if self.free_tau else self.data.tau
 
     def discrete(self, x):
@@ -139,11 +147,12 @@ class _AxisLikelihood:
         if d.causal_rows:  # a measured rate at k+1 carries the noise of y[k+1]: only u[k] may predict y[k+1]
             b_c, _ = strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), g0 + g1)
         tau = self.tau_of(x)
+        regressors = d.rebuild(tau) if tau < -MIN_SERVO_DELAY else d.regressors
         servo = d.servo_row is not None and tau > MIN_SERVO_DELAY
         if servo:
             b_v, _ = strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), np.eye(Ad.shape[0])[0])
         ys, zs = [], []
-        for i, (y, X) in enumerate(zip(d.y, d.regressors)):
+        for i, (y, X) in enumerate(zip(d.y, regressors)):
             ys.append((y - signal.lfilter(b_y, a, y))[d.burn:])
             Z = signal.lfilter(b_u, a, X, axis=-1)
             for r in d.causal_rows:
@@ -299,6 +308,7 @@ class MaximumLikelihoodIdentifier:
         self.axes = axes
         self.max_nfev = max_nfev
         self.select_terms = select_terms
+        self.allow_shift = False  # the diagnosis searches negative alignments (log input shifts) too
 
     # ----------------------------------------------------------------- set-up
     def _param_names(self) -> dict[int, tuple[str, ...]]:
@@ -398,17 +408,25 @@ class MaximumLikelihoodIdentifier:
         damping_name = next((p for p in axis_params if TERMS[p].feature == OWN_RATE[a]), None)
         linear = [p for p in axis_params if p != damping_name and TERMS[p].feature != "1"]
         offset = next((p for p in axis_params if TERMS[p].feature == "1"), None)
-        ys, Xs = [], []
-        for i, f in enumerate(flights):
-            cmd = np.array([f.sticks[r] for r in STICK_ROW])
-            if tau > 0:
-                cmd[a] = pade_filter(f.sticks[STICK_ROW[a]], tau, f.sample_rate)
-            rows = [TERMS[p].sign * np.broadcast_to(FEATURES[TERMS[p].feature](f.rates, cmd, f.sticks[2]), (f.n,))
-                    for p in linear]
-            if offset is not None:
-                rows += [np.full(f.n, float(j == i)) for j in range(len(flights))]
-            ys.append(np.asarray(f.rates[a], dtype=float))
-            Xs.append(np.array(rows, dtype=float).reshape(len(rows), f.n))
+
+        def regressors(tau_or_shift):
+            """Every flight's regressors with the axis' command delayed (> 0, Padé) or advanced (< 0)."""
+            out = []
+            for i, f in enumerate(flights):
+                cmd = np.array([f.sticks[r] for r in STICK_ROW])
+                if tau_or_shift > 0:
+                    cmd[a] = pade_filter(f.sticks[STICK_ROW[a]], tau_or_shift, f.sample_rate)
+                elif tau_or_shift < 0:
+                    cmd[a] = np.interp(f.time - tau_or_shift, f.time, f.sticks[STICK_ROW[a]])
+                rows = [TERMS[p].sign * np.broadcast_to(FEATURES[TERMS[p].feature](f.rates, cmd, f.sticks[2]),
+                                                        (f.n,)) for p in linear]
+                if offset is not None:
+                    rows += [np.full(f.n, float(j == i)) for j in range(len(flights))]
+                out.append(np.array(rows, dtype=float).reshape(len(rows), f.n))
+            return out
+
+        ys = [np.asarray(f.rates[a], dtype=float) for f in flights]
+        Xs = regressors(tau)
         reg_names = tuple(linear) + (tuple(f"{offset}@{j}" for j in range(len(flights))) if offset else ())
         command = next((j for j, p in enumerate(linear) if TERMS[p].feature == COMMAND_FEATURE[a]), None)
         servo_sticks = None
@@ -417,7 +435,7 @@ class MaximumLikelihoodIdentifier:
             servo_sticks = [sign * np.asarray(f.sticks[STICK_ROW[a]], dtype=float) for f in flights]
         causal = tuple(j for j, p in enumerate(linear) if TERMS[p].feature in RATE_DEPENDENCE)
         return _AxisData(ys, Xs, reg_names, flights[0].dt, self.input_hold, burn, wind_model, command,
-                         servo_sticks, float(tau), causal), damping_name
+                         servo_sticks, float(tau), causal, regressors), damping_name
 
     def _search(self, like: _AxisLikelihood, x0, free_damping: bool, max_nfev=None, tau0: float = 0.0):
         """Search the damping and the wind model (and the delay when ``like.free_tau``) from ``x0``, the
@@ -433,7 +451,7 @@ class MaximumLikelihoodIdentifier:
         lo, hi = list(lo[:like.nw]), list(hi[:like.nw])
         if like.free_tau:
             start.append(tau0)
-            lo.append(0.0)
+            lo.append(-MAX_SHIFT if tau0 < 0 or self.allow_shift else 0.0)
             hi.append(MAX_DELAY)
         lo, hi = np.array(lo), np.array(hi)
         x0 = np.clip(np.array(start), lo + 1e-9, hi - 1e-9)
