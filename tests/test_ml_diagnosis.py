@@ -84,3 +84,13 @@ def test_heli_diagnose_by_likelihood_writes_the_model(tmp_path, coupled_flight):
 
     params, _ = load_model(tmp_path / "d")
     assert len(design_gains(params).kp) == 3
+
+
+def test_log_whose_input_lags_is_named_as_a_negative_alignment():
+    from identification.effects import shift_inputs
+
+    flight = shift_inputs(simulate_flight(150, seed=1).flight, (0.3, 0.3, 0.3))  # sticks recorded 0.3 s late
+    d = LikelihoodDiagnoser(axes=("roll",)).fit(flight)
+    assert d.effects_found_ == [("servo_delay", "roll")]
+    assert d.alignment_[0] == pytest.approx(-0.3, abs=0.01)
+    assert d.params_.tau_roll == 0.0  # a log correction, not a servo delay of the aircraft
