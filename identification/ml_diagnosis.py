@@ -144,6 +144,11 @@ def ahead_r2(like: _AxisLikelihood, x, theta, horizon: int) -> float:
     return 1.0 - num / (den or 1.0)
 
 
+def _fresh(x) -> np.ndarray:
+    """A second start for a search: the damping of ``x`` with the wind model's default starting values."""
+    return np.array([max(float(x[0]), 0.5), np.log(4.0), np.log(0.3), np.log(100.0), np.log(100.0)])
+
+
 class LikelihoodDiagnoser:
     """Name the physical effect a model misses by the likelihood of the wind-state model (module docstring).
 
@@ -262,9 +267,8 @@ class LikelihoodDiagnoser:
         # the scan held the undelayed fit's damping and wind, which a large alignment makes wrong: the
         # alignment (a servo delay, or a shift of the log's input) is then searched with the rest, from the
         # base fit and from a fresh start (the likelihood in the alignment is multimodal)
-        fresh = np.array([max(base.x[0], 0.5), np.log(4.0), np.log(0.3), np.log(100.0), np.log(100.0)])
         tries = [self._score(a, base.names, best.alignment, start, kinds, 3 * NFEV, free_tau=True)
-                 for start in (base.x, fresh)]
+                 for start in (base.x, _fresh(base.x))]
         return min(tries, key=lambda sc: sc.nll)
 
     # ------------------------------------------------------------------ fit
@@ -321,9 +325,12 @@ class LikelihoodDiagnoser:
                 base = current[axis]
                 # the base searched with the candidates' budget too, so that a candidate gains only by its terms;
                 # a servo delay found earlier is searched again with the rest (and with every candidate)
+                # and from the fresh start the alignment candidate also gets (else that start alone could
+                # win it a likelihood ratio)
                 free_tau = (SERVO_DELAY, axis) in self.effects_found_
-                again = self._score(a, base.names, base.alignment, base.x, (base.kind,), NFEV, free_tau)
-                base = current[axis] = self._describe(a, again if again.nll < base.nll else base)
+                tries = [base] + [self._score(a, base.names, base.alignment, start, (base.kind,), 3 * NFEV, free_tau)
+                                  for start in (base.x, _fresh(base.x))]
+                base = current[axis] = self._describe(a, min(tries, key=lambda sc: sc.nll))
                 cands = []
                 for name, effect in CATALOGUE.items():
                     if effect.is_alignment:
