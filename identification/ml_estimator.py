@@ -401,7 +401,7 @@ class MaximumLikelihoodIdentifier:
                 return replace(fit, dropped=tuple(dropped))
             names = tuple(p for p in names if p != weakest)
             dropped.append(weakest)
-            fit = self._fit_axis(a, names, flights, burn, start_params, fit.delay if self.delay != "auto" else "auto")
+            fit = self._fit_axis(a, names, flights, burn, start_params, fit.delay)  # the delay found stays
 
     def _axis_data(self, a: int, axis_params, flights, burn: int, tau: float, wind_model: str = "gm2"):
         """The likelihood's data for axis ``a`` at servo delay ``tau``, and the name of its damping term."""
