@@ -55,8 +55,10 @@ def main(argv=None) -> int:
             BackendError, TaskFailed, SweepError, AgentError, DesignError, EnvModelError) as e:
         print(f"heli {args.command}: error: {type(e).__name__}: {e}", file=sys.stderr)
         return 2
-    except FileNotFoundError as e:
-        print(f"heli {args.command}: error: {e}", file=sys.stderr)
+    except (FileNotFoundError, FileExistsError, NotADirectoryError, IsADirectoryError, PermissionError) as e:
+        # a path that is not what the command needs (an output folder that is a file, a read-only folder)
+        what = f"{e.strerror}: {e.filename}" if e.strerror and e.filename else str(e)
+        print(f"heli {args.command}: error: {what}", file=sys.stderr)
         return 2
 
 

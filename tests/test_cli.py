@@ -197,3 +197,11 @@ def test_console_script_help():
     assert done.returncode == 0, done.stderr
     assert done.stdout.startswith("usage: heli")
     assert "simulate-flight" in done.stdout and "identify" in done.stdout
+
+
+def test_an_output_path_under_a_file_is_one_line_and_exit_2(tmp_path, capsys):
+    blocker = tmp_path / "afile"
+    blocker.write_text("")
+    assert main(["simulate-flight", "--duration", "10", "--out", str(blocker / "x.csv")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("heli simulate-flight: error:") and "afile" in err and "Traceback" not in err
