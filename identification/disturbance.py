@@ -92,7 +92,7 @@ import numpy as np
 from scipy import ndimage, stats
 
 from .files import jsonable
-from .errors import DisturbanceError
+from .errors import DisturbanceError, SimulationDivergedError
 from .flight import Flight
 from .integral_method import pade_filter
 from .model import ModelParams
@@ -187,7 +187,11 @@ class DisturbanceProfile:
         (``sha256_of``: "file" for a logged flight, "arrays" otherwise).
     simulation : ValidationResult or None
         The model simulated without and with the identified disturbance
-        (Section 3.4), labels :data:`MODEL_LABELS`.
+        (Section 3.4), labels :data:`MODEL_LABELS`; None when not simulated or
+        when the simulation diverged.
+    simulation_diverged : str or None
+        Why the simulation was dropped, when the model diverged (the message of
+        :class:`~identification.errors.SimulationDivergedError`).
     trace_source : {"eq46", "smoother"}
         What ``trace`` and ``kd`` hold: the smoothed eq. (46) profile, or the wind
         torque the maximum-likelihood model's Rauch-Tung-Striebel smoother
@@ -219,6 +223,7 @@ class DisturbanceProfile:
     source: dict
     simulation: ValidationResult | None = field(default=None)
     trace_source: str = "eq46"
+    simulation_diverged: str | None = None
 
     @property
     def n_intervals(self) -> int:
@@ -253,6 +258,7 @@ class DisturbanceProfile:
             "prefilter": self.prefilter,
             "source": self.source,
             "simulation": None,
+            "simulation_diverged": self.simulation_diverged,
         }
         if self.simulation is not None:
             sim = self.simulation.to_dict()
@@ -298,6 +304,8 @@ class DisturbanceProfile:
                 _md_table(["Axis", "kd (rad/s²)", "std u_d (smoother)", "90 % interval u_d (smoother)",
                            "std u_d (eq. 46, smoothed)", "correlation smoother vs eq. 46"], rows) + "\n",
             ]
+        if self.simulation_diverged:
+            text += [f"**Simulating the model with the identified disturbance: diverged.** {self.simulation_diverged}.\n"]
         if self.simulation is not None:
             rows = []
             for a in self.axes:
@@ -561,7 +569,10 @@ def identify_disturbance(flight: Flight, params: ModelParams, interval: float | 
         params=params, prefilter=prefilter_meta, source=_source_of(flight), trace_source=source,
     )
     if simulate:
-        profile.simulation = simulate_with_disturbance(profile, data)
+        try:
+            profile.simulation = simulate_with_disturbance(profile, data)
+        except SimulationDivergedError as e:  # the profile stands; its simulation is reported as diverged
+            profile.simulation_diverged = str(e)
     return profile
 
 

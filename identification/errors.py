@@ -23,6 +23,15 @@ class IdentifiabilityError(ValueError):
     """The data cannot determine the requested parameters (too short, no excitation, ill-conditioned)."""
 
 
+class SimulationDivergedError(IdentifiabilityError):
+    """A fitted model, simulated from the flight's sticks alone, diverges (its rates leave every finite bound).
+
+    The usual causes: an unmodelled servo delay (identify with ``--delay auto``), a log whose
+    input column lags the response, or a log of an aircraft flown by a rate controller, whose
+    recorded command is not the input of an open-loop plant.
+    """
+
+
 class ModelFileError(ValueError):
     """A model file is missing, corrupt, of the wrong schema version or lacks parameters."""
 

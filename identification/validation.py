@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .attitude import detrend_piecewise
-from .errors import MissingDependency
+from .errors import MissingDependency, SimulationDivergedError
 from .files import jsonable, save_figure
 from .flight import Flight
 from .model import ModelParams, QUAT, euler_from_quaternion, initial_state, simulate
@@ -312,6 +312,29 @@ class ValidationResult:
 
 
 # ---------------------------------------------------------------- validation
+DIVERGED_RATE = 100.0
+"""A simulated body rate beyond this [rad/s] (about 16 revolutions per second) has diverged."""
+
+
+def _check_bounded(label: str, params: ModelParams, time, rates) -> None:
+    """Raise :class:`SimulationDivergedError` when a simulated rate history leaves ``DIVERGED_RATE``."""
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.abs(rates) <= DIVERGED_RATE)  # NaN counts as diverged
+    if not bad.any():
+        return
+    row, col = np.unravel_index(int(np.argmax(bad)), bad.shape)
+    damping = {a: params.get(k) for a, k in zip(AXES, ("k3", "k7", "k11"))}
+    unstable = [a for a, v in damping.items() if not v > 0.0]
+    why = (f"its damping is not positive on {', '.join(unstable)} "
+           f"({', '.join(f'{k}={params.get(k):.3g}' for a, k in zip(AXES, ('k3', 'k7', 'k11')) if a in unstable)})"
+           if unstable else "its added terms feed the rates back faster than the damping removes them")
+    raise SimulationDivergedError(
+        f"model {label!r} diverges when simulated from the flight's sticks: the {AXES[row]} rate leaves "
+        f"±{DIVERGED_RATE:g} rad/s at t={float(time[col]):.2f} s; {why}. Likely causes: an unmodelled servo "
+        "delay (identify with --delay auto), a log whose input column lags the response, or a log of an aircraft "
+        "flown by a rate controller (its recorded command is not an open-loop input)")
+
+
 def validate_models(flight: Flight, models: dict[str, ModelParams], rates=None, disturbance=None) -> ValidationResult:
     """Forward-simulate models with the flight's sticks and compare them with the flight.
 
@@ -345,6 +368,9 @@ def validate_models(flight: Flight, models: dict[str, ModelParams], rates=None, 
     ValueError
         No models, arrays whose shapes do not match the flight, or non-finite
         values.
+    SimulationDivergedError
+        A model whose simulated rates leave ±:data:`DIVERGED_RATE` (the message names
+        the model, axis, time and likely cause).
     TypeError
         A model that is not a :class:`~identification.model.ModelParams`.
     """
@@ -370,6 +396,7 @@ def validate_models(flight: Flight, models: dict[str, ModelParams], rates=None, 
     simulated, sim_att, rate_stats, att_stats = {}, {}, {}, {}
     for label, params in models.items():
         state = simulate(params, flight.time, flight.sticks, disturbance=dist.get(label), x0=x0)
+        _check_bounded(label, params, flight.time, state[:3])
         simulated[label] = state[:3]
         sim_att[label] = euler_from_quaternion(state[QUAT])
         rate_stats[label] = rate_error_stats(measured, simulated[label])

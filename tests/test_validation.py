@@ -193,6 +193,23 @@ def test_validate_bad_inputs(truth_flight):
         validate_models(flight, {"m": PAPER}, disturbance={"other": np.zeros((3, flight.n))})
 
 
+def test_a_diverging_model_is_named_with_its_cause(truth_flight):
+    from identification.disturbance import identify_disturbance
+    from identification.errors import IdentifiabilityError, SimulationDivergedError
+
+    flight, _ = truth_flight
+    unstable = dataclasses.replace(PAPER, k3=-3.0)  # roll damping negative: the rate grows as exp(3 t)
+    with pytest.raises(SimulationDivergedError, match=r"'bad' diverges .* roll rate .* damping is not positive "
+                                                       r"on roll \(k3=-3\).*--delay auto"):
+        validate_models(flight, {"good": PAPER, "bad": unstable})
+    assert issubclass(SimulationDivergedError, IdentifiabilityError)  # the CLI's one-line errors
+    # the disturbance profile of such a model stands; its simulation is reported as diverged, not raised
+    profile = identify_disturbance(flight, unstable)
+    assert profile.simulation is None and "diverges" in profile.simulation_diverged
+    assert profile.to_dict()["simulation_diverged"] == profile.simulation_diverged
+    assert "diverged" in profile.markdown()
+
+
 def test_result_to_dict_is_json(two_model_result):
     d = two_model_result.to_dict()
     back = json.loads(json.dumps(d, allow_nan=False))
