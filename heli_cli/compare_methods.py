@@ -15,7 +15,7 @@ DEFAULT_OUT = "method-comparison"
 def register(sub):
     p = sub.add_parser(
         "compare-methods",
-        help="time the integral method against nonlinear regression and the EKF (paper Tables 3-5)",
+        help="time the integral method against NLR and the EKF",
         description="Identify the decoupled single-axis model (roll: eq. 18 with k1 = k4 = 0) on one flight with "
         "the integral method, nonlinear regression from each of Table 3's start points and the EKF in each of "
         "Table 4's cases and Table 5's sample lengths, all on the same prefiltered data. Prints the tables with "
@@ -35,7 +35,6 @@ def register(sub):
     p.add_argument("--quick", action="store_true",
                    help="cap each NLR run at a few objective evaluations and time fewer repeats (for a fast "
                    "look; the NLR figures are then indicative only)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
 
@@ -57,7 +56,7 @@ def run(args) -> int:
         kwargs = {"nlr_max_nfev": QUICK_NLR_MAX_NFEV, "repeats": {"integral": 5, "ekf": 1, "nlr": 1}, "quick": True}
         print(f"--quick: NLR limited to {QUICK_NLR_MAX_NFEV} objective evaluations per start, integral timed "
               "5 times, EKF once; run without --quick for the real figures.")
-    result = compare_methods(flight, axis=args.axis, truth=truth, progress=not args.no_progress,
+    result = compare_methods(flight, axis=args.axis, truth=truth, progress=not args.quiet,
                              validation=validation, validation_truth=validation_truth, **kwargs)
     print(result.markdown())
     paths = result.save(args.out)

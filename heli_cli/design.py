@@ -33,7 +33,7 @@ def _bandwidths(text):
 def register(sub):
     p = sub.add_parser(
         "design",
-        help="design per-axis PD attitude gains with python-control; write pd.json for 'heli evaluate'",
+        help="design per-axis PD attitude gains (python-control)",
         description="Design per-axis PD attitude controllers on the linear part of an identified model "
         "(the Padé servo of eq. 31 included when identified), sampled at the control period by zero-order "
         "hold as the environment runs them: each axis reaches the requested closed-loop bandwidth with at "

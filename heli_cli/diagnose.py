@@ -8,8 +8,7 @@ from .argtypes import number, whole
 def register(sub):
     p = sub.add_parser(
         "diagnose",
-        help="locate where a model and a flight disagree, name the missing physical effect, add it and "
-        "show the held-out gap shrink",
+        help="find the physical effect a model misses and add it",
         description="Fit the model structure (default: the paper's decoupled model, eqs. 18, 21) by maximum "
         "likelihood with a stochastic wind state, try every effect of the catalogue (servo_delay, cross_coupling, "
         "gyroscopic, collective_torque, nonlinear_damping, gain_scheduling) on every axis, accept those whose "
@@ -26,7 +25,9 @@ def register(sub):
                    help="'ml' likelihood-ratio tests of the wind-state model (default); 'integral' held-out "
                    "forward simulation of integral-method fits")
     p.add_argument("--min-lr", type=number("a number >= 0", 0.0, low_open=False), default=None,
-                   help="ml: smallest likelihood-ratio statistic per added parameter accepted (default 20)")
+                   help="ml: smallest likelihood-ratio statistic per added term accepted (default 10)")
+    p.add_argument("--min-lr-alignment", type=number("a number >= 0", 0.0, low_open=False), default=None,
+                   help="ml: smallest likelihood-ratio statistic of a servo delay / input shift (default 20)")
     p.add_argument("--input-hold", choices=("linear", "zoh"), default="linear",
                    help="ml: sticks between samples, 'linear' (a pilot) or 'zoh' (a flight controller's commands)")
     p.add_argument("--folds", type=whole(2), default=5, help="integral: cross-validation blocks (default 5)")
@@ -83,12 +84,14 @@ def _print_run(run_, evidence) -> int:
 
 
 def _run_ml(args, flight, model, document, source) -> int:
-    from identification.ml_diagnosis import ALPHA, MIN_LR_PER_PARAMETER, LikelihoodDiagnoser
+    from identification.ml_diagnosis import ALPHA, MIN_LR_ALIGNMENT, MIN_LR_PER_PARAMETER, LikelihoodDiagnoser
     from identification.ml_diagnosis_report import diagnose_by_likelihood
 
     print(f"diagnosing {args.flight} by likelihood (every catalogue effect on every axis) ...", flush=True)
     diagnoser = LikelihoodDiagnoser(alpha=ALPHA if args.alpha is None else args.alpha,
                                     min_lr_per_parameter=MIN_LR_PER_PARAMETER if args.min_lr is None else args.min_lr,
+                                    min_lr_alignment=(MIN_LR_ALIGNMENT if args.min_lr_alignment is None
+                                                      else args.min_lr_alignment),
                                     input_hold=args.input_hold)
     run_ = diagnose_by_likelihood(flight, args.out, model=model, model_document=document, source=source,
                                   plots=not args.no_plots, diagnoser=diagnoser)

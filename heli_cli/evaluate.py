@@ -12,7 +12,7 @@ DEFAULT_OUT = "evaluation"
 def register(sub):
     p = sub.add_parser(
         "evaluate",
-        help="fly an agent (PD JSON or PPO/SAC zip) on held-out gusts; report the sweep's error metrics",
+        help="fly a PD or RL agent in held-out gusts; report its errors",
         description="Fly any agent on gust windows of the model's disturbance library (attitude hold, start at "
         "rest) and report per axis the RMS and 50/90/99th percentiles of |attitude error| and |rate error|, "
         "stick RMS and p99, saturation and a histogram, as 'heli sweep' does for PD gain pairs. The held-out "

@@ -41,8 +41,7 @@ def flight_backend(args):
 def register(sub):
     p = sub.add_parser(
         "identify",
-        help="identify the roll/pitch/yaw models (maximum likelihood with a wind state, or the integral method) "
-        "and the wind; write model.json, report.md and the disturbance library",
+        help="identify the attitude model and the wind from CSV flights",
         description="Identify the minimal attitude models (paper eqs. 18, 21) from one or more canonical CSV "
         "flights, by default with the maximum-likelihood filter-error method (a slow and a fast Gauss-Markov gust "
         "state, white gyro noise; unbiased when the pilot fights turbulence), or with the integral method (Fig. 5, "

@@ -31,7 +31,7 @@ def _segment(text):
 def register(sub):
     p = sub.add_parser(
         "import",
-        help="convert a PX4 ULog, ArduPilot .bin or Betaflight/Rotorflight blackbox log to a canonical CSV flight",
+        help="convert a PX4, ArduPilot or blackbox log to a CSV flight",
         description="Read a flight-controller log (format recognised from its content), map body rates, attitude "
         "and the chosen input source to the canonical flight (rad/s, rad, inputs in [-1, 1]; roll right, nose up, "
         "nose right positive), resample it onto a uniform grid, cut the airborne segment, and write OUT (CSV) "

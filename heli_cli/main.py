@@ -2,64 +2,159 @@
 
 Each sub-command lives in its own module of :mod:`heli_cli` and exposes
 ``register(subparsers)``, which adds its parser and sets ``func`` to a function
-taking the parsed arguments and returning an exit code. Errors the user can fix
-(bad input files, unidentifiable data) are printed as one line without a
-traceback and exit with status 2.
+taking the parsed arguments and returning an exit code. Building the parser
+imports no numeric package: a command's handler imports what it needs when it
+runs, so ``heli --help`` and every ``heli COMMAND --help`` answer at once.
+
+Errors the user can fix (bad input files, unidentifiable data, a path that is
+not what the command needs) are printed as one line without a traceback and
+exit with status 2; anything else is a bug, printed as one line with a request
+to report it, exit status 1. ``--debug`` adds the traceback to either.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
+import traceback
+from pathlib import Path
 
 COMMAND_MODULES = (
     "heli_cli.simulate_flight",
-    "heli_cli.identify",
     "heli_cli.import_log",
+    "heli_cli.identify",
+    "heli_cli.diagnose",
     "heli_cli.refresh",
     "heli_cli.compare_methods",
     "heli_cli.design",
     "heli_cli.sweep",
     "heli_cli.train",
     "heli_cli.evaluate",
-    "heli_cli.diagnose",
 )
-"""Modules that register sub-commands, in the order ``heli --help`` lists them."""
+"""Modules that register sub-commands, in the order ``heli --help`` lists them (a workflow's order)."""
+
+USER_ERRORS = {
+    "identification.errors": ("FlightLogError", "IdentifiabilityError", "ModelFileError", "MissingDependency",
+                              "DisturbanceError", "LibraryError", "BackendError", "TaskFailed"),
+    "controllers.errors": ("SweepError", "AgentError", "DesignError"),
+    "heli_env.errors": ("EnvModelError",),
+}
+"""Errors the user can fix, by module: one line and exit status 2 (subclasses included)."""
+
+PATH_ERRORS = (FileNotFoundError, FileExistsError, NotADirectoryError, IsADirectoryError, PermissionError)
+"""A path that is not what the command needs (an output folder that is a file, a read-only folder): exit 2."""
+
+REPORT_HINT = "this is a bug in heli-env; please report it with the command line and the traceback --debug shows"
+
+
+def version() -> str:
+    """The installed package's version, else the one ``pyproject.toml`` beside the source states."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("heli-env")
+    except metadata.PackageNotFoundError:
+        pyproject = Path(__file__).resolve().parents[1] / "pyproject.toml"
+        found = re.search(r'^version\s*=\s*"([^"]+)"', pyproject.read_text(), re.M) if pyproject.exists() else None
+        return found.group(1) if found else "unknown"
+
+
+class _Version(argparse.Action):
+    """``--version``: the version is looked up only when asked for."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, help=None):
+        super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"heli (heli-env) {version()}")
+        parser.exit()
+
+
+def add_global_options(parser, *, on_command: bool) -> None:
+    """``--quiet`` and ``--debug``, accepted before the command and after it.
+
+    On a sub-command the defaults are suppressed, so ``heli --quiet identify ...`` is not undone by the
+    sub-command's own default.
+    """
+    default = (lambda value: argparse.SUPPRESS) if on_command else (lambda value: value)
+    parser.add_argument("-q", "--quiet", action="store_true", default=default(False),
+                        help="no progress lines or bars (results, warnings and errors are still printed)")
+    parser.add_argument("--no-progress", dest="quiet", action="store_true", default=default(False),
+                        help=argparse.SUPPRESS)  # the flag's earlier name on sweep, train and compare-methods
+    parser.add_argument("--debug", action="store_true", default=default(False),
+                        help="show the traceback of an error")
+
+
+class _HelpFormatter(argparse.HelpFormatter):
+    """argparse's layout, with the commands aligned with the options and without the bare ``COMMAND`` line."""
+
+    def _iter_indented_subactions(self, action):
+        yield from getattr(action, "_get_subactions", list)()
+
+    def _format_action(self, action):
+        text = super()._format_action(action)
+        if action.nargs == argparse.PARSER:
+            text = text.split("\n", 1)[1]
+        return text
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="heli",
+        prog="heli", formatter_class=_HelpFormatter,
         description="Identify RC-helicopter attitude models from flight logs, replay their gusts in a "
         "Gymnasium environment, and design controllers against them.",
+        epilog="Run 'heli COMMAND --help' for a command's options. A first look: 'make demo'.",
     )
+    parser.add_argument("--version", action=_Version, help="print the version and exit")
+    add_global_options(parser, on_command=False)
+    parser._positionals.title = "commands"  # listed first, before the options
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    sub.required = True
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)
+    for command_parser in sub.choices.values():
+        add_global_options(command_parser, on_command=True)
     return parser
 
 
-def main(argv=None) -> int:
-    from controllers.errors import AgentError, DesignError, SweepError
-    from heli_env.errors import EnvModelError
-    from identification.errors import (BackendError, DisturbanceError, FlightLogError, IdentifiabilityError,
-                                       LibraryError, MissingDependency, ModelFileError, TaskFailed)
+def command_names() -> list:
+    """The sub-commands, in the order ``heli --help`` lists them."""
+    sub = next(a for a in build_parser()._actions if a.nargs == argparse.PARSER)
+    return list(sub.choices)
 
+
+def _user_errors() -> tuple:
+    """The classes of :data:`USER_ERRORS` whose modules are loaded (no other can have been raised)."""
+    return tuple(getattr(sys.modules[module], name) for module, names in USER_ERRORS.items()
+                 if module in sys.modules for name in names)
+
+
+def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.command is None:  # 'heli' alone: what it can do, on the error stream as argparse's usage errors
+        parser.print_help(sys.stderr)
+        return 2
+    prefix = f"heli {args.command}"
     try:
         return int(args.func(args) or 0)
-    except (FlightLogError, IdentifiabilityError, ModelFileError, MissingDependency, DisturbanceError, LibraryError,
-            BackendError, TaskFailed, SweepError, AgentError, DesignError, EnvModelError) as e:
-        print(f"heli {args.command}: error: {type(e).__name__}: {e}", file=sys.stderr)
-        return 2
-    except (FileNotFoundError, FileExistsError, NotADirectoryError, IsADirectoryError, PermissionError) as e:
-        # a path that is not what the command needs (an output folder that is a file, a read-only folder)
-        what = f"{e.strerror}: {e.filename}" if e.strerror and e.filename else str(e)
-        print(f"heli {args.command}: error: {what}", file=sys.stderr)
-        return 2
+    except KeyboardInterrupt:
+        print(f"{prefix}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as e:  # noqa: BLE001 -- every error ends in one line (module docstring)
+        if args.debug:
+            traceback.print_exc()
+        if isinstance(e, _user_errors()):
+            print(f"{prefix}: error: {type(e).__name__}: {e}", file=sys.stderr)
+            return 2
+        if isinstance(e, PATH_ERRORS):
+            what = f"{e.strerror}: {e.filename}" if e.strerror and e.filename else str(e)
+            print(f"{prefix}: error: {what}", file=sys.stderr)
+            return 2
+        print(f"{prefix}: unexpected error: {type(e).__name__}: {e}", file=sys.stderr)
+        print(f"{prefix}: {REPORT_HINT}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

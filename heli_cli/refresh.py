@@ -11,8 +11,7 @@ from .identify import add_flight_backend_options, flight_backend
 def register(sub):
     p = sub.add_parser(
         "refresh",
-        help="identify new flights, report parameter drift against the current model, refresh it and append "
-        "their wind to the disturbance library",
+        help="refit a model with new flights; report parameter drift",
         description="Identify NEW_FLIGHTs with the structure and settings of MODEL_DIR/model.json, compare every "
         "parameter with the current model (interval bootstrap; a change is flagged when |new - old| > "
         "z*sqrt(se_old^2 + se_new^2), Bonferroni z at family-wise ALPHA), write the refreshed model (previous and "

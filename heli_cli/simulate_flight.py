@@ -12,7 +12,7 @@ from .argtypes import number, whole
 def register(sub):
     p = sub.add_parser(
         "simulate-flight",
-        help="fly the truth model (paper eqs. 18, 21) with a pilot, wind and sensor noise; write a CSV flight",
+        help="write a synthetic test flight (CSV) and its true parameters",
         description="Write a realistic synthetic hover flight (canonical CSV) plus its truth: "
         "<stem>.truth.json (parameters, seed, settings) and <stem>.wind.csv (the true wind u_d).",
     )

@@ -19,7 +19,7 @@ def backend_from_args(args):
 def register(sub):
     p = sub.add_parser(
         "sweep",
-        help="sweep PD gains against the disturbance library; predict each pair's error distribution",
+        help="sweep PD gains in the model's gusts; predict the errors",
         description="Fly every PD gain pair of a Kp x Kd grid on one axis (attitude hold; the other axes held by "
         "nominal PD gains) against windows of the model's disturbance library, replayed through the physics "
         "core (time domain), and predict the same error distribution from the library's Welch spectrum through "
@@ -55,7 +55,6 @@ def register(sub):
                    "RAY_ADDRESS or a Ray instance started here (needs the 'cluster' extra); same result either way")
     p.add_argument("--workers", type=whole(1), default=None, metavar="N",
                    help="local worker processes, or CPUs of a Ray instance started here (default: all cores)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
 
@@ -71,7 +70,7 @@ def run(args) -> int:
     backend = backend_from_args(args)
     try:
         result = sweep_gains(args.model, kp, kd, axis=args.axis, duration=args.duration, dt=args.dt,
-                             seed=args.seed, windows=args.windows, progress=not args.no_progress, backend=backend)
+                             seed=args.seed, windows=args.windows, progress=not args.quiet, backend=backend)
     finally:
         backend.close()
     out = Path(args.out)
@@ -94,7 +93,7 @@ def run(args) -> int:
         if pairs:
             flights = validate_against_flights(args.model, pairs, axis=args.axis, n_flights=args.flights,
                                                duration=args.duration, seed=args.seed, truth=args.truth, dt=args.dt,
-                                               progress=not args.no_progress)
+                                               progress=not args.quiet)
             paths["flights"] = flights.to_json(out / "flight_tests.json")
             report += "\n" + flights.to_markdown()
     from identification.files import write_text

@@ -21,7 +21,7 @@ def _seeds(text):
 def register(sub):
     p = sub.add_parser(
         "train",
-        help="train a PPO or SAC attitude agent on the model's training gusts (needs the 'rl' extra)",
+        help="train a PPO or SAC agent in the model's gusts ('rl' extra)",
         description="Train a stable-baselines3 PPO or SAC agent on the native vector environment (attitude hold "
         "in replayed gusts). Episodes replay windows of the training traces only; the held-out traces (a "
         "quarter of the library by default, chosen by --split-seed; a single-trace library is split in time) "
@@ -65,7 +65,6 @@ def register(sub):
     p.add_argument("--residual-scale", type=number("a number in (0, 2]", 0.0, 2.0, high_open=False), default=0.05,
                    metavar="STICK",
                    help="bound of the residual in stick units (default 0.05)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
 
@@ -86,7 +85,7 @@ def _run_seeds(args) -> int:
     try:
         results = train_seeds(args.algo, args.model, args.timesteps, args.out, seeds=args.seeds, backend=backend,
                               n_envs=args.n_envs, eval_freq=args.eval_freq, checkpoint_freq=args.checkpoint_freq,
-                              progress=not args.no_progress, held_out_fraction=args.held_out_fraction,
+                              progress=not args.quiet, held_out_fraction=args.held_out_fraction,
                               split_seed=args.split_seed, eval_episodes=args.eval_episodes,
                               episode_seconds=args.episode_seconds, **_residual(args),
                               max_seconds=None if args.minutes is None else 60.0 * args.minutes)
@@ -110,7 +109,7 @@ def run(args) -> int:
     try:
         res = train_agent(args.algo, args.model, args.timesteps, args.out, seed=args.seed, n_envs=args.n_envs,
                           eval_freq=args.eval_freq, checkpoint_freq=args.checkpoint_freq,
-                          progress=not args.no_progress, held_out_fraction=args.held_out_fraction,
+                          progress=not args.quiet, held_out_fraction=args.held_out_fraction,
                           split_seed=args.split_seed, eval_episodes=args.eval_episodes,
                           episode_seconds=args.episode_seconds, **_residual(args),
                           max_seconds=None if args.minutes is None else 60.0 * args.minutes)

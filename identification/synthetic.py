@@ -32,7 +32,6 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy import signal
 
 from .files import write_text
 from .flight import Flight, make_flight
@@ -212,6 +211,8 @@ PILOTS = ("pid", "pd", "autopilot")
 def gust_trace(rng: np.random.Generator, n: int, fs: float, config: "FlightConfig", std: float) -> np.ndarray:
     """One axis' zero-mean gust of standard deviation ``std`` with the spectrum of ``config.wind_model``,
     plus the slow Gauss-Markov part of ``config.wind_slow_fraction`` (module docstring)."""
+    from scipy import signal  # here, not at import: the CLI reads this module's settings for --help
+
     if std == 0:
         return np.zeros(n)
     if config.wind_model == "lowpass":
@@ -234,6 +235,8 @@ def gust_trace(rng: np.random.Generator, n: int, fs: float, config: "FlightConfi
 
 def _first_order(rng, n, fs, tau):
     """Unit-variance first-order Gauss-Markov process of time constant ``tau`` (exact AR(1))."""
+    from scipy import signal
+
     a = np.exp(-1.0 / (fs * tau))
     warm = int(5 * tau * fs)
     x = signal.lfilter([np.sqrt(1 - a * a)], [1.0, -a], rng.standard_normal(n + warm))[warm:]
@@ -318,6 +321,8 @@ def load_truth(flight_path) -> tuple[ModelParams, np.ndarray]:
 
 def coloured_noise(rng: np.random.Generator, n: int, fs: float, corner_hz: float, std: float) -> np.ndarray:
     """Zero-mean noise through a 2nd-order Butterworth low-pass, scaled to exactly ``std``."""
+    from scipy import signal
+
     if std == 0:
         return np.zeros(n)
     b, a = signal.butter(2, corner_hz, fs=fs)
@@ -336,6 +341,8 @@ def sweep_schedule(time: np.ndarray, config: FlightConfig) -> np.ndarray:
     every sweep moves all three sticks: roll up the band, pitch down it, yaw at
     a third of the roll frequency.
     """
+    from scipy import signal
+
     out = np.zeros((3, time.size))
     period = config.sweep_length + config.rest_length
     t = time - 5.0

@@ -20,6 +20,8 @@ Sections (``--only NAME`` runs one):
 * ``backends`` — the same sweep on ``local`` with 1 and 2 workers and on ``ray``
   with 2 (issue 8): scaling, Ray overhead, and a projection (stated as such) for
   a 64-core cluster.
+* ``cli`` — wall time of ``heli --help`` and of every ``heli COMMAND --help``, each
+  a fresh process of the installed console script (target <= 0.5 s each, issue 18).
 
 Usage::
 
@@ -338,8 +340,36 @@ def bench_backends(repeats: int) -> dict:
     return out
 
 
+def bench_cli(repeats: int) -> dict:
+    """``heli --help`` and each ``heli COMMAND --help`` as a user runs them: a new process each time,
+    median of ``max(5, repeats // 6)`` runs (5 at the default 30)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from heli_cli.main import command_names
+
+    heli = Path(sys.executable).with_name("heli")
+    if not heli.exists():
+        return {"skipped": f"no console script at {heli} (pip install -e .)"}
+    commands = [""] + command_names()
+    runs = max(5, repeats // 6)
+    out = {}
+    for command in commands:
+        argv = [str(heli)] + ([command] if command else []) + ["--help"]
+        times = []
+        for _ in range(runs):
+            t0 = time.perf_counter()
+            subprocess.run(argv, check=True, stdout=subprocess.DEVNULL)
+            times.append(time.perf_counter() - t0)
+        out[f"heli {command + ' ' if command else ''}--help [s]"] = statistics.median(times)
+    worst = max(out.values())
+    out["target (<= 0.5 s each)"] = f"{'met' if worst <= 0.5 else 'NOT met'} (slowest {worst:.3f} s)"
+    return out
+
+
 SECTIONS = {"identification": bench_identification, "physics": bench_physics, "env": bench_env, "sweep": bench_sweep,
-            "backends": bench_backends}
+            "backends": bench_backends, "cli": bench_cli}
 
 
 def main(argv=None):

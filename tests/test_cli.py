@@ -199,6 +199,85 @@ def test_console_script_help():
     assert "simulate-flight" in done.stdout and "identify" in done.stdout
 
 
+HEAVY = ("matplotlib", "scipy", "torch", "stable_baselines3", "control", "gymnasium", "ray", "numba")
+
+
+def test_building_the_parser_imports_no_heavy_package():
+    # what 'heli --help' and every 'heli COMMAND --help' cost: a handler imports these when its command runs
+    code = ("import sys; from heli_cli.main import build_parser; build_parser(); "
+            f"print(sorted(m for m in sys.modules if m.split('.')[0] in {set(HEAVY)!r}))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True)
+    assert done.stdout.strip() == "[]"
+
+
+def test_heli_alone_lists_every_command_on_one_line_each(capsys, monkeypatch):
+    from heli_cli.main import command_names
+
+    monkeypatch.setenv("COLUMNS", "80")
+    assert main([]) == 2  # argparse's status for a missing command, but with the list instead of an error
+    err = capsys.readouterr().err
+    assert err.startswith("usage: heli") and "heli: error" not in err
+    lines = err.splitlines()
+    for name in command_names():
+        line = next(ln for ln in lines if ln.split()[:1] == [name])
+        assert len(line.split()) > 2 and len(line) <= 80  # a short description on the same line
+
+
+def test_version_is_the_package_version(capsys):
+    from importlib.metadata import version
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out == f"heli (heli-env) {version('heli-env')}\n"
+
+
+def test_quiet_and_debug_are_accepted_before_and_after_the_command():
+    from heli_cli.main import build_parser
+
+    parser = build_parser()
+    for argv in (["--quiet", "design"], ["design", "--quiet"], ["-q", "design"], ["design", "--no-progress"]):
+        assert parser.parse_args(argv).quiet is True
+    assert parser.parse_args(["design"]).quiet is False
+    assert parser.parse_args(["--debug", "design"]).debug is True
+    assert parser.parse_args(["design", "--debug"]).debug is True
+
+
+def _crash(args):
+    raise RuntimeError("something nobody expected")
+
+
+def _user_mistake(args):
+    from identification.errors import FlightLogError
+
+    raise FlightLogError("column 'q' is missing")
+
+
+@pytest.mark.parametrize("debug", [False, True])
+def test_an_unexpected_error_is_one_line_and_a_request_to_report_it(monkeypatch, capsys, debug):
+    import heli_cli.design
+
+    monkeypatch.setattr(heli_cli.design, "run", _crash)
+    assert main(["design"] + (["--debug"] if debug else [])) == 1
+    err = capsys.readouterr().err
+    assert "heli design: unexpected error: RuntimeError: something nobody expected\n" in err
+    assert "please report it" in err
+    assert ("Traceback" in err) is debug
+    if not debug:
+        assert err.count("\n") == 2
+
+
+def test_a_user_error_stays_one_line_exit_2_and_debug_adds_the_traceback(monkeypatch, capsys):
+    import heli_cli.design
+
+    monkeypatch.setattr(heli_cli.design, "run", _user_mistake)
+    assert main(["design"]) == 2
+    assert capsys.readouterr().err == "heli design: error: FlightLogError: column 'q' is missing\n"
+    assert main(["design", "--debug"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" in err and err.endswith("heli design: error: FlightLogError: column 'q' is missing\n")
+
+
 def test_an_output_path_under_a_file_is_one_line_and_exit_2(tmp_path, capsys):
     blocker = tmp_path / "afile"
     blocker.write_text("")
