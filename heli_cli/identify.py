@@ -76,34 +76,51 @@ def register(sub):
 
 
 def run(args) -> int:
-    from tqdm import tqdm
-
     from identification.io import read_flight
     from identification.report import identify_and_report, source_entry
 
-    flights = [read_flight(path) for path in tqdm(args.flights, desc="reading flights", unit="flight",
-                                                   disable=len(args.flights) < 2)]
-    for path, flight in zip(args.flights, flights):
-        for warning in flight.metadata.get("import_warnings") or ():
-            print(f"warning: {path}: {warning}")
-    if args.method == "ml":
-        kwargs = {"delay": args.delay, "input_hold": args.input_hold, "wind_model": args.wind_model}
-    else:
-        kwargs = {"interval": args.interval, "delay": args.delay, "prefilter": not args.no_filter,
-                  "input_hold": args.input_hold}
-    backend = flight_backend(args)
-    try:
-        run = identify_and_report(
-            flights, args.out, coupled=args.coupled, sources=[source_entry(p) for p in args.flights],
-            identifier_kwargs=kwargs, flight_paths=args.flights, plots=not args.no_plots,
-            disturbances=not args.no_disturbances, backend=backend, method=args.method,
-        )
-    finally:
-        if backend is not None:
-            backend.close()
+    from .progress import progress_of
+
+    with progress_of(args) as progress:
+        if len(args.flights) > 1:  # one flight reads in a fraction of a second
+            progress.stage(f"reading {len(args.flights)} flights")
+        flights = [read_flight(path) for path in args.flights]
+        for path, flight in zip(args.flights, flights):
+            for warning in flight.metadata.get("import_warnings") or ():
+                progress.done()
+                print(f"warning: {path}: {warning}")
+        if args.method == "ml":
+            kwargs = {"delay": args.delay, "input_hold": args.input_hold, "wind_model": args.wind_model}
+        else:
+            kwargs = {"interval": args.interval, "delay": args.delay, "prefilter": not args.no_filter,
+                      "input_hold": args.input_hold}
+        backend = flight_backend(args)
+        try:
+            run = identify_and_report(
+                flights, args.out, coupled=args.coupled, sources=[source_entry(p) for p in args.flights],
+                identifier_kwargs=kwargs, flight_paths=args.flights, plots=not args.no_plots,
+                disturbances=not args.no_disturbances, backend=backend, method=args.method,
+                progress=progress.bars and len(flights) > 1, draw_figures=False, stage=progress.stage,
+            )
+        finally:
+            if backend is not None:
+                backend.close()
+        progress.done()
+        _print_run(run, len(flights), args.method)
+        if run.figures:
+            progress.stage("drawing the figures")
+            drawn = run.draw_figures()
+            progress.done()
+            for path in drawn.values():
+                print(f"wrote {path}")
+    return 0
+
+
+def _print_run(run, n_flights: int, method: str) -> None:
+    """The identified parameters, the validation errors, warnings and the files written so far."""
     params = run.params.values()
-    print(f"identified {run.chosen} model from {len(flights)} flight(s) by "
-          f"{'maximum likelihood' if args.method == 'ml' else 'the integral method'}:")
+    print(f"identified {run.chosen} model from {n_flights} flight(s) by "
+          f"{'maximum likelihood' if method == 'ml' else 'the integral method'}:")
     for axis, fit in run.identifiers[run.chosen].axes_.items():
         vals = ", ".join(f"{k}={params[k]:.4f}" for k in fit.params)
         delay = f", delay {fit.delay:.3f} s" if fit.delay else ""
@@ -123,4 +140,3 @@ def run(args) -> int:
     for key, path in run.paths.items():
         if key != "library":
             print(f"wrote {path}")
-    return 0

@@ -265,8 +265,9 @@ class DisturbanceProfile:
             out["simulation"] = {"rate_stats": sim["rate_stats"], "attitude_stats": sim["attitude_stats"]}
         return jsonable(out)
 
-    def markdown(self) -> str:
-        """Report section: the disturbance table (Section 3.3) and the simulation table (Section 3.4)."""
+    def markdown(self, title: str = "Wind disturbance (Sections 2.5.3, 3.3)") -> str:
+        """Report section under the heading ``### title``: the disturbance table (Section 3.3) and the
+        simulation table (Section 3.4)."""
         rows = []
         for a in self.axes:
             i = AXES.index(a)
@@ -281,7 +282,7 @@ class DisturbanceProfile:
                            "90 % interval u_d", "90 % interval recorded stick", "KS statistic", "KS p-value"], rows)
         mode = "chosen by matching fitted normals (Section 3.3)" if self.smoothing == "auto" else "fixed"
         text = [
-            "### Wind disturbance (Sections 2.5.3, 3.3)\n",
+            f"### {title}\n",
             f"Piecewise-constant disturbance torque over Δt = {self.interval:g} s "
             f"({self.samples_per_interval} samples, {self.n_intervals} intervals), eq. (46); "
             f"equivalent input u_d = (ū_d − kd)/k, eqs. (42), (47). Smoothing: {SMOOTHING_WINDOW}-point moving "
@@ -721,16 +722,19 @@ def plot_simulation(profile: DisturbanceProfile, path):
     """Measured vs simulated rates without and with the identified disturbance (Section 3.4)."""
     if profile.simulation is None:
         raise DisturbanceError("the profile holds no simulation; identify it with simulate=True")
-    return plot_rate_fit(profile.simulation, path)
+    return plot_rate_fit(profile.simulation, path, title="Body rates simulated without and with the identified "
+                         "wind disturbance (Section 3.4)")
+
+
+def figure_names(profile: DisturbanceProfile) -> tuple:
+    """The figures :func:`save_figures` draws of ``profile``, each written as ``<prefix>_<name>.png``."""
+    return ("profile", "distributions") + (("simulation",) if profile.simulation is not None else ())
 
 
 def save_figures(profile: DisturbanceProfile, directory, true_ud=None, prefix: str = "disturbance") -> dict[str, Path]:
-    """Write the profile, distribution and (when simulated) rate figures as PNG into ``directory``."""
+    """Write the profile, distribution and (when simulated) rate figures as PNG into ``directory``:
+    ``<prefix>_<name>.png`` for each of :func:`figure_names`."""
     directory = Path(directory)
-    out = {
-        "profile": plot_profile(profile, directory / f"{prefix}_profile.png", true_ud),
-        "distributions": plot_distributions(profile, directory / f"{prefix}_distributions.png"),
-    }
-    if profile.simulation is not None:
-        out["simulation"] = plot_simulation(profile, directory / f"{prefix}_simulation.png")
-    return out
+    draw = {"profile": lambda path: plot_profile(profile, path, true_ud), "distributions":
+            lambda path: plot_distributions(profile, path), "simulation": lambda path: plot_simulation(profile, path)}
+    return {name: draw[name](directory / f"{prefix}_{name}.png") for name in figure_names(profile)}

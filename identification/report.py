@@ -10,12 +10,14 @@ parameter table shows the errors against it.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
-from .disturbance import compare_with_truth, identify_disturbance, save_figures
+from .disturbance import compare_with_truth, figure_names, identify_disturbance, save_figures
 from .disturbance_library import DisturbanceLibrary
 from .files import sha256_of, write_text
 from .flight import Flight
@@ -52,6 +54,9 @@ class IdentificationRun:
     warnings : list of str
         What the data cannot support well (:func:`identification.fit_warnings.fit_warnings`): weak
         fits, short flights, barely excited axes; also in ``report.md``.
+    figures : list of callable
+        Figures ``report.md`` links but :func:`identify_and_report` was asked to leave for later
+        (``draw_figures=False``); each returns ``{key: path}``. :meth:`draw_figures` draws them.
     """
 
     identifiers: dict
@@ -62,11 +67,20 @@ class IdentificationRun:
     disturbances: list = field(default_factory=list)
     library_version: int | None = None
     warnings: list = field(default_factory=list)
+    figures: list = field(default_factory=list)
 
     @property
     def params(self) -> ModelParams:
         """The chosen identified model."""
         return self.identifiers[self.chosen].params_
+
+    def draw_figures(self) -> dict:
+        """Draw the figures left for later (:attr:`figures`); add them to :attr:`paths` and return them."""
+        drawn = {}
+        while self.figures:
+            drawn.update(self.figures.pop(0)())
+        self.paths.update(drawn)
+        return drawn
 
 
 def _truth_of(flight: Flight, path) -> ModelParams | None:
@@ -217,7 +231,8 @@ def wind_table(ident) -> str:
 def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), identifier_kwargs=None,
                         flight_paths=None, plots: bool = True, disturbances: bool = True,
                         progress: bool | None = None, wind_flights=None, model_extra=None,
-                        backend=None, method: str = "ml") -> IdentificationRun:
+                        backend=None, method: str = "ml", draw_figures: bool = True,
+                        stage=None) -> IdentificationRun:
     """Identify, validate and write ``model.json`` + ``report.md`` (+ figures) into ``out_dir``.
 
     Parameters
@@ -253,11 +268,20 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
     method : {"ml", "integral"}
         The estimator (:data:`METHODS`): maximum likelihood with a wind state (default; the library then
         stores the smoother's wind) or the integral method of Fig. 5 (the library stores eq. 46's profile).
+    draw_figures : bool
+        With ``plots``: draw the figures before returning (default), or leave them to
+        :meth:`IdentificationRun.draw_figures` (``report.md`` links them either way), so that a caller
+        can show the numbers first.
+    stage : callable, optional
+        Called with a few words as each step starts (``"fitting ..."``), e.g. to show progress.
     """
+    stage = stage or (lambda text: None)
     flights = [flights] if isinstance(flights, Flight) else list(flights)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     kw = dict(identifier_kwargs or {})
+    how = "by maximum likelihood" if method == "ml" else "by the integral method"
+    stage(f"fitting the decoupled and coupled models {how} ({sum(f.duration for f in flights):.0f} s of flight)")
     identifiers = {
         "decoupled": make_identifier(method, "decoupled", **kw).fit(flights),
         "coupled": make_identifier(method, "coupled", **({**kw, "select_terms": True} if method == "ml" else kw)
@@ -267,6 +291,7 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
     first = identifiers[chosen].flights_[0]  # filtered as identified
     # the share of each axis' rate the sticks explain: the ML fit's simulation, the integral fit's R²
     warnings = fit_warnings(flights, {a: f.r2 for a, f in identifiers[chosen].axes_.items()})
+    stage("validating both models by forward simulation")
     validation = validate_models(first, {lab: ident.params_ for lab, ident in identifiers.items()})
     truth = _truth_of(flights[0], (flight_paths or [None])[0])
 
@@ -280,9 +305,9 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
         sources=sources, extra=model_extra,
     )
     paths = {"model": model_path}
+    figures = []
     if plots:
-        paths["rates_png"] = plot_rate_fit(validation, out / "rates.png")
-        paths["attitude_png"] = plot_attitude_fit(validation, out / "attitude.png")
+        figures.append(partial(_fit_figures, validation, out))
     profiles, dist_md, library_version = [], [], None
     if disturbances:
         from tqdm import tqdm
@@ -293,20 +318,21 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
         chosen_flights = range(len(flights)) if wind_flights is None else [int(i) for i in wind_flights]
         show = (len(chosen_flights) > 1) if progress is None else progress
         done = None
+        stage(f"identifying the wind of {len(chosen_flights)} flight{'s' if len(chosen_flights) != 1 else ''}")
         winds = {i: ident.wind_torque(i) for i in chosen_flights} if hasattr(ident, "wind_torque") else {}
         if backend is not None:
             from .fleet import disturbances_of
 
             done = disturbances_of([flights[i] for i in chosen_flights], ident.params_, backend=backend,
                                    progress=show, wind_torques=[winds.get(i) for i in chosen_flights])
-        for n, i in enumerate(tqdm(chosen_flights, desc="disturbance profiles", unit="flight",
-                                   disable=not show or done is not None)):
+        for n, i in enumerate(tqdm(chosen_flights, desc="disturbance profiles", unit="flight", leave=False,
+                                   disable=not show or done is not None or not sys.stderr.isatty())):
             flight = flights[i]
             profile = (identify_disturbance(flight, ident.params_, wind_torque=winds.get(i)) if done is None
                        else done[n])
             profiles.append(profile)
             prefix = f"disturbance_{i + 1}" if len(flights) > 1 else "disturbance"
-            section = [f"### {names[i]}", "", profile.markdown()]
+            section = [profile.markdown(title=f"{names[i]}: wind disturbance (Sections 2.5.3, 3.3)")]
             true_ud = _true_wind(flight_paths[i] if flight_paths else None, flight)
             if true_ud is not None:
                 cmp = compare_with_truth(profile, true_ud)
@@ -315,9 +341,8 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
                 section += [f"| {a} | {v['correlation']:.3f} | {v['rms_error']:.4f} | {v['rms_truth']:.4f} |"
                             for a, v in cmp.items()]
             if plots:
-                figs = save_figures(profile, out, true_ud=true_ud, prefix=prefix)
-                paths.update({f"{prefix}_{k}": v for k, v in figs.items()})
-                section += [""] + [f"![{k}]({v.name})" for k, v in figs.items()]
+                figures.append(partial(_wind_figures, profile, out, true_ud, prefix))
+                section += [""] + [f"![{k}]({prefix}_{k}.png)" for k in figure_names(profile)]
             dist_md += section + [""]
         library_version = library.append(profiles, model_sha256=model_sha)  # one new version per run
         paths["library"] = out / "disturbances"
@@ -349,6 +374,7 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
             md += [f"Coupled model: {', '.join(dropped)} left out (—): the data do not support them "
                    "(|value| < 3 standard errors; each dropped in turn, weakest first, and the axis refitted).", ""]
         wind_md = wind_table(ident)
+        stage("fitting the integral method for comparison")
         reference = IntegralIdentifier(structure=chosen).fit(flights)
         md += ["## Wind model and sensor noise (maximum likelihood)", "", wind_md, "",
                "## The integral method (Fig. 5) on the same flights, for comparison", "",
@@ -369,7 +395,21 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
                f"Identified with the {chosen} model and appended to the disturbance library "
                f"`disturbances/` as version {library_version}.", ""] + dist_md
     paths["report"] = write_text(out / "report.md", "\n".join(md) + "\n")
-    return IdentificationRun(identifiers, chosen, validation, truth, paths, profiles, library_version, warnings)
+    run = IdentificationRun(identifiers, chosen, validation, truth, paths, profiles, library_version, warnings,
+                            figures)
+    if draw_figures and figures:
+        stage("drawing the figures")
+        run.draw_figures()
+    return run
+
+
+def _fit_figures(validation, out: Path) -> dict:
+    return {"rates_png": plot_rate_fit(validation, out / "rates.png"),
+            "attitude_png": plot_attitude_fit(validation, out / "attitude.png")}
+
+
+def _wind_figures(profile, out: Path, true_ud, prefix: str) -> dict:
+    return {f"{prefix}_{k}": v for k, v in save_figures(profile, out, true_ud=true_ud, prefix=prefix).items()}
 
 
 def source_entry(path, sha256: str | None = None) -> dict:

@@ -494,7 +494,11 @@ def _model_styles(labels):
     return {lab: {"color": f"C{i}", "ls": dashes[i % len(dashes)]} for i, lab in enumerate(labels)}
 
 
-def plot_rate_fit(result: ValidationResult, path, windows=None):
+RATE_FIT_TITLE = "Body rates: measured vs forward-simulated models (cf. paper Figs. 9-14)"
+"""The title of :func:`plot_rate_fit`'s figure unless told otherwise."""
+
+
+def plot_rate_fit(result: ValidationResult, path, windows=None, title: str = RATE_FIT_TITLE):
     """Measured vs modelled body rates, the analog of Figs. 9-14 (residual: Fig. 11).
 
     For each axis: the whole flight (Figs. 9, 12, 13a) with the close-up
@@ -511,6 +515,8 @@ def plot_rate_fit(result: ValidationResult, path, windows=None):
         Close-up windows ``(t_start, t_end)`` [s] used on every axis. Default:
         per axis, the two 10 s windows where the measured rate varies most
         (:func:`pick_windows`).
+    title : str
+        The figure's title (default :data:`RATE_FIT_TITLE`).
 
     Returns
     -------
@@ -570,7 +576,7 @@ def plot_rate_fit(result: ValidationResult, path, windows=None):
         ax_r[1].set_xlabel("time [s]")
         for ax in (ax_full, ax_res):
             ax.grid(alpha=0.3)
-    fig.suptitle("Body rates: measured vs forward-simulated models (cf. paper Figs. 9-14)", fontsize=13)
+    fig.suptitle(title, fontsize=13)
     fig.subplots_adjust(left=0.06, right=0.985, top=0.93, bottom=0.05)
     return save_figure(fig, path, dpi=_DPI)
 
@@ -614,7 +620,7 @@ def plot_attitude_fit(result: ValidationResult, path):
             ax.plot(t, sims[lab][i], **styles[lab], lw=0.9,
                     label=f"{lab} (MAE {s['mae_deg']:.2f}°, std {s['std_deg']:.2f}°)")
             ax_res.plot(t, meas[i] - sims[lab][i], **styles[lab], lw=0.8, label=lab)
-        ax.set_title(f"Measured vs quaternion-derived {names[i]}", loc="left", fontsize=11)
+        ax.set_title(names[i].capitalize(), loc="left", fontsize=11)  # short: the legend shares its line
         ax.set_ylabel(f"detrended {axis} [deg]")
         ax.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), fontsize=8, ncol=1 + len(labels),
                   frameon=False, borderaxespad=0.1)
@@ -627,8 +633,8 @@ def plot_attitude_fit(result: ValidationResult, path):
         a.set_xlabel("time [s]")
     axes[0, 0].set_xlim(t[0], t[-1])
     fig.suptitle(
-        f"Attitude after removing a piecewise-linear trend over {result.period:g} s pieces "
-        "(cf. paper Figs. 15-18)", fontsize=13,
+        f"Attitude: measured vs the models' quaternion-derived angles, after removing a piecewise-linear trend "
+        f"over {result.period:g} s pieces (cf. paper Figs. 15-18)", fontsize=13,
     )
     fig.tight_layout()
     return save_figure(fig, path, dpi=_DPI)

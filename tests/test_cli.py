@@ -153,6 +153,27 @@ def test_identify_prints_a_summary(flight_csv, capsys, tmp_path):
     assert f"wrote {tmp_path / 'model.json'}" in out
 
 
+def test_identify_prints_the_numbers_before_drawing_the_figures(flight_csv, tmp_path, capsys):
+    out = tmp_path / "DIR"
+    assert main(["identify", str(flight_csv), "--out", str(out), "--method", "integral"]) == 0
+    captured = capsys.readouterr()
+    lines = captured.out.splitlines()
+    figures = [i for i, line in enumerate(lines) if line.endswith(".png")]
+    assert figures and lines.index(f"wrote {out / 'report.md'}") < min(figures)
+    assert all((out / name).exists() for name in ("rates.png", "attitude.png", "disturbance_simulation.png"))
+    # stderr is no terminal here: one line per stage, the figures last
+    stages = captured.err.splitlines()
+    assert stages[0].startswith("identify: fitting the decoupled and coupled models by the integral method")
+    assert stages[-1] == "identify: drawing the figures ..."
+
+
+def test_identify_quiet_prints_no_progress(flight_csv, tmp_path, capsys):
+    assert main(["--quiet", "identify", str(flight_csv), "--out", str(tmp_path), "--no-plots", "--method",
+                 "integral"]) == 0
+    captured = capsys.readouterr()
+    assert captured.err == "" and captured.out.startswith("identified decoupled model")
+
+
 def test_identify_flight_with_nan_exits_2_naming_the_column(flight_csv, tmp_path, capsys):
     lines = flight_csv.read_text().splitlines()
     row = lines[101].split(",")  # data row 100, t = 1.00 s

@@ -1,0 +1,40 @@
+"""heli_cli.progress: one line per stage off a terminal, a transient status line on one, nothing with --quiet."""
+
+from __future__ import annotations
+
+import io
+
+from heli_cli.progress import Progress
+
+
+class _Terminal(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_off_a_terminal_each_stage_is_one_line():
+    stream = io.StringIO()
+    with Progress("identify", stream=stream) as progress:
+        progress.stage("fitting roll/pitch/yaw")
+        progress.stage("drawing the figures")
+    assert stream.getvalue() == "identify: fitting roll/pitch/yaw ...\nidentify: drawing the figures ...\n"
+    assert progress.bars
+
+
+def test_quiet_shows_nothing_and_turns_the_library_bars_off():
+    stream = _Terminal()
+    with Progress("sweep", quiet=True, stream=stream) as progress:
+        progress.stage("replaying")
+    assert stream.getvalue() == ""
+    assert not progress.bars
+
+
+def test_on_a_terminal_a_stage_is_a_status_line_erased_when_done():
+    stream = _Terminal()
+    progress = Progress("train", stream=stream)
+    progress.stage("loading stable-baselines3")
+    shown = stream.getvalue()
+    assert "train: loading stable-baselines3 ..." in shown and "\n" not in shown
+    progress.done()
+    assert stream.getvalue().endswith("\r")  # the line is cleared, the cursor back at its start
+    assert progress.terminal
