@@ -46,24 +46,38 @@ def run(args) -> int:
     from identification.model_file import load_model
     from identification.report import source_entry
 
+    from .progress import progress_of
+
     flight = read_flight(args.flight)
     model = document = None
     if args.model is not None:
         model, document = load_model(args.model)
-    if args.method == "ml":
-        return _run_ml(args, flight, model, document, source_entry(args.flight))
-    from identification.diagnose import ALPHA, MIN_GAIN, Diagnoser
-    from identification.diagnose_report import diagnose_and_report
+    with progress_of(args) as progress:
+        if args.method == "ml":
+            return _run_ml(args, flight, model, document, source_entry(args.flight), progress)
+        from identification.diagnose import ALPHA, MIN_GAIN, Diagnoser
+        from identification.diagnose_report import diagnose_and_report
 
-    diagnoser = Diagnoser(folds=args.folds, window=args.window,
-                          alpha=ALPHA if args.alpha is None else args.alpha,
-                          min_gain=MIN_GAIN if args.min_gain is None else args.min_gain, progress=True)
-    run_ = diagnose_and_report(flight, args.out, model=model, model_document=document,
-                               source=source_entry(args.flight), plots=not args.no_plots, diagnoser=diagnoser)
-    return _print_run(run_, lambda s: (
-        f"held-out MAE {s.gap_before['mae_deg_s']:.3f} -> {s.gap_after['mae_deg_s']:.3f} deg/s, gain "
-        f"{100 * s.gain:.1f} %, p {s.p_value:.2g}; "
-        + (f"runner-up {s.runner_up} by {100 * s.margin:.1f} %" if s.runner_up else "no runner-up")))
+        diagnoser = Diagnoser(folds=args.folds, window=args.window,
+                              alpha=ALPHA if args.alpha is None else args.alpha,
+                              min_gain=MIN_GAIN if args.min_gain is None else args.min_gain, progress=progress.bars)
+        progress.stage(f"diagnosing {args.flight} by held-out forward simulation (every catalogue effect on "
+                       "every axis)")
+        run_ = diagnose_and_report(flight, args.out, model=model, model_document=document,
+                                   source=source_entry(args.flight), plots=not args.no_plots, diagnoser=diagnoser,
+                                   draw_figures=False)
+        progress.done()
+        _print_run(run_, lambda s: (
+            f"held-out MAE {s.gap_before['mae_deg_s']:.3f} -> {s.gap_after['mae_deg_s']:.3f} deg/s, gain "
+            f"{100 * s.gain:.1f} %, p {s.p_value:.2g}; "
+            + (f"runner-up {s.runner_up} by {100 * s.margin:.1f} %" if s.runner_up else "no runner-up")))
+        if run_.figures:
+            progress.stage("drawing the figures")
+            drawn = run_.draw_figures()
+            progress.done()
+            for path in drawn.values():
+                print(f"wrote {path}")
+    return 0
 
 
 def _print_run(run_, evidence) -> int:
@@ -83,18 +97,18 @@ def _print_run(run_, evidence) -> int:
     return 0
 
 
-def _run_ml(args, flight, model, document, source) -> int:
-    from identification.ml_diagnosis import ALPHA, MIN_LR_ALIGNMENT, MIN_LR_PER_PARAMETER, LikelihoodDiagnoser
+def _run_ml(args, flight, model, document, source, progress) -> int:
+    from identification.ml_diagnosis import ALPHA, MIN_LR_PER_PARAMETER, LikelihoodDiagnoser
     from identification.ml_diagnosis_report import diagnose_by_likelihood
 
-    print(f"diagnosing {args.flight} by likelihood (every catalogue effect on every axis) ...", flush=True)
+    progress.stage(f"diagnosing {args.flight} by likelihood (every catalogue effect on every axis"
+                   + (", then the figures)" if not args.no_plots else ")"))
     diagnoser = LikelihoodDiagnoser(alpha=ALPHA if args.alpha is None else args.alpha,
                                     min_lr_per_parameter=MIN_LR_PER_PARAMETER if args.min_lr is None else args.min_lr,
-                                    min_lr_alignment=(MIN_LR_ALIGNMENT if args.min_lr_alignment is None
-                                                      else args.min_lr_alignment),
                                     input_hold=args.input_hold)
     run_ = diagnose_by_likelihood(flight, args.out, model=model, model_document=document, source=source,
                                   plots=not args.no_plots, diagnoser=diagnoser)
+    progress.done()
     return _print_run(run_, lambda s: (
         f"LR {s.lr:.1f} > {s.threshold:.1f}; 0.5 s-ahead R² {s.r2_before['ahead_0.5s']:.3f} -> "
         f"{s.r2_after['ahead_0.5s']:.3f}; "

@@ -42,6 +42,7 @@ identified at all.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -188,7 +189,7 @@ class Diagnoser:
     min_duration, min_windows, min_r2 : float, int, float
         Reliability limits (module docstring).
     progress : bool
-        Progress bar over the candidates.
+        Progress bar over the candidates (on a terminal only).
 
     Attributes
     ----------
@@ -354,8 +355,8 @@ class Diagnoser:
             if not todo:
                 break
             cands = []
-            for effect, a in tqdm(todo, desc=f"diagnose round {rnd}", unit="candidate", disable=not self.progress,
-                                  leave=False):
+            for effect, a in tqdm(todo, desc=f"diagnose round {rnd}", unit="candidate", leave=False,
+                                  disable=not self.progress or not sys.stderr.isatty()):
                 c = self._evaluate(held, spec, base, effect, a)
                 if c is not None:
                     cands.append(c)

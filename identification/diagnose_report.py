@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -48,11 +49,23 @@ class DiagnosisRun:
         The content of ``diagnosis.json``.
     paths : dict of str to Path
         Files written.
+    figures : list of callable
+        Figures ``diagnosis.md`` links but :func:`diagnose_and_report` was asked to leave for later
+        (``draw_figures=False``); each returns ``{key: path}``. :meth:`draw_figures` draws them.
     """
 
     diagnoser: Diagnoser
     document: dict
     paths: dict = field(default_factory=dict)
+    figures: list = field(default_factory=list)
+
+    def draw_figures(self) -> dict:
+        """Draw the figures left for later (:attr:`figures`); add them to :attr:`paths` and return them."""
+        drawn = {}
+        while self.figures:
+            drawn.update(self.figures.pop(0)())
+        self.paths.update(drawn)
+        return drawn
 
 
 def criterion_text(d: Diagnoser) -> str:
@@ -225,7 +238,11 @@ def plot_residual_tests(d: Diagnoser, path):
 
 
 def plot_worst_windows(d: Diagnoser, path):
-    """Measured vs held-out simulated rates before and after, in each axis' worst window before."""
+    """Measured vs held-out simulated rates before and after, in each axis' worst window before.
+
+    The y-axis spans the measured and simulated rates; a simulation that diverges in the window is
+    clipped and its legend entry says how far it went (:func:`window_limits`).
+    """
     from .validation import _pyplot
 
     plt = _pyplot()
@@ -237,9 +254,13 @@ def plot_worst_windows(d: Diagnoser, path):
         for j, w in enumerate(np.argsort(b.mse[i])[::-1][:2]):
             ax = axes[i, j]
             t = d.flight_.time[held.starts[w]] + t_rel
-            ax.plot(t, np.degrees(b.measured[i, w]), color="black", lw=1, label="measured")
-            ax.plot(t, np.degrees(b.simulated[i, w]), color="C3", ls="--", label="before")
-            ax.plot(t, np.degrees(a.simulated[i, w]), color="C0", label="after")
+            measured = np.degrees(b.measured[i, w])
+            simulated = {"before": np.degrees(b.simulated[i, w]), "after": np.degrees(a.simulated[i, w])}
+            (lo, hi), notes = window_limits(measured, simulated)
+            ax.plot(t, measured, color="black", lw=1, label="measured")
+            for label, style in (("before", {"color": "C3", "ls": "--"}), ("after", {"color": "C0"})):
+                ax.plot(t, simulated[label], **style, label=label + notes[label])
+            ax.set_ylim(lo, hi)
             ax.set_title(f"{axis} rate, held-out window {t[0]:.0f}-{t[-1]:.0f} s", loc="left", fontsize=10)
             ax.set_ylabel("deg/s")
             ax.grid(alpha=0.3)
@@ -250,10 +271,45 @@ def plot_worst_windows(d: Diagnoser, path):
     return save_figure(fig, path, dpi=110)
 
 
+def window_limits(measured, simulated: dict, pad: float = 0.1, diverged: float = 3.0):
+    """y-limits of a window's plot and a legend note per simulated curve.
+
+    The limits span the measured rate and every simulated curve that stays within ``diverged`` times
+    the measured span of it, plus ``pad`` of the span; a curve that goes further (a model diverging in
+    the window) would flatten the comparison, so it is clipped and its note says how far it went.
+
+    Parameters
+    ----------
+    measured : ndarray, shape (n,)
+        Measured rate [deg/s].
+    simulated : dict of str to ndarray, shape (n,)
+        Simulated rates by label [deg/s].
+
+    Returns
+    -------
+    (float, float), dict of str to str
+        ``(low, high)`` and per label ``""`` or ``" (diverged: up to N deg/s, clipped)"``.
+    """
+    lo, hi = float(np.nanmin(measured)), float(np.nanmax(measured))
+    reach = diverged * max(hi - lo, 1.0)
+    notes = {}
+    for label, values in simulated.items():
+        finite = values[np.isfinite(values)]
+        if finite.size == values.size and finite.min() >= lo - reach and finite.max() <= hi + reach:
+            notes[label] = ""
+            continue
+        peak = float(np.abs(finite).max()) if finite.size else float("nan")
+        notes[label] = f" (diverged: up to {peak:.0f} deg/s, clipped)" if finite.size else " (diverged, clipped)"
+    kept = [measured] + [v for label, v in simulated.items() if not notes[label]]
+    low, high = min(float(np.min(v)) for v in kept), max(float(np.max(v)) for v in kept)
+    margin = pad * max(high - low, 1.0)
+    return (low - margin, high + margin), notes
+
+
 # ------------------------------------------------------------------------ runner
 def diagnose_and_report(flight: Flight, out_dir, *, model: ModelParams | None = None, model_document=None,
                         source: dict | None = None, plots: bool = True, diagnoser: Diagnoser | None = None,
-                        progress: bool = False) -> DiagnosisRun:
+                        progress: bool = False, draw_figures: bool = True) -> DiagnosisRun:
     """Diagnose ``flight`` and write the outputs into ``out_dir``.
 
     Parameters
@@ -273,6 +329,9 @@ def diagnose_and_report(flight: Flight, out_dir, *, model: ModelParams | None = 
         Settings (default :class:`Diagnoser` with ``progress``).
     progress : bool
         Progress bar over the candidate search.
+    draw_figures : bool
+        With ``plots``: draw the figures before returning (default), or leave them to
+        :meth:`DiagnosisRun.draw_figures` (``diagnosis.md`` links them either way).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -284,15 +343,22 @@ def diagnose_and_report(flight: Flight, out_dir, *, model: ModelParams | None = 
         paths["model"] = model_path
         paths["library"] = out / "disturbances"
     doc = diagnosis_document(d, source, model_path)
-    figures = {}
+    figures, pending = {}, []
     if plots and d.baseline_score_ is not None:
-        figures["residual tests"] = plot_residual_tests(d, out / "diagnosis_residuals.png")
-        figures["worst held-out windows, before and after"] = plot_worst_windows(d, out / "diagnosis_windows.png")
-        paths.update({"residuals_png": figures["residual tests"],
-                      "windows_png": figures["worst held-out windows, before and after"]})
+        figures = {"residual tests": out / "diagnosis_residuals.png",
+                   "worst held-out windows, before and after": out / "diagnosis_windows.png"}
+        pending.append(partial(_figures, d, out))
     paths["json"] = write_text(out / "diagnosis.json", json.dumps(doc, indent=2, allow_nan=False) + "\n")
     paths["markdown"] = write_text(out / "diagnosis.md", diagnosis_markdown(d, doc, figures))
-    return DiagnosisRun(d, doc, paths)
+    run = DiagnosisRun(d, doc, paths, pending)
+    if draw_figures:
+        run.draw_figures()
+    return run
+
+
+def _figures(d: Diagnoser, out: Path) -> dict:
+    return {"residuals_png": plot_residual_tests(d, out / "diagnosis_residuals.png"),
+            "windows_png": plot_worst_windows(d, out / "diagnosis_windows.png")}
 
 
 def _write_model(d: Diagnoser, flight: Flight, out: Path, model_document, source) -> Path:

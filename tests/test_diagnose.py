@@ -148,6 +148,20 @@ def test_cli_writes_diagnosis_and_a_model_the_env_and_pd_accept(tmp_path):
     assert len(design_gains(params).kp) == 3
 
 
+def test_a_diverging_simulation_is_clipped_and_named_in_the_windows_plot():
+    from identification.diagnose_report import window_limits
+
+    t = np.linspace(0, 4, 400)
+    measured = 10 * np.sin(t)
+    close = 12 * np.sin(t)  # a fair model that overshoots: shown whole
+    diverged = np.where(t < 0.5, measured, 2000.0)
+    (lo, hi), notes = window_limits(measured, {"before": diverged, "after": close})
+    assert lo < close.min() and close.max() < hi < 20  # the 2000 deg/s do not flatten the comparison
+    assert notes == {"before": " (diverged: up to 2000 deg/s, clipped)", "after": ""}
+    _, notes = window_limits(measured, {"before": np.full_like(t, np.nan)})
+    assert notes == {"before": " (diverged, clipped)"}
+
+
 # ------------------------------------------------------------------ bad input and pieces
 def test_bad_settings_and_inputs_raise_named_errors():
     flight = _flight(seed=1, duration=30.0)
