@@ -772,7 +772,9 @@ def plot_bode(params: ModelParams, axis, kp: float, kd: float, path, dt: float =
     if dt:
         for ax in (ax_m, ax_p):
             ax.axvline(math.pi / dt, color="0.5", lw=0.8)
-        ax_m.text(math.pi / dt, ax_m.get_ylim()[1], " Nyquist", ha="right", va="top", fontsize=8, color="0.4")
+        # placed in axes height (not data), so the final limits cannot push it out of the frame
+        ax_m.text(math.pi / dt, 0.97, "Nyquist ", transform=ax_m.get_xaxis_transform(), ha="right", va="top",
+                  fontsize=8, color="0.4")
     ax_m.set_ylabel("|L| [dB]")
     ax_p.set_ylabel("phase L [deg]")
     ax_p.set_xlabel("frequency [rad/s]")

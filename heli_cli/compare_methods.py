@@ -35,12 +35,14 @@ def register(sub):
     p.add_argument("--quick", action="store_true",
                    help="cap each NLR run at a few objective evaluations and time fewer repeats (for a fast "
                    "look; the NLR figures are then indicative only)")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, out_kind="dir")
 
 
 def run(args) -> int:
     from identification.io import read_flight
     from identification.method_comparison import QUICK_NLR_MAX_NFEV, compare_methods
+
+    from .progress import progress_of
 
     flight = read_flight(args.flight)
     truth = load_truth_if_any(args.flight)
@@ -56,8 +58,10 @@ def run(args) -> int:
         kwargs = {"nlr_max_nfev": QUICK_NLR_MAX_NFEV, "repeats": {"integral": 5, "ekf": 1, "nlr": 1}, "quick": True}
         print(f"--quick: NLR limited to {QUICK_NLR_MAX_NFEV} objective evaluations per start, integral timed "
               "5 times, EKF once; run without --quick for the real figures.")
-    result = compare_methods(flight, axis=args.axis, truth=truth, progress=not args.quiet,
-                             validation=validation, validation_truth=validation_truth, **kwargs)
+    with progress_of(args) as progress:
+        result = compare_methods(flight, axis=args.axis, truth=truth, progress=progress.bars,
+                                 validation=validation, validation_truth=validation_truth, stage=progress.items,
+                                 **kwargs)
     print(result.markdown())
     paths = result.save(args.out)
     for path in paths.values():

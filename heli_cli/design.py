@@ -50,10 +50,11 @@ def register(sub):
     p.add_argument("--dt", type=number("a control period in s, 0 < dt < 1", 0.0, 1.0),
                    default=0.01, help="control period in s (default 0.01, the env's)")
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
-    p.set_defaults(func=run)
+    p.add_argument("--no-plots", action="store_true", help="do not draw step.png and the Bode figures")
+    p.set_defaults(func=run, out_kind="dir")
 
 
-def design_markdown(model_path, analyses, phase_margin, bandwidth) -> str:
+def design_markdown(model_path, analyses, phase_margin, bandwidth, plots: bool = True) -> str:
     """The design report: one row per axis of :meth:`controllers.pd.LoopAnalysis.summary`."""
     asked = "default (5 x rate pole)" if bandwidth is None else f"{bandwidth} rad/s"
     lines = [
@@ -73,39 +74,51 @@ def design_markdown(model_path, analyses, phase_margin, bandwidth) -> str:
                      f"{f(s['gain_margin_db'], '.1f')} | {f(s['gain_crossover_rad_s'])} | "
                      f"{f(s['bandwidth_rad_s'])} | {f(s['max_pole_radius'], '.4f')} | {'yes' if an.stable else 'NO'} |")
     lines += ["", "Control law per axis: `a = clip(sign(k)·(kp·e_angle + kd·e_rate), −1, 1)` on the "
-              "environment's observation.", "", "![step responses](step.png)", ""]
-    lines += [f"![Bode {an.axis}](bode_{an.axis}.png)" for an in analyses]
+              "environment's observation.", ""]
+    if plots:
+        lines += ["![step responses](step.png)", ""] + [f"![Bode {an.axis}](bode_{an.axis}.png)" for an in analyses]
     return "\n".join(lines) + "\n"
 
 
 def run(args) -> int:
+    from controllers.errors import DesignError
     from controllers.pd import PDController, design_gains, loop_analysis, plot_bode, plot_step_responses
     from heli_env.model_dir import load_env_model
-    from controllers.errors import DesignError
     from identification.files import write_text
 
-    env_model = load_env_model(args.model)
-    params = env_model.params
-    try:
-        gains = design_gains(params, bandwidth=args.bandwidth, phase_margin=args.phase_margin, dt=args.dt)
-    except ValueError as e:  # an infeasible request: the message says what is achievable
-        raise DesignError(str(e)) from e
-    analyses = [loop_analysis(params, ax, gains.kp[i], gains.kd[i], args.dt) for i, ax in enumerate(AXES)]
-    out = Path(args.out)
-    pd = PDController.from_model(params, gains)
-    paths = [pd.save(out / "pd.json", {"model": str(env_model.path), "how": "heli design",
-                                       "phase_margin_deg": args.phase_margin, "bandwidth_rad_s": args.bandwidth,
-                                       "dt": args.dt, "analysis": [an.summary() for an in analyses]})]
-    paths.append(plot_step_responses(params, gains, out / "step.png", dt=args.dt))
-    paths += [plot_bode(params, an.axis, an.kp, an.kd, out / f"bode_{an.axis}.png", dt=args.dt) for an in analyses]
-    paths.append(write_text(out / "design.md", design_markdown(env_model.path, analyses, args.phase_margin,
-                                                               args.bandwidth)))
-    for an in analyses:
-        s = an.summary()
-        print(f"  {an.axis:5s}: kp {an.kp:.4g} stick/rad, kd {an.kd:.4g} stick/(rad/s); phase margin "
-              f"{an.phase_margin:.1f} deg, gain margin {an.gain_margin_db:.1f} dB, crossover "
-              f"{an.gain_crossover:.3g} rad/s, bandwidth {an.bandwidth:.3g} rad/s, "
-              f"{'stable' if s['stable'] else 'UNSTABLE'}")
-    for path in paths:
-        print(f"wrote {path}")
+    from .progress import progress_of
+
+    with progress_of(args) as progress:
+        progress.stage("designing the PD gains and analysing each axis' loop")
+        env_model = load_env_model(args.model)
+        params = env_model.params
+        try:
+            gains = design_gains(params, bandwidth=args.bandwidth, phase_margin=args.phase_margin, dt=args.dt)
+        except ValueError as e:  # an infeasible request: the message says what is achievable
+            raise DesignError(str(e)) from e
+        analyses = [loop_analysis(params, ax, gains.kp[i], gains.kd[i], args.dt) for i, ax in enumerate(AXES)]
+        out = Path(args.out)
+        pd = PDController.from_model(params, gains)
+        paths = [pd.save(out / "pd.json", {"model": str(env_model.path), "how": "heli design",
+                                           "phase_margin_deg": args.phase_margin, "bandwidth_rad_s": args.bandwidth,
+                                           "dt": args.dt, "analysis": [an.summary() for an in analyses]}),
+                 write_text(out / "design.md", design_markdown(env_model.path, analyses, args.phase_margin,
+                                                               args.bandwidth, plots=not args.no_plots))]
+        progress.done()
+        for an in analyses:
+            s = an.summary()
+            print(f"  {an.axis:5s}: kp {an.kp:.4g} stick/rad, kd {an.kd:.4g} stick/(rad/s); phase margin "
+                  f"{an.phase_margin:.1f} deg, gain margin {an.gain_margin_db:.1f} dB, crossover "
+                  f"{an.gain_crossover:.3g} rad/s, bandwidth {an.bandwidth:.3g} rad/s, "
+                  f"{'stable' if s['stable'] else 'UNSTABLE'}")
+        for path in paths:
+            print(f"wrote {path}")
+        if not args.no_plots:
+            progress.stage("drawing the step responses and Bode figures")
+            figures = [plot_step_responses(params, gains, out / "step.png", dt=args.dt)]
+            figures += [plot_bode(params, an.axis, an.kp, an.kd, out / f"bode_{an.axis}.png", dt=args.dt)
+                        for an in analyses]
+            progress.done()
+            for path in figures:
+                print(f"wrote {path}")
     return 0

@@ -38,7 +38,7 @@ def register(sub):
     p.add_argument("--min-gain", type=number("a number in (0, 1)", 0.0, 1.0), default=None,
                    help="integral: smallest held-out improvement accepted, as a fraction (default 0.05)")
     p.add_argument("--no-plots", action="store_true", help="do not draw PNG figures")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, out_kind="dir")
 
 
 def run(args) -> int:

@@ -29,7 +29,7 @@ def register(sub):
                    default=30.0, help="episode length in s (default 30)")
     p.add_argument("--seed", type=whole(0), default=0, help="seed of the gust windows (default 0)")
     p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, out_kind="dir")
 
 
 def run(args) -> int:

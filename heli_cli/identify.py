@@ -72,7 +72,7 @@ def register(sub):
     p.add_argument("--no-disturbances", action="store_true",
                    help="do not identify wind profiles nor write the disturbance library")
     add_flight_backend_options(p)
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, out_kind="dir")
 
 
 def run(args) -> int:

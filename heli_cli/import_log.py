@@ -64,7 +64,7 @@ def register(sub):
     p.add_argument("--allow-damaged", action="store_true",
                    help="import what decodes from a log damaged in the middle (corrupt frames or messages) instead "
                    "of failing; a log whose last message is cut needs no flag")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, out_kind="file")
 
 
 def meta_path(out):
@@ -98,14 +98,18 @@ def run(args) -> int:
     from identification.io import read_log, write_csv_flight
     from identification.io.raw_log import rate_attitude_agreement
 
+    from .progress import progress_of
+
     if args.list:
         return _print_list(args.log, args.allow_damaged)
     if not args.out:
         print("heli import: error: --out FLIGHT.csv is required (or --list to see the logs in the file)",
               file=sys.stderr)
         return 2
-    flight = read_log(args.log, inputs=args.inputs, segment=args.segment, rate=args.rate,
-                      calibration=args.calibration, allow_damaged=args.allow_damaged, log=args.log_n)
+    with progress_of(args) as progress:
+        progress.stage(f"reading {args.log}")
+        flight = read_log(args.log, inputs=args.inputs, segment=args.segment, rate=args.rate,
+                          calibration=args.calibration, allow_damaged=args.allow_damaged, log=args.log_n)
     measured = flight.metadata.get("attitude_source") == "measured"
     agreement = rate_attitude_agreement(flight) if measured else None
     meta = {**dict(flight.metadata), "rate_attitude_correlation": agreement}

@@ -124,6 +124,31 @@ def command_names() -> list:
     return list(sub.choices)
 
 
+def check_output(path, kind: str) -> None:
+    """Refuse an output path the command could not write, before any work is done.
+
+    ``kind`` is ``"file"`` (the path will be a file) or ``"dir"`` (a folder the command fills). Raises the
+    :data:`PATH_ERRORS` a late write would have raised (one line, exit 2): the path is the wrong kind of thing,
+    lies under a file, or its nearest existing folder is not writable. Nothing is created here.
+    """
+    import errno
+    import os
+
+    path = Path(path)
+    if path.exists():
+        if kind == "dir" and not path.is_dir():
+            raise NotADirectoryError(errno.ENOTDIR, "the output folder is a file", str(path))
+        if kind == "file" and path.is_dir():
+            raise IsADirectoryError(errno.EISDIR, "the output file is a folder", str(path))
+    parent = path if kind == "dir" and path.is_dir() else path.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise NotADirectoryError(errno.ENOTDIR, "the output path lies under a file", str(parent))
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise PermissionError(errno.EACCES, "the output folder is not writable", str(parent))
+
+
 def _user_errors() -> tuple:
     """The classes of :data:`USER_ERRORS` whose modules are loaded (no other can have been raised)."""
     return tuple(getattr(sys.modules[module], name) for module, names in USER_ERRORS.items()
@@ -138,6 +163,8 @@ def main(argv=None) -> int:
         return 2
     prefix = f"heli {args.command}"
     try:
+        if getattr(args, "out", None) and getattr(args, "out_kind", None):
+            check_output(args.out, args.out_kind)
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print(f"{prefix}: interrupted", file=sys.stderr)

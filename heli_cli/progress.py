@@ -53,6 +53,12 @@ class Progress:
         """Whether the library's own progress bars may show (they show only on a terminal themselves)."""
         return not self.quiet
 
+    @property
+    def items(self):
+        """The ``stage`` callback for a library step that draws its own bar over its items on a terminal:
+        off a terminal one line per item (the bar is off there), on one None (the bar shows the item)."""
+        return None if self.quiet or self.terminal else self.stage
+
     def stage(self, text: str) -> None:
         """Announce the step that starts now, e.g. ``"fitting roll/pitch/yaw"`` (ends the previous one)."""
         self.done()

@@ -48,7 +48,7 @@ def register(sub):
                    help="an extra vibration line on every gyro axis, e.g. 27:0.03 (Hz : rad/s; repeatable)")
     p.add_argument("--input-shift", type=number("seconds", None), default=None,
                    help="shift the logged sticks in s: > 0 the log's inputs lag the response, < 0 they lead")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, out_kind="file")
 
 
 def _line(text):
@@ -67,6 +67,8 @@ def _line(text):
 def run(args) -> int:
     from identification.synthetic import simulate_flight
 
+    from .progress import progress_of
+
     try:
         cfg = _config(args)
     except ValueError as e:  # a combination the single options cannot check (e.g. a shift longer than the flight)
@@ -74,8 +76,10 @@ def run(args) -> int:
 
         print(f"heli simulate-flight: error: {e}", file=sys.stderr)
         return 2
-    result = simulate_flight(args.duration, seed=args.seed, effects=tuple(args.effect), config=cfg)
-    paths = result.save(args.out)
+    with progress_of(args) as progress:
+        progress.stage(f"flying a {args.duration:g} s flight (pilot, wind and sensors of the truth model)")
+        result = simulate_flight(args.duration, seed=args.seed, effects=tuple(args.effect), config=cfg)
+        paths = result.save(args.out)
     f = result.flight
     print(f"wrote {paths['flight']} ({f.duration:.1f} s, {f.n} samples at {f.sample_rate:.0f} Hz)")
     print(f"truth: {paths['truth']}  wind: {paths['wind']}")

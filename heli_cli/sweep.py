@@ -55,7 +55,7 @@ def register(sub):
                    "RAY_ADDRESS or a Ray instance started here (needs the 'cluster' extra); same result either way")
     p.add_argument("--workers", type=whole(1), default=None, metavar="N",
                    help="local worker processes, or CPUs of a Ray instance started here (default: all cores)")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, out_kind="dir")
 
 
 def run(args) -> int:

@@ -65,7 +65,7 @@ def register(sub):
     p.add_argument("--residual-scale", type=number("a number in (0, 2]", 0.0, 2.0, high_open=False), default=0.05,
                    metavar="STICK",
                    help="bound of the residual in stick units (default 0.05)")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, out_kind="file")
 
 
 def _residual(args) -> dict:

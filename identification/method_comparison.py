@@ -510,7 +510,7 @@ def compare_methods(flight: Flight, axis: str = "roll", nlr_starts=TABLE3_STARTS
                     truth: ModelParams | None = None, nlr_max_nfev: int | None = None, prefilter: bool = True,
                     pass_hz: float = DEFAULT_PASS_HZ, stop_hz: float = DEFAULT_STOP_HZ,
                     blas_threads: int | None = 1, quick: bool = False, validation: Flight | None = None,
-                    validation_truth: ModelParams | None = None) -> MethodComparison:
+                    validation_truth: ModelParams | None = None, stage=None) -> MethodComparison:
     """Run the integral method, NLR and the EKF on one flight and tabulate them (Tables 3-5).
 
     With ``validation``, every identified model is also scored on that second
@@ -537,6 +537,8 @@ def compare_methods(flight: Flight, axis: str = "roll", nlr_starts=TABLE3_STARTS
         ``"integral"``, ``"ekf"``, ``"nlr"``); Table 5 uses the EKF's.
     progress : bool
         Show a tqdm progress bar over the methods (only when stderr is a terminal).
+    stage : callable, optional
+        Called with each method's label as it starts (e.g. one line per method in a log).
     truth : ModelParams, optional
         True parameters of a synthetic flight: adds parameter errors and a reference row.
     nlr_max_nfev : int, optional
@@ -617,8 +619,14 @@ def compare_methods(flight: Flight, axis: str = "roll", nlr_starts=TABLE3_STARTS
 
         jobs = 1 + len(starts) + len(cases) + len(lengths)
         bar = _progress_bar(jobs, progress)
+
+        def begin(label):
+            bar.set_description(label)
+            if stage is not None:
+                stage(label)
+
         try:
-            bar.set_description("integral method")
+            begin("integral method")
             integ, cpu, wall = _timed(
                 lambda: IntegralIdentifier(structure={i: names}, axes=(axis,), prefilter=False).fit(data),
                 reps["integral"], warmup=reps["integral"] > 1)
@@ -629,7 +637,7 @@ def compare_methods(flight: Flight, axis: str = "roll", nlr_starts=TABLE3_STARTS
             nlr_runs = []
             for start in starts:
                 label = f"NLR [{', '.join(f'{v:g}' for v in start)}]"
-                bar.set_description(label)
+                begin(label)
                 est, cpu, wall = _timed(
                     lambda: NonlinearRegression(axis=axis, start=start, max_nfev=nlr_max_nfev).fit(data),
                     reps["nlr"], warmup=False)
@@ -646,7 +654,7 @@ def compare_methods(flight: Flight, axis: str = "roll", nlr_starts=TABLE3_STARTS
 
             ekf_runs = []
             for label, q, m0 in cases:
-                bar.set_description(f"EKF {label}")
+                begin(f"EKF {label}")
                 est, cpu, wall = _timed(lambda: ParameterEKF(axis=axis, q=q, m0=m0).fit(data),
                                         reps["ekf"], warmup=reps["ekf"] > 1)
                 ekf_runs.append(_run("ekf", label, {"q": q, "m0": list(m0), "r": est.r_}, est.params_, names,
@@ -657,7 +665,7 @@ def compare_methods(flight: Flight, axis: str = "roll", nlr_starts=TABLE3_STARTS
 
             length_runs = []
             for k, length in enumerate(lengths, start=1):
-                bar.set_description(f"EKF on {length:g} s")
+                begin(f"EKF on {length:g} s")
                 window = data.segment(t0, t0 + length)
                 est, cpu, wall = _timed(lambda: ParameterEKF(axis=axis, **TABLE5_EKF).fit(window),
                                         reps["ekf"], warmup=reps["ekf"] > 1)
