@@ -51,6 +51,35 @@ DESCRIPTIONS: dict[str, str] = {
 }
 """One line of physics per effect, citing the paper where it applies."""
 
+PHYSICAL_BOUNDS: dict[str, tuple[float, float, str]] = {
+    **{k: (-1.0, 1.0, "an inertia ratio such as (Iyy - Izz)/Ixx lies in [-1, 1] for any rigid body (eq. 5)")
+       for k in ("k1", "k5", "k9")},
+    **{k: (0.0, np.inf, "quadratic damping takes energy out of the rotation, so it is positive")
+       for k in ("nld1", "nld2", "nld3")},
+}
+"""Term name -> (lowest, highest, why) for the terms whose physics bounds their value. A candidate
+effect whose fitted terms fall outside is not a physical explanation of the data, whatever its
+likelihood (it fits something else: a controller's loop, a misread input)."""
+
+
+def implausible(values: dict) -> str | None:
+    """Why fitted term ``values`` (name -> value) cannot be physical, or None when they can.
+
+    Examples
+    --------
+    >>> implausible({"nld1": -3.0})
+    'nld1 = -3 outside [0, inf]: quadratic damping takes energy out of the rotation, so it is positive'
+    >>> implausible({"k1": 0.8}) is None
+    True
+    """
+    for name, value in values.items():
+        if name in PHYSICAL_BOUNDS:
+            lo, hi, why = PHYSICAL_BOUNDS[name]
+            if not lo <= value <= hi:
+                return f"{name} = {value:.3g} outside [{lo:g}, {hi:g}]: {why}"
+    return None
+
+
 MAX_ALIGNMENT = 0.6
 """Largest |time alignment| the ``servo_delay`` search covers [s]."""
 

@@ -42,9 +42,12 @@ def criterion_text(d: LikelihoodDiagnoser) -> str:
         "white gyro noise), then with each candidate effect added. A candidate is accepted when the "
         "likelihood-ratio statistic LR = 2 (NLL before - NLL after) exceeds both the chi-square quantile of its k "
         f"added parameters at 1 - {d.alpha:g}/m (m candidates on the axis, Bonferroni) and "
-        f"{d.min_lr_per_parameter:g}·k (the floor calibrated on flights without a missing effect). The best "
+        f"{d.min_lr_per_parameter:g}·k ({d.min_lr_alignment:g} for the alignment; floors calibrated on flights "
+        "without a missing effect). The best "
         "accepted candidate per axis (largest LR over its threshold) is added and the search repeats on the axes "
-        f"that changed (at most {d.max_rounds} rounds). Undecided: a flight shorter than {d.min_duration:g} s."
+        f"that changed (at most {d.max_rounds} rounds). A candidate whose fitted terms break a physical bound "
+        "(an inertia ratio outside [-1, 1], a negative quadratic damping) is not accepted, whatever its LR: it fits "
+        "something else, such as a controller's loop or a misread input. Undecided: a flight shorter than {d.min_duration:g} s."
     )
 
 
@@ -97,7 +100,8 @@ def diagnosis_markdown(d: LikelihoodDiagnoser, figure: Path | None) -> str:
                _table(["Axis", "Effect", "k", "LR", "threshold", "alignment (s)", "accepted"],
                       [[r["axis"], r["effect"], r["n_parameters"], f"{r['lr']:.1f}", f"{r['threshold']:.1f}",
                         f"{r['alignment_s']:+.3f}" if r["effect"] == "servo_delay" else "—",
-                        "**yes**" if r["accepted"] else "no"] for r in rows]), ""]
+                        "**yes**" if r["accepted"] else ("no: " + r["implausible"] if r.get("implausible") else "no")]
+                       for r in rows]), ""]
     if figure is not None:
         md += [f"![Likelihood-ratio statistics]({figure.name})", ""]
     return "\n".join(md)

@@ -13,6 +13,7 @@ telling it the truth, and counts per case:
 Usage::
 
     python scripts/likelihood_diagnosis_study.py [--seeds 20] [--duration 180] [--workers 2] [--cell NAME]
+    python scripts/likelihood_diagnosis_study.py --null-cells [--seeds 5]   # the floors' calibration
 """
 
 from __future__ import annotations
@@ -35,6 +36,10 @@ CASES = {
     "collective_torque": {"effects": ("collective_torque",)},
     "gain_scheduling": {"effects": ("gain_scheduling",)},
     "nonlinear_damping (5x)": {"truth": {k: 5 * v for k, v in EFFECTS["nonlinear_damping"].items()}},
+    # effects that scale with products or powers of the rates, at their catalogue size, on flights that
+    # reach the rates where they act (large sweeps on all sticks at once: MANOEUVRE_CONFIG)
+    "gyroscopic, manoeuvre": {"effects": ("gyroscopic",), "manoeuvre": True},
+    "nonlinear_damping, manoeuvre": {"effects": ("nonlinear_damping",), "manoeuvre": True},
 }
 TRUE_AXES = {
     "servo_delay": {"servo_delay": ("roll", "pitch", "yaw")},
@@ -44,16 +49,18 @@ TRUE_AXES = {
     "collective_torque": {"collective_torque": ("roll", "pitch")},
     "gain_scheduling": {"gain_scheduling": ("roll", "pitch", "yaw")},
     "nonlinear_damping (5x)": {"nonlinear_damping": ("roll", "pitch", "yaw")},
+    "gyroscopic, manoeuvre": {"gyroscopic": ("roll", "pitch", "yaw")},
+    "nonlinear_damping, manoeuvre": {"nonlinear_damping": ("roll", "pitch", "yaw")},
 }
 
 
 def _flight(name, seed, duration, cell):
     from identification.effects import shift_inputs
-    from identification.synthetic import PAPER_PARAMS, simulate_flight
+    from identification.synthetic import MANOEUVRE_CONFIG, PAPER_PARAMS, simulate_flight
 
     case = CASES[name]
     truth = PAPER_PARAMS.with_values(**case["truth"]) if "truth" in case else None
-    config = None
+    config = MANOEUVRE_CONFIG if case.get("manoeuvre") else None
     if cell is not None:
         from identification.bench import BENCH_CELLS
 
@@ -98,7 +105,27 @@ def _one(job):
             "named": bool(truth) and not wrong and len(ok_axes) == n_true,
             "partly": bool(truth) and not wrong and 0 < len(ok_axes) < n_true,
             "wrong": bool(wrong), "seconds": seconds,
-            "max_lr": max((r["lr"] / r["threshold"] for rows in d.rounds_[:1] for r in rows), default=0.0)}
+            "max_lr": max((r["lr"] / r["threshold"] for rows in d.rounds_[:1] for r in rows), default=0.0),
+            "cell": cell, "round1": [(r["axis"], r["effect"], r["lr"]) for rows in d.rounds_[:1] for r in rows]}
+
+
+def _null_table(rows, cells):
+    """Per candidate effect: the largest round-1 statistic on effect-free flights, per cell and over all."""
+    from identification.effects import CATALOGUE
+    from identification.ml_diagnosis import LikelihoodDiagnoser
+
+    thr_terms, thr_align = LikelihoodDiagnoser().threshold(6, 1), LikelihoodDiagnoser().threshold(6, 1, True)
+    print("\nEffect-free flights: the largest round-1 likelihood-ratio statistic of each candidate (any axis), "
+          f"against the thresholds for one parameter among six candidates ({thr_terms:.1f} for a term, "
+          f"{thr_align:.1f} for the alignment)\n")
+    print("| cell | flights | " + " | ".join(CATALOGUE) + " | flights with a wrong effect |")
+    print("|---|---|" + "---|" * len(CATALOGUE) + "---|")
+    for cell in cells + ["all"]:
+        rs = [r for r in rows if cell == "all" or r["cell"] == cell]
+        top = {e: max((lr for r in rs for _, ee, lr in r["round1"] if ee == e), default=float("nan"))
+               for e in CATALOGUE}
+        print(f"| {cell} | {len(rs)} | " + " | ".join(f"{v:.1f}" for v in top.values())
+              + f" | {sum(r['wrong'] for r in rs)}/{len(rs)} |")
 
 
 def main(argv=None):
@@ -108,10 +135,23 @@ def main(argv=None):
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES), metavar="CASE")
     ap.add_argument("--cell", default=None, help="a bench cell (identification.bench) instead of the default flight")
+    ap.add_argument("--null-cells", action="store_true",
+                    help="instead: effect-free flights of every bench cell, and the largest statistic per candidate "
+                    "(the calibration of the floors)")
     args = ap.parse_args(argv)
-    jobs = [(c, s, args.duration, args.cell) for c in args.cases for s in range(1, args.seeds + 1)]
     from tqdm import tqdm
 
+    if args.null_cells:
+        from identification.bench import BENCH_CELLS
+
+        jobs = [("none", s, args.duration, c) for s in range(1, args.seeds + 1) for c in BENCH_CELLS]
+        with ProcessPoolExecutor(args.workers) as pool:
+            rows = list(tqdm(pool.map(_one, jobs), total=len(jobs), desc="flights", unit="flight"))
+        print(f"\nCommand: python scripts/likelihood_diagnosis_study.py --null-cells --seeds {args.seeds} "
+              f"--duration {args.duration:g}")
+        _null_table(rows, list(BENCH_CELLS))
+        return
+    jobs = [(c, s, args.duration, args.cell) for c in args.cases for s in range(1, args.seeds + 1)]
     with ProcessPoolExecutor(args.workers) as pool:
         rows = list(tqdm(pool.map(_one, jobs), total=len(jobs), desc="flights", unit="flight"))
     print(f"\nLikelihood diagnosis, {args.seeds} seeds per case, {args.duration:g} s flights"

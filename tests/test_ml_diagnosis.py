@@ -43,6 +43,28 @@ def test_servo_delay_is_named_with_its_value():
     assert d.params_.tau_roll == pytest.approx(d.alignment_[0])
 
 
+def test_physical_bounds_of_candidate_terms():
+    from identification.effects import PHYSICAL_BOUNDS, implausible
+
+    assert implausible({"nld2": 4.0, "k5": -0.9, "k4": 40.0}) is None  # k4 (flybar) has no bound
+    assert "quadratic damping" in implausible({"nld1": -0.1})
+    assert "inertia ratio" in implausible({"k9": 1.5})
+    assert set(PHYSICAL_BOUNDS) == {"k1", "k5", "k9", "nld1", "nld2", "nld3"}
+
+
+def test_an_unphysical_candidate_is_reported_but_never_accepted():
+    # anti-damping on a flight whose roll rate grows faster than linear damping allows: the quadratic
+    # term fits with the wrong sign, and that is not a physical effect
+    from identification.synthetic import PAPER_PARAMS
+
+    sf = simulate_flight(120, seed=4, truth=PAPER_PARAMS.with_values(nld1=-4.0))
+    d = LikelihoodDiagnoser(axes=("roll",)).fit(sf.flight)
+    rows = [r for r in d.rounds_[0] if r["effect"] == "nonlinear_damping"]
+    assert rows and rows[0]["lr"] > rows[0]["threshold"]
+    assert not rows[0]["accepted"] and "quadratic damping" in rows[0]["implausible"]
+    assert ("nonlinear_damping", "roll") not in d.effects_found_
+
+
 def test_short_flight_is_undecided_and_errors_are_named():
     d = LikelihoodDiagnoser().fit(simulate_flight(40, seed=1).flight)
     assert d.verdict_ == "undecided" and "shorter" in d.evidence_["reason"]
