@@ -6,8 +6,8 @@ taking the parsed arguments and returning an exit code. Building the parser
 imports no numeric package: a command's handler imports what it needs when it
 runs, so ``heli --help`` and every ``heli COMMAND --help`` answer at once.
 
-Errors the user can fix (bad input files, unidentifiable data, a path that is
-not what the command needs) are printed as one line without a traceback and
+Errors the user can fix (any :class:`heli_core.errors.HeliError`: bad input
+files, unidentifiable data; and a path that is not what the command needs) are printed as one line without a traceback and
 exit with status 2; anything else is a bug, printed as one line with a request
 to report it, exit status 1. ``--debug`` adds the traceback to either.
 """
@@ -20,6 +20,8 @@ import re
 import sys
 import traceback
 from pathlib import Path
+
+from heli_core.errors import HeliError
 
 COMMAND_MODULES = (
     "heli_cli.simulate_flight",
@@ -35,13 +37,9 @@ COMMAND_MODULES = (
 )
 """Modules that register sub-commands, in the order ``heli --help`` lists them (a workflow's order)."""
 
-USER_ERRORS = {
-    "identification.errors": ("FlightLogError", "IdentifiabilityError", "ModelFileError", "MissingDependency",
-                              "DisturbanceError", "LibraryError", "BackendError", "TaskFailed"),
-    "controllers.errors": ("SweepError", "AgentError", "DesignError"),
-    "heli_env.errors": ("EnvModelError",),
-}
-"""Errors the user can fix, by module: one line and exit status 2 (subclasses included)."""
+USER_ERRORS = (HeliError,)
+"""Errors the user can fix: every error the packages raise on purpose derives from
+:class:`heli_core.errors.HeliError` (one line and exit status 2)."""
 
 PATH_ERRORS = (FileNotFoundError, FileExistsError, NotADirectoryError, IsADirectoryError, PermissionError)
 """A path that is not what the command needs (an output folder that is a file, a read-only folder): exit 2."""
@@ -149,12 +147,6 @@ def check_output(path, kind: str) -> None:
         raise PermissionError(errno.EACCES, "the output folder is not writable", str(parent))
 
 
-def _user_errors() -> tuple:
-    """The classes of :data:`USER_ERRORS` whose modules are loaded (no other can have been raised)."""
-    return tuple(getattr(sys.modules[module], name) for module, names in USER_ERRORS.items()
-                 if module in sys.modules for name in names)
-
-
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -172,7 +164,7 @@ def main(argv=None) -> int:
     except Exception as e:  # noqa: BLE001 -- every error ends in one line (module docstring)
         if args.debug:
             traceback.print_exc()
-        if isinstance(e, _user_errors()):
+        if isinstance(e, USER_ERRORS):
             print(f"{prefix}: error: {type(e).__name__}: {e}", file=sys.stderr)
             return 2
         if isinstance(e, PATH_ERRORS):

@@ -1,11 +1,17 @@
-"""Named exceptions of the environments."""
+"""Named exceptions of the environments.
+
+Each derives from the package-wide root :class:`heli_core.errors.HeliError` and
+from the standard exception a caller would otherwise catch.
+"""
 
 from __future__ import annotations
 
+from heli_core.errors import HeliError
 
-class EnvModelError(ValueError):
+
+class EnvModelError(HeliError, ValueError):
     """A model directory cannot drive an environment (missing or corrupt model.json or disturbance library)."""
 
 
-class ActionError(ValueError):
+class ActionError(HeliError, ValueError):
     """An action is not a finite vector of the action space's shape."""

@@ -1,14 +1,20 @@
 """Named exceptions of the identification package.
 
 Every error says what was expected and what came, so a user can fix the input
-without reading a traceback. They subclass the standard exception that a
+without reading a traceback. Each derives from the package-wide root
+:class:`heli_core.errors.HeliError` and from the standard exception that a
 caller would otherwise catch (``ValueError``, ``ImportError``).
+:class:`MissingDependency`, :class:`BackendError`, :class:`TaskFailed` and
+:func:`require` belong to the base layer (:mod:`heli_core.errors`) and are
+re-exported here under their old names.
 """
 
 from __future__ import annotations
 
+from heli_core.errors import BackendError, HeliError, MissingDependency, TaskFailed, require
 
-class FlightLogError(ValueError):
+
+class FlightLogError(HeliError, ValueError):
     """A flight log or in-memory flight is malformed (columns, NaNs, time base, units, ranges)."""
 
 
@@ -19,7 +25,7 @@ class UnitError(FlightLogError):
     """
 
 
-class IdentifiabilityError(ValueError):
+class IdentifiabilityError(HeliError, ValueError):
     """The data cannot determine the requested parameters (too short, no excitation, ill-conditioned)."""
 
 
@@ -32,57 +38,24 @@ class SimulationDivergedError(IdentifiabilityError):
     """
 
 
-class ModelFileError(ValueError):
+class ModelFileError(HeliError, ValueError):
     """A model file is missing, corrupt, of the wrong schema version or lacks parameters."""
 
 
-class NotFittedError(ValueError, AttributeError):
+class NotFittedError(HeliError, ValueError, AttributeError):
     """An estimator was used before ``fit`` (as scikit-learn's ``NotFittedError``)."""
 
 
-class MissingDependency(ImportError):
-    """An optional dependency (an extra of ``heli-env``) is not installed."""
-
-
-def require(module: str, extra: str):
-    """Import an optional module lazily, naming the extra that provides it.
-
-    Parameters
-    ----------
-    module : str
-        Importable module name, e.g. ``"pyulog"``.
-    extra : str
-        The ``heli-env`` extra that installs it, e.g. ``"logs"``.
-    """
-    import importlib
-
-    try:
-        return importlib.import_module(module)
-    except ImportError as e:  # pragma: no cover - depends on the environment
-        raise MissingDependency(
-            f"'{module}' is needed for this and is not installed; "
-            f"install it with: pip install 'heli-env[{extra}]'"
-        ) from e
-
-
-class DisturbanceError(ValueError):
+class DisturbanceError(HeliError, ValueError):
     """Disturbance identification cannot run as asked (Δt out of range, bad smoothing, axis without a control gain)."""
 
 
-class LibraryError(ValueError):
+class LibraryError(HeliError, ValueError):
     """A disturbance library is missing, corrupt, of an unknown version, or its traces do not match the manifest."""
 
 
-class BackendError(ValueError):
-    """A compute backend cannot be made as asked (unknown name, a worker count < 1, bad retry settings)."""
-
-
-class TaskFailed(RuntimeError):
-    """A task of a backend could not finish: its worker died more often than the retries allow.
-
-    ``index`` is the task's position among the mapped items.
-    """
-
-    def __init__(self, message: str, index: int = -1):
-        super().__init__(message)
-        self.index = index
+__all__ = [
+    "BackendError", "DisturbanceError", "FlightLogError", "HeliError", "IdentifiabilityError", "LibraryError",
+    "MissingDependency", "ModelFileError", "NotFittedError", "SimulationDivergedError", "TaskFailed", "UnitError",
+    "require",
+]
