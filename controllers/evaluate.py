@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from identification.files import jsonable, save_figure, write_text
+from heli_core.files import jsonable, save_figure, write_text
 
 from .errors import AgentError
 from .metrics import METRIC_NAMES, error_metrics

@@ -10,7 +10,7 @@ rest (zero rates, servo settled, collective 0). For roll, eq. (18) gives::
     phi' = p
 
 and pitch and yaw the same with (k6, k7, tau_pitch) and (k10, k11, tau_yaw) of
-eq. (21). The matrices come from :func:`identification.model.linear_structure`,
+eq. (21). The matrices come from :func:`heli_core.discrete.linear_structure`,
 the package's one statement of the physics, and keep only the axis' own block:
 the flybar cross-coupling (k4, k8) and the gyroscopic products (k1, k5, k9) are
 left out (per-axis design on the decoupled part; the paper finds the coupling
@@ -37,7 +37,7 @@ Sampling
 --------
 The environment samples the observation every ``dt`` and holds the action over
 the period (zero-order hold), then integrates the linear part exactly
-(:func:`identification.model.discrete_step`, matrix exponential). The analysis
+(:func:`heli_core.discrete.discrete_step`, matrix exponential). The analysis
 here therefore discretises the plant with :func:`control.c2d` (``'zoh'``) and
 closes the loop in discrete time: ``L(z) = s (kp G_phi(z) + kd G_p(z))``, where
 ``G_phi`` and ``G_p`` are the sampled stick-to-angle and stick-to-rate responses.
@@ -60,14 +60,14 @@ import control
 import numpy as np
 from scipy.optimize import brentq
 
-from identification.files import jsonable, save_figure, write_text
-from identification.model import ModelParams, linear_structure
-from identification.terms import AXES
+from heli_core.discrete import linear_structure
+from heli_core.files import jsonable, save_figure, write_text
+from heli_core.params import ModelParams
+from heli_core.terms import AXES, STICK_ROW
 
 SCHEMA = "heli-env/pd-controller"
 SCHEMA_VERSION = 1
 OBS_DIM = 12
-_STICK = (0, 1, 3)  # column of lat, lon, ped in linear_structure's input vector
 _HALF_POWER = 10.0 ** (-3.0 / 20.0)
 
 
@@ -116,7 +116,7 @@ def _axis_ss(params: ModelParams, axis: int):
     ``(angle, rate)``. The servo state appears only when the axis has a delay.
     """
     A6, B6, _, _ = linear_structure(params)
-    i, j = axis, _STICK[axis]
+    i, j = axis, STICK_ROW[axis]
     servo = A6[3 + i, 3 + i] != 0.0
     if servo:
         A = np.array([[A6[i, i], A6[i, 3 + i], 0.0],

@@ -46,8 +46,8 @@ import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from identification.errors import require
-from identification.files import jsonable, write_text
+from heli_core.errors import require
+from heli_core.files import jsonable, write_text
 
 from .errors import AgentError, TrainingInterrupted
 from .residual import RESIDUAL_INIT_DEG, RESIDUAL_SCALE, residual_from_metadata, residual_metadata
@@ -460,7 +460,7 @@ def train_seeds(algo: str = "ppo", model=None, timesteps: int = 200_000, out="ag
         Named overrides of :func:`train_agent` arguments (e.g.
         ``{"lr1e-3": {"algo_kwargs": {"learning_rate": 1e-3}}}``); every config is
         trained with every seed.
-    backend : None, {"local", "ray"} or identification.backends.Backend
+    backend : None, {"local", "ray"} or heli_core.backends.Backend
         Where the tasks run (None: the local cores). Each task trains with one torch
         thread (``torch_threads=1``), so a seed trains to the same agent on any
         backend and worker count.
@@ -480,10 +480,10 @@ def train_seeds(algo: str = "ppo", model=None, timesteps: int = 200_000, out="ag
     ------
     AgentError
         No or repeated seeds, bad configs, or what :func:`train_agent` raises.
-    identification.errors.MissingDependency
+    heli_core.errors.MissingDependency
         ``backend="ray"`` without the ``cluster`` extra.
     """
-    from identification.backends import make_backend
+    from heli_core.backends import make_backend
 
     seeds = list(seeds)
     if not seeds or len(set(seeds)) != len(seeds) or not all(
@@ -520,7 +520,7 @@ def train_seeds(algo: str = "ppo", model=None, timesteps: int = 200_000, out="ag
 
 def _place(res: TrainingResult, tmp: str, files: dict, folder: Path) -> TrainingResult:
     """Write a task's files under ``folder`` (atomically, file by file) and point ``res`` at them."""
-    from identification.files import write_bytes
+    from heli_core.files import write_bytes
 
     def moved(p):
         return None if p is None else folder / Path(p).relative_to(tmp)

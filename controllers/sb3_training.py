@@ -21,7 +21,7 @@ import torch
 from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
-from identification.files import atomic_path
+from heli_core.files import atomic_path
 
 OBS_SCALE = np.array([math.radians(10.0)] * 3 + [math.radians(30.0)] * 6 + [1.0] * 3, dtype=np.float32)
 """Typical size of each observation of ``HeliAttitude-v0`` (attitude error 10°, rates and rate errors

@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from identification.files import jsonable, save_figure, write_text
+from heli_core.files import jsonable, save_figure, write_text
 
 from .closed_loop import GAUSS_ABS_FACTOR
 

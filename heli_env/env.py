@@ -10,7 +10,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
-from identification.model import quaternion_from_euler
+from heli_core.quaternion import euler_from_quaternion_scalar, quaternion_from_euler
 
 from .errors import ActionError
 from .spec import MAX_RATE, build_spec
@@ -48,9 +48,9 @@ class HeliAttitudeEnv(gym.Env):
 
     The control period is ``dt`` (default 0.01 s). Each period is integrated
     exactly for the model's linear part under a zero-order hold of the action
-    (:func:`identification.model.discrete_step`); products of rates are held
+    (:func:`heli_core.discrete.discrete_step`); products of rates are held
     over the period and the attitude turns by the mean rate. Largest error
-    against RK4 with 20 sub-steps (:func:`identification.model.step`) over 30 s
+    against RK4 with 20 sub-steps (:func:`heli_core.physics.step`) over 30 s
     of random sticks (σ 0.4) in replayed gusts, worst of four episodes
     (``tests/test_env.py`` checks the first three rows):
 
@@ -267,11 +267,7 @@ class HeliAttitudeEnv(gym.Env):
     def _observe(self):
         s = self.spec_
         x = self._x
-        q0, q1, q2, q3 = x[6], x[7], x[8], x[9]
-        phi = math.atan2(2.0 * (q0 * q1 + q2 * q3), 1.0 - 2.0 * (q1 * q1 + q2 * q2))
-        theta = math.asin(max(-1.0, min(1.0, 2.0 * (q0 * q2 - q3 * q1))))
-        psi = math.atan2(2.0 * (q0 * q3 + q1 * q2), 1.0 - 2.0 * (q2 * q2 + q3 * q3))
-        self._att = (phi, theta, psi)
+        self._att = phi, theta, psi = euler_from_quaternion_scalar(x[6], x[7], x[8], x[9])
         p, q, r = x[0], x[1], x[2]
         t = self._k * s.dt
         ref_att, ref_rate = self._reference(t)

@@ -7,7 +7,7 @@ arithmetic in one pass per copy:
 
 * :func:`clip_actions` checks and clips the actions.
 * :func:`advance_kernel` compiles the physics core's own statements
-  (:func:`identification.model.discrete_step_statements`, the text the single
+  (:func:`heli_core.discrete.discrete_step_statements`, the text the single
   environment's step is compiled from) into a loop that also adds the trim
   sticks of each copy's library row, scales its gust and prepares the Euler
   angles (eqs. 27-29). numba compiles IEEE arithmetic in the order written
@@ -31,6 +31,7 @@ import hashlib
 import importlib.util
 import math
 import os
+import re
 import sys
 from functools import lru_cache
 from pathlib import Path
@@ -38,8 +39,10 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from identification.files import write_text
-from identification.model import DISCRETE_INPUTS, DISCRETE_OUTPUTS, ModelParams, discrete_step_statements
+from heli_core.discrete import DISCRETE_INPUTS, DISCRETE_OUTPUTS, discrete_step_statements
+from heli_core.files import write_text
+from heli_core.params import ModelParams
+from heli_core.quaternion import EULER_ARGUMENTS
 
 from .tasks import TWO_PI
 
@@ -63,16 +66,23 @@ def _clip_line(name: str) -> str:
     return f"{name} = -1.0 if {name} < -1.0 else (1.0 if {name} > 1.0 else {name})"
 
 
+def _on_new_quaternion(expression: str) -> str:
+    """An expression of :data:`heli_core.quaternion.EULER_ARGUMENTS` over ``q0..q3`` read on ``b0..b3``."""
+    return re.sub(r"\bq([0-3])\b", r"b\1", expression)
+
+
+_ON_B = [_on_new_quaternion(e) for e in EULER_ARGUMENTS]
 _EULER_ARGUMENTS = (
-    "trig[0, i] = 2.0 * (b0 * b1 + b2 * b3)",
-    "trig[1, i] = 1.0 - 2.0 * (b1 * b1 + b2 * b2)",
-    "v = 2.0 * (b0 * b2 - b3 * b1)",
+    f"trig[0, i] = {_ON_B[0]}",
+    f"trig[1, i] = {_ON_B[1]}",
+    f"v = {_ON_B[2]}",
     "trig[2, i] = -1.0 if v < -1.0 else (1.0 if v > 1.0 else v)",
-    "trig[3, i] = 2.0 * (b0 * b3 + b1 * b2)",
-    "trig[4, i] = 1.0 - 2.0 * (b2 * b2 + b3 * b3)",
+    f"trig[3, i] = {_ON_B[3]}",
+    f"trig[4, i] = {_ON_B[4]}",
 )
 """Arguments of roll = atan2(trig0, trig1), pitch = asin(trig2), yaw = atan2(trig3, trig4) of the
-quaternion ``b0..b3``: the expressions of :func:`identification.model.euler_from_quaternion`."""
+quaternion ``b0..b3`` the step just computed: the one text of the conversion,
+:data:`heli_core.quaternion.EULER_ARGUMENTS`, with the pitch argument clipped to [-1, 1]."""
 
 
 def kernel_cache_dir() -> Path:

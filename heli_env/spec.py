@@ -1,7 +1,7 @@
 """Settings and precomputed arrays shared by the single and the vector environment.
 
 :func:`build_spec` checks the constructor arguments once and precomputes what
-every step needs: the model's discrete-time step (:func:`identification.model.discrete_step`
+every step needs: the model's discrete-time step (:func:`heli_core.discrete.discrete_step`
 generated for the control period), the gust torque ``k*u_d`` of every library
 sample (:attr:`heli_env.model_dir.EnvModel.torque`), and the trim sticks for
 every recorded collective.
@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from identification.model import _discrete_kernel, trim_sticks
+from heli_core.discrete import discrete_kernel
+from heli_core.physics import trim_sticks
 
 from .model_dir import EnvModel, load_env_model
 from .tasks import TaskConfig
@@ -89,5 +90,5 @@ def build_spec(model=None, task="hold", reference="mixed", dt: float = 0.01, epi
         needed=episode_steps * ratio + 1, collective=collective if collective == "trace" else float(collective),
         gust_scale=float(gust_scale), obs_noise=noise, action_delay=int(action_delay),
         init_angle=math.radians(init_angle_deg), init_rate=math.radians(init_rate_deg),
-        dstep=_discrete_kernel(params, float(dt))[0], torque=torque, trim=trim, col=col,
+        dstep=discrete_kernel(params, float(dt))[0], torque=torque, trim=trim, col=col,
     )

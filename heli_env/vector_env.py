@@ -11,7 +11,8 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from identification.model import N_STATE, quaternion_from_euler
+from heli_core.physics import N_STATE
+from heli_core.quaternion import quaternion_from_euler
 
 from .env import OBS_DIM, action_space, observation_space
 from .errors import ActionError
@@ -32,7 +33,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
     environment (see its docstring), plus ``num_envs`` and ``threads``. The
     state is held as an array of shape ``(N_STATE, num_envs)`` and stepped by
     a fused numba loop compiled from the same statements as the single
-    environment's physics core (:func:`identification.model.discrete_step_statements`,
+    environment's physics core (:func:`heli_core.discrete.discrete_step_statements`,
     :mod:`heli_env.kernels`). ``threads`` is how many threads share the copies
     (default: all of numba's from :data:`THREADED_FROM` copies, else one);
     results do not depend on it. Every episode
