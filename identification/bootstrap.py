@@ -33,11 +33,13 @@ from types import MappingProxyType
 
 import numpy as np
 
+from heli_core.servo import pade_filter
+from heli_core.terms import AXES, STICK_ROW
+
 from .errors import IdentifiabilityError
 from .flight import Flight
-from .integral_method import IntegralIdentifier, pade_filter
+from .integral_method import IntegralIdentifier
 from .preprocess import lowpass_flight
-from .terms import AXES
 
 DEFAULT_REPLICATES = 200
 """Bootstrap replicates (standard errors settle to a few per cent by 200)."""
@@ -45,8 +47,6 @@ DEFAULT_REPLICATES = 200
 MAX_FAILED_FRACTION = 0.1
 """Largest share of replicates allowed to be unidentifiable before the bootstrap gives up."""
 
-STICK_ROW = (0, 1, 3)
-"""Row of ``Flight.sticks`` commanding roll, pitch, yaw (lat, lon, ped)."""
 
 _SETTINGS = ("structure", "extra_terms", "interval", "offsets", "prefilter", "pass_hz", "stop_hz",
              "disturbance_order", "input_hold", "delay", "delay_grid", "max_iter", "tol", "axes")

@@ -15,7 +15,7 @@ Pitch and yaw are the same with ``k6`` and ``k10`` (and, for yaw, the
 collective term ``-k12*col`` among the model terms). The integrals are
 trapezium-rule sums of the features of :mod:`identification.terms` on the
 prefiltered flight (Section 3.1), with the Padé-delayed command (eq. 31,
-:func:`~identification.integral_method.pade_filter`) when the model has a servo
+:func:`~heli_core.servo.pade_filter`) when the model has a servo
 delay; everything is vectorised over samples, intervals and axes. Samples after
 the last whole interval keep the last interval's value.
 
@@ -91,13 +91,14 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage, stats
 
-from .files import jsonable
+from heli_core.files import jsonable
+from heli_core.params import ModelParams
+from heli_core.servo import pade_filter
+from heli_core.terms import AXES, INPUT_FOR_AXIS, STICK_ROW, TERMS, evaluate_features
+
 from .errors import DisturbanceError, SimulationDivergedError
 from .flight import Flight
-from .integral_method import pade_filter
-from .model import ModelParams
 from .preprocess import lowpass_flight
-from .terms import AXES, INPUT_FOR_AXIS, TERMS, evaluate_features
 from .validation import ValidationResult, _md_table, plot_rate_fit, validate_models
 
 DEFAULT_INTERVAL = 0.02
@@ -119,8 +120,6 @@ CONTROL_GAIN = ("k2", "k6", "k10")
 OFFSET = ("kd1", "kd2", "kd3")
 """Constant torque offset of each axis (eqs. 18, 21, 42)."""
 
-STICK_ROW = (0, 1, 3)
-"""Row of ``Flight.sticks`` driving roll, pitch, yaw (lat, lon, ped)."""
 
 MODEL_LABELS = ("no disturbance", "identified disturbance")
 """Labels of the two simulations in :attr:`DisturbanceProfile.simulation`."""
@@ -673,7 +672,7 @@ def plot_profile(profile: DisturbanceProfile, path, true_ud=None):
     axs[0, 0].set_xlim(profile.time[0], profile.time[-1])
     fig.suptitle(f"Identified wind disturbance u_d, Δt = {profile.interval:g} s (cf. paper Fig. 19)", fontsize=12)
     fig.tight_layout()
-    from .files import save_figure
+    from heli_core.files import save_figure
 
     return save_figure(fig, path, dpi=110)
 
@@ -713,7 +712,7 @@ def plot_distributions(profile: DisturbanceProfile, path):
     fig.suptitle("Pilot stick vs identified disturbance: histograms and fitted normals (cf. paper Figs. 20-21)",
                  fontsize=12)
     fig.tight_layout()
-    from .files import save_figure
+    from heli_core.files import save_figure
 
     return save_figure(fig, path, dpi=110)
 

@@ -10,7 +10,7 @@ windows are independent). Every block is held out once (K-fold, contiguous
 blocks in time). The result, per axis and window, is the mean squared
 difference between simulated and measured rate — the held-out gap.
 
-The simulation is the physics core's :func:`identification.model.discrete_step`
+The simulation is the physics core's :func:`heli_core.discrete.discrete_step`
 (eqs. 18, 21, 31, 25; exact for the linear part under a hold), with the sticks held at the mean of each sample pair (the pilot's
 sticks move continuously; a hold of the left sample would add half a sample of
 delay).
@@ -23,14 +23,15 @@ from functools import cached_property
 
 import numpy as np
 
+from heli_core.discrete import discrete_kernel
+from heli_core.params import ModelParams
+from heli_core.quaternion import quaternion_from_euler
+from heli_core.terms import AXES, DECOUPLED, STICK_ROW, TERMS
+
 from .effects import shift_inputs
 from .errors import IdentifiabilityError
 from .flight import MAX_PLAUSIBLE_RATE, Flight
 from .integral_method import IntegralIdentifier
-from .model import ModelParams, _discrete_kernel, quaternion_from_euler
-from .terms import AXES, DECOUPLED, TERMS
-
-_STICKS = (0, 1, 3)  # lat, lon, ped rows of Flight.sticks
 
 
 @dataclass(frozen=True)
@@ -127,12 +128,12 @@ def simulate_windows(params: ModelParams, flight: Flight, starts, length: int) -
     if starts.min() < 0 or starts.max() + length >= flight.n + 1:
         raise ValueError(f"windows of {length} samples from {starts.min()}..{starts.max()} exceed {flight.n} samples")
     sticks = flight.sticks
-    x0 = np.vstack([flight.rates[:, starts], sticks[list(_STICKS)][:, starts],
+    x0 = np.vstack([flight.rates[:, starts], sticks[list(STICK_ROW)][:, starts],
                     quaternion_from_euler(*flight.attitude[:, starts])]).T.tolist()
     idx = starts[:, None] + np.arange(length + 1)[None, :]  # (B, length+1)
     held = (0.5 * (sticks[:, idx[:, :-1]] + sticks[:, idx[:, 1:]])).transpose(1, 2, 0).tolist()  # (B, length, 4)
     zero = (0.0, 0.0, 0.0)
-    dstep = _discrete_kernel(params, float(flight.dt))[0]  # the physics core's discrete_step, looked up once
+    dstep = discrete_kernel(params, float(flight.dt))[0]  # the physics core's discrete_step, looked up once
     for b in range(starts.size):
         # One trajectory in Python floats: the generated kernel runs a step in a few microseconds,
         # faster than numpy rows for the handful of windows of one fold.

@@ -42,14 +42,16 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy import signal
 from scipy.linalg import lapack
+
+from heli_core.params import ModelParams
+from heli_core.servo import pade_filter  # noqa: F401  (re-exported: it lived here before heli_core)
+from heli_core.terms import (AXES, COUPLED, DECOUPLED, EXTRA_PARAMS, FEATURE_EXPRESSIONS, FEATURES, RATE_DEPENDENCE,
+                             STICK_ROW, TERMS)
 
 from .errors import IdentifiabilityError, NotFittedError
 from .flight import Flight
-from .model import ModelParams, servo_coefficients
 from .preprocess import DEFAULT_PASS_HZ, DEFAULT_STOP_HZ, lowpass_flight
-from .terms import AXES, COUPLED, DECOUPLED, EXTRA_PARAMS, FEATURE_EXPRESSIONS, FEATURES, RATE_DEPENDENCE, TERMS
 
 MAX_CONDITION = 1e6
 """Largest condition number of the column-normalised regressor matrix accepted."""
@@ -100,34 +102,6 @@ class AxisFit:
     interval_offsets: np.ndarray
     interval_starts: np.ndarray
     residual: np.ndarray | None = None
-
-
-def pade_filter(command: np.ndarray, tau: float, fs: float) -> np.ndarray:
-    """Pass a command through the first-order Padé delay of eq. (31).
-
-    The continuous filter ``(n1 - n2 s)/(1 + d1 s)`` (coefficients from
-    ``control.pade``) is discretised with the bilinear transform and run from
-    rest at the first sample's value.
-    """
-    if tau <= 0:
-        return np.asarray(command, dtype=float)
-    b, a, zi_unit = _pade_discrete(float(tau), float(fs))
-    zi = zi_unit * command[..., :1]
-    return signal.lfilter(b, a, command, axis=-1, zi=zi)[0]
-
-
-@lru_cache(maxsize=256)
-def _pade_discrete(tau: float, fs: float):
-    """Bilinear-transform coefficients (b, a) of the Padé delay and the filter state for a unit step.
-
-    Cached: scipy's bilinear takes about a millisecond, longer than filtering a whole flight.
-    """
-    d1, n1, n2 = servo_coefficients(tau)
-    b, a = signal.bilinear([-n2, n1], [d1, 1.0], fs=fs)
-    zi = signal.lfilter_zi(b, a)
-    for arr in (b, a, zi):
-        arr.setflags(write=False)
-    return b, a, zi
 
 
 def _split_intervals(values: np.ndarray, n_int: int, length: int):
@@ -430,14 +404,14 @@ class IntegralIdentifier:
         # Every signal as (samples 1..N of each interval (n_int, N), first sample of each interval (n_int,)).
         rates = _pool([_split_intervals(d.rates, m, N) for d, m in zip(datas, counts)])
         col = _pool([_split_intervals(d.sticks[2], m, N) for d, m in zip(datas, counts)])
-        sticks = [_pool([_split_intervals(d.sticks[i], m, N) for d, m in zip(datas, counts)]) for i in (0, 1, 3)]
+        sticks = [_pool([_split_intervals(d.sticks[i], m, N) for d, m in zip(datas, counts)]) for i in STICK_ROW]
         start_times = np.concatenate([d.time[: m * N : N] for d, m in zip(datas, counts)])
 
         def commands(a, tau):
             """Servo-side commands (eq. 31): the stick of axis ``a`` through the Padé delay ``tau``."""
             cmd = list(sticks)
             if tau > 0:
-                i = (0, 1, 3)[a]
+                i = STICK_ROW[a]
                 cmd[a] = _pool([_split_intervals(pade_filter(d.sticks[i], tau, fs), m, N)
                                 for d, m in zip(datas, counts)])
             return [c[0] for c in cmd], [c[1] for c in cmd]
@@ -693,7 +667,7 @@ class IntegralIdentifier:
     def predict(self, flight: Flight) -> np.ndarray:
         """Forward-simulate the identified model with the flight's sticks; rates (3, n) [rad/s]."""
         self._check_fitted()
-        from .model import forward_rates
+        from heli_core.physics import forward_rates
 
         return forward_rates(self.params_, flight)
 

@@ -40,6 +40,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
+from heli_core.params import ModelParams
+from heli_core.terms import AXES, DECOUPLED, STICK_ROW, TERMS
+
 from .effects import CATALOGUE, MAX_ALIGNMENT, NONE, SERVO_DELAY, UNDECIDED, implausible, shift_inputs
 from .errors import NotFittedError
 from .flight import Flight
@@ -47,8 +50,6 @@ from threadpoolctl import threadpool_limits
 
 from .ml_estimator import BURN_IN, MAX_DELAY, MAX_SHIFT, MaximumLikelihoodIdentifier, _AxisLikelihood
 from .state_space import kalman, lti_apply
-from .model import ModelParams
-from .terms import AXES, DECOUPLED, TERMS
 
 ALPHA = 0.01
 """Family-wise level of the likelihood-ratio test per axis and round (Bonferroni over the candidates)."""
@@ -115,7 +116,7 @@ def closed_loop_share(flight: Flight, axis: int, lags=(0.1, 0.2, 0.3, 0.5)) -> f
     fs = flight.sample_rate
     k = [int(round(s * fs)) for s in lags]
     kmax = max(k)
-    stick = flight.sticks[(0, 1, 3)[axis]][kmax:]
+    stick = flight.sticks[STICK_ROW[axis]][kmax:]
     cols = [np.ones(stick.size)]
     for lag in k:
         cols.append(flight.attitude[axis][kmax - lag:flight.n - lag])

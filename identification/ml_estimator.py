@@ -47,23 +47,22 @@ import numpy as np
 from scipy import optimize, signal
 from threadpoolctl import threadpool_limits
 
+from heli_core.params import ModelParams
+from heli_core.servo import pade_filter
+from heli_core.terms import AXES, DECOUPLED, FEATURES, RATE_DEPENDENCE, STICK_ROW, TERMS
+
 from .errors import IdentifiabilityError, NotFittedError
 from .flight import Flight
-from .integral_method import IntegralIdentifier, pade_filter
-from .model import ModelParams
+from .integral_method import IntegralIdentifier
 from .state_space import (N_NONLINEAR, WIND_MODELS, ZETA_BOUNDS, discrete_model, innovation_filters, kalman,
                           rts_smooth, servo_increments, strictly_proper_tf, wind_block)
 from .vibration import remove_vibration_lines
-from .terms import AXES, DECOUPLED, FEATURES, RATE_DEPENDENCE, TERMS
 
 OWN_RATE = ("p", "q", "r")
 """The feature that is each axis' own rate: its term is the damping, a state coefficient."""
 
 COMMAND_FEATURE = ("u_lat", "u_lon", "u_ped")
 """The feature that is each axis' own servo-side command: its term goes through the servo model exactly."""
-
-STICK_ROW = (0, 1, 3)
-"""Row of ``Flight.sticks`` driving roll, pitch, yaw (lat, lon, ped)."""
 
 BURN_IN = 1.0
 """Seconds at the start of each flight left out of the likelihood while the filter settles."""
@@ -605,7 +604,7 @@ class MaximumLikelihoodIdentifier:
     def predict(self, flight: Flight) -> np.ndarray:
         """Forward-simulate the identified model with the flight's sticks; rates (3, n) [rad/s]."""
         self._check_fitted()
-        from .model import forward_rates
+        from heli_core.physics import forward_rates
 
         return forward_rates(self.params_, flight)
 

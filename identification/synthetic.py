@@ -1,6 +1,6 @@
 """Synthetic hover flights from a known truth model (the project's own test aircraft).
 
-A flight is flown by the physics core (:mod:`identification.model`) with the
+A flight is flown by the physics core (:mod:`heli_core.physics`) with the
 paper's identified values as the default truth (eqs. 68-70), a closed-loop pilot
 model, coloured wind torque, and a sensor model:
 
@@ -33,10 +33,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .files import write_text
+from heli_core.files import atomic_path, write_text
+from heli_core.params import ModelParams
+from heli_core.physics import initial_state, kernel
+from heli_core.quaternion import euler_from_quaternion, euler_from_quaternion_scalar
+
 from .flight import Flight, make_flight
 from .io.csv_log import write_csv_flight
-from .model import ModelParams, _kernel, initial_state
 
 PAPER_PARAMS = ModelParams(
     k2=1.3475, k3=2.4208, kd1=0.0399,
@@ -295,8 +298,6 @@ class SyntheticFlight:
         write_text(paths["truth"], json.dumps(truth, indent=2) + "\n")
         cols = np.vstack([self.flight.time, self.wind, self.wind_torque]).T
         header = "time,ud_roll,ud_pitch,ud_yaw,torque_roll,torque_pitch,torque_yaw"
-        from .files import atomic_path
-
         with atomic_path(paths["wind"]) as tmp:
             np.savetxt(tmp, cols, delimiter=",", header=header, comments="", fmt="%.9g")
         return {"flight": path, **paths}
@@ -421,7 +422,7 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
             -(params.kd3 - params.k12 * cfg.collective_trim) / gains[2]]
     delay = 1 if cfg.pilot == "autopilot" else max(1, int(round(cfg.reaction_delay * fs)))
 
-    rk4 = _kernel(params)[0]["rk4"]
+    rk4 = kernel(params)[0]["rk4"]
     x = tuple(float(v) for v in initial_state(sticks=trim))
     h = dt / cfg.substeps
     states = np.empty((n, 10))
@@ -452,13 +453,7 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
     u_next = None
     hold = cfg.pilot == "autopilot"  # a flight controller holds its commands over the sample
     for k in range(n):
-        q0, q1, q2, q3 = x[6], x[7], x[8], x[9]
-        ang = [
-            math.atan2(2.0 * (q0 * q1 + q2 * q3), 1.0 - 2.0 * (q1 * q1 + q2 * q2)),
-            math.asin(max(-1.0, min(1.0, 2.0 * (q0 * q2 - q3 * q1)))),
-            math.atan2(2.0 * (q0 * q3 + q1 * q2), 1.0 - 2.0 * (q2 * q2 + q3 * q3)),
-        ]
-        hist_ang.append(ang)
+        hist_ang.append(euler_from_quaternion_scalar(x[6], x[7], x[8], x[9]))
         hist_rate.append(x[0:3])
         states[k] = x
         u = u_next if u_next is not None else _pilot(k, 0)
@@ -472,8 +467,6 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
             x = rk4(x, uj, torque_l[k], h)
         if len(hist_ang) > 4 * (delay + 2):
             del hist_ang[: -(delay + 2)], hist_rate[: -(delay + 2)]
-
-    from .model import euler_from_quaternion
 
     true_rates = states[:, :3].T
     true_att = euler_from_quaternion(states[:, 6:10].T)

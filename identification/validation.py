@@ -24,12 +24,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from heli_core.errors import MissingDependency
+from heli_core.files import jsonable, save_figure
+from heli_core.params import ModelParams
+from heli_core.physics import QUAT, initial_state, simulate
+from heli_core.quaternion import euler_from_quaternion
+from heli_core.terms import AXES, STICK_ROW
+
 from .attitude import detrend_piecewise
-from .errors import MissingDependency, SimulationDivergedError
-from .files import jsonable, save_figure
+from .errors import SimulationDivergedError
 from .flight import Flight
-from .model import ModelParams, QUAT, euler_from_quaternion, initial_state, simulate
-from .terms import AXES
 
 DETREND_PERIOD = 10.0
 """Length of the linear pieces removed from the angles before comparison [s] (Section 3.2)."""
@@ -392,7 +396,7 @@ def validate_models(flight: Flight, models: dict[str, ModelParams], rates=None, 
     else:
         dist = {}
 
-    x0 = initial_state(rates=measured[:, 0], euler=flight.attitude[:, 0], sticks=flight.sticks[[0, 1, 3], 0])
+    x0 = initial_state(rates=measured[:, 0], euler=flight.attitude[:, 0], sticks=flight.sticks[list(STICK_ROW), 0])
     simulated, sim_att, rate_stats, att_stats = {}, {}, {}, {}
     for label, params in models.items():
         state = simulate(params, flight.time, flight.sticks, disturbance=dist.get(label), x0=x0)

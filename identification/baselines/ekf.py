@@ -30,8 +30,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from heli_core.terms import STICK_ROW, TERMS, evaluate_features
+
 from ..flight import Flight
-from ..terms import TERMS, evaluate_features
 from .single_axis import (
     RateErrors,
     SingleAxisEstimator,
@@ -235,7 +236,7 @@ class ParameterEKF(SingleAxisEstimator):
         # Regressors that do not depend on the estimated rate (gain, offset, k12),
         # signed as in the equations, for all samples at once.
         damp, rest = TERMS[names[0]], [TERMS[n] for n in names[1:]]
-        cmd = flight.sticks[[0, 1, 3]]
+        cmd = flight.sticks[list(STICK_ROW)]
         g = (evaluate_features([t.feature for t in rest], flight.rates, cmd, flight.sticks[2]).T
              * np.array([t.sign for t in rest]))
         t0 = _time.process_time()

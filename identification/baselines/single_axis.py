@@ -30,10 +30,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from heli_core.params import ModelParams
+from heli_core.physics import initial_state, simulate
+from heli_core.terms import AXES, STICK_ROW
+
 from ..errors import NotFittedError
 from ..flight import Flight
-from ..model import ModelParams, initial_state, simulate
-from ..terms import AXES
 from ..validation import PERCENTILE_METHOD
 
 AXIS_PARAMS: dict[str, tuple[str, str, str]] = {
@@ -62,9 +64,6 @@ MAX_SUBSTEPS = 64
 RATE_CAP = 1.0e3
 """rad/s. Simulated rates beyond this (or non-finite) are clipped to it, so a
 diverging simulation (e.g. negative damping) yields large finite residuals."""
-
-_STICK_FOR_CMD = (0, 1, 3)  # rows of Flight.sticks driving roll, pitch, yaw (lat, lon, ped)
-
 
 
 def axis_index(axis: str) -> int:
@@ -142,7 +141,7 @@ def simulate_rate(params: ModelParams, flight: Flight, axis: str, substeps: int 
     i = axis_index(axis)
     rates0 = [0.0, 0.0, 0.0]
     rates0[i] = float(flight.rates[i, 0])
-    x0 = initial_state(rates=rates0, sticks=flight.sticks[list(_STICK_FOR_CMD), 0])
+    x0 = initial_state(rates=rates0, sticks=flight.sticks[list(STICK_ROW), 0])
     damping = abs(params.get(AXIS_PARAMS[axis][0]))
     substeps = int(min(max(substeps, math.ceil(damping * flight.dt / MAX_DAMPING_STEP)), MAX_SUBSTEPS))
     try:
