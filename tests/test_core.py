@@ -1,0 +1,219 @@
+"""The base layer :mod:`heli_core`: it stands alone, the old module names re-export it, one error root."""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import importlib
+import inspect
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+import heli_core.backends
+import heli_core.discrete
+import heli_core.errors
+import heli_core.files
+import heli_core.params
+import heli_core.physics
+import heli_core.quaternion
+import heli_core.servo
+import heli_core.terms
+from heli_core.errors import HeliError
+
+ROOT = Path(__file__).resolve().parents[1]
+CORE_MODULES = ("params", "physics", "discrete", "servo", "terms", "quaternion", "errors", "files", "backends")
+UPPER_PACKAGES = ("identification", "heli_env", "controllers", "heli_cli", "model_store")
+
+
+def test_core_imports_no_package_above_it():
+    """Importing every module of heli_core loads none of the packages that stand on it."""
+    code = (
+        "import sys\n"
+        + "".join(f"import heli_core.{m}\n" for m in CORE_MODULES)
+        + f"print(sorted(m for m in sys.modules if m.split('.')[0] in {UPPER_PACKAGES!r}))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout.strip() == "[]"
+
+
+def test_core_source_names_no_package_above_it():
+    """No import statement in heli_core names identification, heli_env, controllers or the CLI, even a lazy one."""
+    for path in sorted((ROOT / "heli_core").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.level == 0:
+                names = [node.module or ""]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            else:
+                continue
+            assert not [n for n in names if n.split(".")[0] in UPPER_PACKAGES], f"{path.name}:{node.lineno}"
+
+
+@pytest.mark.parametrize("old, new", [
+    ("identification.model.ModelParams", "heli_core.params.ModelParams"),
+    ("identification.model.derivatives", "heli_core.physics.derivatives"),
+    ("identification.model.step", "heli_core.physics.step"),
+    ("identification.model.simulate", "heli_core.physics.simulate"),
+    ("identification.model.initial_state", "heli_core.physics.initial_state"),
+    ("identification.model.trim_sticks", "heli_core.physics.trim_sticks"),
+    ("identification.model.forward_rates", "heli_core.physics.forward_rates"),
+    ("identification.model.model_source", "heli_core.physics.model_source"),
+    ("identification.model._kernel", "heli_core.physics.kernel"),
+    ("identification.model.discrete_step", "heli_core.discrete.discrete_step"),
+    ("identification.model.discrete_step_statements", "heli_core.discrete.discrete_step_statements"),
+    ("identification.model.linear_structure", "heli_core.discrete.linear_structure"),
+    ("identification.model._discrete_kernel", "heli_core.discrete.discrete_kernel"),
+    ("identification.model.servo_coefficients", "heli_core.servo.servo_coefficients"),
+    ("identification.model.quaternion_from_euler", "heli_core.quaternion.quaternion_from_euler"),
+    ("identification.model.euler_from_quaternion", "heli_core.quaternion.euler_from_quaternion"),
+    ("identification.model._CMD_INPUT", "heli_core.terms.STICK_ROW"),
+    ("identification.integral_method.pade_filter", "heli_core.servo.pade_filter"),
+    ("identification.terms.TERMS", "heli_core.terms.TERMS"),
+    ("identification.terms.AXES", "heli_core.terms.AXES"),
+    ("identification.terms.Term", "heli_core.terms.Term"),
+    ("identification.files.write_text", "heli_core.files.write_text"),
+    ("identification.files.atomic_path", "heli_core.files.atomic_path"),
+    ("identification.backends.LocalBackend", "heli_core.backends.LocalBackend"),
+    ("identification.backends.make_backend", "heli_core.backends.make_backend"),
+    ("controllers.backends.RayBackend", "heli_core.backends.RayBackend"),
+    ("identification.errors.MissingDependency", "heli_core.errors.MissingDependency"),
+    ("identification.errors.BackendError", "heli_core.errors.BackendError"),
+    ("identification.errors.TaskFailed", "heli_core.errors.TaskFailed"),
+    ("identification.errors.require", "heli_core.errors.require"),
+])
+def test_old_names_are_the_core_objects(old, new):
+    """The shims re-export, never copy: one class for isinstance checks, one cache of compiled kernels."""
+    def resolve(dotted):
+        module, name = dotted.rsplit(".", 1)
+        return getattr(importlib.import_module(module), name)
+
+    assert resolve(old) is resolve(new)
+
+
+def _error_classes():
+    """Every exception class defined in the packages' error modules."""
+    modules = ("identification.errors", "identification.io.errors", "heli_env.errors", "controllers.errors",
+               "heli_core.errors")
+    found = []
+    for name in modules:
+        module = importlib.import_module(name)
+        found += [c for _, c in inspect.getmembers(module, inspect.isclass)
+                  if issubclass(c, BaseException) and c.__module__ == name]
+    return found
+
+
+@pytest.mark.parametrize("cls", _error_classes(), ids=lambda c: f"{c.__module__}.{c.__name__}")
+def test_every_package_error_derives_from_the_one_root(cls):
+    from controllers.errors import TrainingInterrupted
+
+    if cls is TrainingInterrupted:  # an interrupt, not an error: `except Exception` must not swallow a Ctrl-C
+        assert issubclass(cls, KeyboardInterrupt) and not issubclass(cls, Exception)
+    else:
+        assert issubclass(cls, HeliError)
+
+
+@pytest.mark.parametrize("dotted, standard", [
+    ("identification.errors.FlightLogError", ValueError),
+    ("identification.errors.UnitError", ValueError),
+    ("identification.errors.IdentifiabilityError", ValueError),
+    ("identification.errors.SimulationDivergedError", ValueError),
+    ("identification.errors.ModelFileError", ValueError),
+    ("identification.errors.NotFittedError", ValueError),
+    ("identification.errors.NotFittedError", AttributeError),
+    ("identification.errors.DisturbanceError", ValueError),
+    ("identification.errors.LibraryError", ValueError),
+    ("identification.errors.MissingDependency", ImportError),
+    ("identification.errors.BackendError", ValueError),
+    ("identification.errors.TaskFailed", RuntimeError),
+    ("identification.io.errors.LogFormatError", ValueError),
+    ("heli_env.errors.EnvModelError", ValueError),
+    ("heli_env.errors.ActionError", ValueError),
+    ("controllers.errors.SweepError", ValueError),
+    ("controllers.errors.AgentError", ValueError),
+    ("controllers.errors.DesignError", ValueError),
+    ("controllers.errors.TrainingInterrupted", KeyboardInterrupt),
+])
+def test_package_errors_keep_their_standard_base(dotted, standard):
+    """Callers that catch the standard exception keep working."""
+    module, name = dotted.rsplit(".", 1)
+    cls = getattr(importlib.import_module(module), name)
+    assert issubclass(cls, standard)
+
+
+def test_task_failed_keeps_its_index():
+    e = heli_core.errors.TaskFailed("worker died", index=3)
+    assert e.index == 3 and str(e) == "worker died" and isinstance(e, RuntimeError)
+
+
+def test_cli_counts_every_heli_error_as_a_user_error(capsys, monkeypatch):
+    """A HeliError of any package, even one the CLI never heard of, ends in one line and exit status 2."""
+    from heli_cli import main as cli
+
+    class Invented(HeliError, ValueError):
+        pass
+
+    def fail(args):
+        raise Invented("expected a thing, got another")
+
+    class Parser:
+        def parse_args(self, argv=None):
+            return argparse.Namespace(command="simulate-flight", func=fail, debug=False)
+
+    monkeypatch.setattr(cli, "build_parser", Parser)
+    assert cli.main([]) == 2
+    assert capsys.readouterr().err.splitlines() == ["heli simulate-flight: error: Invented: expected a thing, got another"]
+
+
+def test_euler_conversion_is_one_text():
+    """The numpy, float and numba paths read the same five expressions (eqs. 27-29)."""
+    from heli_env.kernels import _EULER_ARGUMENTS
+
+    rng = np.random.default_rng(0)
+    q = rng.normal(size=(4, 200))
+    q /= np.linalg.norm(q, axis=0)
+    args = heli_core.quaternion.euler_arguments(*q)
+    for i in range(q.shape[1]):  # the float path does the numpy path's arithmetic exactly
+        assert heli_core.quaternion.euler_arguments(*map(float, q[:, i])) == tuple(a[i] for a in args)
+    scalar = np.array([heli_core.quaternion.euler_from_quaternion_scalar(*map(float, q[:, i]))
+                       for i in range(q.shape[1])]).T
+    assert_allclose(scalar, heli_core.quaternion.euler_from_quaternion(q), rtol=0, atol=1e-15)
+    for expr in heli_core.quaternion.EULER_ARGUMENTS:
+        assert any(expr.replace("q", "b") in line for line in _EULER_ARGUMENTS)
+
+
+def test_euler_round_trip():
+    euler = np.array([[0.3, -1.2, 2.9], [-0.1, 0.7, -3.0], [1.4, -0.2, 0.01]]).T  # (3, n) inside the ZYX range
+    assert_allclose(heli_core.quaternion.euler_from_quaternion(heli_core.quaternion.quaternion_from_euler(*euler)),
+                    euler, rtol=0, atol=1e-14)
+    assert math.isclose(heli_core.quaternion.euler_from_quaternion_scalar(1.0, 0.0, 0.0, 0.0)[2], 0.0)
+
+
+def test_stick_rows_name_the_axis_sticks():
+    t = heli_core.terms
+    assert tuple(t.STICKS[i] for i in t.STICK_ROW) == t.INPUT_FOR_AXIS
+    assert t.AXES == ("roll", "pitch", "yaw")
+
+
+def test_discrete_step_follows_rk4():
+    """One exact-ZOH period against 20 RK4 sub-steps of the same model with every effect switched on."""
+    from heli_core.params import ModelParams
+    from heli_core.physics import initial_state, step
+
+    params = ModelParams(k1=0.8, k2=1.35, k3=2.4, k4=0.8, kd1=0.04, k5=0.9, k6=-0.89, k7=2.5, k8=0.7, kd2=0.01,
+                         k9=-0.95, k10=13.5, k11=3.4, k12=-0.56, kd3=0.1, tau_roll=0.08, tau_pitch=0.08, tau_yaw=0.05,
+                         extra=(("nld1", 2.0), ("gs1", -0.8)))
+    rng = np.random.default_rng(1)
+    x = initial_state(rates=rng.normal(0, 0.5, 3), euler=rng.normal(0, 0.2, 3), sticks=rng.uniform(-0.3, 0.3, 3),
+                      batch=())
+    u = rng.uniform(-0.5, 0.5, 4)
+    d = rng.normal(0, 0.3, 3)
+    exact = np.array(heli_core.discrete.discrete_step(tuple(x), tuple(u), tuple(d), params, 0.01))
+    reference = np.array(step(tuple(x), tuple(u), tuple(d), params, 0.01, substeps=20))
+    assert_allclose(exact[:6], reference[:6], rtol=0, atol=5e-5)  # products held over 10 ms: first order in dt
+    assert_allclose(exact[6:], reference[6:], rtol=0, atol=2e-5)  # turned by the mean of two rates
