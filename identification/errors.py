@@ -59,3 +59,12 @@ __all__ = [
     "MissingDependency", "ModelFileError", "NotFittedError", "SimulationDivergedError", "TaskFailed", "UnitError",
     "require",
 ]
+
+
+class ModelDirError(ModelFileError):
+    """A model directory is not one consistent state: an interrupted write that cannot be finished nor rolled
+    back, an unreadable transaction journal, a committed model file that is missing or altered."""
+
+
+class ModelDirBusyError(ModelDirError):
+    """Another command is writing the model directory, and this one was asked not to wait (``--no-wait``)."""
