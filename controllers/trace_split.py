@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from heli_env.tasks import draw_offset, draw_offsets, window_count
+
 
 @dataclass(frozen=True)
 class TraceSegment:
@@ -150,7 +152,7 @@ def segment_rooms(env_model, segments, needed: int) -> np.ndarray:
             raise ValueError(f"segment of trace {seg.trace}: the library holds {env_model.n_traces} traces")
         length = int(env_model.lengths[seg.trace])
         first, end = seg.samples(length)
-        room = end - needed - first + 1
+        room = window_count(end - first, needed)
         if room < 1:
             raise ValueError(
                 f"trace {seg.trace} ({env_model.trace_ids[seg.trace]}) from {first / env_model.sample_rate:g} s to "
@@ -197,13 +199,11 @@ def draw_windows(env_model, segments, needed: int, rng: np.random.Generator, cou
             j = int(rng.choice(len(segments), p=p))
             seg = segments[j]
             first = seg.samples(int(env_model.lengths[seg.trace]))[0]
-            out.append((seg.trace, first + int(rng.integers(rooms[j]))))
+            out.append((seg.trace, first + draw_offset(rng, rooms[j])))
         return out
     for seg, room in zip(segments, rooms):
         first = seg.samples(int(env_model.lengths[seg.trace]))[0]
-        m = int(per_segment)
-        offs = rng.choice(room, size=m, replace=m > room)
-        out.extend((seg.trace, first + int(o)) for o in np.sort(offs))
+        out.extend((seg.trace, first + o) for o in draw_offsets(rng, room, int(per_segment)))
     return out
 
 
@@ -225,7 +225,7 @@ class WindowSampler:
 
     def __call__(self, i: int, rng: np.random.Generator) -> dict:
         j = int(rng.choice(len(self.segments), p=self._p)) if len(self.segments) > 1 else 0
-        return {"trace": self.segments[j].trace, "offset": self.firsts[j] + int(rng.integers(self.rooms[j]))}
+        return {"trace": self.segments[j].trace, "offset": self.firsts[j] + draw_offset(rng, self.rooms[j])}
 
 
 def as_segments(traces, split: TraceSplit | None = None, default: str = "held-out") -> tuple:

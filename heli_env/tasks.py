@@ -119,8 +119,7 @@ def draw_episode(rng: np.random.Generator, cfg: TaskConfig, n_traces: int, lengt
         trace = int(options["trace"])
         if not 0 <= trace < n_traces:
             raise ValueError(f"options['trace'] must be a trace index in [0, {n_traces}), got {trace}")
-    room = int(lengths[trace]) - needed
-    offset = int(rng.integers(max(room, 0) + 1))
+    offset = draw_offset(rng, max(window_count(lengths[trace], needed), 1))  # a short trace ends the episode early
     if options.get("offset") is not None:
         offset = int(options["offset"])
         if not 0 <= offset < int(lengths[trace]) - 1:
@@ -138,6 +137,27 @@ def draw_episode(rng: np.random.Generator, cfg: TaskConfig, n_traces: int, lengt
     unit_steps[:, 0] = 0.0  # start from the current hold point, then step
     amp = unit_amp / unit_amp.sum(axis=1, keepdims=True) * bound
     return Episode(trace, offset, angles, rates, smooth, unit_steps * bound, amp, freq, phase)
+
+
+def window_count(length: int, needed: int) -> int:
+    """Distinct gust windows of ``needed`` samples in a stretch of ``length`` samples: ``length - needed + 1``.
+
+    Less than 1 when no window fits. Window ``o`` replays samples ``o .. o + needed - 1``.
+    """
+    return int(length) - int(needed) + 1
+
+
+def draw_offset(rng: np.random.Generator, count: int) -> int:
+    """One window start, uniform over ``count`` distinct windows (one ``rng.integers`` draw)."""
+    return int(rng.integers(count))
+
+
+def draw_offsets(rng: np.random.Generator, count: int, m: int) -> list:
+    """``m`` window starts uniform over ``count`` windows, sorted; distinct when ``m <= count``.
+
+    One ``rng.choice`` draw, without replacement where the stretch has room for ``m`` windows.
+    """
+    return [int(o) for o in np.sort(rng.choice(count, size=m, replace=m > count))]
 
 
 def reference_bounds(cfg: TaskConfig) -> np.ndarray:
