@@ -38,17 +38,20 @@ measure. Issue target: KS <= 0.1 at stable swept gains.
 from __future__ import annotations
 
 import math
-import sys
 from dataclasses import dataclass
 
 import numpy as np
 
-from identification.files import jsonable, write_text
-from identification.model import ModelParams, _kernel, euler_from_quaternion, trim_sticks
+from heli_core.files import jsonable, write_text
+from heli_core.params import ModelParams
+from heli_core.physics import trim_sticks
 from identification.synthetic import PAPER_PARAMS, FlightConfig, coloured_noise
 
-from .closed_loop import AXES, axis_index, disturbance_spectrum, pd_command
+from .closed_loop import AXES, axis_index, disturbance_spectrum
 from .errors import SweepError
+from .metrics import QUANTILES
+from .replay import LoopInputs, fly, rk4_step
+from .sweep_inputs import check_pairs, load_model
 
 _DEG = 180.0 / math.pi
 KS_TARGET = 0.1
@@ -266,19 +269,9 @@ def validate_against_flights(model, pairs, axis="roll", n_flights: int = 10, dur
         Bad pairs, flights or duration, a missing or corrupt model directory, or a ``prediction``
         of another axis, another dt, without samples or without one of ``pairs``.
     """
-    from scipy import stats as sps
-
-    from .sweep import _load, check_gains, sweep_pairs
-
-    try:
-        env_model = _load(model)
-    except ValueError as e:
-        raise SweepError(str(e)) from e
+    env_model = load_model(model)
     ax = axis_index(axis)
-    arr = np.asarray(pairs, dtype=float)
-    if arr.ndim != 2 or arr.shape[1] != 2 or arr.shape[0] == 0:
-        raise SweepError(f"pairs must be a non-empty list of (kp, kd), got shape {arr.shape}")
-    kp_all, kd_all = check_gains(arr[:, 0], "kp of pairs"), check_gains(arr[:, 1], "kd of pairs")
+    arr, kp_all, kd_all = check_pairs(pairs)
     if int(n_flights) != n_flights or n_flights < 1:
         raise SweepError(f"n_flights must be a whole number >= 1, got {n_flights!r}")
     if not (duration > 0 and math.isfinite(duration)):
@@ -287,6 +280,8 @@ def validate_against_flights(model, pairs, axis="roll", n_flights: int = 10, dur
     substeps = cfg.substeps if substeps is None else int(substeps)
     truth_name, params = _truth(truth, env_model)
     if prediction is None:
+        from .sweep import sweep_pairs
+
         prediction = sweep_pairs(env_model, arr, axis=AXES[ax], duration=None, dt=dt, keep_samples=True,
                                  progress=progress)
     elif not prediction.samples:
@@ -297,10 +292,31 @@ def validate_against_flights(model, pairs, axis="roll", n_flights: int = 10, dur
     flyable = np.array([r["status"] == "stable" for r in pred_rows])
 
     wind = wind_statistics(env_model, dt)
-    fs = 1.0 / dt
     n = int(round(duration / dt))
-    F = int(n_flights)
-    rng = np.random.default_rng(seed)
+    inputs = _fresh_wind(np.random.default_rng(seed), wind, params, env_model.params, n, int(n_flights), dt,
+                         sensors, cfg)
+    idx = np.flatnonzero(flyable)
+    att, rate, sat = _fly(params, env_model.params, inputs, ax, kp_all[idx], kd_all[idx], nominal, dt, substeps,
+                          max_batch, progress)
+    table, samples = _compare(kp_all, kd_all, flyable, idx, att, rate, sat, n, prediction, pred_idx, pred_rows)
+    pset = prediction.settings
+    settings = {"truth": truth_name, "truth_parameters": params.values(), "n_flights": int(n_flights),
+                "duration": n * dt, "dt": dt, "seed": int(seed), "sensors": bool(sensors), "substeps": substeps,
+                "wind": wind, "nominal_gains": nominal.tolist(), "model": str(env_model.path),
+                "prediction": f"{pset['n_windows']} windows of {pset['duration']:g} s"}
+    return FlightTestResult(AXES[ax], table, settings, samples)
+
+
+def _fresh_wind(rng, wind: dict, params, model_params, n: int, F: int, dt: float, sensors: bool,
+                cfg: FlightConfig) -> LoopInputs:
+    """What ``F`` flights of ``n`` periods hold over each period: fresh gusts, a wandering collective, sensors.
+
+    Per flight, in this order from ``rng``: the gust of each axis (coloured noise at the library's
+    level and bandwidth), the collective (0.05 Hz low-pass around the library's mean), and with
+    ``sensors`` the flight generator's gyro (noise + rotor vibration) and attitude noise. The torque
+    is the truth's ``k·u_d``; the trim the autopilot adds is the identified model's (``model_params``).
+    """
+    fs = 1.0 / dt
     gust = np.empty((3, n, F))
     col = np.empty((n, F))
     gyro = np.zeros((3, n, F))
@@ -318,51 +334,33 @@ def validate_against_flights(model, pairs, axis="roll", n_flights: int = 10, dur
             gyro[:, :, f] = cfg.gyro_noise * rng.standard_normal((3, n)) + vib
             attn[:, :, f] = cfg.attitude_noise * rng.standard_normal((3, n))
     torque = params.control_gains[:, None, None] * gust
-    trim = np.array(trim_sticks(env_model.params, col))  # the autopilot's trim: the identified model's
-    rk4 = _kernel(params)[0]["rk4"]
-    signs = np.sign(env_model.params.control_gains)
-    h = dt / substeps
-    idx = np.flatnonzero(flyable)
-    P = idx.size
+    trim = np.array(trim_sticks(model_params, col))  # the autopilot's trim: the identified model's
+    return LoopInputs(trim, col, torque, att_noise=attn, rate_noise=gyro)
+
+
+def _fly(params, model_params, inputs: LoopInputs, ax, kp, kd, nominal, dt, substeps, max_batch, progress):
+    """The truth (``params``, RK4 with ``substeps``) under the autopilot (signs of ``model_params``).
+
+    Returns the swept axis' attitude and rate errors (P, n, F) of the true state and the clipped periods (P, F).
+    """
+    P, n, F = kp.size, inputs.steps, inputs.windows
     att = np.zeros((P, n, F), dtype=np.float32)
     rate = np.zeros((P, n, F), dtype=np.float32)
     sat = np.zeros((P, F))
-    from tqdm import tqdm
+    signs = np.sign(model_params.control_gains)
+    for sl, rec in fly(rk4_step(params, dt, substeps), inputs, ax, kp, kd, nominal, signs, max_batch, progress,
+                       "flight tests"):
+        att[sl], rate[sl], sat[sl] = rec.att, rec.rate, rec.sat
+    return att, rate, sat
 
-    cp = max(1, max_batch // F)
-    bar = tqdm(total=P * n * F, desc="flight tests", unit="step", unit_scale=True, leave=False, file=sys.stderr,
-               disable=not progress or not sys.stderr.isatty())
-    with bar, np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        for c0 in range(0, P, cp):
-            sl = slice(c0, min(P, c0 + cp))
-            g = sl.stop - sl.start
-            gains = [(nominal[i][0], nominal[i][1]) for i in range(3)]
-            gains[ax] = (kp_all[idx[sl]][:, None], kd_all[idx[sl]][:, None])
-            z = np.zeros((g, F))
-            x = (z, z, z, z + trim[0, 0], z + trim[1, 0], z + trim[2, 0], z + 1.0, z, z, z)
-            for k in range(n):
-                ang = euler_from_quaternion(x[6:10])
-                att[sl, k] = -ang[ax]
-                rate[sl, k] = -x[ax]
-                sticks = []
-                for i in range(3):
-                    u = pd_command(gains[i][0], gains[i][1], signs[i], -(ang[i] + attn[i, k]), -(x[i] + gyro[i, k]))
-                    a = np.clip(u, -1.0, 1.0)
-                    s = np.clip(trim[i, k] + a, -1.0, 1.0)
-                    if i == ax:
-                        sat[sl] += (a != u) | (s != trim[i, k] + a)
-                    sticks.append(s)
-                u4 = (sticks[0], sticks[1], col[k], sticks[2])
-                d = (torque[0, k], torque[1, k], torque[2, k])
-                for _ in range(substeps):
-                    x = rk4(x, u4, d, h)
-                if k % 200 == 199:
-                    bar.update(200 * g * F)
-            bar.update((n % 200) * g * F)
+
+def _compare(kp_all, kd_all, flyable, idx, att, rate, sat, n, prediction, pred_idx, pred_rows):
+    """The table of measured against predicted distributions per pair, and the measured samples."""
+    from scipy import stats as sps
 
     G = kp_all.size
     cols = ["ks_att", "ks_att_gauss", "ks_rate", "ks_rate_gauss", "saturation"]
-    for q in (50, 90, 99):
+    for q in QUANTILES:
         cols += [f"att_p{q}_deg", f"pred_td_att_p{q}_deg", f"pred_fd_att_p{q}_deg",
                  f"rate_p{q}_dps", f"pred_td_rate_p{q}_dps", f"pred_fd_rate_p{q}_dps"]
     cols += ["att_p90_err_td", "att_p90_err_fd"]
@@ -382,8 +380,8 @@ def validate_against_flights(model, pairs, axis="roll", n_flights: int = 10, dur
         table["ks_att_gauss"][gi] = sps.kstest(ma, "halfnorm", args=(0.0, row["pred_att_rms_deg"])).statistic
         table["ks_rate_gauss"][gi] = sps.kstest(mr, "halfnorm", args=(0.0, row["pred_rate_rms_dps"])).statistic
         table["saturation"][gi] = sat[j].mean() / n
-        pm_a, pm_r = np.percentile(ma, [50, 90, 99]), np.percentile(mr, [50, 90, 99])
-        for q, va, vr in zip((50, 90, 99), pm_a, pm_r):
+        pm_a, pm_r = np.percentile(ma, QUANTILES), np.percentile(mr, QUANTILES)
+        for q, va, vr in zip(QUANTILES, pm_a, pm_r):
             table[f"att_p{q}_deg"][gi] = va
             table[f"rate_p{q}_dps"][gi] = vr
             table[f"pred_td_att_p{q}_deg"][gi] = row[f"att_p{q}_deg"]
@@ -392,9 +390,4 @@ def validate_against_flights(model, pairs, axis="roll", n_flights: int = 10, dur
             table[f"pred_fd_rate_p{q}_dps"][gi] = row[f"pred_rate_p{q}_dps"]
         table["att_p90_err_td"][gi] = row["att_p90_deg"] / pm_a[1] - 1.0
         table["att_p90_err_fd"][gi] = row["pred_att_p90_deg"] / pm_a[1] - 1.0
-    pset = prediction.settings
-    settings = {"truth": truth_name, "truth_parameters": params.values(), "n_flights": F, "duration": n * dt,
-                "dt": dt, "seed": int(seed), "sensors": bool(sensors), "substeps": substeps, "wind": wind,
-                "nominal_gains": nominal.tolist(), "model": str(env_model.path),
-                "prediction": f"{pset['n_windows']} windows of {pset['duration']:g} s"}
-    return FlightTestResult(AXES[ax], table, settings, samples)
+    return table, samples

@@ -1,0 +1,207 @@
+"""One batched closed loop: per-axis PD attitude hold of many gain pairs against many gust windows.
+
+The gain sweep (:mod:`controllers.sweep`, the identified model replaying the
+library's gusts) and the flight tests (:mod:`controllers.flight_test`, the
+truth model in fresh wind) fly the same loop; this module writes it once.
+
+At every control period ``dt`` the PD law (:func:`controllers.closed_loop.pd_command`)
+computes a stick offset per axis from the attitude and rates the autopilot sees
+(the true state, plus sensor noise where given; reference 0: attitude hold),
+clipped to [-1, 1]; the applied stick is ``clip(trim + offset, -1, 1)``, exactly
+as the environments apply an action. The sticks, the recorded collective and the
+gust torque ``k·u_d`` [rad/s²] are held over the period (zero-order hold) while
+the physics core advances the state: its exact discrete step
+(:func:`zoh_step`, the environments' integrator) or RK4 with sub-steps
+(:func:`rk4_step`, the synthetic flight generator's). The state starts level at
+rest, servos settled on the first trim.
+
+All three axes fly: the swept axis with the pair under test, the other two with
+the ``nominal`` gains. The state is a tuple of arrays of shape (pairs in a
+chunk, windows); the per-period inputs, of shape (windows,), broadcast over the
+pairs. Records are taken on the swept axis at the start of each period (the
+state the controller acts on), so the first sample of every window is the start.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+
+import numpy as np
+
+from heli_core.discrete import discrete_kernel
+from heli_core.physics import kernel
+from heli_core.quaternion import euler_from_quaternion
+
+from .closed_loop import AXES, pd_command
+
+PROGRESS_EVERY = 200
+"""Control periods between two updates of the progress bar."""
+
+
+@dataclass(frozen=True, eq=False)
+class LoopInputs:
+    """What is held over each control period, shared by every gain pair of a batch.
+
+    Attributes
+    ----------
+    trim : ndarray, shape (3, n, W)
+        Trim sticks (lat, lon, ped) for the period's collective [stick]; the PD offset is added to it.
+    col : ndarray, shape (n, W)
+        Collective stick [stick].
+    torque : ndarray, shape (3, n, W)
+        Gust torque ``k·u_d`` per axis [rad/s²].
+    att_noise, rate_noise : ndarray, shape (3, n, W), optional
+        Sensor errors added to the Euler angles [rad] and the body rates [rad/s] the autopilot
+        sees; None: it sees the true state.
+    """
+
+    trim: np.ndarray
+    col: np.ndarray
+    torque: np.ndarray
+    att_noise: np.ndarray | None = None
+    rate_noise: np.ndarray | None = None
+
+    @property
+    def steps(self) -> int:
+        return int(self.col.shape[0])
+
+    @property
+    def windows(self) -> int:
+        return int(self.col.shape[1])
+
+
+@dataclass(eq=False)
+class LoopRecord:
+    """What one chunk of gain pairs did, on the swept axis.
+
+    Attributes
+    ----------
+    att, rate : ndarray of float32, shape (g, n, W)
+        Attitude error [rad] and rate error [rad/s] (reference 0: ``-angle``, ``-rate``) of the
+        true state at the start of each period; laid out (pair, period, window) so each pair's
+        samples are contiguous.
+    act : ndarray of float32, shape (g, n, W)
+        Applied stick offset from trim [stick].
+    sat : ndarray, shape (g, W)
+        Periods where the PD command or the stick (trim + offset) was clipped.
+    omax : ndarray, shape (g, W)
+        Largest |angle| of the two held axes [rad].
+    """
+
+    att: np.ndarray
+    rate: np.ndarray
+    act: np.ndarray
+    sat: np.ndarray
+    omax: np.ndarray
+
+
+def zoh_step(params, dt: float):
+    """``step(x, u, d)``: the physics core's exact discrete step over one period (the environments')."""
+    return discrete_kernel(params, float(dt))[0]
+
+
+def rk4_step(params, dt: float, substeps: int):
+    """``step(x, u, d)``: ``substeps`` RK4 steps of the physics core over one period (the flight generator's)."""
+    rk4 = kernel(params)[0]["rk4"]
+    h = dt / substeps
+
+    def step(x, u, d):
+        for _ in range(substeps):
+            x = rk4(x, u, d, h)
+        return x
+
+    return step
+
+
+def _progress(total, show, desc):
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit="step", unit_scale=True, leave=False, file=sys.stderr,
+                disable=not show or not sys.stderr.isatty())
+
+
+def fly(step, inputs: LoopInputs, axis: int, kp, kd, nominal, signs, max_batch: int = 4096,
+        progress: bool = True, desc: str | None = None):
+    """Fly gain pairs ``(kp[g], kd[g])`` on ``axis`` against every window; yield ``(slice, LoopRecord)`` per chunk.
+
+    Parameters
+    ----------
+    step : callable
+        ``step(x, u, d)`` advancing the state one period (:func:`zoh_step` or :func:`rk4_step`).
+    inputs : LoopInputs
+    axis : int
+        Swept axis, 0 roll, 1 pitch, 2 yaw.
+    kp, kd : ndarray, shape (G,)
+        Gains of the swept axis [stick/rad], [stick/(rad/s)].
+    nominal : array (3, 2)
+        (kp, kd) of the held axes.
+    signs : array (3,)
+        Signs of the control gains (k2, k6, k10) the autopilot assumes.
+    max_batch : int
+        Pair × window states stepped at once; chunks hold ``max(1, max_batch // W)`` pairs.
+    progress : bool
+        tqdm bar on stderr (when it is a terminal).
+    desc : str, optional
+        Label of the bar.
+
+    Yields
+    ------
+    slice, LoopRecord
+        The chunk's pairs and what they did. Every pair's states are independent of the
+        others in its chunk (element-wise numpy), so the split changes no number.
+    """
+    G, W, n = kp.size, inputs.windows, inputs.steps
+    cp = max(1, max_batch // W)
+    ins = _contiguous(inputs)
+    with _progress(G * W * n, progress, desc or f"replay {AXES[axis]}") as bar, \
+            np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        for c0 in range(0, G, cp):
+            sl = slice(c0, min(G, c0 + cp))
+            gains = [(nominal[i][0], nominal[i][1]) for i in range(3)]
+            gains[axis] = (kp[sl][:, None], kd[sl][:, None])
+            yield sl, _fly_chunk(step, ins, axis, gains, signs, sl.stop - sl.start, bar)
+
+
+def _contiguous(inputs: LoopInputs) -> dict:
+    """Per-axis rows of the inputs as contiguous arrays (the loop reads one period of one axis at a time)."""
+    def rows(a):
+        return None if a is None else [np.ascontiguousarray(a[i]) for i in range(3)]
+
+    return {"trim": rows(inputs.trim), "torque": rows(inputs.torque), "col": inputs.col,
+            "att_noise": rows(inputs.att_noise), "rate_noise": rows(inputs.rate_noise)}
+
+
+def _fly_chunk(step, ins: dict, ax: int, gains, signs, g: int, bar) -> LoopRecord:
+    """One chunk of ``g`` pairs over every period; see :func:`fly`."""
+    trim, torque, col = ins["trim"], ins["torque"], ins["col"]
+    att_noise, rate_noise = ins["att_noise"], ins["rate_noise"]
+    n, W = col.shape
+    clip = np.clip
+    z = np.zeros((g, W))
+    x = (z, z, z, z + trim[0][0], z + trim[1][0], z + trim[2][0], z + 1.0, z, z, z)
+    rec = LoopRecord(np.empty((g, n, W), dtype=np.float32), np.empty((g, n, W), dtype=np.float32),
+                     np.empty((g, n, W), dtype=np.float32), np.zeros((g, W)), np.zeros((g, W)))
+    others = [i for i in range(3) if i != ax]
+    for k in range(n):
+        ang = euler_from_quaternion(x[6:10])
+        sticks = []
+        for i in range(3):
+            e_ang = -ang[i] if att_noise is None else -(ang[i] + att_noise[i][k])
+            e_rate = -x[i] if rate_noise is None else -(x[i] + rate_noise[i][k])
+            u = pd_command(gains[i][0], gains[i][1], signs[i], e_ang, e_rate)
+            a = clip(u, -1.0, 1.0)
+            t_i = trim[i][k]
+            s = clip(t_i + a, -1.0, 1.0)
+            sticks.append(s)
+            if i == ax:
+                rec.att[:, k] = -ang[i]
+                rec.rate[:, k] = -x[i]
+                rec.act[:, k] = s - t_i
+                rec.sat += (a != u) | (s != t_i + a)
+        rec.omax = np.maximum(rec.omax, np.maximum(np.abs(ang[others[0]]), np.abs(ang[others[1]])))
+        x = step(x, (sticks[0], sticks[1], col[k], sticks[2]), (torque[0][k], torque[1][k], torque[2][k]))
+        if k % PROGRESS_EVERY == PROGRESS_EVERY - 1:
+            bar.update(PROGRESS_EVERY * g * W)
+    bar.update((n % PROGRESS_EVERY) * g * W)
+    return rec
