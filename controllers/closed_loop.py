@@ -10,7 +10,7 @@ theory for every gain pair (paper Section 4 proposal):
   transfer function from the equivalent stick ``u_d`` (eq. 42) to the attitude
   error, the rate error and the stick.
 
-The plant is the package's one physics core (:mod:`identification.model`):
+The plant is the package's one physics core (:mod:`heli_core.physics`):
 its right-hand side is differentiated numerically about hover at the trim
 (rates 0, servo settled on the trim sticks, level attitude, the given
 collective), which picks up every term of the model — the decoupled eqs.
@@ -37,13 +37,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from identification.model import _kernel, servo_coefficients, trim_sticks
+from heli_core.physics import kernel, trim_sticks
+from heli_core.servo import servo_coefficients
+from heli_core.terms import AXES, STICK_ROW
 
 from .errors import SweepError
-
-AXES = ("roll", "pitch", "yaw")
-"""Axis names; index 0, 1, 2 = roll/lat/k2, pitch/lon/k6, yaw/ped/k10."""
-_STICK_IN_U = (0, 1, 3)  # lat, lon, ped in the core's input (lat, lon, col, ped)
 STABILITY_MARGIN = 1e-9
 """A gain pair is stable when every discrete closed-loop pole has ``|z| < 1 - STABILITY_MARGIN``
 (a pole on the unit circle, e.g. ``kp = 0``, lets the attitude drift and counts as unstable)."""
@@ -78,10 +76,13 @@ def pd_command(kp, kd, sign, e_angle, e_rate):
 
     Notes
     -----
-    The law of :class:`controllers.pd.PDController` (``predict``: ``clip(s·(kp·obs[0:3] +
-    kd·obs[6:9]), -1, 1)``), written out here because the sweep steps many gain pairs in one
-    batch while a ``PDController`` holds one gain set; ``tests/test_sweep.py`` checks that the
-    two give the same actions. The caller clips the result to [-1, 1] and adds the trim.
+    The package's one PD law, for floats and numpy batches alike: the batched closed loop
+    (:mod:`controllers.replay`) evaluates it for many gain pairs at once, the linear closed
+    loop takes its slopes (:func:`gain_matrices`), and :class:`controllers.pd.PDController`
+    (``predict``: ``clip(s·(kp·obs[0:3] + kd·obs[6:9]), -1, 1)``) computes the same numbers
+    (``tests/test_sweep.py`` checks it; ``sign`` is ±1, so ``s·(kp·e + kd·ė)`` and
+    ``(s·kp)·e + (s·kd)·ė`` agree bit for bit). The caller clips the result to [-1, 1] and adds
+    the trim.
     """
     return sign * (kp * e_angle + kd * e_rate)
 
@@ -145,7 +146,7 @@ def hover_plant(params, dt: float, collective: float = 0.0) -> HoverPlant:
     gains = params.control_gains
     if np.any(gains == 0.0):
         raise SweepError(f"the model has a zero control gain (k2, k6, k10 = {gains.tolist()}); it cannot be controlled")
-    rhs = _kernel(params)[0]["rhs"]
+    rhs = kernel(params)[0]["rhs"]
     trim = [float(v) for v in trim_sticks(params, float(collective))]
     delayed = [i for i, tau in enumerate(params.taus) if servo_coefficients(tau)[0] != 0.0]
     x0 = [0.0, 0.0, 0.0, trim[0], trim[1], trim[2], 1.0, 0.0, 0.0, 0.0]
@@ -171,7 +172,7 @@ def hover_plant(params, dt: float, collective: float = 0.0) -> HoverPlant:
     for j, v in enumerate(state_vars):
         Ac[:m, j] = jac("x", v)
     for i in range(3):
-        Buc[:m, i] = jac("u", _STICK_IN_U[i])
+        Buc[:m, i] = jac("u", STICK_ROW[i])
         Bwc[:m, i] = jac("d", i) * gains[i]  # torque k*u_d per unit equivalent stick, eq. (42)
         Ac[m + i, i] = 1.0  # level-flight attitude kinematics, eq. (25)
     Ac[np.abs(Ac) < 1e-9] = 0.0
@@ -203,6 +204,8 @@ def gain_matrices(plant: HoverPlant, axis: int, kp, kd, nominal) -> np.ndarray:
     """State-feedback matrices ``K`` (u = −K x) of the PD law for each gain pair, shape (G, 3, n).
 
     The swept ``axis`` gets ``kp[g], kd[g]``; the other two axes their ``nominal`` (3, 2) gains.
+    Each row is the slope of :func:`pd_command` in the angle and in the rate (the law is linear,
+    so these are exactly ``sign·kp`` and ``sign·kd``).
     """
     kp = np.atleast_1d(np.asarray(kp, dtype=float))
     kd = np.atleast_1d(np.asarray(kd, dtype=float))
@@ -210,8 +213,8 @@ def gain_matrices(plant: HoverPlant, axis: int, kp, kd, nominal) -> np.ndarray:
     K = np.zeros((G, 3, plant.n))
     for i in range(3):
         p_i, d_i = (kp, kd) if i == axis else (np.full(G, nominal[i][0]), np.full(G, nominal[i][1]))
-        K[:, i, plant.angle_idx[i]] = plant.signs[i] * p_i
-        K[:, i, plant.rate_idx[i]] = plant.signs[i] * d_i
+        K[:, i, plant.angle_idx[i]] = pd_command(p_i, d_i, plant.signs[i], 1.0, 0.0)
+        K[:, i, plant.rate_idx[i]] = pd_command(p_i, d_i, plant.signs[i], 0.0, 1.0)
     return K
 
 

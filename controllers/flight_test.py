@@ -45,9 +45,10 @@ import numpy as np
 from heli_core.files import jsonable, write_text
 from heli_core.params import ModelParams
 from heli_core.physics import trim_sticks
+from heli_core.terms import AXES
 from identification.synthetic import PAPER_PARAMS, FlightConfig, coloured_noise
 
-from .closed_loop import AXES, axis_index, disturbance_spectrum
+from .closed_loop import axis_index, disturbance_spectrum
 from .errors import SweepError
 from .metrics import QUANTILES
 from .replay import LoopInputs, fly, rk4_step

@@ -46,8 +46,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from heli_core.terms import AXES
+
 from .closed_loop import (
-    AXES,
     GAUSS_ABS_FACTOR,
     closed_loop_poles,
     disturbance_spectrum,

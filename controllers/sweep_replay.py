@@ -16,7 +16,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from .closed_loop import AXES
+from heli_core.terms import AXES
+
 from .errors import SweepError
 from .metrics import abs_in_place, error_metrics_inplace
 from .replay import fly, zoh_step
