@@ -441,3 +441,92 @@ def test_cli_rejects_a_bad_duration(capsys):
     with pytest.raises(SystemExit) as e:
         main(["sweep", "--kp", "1", "--kd", "1", "--duration", "-5"])
     assert e.value.code == 2
+
+
+# ------------------------------------------------------- one closed loop, one sampler, one config
+def test_the_replay_splits_pairs_into_chunks_without_changing_a_number(shipped):
+    """controllers.replay.fly: every pair's states are independent of the others in its chunk."""
+    from controllers.replay import fly, zoh_step
+    from controllers.sweep_inputs import prepare
+
+    rp = prepare(shipped, "pitch", 2.0, 0.01, 3, None, 3)
+    kp, kd = np.array([1.0, 3.0, 6.0]), np.array([0.5, 1.0, 2.0])
+    nominal = np.array([[8.0, 2.0], [8.0, 2.0], [1.0, 0.3]])
+    signs = np.sign(shipped.params.control_gains)
+    step = zoh_step(shipped.params, 0.01)
+    whole = [rec for _, rec in fly(step, rp.inputs, 1, kp, kd, nominal, signs, progress=False)]
+    parts = [rec for _, rec in fly(step, rp.inputs, 1, kp, kd, nominal, signs, max_batch=1, progress=False)]
+    assert len(whole) == 1 and len(parts) == 3
+    for name in ("att", "rate", "act", "sat", "omax"):
+        assert_array_equal(np.concatenate([getattr(r, name) for r in parts]), getattr(whole[0], name),
+                           err_msg=name)
+
+
+def test_the_replay_with_zero_sensor_noise_flies_the_true_state(shipped):
+    from controllers.replay import LoopInputs, fly, rk4_step
+    from controllers.sweep_inputs import prepare
+
+    rp = prepare(shipped, "roll", 1.0, 0.01, 0, None, 2)
+    quiet = LoopInputs(rp.inputs.trim, rp.inputs.col, rp.inputs.torque, np.zeros_like(rp.inputs.torque),
+                       np.zeros_like(rp.inputs.torque))
+    args = (0, np.array([3.0]), np.array([1.0]), np.array([[3.0, 1.0]] * 3), np.sign(shipped.params.control_gains))
+    step = rk4_step(shipped.params, 0.01, 2)
+    (_, a), = fly(step, rp.inputs, *args, progress=False)
+    (_, b), = fly(step, quiet, *args, progress=False)
+    for name in ("att", "rate", "act", "sat"):
+        assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
+def test_in_place_metrics_equal_the_shared_error_metrics():
+    from controllers.metrics import error_metrics, error_metrics_inplace, histogram_edges
+
+    rng = np.random.default_rng(4)
+    att, rate, act = (rng.standard_normal((3, 5000)) * s for s in (2.0, 20.0, 0.3))
+    edges = histogram_edges()
+    ref = error_metrics(att, rate, act, saturated=np.zeros(att.shape, bool), hist_edges=edges)
+    got = error_metrics_inplace(*(np.abs(v).astype(np.float32) for v in (att, rate, act)), np.zeros(3), edges)
+    for c in ("att_rms_deg", "att_p50_deg", "att_p90_deg", "att_p99_deg", "rate_rms_dps", "rate_p99_dps",
+              "stick_rms", "stick_p99", "saturation"):
+        assert_allclose(got[c], ref[c], rtol=1e-5, atol=1e-9, err_msg=c)
+    assert np.abs(got["hist_counts"] - ref["hist_counts"]).sum() <= 6  # float32 rounding at bin edges
+    assert_array_equal(got["hist_counts"].sum(axis=1) + got["hist_overflow"], 5000)
+
+
+def test_sweep_config_runs_the_same_sweep_as_the_keywords(shipped):
+    from controllers.sweep import SweepConfig
+
+    cfg = SweepConfig(axis="yaw", duration=2.0, windows=2, seed=5, progress=False, hist_bins=30)
+    a = sweep_gains(shipped, [1.0, 2.0], [0.5], **dataclasses.asdict(cfg))
+    b = sweep_gains(shipped, [1.0, 2.0], [0.5], axis="yaw", duration=2.0, windows=2, seed=5, progress=False,
+                    hist_bins=30)
+    assert a.windows == b.windows and a.settings["axis"] == "yaw"
+    for c, v in _numeric(a).items():
+        assert_array_equal(_numeric(b)[c], v, err_msg=c)
+
+
+def test_one_window_sampler_for_sweep_episodes_and_splits(shipped):
+    """heli_env.tasks' draws are the ones draw_episode, the sweep and trace_split make."""
+    from controllers.sweep_inputs import draw_library_windows
+    from heli_env.tasks import TaskConfig, draw_episode, draw_offset, draw_offsets, window_count
+
+    assert window_count(100, 100) == 1 and window_count(99, 100) == 0
+    ep = draw_episode(np.random.default_rng(2), TaskConfig(), 3, shipped.lengths, 1001, 1000, 0.01, 0.0, 0.0)
+    rng = np.random.default_rng(2)
+    trace = int(rng.integers(3))
+    assert (ep.trace, ep.offset) == (trace, draw_offset(rng, window_count(shipped.lengths[trace], 1001)))
+    wins = draw_library_windows(shipped, [1], 3, 100, 1, 9)
+    assert list(wins) == [(1, o) for o in draw_offsets(np.random.default_rng(9), window_count(shipped.lengths[1],
+                                                                                                101), 3)]
+    assert len(set(wins)) == 3
+
+
+def test_gain_matrices_are_the_slopes_of_the_pd_law(shipped):
+    plant = cl.hover_plant(shipped.params, 0.01, 0.1)
+    nominal = cl.nominal_gains(plant)
+    K = cl.gain_matrices(plant, 1, [2.0, 5.0], [0.5, 1.5], nominal)
+    x = np.random.default_rng(0).standard_normal(plant.n)
+    for g, (kp, kd) in enumerate(((2.0, 0.5), (5.0, 1.5))):
+        gains = [tuple(nominal[0]), (kp, kd), tuple(nominal[2])]
+        u = [cl.pd_command(p, d, plant.signs[i], -x[plant.angle_idx[i]], -x[plant.rate_idx[i]])
+             for i, (p, d) in enumerate(gains)]
+        assert_allclose(-K[g] @ x, u, rtol=1e-12, atol=1e-15)
