@@ -33,12 +33,12 @@ from pathlib import Path
 import numpy as np
 
 from heli_core.files import jsonable, save_figure, write_text
+from heli_core.terms import AXES
 
 from .errors import AgentError
 from .metrics import METRIC_NAMES, error_metrics
 from .trace_split import as_segments, draw_windows, split_traces
 
-AXES = ("roll", "pitch", "yaw")
 SCHEMA = "heli-env/agent-evaluation"
 
 
