@@ -22,7 +22,7 @@ The truth is, by choice:
 * ``"paper"`` — :data:`identification.synthetic.PAPER_PARAMS`, the truth the
   shipped model's synthetic flights were flown with: adds the identification
   error (e.g. k12, kd3 of the yaw axis);
-* a :class:`identification.model.ModelParams`.
+* a :class:`heli_core.params.ModelParams`.
 
 The collective wanders as the generator's does (0.05 Hz low-pass) around the
 library's recorded mean with its standard deviation.
