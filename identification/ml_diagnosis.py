@@ -287,7 +287,7 @@ class LikelihoodDiagnoser:
         # base fit and from a fresh start (the likelihood in the alignment is multimodal), and with every
         # gust model, the best by Akaike as in the identifier: a delay changes which one fits (held at the
         # undelayed choice, a 50 ms yaw delay came out 46 ms, 76 in NLL short, and a quadratic damping
-        # made up the difference). Switching models alone gains LR < 2 (Akaike chose the base's).
+        # made up the difference). The base of each round gets the same choice.
         tries = [self._score(a, base.names, best.alignment, start, WIND_MODELS, 3 * NFEV, free_tau=True)
                  for start in (base.x, _fresh(base.x))]
         return min(tries, key=lambda sc: sc.nll)
@@ -362,7 +362,8 @@ class LikelihoodDiagnoser:
                 # and from the fresh start the alignment candidate also gets (else that start alone could
                 # win it a likelihood ratio)
                 free_tau = (SERVO_DELAY, axis) in self.effects_found_
-                tries = [base] + [self._score(a, base.names, base.alignment, start, (base.kind,), 3 * NFEV, free_tau)
+                # (with every gust model, as the alignment candidate: switching models alone cannot win LR)
+                tries = [base] + [self._score(a, base.names, base.alignment, start, WIND_MODELS, 3 * NFEV, free_tau)
                                   for start in (base.x, _fresh(base.x))]
                 base = current[axis] = self._describe(a, min(tries, key=lambda sc: sc.nll))
                 cands = []
