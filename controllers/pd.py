@@ -65,6 +65,8 @@ from heli_core.files import jsonable, save_figure, write_text
 from heli_core.params import ModelParams
 from heli_core.terms import AXES, STICK_ROW
 
+from .closed_loop import pd_command
+
 SCHEMA = "heli-env/pd-controller"
 SCHEMA_VERSION = 1
 OBS_DIM = 12
@@ -813,8 +815,7 @@ class PDController:
             raise ValueError(f"signs must be three values of +1 or -1 (roll, pitch, yaw), got {signs!r}")
         self.gains = gains
         self.signs = tuple(float(v) for v in sg)
-        self._kp = sg * np.array(gains.kp)
-        self._kd = sg * np.array(gains.kd)
+        self._kp, self._kd, self._sign = np.array(gains.kp, dtype=float), np.array(gains.kd, dtype=float), sg
 
     @classmethod
     def from_model(cls, params: ModelParams, gains: PDGains) -> "PDController":
@@ -850,7 +851,7 @@ class PDController:
         obs = np.asarray(observation, dtype=np.float64)
         if obs.ndim not in (1, 2) or obs.shape[-1] != OBS_DIM:
             raise ValueError(f"observation must have shape ({OBS_DIM},) or (n, {OBS_DIM}), got {obs.shape}")
-        return self._kp * obs[..., 0:3] + self._kd * obs[..., 6:9]
+        return pd_command(self._kp, self._kd, self._sign, obs[..., 0:3], obs[..., 6:9])  # the one PD law
 
     def document(self, metadata=None) -> dict:
         """The JSON document :meth:`save` writes."""
