@@ -72,6 +72,8 @@ def register(sub):
     p.add_argument("--no-disturbances", action="store_true",
                    help="do not identify wind profiles nor write the disturbance library")
     add_flight_backend_options(p)
+    p.add_argument("--no-wait", action="store_true",
+                   help="refuse at once when another command is writing the model folder (default: wait for it)")
     p.set_defaults(func=run, out_kind="dir")
 
 
@@ -101,6 +103,7 @@ def run(args) -> int:
                 identifier_kwargs=kwargs, flight_paths=args.flights, plots=not args.no_plots,
                 disturbances=not args.no_disturbances, backend=backend, method=args.method,
                 progress=progress.bars and len(flights) > 1, draw_figures=False, stage=progress.stage,
+                wait=not args.no_wait,
             )
         finally:
             if backend is not None:

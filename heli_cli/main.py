@@ -29,6 +29,7 @@ COMMAND_MODULES = (
     "heli_cli.identify",
     "heli_cli.diagnose",
     "heli_cli.refresh",
+    "heli_cli.check",
     "heli_cli.compare_methods",
     "heli_cli.design",
     "heli_cli.sweep",

@@ -39,6 +39,8 @@ def register(sub):
                    help="smallest relative change that may be flagged, e.g. 0.05 (default 0: any significant change)")
     p.add_argument("--no-plots", action="store_true", help="do not draw PNG figures")
     add_flight_backend_options(p)
+    p.add_argument("--no-wait", action="store_true",
+                   help="refuse at once when another command is writing the model folder (default: wait for it)")
     p.set_defaults(func=run)
 
 
@@ -51,6 +53,7 @@ def run(args) -> int:
             args.model_dir, args.flights, previous_flights=args.previous_flights, fit=args.fit,
             n_replicates=args.bootstrap, block=args.block, seed=args.seed, alpha=args.alpha,
             min_relative=args.min_change, plots=not args.no_plots, progress=True, backend=backend,
+            wait=not args.no_wait,
         )
     finally:
         if backend is not None:

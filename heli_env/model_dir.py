@@ -1,9 +1,11 @@
 """Load what an environment needs from a model directory written by ``heli identify``.
 
-A model directory holds ``model.json`` (:mod:`identification.model_file`) and
-the disturbance library ``disturbances/`` (:mod:`identification.disturbance_library`).
-:func:`load_env_model` reads and checks both once and packs the library's
-traces into flat arrays the environments index without copying.
+A model directory holds ``model.json`` (:mod:`model_store.model_file`) and
+the disturbance library ``disturbances/`` (:mod:`model_store.disturbance_library`);
+:class:`model_store.ModelDir` reads them as one state (a write that was
+interrupted reads as before or after it). :func:`load_env_model` reads and
+checks both once and packs the library's traces into flat arrays the
+environments index without copying.
 """
 
 from __future__ import annotations
@@ -15,10 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from identification.disturbance_library import DisturbanceLibrary
 from identification.errors import LibraryError, ModelFileError
 from identification.model import ModelParams
-from identification.model_file import MODEL_FILENAME, load_model
+from model_store import MODEL_FILENAME, ModelDir
+from model_store.disturbance_library import LIBRARY_DIRNAME
 
 from .errors import EnvModelError
 
@@ -112,7 +114,7 @@ def load_env_model(path=None, library_version: int | None = None) -> EnvModel:
     path : str or Path, optional
         Model directory (or its ``model.json``). Default: the model shipped with the package.
     library_version : int, optional
-        Library version to replay (default the latest).
+        Library version to replay (default the directory's own: its latest committed version).
 
     Raises
     ------
@@ -125,22 +127,20 @@ def load_env_model(path=None, library_version: int | None = None) -> EnvModel:
         root = root.parent
     if not root.is_dir():
         raise EnvModelError(f"model directory {str(root)!r} does not exist (write one with 'heli identify')")
+    lib_dir = root / LIBRARY_DIRNAME
     try:
-        params, doc = load_model(root / MODEL_FILENAME)
-    except ModelFileError as e:
-        raise EnvModelError(str(e)) from e
-    lib_dir = root / "disturbances"
-    if not lib_dir.is_dir():
-        raise EnvModelError(
-            f"{lib_dir}: no disturbance library beside {MODEL_FILENAME}; 'heli identify' writes one "
-            "(the environment replays its gusts)"
-        )
-    try:
-        library = DisturbanceLibrary.open(root)
-        version = library_version if library_version is not None else library.latest_version
-        traces = library.load(version)
+        state = ModelDir(root).load(library_version)
     except LibraryError as e:
         raise EnvModelError(f"{lib_dir}: {e}") from e
+    except ModelFileError as e:
+        raise EnvModelError(str(e)) from e
+    params, doc, traces, version = state.params, state.document, state.traces, state.library_version
+    if version is None:
+        raise EnvModelError(
+            f"{lib_dir}: no disturbance library beside {MODEL_FILENAME}; 'heli identify' writes one "
+            "(the environment replays its gusts)" if not lib_dir.is_dir() else
+            f"{lib_dir}: the disturbance library at {lib_dir} is empty: no manifest-vNNNN.json yet"
+        )
     if not traces:
         raise EnvModelError(f"{lib_dir}: the library holds no traces")
     rates = np.array([t.sample_rate for t in traces])

@@ -25,12 +25,14 @@ from pathlib import Path
 
 import numpy as np
 
+from model_store import ModelDir
+from model_store.model_file import model_document as new_model_document
+
 from .diagnose import Diagnoser, heldout_stats
 from .effects import CATALOGUE, alignment_parts, shift_inputs
-from .files import jsonable, save_figure, sha256_of, write_text
+from .files import jsonable, save_figure, write_text
 from .flight import Flight
 from .model import ModelParams
-from .model_file import save_model
 from .terms import AXES, INPUT_FOR_AXIS
 
 SCHEMA = "heli-env/diagnosis"
@@ -309,7 +311,7 @@ def window_limits(measured, simulated: dict, pad: float = 0.1, diverged: float =
 # ------------------------------------------------------------------------ runner
 def diagnose_and_report(flight: Flight, out_dir, *, model: ModelParams | None = None, model_document=None,
                         source: dict | None = None, plots: bool = True, diagnoser: Diagnoser | None = None,
-                        progress: bool = False, draw_figures: bool = True) -> DiagnosisRun:
+                        progress: bool = False, draw_figures: bool = True, wait: bool = True) -> DiagnosisRun:
     """Diagnose ``flight`` and write the outputs into ``out_dir``.
 
     Parameters
@@ -332,24 +334,33 @@ def diagnose_and_report(flight: Flight, out_dir, *, model: ModelParams | None = 
     draw_figures : bool
         With ``plots``: draw the figures before returning (default), or leave them to
         :meth:`DiagnosisRun.draw_figures` (``diagnosis.md`` links them either way).
+    wait : bool
+        When an effect was found: wait for another command writing ``out_dir`` (default), or raise
+        :class:`~identification.errors.ModelDirBusyError`. The new model, its wind and the diagnosis files
+        are written as one transaction (:class:`model_store.ModelDir`).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     d = (diagnoser or Diagnoser(progress=progress)).fit(flight, model=model)
     paths = {}
-    model_path = None
-    if d.steps_:
-        model_path = _write_model(d, flight, out, model_document, source)
-        paths["model"] = model_path
-        paths["library"] = out / "disturbances"
-    doc = diagnosis_document(d, source, model_path)
     figures, pending = {}, []
     if plots and d.baseline_score_ is not None:
         figures = {"residual tests": out / "diagnosis_residuals.png",
                    "worst held-out windows, before and after": out / "diagnosis_windows.png"}
         pending.append(partial(_figures, d, out))
-    paths["json"] = write_text(out / "diagnosis.json", json.dumps(doc, indent=2, allow_nan=False) + "\n")
-    paths["markdown"] = write_text(out / "diagnosis.md", diagnosis_markdown(d, doc, figures))
+    if not d.steps_:
+        doc = diagnosis_document(d, source, None)
+        paths["json"] = write_text(out / "diagnosis.json", json.dumps(doc, indent=2, allow_nan=False) + "\n")
+        paths["markdown"] = write_text(out / "diagnosis.md", diagnosis_markdown(d, doc, figures))
+    else:
+        document, profile = _new_model(d, flight, model_document, source)
+        with ModelDir(out).transaction(wait=wait, what="diagnose") as tx:
+            paths["model"] = model_path = tx.write_model_document(document)
+            tx.add_traces([profile])
+            paths["library"] = out / "disturbances"
+            doc = diagnosis_document(d, source, model_path)
+            paths["json"] = tx.write_report("diagnosis.json", json.dumps(doc, indent=2, allow_nan=False) + "\n")
+            paths["markdown"] = tx.write_report("diagnosis.md", diagnosis_markdown(d, doc, figures))
     run = DiagnosisRun(d, doc, paths, pending)
     if draw_figures:
         run.draw_figures()
@@ -361,10 +372,9 @@ def _figures(d: Diagnoser, out: Path) -> dict:
             "windows_png": plot_worst_windows(d, out / "diagnosis_windows.png")}
 
 
-def _write_model(d: Diagnoser, flight: Flight, out: Path, model_document, source) -> Path:
-    """The re-identified model with the added effects as a new ``model.json`` version, and its wind."""
+def _new_model(d: Diagnoser, flight: Flight, model_document, source):
+    """The re-identified model with the added effects (its ``model.json`` document) and this flight's wind."""
     from .disturbance import identify_disturbance
-    from .disturbance_library import DisturbanceLibrary
 
     ident = d.identifier_
     delays, log_shift = alignment_parts(d.spec_.alignment)
@@ -380,15 +390,12 @@ def _write_model(d: Diagnoser, flight: Flight, out: Path, model_document, source
         "criterion": criterion_text(d),
     }
     sources = list((model_document or {}).get("provenance", {}).get("sources", [])) + ([source] if source else [])
-    path = save_model(
-        out, params, structure="custom", sample_rate=d.flight_.sample_rate,
+    document = new_model_document(
+        params, structure="custom", sample_rate=d.flight_.sample_rate,
         filter_settings=d.flight_.metadata.get("prefilter"),
         identification={"method": "integral (Fig. 5) after heli diagnose", "interval": d.interval,
                         "structure": d.spec_.to_dict(), "alpha": d.alpha},
         fit_statistics={"axes": ident.summary(), "heldout_after": heldout_stats(d.final_score_)},
         sources=sources, extra={"diagnosis": diagnosis},
     )
-    library = DisturbanceLibrary.open(out, create=True)
-    profile = identify_disturbance(shift_inputs(flight, log_shift), params)
-    library.append([profile], model_sha256=sha256_of(path))
-    return path
+    return document, identify_disturbance(shift_inputs(flight, log_shift), params)

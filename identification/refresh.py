@@ -47,7 +47,6 @@ directory written by ``heli identify``:
 from __future__ import annotations
 
 import datetime as _dt
-import hashlib
 import json
 import math
 from dataclasses import dataclass, field
@@ -56,10 +55,11 @@ from pathlib import Path
 import numpy as np
 
 from .bootstrap import DEFAULT_REPLICATES, BootstrapResult, interval_bootstrap
-from .disturbance_library import DisturbanceLibrary
+from model_store import ModelDir
+from model_store.model_file import MODEL_FILENAME, load_model
+
 from .errors import LibraryError, ModelFileError
-from .files import jsonable, keep_copy, sha256_of, write_bytes, write_text
-from .model_file import MODEL_FILENAME, load_model
+from .files import jsonable, keep_copy, sha256_of
 from .terms import AXES, TERMS
 
 REFRESH_SCHEMA = "heli-env/refresh"
@@ -407,7 +407,7 @@ def _previous_se(doc: dict, names, new: BootstrapResult, library_entries, old_so
 def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "auto",
                   n_replicates: int = DEFAULT_REPLICATES, block: int = 1, seed: int = 0, alpha: float = 0.05,
                   min_relative: float = 0.0, plots: bool = True, progress: bool | None = None,
-                  backend=None) -> RefreshResult:
+                  backend=None, wait: bool = True) -> RefreshResult:
     """Refresh the model in ``model_dir`` with new flights (module docstring).
 
     Parameters
@@ -437,6 +437,11 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
     backend : None, {"local", "ray"} or identification.backends.Backend
         Where the new flights' winds are identified, one task per flight
         (:func:`identification.report.identify_and_report`); None: in this process.
+    wait : bool
+        Wait for another command writing ``model_dir`` (default, saying so), or raise
+        :class:`~identification.errors.ModelDirBusyError`. The folder is locked from reading the current model
+        to writing the refreshed one, and everything is written as one transaction
+        (:class:`model_store.ModelDir`): after a crash it holds the model before or after the refresh.
 
     Raises
     ------
@@ -448,15 +453,12 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
     DuplicateFlightError
         A new flight already in the model or library, or given twice.
     LibraryError
-        The existing library is corrupt (nothing is written).
+        The existing library is corrupt or incomplete (nothing is written).
+    ModelDirBusyError
+        Another command is writing ``model_dir`` and ``wait`` is false.
     FlightLogError, IdentifiabilityError
         A new flight cannot be read or identified.
     """
-    from tqdm import tqdm
-
-    from .io import read_flight
-    from .report import identify_and_report, make_identifier, source_entry
-
     if fit not in FIT_CHOICES:
         raise RefreshError(f"fit must be one of {FIT_CHOICES}, got {fit!r}")
     if not 0.0 < alpha < 1.0:
@@ -469,22 +471,37 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
     root = Path(model_dir)
     if root.suffix == ".json":
         root = root.parent
-    model_path = root / MODEL_FILENAME
-    old_params, doc = load_model(model_path)
-    old_model_bytes = model_path.read_bytes()
-    structure, kw = identifier_settings(doc, str(model_path))
-    old_sources = list((doc.get("provenance") or {}).get("sources") or [])
-
-    library = DisturbanceLibrary(root)
-    entries, previous_version = [], None
-    if library.path.is_dir() and library.versions():
-        previous_version = library.latest_version
-        entries = list(library.manifest(previous_version)["traces"])  # a corrupt manifest stops here
-
-    show = (len(new_paths) > 1) if progress is None else progress
+    load_model(root / MODEL_FILENAME)  # a missing or corrupt model is named before anything is locked or made
     for p in new_paths:
         if not p.is_file():
             raise FileNotFoundError(f"new flight {str(p)!r} does not exist")
+    options = dict(previous_flights=previous_flights, fit=fit, n_replicates=n_replicates, block=block, seed=seed,
+                   alpha=alpha, min_relative=min_relative, plots=plots, progress=progress, backend=backend)
+    with ModelDir(root).transaction(wait=wait, what="refresh") as tx:
+        result = _refresh(tx, new_paths, **options)
+    if result.run.figures:
+        result.paths.update(result.run.draw_figures())
+    return result
+
+
+def _refresh(tx, new_paths, *, previous_flights, fit, n_replicates, block, seed, alpha, min_relative, plots, progress,
+             backend) -> RefreshResult:
+    """The refresh of :func:`refresh_model` inside its transaction ``tx``: read, compute, stage the files."""
+    from tqdm import tqdm
+
+    from .io import read_flight
+    from .report import identify_and_report, make_identifier, source_entry
+
+    root = tx.root
+    model_path = root / MODEL_FILENAME
+    if tx.base.params is None:
+        load_model(model_path)  # raises the reader's error
+    old_params, doc = tx.base.params, tx.base.document
+    structure, kw = identifier_settings(doc, str(model_path))
+    old_sources = list((doc.get("provenance") or {}).get("sources") or [])
+    entries, previous_version = tx.base.entries, tx.base.library_version
+
+    show = (len(new_paths) > 1) if progress is None else progress
     digests = [sha256_of(p) for p in new_paths]
     _check_new_flights(new_paths, digests, old_sources, entries)
     flights = [read_flight(p) for p in tqdm(new_paths, desc="reading new flights", unit="flight", disable=not show)]
@@ -560,9 +577,10 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
         pooled = identifier() if estimator == "integral" else identifier().fit(fit_flights)
         boot_model = uncertainty(pooled, fit_flights, seeds[2], "bootstrap (refreshed model)")
 
-    # -- write: history first, then model + report + library (identify_and_report), then the drift files
+    # -- stage: the files a refresh replaces are kept in history/, the model + report + library version
+    # (identify_and_report) and the drift files are committed together when the transaction ends
     kept = _keep_in_history(root)
-    old_digest = hashlib.sha256(old_model_bytes).hexdigest()
+    old_digest = tx.base.model_sha256
     new_sources = [source_entry(p, sha) for p, sha in zip(new_paths, digests)]
     sources = new_sources + (old_sources if mode == "pooled" else [])
     created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
@@ -575,22 +593,12 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
         "drift_file": "refresh.json",
         "bootstrap": boot_model.to_dict(),
     }
-    old_report = (root / "report.md").read_bytes() if (root / "report.md").is_file() else None
-    try:
-        run = identify_and_report(
-            fit_flights, root, coupled=structure == "coupled", sources=sources, identifier_kwargs=kw,
-            flight_paths=fit_paths, plots=plots, disturbances=True, progress=show,
-            wind_flights=range(len(flights)), model_extra={"refresh": record}, backend=backend, method=estimator,
-        )
-    except BaseException:
-        # Stopped before the library gained its version: put the previous model back, so that the
-        # directory stays consistent and the same refresh can be run again (its flights are not yet
-        # sources of model.json). Once the version is written, the new model belongs with it.
-        if DisturbanceLibrary(root).latest_version == previous_version:
-            write_bytes(model_path, old_model_bytes)
-            if old_report is not None:
-                write_bytes(root / "report.md", old_report)
-        raise
+    run = identify_and_report(
+        fit_flights, root, coupled=structure == "coupled", sources=sources, identifier_kwargs=kw,
+        flight_paths=fit_paths, plots=plots, disturbances=True, progress=show,
+        wind_flights=range(len(flights)), model_extra={"refresh": record}, backend=backend, method=estimator,
+        transaction=tx, draw_figures=False,
+    )
     library_version = run.library_version
     paths = dict(run.paths)
     result = RefreshResult(
@@ -622,13 +630,13 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
                       "refreshed": boot_model.to_dict()},
         "library": {"previous_version": previous_version, "version": library_version,
                     "added": [p.source for p in run.disturbances]},
-        "model_sha256": sha256_of(paths["model"]),
+        "model_sha256": tx.model_sha256,
         "kept_in_history": [str(p.relative_to(root)) for p in kept],
         "notes": notes,
     }
-    paths["refresh_json"] = write_text(root / "refresh.json",
-                                       json.dumps(jsonable(doc_out), indent=2, allow_nan=False) + "\n")
-    paths["refresh_md"] = write_text(root / "refresh.md", refresh_markdown(result, doc_out))
+    paths["refresh_json"] = tx.write_report("refresh.json",
+                                            json.dumps(jsonable(doc_out), indent=2, allow_nan=False) + "\n")
+    paths["refresh_md"] = tx.write_report("refresh.md", refresh_markdown(result, doc_out))
     result.paths = paths
     return result
 

@@ -10,6 +10,7 @@ parameter table shows the errors against it.
 
 from __future__ import annotations
 
+import contextlib
 import sys
 from dataclasses import dataclass, field
 from functools import partial
@@ -17,14 +18,15 @@ from pathlib import Path
 
 import numpy as np
 
+from model_store import ModelDir
+from model_store.model_file import model_document
+
 from .disturbance import compare_with_truth, figure_names, identify_disturbance, save_figures
-from .disturbance_library import DisturbanceLibrary
-from .files import sha256_of, write_text
+from .files import sha256_of
 from .flight import Flight
 from .fit_warnings import fit_warnings
 from .integral_method import IntegralIdentifier
 from .model import ModelParams
-from .model_file import save_model
 from .synthetic import load_truth, truth_paths
 from .terms import AXES, BASE_PARAMS, TERMS
 from .validation import ValidationResult, plot_attitude_fit, plot_rate_fit, validate_models
@@ -232,7 +234,7 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
                         flight_paths=None, plots: bool = True, disturbances: bool = True,
                         progress: bool | None = None, wind_flights=None, model_extra=None,
                         backend=None, method: str = "ml", draw_figures: bool = True,
-                        stage=None) -> IdentificationRun:
+                        stage=None, transaction=None, wait: bool = True) -> IdentificationRun:
     """Identify, validate and write ``model.json`` + ``report.md`` (+ figures) into ``out_dir``.
 
     Parameters
@@ -274,6 +276,13 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
         can show the numbers first.
     stage : callable, optional
         Called with a few words as each step starts (``"fitting ..."``), e.g. to show progress.
+    transaction : model_store.Transaction, optional
+        Stage ``model.json``, the traces and ``report.md`` into this open transaction of ``out_dir``
+        (``heli refresh`` adds its own files and commits); default: one transaction of this call, so the
+        model, the library version and the report are written as one step (:class:`model_store.ModelDir`).
+    wait : bool
+        Without ``transaction``: wait for another command writing ``out_dir`` (default), or raise
+        :class:`~identification.errors.ModelDirBusyError`.
     """
     stage = stage or (lambda text: None)
     flights = [flights] if isinstance(flights, Flight) else list(flights)
@@ -297,55 +306,85 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
 
     ident = identifiers[chosen]
     settings = identification_settings(ident)
-    model_path = save_model(
-        out, ident.params_, structure=chosen, sample_rate=first.sample_rate,
+    document = model_document(
+        ident.params_, structure=chosen, sample_rate=first.sample_rate,
         filter_settings=first.metadata.get("prefilter"), identification=settings,
         fit_statistics={"axes": ident.summary(), "validation": validation.to_dict(),
                         "fit_time_s": ident.fit_time_},
         sources=sources, extra=model_extra,
     )
-    paths = {"model": model_path}
     figures = []
     if plots:
         figures.append(partial(_fit_figures, validation, out))
-    profiles, dist_md, library_version = [], [], None
+    profiles, dist_md = [], []
     if disturbances:
-        from tqdm import tqdm
+        profiles, dist_md = _winds(ident, flights, flight_paths, wind_flights, chosen, out, plots, figures, progress,
+                                   backend, stage)
+    reference = None
+    if method == "ml":
+        stage("fitting the integral method for comparison")
+        reference = IntegralIdentifier(structure=chosen).fit(flights)
+    writing = (contextlib.nullcontext(transaction) if transaction is not None
+               else ModelDir(out).transaction(wait=wait, what="identify"))
+    with writing as tx:
+        model_path = tx.write_model_document(document)
+        library_version = tx.add_traces(profiles) if profiles else None
+        paths = {"model": model_path}
+        if disturbances:
+            paths["library"] = out / "disturbances"
+        md = _report_markdown(flights, identifiers, chosen, ident, model_path, sources, warnings, truth, method,
+                              validation, plots, disturbances, library_version, dist_md, reference)
+        paths["report"] = tx.write_report("report.md", md)
+    run = IdentificationRun(identifiers, chosen, validation, truth, paths, profiles, library_version, warnings,
+                            figures)
+    if draw_figures and figures:
+        stage("drawing the figures")
+        run.draw_figures()
+    return run
 
-        library = DisturbanceLibrary.open(out, create=True)
-        model_sha = sha256_of(model_path)
-        names = [Path(p).name for p in (flight_paths or [])] or [f"flight {i + 1}" for i in range(len(flights))]
-        chosen_flights = range(len(flights)) if wind_flights is None else [int(i) for i in wind_flights]
-        show = (len(chosen_flights) > 1) if progress is None else progress
-        done = None
-        stage(f"identifying the wind of {len(chosen_flights)} flight{'s' if len(chosen_flights) != 1 else ''}")
-        winds = {i: ident.wind_torque(i) for i in chosen_flights} if hasattr(ident, "wind_torque") else {}
-        if backend is not None:
-            from .fleet import disturbances_of
 
-            done = disturbances_of([flights[i] for i in chosen_flights], ident.params_, backend=backend,
-                                   progress=show, wind_torques=[winds.get(i) for i in chosen_flights])
-        for n, i in enumerate(tqdm(chosen_flights, desc="disturbance profiles", unit="flight", leave=False,
-                                   disable=not show or done is not None or not sys.stderr.isatty())):
-            flight = flights[i]
-            profile = (identify_disturbance(flight, ident.params_, wind_torque=winds.get(i)) if done is None
-                       else done[n])
-            profiles.append(profile)
-            prefix = f"disturbance_{i + 1}" if len(flights) > 1 else "disturbance"
-            section = [profile.markdown(title=f"{names[i]}: wind disturbance (Sections 2.5.3, 3.3)")]
-            true_ud = _true_wind(flight_paths[i] if flight_paths else None, flight)
-            if true_ud is not None:
-                cmp = compare_with_truth(profile, true_ud)
-                section += ["", "Against the true wind of this synthetic flight:", "",
-                            "| Axis | correlation | RMS error | RMS of the true wind |", "|---|---|---|---|"]
-                section += [f"| {a} | {v['correlation']:.3f} | {v['rms_error']:.4f} | {v['rms_truth']:.4f} |"
-                            for a, v in cmp.items()]
-            if plots:
-                figures.append(partial(_wind_figures, profile, out, true_ud, prefix))
-                section += [""] + [f"![{k}]({prefix}_{k}.png)" for k in figure_names(profile)]
-            dist_md += section + [""]
-        library_version = library.append(profiles, model_sha256=model_sha)  # one new version per run
-        paths["library"] = out / "disturbances"
+def _winds(ident, flights, flight_paths, wind_flights, chosen, out, plots, figures, progress, backend, stage):
+    """Each chosen flight's wind profile (eqs. 41-47) and its section of ``report.md``; queues its figures."""
+    from tqdm import tqdm
+
+    profiles, dist_md = [], []
+    names = [Path(p).name for p in (flight_paths or [])] or [f"flight {i + 1}" for i in range(len(flights))]
+    chosen_flights = range(len(flights)) if wind_flights is None else [int(i) for i in wind_flights]
+    show = (len(chosen_flights) > 1) if progress is None else progress
+    done = None
+    stage(f"identifying the wind of {len(chosen_flights)} flight{'s' if len(chosen_flights) != 1 else ''}")
+    winds = {i: ident.wind_torque(i) for i in chosen_flights} if hasattr(ident, "wind_torque") else {}
+    if backend is not None:
+        from .fleet import disturbances_of
+
+        done = disturbances_of([flights[i] for i in chosen_flights], ident.params_, backend=backend,
+                               progress=show, wind_torques=[winds.get(i) for i in chosen_flights])
+    for n, i in enumerate(tqdm(chosen_flights, desc="disturbance profiles", unit="flight", leave=False,
+                               disable=not show or done is not None or not sys.stderr.isatty())):
+        flight = flights[i]
+        profile = (identify_disturbance(flight, ident.params_, wind_torque=winds.get(i)) if done is None
+                   else done[n])
+        profiles.append(profile)
+        prefix = f"disturbance_{i + 1}" if len(flights) > 1 else "disturbance"
+        section = [profile.markdown(title=f"{names[i]}: wind disturbance (Sections 2.5.3, 3.3)")]
+        true_ud = _true_wind(flight_paths[i] if flight_paths else None, flight)
+        if true_ud is not None:
+            cmp = compare_with_truth(profile, true_ud)
+            section += ["", "Against the true wind of this synthetic flight:", "",
+                        "| Axis | correlation | RMS error | RMS of the true wind |", "|---|---|---|---|"]
+            section += [f"| {a} | {v['correlation']:.3f} | {v['rms_error']:.4f} | {v['rms_truth']:.4f} |"
+                        for a, v in cmp.items()]
+        if plots:
+            figures.append(partial(_wind_figures, profile, out, true_ud, prefix))
+            section += [""] + [f"![{k}]({prefix}_{k}.png)" for k in figure_names(profile)]
+        dist_md += section + [""]
+    return profiles, dist_md
+
+
+def _report_markdown(flights, identifiers, chosen, ident, model_path, sources, warnings, truth, method, validation,
+                     plots, disturbances, library_version, dist_md, reference) -> str:
+    """The text of ``report.md`` (``reference``: the integral method's fit shown beside a maximum-likelihood one)."""
+    first = identifiers[chosen].flights_[0]
     n_total = sum(f.n for f in flights)
     dur = sum(f.duration for f in flights)
     src_lines = "\n".join(f"- `{s.get('file')}` (SHA-256 `{s.get('sha256', '')[:16]}…`)" for s in sources) or "- (in memory)"
@@ -374,8 +413,6 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
             md += [f"Coupled model: {', '.join(dropped)} left out (—): the data do not support them "
                    "(|value| < 3 standard errors; each dropped in turn, weakest first, and the axis refitted).", ""]
         wind_md = wind_table(ident)
-        stage("fitting the integral method for comparison")
-        reference = IntegralIdentifier(structure=chosen).fit(flights)
         md += ["## Wind model and sensor noise (maximum likelihood)", "", wind_md, "",
                "## The integral method (Fig. 5) on the same flights, for comparison", "",
                parameter_table({f"integral ({chosen})": reference}, truth), ""]
@@ -394,13 +431,7 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
         md += ["## Wind disturbance (eqs. 41-47)", "",
                f"Identified with the {chosen} model and appended to the disturbance library "
                f"`disturbances/` as version {library_version}.", ""] + dist_md
-    paths["report"] = write_text(out / "report.md", "\n".join(md) + "\n")
-    run = IdentificationRun(identifiers, chosen, validation, truth, paths, profiles, library_version, warnings,
-                            figures)
-    if draw_figures and figures:
-        stage("drawing the figures")
-        run.draw_figures()
-    return run
+    return "\n".join(md) + "\n"
 
 
 def _fit_figures(validation, out: Path) -> dict:

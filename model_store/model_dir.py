@@ -5,30 +5,28 @@ Layout (``DIR`` is what ``heli identify --out`` names)::
 
     DIR/model.json                  the model (:mod:`model_store.model_file`)
     DIR/disturbances/               the disturbance library (:mod:`model_store.disturbance_library`)
-    DIR/history/                    every model the folder held (model-<sha256[:12]>.json) and every replaced
-                                    report (report-<sha256[:12]>.md, refresh-..., diagnosis-...)
+    DIR/history/                    every model the folder replaced (model-<sha256[:12]>.json), and the reports
+                                    a refresh replaced (report-<sha256[:12]>.md, ...)
     DIR/report.md, refresh.*, diagnosis.*   reports written with the model
     DIR/.heli-lock                  writers' lock (flock), held for a command's whole read-compute-commit
     DIR/.heli-commit-lock           held exclusively while files move, shared by readers
     DIR/.heli-journal.json          only while a write is under way, or after one was interrupted
-    DIR/.heli-staging/<id>/         the new reports of that write
+    DIR/.heli-staging/<id>/         the new model and reports of that write
 
 The steady state is the format every earlier version wrote: ``model.json`` and the library's latest version.
 A write (:meth:`ModelDir.transaction`) keeps its new files out of that state until one atomic step:
 
-1. keep a copy of every file about to be replaced in ``history/``;
+1. keep a copy of the ``model.json`` about to be replaced in ``history/``;
 2. write the journal, state ``"prepared"``: the base (model SHA-256, library version), the target and the files
    the write will create;
-3. write the new model to ``history/model-<sha256[:12]>.json``, the reports to ``.heli-staging/<id>/``, the
-   traces and the next library manifest;
+3. write the new model and reports to ``.heli-staging/<id>/``, the traces and the next library manifest;
 4. **commit**: replace the journal by the same with state ``"committed"`` (``os.replace``): it names the new
    ``model.json``'s SHA-256 and the library version together;
-5. move the new files into place (``model.json`` from its history copy, the staged reports), then remove the
-   staging folder and the journal.
+5. move the staged files into place, then remove the staging folder and the journal.
 
 A reader takes the state the journal names: none, the steady state; ``"prepared"``, the base (``model.json`` is
-untouched until the commit, the library's base version); ``"committed"``, the target (the model from its
-history copy, the target library version). So after a kill at any instant the folder reads as the old or the
+untouched until the commit, the library's base version); ``"committed"``, the target (``model.json`` once
+moved, its staged copy until then; the target library version). So after a kill at any instant the folder reads as the old or the
 new state. The next writer (or ``heli check``) finishes a committed write or rolls back a prepared one (deleting
 the files it created) and says so. Writers take an exclusive ``flock`` for their whole read-compute-commit, so
 two refreshes serialise and neither is lost; with ``wait=False`` a busy folder is refused with
@@ -187,6 +185,11 @@ class ModelDir:
                 fh.write(f"pid {os.getpid()} ({what}, since "
                          f"{_dt.datetime.now().astimezone().isoformat(timespec='seconds')})\n")
                 fh.flush()
+                try:
+                    yield
+                finally:
+                    fh.truncate(0)  # the holder's line goes with the holder: a refused command leaves no trace
+                return
             yield
 
     # ------------------------------------------------------------------ reading
@@ -234,9 +237,8 @@ class ModelDir:
             version = self.library.latest_version
         elif journal["state"] == "committed":
             version = journal["target"]["library_version"]
-            want_sha = journal["target"]["model_sha256"]
-            if want_sha is not None and journal["target"]["model_file"]:
-                model_file = self.root / journal["target"]["model_file"]
+            if journal["target"]["model_file"] and not self._holds(self.model_path, journal["target"]["model_sha256"]):
+                model_file, want_sha = self.root / journal["target"]["model_file"], journal["target"]["model_sha256"]
         else:
             version = journal["base"]["library_version"]
         if library_version is not None:
@@ -253,6 +255,14 @@ class ModelDir:
             manifest = self.library.manifest(version)
         return ModelState(self.root, params, doc, digest, version, traces, manifest,
                           journal["state"] if journal else None)
+
+    @staticmethod
+    def _holds(path: Path, digest: str | None) -> bool:
+        """Whether the file at ``path`` exists with SHA-256 ``digest``."""
+        try:
+            return digest is not None and _sha(path.read_bytes()) == digest
+        except OSError:
+            return False
 
     def _read_model(self, path: Path, want_sha: str | None = None):
         if not path.exists():
@@ -323,23 +333,19 @@ class ModelDir:
 
     def _roll_forward(self, journal: dict) -> None:
         target = journal["target"]
-        if target["model_file"] and target["model_sha256"]:
-            current = self.model_path.read_bytes() if self.model_path.exists() else b""
-            if _sha(current) != target["model_sha256"]:
-                data = (self.root / target["model_file"]).read_bytes()
-                if _sha(data) != target["model_sha256"]:
-                    raise ModelDirError(f"{self.root / target['model_file']}: not the committed model "
-                                        f"(SHA-256 {target['model_sha256']}); cannot finish the interrupted write")
-                write_bytes(self.model_path, data)
-                faults.event(f"wrote {self.model_path}")
+        moves = dict(target["files"])
+        if target["model_file"]:
+            moves[MODEL_FILENAME] = target["model_sha256"]
         staging = self.root / STAGING_NAME / journal["id"]
-        for name, digest in target["files"].items():
+        for name, digest in moves.items():
             staged, final = staging / name, self.root / name
-            if staged.exists():
-                os.replace(staged, final)
-                faults.event(f"moved {final}")
-            elif not (final.exists() and _sha(final.read_bytes()) == digest):
-                self.notify(f"{final}: the staged copy of the interrupted write is gone; kept what is there")
+            if self._holds(final, digest):
+                continue
+            if not self._holds(staged, digest):
+                raise ModelDirError(f"{staged}: expected the committed {name} (SHA-256 {digest[:12]}…), "
+                                    "found it missing or changed; cannot finish the interrupted write")
+            os.replace(staged, final)
+            faults.event(f"moved {final}")
         self._remove_staging()
         self.journal_path.unlink()
         faults.event(f"removed {self.journal_path}")
@@ -490,17 +496,16 @@ class Transaction:
             return
         model_bytes = None if self._model_text is None else self._model_text.encode("utf-8")
         model_sha = self.model_sha256
-        model_file = None if model_bytes is None else _history_name(MODEL_FILENAME, model_sha)
+        tx_id = uuid.uuid4().hex
+        staging = self.root / STAGING_NAME / tx_id
+        model_file = None if model_bytes is None else f"{STAGING_NAME}/{tx_id}/{MODEL_FILENAME}"
         version, library_files = (None, [])
         if self._traces:
             version, library_files = d.library.planned(self._traces, self.base.library_version)
-        created = []
-        if model_file and not (self.root / model_file).exists():
-            created.append(model_file)
-        created += [f"{LIBRARY_DIRNAME}/{f}" for f in library_files]
+        created = [f"{LIBRARY_DIRNAME}/{f}" for f in library_files]
         journal = {
             "schema": JOURNAL_SCHEMA, "schema_version": JOURNAL_SCHEMA_VERSION,
-            "id": uuid.uuid4().hex, "what": self.what, "pid": os.getpid(),
+            "id": tx_id, "what": self.what, "pid": os.getpid(),
             "started": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             "state": "prepared",
             "base": {"model_sha256": self.base.model_sha256, "library_version": self.base.library_version},
@@ -514,17 +519,16 @@ class Transaction:
                 self._keep_replaced(model_bytes)
                 write_text(d.journal_path, json.dumps(journal, indent=2) + "\n")
                 faults.event(f"wrote {d.journal_path} (prepared)")
-                if model_file and model_file in created:
+                if model_file:
                     write_bytes(self.root / model_file, model_bytes)
                     faults.event(f"wrote {model_file}")
-                staging = self.root / STAGING_NAME / journal["id"]
                 for name, data in self._reports.items():
                     write_bytes(staging / name, data)
                     faults.event(f"wrote {staging / name}")
                 if version is not None:
                     d.library.path.mkdir(parents=True, exist_ok=True)
-                    with d.library._lock():
-                        written = d.library._append(self._traces, None, model_sha, self.base.library_version)
+                    written = d.library.append(self._traces, model_sha256=model_sha,
+                                               base_version=self.base.library_version)
                     if written != version:
                         raise LibraryError(f"{d.library.path}: wrote version {written}, expected {version}")
                 journal["state"] = "committed"
@@ -542,10 +546,10 @@ class Transaction:
         self.library_version = journal["target"]["library_version"]
 
     def _keep_replaced(self, model_bytes) -> None:
-        """Copy the files the commit replaces to ``history/`` (named by content; a kept copy is not rewritten)."""
-        names = ([MODEL_FILENAME] if model_bytes is not None else []) + list(self._reports)
-        for name in names:
-            path = self.root / name
-            if path.is_file() and not (self.root / _history_name(name, _sha(path.read_bytes()))).exists():
+        """Copy the ``model.json`` the commit replaces to ``history/`` (named by content; kept once)."""
+        path = self.dir.model_path
+        if model_bytes is not None and path.is_file():
+            digest = _sha(path.read_bytes())
+            if digest != _sha(model_bytes) and not (self.root / _history_name(MODEL_FILENAME, digest)).exists():
                 keep_copy(path)
                 faults.event(f"kept {path} in history")
