@@ -128,6 +128,11 @@ def run(args) -> int:
     print(f"wrote {res.run_dir / 'training.json'}")
     if res.best_model is not None:
         print(f"wrote {res.best_model}")
+    else:  # say why the files the help names are absent, instead of leaving them silently out
+        print(f"no held-out evaluation ran (--eval-freq {args.eval_freq} against {res.timesteps} timesteps): "
+              "no best_model.zip or evaluations.npz")
     if res.checkpoints:
         print(f"wrote {len(res.checkpoints)} checkpoints in {res.run_dir / 'checkpoints'}")
+    else:
+        print(f"no checkpoint (--checkpoint-freq {args.checkpoint_freq} against {res.timesteps} timesteps)")
     return 0
