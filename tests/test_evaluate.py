@@ -21,12 +21,6 @@ from controllers.pd import PDController, PDGains, design_gains
 from controllers.sweep import sweep_pairs
 from controllers.trace_split import TraceSegment, split_traces
 from heli_cli.main import main
-from heli_env import load_env_model
-
-
-@pytest.fixture(scope="module")
-def shipped():
-    return load_env_model()
 
 
 @pytest.fixture(scope="module")

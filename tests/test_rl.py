@@ -24,15 +24,9 @@ from controllers.pd import PDController, PDGains  # noqa: E402
 from controllers.rl import agent_metadata, load_agent, split_traces, train_agent  # noqa: E402
 from controllers.trace_split import TraceSegment, WindowSampler, draw_windows  # noqa: E402
 from heli_cli.main import main  # noqa: E402
-from heli_env import load_env_model  # noqa: E402
 
 TINY = {"ppo": {"n_steps": 64, "batch_size": 64, "n_epochs": 2},
         "sac": {"learning_starts": 64, "batch_size": 32, "buffer_size": 1000}}
-
-
-@pytest.fixture(scope="module")
-def shipped():
-    return load_env_model()
 
 
 def _tiny(algo, out, shipped, timesteps=256, **kw):

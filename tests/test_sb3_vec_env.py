@@ -17,13 +17,7 @@ pytest.importorskip("stable_baselines3")
 
 from controllers.sb3_vec_env import GymnasiumVecEnv  # noqa: E402
 from controllers.trace_split import TraceSegment, WindowSampler  # noqa: E402
-from heli_env import load_env_model  # noqa: E402
 from heli_env.vector_env import HeliAttitudeVectorEnv  # noqa: E402
-
-
-@pytest.fixture(scope="module")
-def shipped():
-    return load_env_model()
 
 
 def _pair(shipped, n=3, seconds=0.05, **kw):

@@ -22,12 +22,7 @@ from controllers.errors import SweepError
 from controllers.flight_test import fit_corner, validate_against_flights
 from controllers.sweep import COLUMNS, TD_COLUMNS, parse_range, sweep_gains, sweep_pairs
 from heli_cli.main import main
-from heli_env import HeliAttitudeEnv, load_env_model
-
-
-@pytest.fixture(scope="session")
-def shipped():
-    return load_env_model()
+from heli_env import HeliAttitudeEnv
 
 
 @pytest.fixture(scope="session")
