@@ -77,6 +77,14 @@ def run(args) -> int:
             progress.done()
             for path in drawn.values():
                 print(f"wrote {path}")
+    return _write_html(run_)
+
+
+def _write_html(run_) -> int:
+    """``diagnosis.html`` beside ``diagnosis.md``, once its figures are drawn (they are embedded)."""
+    from .html_report import write_html_report
+
+    print(f"wrote {write_html_report(run_.paths['markdown'])}")
     return 0
 
 
@@ -109,7 +117,8 @@ def _run_ml(args, flight, model, document, source, progress) -> int:
     run_ = diagnose_by_likelihood(flight, args.out, model=model, model_document=document, source=source,
                                   plots=not args.no_plots, diagnoser=diagnoser)
     progress.done()
-    return _print_run(run_, lambda s: (
+    _print_run(run_, lambda s: (
         f"LR {s.lr:.1f} > {s.threshold:.1f}; 0.5 s-ahead R² {s.r2_before['ahead_0.5s']:.3f} -> "
         f"{s.r2_after['ahead_0.5s']:.3f}; "
         + (f"runner-up {s.runner_up} (LR {s.runner_up_lr:.1f})" if s.runner_up else "no runner-up")))
+    return _write_html(run_)

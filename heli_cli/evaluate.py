@@ -62,5 +62,8 @@ def run(args) -> int:
     print(f"  mean return {res.mean_return:.2f}; episodes ended early: {res.n_terminated}")
     for path in paths:
         print(f"wrote {path}")
+    from .html_report import write_html_report  # evaluation.md links no figure: episode.png is appended
+
+    print(f"wrote {write_html_report(paths[1], figures=[paths[2]])}")
     return 0
 

@@ -116,6 +116,9 @@ def run(args) -> int:
             progress.done()
             for path in drawn.values():
                 print(f"wrote {path}")
+    from .html_report import write_html_report
+
+    print(f"wrote {write_html_report(run.paths['report'])}")  # after the figures: it embeds them
     return 0
 
 

@@ -120,4 +120,7 @@ def run(args) -> int:
               f"{'met' if flights.target_met else 'NOT met'})")
     for path in paths.values():
         print(f"wrote {path}")
+    from .html_report import write_html_report  # sweep.md links no figure: the two are appended
+
+    print(f"wrote {write_html_report(paths['report'], figures=[paths['heatmap'], paths['histograms']])}")
     return 0
