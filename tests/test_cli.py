@@ -80,7 +80,7 @@ def test_simulate_flight_rejects_bad_options(tmp_path, capsys, option, value):
 def test_identify_writes_model_report_and_figures(identified):
     assert sorted(p.name for p in identified.iterdir() if not p.name.startswith(".heli-")) == [
         "attitude.png", "disturbance_distributions.png", "disturbance_profile.png", "disturbance_simulation.png",
-        "disturbances", "model.json", "rates.png", "report.md"]
+        "disturbances", "model.json", "rates.png", "report.html", "report.md"]
     for png in ("rates.png", "attitude.png"):
         assert (identified / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     report = (identified / "report.md").read_text()
@@ -102,7 +102,7 @@ def test_model_json_schema_parameters_and_provenance(identified, flight_csv):
 
 def test_identify_coupled_without_plots(identified_coupled):
     assert sorted(p.name for p in identified_coupled.iterdir() if not p.name.startswith(".heli-")) == [
-        "disturbances", "model.json", "report.md"]
+        "disturbances", "model.json", "report.html", "report.md"]
     assert _model(identified_coupled)["structure"] == "coupled"
     assert "rates.png" not in (identified_coupled / "report.md").read_text()
 

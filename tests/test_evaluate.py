@@ -176,7 +176,7 @@ def test_heli_evaluate_pd_json(pd, tmp_path, capsys):
                  "--episodes-per-trace", "2"]) == 0
     text = capsys.readouterr().out
     assert "held-out traces" in text and "default split" in text
-    assert sorted(p.name for p in out.iterdir()) == ["episode.png", "evaluation.json", "evaluation.md"]
+    assert sorted(p.name for p in out.iterdir()) == ["episode.png", "evaluation.html", "evaluation.json", "evaluation.md"]
 
 
 def test_heli_evaluate_errors(pd, tmp_path, capsys):

@@ -412,8 +412,8 @@ def test_cli_writes_the_outputs(tmp_path, capsys):
     out = tmp_path / "sw"
     rc = main(["sweep", "--kp", "1:4:2", "--kd", "0:1:2", "--duration", "5", "--out", str(out), "--no-progress"])
     assert rc == 0
-    assert sorted(p.name for p in out.iterdir()) == ["heatmap.png", "histograms.png", "sweep.csv", "sweep.json",
-                                                     "sweep.md"]
+    assert sorted(p.name for p in out.iterdir()) == ["heatmap.png", "histograms.png", "sweep.csv", "sweep.html",
+                                                     "sweep.json", "sweep.md"]
     text = capsys.readouterr().out
     assert "best by p90" in text and "unstable (closed-loop poles, not simulated): 0" in text
 
