@@ -38,6 +38,8 @@ def register(sub):
     p.add_argument("--min-gain", type=number("a number in (0, 1)", 0.0, 1.0), default=None,
                    help="integral: smallest held-out improvement accepted, as a fraction (default 0.05)")
     p.add_argument("--no-plots", action="store_true", help="do not draw PNG figures")
+    p.add_argument("--no-wait", action="store_true",
+                   help="refuse at once when another command is writing the model folder (default: wait for it)")
     p.set_defaults(func=run, out_kind="dir")
 
 
@@ -65,7 +67,7 @@ def run(args) -> int:
                        "every axis)")
         run_ = diagnose_and_report(flight, args.out, model=model, model_document=document,
                                    source=source_entry(args.flight), plots=not args.no_plots, diagnoser=diagnoser,
-                                   draw_figures=False)
+                                   draw_figures=False, wait=not args.no_wait)
         progress.done()
         _print_run(run_, lambda s: (
             f"held-out MAE {s.gap_before['mae_deg_s']:.3f} -> {s.gap_after['mae_deg_s']:.3f} deg/s, gain "
@@ -106,16 +108,17 @@ def _print_run(run_, evidence) -> int:
 
 
 def _run_ml(args, flight, model, document, source, progress) -> int:
-    from identification.ml_diagnosis import ALPHA, MIN_LR_PER_PARAMETER, LikelihoodDiagnoser
+    from identification.ml_diagnosis import ALPHA, MIN_LR_ALIGNMENT, MIN_LR_PER_PARAMETER, LikelihoodDiagnoser
     from identification.ml_diagnosis_report import diagnose_by_likelihood
 
     progress.stage(f"diagnosing {args.flight} by likelihood (every catalogue effect on every axis"
                    + (", then the figures)" if not args.no_plots else ")"))
     diagnoser = LikelihoodDiagnoser(alpha=ALPHA if args.alpha is None else args.alpha,
                                     min_lr_per_parameter=MIN_LR_PER_PARAMETER if args.min_lr is None else args.min_lr,
-                                    input_hold=args.input_hold)
+                                    input_hold=args.input_hold, min_lr_alignment=MIN_LR_ALIGNMENT
+                                    if args.min_lr_alignment is None else args.min_lr_alignment)
     run_ = diagnose_by_likelihood(flight, args.out, model=model, model_document=document, source=source,
-                                  plots=not args.no_plots, diagnoser=diagnoser)
+                                  plots=not args.no_plots, diagnoser=diagnoser, wait=not args.no_wait)
     progress.done()
     _print_run(run_, lambda s: (
         f"LR {s.lr:.1f} > {s.threshold:.1f}; 0.5 s-ahead R² {s.r2_before['ahead_0.5s']:.3f} -> "

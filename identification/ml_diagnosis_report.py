@@ -22,13 +22,15 @@ from pathlib import Path
 
 import numpy as np
 
+from model_store import ModelDir
+from model_store.model_file import model_document as new_model_document
+
 from .diagnose_report import DiagnosisRun
 from .effects import CATALOGUE, alignment_parts, describe, shift_inputs
-from .files import jsonable, save_figure, sha256_of, write_text
+from .files import jsonable, save_figure, write_text
 from .flight import Flight
 from .ml_diagnosis import AHEAD_S, LikelihoodDiagnoser
 from .model import ModelParams
-from .model_file import save_model
 from .terms import AXES
 
 SCHEMA = "heli-env/diagnosis"
@@ -135,30 +137,40 @@ def plot_statistics(d: LikelihoodDiagnoser, path) -> Path | None:
 
 def diagnose_by_likelihood(flight: Flight, out_dir, *, model: ModelParams | None = None, model_document=None,
                            source: dict | None = None, plots: bool = True,
-                           diagnoser: LikelihoodDiagnoser | None = None) -> DiagnosisRun:
-    """Diagnose ``flight`` by likelihood and write the outputs into ``out_dir`` (module docstring)."""
+                           diagnoser: LikelihoodDiagnoser | None = None, wait: bool = True) -> DiagnosisRun:
+    """Diagnose ``flight`` by likelihood and write the outputs into ``out_dir`` (module docstring).
+
+    When an effect is found, the new model, this flight's wind and the diagnosis files are written as one
+    transaction of the model folder (:class:`model_store.ModelDir`): after a kill at any instant the folder
+    reads as before or after. ``wait``: wait for another command writing ``out_dir`` (default), or raise
+    :class:`~identification.errors.ModelDirBusyError`. The figure is drawn after the numbers are written.
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     d = (diagnoser or LikelihoodDiagnoser()).fit(flight, model=model)
     paths = {}
-    model_path = None
-    if d.steps_:
-        model_path = _write_model(d, flight, out, model_document, source)
-        paths["model"] = model_path
-        paths["library"] = out / "disturbances"
-    doc = diagnosis_document(d, source, model_path)
-    figure = plot_statistics(d, out / "diagnosis_likelihood.png") if plots else None
-    if figure is not None:
+    figure = out / "diagnosis_likelihood.png" if plots and d.rounds_ else None
+    if not d.steps_:
+        doc = diagnosis_document(d, source, None)
+        paths["json"] = write_text(out / "diagnosis.json", json.dumps(doc, indent=2, allow_nan=False) + "\n")
+        paths["markdown"] = write_text(out / "diagnosis.md", diagnosis_markdown(d, figure))
+    else:
+        document, profile = _new_model(d, flight, model_document, source)
+        with ModelDir(out).transaction(wait=wait, what="diagnose") as tx:
+            paths["model"] = model_path = tx.write_model_document(document)
+            tx.add_traces([profile])
+            paths["library"] = out / "disturbances"
+            doc = diagnosis_document(d, source, model_path)
+            paths["json"] = tx.write_report("diagnosis.json", json.dumps(doc, indent=2, allow_nan=False) + "\n")
+            paths["markdown"] = tx.write_report("diagnosis.md", diagnosis_markdown(d, figure))
+    if figure is not None and plot_statistics(d, figure) is not None:
         paths["likelihood_png"] = figure
-    paths["json"] = write_text(out / "diagnosis.json", json.dumps(doc, indent=2, allow_nan=False) + "\n")
-    paths["markdown"] = write_text(out / "diagnosis.md", diagnosis_markdown(d, figure))
     return DiagnosisRun(d, doc, paths)
 
 
-def _write_model(d: LikelihoodDiagnoser, flight: Flight, out: Path, model_document, source) -> Path:
-    """The model with the added effects as a new ``model.json`` version, and this flight's wind."""
+def _new_model(d: LikelihoodDiagnoser, flight: Flight, model_document, source):
+    """The model with the added effects (its ``model.json`` document) and this flight's wind."""
     from .disturbance import identify_disturbance
-    from .disturbance_library import DisturbanceLibrary
     from .report import identification_settings
 
     delays, log_shift = alignment_parts(d.alignment_)
@@ -176,10 +188,8 @@ def _write_model(d: LikelihoodDiagnoser, flight: Flight, out: Path, model_docume
     sources = list((model_document or {}).get("provenance", {}).get("sources", [])) + ([source] if source else [])
     settings = identification_settings(ident)
     settings["method"] += " after heli diagnose"
-    path = save_model(out, d.params_, structure="custom", sample_rate=flight.sample_rate,
-                      identification=settings, fit_statistics={"axes": ident.summary()}, sources=sources,
-                      extra={"diagnosis": diagnosis})
+    document = new_model_document(d.params_, structure="custom", sample_rate=flight.sample_rate,
+                                  identification=settings, fit_statistics={"axes": ident.summary()},
+                                  sources=sources, extra={"diagnosis": diagnosis})
     aligned = shift_inputs(flight, log_shift) if min(log_shift) < 0 else flight
-    profile = identify_disturbance(aligned, d.params_, wind_torque=ident.wind_torque(0))
-    DisturbanceLibrary.open(out, create=True).append([profile], model_sha256=sha256_of(path))
-    return path
+    return document, identify_disturbance(aligned, d.params_, wind_torque=ident.wind_torque(0))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 
 import pytest
@@ -92,6 +93,12 @@ def test_heli_diagnose_by_likelihood_writes_the_model(tmp_path, coupled_flight):
     assert model["parameters"]["k4"] != 0.0 and model["parameters"]["k8"] != 0.0
     assert (tmp_path / "d" / "disturbances" / "manifest-v0001.json").is_file()
     assert "Who closes the loop" in (tmp_path / "d" / "diagnosis.md").read_text()
+    # written as one transaction of the model folder: nothing staged is left, the journal names this model
+    from model_store import ModelDir
+
+    assert ModelDir(tmp_path / "d").verify() == []
+    assert ModelDir(tmp_path / "d").load().model_sha256 == hashlib.sha256(
+        (tmp_path / "d" / "model.json").read_bytes()).hexdigest()
     # the directory is a model the environment and the PD design load
     import gymnasium as gym
     import numpy as np
