@@ -17,10 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from identification.errors import LibraryError, ModelFileError
-from identification.model import ModelParams
+from heli_core.params import ModelParams
 from model_store import MODEL_FILENAME, ModelDir
 from model_store.disturbance_library import LIBRARY_DIRNAME
+from model_store.errors import LibraryError, ModelFileError
 
 from .errors import EnvModelError
 

@@ -234,6 +234,18 @@ class DisturbanceProfile:
         """Disturbance torque ``k*u_d`` at the flight's samples, shape (3, n) [rad/s^2]."""
         return self.control_gains[:, None] * self.trace
 
+    @property
+    def smoothing_window(self) -> int:
+        """Samples per pass of the smoother of eq. (46) (:data:`SMOOTHING_WINDOW`)."""
+        return SMOOTHING_WINDOW
+
+    def to_trace(self, **metadata):
+        """This profile as a :class:`model_store.Trace` of the disturbance library (``metadata`` recorded
+        under the entry's ``metadata``)."""
+        from model_store.disturbance_library import Trace
+
+        return Trace.from_profile(self, **metadata)
+
     def simulation_params(self) -> ModelParams:
         """The model with the offsets of eq. (47) in place of its own (Section 3.4)."""
         return self.params.with_values(**{OFFSET[AXES.index(a)]: float(self.kd[AXES.index(a)]) for a in self.axes})

@@ -12,6 +12,7 @@ re-exported here under their old names.
 from __future__ import annotations
 
 from heli_core.errors import BackendError, HeliError, MissingDependency, TaskFailed, require
+from model_store.errors import LibraryError, ModelDirBusyError, ModelDirError, ModelFileError
 
 
 class FlightLogError(HeliError, ValueError):
@@ -38,10 +39,6 @@ class SimulationDivergedError(IdentifiabilityError):
     """
 
 
-class ModelFileError(HeliError, ValueError):
-    """A model file is missing, corrupt, of the wrong schema version or lacks parameters."""
-
-
 class NotFittedError(HeliError, ValueError, AttributeError):
     """An estimator was used before ``fit`` (as scikit-learn's ``NotFittedError``)."""
 
@@ -50,21 +47,8 @@ class DisturbanceError(HeliError, ValueError):
     """Disturbance identification cannot run as asked (Δt out of range, bad smoothing, axis without a control gain)."""
 
 
-class LibraryError(HeliError, ValueError):
-    """A disturbance library is missing, corrupt, of an unknown version, or its traces do not match the manifest."""
-
-
 __all__ = [
     "BackendError", "DisturbanceError", "FlightLogError", "HeliError", "IdentifiabilityError", "LibraryError",
-    "MissingDependency", "ModelFileError", "NotFittedError", "SimulationDivergedError", "TaskFailed", "UnitError",
-    "require",
+    "MissingDependency", "ModelDirBusyError", "ModelDirError", "ModelFileError", "NotFittedError",
+    "SimulationDivergedError", "TaskFailed", "UnitError", "require",
 ]
-
-
-class ModelDirError(ModelFileError):
-    """A model directory is not one consistent state: an interrupted write that cannot be finished nor rolled
-    back, an unreadable transaction journal, a committed model file that is missing or altered."""
-
-
-class ModelDirBusyError(ModelDirError):
-    """Another command is writing the model directory, and this one was asked not to wait (``--no-wait``)."""

@@ -83,9 +83,9 @@ from types import MappingProxyType
 
 import numpy as np
 
-from identification.errors import LibraryError
-from identification.files import atomic_path, jsonable, sha256_of, write_text
-from identification.terms import AXES
+from .errors import LibraryError
+from heli_core.files import atomic_path, jsonable, sha256_of, write_text
+from heli_core.terms import AXES
 
 from . import faults
 
@@ -199,10 +199,10 @@ class Trace:
     def from_profile(cls, profile, **metadata) -> "Trace":
         """The trace of a :class:`~identification.disturbance.DisturbanceProfile`, with its metadata.
 
-        Keyword arguments are recorded under the entry's ``metadata``.
+        Keyword arguments are recorded under the entry's ``metadata``. The profile is read by its attributes
+        (the store imports nothing of ``identification``); its ``smoothing_window`` names the smoother's
+        window (eq. 46).
         """
-        from identification.disturbance import SMOOTHING_WINDOW
-
         p = profile
         params = p.params
         ident = {
@@ -215,7 +215,7 @@ class Trace:
             "source": dict(p.source),
             "interval_s": float(p.interval),
             "samples_per_interval": int(p.samples_per_interval),
-            "smoothing": {"mode": "auto" if p.smoothing == "auto" else "fixed", "window": SMOOTHING_WINDOW,
+            "smoothing": {"mode": "auto" if p.smoothing == "auto" else "fixed", "window": int(profile.smoothing_window),
                           "passes": {a: int(p.passes[AXES.index(a)]) for a in p.axes}},
             "prefilter": p.prefilter,
             "kd": {a: float(p.kd[AXES.index(a)]) for a in p.axes},
@@ -556,18 +556,17 @@ class DisturbanceLibrary:
 
     @staticmethod
     def _as_traces(items) -> list[Trace]:
-        from identification.disturbance import DisturbanceProfile
-
-        if isinstance(items, (Trace, DisturbanceProfile)):
+        """Traces, or disturbance profiles (anything with ``to_trace()``), as a list of :class:`Trace`."""
+        if isinstance(items, Trace) or hasattr(items, "to_trace"):
             items = [items]
         elif not isinstance(items, Iterable):
             raise LibraryError(f"append takes a Trace, a DisturbanceProfile or a list of them, got {type(items).__name__}")
         out = []
         for k, item in enumerate(items):
-            if isinstance(item, DisturbanceProfile):
-                out.append(Trace.from_profile(item))
-            elif isinstance(item, Trace):
+            if isinstance(item, Trace):
                 out.append(item)
+            elif hasattr(item, "to_trace"):
+                out.append(item.to_trace())
             else:
                 raise LibraryError(f"item {k}: expected a Trace or a DisturbanceProfile, got {type(item).__name__}")
         if not out:

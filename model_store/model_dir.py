@@ -47,8 +47,8 @@ import uuid
 from dataclasses import dataclass
 from pathlib import Path
 
-from identification.errors import LibraryError, ModelDirBusyError, ModelDirError, ModelFileError
-from identification.files import keep_copy, write_bytes, write_text
+from .errors import LibraryError, ModelDirBusyError, ModelDirError, ModelFileError
+from heli_core.files import keep_copy, write_bytes, write_text
 
 from . import faults
 from .disturbance_library import LIBRARY_DIRNAME, DisturbanceLibrary, Trace

@@ -27,10 +27,10 @@ import datetime as _dt
 import json
 from pathlib import Path
 
-from identification.errors import ModelFileError
-from identification.files import jsonable, keep_copy, write_text
-from identification.model import ModelParams
-from identification.terms import AXES, BASE_PARAMS, EXTRA_PARAMS, TERMS
+from .errors import ModelFileError
+from heli_core.files import jsonable, keep_copy, write_text
+from heli_core.params import ModelParams
+from heli_core.terms import AXES, BASE_PARAMS, EXTRA_PARAMS, TERMS
 
 SCHEMA = "heli-env/model"
 SCHEMA_VERSION = 1

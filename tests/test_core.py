@@ -55,6 +55,32 @@ def test_core_source_names_no_package_above_it():
             assert not [n for n in names if n.split(".")[0] in UPPER_PACKAGES], f"{path.name}:{node.lineno}"
 
 
+def test_the_env_loads_and_steps_a_model_without_identification():
+    """heli_env stands on heli_core and model_store only: loading the shipped model folder and stepping the
+    single and the vector env import no module of identification or controllers."""
+    code = (
+        "import sys\nimport numpy as np\nimport gymnasium as gym\nimport heli_env\n"
+        "env = gym.make('HeliAttitude-v0'); env.reset(seed=0); env.step(np.zeros(3, dtype=np.float32))\n"
+        "from heli_env.vector_env import HeliAttitudeVectorEnv\nvenv = HeliAttitudeVectorEnv(2); venv.reset(seed=0); venv.step(np.zeros((2, 3), dtype=np.float32))\n"
+        "print(sorted({m.split('.')[0] for m in sys.modules} & {'identification', 'controllers', 'heli_cli'}))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_model_store_source_names_only_the_core():
+    """model_store (the model folder) imports heli_core and nothing of the packages that stand on it."""
+    for path in sorted((ROOT / "model_store").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.level == 0:
+                names = [node.module or ""]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            else:
+                continue
+            assert not [n for n in names if n.split(".")[0] in UPPER_PACKAGES[:-1]], f"{path.name}:{node.lineno}"
+
+
 @pytest.mark.parametrize("old, new", [
     ("identification.model.ModelParams", "heli_core.params.ModelParams"),
     ("identification.model.derivatives", "heli_core.physics.derivatives"),
