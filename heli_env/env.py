@@ -13,7 +13,7 @@ from gymnasium.error import ResetNeeded
 from heli_core.quaternion import euler_from_quaternion_scalar, quaternion_from_euler
 
 from .errors import ActionError
-from .spec import MAX_RATE, build_spec
+from .spec import MAX_RATE, build_spec, real_actions, reset_options
 from .tasks import draw_episode, reward_from_sums, wrap
 
 OBS_DIM = 12
@@ -170,12 +170,7 @@ class HeliAttitudeEnv(gym.Env):
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
         s = self.spec_
-        options = dict(options or {})
-        gust = s.gust_scale if options.get("gust_scale") is None else float(options["gust_scale"])
-        if options.get("gusts") is False:
-            gust = 0.0
-        if not (gust >= 0 and math.isfinite(gust)):
-            raise ValueError(f"options['gust_scale'] must be a non-negative number, got {gust!r}")
+        options, gust = reset_options(options, s.gust_scale)
         ep = draw_episode(self.np_random, s.task, s.model.n_traces, s.model.lengths, s.needed, s.episode_steps,
                           s.dt, s.init_angle, s.init_rate, options)
         self._episode = ep
@@ -214,10 +209,10 @@ class HeliAttitudeEnv(gym.Env):
             raise ResetNeeded(f"the episode is over: t = {self._k * self.spec_.dt:g} s reached the time limit or the "
                               "end of the disturbance trace; call reset() before step()")
         s = self.spec_
-        if isinstance(action, np.ndarray) and action.shape == (3,):
+        if isinstance(action, np.ndarray) and action.shape == (3,) and action.dtype.kind == "f":
             a0, a1, a2 = action.tolist()
         else:
-            a = np.asarray(action, dtype=np.float64)
+            a = real_actions(action, "action")
             if a.shape != (3,):
                 raise ActionError(f"action must have shape (3,) (lat, lon, ped), got {a.shape}")
             a0, a1, a2 = a.tolist()

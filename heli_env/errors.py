@@ -15,3 +15,7 @@ class EnvModelError(HeliError, ValueError):
 
 class ActionError(HeliError, ValueError):
     """An action is not a finite vector of the action space's shape."""
+
+
+class OptionError(HeliError, ValueError):
+    """A setting of an environment or an option of ``reset`` has the wrong type or lies outside its range."""

@@ -17,6 +17,7 @@ import numpy as np
 from heli_core.discrete import discrete_kernel
 from heli_core.physics import trim_sticks
 
+from .errors import ActionError, OptionError
 from .model_dir import EnvModel, load_env_model
 from .tasks import TaskConfig
 
@@ -46,6 +47,77 @@ class EnvSpec:
     col: np.ndarray  # (total,) collective applied at each library sample
 
 
+MAX_GUST_SCALE = 100.0
+"""Largest gust multiplier accepted: beyond it the replayed gust is no longer the aircraft's weather
+(and at 1e300 the reward overflows)."""
+
+MAX_INIT_ANGLE_DEG = 90.0
+"""Largest initial roll/pitch magnitude drawn at reset [deg]."""
+
+MAX_INIT_RATE_DEG = 1000.0
+"""Largest initial body-rate magnitude drawn at reset [deg/s]."""
+
+
+def _real(value) -> bool:
+    """A finite real number (not a bool, not a string, not complex)."""
+    return (isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+            and math.isfinite(value))
+
+
+def _index(value) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+def checked_gust_scale(value, name: str) -> float:
+    """``value`` as a gust multiplier in [0, :data:`MAX_GUST_SCALE`], else :class:`OptionError`."""
+    if not (_real(value) and 0 <= value <= MAX_GUST_SCALE):
+        raise OptionError(f"{name} must be a number in [0, {MAX_GUST_SCALE:g}], got {value!r}")
+    return float(value)
+
+
+def real_actions(actions, name: str) -> np.ndarray:
+    """``actions`` as a float64 array, or :class:`~heli_env.errors.ActionError` when they are not real
+    numbers (strings, None, complex values: the imaginary part is never dropped silently)."""
+    a = np.asarray(actions) if not isinstance(actions, np.ndarray) else actions
+    if a.dtype.kind not in "iuf":
+        if a.dtype.kind == "O":
+            try:
+                a = a.astype(np.float64)
+            except (TypeError, ValueError) as e:
+                raise ActionError(f"{name} must be real numbers, got {actions!r}") from e
+        else:
+            raise ActionError(f"{name} must be real numbers, got dtype {a.dtype} ({actions!r})")
+    return np.asarray(a, dtype=np.float64)
+
+
+RESET_OPTIONS = ("trace", "offset", "gust_scale", "gusts")
+"""Options ``reset`` reads (the vector env adds ``reset_mask``)."""
+
+
+def reset_options(options, default_gust: float, extra=()) -> tuple[dict, float]:
+    """Check ``reset``'s options once for both environments: ``(options, gust multiplier)``.
+
+    ``trace`` and ``offset`` must be whole numbers (an index, not 0.9), ``gusts`` a bool, ``gust_scale`` a
+    number in [0, :data:`MAX_GUST_SCALE`]; an unknown key is refused. Raises :class:`OptionError`.
+    """
+    if options is None:
+        options = {}
+    if not isinstance(options, dict):
+        raise OptionError(f"options must be a dict, got {type(options).__name__}")
+    unknown = [k for k in options if k not in RESET_OPTIONS + tuple(extra)]
+    if unknown:
+        raise OptionError(f"unknown reset option(s) {unknown}; known: {', '.join(RESET_OPTIONS + tuple(extra))}")
+    for key in ("trace", "offset"):
+        if options.get(key) is not None and not _index(options[key]):
+            raise OptionError(f"options[{key!r}] must be a whole number (an index), got {options[key]!r}")
+    gusts = options.get("gusts", True)
+    if not isinstance(gusts, (bool, np.bool_)):
+        raise OptionError(f"options['gusts'] must be True or False, got {gusts!r}")
+    gust = default_gust if options.get("gust_scale") is None else checked_gust_scale(options["gust_scale"],
+                                                                                     "options['gust_scale']")
+    return dict(options), (gust if gusts else 0.0)
+
+
 def build_spec(model=None, task="hold", reference="mixed", dt: float = 0.01, episode_seconds: float = 30.0,
                collective="trace", gust_scale: float = 1.0, obs_noise=(0.0, 0.0), action_delay: int = 0,
                init_angle_deg: float = 5.0, init_rate_deg: float = 5.0, library_version=None) -> EnvSpec:
@@ -64,8 +136,11 @@ def build_spec(model=None, task="hold", reference="mixed", dt: float = 0.01, epi
     if not (episode_seconds > 0 and math.isfinite(episode_seconds)):
         raise ValueError(f"episode_seconds must be positive, got {episode_seconds!r}")
     episode_steps = int(round(episode_seconds / dt))
-    if not (gust_scale >= 0 and math.isfinite(gust_scale)):
-        raise ValueError(f"gust_scale must be a non-negative number, got {gust_scale!r}")
+    gust_scale = checked_gust_scale(gust_scale, "gust_scale")
+    for name, value, high in (("init_angle_deg", init_angle_deg, MAX_INIT_ANGLE_DEG),
+                              ("init_rate_deg", init_rate_deg, MAX_INIT_RATE_DEG)):
+        if not (_real(value) and 0 <= value <= high):
+            raise OptionError(f"{name} must be a number in [0, {high:g}], got {value!r}")
     noise = (float(obs_noise), float(obs_noise)) if np.ndim(obs_noise) == 0 else tuple(float(v) for v in obs_noise)
     if len(noise) != 2 or any(not (v >= 0 and math.isfinite(v)) for v in noise):
         raise ValueError(f"obs_noise must be a std or (attitude rad, rate rad/s) stds >= 0, got {obs_noise!r}")

@@ -17,7 +17,7 @@ from heli_core.quaternion import quaternion_from_euler
 from .env import OBS_DIM, action_space, observation_space
 from .errors import ActionError
 from .kernels import ROW_PAD, advance_kernel, batch_rows, clip_actions, euler_arguments_kernel, observe_kernel
-from .spec import MAX_RATE, build_spec
+from .spec import MAX_RATE, build_spec, real_actions, reset_options
 from .tasks import N_SINES, draw_episode, reward_coefficients
 
 THREADED_FROM = 256
@@ -149,11 +149,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
 
     def _reset_envs(self, which, options):
         s = self.spec_
-        gust_default = s.gust_scale if options.get("gust_scale") is None else float(options["gust_scale"])
-        if options.get("gusts") is False:
-            gust_default = 0.0
-        if not (gust_default >= 0 and math.isfinite(gust_default)):
-            raise ValueError(f"options['gust_scale'] must be a non-negative number, got {gust_default!r}")
+        options, gust_default = reset_options(options, s.gust_scale)
         # Every copy draws its episode from its own generator (as a single env seeded seed + i would);
         # the state is then written for all of them at once, and only once every draw has succeeded.
         eps = [draw_episode(self._rngs[i], s.task, s.model.n_traces, s.model.lengths, s.needed, s.episode_steps,
@@ -193,7 +189,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
         s = self.spec_
         n = self.num_envs
         native = isinstance(actions, np.ndarray) and actions.dtype in (np.float32, np.float64)
-        a = actions if native else np.asarray(actions, dtype=np.float64)  # the loop reads float32 or float64
+        a = actions if native else real_actions(actions, "actions")  # the loop reads float32 or float64
         if a.shape != (n, 3):
             raise ActionError(f"actions must have shape ({n}, 3) (lat, lon, ped per copy), got {a.shape}")
         incoming = self._incoming

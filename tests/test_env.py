@@ -280,15 +280,31 @@ def test_gust_scale_option_scales_the_disturbance_and_overrides_the_constructor(
         ({"trace": 3}, r"options\['trace'\] must be a trace index in \[0, 3\)"),
         ({"trace": 0, "offset": -1}, r"options\['offset'\] must be a sample in \[0, 20000\) of trace 0"),
         ({"trace": 0, "offset": 20000}, r"options\['offset'\] must be a sample in \[0, 20000\) of trace 0"),
-        ({"gust_scale": -0.5}, r"options\['gust_scale'\] must be a non-negative number"),
-        ({"gust_scale": float("nan")}, r"options\['gust_scale'\] must be a non-negative number"),
-        ({"gust_scale": float("inf")}, r"options\['gust_scale'\] must be a non-negative number"),
+        ({"gust_scale": -0.5}, r"options\['gust_scale'\] must be a number in \[0, 100\]"),
+        ({"gust_scale": float("nan")}, r"options\['gust_scale'\] must be a number in \[0, 100\]"),
+        ({"gust_scale": float("inf")}, r"options\['gust_scale'\] must be a number in \[0, 100\]"),
+        ({"gust_scale": 1e300}, r"options\['gust_scale'\] must be a number in \[0, 100\], got 1e\+300"),
+        ({"gusts": 0}, r"options\['gusts'\] must be True or False, got 0"),
+        ({"gusts": "off"}, r"options\['gusts'\] must be True or False, got 'off'"),
+        ({"trace": 0.9}, r"options\['trace'\] must be a whole number \(an index\), got 0.9"),
+        ({"trace": True}, r"options\['trace'\] must be a whole number"),
+        ({"seed": 3}, r"unknown reset option\(s\) \['seed'\]"),
     ],
 )
 def test_invalid_reset_options_raise(options, match):
     env = HeliAttitudeEnv()
-    with pytest.raises(ValueError, match=match):
+    with pytest.raises(ValueError, match=match):  # OptionError is a ValueError
         env.reset(seed=0, options=options)
+
+
+@pytest.mark.parametrize("action", ["abc", ["a", 0, 0], [1j, 0, 0], np.array([0.1 + 0.5j, 0, 0]), object()])
+def test_an_action_that_is_not_real_numbers_is_an_action_error(action):
+    from heli_env.errors import ActionError
+
+    env = HeliAttitudeEnv()
+    env.reset(seed=0)
+    with pytest.raises(ActionError):
+        env.step(action)
 
 
 # ------------------------------------------------------------------------------------------ episode end
@@ -443,8 +459,11 @@ def test_env_model_error_is_a_value_error():
         ({"dt": 0.005}, r"must be a whole number of the disturbance traces' sample periods"),
         ({"dt": 0.0}, "dt must be a positive control period"),
         ({"dt": float("nan")}, "dt must be a positive control period"),
-        ({"gust_scale": -1.0}, "gust_scale must be a non-negative number"),
-        ({"gust_scale": float("inf")}, "gust_scale must be a non-negative number"),
+        ({"gust_scale": -1.0}, r"gust_scale must be a number in \[0, 100\]"),
+        ({"gust_scale": float("inf")}, r"gust_scale must be a number in \[0, 100\]"),
+        ({"gust_scale": 1e300}, r"gust_scale must be a number in \[0, 100\]"),
+        ({"init_rate_deg": -1.0}, r"init_rate_deg must be a number in \[0, 1000\]"),
+        ({"init_angle_deg": "5"}, r"init_angle_deg must be a number in \[0, 90\]"),
         ({"task": "hover"}, r"task must be one of \('hold', 'track', 'rate'\)"),
         ({"task": "track", "reference": "zigzag"}, "reference must be one of"),
         ({"episode_seconds": 0.0}, "episode_seconds must be positive"),

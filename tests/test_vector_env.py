@@ -164,7 +164,7 @@ def test_seed_list_and_options_apply_per_reset():
         venv.reset(seed=[1, 2])
     with pytest.raises(ValueError, match=r"options\['trace'\] must be a trace index"):
         venv.reset(seed=0, options={"trace": 5})
-    with pytest.raises(ValueError, match=r"options\['gust_scale'\] must be a non-negative number"):
+    with pytest.raises(ValueError, match=r"options\['gust_scale'\] must be a number in \[0, 100\]"):
         venv.reset(seed=0, options={"gust_scale": -1.0})
 
 
@@ -198,6 +198,18 @@ def test_non_finite_actions_raise_naming_the_copy(bad):
     actions[2, 1] = bad
     with pytest.raises(ActionError, match="actions must be finite; copy 2"):
         venv.step(actions)
+
+
+@pytest.mark.parametrize("bad", [np.full((4, 3), 0.1 + 0.2j), [["a", 0, 0]] * 4, "abc"])
+def test_actions_that_are_not_real_numbers_raise_and_change_nothing(bad):
+    venv = HeliAttitudeVectorEnv(4)
+    obs, _ = venv.reset(seed=0)
+    with pytest.raises(ActionError, match="actions must be real numbers"):  # no imaginary part silently dropped
+        venv.step(bad)
+    again, *_ = venv.step(np.zeros((4, 3), np.float32))
+    ref = HeliAttitudeVectorEnv(4)
+    ref.reset(seed=0)
+    assert np.array_equal(again, ref.step(np.zeros((4, 3), np.float32))[0])
 
 
 def test_step_before_reset_raises():
