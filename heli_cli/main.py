@@ -154,6 +154,17 @@ def main(argv=None) -> int:
     if args.command is None:  # 'heli' alone: what it can do, on the error stream as argparse's usage errors
         parser.print_help(sys.stderr)
         return 2
+    created = None  # an output folder this run creates, removed again if the run fails and leaves it empty
+    if getattr(args, "out", None) and getattr(args, "out_kind", None) == "dir" and not Path(args.out).exists():
+        created = Path(args.out)
+    code = _run(args)
+    if code != 0 and created is not None and created.is_dir() and not any(created.iterdir()):
+        created.rmdir()
+    return code
+
+
+def _run(args) -> int:
+    """Run the parsed command; every error ends in one line and an exit status (module docstring)."""
     prefix = f"heli {args.command}"
     try:
         if getattr(args, "out", None) and getattr(args, "out_kind", None):
@@ -171,6 +182,10 @@ def main(argv=None) -> int:
         if isinstance(e, PATH_ERRORS):
             what = f"{e.strerror}: {e.filename}" if e.strerror and e.filename else str(e)
             print(f"{prefix}: error: {what}", file=sys.stderr)
+            return 2
+        if isinstance(e, MemoryError):  # a request larger than the machine: what it would need, and what to do
+            print(f"{prefix}: error: not enough memory for this request ({e or 'allocation failed'}); ask for "
+                  "less (a shorter --duration, a smaller gain grid, fewer windows)", file=sys.stderr)
             return 2
         print(f"{prefix}: unexpected error: {type(e).__name__}: {e}", file=sys.stderr)
         print(f"{prefix}: {REPORT_HINT}", file=sys.stderr)

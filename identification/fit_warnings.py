@@ -40,6 +40,33 @@ MIN_RATE_STD = math.radians(0.5)
 """rad/s: least standard deviation of an axis' rate."""
 
 
+CONSTANT_STICK_STD = 1e-9
+"""A stick whose standard deviation is below this [stick units] is constant: its axis cannot be identified."""
+
+
+def require_moving_sticks(flights, axes) -> None:
+    """Refuse to fit an axis whose stick never moves (a barely moving one only warns, :func:`fit_warnings`).
+
+    Raises
+    ------
+    IdentifiabilityError
+        Names the axis, the stick and its constant value: with a constant input the gain and the
+        offset of eq. (18) are the same column, and the fit would return a gain of 0 and a damping of
+        whatever sign fits the wind.
+    """
+    from .errors import IdentifiabilityError
+
+    flights = [flights] if hasattr(flights, "time") else list(flights)
+    for axis in axes:
+        stick, row = AXIS_STICK[axis]
+        values = np.concatenate([np.asarray(f.sticks[row], dtype=float) for f in flights])
+        if values.size and float(np.std(values)) < CONSTANT_STICK_STD:
+            raise IdentifiabilityError(
+                f"the {stick} stick is constant ({float(values[0]):.4g} over the whole flight): {axis}'s gain and "
+                f"damping cannot be identified without input changes; fly sweeps on {stick}, or check the input "
+                "source (heli import --inputs)")
+
+
 def _name(flight, k: int, n: int) -> str:
     meta = getattr(flight, "metadata", {}) or {}
     source = meta.get("source")

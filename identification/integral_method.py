@@ -50,6 +50,7 @@ from heli_core.terms import (AXES, COUPLED, DECOUPLED, EXTRA_PARAMS, FEATURE_EXP
                              STICK_ROW, TERMS)
 
 from .errors import IdentifiabilityError, NotFittedError
+from .fit_warnings import require_moving_sticks
 from .flight import Flight
 from .preprocess import DEFAULT_PASS_HZ, DEFAULT_STOP_HZ, lowpass_flight
 
@@ -381,6 +382,7 @@ class IntegralIdentifier:
         flights = [flight] if isinstance(flight, Flight) else list(flight)
         if not flights:
             raise ValueError("fit needs at least one flight")
+        require_moving_sticks(flights, self.axes)
         names = self._param_names()
         delays = self._delays()
         datas = [lowpass_flight(f, self.pass_hz, self.stop_hz) if self.prefilter else f for f in flights]

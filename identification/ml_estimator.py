@@ -52,6 +52,7 @@ from heli_core.servo import pade_filter
 from heli_core.terms import AXES, DECOUPLED, FEATURES, RATE_DEPENDENCE, STICK_ROW, TERMS
 
 from .errors import IdentifiabilityError, NotFittedError
+from .fit_warnings import require_moving_sticks
 from .flight import Flight
 from .integral_method import IntegralIdentifier
 from .state_space import (N_NONLINEAR, WIND_MODELS, ZETA_BOUNDS, discrete_model, innovation_filters, kalman,
@@ -355,6 +356,7 @@ class MaximumLikelihoodIdentifier:
         flights = [flight] if isinstance(flight, Flight) else list(flight)
         if not flights:
             raise ValueError("fit needs at least one flight")
+        require_moving_sticks(flights, self.axes)
         fs = flights[0].sample_rate
         for f in flights[1:]:
             if abs(f.sample_rate - fs) > 1e-3 * fs:

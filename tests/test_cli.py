@@ -7,6 +7,7 @@ installed ``heli`` console script.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import subprocess
@@ -306,3 +307,38 @@ def test_an_output_path_under_a_file_is_one_line_and_exit_2(tmp_path, capsys):
     assert main(["simulate-flight", "--duration", "10", "--out", str(blocker / "x.csv")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("heli simulate-flight: error:") and "afile" in err and "Traceback" not in err
+
+
+def _out_of_memory(args):
+    import numpy as np
+
+    np.empty((10**8, 10**8))  # 72 PiB: refused by the allocator at once
+
+
+def test_a_request_larger_than_memory_is_one_line_with_its_size_and_leaves_no_folder(monkeypatch, tmp_path, capsys):
+    import heli_cli.design
+
+    monkeypatch.setattr(heli_cli.design, "run", _out_of_memory)
+    assert main(["design", "--out", str(tmp_path / "pd")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("heli design: error: not enough memory for this request (Unable to allocate ")
+    assert err.count("\n") == 1 and not (tmp_path / "pd").exists()
+
+
+def test_a_constant_stick_is_an_identifiability_error_naming_the_stick(tmp_path, capsys):
+    from identification.integral_method import IntegralIdentifier
+    from identification.errors import IdentifiabilityError
+    from identification.io import write_csv_flight
+    from identification.synthetic import simulate_flight
+
+    flight = simulate_flight(30, seed=2).flight
+    sticks = flight.sticks.copy()
+    sticks[0] = 0.3  # lat never moves: roll's gain and offset are one column
+    flight = dataclasses.replace(flight, sticks=sticks)
+    with pytest.raises(IdentifiabilityError, match=r"the lat stick is constant \(0\.3 over the whole flight\)"):
+        IntegralIdentifier().fit(flight)
+    path = tmp_path / "const.csv"
+    write_csv_flight(flight, path)
+    assert main(["identify", str(path), "--out", str(tmp_path / "m"), "--no-plots", "-q"]) == 2
+    assert "IdentifiabilityError: the lat stick is constant" in capsys.readouterr().err
+    assert not (tmp_path / "m").exists()  # a failed run leaves no empty output folder
