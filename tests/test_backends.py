@@ -396,3 +396,93 @@ def test_ray_seeds_equal_the_local_backend(ray_backend, seeds_local, tmp_path):
     on_ray = train_seeds("ppo", None, 128, tmp_path / "ppo", seeds=[6], backend=ray_backend, progress=False,
                          **TINY_PPO)
     assert _same_policy(_policy(seeds_local[6].path), _policy(on_ray[6].path))
+
+
+# ------------------------------------------------------------------------- workers die with their parent
+_NAPPER = '''
+import os, time
+from pathlib import Path
+
+
+def nap(item, shared):
+    Path(shared, str(os.getpid())).touch()
+    time.sleep(60)
+    return item
+'''
+
+_PARENT = '''
+import sys
+from heli_core.backends import LocalBackend
+import napper
+
+LocalBackend(workers=2, start_method=sys.argv[2]).map(napper.nap, range(4), sys.argv[1])
+'''
+
+
+def _children_of(pid) -> set:
+    """Pids whose parent is ``pid`` (from /proc: psutil is not a dependency)."""
+    from pathlib import Path
+
+    out = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.add(int(stat.parent.name))
+    return out
+
+
+def _descendants_of(pid) -> set:
+    found, todo = set(), [pid]
+    while todo:
+        kids = _children_of(todo.pop()) - found
+        found |= kids
+        todo.extend(kids)
+    return found
+
+
+def _running(pid) -> bool:
+    from pathlib import Path
+
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+@pytest.mark.parametrize("start_method", ["forkserver", "spawn"])
+def test_local_workers_die_with_a_killed_parent(tmp_path, start_method):
+    """SIGKILL of a process running a LocalBackend map leaves no process of it behind (issue 15: the resource
+    tracker, the forkserver and two workers stayed, 3 of 3 times)."""
+    import subprocess
+    import time
+    from pathlib import Path
+
+    (tmp_path / "napper.py").write_text(_NAPPER)
+    started = tmp_path / "started"
+    started.mkdir()
+    repo = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(repo), os.environ.get("PYTHONPATH", "")])}
+    parent = subprocess.Popen([sys.executable, "-c", _PARENT, str(started), start_method], env=env, cwd=tmp_path)
+    try:
+        deadline = time.monotonic() + 30
+        while len(list(started.iterdir())) < 2:  # both workers are in a task
+            assert parent.poll() is None, "the parent ended early"
+            assert time.monotonic() < deadline, "the workers did not start"
+            time.sleep(0.05)
+        left = _descendants_of(parent.pid)
+        workers = {int(p.name) for p in started.iterdir()}
+        assert workers <= left
+    finally:
+        parent.kill()
+        parent.wait()
+    deadline = time.monotonic() + 5
+    while {p for p in left if _running(p)} and time.monotonic() < deadline:
+        time.sleep(0.05)
+    alive = {p for p in left if _running(p)}
+    for p in alive:  # do not leave them to the next test
+        os.kill(p, signal.SIGKILL)
+    assert not alive, f"{len(alive)} of {len(left)} processes outlived their killed parent"
