@@ -23,6 +23,12 @@ def register(sub):
     p.add_argument("--effect", action="append", default=[], metavar="NAME",
                    choices=sorted(list(EFFECTS) + list(EFFECT_ALIASES)),
                    help=f"switch on a hidden physical effect (repeatable): {', '.join(EFFECTS)}")
+    p.add_argument("--effect-scale", type=number("a number > 0", 0.0), default=1.0, metavar="X",
+                   help="multiply the sizes of the --effect parameters (default 1; the diagnosis study's quadratic "
+                   "damping is 5)")
+    p.add_argument("--manoeuvre", action="store_true",
+                   help="an aggressive pilot: large sweeps on all three sticks at once (rates to ~60 deg/s in roll, "
+                   "~150 deg/s in yaw), where gyroscopic and quadratic-damping effects show")
     p.add_argument("--wind", type=number("a finite number >= 0", 0.0, low_open=False), default=None,
                    help="half-width of the 90%% interval of the cyclic wind u_d (default 0.09, the paper's level)")
     p.add_argument("--cell", default=None, choices=sorted(BENCH_CELLS), metavar="NAME",
@@ -65,7 +71,7 @@ def _line(text):
 
 
 def run(args) -> int:
-    from identification.synthetic import simulate_flight
+    from identification.synthetic import EFFECT_ALIASES, EFFECTS, PAPER_PARAMS, simulate_flight
 
     from .progress import progress_of
 
@@ -78,13 +84,19 @@ def run(args) -> int:
         return 2
     with progress_of(args) as progress:
         progress.stage(f"flying a {args.duration:g} s flight (pilot, wind and sensors of the truth model)")
-        result = simulate_flight(args.duration, seed=args.seed, effects=tuple(args.effect), config=cfg)
+        effects, truth = tuple(args.effect), None
+        if args.effect_scale != 1.0:  # the effects' parameters scaled, in the truth model itself
+            truth = PAPER_PARAMS.with_values(**{k: args.effect_scale * v for e in effects
+                                                for k, v in EFFECTS[EFFECT_ALIASES.get(e, e)].items()})
+            effects = ()
+        result = simulate_flight(args.duration, seed=args.seed, effects=effects, config=cfg, truth=truth)
         paths = result.save(args.out)
     f = result.flight
     print(f"wrote {paths['flight']} ({f.duration:.1f} s, {f.n} samples at {f.sample_rate:.0f} Hz)")
     print(f"truth: {paths['truth']}  wind: {paths['wind']}")
     if args.effect:
-        print(f"hidden effects: {', '.join(args.effect)}")
+        scale = f" (x{args.effect_scale:g})" if args.effect_scale != 1.0 else ""
+        print(f"hidden effects: {', '.join(args.effect)}{scale}")
     return 0
 
 
@@ -92,9 +104,11 @@ def _config(args):
     """The flight's settings from a bench cell (or the default) and the options that change it."""
     from dataclasses import replace
 
-    from identification.synthetic import FlightConfig
+    from identification.synthetic import MANOEUVRE_CONFIG, FlightConfig
 
     cfg = replace(BENCH_CELLS[args.cell], duration=args.duration) if args.cell else FlightConfig(duration=args.duration)
+    if args.manoeuvre:
+        cfg = replace(cfg, sweep_amplitude=MANOEUVRE_CONFIG.sweep_amplitude, sweep_mode=MANOEUVRE_CONFIG.sweep_mode)
     if args.wind is not None:
         cfg = replace(cfg, wind_level=(args.wind, args.wind, args.wind / 3.0))
     changes = {"wind_model": args.wind_model, "wind_corner_hz": args.wind_corner, "pilot": args.pilot,
