@@ -342,3 +342,13 @@ def test_a_constant_stick_is_an_identifiability_error_naming_the_stick(tmp_path,
     assert main(["identify", str(path), "--out", str(tmp_path / "m"), "--no-plots", "-q"]) == 2
     assert "IdentifiabilityError: the lat stick is constant" in capsys.readouterr().err
     assert not (tmp_path / "m").exists()  # a failed run leaves no empty output folder
+
+
+def test_simulate_flight_scales_effects_and_flies_the_manoeuvre(tmp_path, capsys):
+    out = tmp_path / "m.csv"
+    assert main(["simulate-flight", "--duration", "10", "--seed", "2", "--effect", "nonlinear_damping",
+                 "--effect-scale", "5", "--manoeuvre", "--out", str(out), "-q"]) == 0
+    assert "hidden effects: nonlinear_damping (x5)" in capsys.readouterr().out
+    truth = json.loads(out.with_suffix(".truth.json").read_text())
+    assert {k: truth["parameters"][k] for k in ("nld1", "nld2", "nld3")} == {"nld1": 10.0, "nld2": 10.0, "nld3": 3.0}
+    assert truth["config"]["sweep_mode"] == "simultaneous"
