@@ -378,3 +378,36 @@ def test_other_units_in_a_csv_are_named(tmp_path, edit, message):
     path = _write(tmp_path / "units.csv", HEADER, data)
     with pytest.raises(UnitError, match=message):
         read_csv_flight(path)
+
+
+# ------------------------------------------------------------------ hostile inputs (issue 15)
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        (b"\x82\xff\x00binary", r"servo calibration '.*cal\.json' is not a readable JSON file: 'utf-8' codec"),
+        (b"[1, 2, 3]", r"servo calibration must be a JSON object with keys 'G' \(4x4\) and 'U_trim' \(4\), got a list"),
+        (b'{"G": "fast", "U_trim": [1, 2, 3, 4]}', r"servo calibration: G' \(4x4\) and U_trim \(4\) must be numbers"),
+        (b'{"G": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "U_trim": [1.5, NaN, 1.5, 1.5]}',
+         r"servo trim U_trim must be finite numbers, got \[1\.5, nan, 1\.5, 1\.5\]"),
+    ],
+    ids=["binary", "list", "strings", "nan-trim"],
+)
+def test_hostile_servo_calibration_files(tmp_path, content, message):
+    path, _ = _servo_log(tmp_path)
+    (tmp_path / "cal.json").write_bytes(content)
+    with pytest.raises(FlightLogError, match=message):
+        read_servo_csv(path, tmp_path / "cal.json")
+
+
+def test_a_folder_or_a_pipe_is_refused_not_read(tmp_path):
+    """A pipe given as the flight would block the reader for ever; a folder is named as one."""
+    import os
+
+    os.mkfifo(tmp_path / "pipe.csv")
+    (tmp_path / "folder.csv").mkdir()
+    with pytest.raises(FlightLogError, match=r"pipe\.csv: not a regular file \(a pipe, socket or device\)"):
+        read_flight(tmp_path / "pipe.csv")
+    with pytest.raises(FlightLogError, match=r"folder\.csv: a folder; expected a flight log file"):
+        read_flight(tmp_path / "folder.csv")
+    with pytest.raises(FlightLogError, match=r"'.*pipe\.csv' is not a regular file; expected a CSV file"):
+        read_csv_flight(tmp_path / "pipe.csv")

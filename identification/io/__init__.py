@@ -84,6 +84,13 @@ def _read_csv(path, inputs, segment, calibration):
     return flight.segment(t0, t1)
 
 
+def _check_regular_file(path: Path) -> None:
+    """Refuse a folder, or a pipe or device that reading would block on for ever (``LogFormatError``)."""
+    if path.exists() and not path.is_file():
+        kind = "a folder" if path.is_dir() else "not a regular file (a pipe, socket or device)"
+        raise LogFormatError(f"{path}: {kind}; expected a flight log file")
+
+
 def read_log(path, inputs: str | None = None, segment=None, rate: float | None = None, calibration=None,
              allow_damaged: bool = False, log: int | None = None):
     """Read a flight log of any supported format into a validated :class:`~identification.flight.Flight`.
@@ -134,6 +141,7 @@ def read_log(path, inputs: str | None = None, segment=None, rate: float | None =
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"flight log {str(path)!r} does not exist")
+    _check_regular_file(path)
     from .container import locate
 
     where = locate(path)
@@ -176,6 +184,7 @@ def list_logs(path, allow_damaged: bool = False) -> list[dict]:
     from .errors import NotAirborneError
 
     path = Path(path)
+    _check_regular_file(path)
     fmt = locate(path).format
     if fmt == "blackbox":
         from .blackbox import blackbox_log_summaries

@@ -32,6 +32,9 @@ SERVO_STICK_ORDER = ("lon", "lat", "col", "ped")
 def _read_table(path: Path) -> tuple[list[str], np.ndarray]:
     if not path.exists():
         raise FlightLogError(f"flight log {str(path)!r} does not exist")
+    if not path.is_file():  # a folder, or a pipe that reading would block on for ever
+        raise FlightLogError(f"flight log {str(path)!r} is {'a folder' if path.is_dir() else 'not a regular file'}; "
+                             "expected a CSV file")
     with open(path, encoding="utf-8-sig", errors="replace") as fh:  # -sig: drop a spreadsheet BOM
         header_line = fh.readline()
     header = [h.strip() for h in header_line.strip().split(",")]
@@ -119,15 +122,20 @@ def sticks_from_servos(servos, gain, trim) -> np.ndarray:
     ndarray, shape (4, n)
         Sticks in the canonical order lat, lon, col, ped.
     """
-    G = np.asarray(gain, dtype=float)
+    try:
+        G = np.asarray(gain, dtype=float)
+        trim = np.asarray(trim, dtype=float)
+    except (TypeError, ValueError) as e:  # strings, nested dicts, ragged lists
+        raise FlightLogError(f"servo calibration: G' (4x4) and U_trim (4) must be numbers: {e}") from None
     if G.shape != (4, 4):
         raise FlightLogError(f"servo mixing gain G' must be 4x4, got shape {G.shape}")
     cond = np.linalg.cond(G)
     if not np.isfinite(cond) or cond > 1e8:
         raise FlightLogError(f"servo mixing gain G' is singular (condition number {cond:.3g}); cannot invert eq. (67)")
-    trim = np.asarray(trim, dtype=float)
     if trim.size != 4:
         raise FlightLogError(f"servo trim U_trim must have 4 values, got shape {trim.shape}")
+    if not np.isfinite(trim).all():
+        raise FlightLogError(f"servo trim U_trim must be finite numbers, got {trim.tolist()}")
     trim = trim.reshape(4, 1)
     delta = np.linalg.solve(G, np.asarray(servos, dtype=float) - trim)  # (lon, lat, col, ped)
     order = [SERVO_STICK_ORDER.index(s) for s in STICK_COLUMNS]
@@ -150,8 +158,11 @@ def read_servo_csv(path, calibration) -> Flight:
         cal_path = Path(calibration)
         try:
             calibration = json.loads(cal_path.read_text())
-        except (OSError, json.JSONDecodeError) as e:
+        except (OSError, ValueError) as e:  # ValueError: not JSON, or not text (UnicodeDecodeError)
             raise FlightLogError(f"servo calibration {str(cal_path)!r} is not a readable JSON file: {e}") from e
+    if not isinstance(calibration, dict):
+        raise FlightLogError(f"servo calibration must be a JSON object with keys 'G' (4x4) and 'U_trim' (4), got "
+                             f"a {type(calibration).__name__}")
     for key in ("G", "U_trim"):
         if key not in calibration:
             raise FlightLogError(f"servo calibration lacks {key!r}; expected keys 'G' (4x4) and 'U_trim' (4)")
