@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import sys
 
+from .argtypes import output_path
+
 DEFAULT_OUT = "method-comparison"
 
 
@@ -25,7 +27,7 @@ def register(sub):
         "sees (held-out errors); the target is then judged both in-sample and held-out.",
     )
     p.add_argument("flight", metavar="FLIGHT.csv", help="canonical CSV flight log")
-    p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR",
+    p.add_argument("--out", default=DEFAULT_OUT, type=output_path, metavar="DIR",
                    help=f"output directory (default ./{DEFAULT_OUT})")
     p.add_argument("--axis", default="roll", choices=("roll", "pitch", "yaw"),
                    help="axis to compare (default roll, as the paper)")

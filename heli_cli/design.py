@@ -11,7 +11,7 @@ import argparse
 import math
 from pathlib import Path
 
-from .argtypes import number
+from .argtypes import number, output_path
 
 DEFAULT_OUT = "pd"
 AXES = ("roll", "pitch", "yaw")
@@ -49,7 +49,7 @@ def register(sub):
                    help="closed-loop -3 dB bandwidth in rad/s, one for all axes or roll,pitch,yaw")
     p.add_argument("--dt", type=number("a control period in s, 0 < dt < 1", 0.0, 1.0),
                    default=0.01, help="control period in s (default 0.01, the env's)")
-    p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
+    p.add_argument("--out", default=DEFAULT_OUT, type=output_path, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
     p.add_argument("--no-plots", action="store_true", help="do not draw step.png and the Bode figures")
     p.set_defaults(func=run, out_kind="dir")
 

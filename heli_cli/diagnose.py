@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from .argtypes import number, whole
+from .argtypes import number, output_path, whole
 
 
 def register(sub):
@@ -20,7 +20,7 @@ def register(sub):
     p.add_argument("flight", metavar="FLIGHT.csv", help="canonical CSV flight log")
     p.add_argument("--model", metavar="DIR/model.json", default=None,
                    help="model whose structure is diagnosed (default: the paper's decoupled model)")
-    p.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    p.add_argument("--out", required=True, type=output_path, metavar="DIR", help="output directory")
     p.add_argument("--method", choices=("ml", "integral"), default="ml",
                    help="'ml' likelihood-ratio tests of the wind-state model (default); 'integral' held-out "
                    "forward simulation of integral-method fits")
@@ -30,7 +30,8 @@ def register(sub):
                    help="ml: smallest likelihood-ratio statistic of a servo delay / input shift (default 20)")
     p.add_argument("--input-hold", choices=("linear", "zoh"), default="linear",
                    help="ml: sticks between samples, 'linear' (a pilot) or 'zoh' (a flight controller's commands)")
-    p.add_argument("--folds", type=whole(2), default=5, help="integral: cross-validation blocks (default 5)")
+    p.add_argument("--folds", type=whole(2, 12), default=5,  # at most Diagnoser.min_windows (12)
+                   help="integral: cross-validation blocks, 2 to 12 (default 5)")
     p.add_argument("--window", type=number("a positive number of seconds", 0.0),
                    default=4.0, help="integral: held-out simulation window in s (default 4)")
     p.add_argument("--alpha", type=number("a number in (0, 1)", 0.0, 1.0), default=None,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .argtypes import number, whole
+from .argtypes import number, output_path, seed, whole
 
 DEFAULT_OUT = "evaluation"
 
@@ -25,10 +25,10 @@ def register(sub):
     p.add_argument("--traces", default="held-out", choices=("held-out", "all", "train"),
                    help="which library traces to fly (default held-out)")
     p.add_argument("--episodes-per-trace", type=whole(1), default=4, help="episodes per trace (default 4)")
-    p.add_argument("--episode-seconds", type=number("a finite number > 0", 0.0),
+    p.add_argument("--episode-seconds", type=number("seconds >= 0.01 (one control period)", 0.01, low_open=False),
                    default=30.0, help="episode length in s (default 30)")
-    p.add_argument("--seed", type=whole(0), default=0, help="seed of the gust windows (default 0)")
-    p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
+    p.add_argument("--seed", type=seed(), default=0, help="seed of the gust windows (default 0)")
+    p.add_argument("--out", default=DEFAULT_OUT, type=output_path, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
     p.set_defaults(func=run, out_kind="dir")
 
 

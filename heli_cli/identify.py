@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from .argtypes import number, whole
+from .argtypes import number, output_path, whole
 
 
 def _delay(text):
@@ -50,7 +50,7 @@ def register(sub):
         "appends the winds to the disturbance library DIR/disturbances (a new version; earlier versions are kept).",
     )
     p.add_argument("flights", nargs="+", metavar="FLIGHT.csv", help="canonical CSV flight log(s)")
-    p.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    p.add_argument("--out", required=True, type=output_path, metavar="DIR", help="output directory")
     p.add_argument("--coupled", action="store_true", help="write the coupled model (k1..k12) instead of the decoupled one")
     p.add_argument("--method", choices=("ml", "integral"), default="ml",
                    help="estimator: 'ml' maximum likelihood with a stochastic wind state (default), 'integral' the "

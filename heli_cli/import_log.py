@@ -13,7 +13,7 @@ import argparse
 import math
 import sys
 
-from .argtypes import number, whole
+from .argtypes import number, output_path, whole
 
 
 def _segment(text):
@@ -42,7 +42,7 @@ def register(sub):
         "--allow-damaged. Nothing is written for a refused log.",
     )
     p.add_argument("log", metavar="LOG", help="PX4 .ulg, ArduPilot .bin, Betaflight/Rotorflight blackbox, or CSV")
-    p.add_argument("--out", metavar="FLIGHT.csv", help="canonical CSV to write (required unless --list)")
+    p.add_argument("--out", metavar="FLIGHT.csv", type=output_path, help="canonical CSV to write (required unless --list)")
     p.add_argument("--list", action="store_true",
                    help="list the logs in the file (a blackbox flash dump holds several) with their length and "
                    "airborne time, and write nothing")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from .argtypes import number, whole
+from .argtypes import number, seed, whole
 from .identify import add_flight_backend_options, flight_backend
 
 
@@ -31,7 +31,7 @@ def register(sub):
                    help="bootstrap replicates per data set (default 200)")
     p.add_argument("--block", type=whole(1), default=1, metavar="K",
                    help="consecutive intervals per bootstrap block (default 1)")
-    p.add_argument("--seed", type=whole(0), default=0, help="bootstrap seed (default 0; same seed, same table)")
+    p.add_argument("--seed", type=seed(), default=0, help="bootstrap seed (default 0; same seed, same table)")
     p.add_argument("--alpha", type=number("a probability in (0, 1)", 0.0, 1.0), default=0.05,
                    help="family-wise probability of a false flag over the parameters (default 0.05)")
     p.add_argument("--min-change", type=number("a non-negative fraction (0.05 = 5 %)", 0.0, low_open=False),

@@ -6,7 +6,7 @@ from __future__ import annotations
 from identification.bench import BENCH_CELLS
 from identification.synthetic import EFFECT_ALIASES, EFFECTS
 
-from .argtypes import number, whole
+from .argtypes import FLIGHT_BYTES_PER_SECOND, affordable, number, output_path, seed
 
 
 def register(sub):
@@ -16,10 +16,10 @@ def register(sub):
         description="Write a realistic synthetic hover flight (canonical CSV) plus its truth: "
         "<stem>.truth.json (parameters, seed, settings) and <stem>.wind.csv (the true wind u_d).",
     )
-    p.add_argument("--duration", type=number("a finite number > 0", 0.0),
+    p.add_argument("--duration", type=affordable("a flight length in seconds > 0", FLIGHT_BYTES_PER_SECOND, "s"),
                    default=300.0, help="flight length in seconds (default 300)")
-    p.add_argument("--seed", type=whole(0), default=1, help="random seed: same seed, same flight (default 1)")
-    p.add_argument("--out", required=True, help="output CSV path, e.g. flight.csv")
+    p.add_argument("--seed", type=seed(), default=1, help="random seed: same seed, same flight (default 1)")
+    p.add_argument("--out", required=True, type=output_path, help="output CSV path, e.g. flight.csv")
     p.add_argument("--effect", action="append", default=[], metavar="NAME",
                    choices=sorted(list(EFFECTS) + list(EFFECT_ALIASES)),
                    help=f"switch on a hidden physical effect (repeatable): {', '.join(EFFECTS)}")
@@ -39,14 +39,14 @@ def register(sub):
     p.add_argument("--wind-model", choices=("lowpass", "gauss_markov", "dryden"), default=None,
                    help="gust spectrum: 'lowpass' (2nd-order, default), 'gauss_markov' (1st-order, broadband), "
                    "'dryden' (lateral Dryden form)")
-    p.add_argument("--wind-corner", type=number("a frequency in Hz > 0", 0.0), default=None,
+    p.add_argument("--wind-corner", type=number("a frequency in Hz from 0.001 to below 50 (Nyquist of the 100 Hz flight)", 0.001, 50.0, low_open=False), default=None,
                    help="corner of the lowpass/Dryden gusts in Hz (0.2 to 2 typical; default 0.5)")
     p.add_argument("--slow-gusts", type=number("a fraction in [0, 1)", 0.0, 1.0, low_open=False), default=None,
                    help="share of the wind's variance in slow gusts (first-order, 4 s)")
     p.add_argument("--pilot", choices=("pid", "pd", "autopilot"), default=None,
                    help="'pid' the default human pilot, 'pd' a pilot fighting gusts with a PD on attitude and rate, "
                    "'autopilot' a flight controller holding its commands between samples")
-    p.add_argument("--reaction-delay", type=number("seconds >= 0", 0.0, low_open=False), default=None,
+    p.add_argument("--reaction-delay", type=number("seconds from 0 to 5", 0.0, 5.0, low_open=False, high_open=False), default=None,
                    help="the pilot's reaction delay in s (0.1-0.25 typical; default 0.2)")
     p.add_argument("--gyro-noise", type=number("rad/s >= 0", 0.0, low_open=False), default=None,
                    help="gyro white-noise standard deviation in rad/s (default 0.01)")

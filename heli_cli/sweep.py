@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .argtypes import number, whole
+from .argtypes import number, output_path, seed, whole
 
 DEFAULT_OUT = "sweep"
 
@@ -41,8 +41,8 @@ def register(sub):
                    default=0.01, help="control period in seconds (default 0.01)")
     p.add_argument("--windows", type=whole(1), default=None,
                    help="number of (trace, offset) gust windows (default one per library trace)")
-    p.add_argument("--seed", type=whole(0), default=0, help="seed of the window offsets and flights (default 0)")
-    p.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
+    p.add_argument("--seed", type=seed(), default=0, help="seed of the window offsets and flights (default 0)")
+    p.add_argument("--out", default=DEFAULT_OUT, type=output_path, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
     p.add_argument("--flights", type=whole(0), default=0, metavar="N",
                    help="check the prediction with N fresh-wind flights per pair of the truth model (default 0: no)")
     p.add_argument("--flight-pairs", type=whole(0), default=4, metavar="K",

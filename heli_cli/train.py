@@ -2,20 +2,9 @@
 
 from __future__ import annotations
 
-import argparse
 import sys
 
-from .argtypes import number, whole
-
-
-def _seeds(text):
-    try:
-        seeds = [int(v) for v in text.split(",") if v.strip() != ""]
-    except ValueError:
-        seeds = []
-    if not seeds or len(set(seeds)) != len(seeds):
-        raise argparse.ArgumentTypeError(f"expected distinct whole numbers separated by commas, got {text!r}")
-    return seeds
+from .argtypes import number, output_path, seed, seed_list, whole
 
 
 def register(sub):
@@ -34,8 +23,8 @@ def register(sub):
                    help="model directory written by 'heli identify' (default: the model shipped with heli-env)")
     p.add_argument("--timesteps", required=True, type=whole(1), metavar="N",
                    help="environment steps to train for (all copies together)")
-    p.add_argument("--out", required=True, metavar="AGENT", help="agent path (.zip is added)")
-    p.add_argument("--seed", type=whole(0), default=0, help="seed of everything (default 0)")
+    p.add_argument("--out", required=True, type=output_path, metavar="AGENT", help="agent path (.zip is added)")
+    p.add_argument("--seed", type=seed(), default=0, help="seed of everything (default 0)")
     p.add_argument("--n-envs", type=whole(1), default=8, help="environment copies (default 8)")
     p.add_argument("--minutes", type=number("a finite number > 0", 0.0), default=None,
                    help="wall-time budget; training stops at --timesteps or this, whichever comes first")
@@ -44,12 +33,12 @@ def register(sub):
     p.add_argument("--eval-episodes", type=whole(1), default=4, help="held-out episodes per evaluation (default 4)")
     p.add_argument("--checkpoint-freq", type=whole(0), default=100_000, metavar="N",
                    help="timesteps between checkpoints (0: none; default 100000)")
-    p.add_argument("--episode-seconds", type=number("a finite number > 0", 0.0), default=30.0,
+    p.add_argument("--episode-seconds", type=number("seconds >= 0.01 (one control period)", 0.01, low_open=False), default=30.0,
                    help="episode length in s (default 30)")
     p.add_argument("--held-out-fraction", type=number("a fraction in (0, 1)", 0.0, 1.0), default=0.25,
                    help="fraction of the library's traces held out (default 0.25)")
-    p.add_argument("--split-seed", type=whole(0), default=0, help="seed of the held-out choice (default 0)")
-    p.add_argument("--seeds", type=_seeds, default=None, metavar="S1,S2,...",
+    p.add_argument("--split-seed", type=seed(), default=0, help="seed of the held-out choice (default 0)")
+    p.add_argument("--seeds", type=seed_list, default=None, metavar="S1,S2,...",
                    help="train one agent per seed, each as a task of --backend (one torch thread each); agents "
                    "are written to AGENT_seed<S>.zip and AGENT_seed<S>_training/ (overrides --seed)")
     p.add_argument("--backend", default="local", choices=("local", "ray"),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 
 import pytest
 
@@ -55,3 +56,81 @@ def test_commands_reject_bad_numbers_with_exit_2(argv, capsys):
         main(argv)
     assert e.value.code == 2
     assert "expected" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ hostile inputs (issue 15)
+def test_whole_with_a_maximum():
+    from heli_cli.argtypes import whole
+
+    assert whole(2, 12)("12") == 12
+    for text in ("13", "1", "1e9"):
+        with pytest.raises(argparse.ArgumentTypeError, match=rf"expected a whole number from 2 to 12, got {text!r}"):
+            whole(2, 12)(text)
+
+
+def test_diagnose_folds_bound_is_the_diagnosers_minimum_of_windows():
+    """--folds above Diagnoser.min_windows ended in 'ValueError: Diagnoser.min_windows out of range' (exit 1)."""
+    from identification.diagnose import MIN_WINDOWS
+
+    assert MIN_WINDOWS == 12  # the bound written in heli_cli/diagnose.py
+
+
+@pytest.mark.parametrize("text", ["-1", "4294967296", "99999999999999999999", "1e3", "x"])
+def test_seed_is_what_numpy_accepts(text):
+    from heli_cli.argtypes import seed
+
+    with pytest.raises(argparse.ArgumentTypeError, match=r"expected a whole number from 0 to 4294967295"):
+        seed()(text)
+
+
+@pytest.mark.parametrize("text", ["", "-1", "1,,1", "a,b", "4294967296"])
+def test_seed_list_refuses_negatives_duplicates_and_text(text):
+    from heli_cli.argtypes import seed_list
+
+    with pytest.raises(argparse.ArgumentTypeError, match=r"expected distinct whole numbers from 0 to 4294967295"):
+        seed_list(text)
+    assert seed_list("0,3,2") == [0, 3, 2]
+
+
+def test_output_path_refuses_an_empty_path():
+    from heli_cli.argtypes import output_path
+
+    with pytest.raises(argparse.ArgumentTypeError, match=r"expected a path to write to, got ' '"):
+        output_path(" ")
+    assert output_path("a.csv") == "a.csv"
+
+
+def test_affordable_refuses_a_request_larger_than_memory_naming_its_size():
+    from heli_cli.argtypes import affordable
+
+    parse = affordable("a flight length in seconds > 0", 1000.0, "s", memory=lambda: 2**30)
+    assert parse("1000") == 1000.0
+    with pytest.raises(argparse.ArgumentTypeError,
+                       match=r"expected a flight length in seconds > 0; 1e7 s would need about 9\.31 GiB of "
+                             r"memory and 1 GiB are available"):
+        parse("1e7")
+    for text in ("0", "nan", "inf", "-1"):
+        with pytest.raises(argparse.ArgumentTypeError, match=rf"got {text!r}"):
+            parse(text)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["simulate-flight", "--duration", "1e9", "--out", "x.csv"], r"1e9 s would need about .* GiB of memory"),
+    (["simulate-flight", "--duration", "1e300", "--out", "x.csv"], r"1e300 s would need about .* GiB of memory"),
+    (["simulate-flight", "--out", ""], r"expected a path to write to, got ''"),
+    (["simulate-flight", "--wind-corner", "1e300", "--out", "x.csv"], r"below 50 \(Nyquist"),
+    (["simulate-flight", "--reaction-delay", "1e300", "--out", "x.csv"], r"seconds from 0 to 5"),
+    (["simulate-flight", "--seed", "99999999999999", "--out", "x.csv"], r"from 0 to 4294967295"),
+    (["diagnose", "x.csv", "--out", "y", "--folds", "100000"], r"from 2 to 12"),
+    (["train", "--algo", "ppo", "--timesteps", "8", "--out", "a", "--seeds", "-1"], r"from 0 to 4294967295"),
+    (["evaluate", "a.json", "--episode-seconds", "1e-9"], r"seconds >= 0\.01 \(one control period\)"),
+    (["sweep", "--kp", "1", "--kd", "1", "--out", ""], r"expected a path to write to"),
+])
+def test_hostile_numbers_end_in_argparse_exit_2(argv, message, capsys, tmp_path, monkeypatch):
+    """Each ended in 'unexpected error' (exit 1) before: a ValueError or OverflowError deep in the work."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    assert e.value.code == 2
+    assert re.search(message, capsys.readouterr().err)
+    assert not any(tmp_path.iterdir())
