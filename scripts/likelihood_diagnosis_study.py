@@ -61,10 +61,15 @@ def _flight(name, seed, duration, cell):
     case = CASES[name]
     truth = PAPER_PARAMS.with_values(**case["truth"]) if "truth" in case else None
     config = MANOEUVRE_CONFIG if case.get("manoeuvre") else None
-    if cell is not None:
+    if cell is not None:  # the cell's wind, pilot and sensors; a manoeuvre case keeps its large sweeps
+        from dataclasses import replace
+
         from identification.bench import BENCH_CELLS
 
         config = BENCH_CELLS[cell]
+        if case.get("manoeuvre"):
+            config = replace(config, sweep_amplitude=MANOEUVRE_CONFIG.sweep_amplitude,
+                             sweep_mode=MANOEUVRE_CONFIG.sweep_mode)
     sim = simulate_flight(duration, seed=seed, effects=case.get("effects", ()), truth=truth, config=config)
     flight = sim.flight
     if "shift" in case:  # the log's input column lags the response: the sticks are recorded late
