@@ -19,6 +19,7 @@ import numpy as np
 from scipy import fft as sp_fft
 from scipy import signal
 
+from .errors import FlightLogError
 from .flight import Flight
 
 DEFAULT_PASS_HZ = 4.0
@@ -43,8 +44,11 @@ def fir_lowpass(fs: float, pass_hz: float = DEFAULT_PASS_HZ, stop_hz: float = DE
     nyq = 0.5 * fs
     if not 0 < pass_hz < stop_hz:
         raise ValueError(f"need 0 < pass_hz < stop_hz, got {pass_hz} and {stop_hz}")
-    if stop_hz >= nyq:
-        raise ValueError(f"stop band edge {stop_hz} Hz must lie below the Nyquist frequency {nyq} Hz")
+    if stop_hz >= nyq:  # a flight logged too slowly for the paper's prefilter (Section 3.1)
+        raise FlightLogError(
+            f"the flight is sampled at {fs:.3g} Hz; the {pass_hz:g}/{stop_hz:g} Hz prefilter needs more than "
+            f"{2 * stop_hz:g} Hz (its stop band must lie below the Nyquist frequency {nyq:.3g} Hz): log faster "
+            "(50-100 Hz resolves the attitude dynamics), or identify without the prefilter (--no-filter)")
     numtaps, beta = signal.kaiserord(attenuation_db, (stop_hz - pass_hz) / nyq)
     numtaps |= 1  # odd length: a type I filter
     return signal.firwin(numtaps, 0.5 * (pass_hz + stop_hz), window=("kaiser", beta), fs=fs)

@@ -49,6 +49,7 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import math
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -504,7 +505,10 @@ def _refresh(tx, new_paths, *, previous_flights, fit, n_replicates, block, seed,
     show = (len(new_paths) > 1) if progress is None else progress
     digests = [sha256_of(p) for p in new_paths]
     _check_new_flights(new_paths, digests, old_sources, entries)
-    flights = [read_flight(p) for p in tqdm(new_paths, desc="reading new flights", unit="flight", disable=not show)]
+    # the bar only on a terminal (off one, a failing read's error would land on the bar's line)
+    on_terminal = bool(getattr(sys.stderr, "isatty", lambda: False)())
+    with tqdm(new_paths, desc="reading new flights", unit="flight", disable=not (show and on_terminal)) as bar:
+        flights = [read_flight(p) for p in bar]
 
     # -- uncertainty: the new flights alone, and the previous flights when at hand
     seeds = np.random.SeedSequence(seed).spawn(3)

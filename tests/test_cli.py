@@ -352,3 +352,18 @@ def test_simulate_flight_scales_effects_and_flies_the_manoeuvre(tmp_path, capsys
     truth = json.loads(out.with_suffix(".truth.json").read_text())
     assert {k: truth["parameters"][k] for k in ("nld1", "nld2", "nld3")} == {"nld1": 10.0, "nld2": 10.0, "nld3": 3.0}
     assert truth["config"]["sweep_mode"] == "simultaneous"
+
+
+def test_a_flight_logged_too_slowly_for_the_prefilter_is_named(tmp_path, capsys):
+    from identification.io import write_csv_flight
+    from identification.synthetic import simulate_flight
+
+    flight = simulate_flight(120, seed=3).flight
+    slow = dataclasses.replace(flight, time=flight.time[::50], rates=flight.rates[:, ::50],
+                               attitude=flight.attitude[:, ::50], sticks=flight.sticks[:, ::50])  # 2 Hz
+    path = write_csv_flight(slow, tmp_path / "slow.csv")
+    assert main(["identify", str(path), "--out", str(tmp_path / "m"), "--method", "integral", "--no-plots",
+                 "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("heli identify: error: FlightLogError: the flight is sampled at 2 Hz")
+    assert "--no-filter" in err and err.count("\n") == 1
