@@ -33,10 +33,12 @@ $(VENV)/.installed-logs: pyproject.toml | setup
 	$(BIN)/python -c "import orangebox, pyulog, pymavlink.DFReader; print('log parsers: ok')"
 	touch $@
 
+# The suite without the tests marked slow (each over ~5 s and covered at smaller size by a fast one);
+# test-slow runs only those.
 test: setup logs
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -m "not slow"
 
-test-slow: setup
+test-slow: setup logs
 	$(BIN)/python -m pytest -q -m slow
 
 demo: setup

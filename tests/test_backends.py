@@ -223,6 +223,8 @@ def test_local_sweep_equals_the_single_process_sweep(delayed, reference, workers
     assert res.settings["backend"].startswith("local")
 
 
+# slow (5 s): test_local_pool_survives_a_killed_worker covers the pool's recovery in 3.8 s
+@pytest.mark.slow
 def test_local_sweep_survives_a_killed_worker(delayed, reference, tmp_path):
     res = sweep_gains(delayed, **GRID, **SWEEP, backend=_KillingBackend(LocalBackend(2), tmp_path / "k"),
                       chunk_pairs=2)

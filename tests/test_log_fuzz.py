@@ -28,6 +28,8 @@ def _script():
     return module
 
 
+# slow (6 s): the seeded fuzz of every fixture; scripts/fuzz_loaders.py runs the long version
+@pytest.mark.slow
 def test_mutated_logs_import_or_are_refused_by_our_own_errors():
     fz = _script()
     folder = fz.fixture_dir()

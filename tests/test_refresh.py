@@ -268,6 +268,8 @@ def test_refresh_of_a_missing_model_is_one_line(tmp_path, flights, capsys):
     assert err.count("\n") == 0 and "ModelFileError" in err and "does not exist" in err
 
 
+# slow (10 s): tests/test_model_store.py kills a refresh at every file event in 3 s
+@pytest.mark.slow
 def test_a_refresh_stopped_before_the_library_write_can_be_run_again(model_dir, flights, monkeypatch):
     before = (model_dir / "model.json").read_bytes()
 
