@@ -130,8 +130,8 @@ class EvaluationResult:
         lines = [f"# Evaluation of {self.name}", "",
                  f"Model `{st['model']}` (library v{st['library_version']}), task `{st['task']}`, "
                  f"{len(self.episodes)} episodes of {st['episode_seconds']:g} s at dt = {st['dt']:g} s on "
-                 f"{st['traces_label']} traces {', '.join(st['trace_ids_used'])}, seed {st['seed']}; episodes start "
-                 f"within ±{st['init_angle_deg']:g}° and ±{st['init_rate_deg']:g}°/s of rest.", "",
+                 f"{st['traces_label']} traces {', '.join(st['trace_ids_used'])}, seed {st['seed']}; "
+                 + _start_text(st['init_angle_deg'], st['init_rate_deg']), "",
                  metrics_table([self]), "",
                  f"Mean return {self.mean_return:.2f}; episodes ended early (|roll| or |pitch| > 60°): "
                  f"{self.n_terminated} of {len(self.episodes)}.", "",
@@ -373,3 +373,10 @@ def comparison_markdown(results, title: str = "Agents on the same held-out gusts
         lines.append(f"| {r.name} | {r.mean_return:.2f} | {r.n_terminated} of {len(r.episodes)} | {p90} |")
     lines += [""] + [f"{n}" for n in notes]
     return "\n".join(lines) + "\n"
+
+
+def _start_text(angle_deg: float, rate_deg: float) -> str:
+    """How the episodes start, in words: level and at rest, or drawn within the given bounds."""
+    if angle_deg == 0 and rate_deg == 0:
+        return "episodes start level and at rest (the gust response alone, as the sweep's replays)."
+    return f"episodes start within ±{angle_deg:g}° and ±{rate_deg:g}°/s of rest."
