@@ -7,7 +7,7 @@ EXTRAS ?= test,rl,cluster
 # stable-baselines3 does not pull a multi-GB CUDA build; elsewhere install normally.
 TORCH_PIN := $(if $(wildcard /opt/wheels/torch-2.13.0*),-c constraints/local-cpu-torch.txt,)
 
-.PHONY: setup logs test test-slow demo bench clean
+.PHONY: setup logs test test-slow demo bench docs-check clean
 
 comma := ,
 setup: $(VENV)/.installed-$(subst $(comma),_,$(EXTRAS))
@@ -46,6 +46,10 @@ demo: setup
 
 bench: setup
 	$(BIN)/python scripts/bench.py
+
+# Re-run the quick figures of docs/ and fail when one drifted from the text (about 3 minutes).
+docs-check: setup
+	$(BIN)/python scripts/docs_check.py
 
 clean:
 	rm -rf $(VENV) demo-out .pytest_cache
