@@ -52,7 +52,7 @@ def run(args) -> int:
         result = refresh_model(
             args.model_dir, args.flights, previous_flights=args.previous_flights, fit=args.fit,
             n_replicates=args.bootstrap, block=args.block, seed=args.seed, alpha=args.alpha,
-            min_relative=args.min_change, plots=not args.no_plots, progress=True, backend=backend,
+            min_relative=args.min_change, plots=not args.no_plots, progress=not args.quiet, backend=backend,
             wait=not args.no_wait,
         )
     finally:

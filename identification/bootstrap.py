@@ -235,7 +235,8 @@ def interval_bootstrap(flights, identifier: IntegralIdentifier, n_replicates: in
     from tqdm import tqdm
 
     reps, failed = [], 0
-    for idx in tqdm(draws, desc=desc, unit="replicate", disable=not progress, leave=False):
+    # a bar on a terminal only (disable=None: tqdm switches itself off when stderr is not a TTY)
+    for idx in tqdm(draws, desc=desc, unit="replicate", disable=None if progress else True, leave=False):
         try:
             fit = IntegralIdentifier(**settings).fit([pieces[i] for i in idx])
         except IdentifiabilityError:
