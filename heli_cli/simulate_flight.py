@@ -3,8 +3,18 @@
 from __future__ import annotations
 
 
-from identification.bench import BENCH_CELLS
-from identification.synthetic import EFFECT_ALIASES, EFFECTS
+CELL_NAMES = ("default", "independent", "broadband-pd-half", "broadband-pd-2x", "broadband-pd-delay0.1",
+              "broadband-pd-delay0.25", "dryden-0.2Hz-pid", "dryden-2Hz-pd", "broadband-autopilot",
+              "broadband-pd-noisy-gyro")
+"""The names of :data:`identification.bench.BENCH_CELLS`, written here so that ``--help`` imports no numpy
+(a test keeps the two equal)."""
+
+EFFECT_NAMES = ("servo_delay", "cross_coupling", "gyroscopic", "nonlinear_damping", "gain_scheduling",
+                "collective_torque")
+"""The names of :data:`identification.synthetic.EFFECTS` (a test keeps the two equal)."""
+
+EFFECT_ALIAS_NAMES = ("flybar", "quadratic_damping", "collective_effectiveness")
+"""The names of :data:`identification.synthetic.EFFECT_ALIASES` (a test keeps the two equal)."""
 
 from .argtypes import FLIGHT_BYTES_PER_SECOND, affordable, number, output_path, seed
 
@@ -21,8 +31,8 @@ def register(sub):
     p.add_argument("--seed", type=seed(), default=1, help="random seed: same seed, same flight (default 1)")
     p.add_argument("--out", required=True, type=output_path, help="output CSV path, e.g. flight.csv")
     p.add_argument("--effect", action="append", default=[], metavar="NAME",
-                   choices=sorted(list(EFFECTS) + list(EFFECT_ALIASES)),
-                   help=f"switch on a hidden physical effect (repeatable): {', '.join(EFFECTS)}")
+                   choices=sorted(EFFECT_NAMES + EFFECT_ALIAS_NAMES),
+                   help=f"switch on a hidden physical effect (repeatable): {', '.join(EFFECT_NAMES)}")
     p.add_argument("--effect-scale", type=number("a number > 0", 0.0), default=1.0, metavar="X",
                    help="multiply the sizes of the --effect parameters (default 1; the diagnosis study's quadratic "
                    "damping is 5)")
@@ -31,9 +41,9 @@ def register(sub):
                    "~150 deg/s in yaw), where gyroscopic and quadratic-damping effects show")
     p.add_argument("--wind", type=number("a finite number >= 0", 0.0, low_open=False), default=None,
                    help="half-width of the 90%% interval of the cyclic wind u_d (default 0.09, the paper's level)")
-    p.add_argument("--cell", default=None, choices=sorted(BENCH_CELLS), metavar="NAME",
+    p.add_argument("--cell", default=None, choices=sorted(CELL_NAMES), metavar="NAME",
                    help="start from a test-bench condition (identification/bench.py): "
-                   + ", ".join(BENCH_CELLS) + "; the options below change it further")
+                   + ", ".join(CELL_NAMES) + "; the options below change it further")
     p.add_argument("--wind-scale", type=number("a number > 0", 0.0), default=None,
                    help="multiply the wind level (0.5 to 2 spans calm to twice the paper's)")
     p.add_argument("--wind-model", choices=("lowpass", "gauss_markov", "dryden"), default=None,
@@ -104,6 +114,7 @@ def _config(args):
     """The flight's settings from a bench cell (or the default) and the options that change it."""
     from dataclasses import replace
 
+    from identification.bench import BENCH_CELLS
     from identification.synthetic import MANOEUVRE_CONFIG, FlightConfig
 
     cfg = replace(BENCH_CELLS[args.cell], duration=args.duration) if args.cell else FlightConfig(duration=args.duration)

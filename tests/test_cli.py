@@ -222,7 +222,7 @@ def test_console_script_help():
     assert "simulate-flight" in done.stdout and "identify" in done.stdout
 
 
-HEAVY = ("matplotlib", "scipy", "torch", "stable_baselines3", "control", "gymnasium", "ray", "numba")
+HEAVY = ("numpy", "matplotlib", "scipy", "torch", "stable_baselines3", "control", "gymnasium", "ray", "numba")
 
 
 def test_building_the_parser_imports_no_heavy_package():
@@ -367,3 +367,13 @@ def test_a_flight_logged_too_slowly_for_the_prefilter_is_named(tmp_path, capsys)
     err = capsys.readouterr().err
     assert err.startswith("heli identify: error: FlightLogError: the flight is sampled at 2 Hz")
     assert "--no-filter" in err and err.count("\n") == 1
+
+
+def test_simulate_flight_lists_the_bench_cells_and_effects_the_library_has():
+    # written out in heli_cli so that 'heli --help' needs no numpy; they must stay the library's names
+    from heli_cli import simulate_flight as cli
+    from identification.bench import BENCH_CELLS
+    from identification.synthetic import EFFECT_ALIASES, EFFECTS
+
+    assert cli.CELL_NAMES == tuple(BENCH_CELLS)
+    assert cli.EFFECT_NAMES == tuple(EFFECTS) and cli.EFFECT_ALIAS_NAMES == tuple(EFFECT_ALIASES)
