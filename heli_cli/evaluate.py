@@ -39,18 +39,25 @@ def run(args) -> int:
     from heli_env.model_dir import load_env_model
     from identification.files import write_text
 
+    from .progress import progress_of
+
+    progress = progress_of(args)
+    progress.stage(f"loading {args.agent} and the model")
     env_model = load_env_model(args.model)
     agent = load_agent(args.agent)
     meta = agent_metadata(args.agent)
     split, origin = split_traces(env_model.n_traces), "default split"
     if meta and meta.get("split") and meta["split"].get("n_traces") == env_model.n_traces:
         split, origin = TraceSplit.from_dict(meta["split"]), "the agent's training split"
+    progress.stage(f"flying {args.traces} traces' episodes")
     res = evaluate_agent(agent, env_model, traces=args.traces, episodes_per_trace=args.episodes_per_trace,
                          episode_seconds=args.episode_seconds, seed=args.seed, split=split,
                          name=f"{Path(args.agent).name} ({describe_agent(agent)[0]})")
     out = Path(args.out)
+    progress.stage("writing the report and drawing an episode")
     paths = [res.to_json(out / "evaluation.json"), write_text(out / "evaluation.md", res.markdown()),
              res.plot_episode(out / "episode.png")]
+    progress.done()
     st = res.settings
     print(f"heli evaluate: {res.name} on {len(res.episodes)} episodes of {st['episode_seconds']:g} s, "
           f"{args.traces} traces {', '.join(st['trace_ids_used'])} ({origin})")

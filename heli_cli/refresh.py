@@ -47,7 +47,12 @@ def register(sub):
 def run(args) -> int:
     from identification.refresh import refresh_model
 
+    from .progress import progress_of
+
+    progress = progress_of(args)
     backend = flight_backend(args)
+    progress.stage(f"refitting {args.model_dir} with {len(args.flights)} new flight(s), the drift's uncertainty "
+                   "and the new wind (the figures after the commit)")
     try:
         result = refresh_model(
             args.model_dir, args.flights, previous_flights=args.previous_flights, fit=args.fit,
@@ -56,6 +61,7 @@ def run(args) -> int:
             wait=not args.no_wait,
         )
     finally:
+        progress.done()
         if backend is not None:
             backend.close()
     crit = result.criterion

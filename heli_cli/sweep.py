@@ -67,12 +67,17 @@ def run(args) -> int:
     kd = parse_range(args.kd, "--kd")
     if args.model is not None and not Path(args.model).is_dir():
         raise SweepError(f"model directory {args.model!r} does not exist (write one with 'heli identify')")
+    from .progress import progress_of
+
+    progress = progress_of(args)
     backend = backend_from_args(args)
+    progress.stage(f"sweeping {len(kp)} x {len(kd)} gain pairs on {args.axis} in the model's gusts")
     try:
         result = sweep_gains(args.model, kp, kd, axis=args.axis, duration=args.duration, dt=args.dt,
                              seed=args.seed, windows=args.windows, progress=not args.quiet, backend=backend)
     finally:
         backend.close()
+    progress.stage("drawing the heatmap and the histograms")
     out = Path(args.out)
     paths = {
         "csv": result.to_csv(out / "sweep.csv"),
@@ -91,6 +96,7 @@ def run(args) -> int:
         else:
             pairs = default_pairs(result, args.flight_pairs)
         if pairs:
+            progress.stage(f"flying {args.flights} flight test(s) per pair at {len(pairs)} gain pair(s)")
             flights = validate_against_flights(args.model, pairs, axis=args.axis, n_flights=args.flights,
                                                duration=args.duration, seed=args.seed, truth=args.truth, dt=args.dt,
                                                progress=not args.quiet)
@@ -99,6 +105,7 @@ def run(args) -> int:
     from identification.files import write_text
 
     paths["report"] = write_text(out / "sweep.md", report)
+    progress.done()
 
     st = result.table["status"]
     n_unstable = int((st == "unstable").sum())

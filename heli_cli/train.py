@@ -90,12 +90,18 @@ def _run_seeds(args) -> int:
 
 
 def run(args) -> int:
+    from .progress import progress_of
+
+    progress = progress_of(args)
+    progress.stage("loading stable-baselines3, torch and the model; training shows its own bar on a terminal")
     from controllers.errors import TrainingInterrupted
     from controllers.rl import train_agent
 
     if args.seeds is not None:
+        progress.done()
         return _run_seeds(args)
     try:
+        progress.done()
         res = train_agent(args.algo, args.model, args.timesteps, args.out, seed=args.seed, n_envs=args.n_envs,
                           eval_freq=args.eval_freq, checkpoint_freq=args.checkpoint_freq,
                           progress=not args.quiet, held_out_fraction=args.held_out_fraction,

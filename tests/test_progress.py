@@ -38,3 +38,16 @@ def test_on_a_terminal_a_stage_is_a_status_line_erased_when_done():
     progress.done()
     assert stream.getvalue().endswith("\r")  # the line is cleared, the cursor back at its start
     assert progress.terminal
+
+
+def test_sweep_and_evaluate_announce_their_stages_off_a_terminal(tmp_path, capsys):
+    """A log shows what a long command is doing (issue 18: 'sweep --flights in a log shows nothing for 10 s')."""
+    from heli_cli.main import main
+
+    assert main(["sweep", "--kp", "1:4:2", "--kd", "0:1:2", "--duration", "5", "--out", str(tmp_path / "sw")]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert "sweep: sweeping 2 x 2 gain pairs on roll in the model's gusts ..." in err
+    assert "sweep: drawing the heatmap and the histograms ..." in err
+    assert main(["sweep", "--kp", "1:4:2", "--kd", "0:1:2", "--duration", "5", "--out", str(tmp_path / "q"),
+                 "-q"]) == 0
+    assert capsys.readouterr().err == ""
