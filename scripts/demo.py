@@ -44,8 +44,9 @@ def main(argv=None) -> int:
         code = heli(step)
         if code:
             return code
-    print(f"\nDemo finished: open {out / 'model' / 'report.md'}, {out / 'pd' / 'design.md'}, "
-          f"{out / 'sweep' / 'sweep.md'} and {out / 'evaluation' / 'evaluation.md'}")
+    print(f"\nDemo finished: open {out / 'model' / 'report.html'}, {out / 'sweep' / 'sweep.html'} and "
+          f"{out / 'evaluation' / 'evaluation.html'} in a browser (figures inside), or the .md beside each; "
+          f"the PD design: {out / 'pd' / 'design.md'}")
     return 0
 
 
