@@ -29,6 +29,7 @@ def register(sub):
                    default=30.0, help="episode length in s (default 30)")
     p.add_argument("--seed", type=seed(), default=0, help="seed of the gust windows (default 0)")
     p.add_argument("--out", default=DEFAULT_OUT, type=output_path, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
+    p.add_argument("--no-plots", action="store_true", help="do not draw episode.png")
     p.set_defaults(func=run, out_kind="dir")
 
 
@@ -54,9 +55,10 @@ def run(args) -> int:
                          episode_seconds=args.episode_seconds, seed=args.seed, split=split,
                          name=f"{Path(args.agent).name} ({describe_agent(agent)[0]})")
     out = Path(args.out)
-    progress.stage("writing the report and drawing an episode")
-    paths = [res.to_json(out / "evaluation.json"), write_text(out / "evaluation.md", res.markdown()),
-             res.plot_episode(out / "episode.png")]
+    progress.stage("writing the report" + ("" if args.no_plots else " and drawing an episode"))
+    paths = [res.to_json(out / "evaluation.json"), write_text(out / "evaluation.md", res.markdown())]
+    if not args.no_plots:
+        paths.append(res.plot_episode(out / "episode.png"))
     progress.done()
     st = res.settings
     print(f"heli evaluate: {res.name} on {len(res.episodes)} episodes of {st['episode_seconds']:g} s, "
@@ -71,6 +73,6 @@ def run(args) -> int:
         print(f"wrote {path}")
     from .html_report import write_html_report  # evaluation.md links no figure: episode.png is appended
 
-    print(f"wrote {write_html_report(paths[1], figures=[paths[2]])}")
+    print(f"wrote {write_html_report(paths[1], figures=paths[2:])}")
     return 0
 

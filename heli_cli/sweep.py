@@ -43,6 +43,7 @@ def register(sub):
                    help="number of (trace, offset) gust windows (default one per library trace)")
     p.add_argument("--seed", type=seed(), default=0, help="seed of the window offsets and flights (default 0)")
     p.add_argument("--out", default=DEFAULT_OUT, type=output_path, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
+    p.add_argument("--no-plots", action="store_true", help="do not draw heatmap.png and histograms.png")
     p.add_argument("--flights", type=whole(0), default=0, metavar="N",
                    help="check the prediction with N fresh-wind flights per pair of the truth model (default 0: no)")
     p.add_argument("--flight-pairs", type=whole(0), default=4, metavar="K",
@@ -77,14 +78,12 @@ def run(args) -> int:
                              seed=args.seed, windows=args.windows, progress=not args.quiet, backend=backend)
     finally:
         backend.close()
-    progress.stage("drawing the heatmap and the histograms")
     out = Path(args.out)
-    paths = {
-        "csv": result.to_csv(out / "sweep.csv"),
-        "json": result.to_json(out / "sweep.json"),
-        "heatmap": result.plot_heatmap(out / "heatmap.png"),
-        "histograms": result.plot_histograms(out / "histograms.png"),
-    }
+    paths = {"csv": result.to_csv(out / "sweep.csv"), "json": result.to_json(out / "sweep.json")}
+    if not args.no_plots:
+        progress.stage("drawing the heatmap and the histograms")
+        paths["heatmap"] = result.plot_heatmap(out / "heatmap.png")
+        paths["histograms"] = result.plot_histograms(out / "histograms.png")
     report = result.to_markdown()
     flights = None
     if args.flights:
@@ -129,5 +128,6 @@ def run(args) -> int:
         print(f"wrote {path}")
     from .html_report import write_html_report  # sweep.md links no figure: the two are appended
 
-    print(f"wrote {write_html_report(paths['report'], figures=[paths['heatmap'], paths['histograms']])}")
+    figures = [paths[k] for k in ("heatmap", "histograms") if k in paths]
+    print(f"wrote {write_html_report(paths['report'], figures=figures)}")
     return 0

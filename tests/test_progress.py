@@ -51,3 +51,17 @@ def test_sweep_and_evaluate_announce_their_stages_off_a_terminal(tmp_path, capsy
     assert main(["sweep", "--kp", "1:4:2", "--kd", "0:1:2", "--duration", "5", "--out", str(tmp_path / "q"),
                  "-q"]) == 0
     assert capsys.readouterr().err == ""
+
+
+def test_sweep_and_evaluate_skip_their_figures_with_no_plots(tmp_path):
+    from heli_cli.main import main
+
+    assert main(["sweep", "--kp", "1:4:2", "--kd", "0:1:2", "--duration", "5", "--out", str(tmp_path / "sw"),
+                 "--no-plots", "-q"]) == 0
+    assert sorted(p.name for p in (tmp_path / "sw").iterdir()) == ["sweep.csv", "sweep.html", "sweep.json",
+                                                                   "sweep.md"]
+    assert main(["design", "--out", str(tmp_path / "pd"), "--no-plots", "-q"]) == 0
+    assert main(["evaluate", str(tmp_path / "pd" / "pd.json"), "--episode-seconds", "2", "--out",
+                 str(tmp_path / "ev"), "--no-plots", "-q"]) == 0
+    assert sorted(p.name for p in (tmp_path / "ev").iterdir()) == ["evaluation.html", "evaluation.json",
+                                                                   "evaluation.md"]
