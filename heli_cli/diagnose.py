@@ -74,12 +74,7 @@ def run(args) -> int:
             f"held-out MAE {s.gap_before['mae_deg_s']:.3f} -> {s.gap_after['mae_deg_s']:.3f} deg/s, gain "
             f"{100 * s.gain:.1f} %, p {s.p_value:.2g}; "
             + (f"runner-up {s.runner_up} by {100 * s.margin:.1f} %" if s.runner_up else "no runner-up")))
-        if run_.figures:
-            progress.stage("drawing the figures")
-            drawn = run_.draw_figures()
-            progress.done()
-            for path in drawn.values():
-                print(f"wrote {path}")
+        progress.draw_figures(run_)
     return _write_html(run_)
 
 

@@ -110,12 +110,7 @@ def run(args) -> int:
                 backend.close()
         progress.done()
         _print_run(run, len(flights), args.method)
-        if run.figures:
-            progress.stage("drawing the figures")
-            drawn = run.draw_figures()
-            progress.done()
-            for path in drawn.values():
-                print(f"wrote {path}")
+        progress.draw_figures(run)
     from .html_report import write_html_report
 
     print(f"wrote {write_html_report(run.paths['report'])}")  # after the figures: it embeds them

@@ -72,6 +72,16 @@ class Progress:
         else:
             print(line, file=self.stream, flush=True)
 
+    def draw_figures(self, run) -> None:
+        """Draw the figures a run left for later (``run.draw_figures()``) as one stage, then print each path."""
+        if not run.figures:
+            return
+        self.stage("drawing the figures")
+        drawn = run.draw_figures()
+        self.done()
+        for path in drawn.values():
+            print(f"wrote {path}")
+
     def done(self) -> None:
         """End the current stage (erases its status line on a terminal); call before printing results."""
         if self._bar is not None:

@@ -33,6 +33,7 @@ from .effects import CATALOGUE, alignment_parts, shift_inputs
 from .files import jsonable, save_figure, write_text
 from .flight import Flight
 from .model import ModelParams
+from .report import PendingFigures
 from .terms import AXES, INPUT_FOR_AXIS
 
 SCHEMA = "heli-env/diagnosis"
@@ -40,7 +41,7 @@ SCHEMA_VERSION = 1
 
 
 @dataclass
-class DiagnosisRun:
+class DiagnosisRun(PendingFigures):
     """What :func:`diagnose_and_report` produced.
 
     Attributes
@@ -61,13 +62,6 @@ class DiagnosisRun:
     paths: dict = field(default_factory=dict)
     figures: list = field(default_factory=list)
 
-    def draw_figures(self) -> dict:
-        """Draw the figures left for later (:attr:`figures`); add them to :attr:`paths` and return them."""
-        drawn = {}
-        while self.figures:
-            drawn.update(self.figures.pop(0)())
-        self.paths.update(drawn)
-        return drawn
 
 
 def criterion_text(d: Diagnoser) -> str:
@@ -342,29 +336,44 @@ def diagnose_and_report(flight: Flight, out_dir, *, model: ModelParams | None = 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     d = (diagnoser or Diagnoser(progress=progress)).fit(flight, model=model)
-    paths = {}
     figures, pending = {}, []
     if plots and d.baseline_score_ is not None:
         figures = {"residual tests": out / "diagnosis_residuals.png",
                    "worst held-out windows, before and after": out / "diagnosis_windows.png"}
         pending.append(partial(_figures, d, out))
-    if not d.steps_:
-        doc = diagnosis_document(d, source, None)
-        paths["json"] = write_text(out / "diagnosis.json", json.dumps(doc, indent=2, allow_nan=False) + "\n")
-        paths["markdown"] = write_text(out / "diagnosis.md", diagnosis_markdown(d, doc, figures))
-    else:
-        document, profile = _new_model(d, flight, model_document, source)
-        with ModelDir(out).transaction(wait=wait, what="diagnose") as tx:
-            paths["model"] = model_path = tx.write_model_document(document)
-            tx.add_traces([profile])
-            paths["library"] = out / "disturbances"
-            doc = diagnosis_document(d, source, model_path)
-            paths["json"] = tx.write_report("diagnosis.json", json.dumps(doc, indent=2, allow_nan=False) + "\n")
-            paths["markdown"] = tx.write_report("diagnosis.md", diagnosis_markdown(d, doc, figures))
+    new_model = _new_model(d, flight, model_document, source) if d.steps_ else None
+    doc, paths = write_diagnosis(out, new_model, lambda model_path: diagnosis_document(d, source, model_path),
+                                 lambda doc: diagnosis_markdown(d, doc, figures), wait)
     run = DiagnosisRun(d, doc, paths, pending)
     if draw_figures:
         run.draw_figures()
     return run
+
+
+def write_diagnosis(out: Path, new_model, document_of, markdown_of, wait: bool = True) -> tuple[dict, dict]:
+    """Write ``diagnosis.json`` and ``diagnosis.md`` into ``out``; with ``new_model`` (a ``model.json``
+    document and the flight's wind profile) also the new model and its trace, all as one transaction of the
+    model folder (:class:`model_store.ModelDir`). Both diagnosis methods write through here.
+
+    ``document_of(model_path)`` builds the diagnosis document (``model_path`` None when no model is
+    written), ``markdown_of(document)`` the report. Returns ``(document, paths)``.
+    """
+    def text(doc):
+        return json.dumps(doc, indent=2, allow_nan=False) + "\n"
+
+    if new_model is None:
+        doc = document_of(None)
+        return doc, {"json": write_text(out / "diagnosis.json", text(doc)),
+                     "markdown": write_text(out / "diagnosis.md", markdown_of(doc))}
+    document, profile = new_model
+    with ModelDir(out).transaction(wait=wait, what="diagnose") as tx:
+        model_path = tx.write_model_document(document)
+        tx.add_traces([profile])
+        doc = document_of(model_path)
+        paths = {"model": model_path, "library": out / "disturbances",
+                 "json": tx.write_report("diagnosis.json", text(doc)),
+                 "markdown": tx.write_report("diagnosis.md", markdown_of(doc))}
+    return doc, paths
 
 
 def _figures(d: Diagnoser, out: Path) -> dict:

@@ -17,17 +17,15 @@ each file atomically (:mod:`identification.files`):
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
-from model_store import ModelDir
 from model_store.model_file import model_document as new_model_document
 
-from .diagnose_report import DiagnosisRun
+from .diagnose_report import DiagnosisRun, write_diagnosis
 from .effects import CATALOGUE, alignment_parts, describe, shift_inputs
-from .files import jsonable, save_figure, write_text
+from .files import jsonable, save_figure
 from .flight import Flight
 from .ml_diagnosis import AHEAD_S, LikelihoodDiagnoser
 from .model import ModelParams
@@ -148,21 +146,10 @@ def diagnose_by_likelihood(flight: Flight, out_dir, *, model: ModelParams | None
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     d = (diagnoser or LikelihoodDiagnoser()).fit(flight, model=model)
-    paths = {}
     figure = out / "diagnosis_likelihood.png" if plots and d.rounds_ else None
-    if not d.steps_:
-        doc = diagnosis_document(d, source, None)
-        paths["json"] = write_text(out / "diagnosis.json", json.dumps(doc, indent=2, allow_nan=False) + "\n")
-        paths["markdown"] = write_text(out / "diagnosis.md", diagnosis_markdown(d, figure))
-    else:
-        document, profile = _new_model(d, flight, model_document, source)
-        with ModelDir(out).transaction(wait=wait, what="diagnose") as tx:
-            paths["model"] = model_path = tx.write_model_document(document)
-            tx.add_traces([profile])
-            paths["library"] = out / "disturbances"
-            doc = diagnosis_document(d, source, model_path)
-            paths["json"] = tx.write_report("diagnosis.json", json.dumps(doc, indent=2, allow_nan=False) + "\n")
-            paths["markdown"] = tx.write_report("diagnosis.md", diagnosis_markdown(d, figure))
+    new_model = _new_model(d, flight, model_document, source) if d.steps_ else None
+    doc, paths = write_diagnosis(out, new_model, lambda model_path: diagnosis_document(d, source, model_path),
+                                 lambda doc: diagnosis_markdown(d, figure), wait)
     if figure is not None and plot_statistics(d, figure) is not None:
         paths["likelihood_png"] = figure
     return DiagnosisRun(d, doc, paths)

@@ -32,8 +32,21 @@ from .terms import AXES, BASE_PARAMS, TERMS
 from .validation import ValidationResult, plot_attitude_fit, plot_rate_fit, validate_models
 
 
+class PendingFigures:
+    """A run whose report links figures drawn later: :attr:`figures` holds callables each returning
+    ``{key: path}``, :attr:`paths` the files written (both fields of the dataclass that mixes this in)."""
+
+    def draw_figures(self) -> dict:
+        """Draw the figures left for later (:attr:`figures`); add them to :attr:`paths` and return them."""
+        drawn = {}
+        while self.figures:
+            drawn.update(self.figures.pop(0)())
+        self.paths.update(drawn)
+        return drawn
+
+
 @dataclass
-class IdentificationRun:
+class IdentificationRun(PendingFigures):
     """Everything one ``heli identify`` run produced.
 
     Attributes
@@ -76,13 +89,6 @@ class IdentificationRun:
         """The chosen identified model."""
         return self.identifiers[self.chosen].params_
 
-    def draw_figures(self) -> dict:
-        """Draw the figures left for later (:attr:`figures`); add them to :attr:`paths` and return them."""
-        drawn = {}
-        while self.figures:
-            drawn.update(self.figures.pop(0)())
-        self.paths.update(drawn)
-        return drawn
 
 
 def _truth_of(flight: Flight, path) -> ModelParams | None:
