@@ -81,7 +81,7 @@ def _line(text):
 
 
 def run(args) -> int:
-    from identification.synthetic import EFFECT_ALIASES, EFFECTS, PAPER_PARAMS, simulate_flight
+    from identification.synthetic import simulate_flight
 
     from .progress import progress_of
 
@@ -94,12 +94,8 @@ def run(args) -> int:
         return 2
     with progress_of(args) as progress:
         progress.stage(f"flying a {args.duration:g} s flight (pilot, wind and sensors of the truth model)")
-        effects, truth = tuple(args.effect), None
-        if args.effect_scale != 1.0:  # the effects' parameters scaled, in the truth model itself
-            truth = PAPER_PARAMS.with_values(**{k: args.effect_scale * v for e in effects
-                                                for k, v in EFFECTS[EFFECT_ALIASES.get(e, e)].items()})
-            effects = ()
-        result = simulate_flight(args.duration, seed=args.seed, effects=effects, config=cfg, truth=truth)
+        result = simulate_flight(args.duration, seed=args.seed, effects=tuple(args.effect), config=cfg,
+                                 effect_scale=args.effect_scale)
         paths = result.save(args.out)
     f = result.flight
     print(f"wrote {paths['flight']} ({f.duration:.1f} s, {f.n} samples at {f.sample_rate:.0f} Hz)")

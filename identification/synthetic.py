@@ -68,14 +68,14 @@ EFFECT_ALIASES = {"flybar": "cross_coupling", "quadratic_damping": "nonlinear_da
                   "collective_effectiveness": "gain_scheduling"}
 
 
-def truth_params(effects=(), base: ModelParams = PAPER_PARAMS) -> ModelParams:
-    """Truth parameters: ``base`` with the named :data:`EFFECTS` switched on."""
+def truth_params(effects=(), base: ModelParams = PAPER_PARAMS, scale: float = 1.0) -> ModelParams:
+    """Truth parameters: ``base`` with the named :data:`EFFECTS` switched on, their parameters times ``scale``."""
     values = {}
     for name in effects:
         key = EFFECT_ALIASES.get(name, name)
         if key not in EFFECTS:
             raise ValueError(f"unknown effect {name!r}; known: {', '.join(list(EFFECTS) + list(EFFECT_ALIASES))}")
-        values.update(EFFECTS[key])
+        values.update({k: scale * v for k, v in EFFECTS[key].items()})
     return base.with_values(**values)
 
 
@@ -281,6 +281,7 @@ class SyntheticFlight:
     config: FlightConfig
     seed: int
     effects: tuple = field(default=())
+    effect_scale: float = 1.0
 
     def save(self, path) -> dict[str, Path]:
         """Write ``path`` (canonical CSV), ``<stem>.truth.json`` and ``<stem>.wind.csv`` atomically."""
@@ -291,6 +292,7 @@ class SyntheticFlight:
             "schema": "heli-env/synthetic-truth/1",
             "seed": self.seed,
             "effects": list(self.effects),
+            "effect_scale": self.effect_scale,
             "parameters": self.truth.values() | {k: getattr(self.truth, k) for k in ("tau_roll", "tau_pitch", "tau_yaw")},
             "config": asdict(self.config),
             "wind_file": paths["wind"].name,
@@ -367,7 +369,7 @@ def sweep_schedule(time: np.ndarray, config: FlightConfig) -> np.ndarray:
 
 
 def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), config: FlightConfig | None = None,
-                    truth: ModelParams | None = None) -> SyntheticFlight:
+                    truth: ModelParams | None = None, effect_scale: float = 1.0) -> SyntheticFlight:
     """Fly a synthetic hover flight.
 
     Parameters
@@ -383,6 +385,8 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
     config : FlightConfig, optional
     truth : ModelParams, optional
         Truth parameters; default the paper's values (eqs. 68-70) with ``effects``.
+    effect_scale : float
+        Multiplies the parameters of ``effects`` (the diagnosis study's quadratic damping is 5).
 
     Returns
     -------
@@ -391,7 +395,7 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
     cfg = config or FlightConfig()
     if duration is not None and duration != cfg.duration:
         cfg = FlightConfig(**{**asdict(cfg), "duration": float(duration)})
-    params = truth_params(effects, truth or PAPER_PARAMS)
+    params = truth_params(effects, truth or PAPER_PARAMS, effect_scale)
     rng = np.random.default_rng(seed)
     fs = cfg.sample_rate
     dt = 1.0 / fs
@@ -494,4 +498,4 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
         logged = np.ascontiguousarray(logged[:, idx])
         meta["input_shift_s"] = shift / fs
     flight = make_flight(time, rates, logged, attitude=att, metadata=meta)
-    return SyntheticFlight(flight, params, wind, torque, true_rates, cfg, int(seed), tuple(effects))
+    return SyntheticFlight(flight, params, wind, torque, true_rates, cfg, int(seed), tuple(effects), float(effect_scale))

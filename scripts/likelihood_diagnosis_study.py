@@ -25,8 +25,6 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from identification.synthetic import EFFECTS
-
 CASES = {
     "none": {},
     "servo_delay": {"effects": ("servo_delay",)},
@@ -35,7 +33,7 @@ CASES = {
     "gyroscopic": {"effects": ("gyroscopic",)},
     "collective_torque": {"effects": ("collective_torque",)},
     "gain_scheduling": {"effects": ("gain_scheduling",)},
-    "nonlinear_damping (5x)": {"truth": {k: 5 * v for k, v in EFFECTS["nonlinear_damping"].items()}},
+    "nonlinear_damping (5x)": {"effects": ("nonlinear_damping",), "effect_scale": 5.0},
     # effects that scale with products or powers of the rates, at their catalogue size, on flights that
     # reach the rates where they act (large sweeps on all sticks at once: MANOEUVRE_CONFIG)
     "gyroscopic, manoeuvre": {"effects": ("gyroscopic",), "manoeuvre": True},
@@ -56,10 +54,9 @@ TRUE_AXES = {
 
 def _flight(name, seed, duration, cell):
     from identification.effects import shift_inputs
-    from identification.synthetic import MANOEUVRE_CONFIG, PAPER_PARAMS, simulate_flight
+    from identification.synthetic import MANOEUVRE_CONFIG, simulate_flight
 
     case = CASES[name]
-    truth = PAPER_PARAMS.with_values(**case["truth"]) if "truth" in case else None
     config = MANOEUVRE_CONFIG if case.get("manoeuvre") else None
     if cell is not None:  # the cell's wind, pilot and sensors; a manoeuvre case keeps its large sweeps
         from dataclasses import replace
@@ -70,7 +67,8 @@ def _flight(name, seed, duration, cell):
         if case.get("manoeuvre"):
             config = replace(config, sweep_amplitude=MANOEUVRE_CONFIG.sweep_amplitude,
                              sweep_mode=MANOEUVRE_CONFIG.sweep_mode)
-    sim = simulate_flight(duration, seed=seed, effects=case.get("effects", ()), truth=truth, config=config)
+    sim = simulate_flight(duration, seed=seed, effects=case.get("effects", ()), config=config,
+                          effect_scale=case.get("effect_scale", 1.0))
     flight = sim.flight
     if "shift" in case:  # the log's input column lags the response: the sticks are recorded late
         flight = shift_inputs(flight, (case["shift"],) * 3)
