@@ -49,7 +49,6 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import math
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -505,9 +504,9 @@ def _refresh(tx, new_paths, *, previous_flights, fit, n_replicates, block, seed,
     show = (len(new_paths) > 1) if progress is None else progress
     digests = [sha256_of(p) for p in new_paths]
     _check_new_flights(new_paths, digests, old_sources, entries)
-    # the bar only on a terminal (off one, a failing read's error would land on the bar's line)
-    on_terminal = bool(getattr(sys.stderr, "isatty", lambda: False)())
-    with tqdm(new_paths, desc="reading new flights", unit="flight", disable=not (show and on_terminal)) as bar:
+    # the bar only on a terminal (disable=None: tqdm's own check; off one a failing read's error would land on
+    # the bar's line), closed on an error too
+    with tqdm(new_paths, desc="reading new flights", unit="flight", disable=None if show else True) as bar:
         flights = [read_flight(p) for p in bar]
 
     # -- uncertainty: the new flights alone, and the previous flights when at hand
@@ -533,7 +532,7 @@ def _refresh(tx, new_paths, *, previous_flights, fit, n_replicates, block, seed,
     boot_old, old_flights = None, []
     if have_old:
         old_flights = [read_flight(s["path"]) for s in tqdm(found, desc="reading previous flights", unit="flight",
-                                                            disable=not show)]
+                                                            disable=None if show else True)]
         old_ident = identifier().fit(old_flights)
         boot_old = uncertainty(old_ident, old_flights, seeds[1], "bootstrap (previous flights)")
         diff = max((abs(old_ident.params_.get(k) - old_params.get(k)) / max(abs(old_params.get(k)), 1e-12)
