@@ -42,17 +42,20 @@ def test_core_imports_no_package_above_it():
     assert out.stdout.strip() == "[]"
 
 
+def _absolute_imports(path):
+    """``(line, top-level package)`` of every absolute import statement in ``path``, lazy ones included."""
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.level == 0:
+            yield node.lineno, (node.module or "").split(".")[0]
+        elif isinstance(node, ast.Import):
+            yield from ((node.lineno, a.name.split(".")[0]) for a in node.names)
+
+
 def test_core_source_names_no_package_above_it():
     """No import statement in heli_core names identification, heli_env, controllers or the CLI, even a lazy one."""
     for path in sorted((ROOT / "heli_core").glob("*.py")):
-        for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.ImportFrom) and node.level == 0:
-                names = [node.module or ""]
-            elif isinstance(node, ast.Import):
-                names = [a.name for a in node.names]
-            else:
-                continue
-            assert not [n for n in names if n.split(".")[0] in UPPER_PACKAGES], f"{path.name}:{node.lineno}"
+        for line, package in _absolute_imports(path):
+            assert package not in UPPER_PACKAGES, f"{path.name}:{line}"
 
 
 def test_the_env_loads_and_steps_a_model_without_identification():
@@ -71,14 +74,8 @@ def test_the_env_loads_and_steps_a_model_without_identification():
 def test_model_store_source_names_only_the_core():
     """model_store (the model folder) imports heli_core and nothing of the packages that stand on it."""
     for path in sorted((ROOT / "model_store").glob("*.py")):
-        for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.ImportFrom) and node.level == 0:
-                names = [node.module or ""]
-            elif isinstance(node, ast.Import):
-                names = [a.name for a in node.names]
-            else:
-                continue
-            assert not [n for n in names if n.split(".")[0] in UPPER_PACKAGES[:-1]], f"{path.name}:{node.lineno}"
+        for line, package in _absolute_imports(path):
+            assert package not in UPPER_PACKAGES[:-1], f"{path.name}:{line}"
 
 
 @pytest.mark.parametrize("old, new", [
