@@ -1,0 +1,150 @@
+"""How the house reads: module sizes, long functions and long argument lists, layering and import depth.
+
+The figures of the redesign (issue 14) are measured here, not counted by hand:
+
+* modules over ``--max-lines`` lines (default 600) and functions over ``--max-function`` lines (default 80,
+  from the ``def`` line to the end of the body);
+* functions taking more than ``--max-args`` settings (default 8; ``self``/``cls`` and ``*args``/``**kwargs``
+  not counted);
+* the package imports: every absolute import between the packages, the ones that go *upward* (against
+  the data flow ``heli_core -> model_store -> identification -> heli_env -> controllers -> heli_cli``; none
+  allowed, except that ``heli_env`` may import only ``heli_core`` and ``model_store``), and the import depth
+  of each package (the longest chain of package-to-package imports below it);
+* how many modules import each module from another package (fan-in).
+
+Usage::
+
+    python scripts/structure_report.py [--max-lines 600] [--max-function 80] [--max-args 8]
+
+Exit status 1 when an upward import exists (so a script or CI can rely on it), 0 otherwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import sys
+from collections import Counter, defaultdict
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+LAYERS = ("heli_core", "model_store", "identification", "heli_env", "controllers", "heli_cli")
+"""The packages in the order data flows through them; each may import only those before it."""
+ALLOWED = {"heli_env": {"heli_core", "model_store"}}
+"""Packages that may import fewer than all those before them."""
+
+
+def _modules():
+    for pkg in LAYERS:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            yield pkg, path
+
+
+def _dotted(path: Path) -> str:
+    rel = path.relative_to(ROOT).with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def _imports(tree: ast.AST, module: str, is_package: bool) -> set[str]:
+    """Absolute names of the modules ``tree`` imports (relative imports resolved)."""
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = module.split(".")
+                base = base[: len(base) - node.level + (1 if is_package else 0)]
+                name = ".".join(base + ([node.module] if node.module else []))
+            else:
+                name = node.module or ""
+            out.add(name)
+            out.update(f"{name}.{alias.name}" for alias in node.names)  # a submodule imported by name
+    return out
+
+
+def _functions(tree: ast.AST):
+    """(qualified name, first line, lines, settings) of every function and method."""
+    def walk(node, prefix):
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                a = child.args
+                names = [x.arg for x in a.posonlyargs + a.args + a.kwonlyargs]
+                settings = len([n for n in names if n not in ("self", "cls")])
+                yield f"{prefix}{child.name}", child.lineno, child.end_lineno - child.lineno + 1, settings
+                yield from walk(child, f"{prefix}{child.name}.")
+            elif isinstance(child, ast.ClassDef):
+                yield from walk(child, f"{prefix}{child.name}.")
+    yield from walk(tree, "")
+
+
+def measure():
+    """Everything the report prints, as data (for tests and for the printout)."""
+    sizes, functions, edges = {}, [], defaultdict(set)
+    fan_in = Counter()
+    known = {_dotted(p) for _, p in _modules()}
+    for pkg, path in _modules():
+        text = path.read_text(encoding="utf-8")
+        tree = ast.parse(text)
+        module = _dotted(path)
+        sizes[module] = text.count("\n") + (not text.endswith("\n"))
+        for name, line, n, settings in _functions(tree):
+            functions.append((module, name, line, n, settings))
+        for imp in _imports(tree, module, path.name == "__init__.py"):
+            top = imp.split(".")[0]
+            if top in LAYERS and top != pkg:
+                edges[pkg].add(top)
+                if imp in known:
+                    fan_in[imp] += 1
+    upward = sorted((a, b) for a, bs in edges.items() for b in bs
+                    if b not in ALLOWED.get(a, set(LAYERS[: LAYERS.index(a)])))
+
+    def depth(pkg, seen=()):
+        below = [b for b in edges.get(pkg, ()) if b not in seen]
+        return 1 + max((depth(b, seen + (pkg,)) for b in below), default=0)
+
+    return {"sizes": sizes, "functions": functions, "edges": {k: sorted(v) for k, v in edges.items()},
+            "upward": upward, "depth": {p: depth(p) for p in LAYERS}, "fan_in": fan_in}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--max-lines", type=int, default=600)
+    ap.add_argument("--max-function", type=int, default=80)
+    ap.add_argument("--max-args", type=int, default=8)
+    args = ap.parse_args(argv)
+    m = measure()
+    sizes = m["sizes"]
+    print(f"Command: python scripts/structure_report.py --max-lines {args.max_lines} --max-function "
+          f"{args.max_function} --max-args {args.max_args}\n")
+    print(f"{len(sizes)} modules, {sum(sizes.values())} lines; median {sorted(sizes.values())[len(sizes) // 2]} lines")
+    big = sorted(((n, mod) for mod, n in sizes.items() if n > args.max_lines), reverse=True)
+    print(f"\nModules over {args.max_lines} lines: {len(big)}")
+    for n, mod in big:
+        print(f"  {n:5d}  {mod}")
+    long_f = sorted(((n, f"{mod}.{name}") for mod, name, _, n, _ in m["functions"] if n > args.max_function),
+                    reverse=True)
+    print(f"\nFunctions over {args.max_function} lines: {len(long_f)}")
+    for n, name in long_f:
+        print(f"  {n:5d}  {name}")
+    many = sorted(((k, f"{mod}.{name}") for mod, name, _, _, k in m["functions"] if k > args.max_args),
+                  reverse=True)
+    print(f"\nFunctions taking more than {args.max_args} settings: {len(many)}")
+    for k, name in many:
+        print(f"  {k:5d}  {name}")
+    print("\nPackage imports (data flows left to right: " + " -> ".join(LAYERS) + ")")
+    for pkg in LAYERS:
+        print(f"  {pkg:15s} imports {', '.join(m['edges'].get(pkg, [])) or 'no package of ours'}"
+              f"  (depth {m['depth'][pkg]})")
+    print(f"\nUpward imports: {len(m['upward'])}" + "".join(f"\n  {a} -> {b}" for a, b in m["upward"]))
+    print("\nMost imported modules from other packages:")
+    for mod, n in m["fan_in"].most_common(10):
+        print(f"  {n:4d}  {mod}")
+    return 1 if m["upward"] else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
