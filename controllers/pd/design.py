@@ -145,6 +145,26 @@ def propose_gains(params: ModelParams, axis, bandwidth: float | None = None, pha
     resp = _Responses(params, i, dt, nd)
     w_top = 0.98 * math.pi / dt if dt else 1e3
     w_grid = np.geomspace(1e-2, w_top, 160)
+    bandwidth = _feasible_bandwidth(params, resp, i, bandwidth, phase_margin, w_grid)
+    wc = _crossover_for(resp, bandwidth, phase_margin, np.geomspace(min(1e-3 * bandwidth, w_grid[0]), w_top, 240))
+    design = _design_at(resp, wc, phase_margin)
+    if design is None:  # the bandwidth is only reached where the designs stop existing
+        raise ValueError(f"{AXES[i]}: no PD design reaches {bandwidth:g} rad/s with a phase margin of "
+                         f"{phase_margin:g} deg; ask for a lower bandwidth or margin")
+    kp, kd = design
+    an = loop_analysis(params, i, kp, kd, dt, nd)
+    if not (an.stable and an.phase_margin >= phase_margin - 1e-6):
+        raise ValueError(
+            f"{AXES[i]}: the design for {bandwidth:g} rad/s (kp={kp:.4g}, kd={kd:.4g}) has a phase margin of only "
+            f"{an.phase_margin:.1f} deg at another crossover ({an.gain_crossover:.3g} rad/s); ask for a lower "
+            "bandwidth"
+        )
+    return kp, kd, an
+
+
+def _feasible_bandwidth(params, resp: _Responses, i: int, bandwidth, phase_margin: float, w_grid) -> float:
+    """The bandwidth asked for (or the default of :func:`propose_gains`), checked to be reachable with
+    ``phase_margin``; ValueError saying what is reachable otherwise."""
     bw_max = _max_bandwidth(resp, phase_margin, w_grid)
     if bandwidth is None:
         A, _, _ = _axis_ss(params, i)
@@ -159,28 +179,18 @@ def propose_gains(params: ModelParams, axis, bandwidth: float | None = None, pha
         at = ("no phase margin at all" if best is None else f"at most {best:.1f} deg of phase margin")
         raise ValueError(
             f"{AXES[i]}: a PD controller cannot reach a bandwidth of {bandwidth:g} rad/s with a phase margin of "
-            f"{phase_margin:g} deg (dt={dt:g} s): at that bandwidth it has {at}; with {phase_margin:g} deg "
+            f"{phase_margin:g} deg (dt={resp.dt:g} s): at that bandwidth it has {at}; with {phase_margin:g} deg "
             f"the largest bandwidth is {max(bw_max, 0.0):.3g} rad/s"
         )
-    # the first crossover frequency whose design reaches the bandwidth, refined by brentq
-    grid = np.geomspace(min(1e-3 * bandwidth, w_grid[0]), w_top, 240)
+    return bandwidth
+
+
+def _crossover_for(resp: _Responses, bandwidth: float, phase_margin: float, grid) -> float:
+    """The first crossover frequency on ``grid`` whose design reaches ``bandwidth``, refined by brentq [rad/s]."""
     bws = np.array([_bw_at(resp, w, phase_margin) for w in grid])
     k = int(np.argmax(bws >= bandwidth))
-    wc = grid[0] if k == 0 else brentq(lambda x: _bw_at(resp, x, phase_margin) - bandwidth, grid[k - 1], grid[k],
-                                       xtol=1e-12, rtol=1e-12)
-    design = _design_at(resp, wc, phase_margin)
-    if design is None:  # the bandwidth is only reached where the designs stop existing
-        raise ValueError(f"{AXES[i]}: no PD design reaches {bandwidth:g} rad/s with a phase margin of "
-                         f"{phase_margin:g} deg; ask for a lower bandwidth or margin")
-    kp, kd = design
-    an = loop_analysis(params, i, kp, kd, dt, nd)
-    if not (an.stable and an.phase_margin >= phase_margin - 1e-6):
-        raise ValueError(
-            f"{AXES[i]}: the design for {bandwidth:g} rad/s (kp={kp:.4g}, kd={kd:.4g}) has a phase margin of only "
-            f"{an.phase_margin:.1f} deg at another crossover ({an.gain_crossover:.3g} rad/s); ask for a lower "
-            "bandwidth"
-        )
-    return kp, kd, an
+    return grid[0] if k == 0 else brentq(lambda x: _bw_at(resp, x, phase_margin) - bandwidth, grid[k - 1], grid[k],
+                                         xtol=1e-12, rtol=1e-12)
 
 
 def _best_margin(resp, bandwidth, w_grid, upper):
