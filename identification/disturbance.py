@@ -19,16 +19,14 @@ prefiltered flight (Section 3.1), with the Padé-delayed command (eq. 31,
 delay; everything is vectorised over samples, intervals and axes. Samples after
 the last whole interval keep the last interval's value.
 
-Smoothing (Section 3.3). The interval-level profile is smoothed by repeated
-10-point moving averages (alternating the window's half-sample offset, so that
-two passes are exactly centred). With ``smoothing="auto"`` the number of passes
-is the one whose fitted normal distribution of ``u_d`` (:func:`scipy.stats.norm.fit`)
-is closest in least squares (integrated squared difference of the two
-densities) to the fitted normal of the pilot's stick on that axis, stick minus
-its mean: the paper's assumption is that the pilot's stick mirrors the gusts.
-The two-sample Kolmogorov-Smirnov test (:func:`scipy.stats.ks_2samp`) and the
-90 % intervals of both are reported. Note that a *small* KS p-value (the
-paper's 0.00097) rejects the hypothesis that the two samples come from one
+Smoothing (Section 3.3, :mod:`identification.disturbance_smoothing`). The
+interval-level profile is smoothed by repeated 10-point moving averages. With
+``smoothing="auto"`` the number of passes is the one whose fitted normal
+distribution of ``u_d`` is closest to that of the pilot's stick on that axis:
+the paper's assumption is that the pilot's stick mirrors the gusts. The
+two-sample Kolmogorov-Smirnov test (:func:`scipy.stats.ks_2samp`) and the 90 %
+intervals of both are reported. Note that a *small* KS p-value (the paper's
+0.00097) rejects the hypothesis that the two samples come from one
 distribution; it is reported as it comes, without the paper's reading.
 
 Simulation with the disturbance (Section 3.4). The model is simulated by
@@ -76,30 +74,27 @@ detrended attitude error from 1.37 | 1.07 | 3.14° to 0.15 | 0.15 | 0.15° (pape
 roll: 0.095 deg/s and 0.28°). Unsmoothed profiles reproduce the rate more
 closely (0.07 deg/s at Δt = 0.1 s) because they also absorb the noise, which is
 why the rate error alone cannot choose the smoothing.
-
-An even-length (10-point) moving average is centred half an interval off;
-successive passes alternate the side, so an odd number of passes leaves a lag
-of Δt/2 (0.01 s at the default).
 """
 
 from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
-from scipy import ndimage, stats
+from scipy import stats
 
 from heli_core.files import jsonable
 from heli_core.params import ModelParams
 from heli_core.servo import pade_filter
-from heli_core.terms import AXES, INPUT_FOR_AXIS, STICK_ROW, TERMS, evaluate_features
+from heli_core.terms import AXES, STICK_ROW, TERMS, evaluate_features
 
+from .disturbance_smoothing import MAX_PASSES  # noqa: F401  (re-exported: it lived here)
+from .disturbance_smoothing import SMOOTHING_WINDOW, check_smoothing, smooth, smoothing_rule
 from .errors import DisturbanceError, SimulationDivergedError
 from .flight import Flight
 from .preprocess import lowpass_flight
-from .validation import ValidationResult, _md_table, plot_rate_fit, validate_models
+from .validation import ValidationResult, validate_models
 
 DEFAULT_INTERVAL = 0.02
 """Default Δt of eqs. (43)-(46) [s], chosen in ``scripts/disturbance_study.py`` (module
@@ -108,21 +103,25 @@ docstring); raised to two samples on flights logged below 100 Hz."""
 DEFAULT_SMOOTHING = 5
 """Default number of 10-point moving-average passes, chosen in ``scripts/disturbance_study.py``."""
 
-SMOOTHING_WINDOW = 10
-"""Points of each moving average (Section 3.3: "a 10 point moving average")."""
-
-MAX_PASSES = 40
-"""Largest number of smoothing passes ``smoothing="auto"`` considers."""
-
 CONTROL_GAIN = ("k2", "k6", "k10")
 """Parameter that turns the equivalent input u_d into torque on each axis (eq. 42)."""
 
 OFFSET = ("kd1", "kd2", "kd3")
 """Constant torque offset of each axis (eqs. 18, 21, 42)."""
 
-
 MODEL_LABELS = ("no disturbance", "identified disturbance")
 """Labels of the two simulations in :attr:`DisturbanceProfile.simulation`."""
+
+_IN_REPORT = ("plot_profile", "plot_distributions", "plot_simulation", "figure_names", "save_figures")
+"""Names of the figures, now in :mod:`identification.disturbance_report`, still importable from here."""
+
+
+def __getattr__(name):
+    if name in _IN_REPORT:
+        from . import disturbance_report
+
+        return getattr(disturbance_report, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 # ------------------------------------------------------------------ the result
@@ -278,64 +277,10 @@ class DisturbanceProfile:
 
     def markdown(self, title: str = "Wind disturbance (Sections 2.5.3, 3.3)") -> str:
         """Report section under the heading ``### title``: the disturbance table (Section 3.3) and the
-        simulation table (Section 3.4)."""
-        rows = []
-        for a in self.axes:
-            i = AXES.index(a)
-            s = self.statistics[a]
-            rows.append([
-                a.capitalize(), f"{self.kd[i]:.4f}", str(s["passes"]), str(s["auto_passes"]), f"{s['ud_std']:.4f}",
-                "[{:.4f}, {:.4f}]".format(*s["ud_interval90"]),
-                "[{:.4f}, {:.4f}]".format(*s["stick_interval90"]),
-                f"{s['ks_statistic']:.3f}", f"{s['ks_pvalue']:.3g}",
-            ])
-        table = _md_table(["Axis", "kd (rad/s²)", "passes", "passes by the paper's rule", "std u_d",
-                           "90 % interval u_d", "90 % interval recorded stick", "KS statistic", "KS p-value"], rows)
-        mode = "chosen by matching fitted normals (Section 3.3)" if self.smoothing == "auto" else "fixed"
-        text = [
-            f"### {title}\n",
-            f"Piecewise-constant disturbance torque over Δt = {self.interval:g} s "
-            f"({self.samples_per_interval} samples, {self.n_intervals} intervals), eq. (46); "
-            f"equivalent input u_d = (ū_d − kd)/k, eqs. (42), (47). Smoothing: {SMOOTHING_WINDOW}-point moving "
-            f"average, passes {mode}. Source: {self.source.get('name')} "
-            f"(SHA-256 {str(self.source.get('sha256'))[:12]}…).\n",
-            table + "\n",
-            "The paper's rule matches the fitted normal of u_d to that of the stick (minus its mean); the KS test "
-            "compares the two samples (a small p-value says they differ).\n",
-        ]
-        if self.trace_source == "smoother":
-            rows = [[a.capitalize(), f"{self.kd[AXES.index(a)]:.4f}", f"{self.statistics[a]['smoother_ud_std']:.4f}",
-                     "[{:.4f}, {:.4f}]".format(*self.statistics[a]["smoother_ud_interval90"]),
-                     f"{self.statistics[a]['ud_std']:.4f}",
-                     f"{self.statistics[a]['smoother_vs_eq46_correlation']:.3f}"] for a in self.axes]
-            text += [
-                "**Stored trace: the smoother's wind.** The library stores (and the environment replays) the wind "
-                "torque that the Rauch-Tung-Striebel smoother of the maximum-likelihood model estimated at every "
-                "sample, over the control gain; kd is the model's offset plus the flight's mean wind. The eq. (46) "
-                "profile above is kept for the paper's comparison.\n",
-                _md_table(["Axis", "kd (rad/s²)", "std u_d (smoother)", "90 % interval u_d (smoother)",
-                           "std u_d (eq. 46, smoothed)", "correlation smoother vs eq. 46"], rows) + "\n",
-            ]
-        if self.simulation_diverged:
-            text += [f"**Simulating the model with the identified disturbance: diverged.** {self.simulation_diverged}.\n"]
-        if self.simulation is not None:
-            rows = []
-            for a in self.axes:
-                r0 = self.simulation.rate_stats[MODEL_LABELS[0]][a]
-                r1 = self.simulation.rate_stats[MODEL_LABELS[1]][a]
-                a0 = self.simulation.attitude_stats[MODEL_LABELS[0]][a]
-                a1 = self.simulation.attitude_stats[MODEL_LABELS[1]][a]
-                rows.append([a.capitalize(), f"{r0['mae_deg_s']:.4f}", f"{r1['mae_deg_s']:.4f}",
-                             f"{r1['p90_deg_s']:.4f}", f"{a0['mae_deg']:.4f}", f"{a1['mae_deg']:.4f}",
-                             f"{a1['std_deg']:.4f}"])
-            text += [
-                "**Simulating the model with the identified disturbance** (Section 3.4; paper: roll-rate MAE "
-                "0.095 deg/s, roll-angle MAE 0.28°)\n",
-                _md_table(["Axis", "rate MAE without (deg/s)", "rate MAE with (deg/s)", "90th pct with (deg/s)",
-                           "angle MAE without (deg)", "angle MAE with (deg)", "angle error std with (deg)"],
-                          rows) + "\n",
-            ]
-        return "\n".join(text)
+        simulation table (Section 3.4) (:func:`identification.disturbance_report.profile_markdown`)."""
+        from .disturbance_report import profile_markdown
+
+        return profile_markdown(self, title)
 
 
 # ------------------------------------------------------------------- helpers
@@ -375,45 +320,10 @@ def _intervals(flight: Flight, interval: float) -> int:
     return N
 
 
-def smooth(values: np.ndarray, passes: int, window: int = SMOOTHING_WINDOW) -> np.ndarray:
-    """``passes`` repeated ``window``-point moving averages along the last axis (Section 3.3).
-
-    Even windows are centred half a sample off; successive passes alternate the
-    offset so that every two passes are exactly centred. Ends use the nearest value.
-    """
-    out = np.asarray(values, dtype=float)
-    for k in range(int(passes)):
-        out = _smooth_pass(out, k, window)
-    return out
-
-
-def _smooth_pass(values: np.ndarray, k: int, window: int = SMOOTHING_WINDOW) -> np.ndarray:
-    """Pass number ``k`` (from 0) of :func:`smooth`: odd passes shift the even window the other way."""
-    origin = -(k % 2) if window % 2 == 0 else 0
-    return ndimage.uniform_filter1d(values, window, axis=-1, mode="nearest", origin=origin)
-
-
-def _normal_distance(mu1, s1, mu2, s2) -> np.ndarray:
-    """Integrated squared difference of two normal densities (closed form), vectorised."""
-    s1, s2 = np.asarray(s1, dtype=float), np.asarray(s2, dtype=float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        self1 = 1.0 / (2.0 * np.sqrt(np.pi) * s1)
-        self2 = 1.0 / (2.0 * np.sqrt(np.pi) * s2)
-        cross = stats.norm.pdf(np.asarray(mu1) - np.asarray(mu2), scale=np.sqrt(s1 * s1 + s2 * s2))
-    return np.where((s1 > 0) & (s2 > 0), self1 + self2 - 2.0 * cross, np.inf)
-
-
-def _interval90(x) -> list[float]:
+def interval90(x) -> list[float]:
+    """The 5th and 95th percentiles of ``x``: its central 90 % interval."""
     lo, hi = np.percentile(x, [5.0, 95.0])
     return [float(lo), float(hi)]
-
-
-def _check_smoothing(smoothing):
-    if smoothing == "auto":
-        return smoothing
-    if isinstance(smoothing, (int, np.integer)) and not isinstance(smoothing, bool) and 0 <= smoothing <= 10 * MAX_PASSES:
-        return int(smoothing)
-    raise DisturbanceError(f"smoothing must be 'auto' or a number of passes 0..{10 * MAX_PASSES}, got {smoothing!r}")
 
 
 # -------------------------------------------------------------- identification
@@ -464,7 +374,72 @@ def identify_disturbance(flight: Flight, params: ModelParams, interval: float | 
         than two intervals; a bad ``smoothing``; an unknown axis; an axis whose
         control gain in ``params`` is zero.
     """
-    smoothing = _check_smoothing(smoothing)
+    smoothing = check_smoothing(smoothing)
+    axes, rows = _checked_axes(axes, params)
+    N = _intervals(flight, max(DEFAULT_INTERVAL, 2.0 / flight.sample_rate) if interval is None else interval)
+    data = lowpass_flight(flight) if prefilter else flight
+    torque = interval_torque(data, params, N)
+    kd, ud_raw = _equivalent_input(torque, params.control_gains, rows)
+    # Smoothing (Section 3.3): the paper's rule is evaluated for every pass count on
+    # every axis (reported even when a fixed count is used), then applied or not.
+    stick = np.asarray(flight.sticks[list(STICK_ROW)], dtype=float)
+    cost, auto = smoothing_rule(ud_raw, stick, rows)
+    passes = [(auto[i] if smoothing == "auto" else smoothing) if i in rows else 0 for i in range(3)]
+    ud = _smoothed(ud_raw, passes, rows)
+    # Piecewise-constant trace at the flight's samples (eq. 43); the tail holds the last interval.
+    which = np.minimum(np.arange(data.n) // N, torque.shape[1] - 1)
+    trace = ud[:, which]
+    statistics = {a: _axis_statistics(ud[i], ud_raw[i], stick[i], passes[i], auto[i]) for a, i in zip(axes, rows)}
+    if wind_torque is not None:
+        trace, kd = _smoother_trace(wind_torque, params, kd, rows, data.n)
+        for a, i in zip(axes, rows):
+            statistics[a].update(_smoother_statistics(trace[i], ud[i, which]))
+    starts = np.arange(torque.shape[1]) * N
+    profile = DisturbanceProfile(
+        axes=axes, interval=round(N * (1.0 / data.sample_rate), 12), samples_per_interval=N,
+        sample_rate=round(float(data.sample_rate), 9), time=np.asarray(flight.time), interval_starts=data.time[starts],
+        torque=torque, kd=kd, control_gains=params.control_gains, ud_raw=ud_raw, ud=ud, trace=trace,
+        collective=np.asarray(data.sticks[2], dtype=float), sticks=stick, passes=tuple(int(p) for p in passes),
+        smoothing=smoothing, smoothing_cost=cost, statistics=statistics, params=params,
+        prefilter=dict(data.metadata.get("prefilter", {})) if prefilter else None, source=_source_of(flight),
+        trace_source="eq46" if wind_torque is None else "smoother",
+    )
+    if simulate:
+        _attach_simulation(profile, data)
+    return profile
+
+
+def _equivalent_input(torque: np.ndarray, gains: np.ndarray, rows) -> tuple[np.ndarray, np.ndarray]:
+    """The offsets ``kd = mean(ū_d)`` (eq. 47 with zero-mean u_d) and the equivalent input
+    ``u_d = (ū_d - kd) / k`` on ``rows`` (zero elsewhere), eq. (42), before smoothing."""
+    kd = torque.mean(axis=1)
+    ud_raw = np.zeros_like(torque)
+    for i in rows:
+        ud_raw[i] = (torque[i] - kd[i]) / gains[i]
+    return kd, ud_raw
+
+
+def _smoothed(ud_raw: np.ndarray, passes, rows) -> np.ndarray:
+    """``ud_raw`` smoothed by ``passes[i]`` moving averages on each of ``rows`` and re-centred (zero elsewhere)."""
+    ud = np.zeros_like(ud_raw)
+    for i in rows:
+        ud[i] = smooth(ud_raw[i], passes[i])
+        ud[i] -= ud[i].mean()  # the ends (nearest-value padding) move the mean slightly
+    return ud
+
+
+def _attach_simulation(profile: DisturbanceProfile, data: Flight) -> None:
+    """Keep :func:`simulate_with_disturbance` in ``profile.simulation``, or why it diverged in
+    ``profile.simulation_diverged`` (the profile stands either way)."""
+    try:
+        profile.simulation = simulate_with_disturbance(profile, data)
+    except SimulationDivergedError as e:
+        profile.simulation_diverged = str(e)
+
+
+def _checked_axes(axes, params: ModelParams) -> tuple[tuple, list[int]]:
+    """``axes`` as a tuple and their rows (0 roll, 1 pitch, 2 yaw); :class:`DisturbanceError` for an unknown
+    axis or one whose control gain is zero (u_d = ū_d / k undefined)."""
     axes = tuple(axes)
     bad = [a for a in axes if a not in AXES]
     if bad or not axes:
@@ -476,19 +451,35 @@ def identify_disturbance(flight: Flight, params: ModelParams, interval: float | 
                 f"{a}: the model's control gain {CONTROL_GAIN[AXES.index(a)]} is 0, so u_d = ū_d / k is "
                 "undefined; identify the model on this axis first"
             )
-    if interval is None:
-        interval = max(DEFAULT_INTERVAL, 2.0 / flight.sample_rate)
-    N = _intervals(flight, interval)
-    data = lowpass_flight(flight) if prefilter else flight
+    return axes, [AXES.index(a) for a in axes]
+
+
+def interval_torque(data: Flight, params: ModelParams, N: int) -> np.ndarray:
+    """The piecewise-constant disturbance torque ū_{d,i} of every whole interval of ``N`` samples, eq. (46).
+
+    Every model term but the offset, with the servo-side commands (eq. 31), is
+    integrated by the trapezium rule from the first sample; each interval's
+    integral is a difference of that running sum.
+
+    Parameters
+    ----------
+    data : Flight
+        The flight as used (prefiltered when the profile is).
+    params : ModelParams
+        The model, held fixed.
+    N : int
+        Samples per interval (at least 2).
+
+    Returns
+    -------
+    ndarray, shape (3, (n - 1) // N)
+        ū_d per axis and interval [rad/s^2].
+    """
     fs = data.sample_rate
     dt = 1.0 / fs
     n = data.n
-    n_int = (n - 1) // N
-    starts = np.arange(n_int) * N
+    starts = np.arange((n - 1) // N) * N
     ends = starts + N
-    idx = [AXES.index(a) for a in axes]
-
-    # Servo-side commands (eq. 31) and every model term but the offset, per axis.
     sticks3 = data.sticks[list(STICK_ROW)]
     cmd = np.array([pade_filter(sticks3[i], params.taus[i], fs) for i in range(3)])
     terms = [(TERMS[name], value) for name, value in params.values().items()
@@ -497,95 +488,59 @@ def identify_disturbance(flight: Flight, params: ModelParams, interval: float | 
     if terms:
         F = evaluate_features([t.feature for t, _ in terms], data.rates, cmd, data.sticks[2])  # (m, n)
         np.add.at(drive, [t.axis for t, _ in terms], np.array([t.sign * v for t, v in terms])[:, None] * F)
-    # Trapezium-rule integral from the first sample, then per interval by differences (eq. 46).
     cum = np.concatenate([np.zeros((3, 1)), np.cumsum(0.5 * (drive[:, 1:] + drive[:, :-1]), axis=1) * dt], axis=1)
     width = N * dt
-    torque = (data.rates[:, ends] - data.rates[:, starts] - (cum[:, ends] - cum[:, starts])) / width
-    kd = torque.mean(axis=1)  # eq. (47) with zero-mean u_d
-    ud_raw = np.zeros_like(torque)
-    for i in idx:
-        ud_raw[i] = (torque[i] - kd[i]) / gains[i]
+    return (data.rates[:, ends] - data.rates[:, starts] - (cum[:, ends] - cum[:, starts])) / width
 
-    # Smoothing (Section 3.3): the paper's rule is evaluated for every pass count on
-    # every axis (reported even when a fixed count is used), then applied or not.
-    stick = np.asarray(flight.sticks[list(STICK_ROW)], dtype=float)
-    # norm.fit's estimates are the sample mean and the population std: taken for every
-    # pass count at once on all axes, without keeping the smoothed profiles.
-    moments = np.empty((MAX_PASSES + 1, 2, 3))
-    cur = ud_raw
-    for k in range(MAX_PASSES + 1):
-        moments[k] = cur.mean(axis=-1), cur.std(axis=-1)
-        cur = _smooth_pass(cur, k)
-    cost = np.full((3, MAX_PASSES + 1), np.nan)
-    auto = [0, 0, 0]
-    for i in idx:
-        mu_s, sd_s = stats.norm.fit(stick[i] - stick[i].mean())
-        # a smoothed profile is re-centred to zero mean below, so its fitted normal is centred
-        cost[i] = _normal_distance(0.0, moments[:, 1, i], mu_s, sd_s)
-        auto[i] = int(np.argmin(cost[i]))
-    passes = [(auto[i] if smoothing == "auto" else smoothing) if i in idx else 0 for i in range(3)]
-    ud = np.zeros_like(ud_raw)
-    for i in idx:
-        ud[i] = smooth(ud_raw[i], passes[i])
-        ud[i] -= ud[i].mean()  # the ends (nearest-value padding) move the mean slightly
 
-    # Piecewise-constant trace at the flight's samples (eq. 43); the tail holds the last interval.
-    which = np.minimum(np.arange(n) // N, n_int - 1)
-    trace = ud[:, which]
+def _smoother_trace(wind_torque, params: ModelParams, kd: np.ndarray, rows, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The profile's trace and offsets from the smoother's wind torque (3, n) about the model's offsets.
 
-    source = "eq46"
-    smoother_ud = None
-    if wind_torque is not None:
-        wt = np.asarray(wind_torque, dtype=float)
-        if wt.shape != (3, n) or not np.all(np.isfinite(wt[idx])):
-            raise DisturbanceError(f"wind_torque must be finite with shape (3, {n}) (roll, pitch, yaw by sample), "
-                                   f"got shape {wt.shape}")
-        source = "smoother"
-        base_kd = np.array([params.get(name) for name in OFFSET])
-        trace = np.zeros((3, n))
-        for i in idx:
-            kd[i] = base_kd[i] + wt[i].mean()
-            trace[i] = (wt[i] - wt[i].mean()) / gains[i]
-        smoother_ud = trace
+    Returns the wind over the control gain, zero-mean, on ``rows`` (zero elsewhere), and ``kd`` with the
+    model's offset plus the wind's mean on ``rows``.
+    """
+    wt = np.asarray(wind_torque, dtype=float)
+    if wt.shape != (3, n) or not np.all(np.isfinite(wt[rows])):
+        raise DisturbanceError(f"wind_torque must be finite with shape (3, {n}) (roll, pitch, yaw by sample), "
+                               f"got shape {wt.shape}")
+    gains = params.control_gains
+    base_kd = np.array([params.get(name) for name in OFFSET])
+    kd = kd.copy()
+    trace = np.zeros((3, n))
+    for i in rows:
+        kd[i] = base_kd[i] + wt[i].mean()
+        trace[i] = (wt[i] - wt[i].mean()) / gains[i]
+    return trace, kd
 
-    statistics = {}
-    for a, i in zip(axes, idx):
-        ks = stats.ks_2samp(ud[i], stick[i] - stick[i].mean())
-        statistics[a] = {
-            "passes": int(passes[i]),
-            "auto_passes": int(auto[i]),
-            "ud_mean": float(ud[i].mean()),
-            "ud_std": float(ud[i].std()),
-            "ud_interval90": _interval90(ud[i]),
-            "ud_raw_std": float(ud_raw[i].std()),
-            "stick_mean": float(stick[i].mean()),
-            "stick_std": float(stick[i].std()),
-            "stick_interval90": _interval90(stick[i]),
-            "stick_centred_interval90": _interval90(stick[i] - stick[i].mean()),
-            "ks_statistic": float(ks.statistic),
-            "ks_pvalue": float(ks.pvalue),
-        }
-        if smoother_ud is not None:
-            statistics[a].update({
-                "trace_source": "smoother",
-                "smoother_ud_std": float(smoother_ud[i].std()),
-                "smoother_ud_interval90": _interval90(smoother_ud[i]),
-                "smoother_vs_eq46_correlation": float(np.corrcoef(smoother_ud[i], ud[i, which])[0, 1]),
-            })
-    prefilter_meta = dict(data.metadata.get("prefilter", {})) if prefilter else None
-    profile = DisturbanceProfile(
-        axes=axes, interval=round(width, 12), samples_per_interval=N, sample_rate=round(float(fs), 9), time=np.asarray(flight.time),
-        interval_starts=data.time[starts], torque=torque, kd=kd, control_gains=gains, ud_raw=ud_raw, ud=ud,
-        trace=trace, collective=np.asarray(data.sticks[2], dtype=float), sticks=stick,
-        passes=tuple(int(p) for p in passes), smoothing=smoothing, smoothing_cost=cost, statistics=statistics,
-        params=params, prefilter=prefilter_meta, source=_source_of(flight), trace_source=source,
-    )
-    if simulate:
-        try:
-            profile.simulation = simulate_with_disturbance(profile, data)
-        except SimulationDivergedError as e:  # the profile stands; its simulation is reported as diverged
-            profile.simulation_diverged = str(e)
-    return profile
+
+def _axis_statistics(ud, ud_raw, stick, passes: int, auto: int) -> dict:
+    """One axis' entry of :attr:`DisturbanceProfile.statistics`: u_d against the recorded stick (Section 3.3)."""
+    ks = stats.ks_2samp(ud, stick - stick.mean())
+    return {
+        "passes": int(passes),
+        "auto_passes": int(auto),
+        "ud_mean": float(ud.mean()),
+        "ud_std": float(ud.std()),
+        "ud_interval90": interval90(ud),
+        "ud_raw_std": float(ud_raw.std()),
+        "stick_mean": float(stick.mean()),
+        "stick_std": float(stick.std()),
+        "stick_interval90": interval90(stick),
+        "stick_centred_interval90": interval90(stick - stick.mean()),
+        "ks_statistic": float(ks.statistic),
+        "ks_pvalue": float(ks.pvalue),
+    }
+
+
+def _smoother_statistics(smoother_ud, eq46_ud) -> dict:
+    """What one axis' statistics add when the trace is the smoother's: its spread and its agreement with
+    the eq. (46) profile held at the samples."""
+    return {
+        "trace_source": "smoother",
+        "smoother_ud_std": float(smoother_ud.std()),
+        "smoother_ud_interval90": interval90(smoother_ud),
+        "smoother_vs_eq46_correlation": float(np.corrcoef(smoother_ud, eq46_ud)[0, 1]),
+    }
 
 
 def simulate_with_disturbance(profile: DisturbanceProfile, flight: Flight) -> ValidationResult:
@@ -642,110 +597,3 @@ def compare_with_truth(profile: DisturbanceProfile, true_ud) -> dict[str, dict[s
             "rms_truth": float(np.sqrt(np.mean(t * t))),
         }
     return out
-
-
-# --------------------------------------------------------------------- figures
-def _pyplot():
-    from .validation import _pyplot as get
-
-    return get()
-
-
-def plot_profile(profile: DisturbanceProfile, path, true_ud=None):
-    """The identified disturbance profile u_d against time, the analog of Fig. 19.
-
-    Per axis: u_d before smoothing (light) and after (the stored profile), with
-    the true wind of a synthetic flight when ``true_ud`` (3, n) is given.
-    """
-    plt = _pyplot()
-    fig, axs = plt.subplots(len(profile.axes), 1, figsize=(13, 2.9 * len(profile.axes) + 0.6), sharex=True,
-                            squeeze=False)
-    t_int = profile.interval_starts
-    truth = compare_with_truth(profile, true_ud) if true_ud is not None else None
-    for ax, a in zip(axs[:, 0], profile.axes):
-        i = AXES.index(a)
-        ax.step(t_int, profile.ud_raw[i], where="post", color="0.7", lw=0.6, label="eq. (46), unsmoothed")
-        ax.step(profile.time, profile.trace[i], where="post", color="C0", lw=1.0,
-                label=f"smoothed, {profile.passes[i]} passes")
-        if true_ud is not None:
-            tr = np.asarray(true_ud)[i]
-            c = truth[a]
-            ax.plot(profile.time, tr - tr.mean(), color="C3", lw=0.9, ls="--",
-                    label=f"true wind (corr {c['correlation']:.3f}, RMS err {c['rms_error']:.4f})")
-        ax.axhline(0.0, color="0.4", lw=0.5)
-        name = {"roll": "lateral cyclic", "pitch": "longitudinal cyclic", "yaw": "pedal"}[a]
-        ax.set_ylabel(f"u_d {a}\n[{name}, stick units]")
-        ax.set_title(f"{a.capitalize()}: identified disturbance, kd = {profile.kd[i]:.4f} rad/s²", loc="left",
-                     fontsize=10)
-        ax.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), fontsize=8, ncol=3, frameon=False,
-                  borderaxespad=0.1)
-        ax.grid(alpha=0.3)
-    axs[-1, 0].set_xlabel("time [s]")
-    axs[0, 0].set_xlim(profile.time[0], profile.time[-1])
-    fig.suptitle(f"Identified wind disturbance u_d, Δt = {profile.interval:g} s (cf. paper Fig. 19)", fontsize=12)
-    fig.tight_layout()
-    from heli_core.files import save_figure
-
-    return save_figure(fig, path, dpi=110)
-
-
-def plot_distributions(profile: DisturbanceProfile, path):
-    """Histograms of the pilot's stick and of u_d with fitted normals and 90 % intervals, Figs. 20-21."""
-    plt = _pyplot()
-    fig, axs = plt.subplots(len(profile.axes), 2, figsize=(12, 3.0 * len(profile.axes) + 0.6), squeeze=False)
-    for row, a in zip(axs, profile.axes):
-        i = AXES.index(a)
-        s = profile.statistics[a]
-        stick = profile.sticks[i] - profile.sticks[i].mean()
-        for ax, x, what, color in ((row[0], stick, f"pilot {INPUT_FOR_AXIS[i]} stick − mean", "C1"),
-                                   (row[1], profile.ud[i], "disturbance u_d", "C0")):
-            ax.hist(x, bins=60, density=True, color=color, alpha=0.45, label="histogram")
-            mu, sd = stats.norm.fit(x)
-            lo_x, hi_x = np.percentile(x, [0.1, 99.9])
-            xs = np.linspace(lo_x, hi_x, 300)
-            ax.plot(xs, stats.norm.pdf(xs, mu, sd), color=color, lw=1.6, label=f"fitted normal (σ = {sd:.4f})")
-            if x is not stick:
-                mu_s, sd_s = stats.norm.fit(stick)
-                ax.plot(xs, stats.norm.pdf(xs, mu_s, sd_s), color="C1", lw=1.0, ls=":",
-                        label=f"stick's fitted normal (σ = {sd_s:.4f})")
-            lo, hi = _interval90(x)
-            for v in (lo, hi):
-                ax.axvline(v, color="k", ls="--", lw=0.8)
-            ax.plot([], [], color="k", ls="--", lw=0.8, label=f"90 %: [{lo:.4f}, {hi:.4f}]")
-            ax.set_ylim(top=ax.get_ylim()[1] * 1.35)  # room for the legend
-            ax.set_title(f"{a.capitalize()}: {what}", loc="left", fontsize=10)
-            ax.set_xlabel("stick units")
-            ax.set_ylabel("density")
-            ax.legend(fontsize=8, loc="upper right")
-            ax.grid(alpha=0.3)
-        row[1].text(0.02, 0.95, f"{s['passes']} passes\nKS D = {s['ks_statistic']:.3f}\np = {s['ks_pvalue']:.2g}",
-                    transform=row[1].transAxes, va="top", fontsize=8,
-                    bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "0.7"})
-    fig.suptitle("Pilot stick vs identified disturbance: histograms and fitted normals (cf. paper Figs. 20-21)",
-                 fontsize=12)
-    fig.tight_layout()
-    from heli_core.files import save_figure
-
-    return save_figure(fig, path, dpi=110)
-
-
-def plot_simulation(profile: DisturbanceProfile, path):
-    """Measured vs simulated rates without and with the identified disturbance (Section 3.4)."""
-    if profile.simulation is None:
-        raise DisturbanceError("the profile holds no simulation; identify it with simulate=True")
-    return plot_rate_fit(profile.simulation, path, title="Body rates simulated without and with the identified "
-                         "wind disturbance (Section 3.4)")
-
-
-def figure_names(profile: DisturbanceProfile) -> tuple:
-    """The figures :func:`save_figures` draws of ``profile``, each written as ``<prefix>_<name>.png``."""
-    return ("profile", "distributions") + (("simulation",) if profile.simulation is not None else ())
-
-
-def save_figures(profile: DisturbanceProfile, directory, true_ud=None, prefix: str = "disturbance") -> dict[str, Path]:
-    """Write the profile, distribution and (when simulated) rate figures as PNG into ``directory``:
-    ``<prefix>_<name>.png`` for each of :func:`figure_names`."""
-    directory = Path(directory)
-    draw = {"profile": lambda path: plot_profile(profile, path, true_ud), "distributions":
-            lambda path: plot_distributions(profile, path), "simulation": lambda path: plot_simulation(profile, path)}
-    return {name: draw[name](directory / f"{prefix}_{name}.png") for name in figure_names(profile)}
