@@ -212,7 +212,7 @@ class WindowSampler:
 
     Windows are uniform over every window the segments hold (as :func:`draw_windows`
     with ``count=1``), drawn from the caller's ``rng``; ``i`` (the copy) is unused.
-    This is the ``episode_options`` hook of :class:`controllers.sb3_vec_env.GymnasiumVecEnv`.
+    This is the ``episode_options`` hook of :class:`controllers.rl.vec_env.GymnasiumVecEnv`.
     """
 
     def __init__(self, env_model, segments, needed: int):

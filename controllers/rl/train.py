@@ -1,8 +1,8 @@
-"""RL attitude agents with stable-baselines3: training on the vector env, checkpoints, loading any agent.
+"""Training an RL attitude agent with stable-baselines3 on the vector env: settings, checkpoints, record.
 
 :func:`train_agent` trains PPO or SAC on the native vector environment
 (:class:`heli_env.vector_env.HeliAttitudeVectorEnv`) seen through SB3's
-``VecEnv`` API (:class:`controllers.sb3_vec_env.GymnasiumVecEnv`). Episodes
+``VecEnv`` API (:class:`controllers.rl.vec_env.GymnasiumVecEnv`). Episodes
 replay gust windows of the *training* traces only (:func:`split_traces`); an
 ``EvalCallback`` scores the deterministic policy on fixed windows of the
 *held-out* traces during training. Every file below is written atomically
@@ -22,7 +22,7 @@ The final agent, not the best one, is what a comparison should use: the best
 was chosen on the held-out traces it would be compared on.
 
 With ``residual=`` a PD controller, the agent learns a bounded correction on top
-of that PD rather than the whole law (:mod:`controllers.residual`); the zip then
+of that PD rather than the whole law (:mod:`controllers.rl.residual`); the zip then
 carries the PD and :func:`load_agent` returns the combined agent.
 
 Reproducibility: one ``seed`` seeds Python, numpy and torch
@@ -42,21 +42,15 @@ import math
 import numbers
 import os
 import time
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from heli_core.errors import require
 from heli_core.files import jsonable, write_text
 
-from .errors import AgentError, TrainingInterrupted
-from .residual import RESIDUAL_INIT_DEG, RESIDUAL_SCALE, residual_from_metadata, residual_metadata
-from .trace_split import TraceSegment, TraceSplit, WindowSampler, as_segments, split_traces  # noqa: F401
-
-ALGOS = ("ppo", "sac")
-AGENT_SCHEMA = "heli-env/rl-agent"
-AGENT_SCHEMA_VERSION = 1
-METADATA_FILE = "heli_agent.json"
+from ..errors import AgentError, TrainingInterrupted
+from ..trace_split import WindowSampler, as_segments, split_traces
+from .agent_file import AGENT_SCHEMA, AGENT_SCHEMA_VERSION, ALGOS, _algo_class, _sb3
+from .residual import RESIDUAL_INIT_DEG, RESIDUAL_SCALE, residual_metadata
 
 DEFAULT_KWARGS = {
     # A rollout of 512 steps x 8 copies (41 s of flight), a 1 s horizon (gamma 0.99 at 100 Hz),
@@ -71,14 +65,6 @@ DEFAULT_KWARGS = {
 }
 """Hyperparameters :func:`train_agent` starts from; ``algo_kwargs`` override them (``policy_kwargs`` merged)."""
 
-
-def _sb3():
-    return require("stable_baselines3", "rl")
-
-
-def _algo_class(algo: str):
-    sb3 = _sb3()
-    return {"ppo": sb3.PPO, "sac": sb3.SAC}[algo]
 
 
 def _out_paths(out) -> tuple[Path, Path, str]:
@@ -202,12 +188,12 @@ def train_agent(algo: str = "ppo", model=None, timesteps: int = 200_000, out="ag
         SB3 verbosity.
     residual : PDController or path of a PD controller JSON, optional
         Train a residual on this PD instead of a whole policy
-        (:mod:`controllers.residual`): the env receives
+        (:mod:`controllers.rl.residual`): the env receives
         ``clip(PD(obs) + residual_scale * action, -1, 1)``. Unless given, the task's
         reward scales, the observation scales (``policy_kwargs``'
         ``features_extractor_kwargs``) and the initial ranges follow the PD's own
         error level on the training gusts; the saved agent carries the PD and
-        :func:`load_agent` returns a :class:`controllers.residual.ResidualAgent`.
+        :func:`load_agent` returns a :class:`controllers.rl.residual.ResidualAgent`.
     residual_scale : float
         Bound of the residual [stick] (default 0.05).
     init_angle_deg, init_rate_deg : float, optional
@@ -287,9 +273,9 @@ def _train(algo, env_model, timesteps, path, run_dir, name, seed, n_envs, eval_f
     from heli_env.tasks import TaskConfig
     from heli_env.vector_env import HeliAttitudeVectorEnv
 
-    from .sb3_training import (AtomicCheckpoint, AtomicEvalCallback, ObservationScaler, ProgressBar, WallClockLimit,
+    from ..sb3_training import (AtomicCheckpoint, AtomicEvalCallback, ObservationScaler, ProgressBar, WallClockLimit,
                                save_atomically)
-    from .sb3_vec_env import GymnasiumVecEnv
+    from .vec_env import GymnasiumVecEnv
 
     set_random_seed(seed)
     base, residual_scale = residual
@@ -416,224 +402,3 @@ def _std(values) -> float:
     m = sum(values) / len(values)
     return math.sqrt(sum((v - m) ** 2 for v in values) / len(values))
 
-
-# ------------------------------------------------------------------- many seeds
-def _run_name(out, key) -> Path:
-    stem = _out_paths(out)[0].with_suffix("")
-    name, seed = key if isinstance(key, tuple) else (None, key)
-    return stem.with_name(stem.name + (f"_{name}" if name is not None else "") + f"_seed{seed}")
-
-
-def _train_task(item, shared):
-    """One backend task: train one (config, seed) in a scratch folder; return the result and the files' bytes.
-
-    The files travel back with the result, so a worker on another node needs no
-    shared file system, and a task rerun after a dead worker leaves nothing behind.
-    """
-    import tempfile
-
-    key, overrides = item
-    algo, env_model, timesteps, out, kwargs = shared
-    seed = key[1] if isinstance(key, tuple) else key
-    name = _run_name(out, key).name
-    with tempfile.TemporaryDirectory(prefix="heli-train-") as tmp:
-        res = train_agent(algo, env_model, timesteps, Path(tmp) / name, seed=seed, **{**kwargs, **overrides})
-        files = {str(p.relative_to(tmp)): p.read_bytes() for p in sorted(Path(tmp).rglob("*")) if p.is_file()}
-        res.agent = None  # the zip carries it; a live SB3 model does not travel well
-        return res, str(Path(tmp)), files
-
-
-def train_seeds(algo: str = "ppo", model=None, timesteps: int = 200_000, out="agent", seeds=(0,),
-                configs: dict | None = None, backend=None, progress: bool = True, **train_kwargs) -> dict:
-    """Train one agent per seed (and per hyperparameter set), each as one task of a backend.
-
-    Parameters
-    ----------
-    algo, model, timesteps :
-        As :func:`train_agent`.
-    out : str or Path
-        Stem of the agents: seed ``s`` is written to ``<out>_seed<s>.zip`` and
-        ``<out>_seed<s>_training/`` (``<out>_<name>_seed<s>`` with ``configs``).
-    seeds : sequence of int
-        One agent per seed, each seeded as :func:`train_agent` with that seed.
-    configs : dict of str -> dict, optional
-        Named overrides of :func:`train_agent` arguments (e.g.
-        ``{"lr1e-3": {"algo_kwargs": {"learning_rate": 1e-3}}}``); every config is
-        trained with every seed.
-    backend : None, {"local", "ray"} or heli_core.backends.Backend
-        Where the tasks run (None: the local cores). Each task trains with one torch
-        thread (``torch_threads=1``), so a seed trains to the same agent on any
-        backend and worker count.
-    progress : bool
-        tqdm bar of finished tasks (per-task bars are off).
-    **train_kwargs
-        Further :func:`train_agent` arguments shared by all tasks.
-
-    Returns
-    -------
-    dict
-        ``{seed: TrainingResult}``, or ``{(name, seed): TrainingResult}`` with ``configs``,
-        in the order of ``configs`` and ``seeds``. Paths point at the files written
-        here; ``agent`` is None (``load_agent(result.path)``).
-
-    Raises
-    ------
-    AgentError
-        No or repeated seeds, bad configs, or what :func:`train_agent` raises.
-    heli_core.errors.MissingDependency
-        ``backend="ray"`` without the ``cluster`` extra.
-    """
-    from heli_core.backends import make_backend
-
-    seeds = list(seeds)
-    if not seeds or len(set(seeds)) != len(seeds) or not all(
-            isinstance(s, numbers.Integral) and not isinstance(s, bool) for s in seeds):
-        raise AgentError(f"seeds must be distinct whole numbers, at least one, got {seeds!r}")
-    if algo not in ALGOS:
-        raise AgentError(f"algo must be one of {ALGOS}, got {algo!r}")
-    for bad in ("seed", "callbacks"):
-        if bad in train_kwargs:
-            raise AgentError(f"train_seeds takes seeds=, not {bad}= (callbacks do not travel to workers)")
-    if configs is not None and (not isinstance(configs, dict) or not configs or not all(
-            isinstance(k, str) and isinstance(v, dict) and "seed" not in v for k, v in configs.items())):
-        raise AgentError("configs must be a non-empty dict of name -> dict of train_agent arguments (no seed)")
-    from heli_env.model_dir import EnvModel, load_env_model
-
-    env_model = model if isinstance(model, EnvModel) else load_env_model(model)
-    kwargs = {"torch_threads": 1, **train_kwargs, "progress": False}
-    if configs is None:
-        items = [(int(s), {}) for s in seeds]
-    else:
-        items = [((name, int(s)), dict(over)) for name, over in configs.items() for s in seeds]
-    be = make_backend(backend)
-    try:
-        parts = be.map(_train_task, items, (algo, env_model, timesteps, out, kwargs), progress=progress,
-                       desc=f"train {algo}")
-    finally:
-        if be is not backend:
-            be.close()
-    results = {}
-    for (key, _), (res, tmp, files) in zip(items, parts):
-        results[key] = _place(res, tmp, files, _run_name(out, key).parent)
-    return results
-
-
-def _place(res: TrainingResult, tmp: str, files: dict, folder: Path) -> TrainingResult:
-    """Write a task's files under ``folder`` (atomically, file by file) and point ``res`` at them."""
-    from heli_core.files import write_bytes
-
-    def moved(p):
-        return None if p is None else folder / Path(p).relative_to(tmp)
-
-    for rel, data in files.items():
-        if rel.endswith("training.json"):  # its paths name the scratch folder
-            data = data.decode().replace(json.dumps(tmp)[1:-1], json.dumps(str(folder))[1:-1]).encode()
-        write_bytes(folder / rel, data)
-    return dataclasses.replace(res, path=moved(res.path), run_dir=moved(res.run_dir),
-                               checkpoints=[moved(p) for p in res.checkpoints], best_model=moved(res.best_model))
-
-
-# ------------------------------------------------------------------------ loading
-def agent_metadata(path) -> dict | None:
-    """The ``heli_agent.json`` an RL agent zip carries (algo, split, settings), or None.
-
-    Raises
-    ------
-    AgentError
-        The entry is not a JSON object, or its ``split`` is not a trace split
-        (:meth:`TraceSplit.from_dict`).
-    """
-    path = _resolve(path)
-    if not zipfile.is_zipfile(path):
-        return None
-    with zipfile.ZipFile(path) as z:
-        if METADATA_FILE not in z.namelist():
-            return None
-        meta = _zip_json(z, METADATA_FILE, path, "the agent's metadata (algo, split, settings)")
-    if meta.get("split"):
-        try:
-            TraceSplit.from_dict(meta["split"])
-        except ValueError as e:
-            raise AgentError(f"{path}: {METADATA_FILE} entry 'split' is not a trace split ({e})") from e
-    return meta
-
-
-def _zip_json(z: zipfile.ZipFile, entry: str, path: Path, expected: str) -> dict:
-    """The JSON object in entry ``entry`` of an open zip; AgentError naming the file if it is anything else."""
-    try:
-        doc = json.loads(z.read(entry))
-    except (ValueError, zipfile.BadZipFile) as e:  # JSONDecodeError, UnicodeDecodeError, a corrupt member
-        raise AgentError(f"{path}: zip entry {entry!r} should be a JSON object holding {expected}; "
-                         f"it cannot be read as JSON ({e})") from e
-    if not isinstance(doc, dict):
-        raise AgentError(f"{path}: zip entry {entry!r} should be a JSON object holding {expected}; "
-                         f"got a JSON {type(doc).__name__}")
-    return doc
-
-
-def _resolve(path) -> Path:
-    path = Path(path)
-    if not path.exists() and path.suffix != ".zip" and path.with_name(path.name + ".zip").exists():
-        path = path.with_name(path.name + ".zip")
-    if not path.exists():
-        raise FileNotFoundError(f"agent file {str(path)!r} does not exist")
-    if path.is_dir():
-        raise AgentError(f"{path} is a folder; expected a PD controller JSON or a PPO/SAC zip")
-    return path
-
-
-def _zip_algo(path: Path) -> str:
-    """"ppo" or "sac" from the agent zip's metadata, else from SB3's saved policy class and optimizers."""
-    with zipfile.ZipFile(path) as z:
-        names = z.namelist()
-        if METADATA_FILE in names:
-            algo = _zip_json(z, METADATA_FILE, path, "the agent's metadata (algo, split, settings)").get("algo")
-            if algo in ALGOS:
-                return algo
-        if "data" not in names:
-            raise AgentError(f"{path}: a zip file but not a stable-baselines3 agent (no 'data' entry)")
-        data = _zip_json(z, "data", path, "stable-baselines3's saved model data")
-    policy_class = data.get("policy_class")
-    module = str(policy_class.get("__module__", "")) if isinstance(policy_class, dict) else ""
-    if ".sac." in module or "actor.optimizer.pth" in names:
-        return "sac"
-    if "policy.optimizer.pth" in names and ("common.policies" in module or ".ppo." in module):
-        return "ppo"
-    raise AgentError(f"{path}: a stable-baselines3 agent of policy {module or 'unknown'}; only PPO and SAC load")
-
-
-def load_agent(path):
-    """Load any agent: a PD controller JSON (:meth:`controllers.pd.PDController.load`) or a PPO/SAC zip.
-
-    The kind is read from the file, not its name: a zip is an SB3 agent (its
-    ``heli_agent.json``, else SB3's saved policy class, tells PPO from SAC), anything
-    else must be a PD controller JSON. ``agents/ppo`` finds ``agents/ppo.zip``.
-
-    Returns
-    -------
-    PDController, stable_baselines3 PPO / SAC, or ResidualAgent (a PPO / SAC residual on a PD)
-        Each has ``predict(observation, state=None, episode_start=None, deterministic=False)``.
-
-    Raises
-    ------
-    FileNotFoundError
-        No such file.
-    AgentError
-        Neither kind, an agent zip whose metadata or model data is not readable JSON, or
-        an SB3 agent of another algorithm.
-    """
-    path = _resolve(path)
-    if zipfile.is_zipfile(path):
-        algo = _zip_algo(path)
-        try:
-            policy = _algo_class(algo).load(path, device="cpu")
-        except (ValueError, KeyError, RuntimeError) as e:
-            raise AgentError(f"{path}: cannot load the {algo.upper()} agent: {e}") from e
-        meta = agent_metadata(path) or {}
-        return residual_from_metadata(meta, policy, path) if meta.get("residual") else policy
-    from .pd import PDController
-
-    try:
-        return PDController.load(path)
-    except (ValueError, UnicodeDecodeError) as e:
-        raise AgentError(f"{path}: neither a PPO/SAC zip nor a PD controller JSON ({e})") from e

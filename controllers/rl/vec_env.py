@@ -1,0 +1,163 @@
+"""A Gymnasium vector environment seen through stable-baselines3's ``VecEnv`` API.
+
+SB3 (2.x) trains on its own ``VecEnv`` and does not take a
+:class:`gymnasium.vector.VectorEnv`. The two differ in three ways, which
+:class:`GymnasiumVecEnv` bridges:
+
+* **Reset timing.** The native env (:class:`heli_env.vector_env.HeliAttitudeVectorEnv`)
+  autoresets ``NEXT_STEP``: the step that ends an episode returns its last
+  observation, and the *next* step resets the copy (reward 0, action ignored).
+  SB3 expects a *same-step* reset: the step that ends an episode returns
+  ``done=True`` with the first observation of the next episode, and the last
+  observation in ``infos[i]["terminal_observation"]``. The adapter resets the
+  finished copies itself with ``reset(options={"reset_mask": ...})`` right after
+  the step, so the native autoreset never fires and no step is wasted.
+* **Truncation.** ``terminated``/``truncated`` become SB3's ``dones`` and
+  ``infos[i]["TimeLimit.truncated"]`` (truncated and not terminated), which PPO
+  and SAC use to bootstrap the value of time-limited episodes.
+* **Infos.** Gymnasium's dict of arrays (with ``_name`` masks) becomes SB3's
+  list of per-copy dicts.
+
+Per-episode reset options (a pinned gust window, :mod:`controllers.trace_split`)
+come from ``episode_options(i, rng)``, called for copy ``i`` at every reset with
+the adapter's own random generator, seeded with the environments.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import numpy as np
+from gymnasium.vector import AutoresetMode
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv
+
+
+class GymnasiumVecEnv(VecEnv):
+    """SB3 ``VecEnv`` over a Gymnasium ``VectorEnv`` with ``NEXT_STEP`` autoreset and ``reset_mask``.
+
+    Parameters
+    ----------
+    env : gymnasium.vector.VectorEnv
+        Must autoreset ``NEXT_STEP`` and accept ``reset(options={"reset_mask": mask})``
+        (as :class:`heli_env.vector_env.HeliAttitudeVectorEnv`).
+    episode_options : callable, optional
+        ``episode_options(i, rng) -> dict`` of reset options for copy ``i``'s next
+        episode (e.g. ``{"trace": 2, "offset": 1234}``), drawn from ``rng``, the
+        adapter's ``numpy.random.Generator``.
+    fixed_seed : int, optional
+        Every :meth:`reset` reseeds the environments and ``rng`` with this seed, so
+        every call replays the same episodes (evaluation environments).
+    """
+
+    def __init__(self, env, episode_options: Callable[[int, np.random.Generator], dict] | None = None,
+                 fixed_seed: int | None = None):
+        mode = env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
+        if mode != AutoresetMode.NEXT_STEP:
+            raise ValueError(f"GymnasiumVecEnv needs a NEXT_STEP autoreset vector env, got {mode}")
+        self.env = env
+        self.episode_options = episode_options
+        self.fixed_seed = fixed_seed
+        self._rng = np.random.default_rng(fixed_seed)
+        self._obs = None
+        self._actions = None
+        super().__init__(env.num_envs, env.single_observation_space, env.single_action_space)
+
+    # ------------------------------------------------------------------ reset
+    def reset(self):
+        n = self.num_envs
+        seeds = self._seeds
+        if self.fixed_seed is not None:
+            seeds = [self.fixed_seed + i for i in range(n)]
+        seed = None if seeds[0] is None else [int(s) for s in seeds]
+        if seed is not None:
+            self._rng = np.random.default_rng(seed[0])
+        options = self._options
+        if self.episode_options is None and all(o == options[0] for o in options):
+            obs, info = self.env.reset(seed=seed, options=dict(options[0]) or None)
+            self.reset_infos = self._split_infos(info, range(n))
+        else:
+            obs, info = self.env.reset(seed=seed)
+            obs = self._reset_copies(np.arange(n), obs, per_copy=options)
+        self._reset_seeds()
+        self._reset_options()
+        self._obs = obs
+        return obs.copy()
+
+    def _reset_copies(self, which, obs, per_copy=None):
+        """Reset copies ``which`` (one masked reset per copy when options differ); returns the observations."""
+        n = self.num_envs
+        if self.episode_options is None and not per_copy:
+            mask = np.zeros(n, dtype=bool)
+            mask[which] = True
+            obs, info = self.env.reset(options={"reset_mask": mask})
+            for i, d in zip(which, self._split_infos(info, which)):
+                self.reset_infos[i] = d
+            return obs
+        for i in which:
+            mask = np.zeros(n, dtype=bool)
+            mask[i] = True
+            opts = dict(per_copy[i]) if per_copy else {}
+            if self.episode_options is not None:
+                opts.update(self.episode_options(int(i), self._rng))
+            new_obs, info = self.env.reset(options={"reset_mask": mask, **opts})
+            obs = obs.copy()
+            obs[i] = new_obs[i]
+            self.reset_infos[i] = self._split_infos(info, [i])[0]
+        return obs
+
+    # ------------------------------------------------------------------- step
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = actions
+
+    def step_wait(self):
+        obs, rew, terminated, truncated, info = self.env.step(self._actions)
+        dones = np.logical_or(terminated, truncated)
+        infos = self._split_infos(info, range(self.num_envs))
+        for i in range(self.num_envs):
+            infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
+        if dones.any():
+            which = np.flatnonzero(dones)
+            for i in which:
+                infos[i]["terminal_observation"] = obs[i].copy()
+            obs = self._reset_copies(which, obs)
+        self._obs = obs
+        return obs.copy(), np.asarray(rew, dtype=np.float32), dones, infos
+
+    @staticmethod
+    def _split_infos(info: dict, which) -> list[dict[str, Any]]:
+        """Gymnasium's vector info (dict of arrays with ``_name`` masks) as one dict per copy in ``which``."""
+        keys = [k for k in info if not k.startswith("_")]
+        out = []
+        for i in which:
+            d = {}
+            for k in keys:
+                mask = info.get("_" + k)
+                if mask is not None and not mask[i]:
+                    continue
+                v = info[k]
+                d[k] = v[i].copy() if isinstance(v, np.ndarray) and v.ndim > 1 else (
+                    v[i].item() if isinstance(v, np.ndarray) else v)
+            out.append(d)
+        return out
+
+    # --------------------------------------------------------------- plumbing
+    def close(self) -> None:
+        self.env.close()
+
+    def get_attr(self, attr_name: str, indices=None) -> list[Any]:
+        """The vector env's attribute, once per copy (the copies share one object)."""
+        value = getattr(self.env, attr_name)
+        return [value for _ in self._get_indices(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices=None) -> None:
+        setattr(self.env, attr_name, value)
+
+    def env_method(self, method_name: str, *method_args, indices=None, **method_kwargs) -> list[Any]:
+        result = getattr(self.env, method_name)(*method_args, **method_kwargs)
+        return [result for _ in self._get_indices(indices)]
+
+    def env_is_wrapped(self, wrapper_class, indices=None) -> list[bool]:
+        return [False for _ in self._get_indices(indices)]
+
+    def get_images(self):
+        return [self.env.render()] + [None] * (self.num_envs - 1)
