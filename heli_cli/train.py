@@ -57,27 +57,26 @@ def register(sub):
     p.set_defaults(func=run, out_kind="file")
 
 
-def _residual(args) -> dict:
-    """train_agent's residual arguments; the PD file is read here so a bad one fails before any work."""
-    if args.residual is None:
-        return {}
-    from controllers.residual import as_base
+def _config(args):
+    """The TrainConfig of the command line; a --residual PD file is read here, so a bad one fails before any work."""
+    from controllers.rl import TrainConfig
 
-    return {"residual": as_base(args.residual), "residual_scale": args.residual_scale}
+    return TrainConfig(algo=args.algo, timesteps=args.timesteps, seed=args.seed, n_envs=args.n_envs,
+                       eval_freq=args.eval_freq, checkpoint_freq=args.checkpoint_freq,
+                       held_out_fraction=args.held_out_fraction, split_seed=args.split_seed,
+                       eval_episodes=args.eval_episodes, episode_seconds=args.episode_seconds,
+                       residual=args.residual, residual_scale=args.residual_scale,
+                       max_seconds=None if args.minutes is None else 60.0 * args.minutes)
 
 
-def _run_seeds(args) -> int:
+def _run_seeds(args, config) -> int:
     from controllers.rl import train_seeds
     from identification.backends import make_backend
 
     backend = make_backend(args.backend, workers=args.workers)
     try:
-        results = train_seeds(args.algo, args.model, args.timesteps, args.out, seeds=args.seeds, backend=backend,
-                              n_envs=args.n_envs, eval_freq=args.eval_freq, checkpoint_freq=args.checkpoint_freq,
-                              progress=not args.quiet, held_out_fraction=args.held_out_fraction,
-                              split_seed=args.split_seed, eval_episodes=args.eval_episodes,
-                              episode_seconds=args.episode_seconds, **_residual(args),
-                              max_seconds=None if args.minutes is None else 60.0 * args.minutes)
+        results = train_seeds(model=args.model, out=args.out, seeds=args.seeds, backend=backend,
+                              progress=not args.quiet, config=config)
         where = backend.describe()
     finally:
         backend.close()
@@ -99,15 +98,10 @@ def run(args) -> int:
 
     if args.seeds is not None:
         progress.done()
-        return _run_seeds(args)
+        return _run_seeds(args, _config(args))
     try:
         progress.done()
-        res = train_agent(args.algo, args.model, args.timesteps, args.out, seed=args.seed, n_envs=args.n_envs,
-                          eval_freq=args.eval_freq, checkpoint_freq=args.checkpoint_freq,
-                          progress=not args.quiet, held_out_fraction=args.held_out_fraction,
-                          split_seed=args.split_seed, eval_episodes=args.eval_episodes,
-                          episode_seconds=args.episode_seconds, **_residual(args),
-                          max_seconds=None if args.minutes is None else 60.0 * args.minutes)
+        res = train_agent(model=args.model, out=args.out, config=_config(args), progress=not args.quiet)
     except TrainingInterrupted as e:
         print(f"heli train: interrupted after {e.timesteps} timesteps; checkpoint saved to {e.checkpoint}",
               file=sys.stderr)

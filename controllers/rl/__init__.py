@@ -2,6 +2,7 @@
 
 One concept per module:
 
+* :mod:`~controllers.rl.config`: :class:`TrainConfig`, the settings of a run, checked once;
 * :mod:`~controllers.rl.train`: :func:`train_agent`, one PPO or SAC agent on the
   training gusts, with held-out evaluations, atomic checkpoints and a record;
 * :mod:`~controllers.rl.seeds`: :func:`train_seeds`, one agent per seed (and
@@ -18,11 +19,12 @@ and torch are the ``rl`` extra, imported when an agent is trained or loaded.
 
 from ..trace_split import TraceSegment, TraceSplit, WindowSampler, as_segments, split_traces
 from .agent_file import AGENT_SCHEMA, AGENT_SCHEMA_VERSION, ALGOS, METADATA_FILE, agent_metadata, load_agent
+from .config import DEFAULT_KWARGS, TrainConfig, make_config
 from .residual import RESIDUAL_INIT_DEG, RESIDUAL_SCALE, residual_from_metadata, residual_metadata
 from .seeds import train_seeds
-from .train import DEFAULT_KWARGS, TrainingResult, train_agent
+from .train import TrainingResult, train_agent
 
 __all__ = ["AGENT_SCHEMA", "AGENT_SCHEMA_VERSION", "ALGOS", "DEFAULT_KWARGS", "METADATA_FILE", "RESIDUAL_INIT_DEG",
-           "RESIDUAL_SCALE", "TraceSegment", "TraceSplit", "TrainingResult", "WindowSampler", "agent_metadata",
-           "as_segments", "load_agent", "residual_from_metadata", "residual_metadata", "split_traces", "train_agent",
-           "train_seeds"]
+           "RESIDUAL_SCALE", "TraceSegment", "TraceSplit", "TrainConfig", "TrainingResult", "WindowSampler",
+           "agent_metadata", "as_segments", "load_agent", "make_config", "residual_from_metadata",
+           "residual_metadata", "split_traces", "train_agent", "train_seeds"]

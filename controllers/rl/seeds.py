@@ -14,8 +14,11 @@ import numbers
 from pathlib import Path
 
 from ..errors import AgentError
-from .agent_file import ALGOS
+from .config import TrainConfig, make_config
 from .train import TrainingResult, _out_paths, train_agent
+
+WATCH_OPTIONS = ("progress", "verbose")
+"""Keywords of :func:`train_agent` that say how a run is watched, not what is trained (no TrainConfig field)."""
 
 
 def _run_name(out, key) -> Path:
@@ -33,41 +36,43 @@ def _train_task(item, shared):
     import tempfile
 
     key, overrides = item
-    algo, env_model, timesteps, out, kwargs = shared
+    env_model, out, config, watch = shared
     seed = key[1] if isinstance(key, tuple) else key
     name = _run_name(out, key).name
     with tempfile.TemporaryDirectory(prefix="heli-train-") as tmp:
-        res = train_agent(algo, env_model, timesteps, Path(tmp) / name, seed=seed, **{**kwargs, **overrides})
+        res = train_agent(model=env_model, out=Path(tmp) / name, config=config,
+                          **{"seed": seed, "progress": False, **watch, **overrides})
         files = {str(p.relative_to(tmp)): p.read_bytes() for p in sorted(Path(tmp).rglob("*")) if p.is_file()}
         res.agent = None  # the zip carries it; a live SB3 model does not travel well
         return res, str(Path(tmp)), files
 
 
-def train_seeds(algo: str = "ppo", model=None, timesteps: int = 200_000, out="agent", seeds=(0,),
-                configs: dict | None = None, backend=None, progress: bool = True, **train_kwargs) -> dict:
+def train_seeds(algo: str | None = None, model=None, timesteps: int | None = None, out="agent", seeds=(0,),
+                configs: dict | None = None, backend=None, progress: bool = True, *,
+                config: TrainConfig | None = None, **train_kwargs) -> dict:
     """Train one agent per seed (and per hyperparameter set), each as one task of a backend.
 
     Parameters
     ----------
-    algo, model, timesteps :
-        As :func:`train_agent`.
+    algo, model, timesteps, config :
+        As :func:`train_agent`: the settings shared by all tasks (``config.seed`` is replaced by each seed).
     out : str or Path
         Stem of the agents: seed ``s`` is written to ``<out>_seed<s>.zip`` and
         ``<out>_seed<s>_training/`` (``<out>_<name>_seed<s>`` with ``configs``).
     seeds : sequence of int
         One agent per seed, each seeded as :func:`train_agent` with that seed.
     configs : dict of str -> dict, optional
-        Named overrides of :func:`train_agent` arguments (e.g.
+        Named overrides of :class:`TrainConfig` fields (or ``verbose``) (e.g.
         ``{"lr1e-3": {"algo_kwargs": {"learning_rate": 1e-3}}}``); every config is
         trained with every seed.
     backend : None, {"local", "ray"} or heli_core.backends.Backend
-        Where the tasks run (None: the local cores). Each task trains with one torch
-        thread (``torch_threads=1``), so a seed trains to the same agent on any
-        backend and worker count.
+        Where the tasks run (None: the local cores). Each task trains with the
+        config's torch threads (one by default), so a seed trains to the same agent
+        on any backend and worker count.
     progress : bool
         tqdm bar of finished tasks (per-task bars are off).
     **train_kwargs
-        Further :func:`train_agent` arguments shared by all tasks.
+        :class:`TrainConfig` fields replacing the config's, and ``verbose``, shared by all tasks.
 
     Returns
     -------
@@ -79,7 +84,7 @@ def train_seeds(algo: str = "ppo", model=None, timesteps: int = 200_000, out="ag
     Raises
     ------
     AgentError
-        No or repeated seeds, bad configs, or what :func:`train_agent` raises.
+        No or repeated seeds, bad configs (checked before any task runs), or what :func:`train_agent` raises.
     heli_core.errors.MissingDependency
         ``backend="ray"`` without the ``cluster`` extra.
     """
@@ -89,26 +94,27 @@ def train_seeds(algo: str = "ppo", model=None, timesteps: int = 200_000, out="ag
     if not seeds or len(set(seeds)) != len(seeds) or not all(
             isinstance(s, numbers.Integral) and not isinstance(s, bool) for s in seeds):
         raise AgentError(f"seeds must be distinct whole numbers, at least one, got {seeds!r}")
-    if algo not in ALGOS:
-        raise AgentError(f"algo must be one of {ALGOS}, got {algo!r}")
     for bad in ("seed", "callbacks"):
         if bad in train_kwargs:
             raise AgentError(f"train_seeds takes seeds=, not {bad}= (callbacks do not travel to workers)")
     if configs is not None and (not isinstance(configs, dict) or not configs or not all(
             isinstance(k, str) and isinstance(v, dict) and "seed" not in v for k, v in configs.items())):
         raise AgentError("configs must be a non-empty dict of name -> dict of train_agent arguments (no seed)")
+    watch = {k: v for k, v in train_kwargs.items() if k in WATCH_OPTIONS}
+    config = make_config(config, algo, timesteps, **{k: v for k, v in train_kwargs.items() if k not in watch})
+    for over in (configs or {}).values():  # a bad named config fails here, not in a worker
+        make_config(config, **{k: v for k, v in over.items() if k not in WATCH_OPTIONS})
     from heli_env.model_dir import EnvModel, load_env_model
 
     env_model = model if isinstance(model, EnvModel) else load_env_model(model)
-    kwargs = {"torch_threads": 1, **train_kwargs, "progress": False}
     if configs is None:
         items = [(int(s), {}) for s in seeds]
     else:
         items = [((name, int(s)), dict(over)) for name, over in configs.items() for s in seeds]
     be = make_backend(backend)
     try:
-        parts = be.map(_train_task, items, (algo, env_model, timesteps, out, kwargs), progress=progress,
-                       desc=f"train {algo}")
+        parts = be.map(_train_task, items, (env_model, out, config, watch), progress=progress,
+                       desc=f"train {config.algo}")
     finally:
         if be is not backend:
             be.close()

@@ -44,27 +44,15 @@ import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 from heli_core.files import jsonable, write_text
 
 from ..errors import AgentError, TrainingInterrupted
 from ..trace_split import WindowSampler, as_segments, split_traces
-from .agent_file import AGENT_SCHEMA, AGENT_SCHEMA_VERSION, ALGOS, _algo_class, _sb3
-from .residual import RESIDUAL_INIT_DEG, RESIDUAL_SCALE, residual_metadata
-
-DEFAULT_KWARGS = {
-    # A rollout of 512 steps x 8 copies (41 s of flight), a 1 s horizon (gamma 0.99 at 100 Hz),
-    # an initial action noise of std 0.37 stick (log std -1) rather than SB3's 1.
-    "ppo": {"n_steps": 512, "batch_size": 256, "n_epochs": 10, "learning_rate": 3e-4, "gamma": 0.99,
-            "gae_lambda": 0.95, "clip_range": 0.2, "ent_coef": 0.0,
-            "policy_kwargs": {"net_arch": [64, 64], "log_std_init": -1.0}},
-    # One gradient step per vector step (8 transitions); small networks for a 12-dimensional state.
-    "sac": {"buffer_size": 200_000, "learning_starts": 2_000, "batch_size": 256, "learning_rate": 3e-4,
-            "gamma": 0.99, "tau": 0.005, "train_freq": 1, "gradient_steps": 1,
-            "policy_kwargs": {"net_arch": [64, 64]}},
-}
-"""Hyperparameters :func:`train_agent` starts from; ``algo_kwargs`` override them (``policy_kwargs`` merged)."""
-
+from .agent_file import AGENT_SCHEMA, AGENT_SCHEMA_VERSION, _algo_class, _sb3
+from .config import TrainConfig, make_config
+from .residual import residual_metadata
 
 
 def _out_paths(out) -> tuple[Path, Path, str]:
@@ -72,6 +60,7 @@ def _out_paths(out) -> tuple[Path, Path, str]:
     out = Path(out)
     stem = out.with_suffix("") if out.suffix == ".zip" else out
     return stem.with_name(stem.name + ".zip"), stem.with_name(stem.name + "_training"), stem.name
+
 
 
 @dataclass(eq=False)
@@ -119,86 +108,35 @@ class TrainingResult:
         return self.timesteps / self.seconds if self.seconds > 0 else math.nan
 
 
-def _check_count(value, name, minimum=1):
-    whole = isinstance(value, numbers.Integral) or (isinstance(value, float) and value.is_integer())
-    if isinstance(value, bool) or not whole or value < minimum:
-        raise AgentError(f"{name} must be a whole number >= {minimum}, got {value!r}")
-    return int(value)
 
-
-def train_agent(algo: str = "ppo", model=None, timesteps: int = 200_000, out="agent", seed: int = 0,
-                n_envs: int = 8, eval_freq: int = 50_000, checkpoint_freq: int = 100_000, progress: bool = True,
-                train_traces=None, eval_traces=None, held_out_fraction: float = 0.25, split_seed: int = 0,
-                eval_episodes: int = 4, episode_seconds: float = 30.0, task="hold", max_seconds: float | None = None,
-                algo_kwargs: dict | None = None, normalize_reward: bool | None = None, callbacks=(),
-                torch_threads: int | None = 1, verbose: int = 0, residual=None,
-                residual_scale: float = RESIDUAL_SCALE, init_angle_deg: float | None = None,
-                init_rate_deg: float | None = None) -> TrainingResult:
+def train_agent(algo: str | None = None, model=None, timesteps: int | None = None, out="agent", *,
+                config: TrainConfig | None = None, progress: bool = True, verbose: int = 0, callbacks=(),
+                **settings) -> TrainingResult:
     """Train a PPO or SAC attitude agent on the training traces of a model's disturbance library.
 
     Parameters
     ----------
-    algo : {"ppo", "sac"}
+    algo : {"ppo", "sac"}, optional
+        Replaces ``config.algo``.
     model : str, Path, EnvModel or None
         Model directory written by ``heli identify`` (None: the shipped model).
-    timesteps : int
-        Environment steps to train for (summed over the copies).
+    timesteps : int, optional
+        Replaces ``config.timesteps``: environment steps to train for (summed over the copies).
     out : str or Path
         The agent's path; ``.zip`` is added. The run folder is ``<out>_training/``.
-    seed : int
-        Seeds everything (see the module docstring).
-    n_envs : int
-        Environment copies stepped as one batch.
-    eval_freq : int
-        Timesteps between held-out evaluations (0: none).
-    checkpoint_freq : int
-        Timesteps between checkpoints (0: none besides the one an interrupt writes).
+    config : TrainConfig, optional
+        The settings of the run (default ``TrainConfig()``).
     progress : bool
         tqdm bar on stderr (when it is a terminal).
-    train_traces, eval_traces : None, str, or sequence of int / TraceSegment
-        Gust segments of training episodes and of evaluations. Default: the
-        training and held-out sides of ``split_traces(n_traces, held_out_fraction, split_seed)``.
-    held_out_fraction, split_seed :
-        The split (:func:`split_traces`).
-    eval_episodes : int
-        Held-out episodes per evaluation (fixed windows, the same at every evaluation).
-    episode_seconds : float
-        Episode length [s].
-    task : str or TaskConfig
-        Environment task ("hold", "track", "rate").
-    max_seconds : float, optional
-        Wall-time budget of training [s]; training stops at whichever of
-        ``timesteps`` and the budget comes first.
-    algo_kwargs : dict, optional
-        Overrides of :data:`DEFAULT_KWARGS` (``policy_kwargs`` merged key by key).
-    normalize_reward : bool, optional
-        Divide training rewards by a running estimate of the discounted return's
-        standard deviation (SB3 ``VecNormalize(norm_obs=False)``). Default: True for PPO,
-        whose value function otherwise chases returns of -1e2 to -1e5 (a spinning
-        yaw costs 324 per step), False for SAC. Observations are never normalised
-        (the policy scales them itself), so the saved agent needs no statistics.
-    callbacks : sequence of BaseCallback
-        Extra SB3 callbacks.
-    torch_threads : int or None
-        torch threads during training (restored after); None leaves torch's setting.
-        One is fastest for these small networks: on 2 cores shared with other work,
-        two threads ran PPO 20 times slower than one (thread contention), and a
-        fixed count keeps results reproducible.
     verbose : int
         SB3 verbosity.
-    residual : PDController or path of a PD controller JSON, optional
-        Train a residual on this PD instead of a whole policy
-        (:mod:`controllers.rl.residual`): the env receives
-        ``clip(PD(obs) + residual_scale * action, -1, 1)``. Unless given, the task's
-        reward scales, the observation scales (``policy_kwargs``'
-        ``features_extractor_kwargs``) and the initial ranges follow the PD's own
-        error level on the training gusts; the saved agent carries the PD and
-        :func:`load_agent` returns a :class:`controllers.rl.residual.ResidualAgent`.
-    residual_scale : float
-        Bound of the residual [stick] (default 0.05).
-    init_angle_deg, init_rate_deg : float, optional
-        Initial roll/pitch range [deg] and rate range [deg/s] of training and
-        evaluation episodes. Default 5 and 5 (the env's), 0.5 and 0.5 with ``residual``.
+    callbacks : sequence of BaseCallback
+        Extra SB3 callbacks.
+    **settings
+        Fields of :class:`TrainConfig` replacing the config's, e.g. ``seed=3, n_envs=2``
+        (so ``train_agent("ppo", model, 10_000, "agents/ppo", seed=3)`` needs no config).
+        With ``residual``, the saved agent carries the PD and :func:`load_agent`
+        returns a :class:`controllers.rl.residual.ResidualAgent`.
 
     Returns
     -------
@@ -209,161 +147,203 @@ def train_agent(algo: str = "ppo", model=None, timesteps: int = 200_000, out="ag
     AgentError
         Unknown algorithm, bad counts, split, traces, task or episode length,
         episodes longer than the gust segments, or a bad residual base or scale.
+    TypeError
+        A keyword that is not a field of :class:`TrainConfig`.
     heli_env.errors.EnvModelError
         Missing or corrupt model directory.
     TrainingInterrupted
         KeyboardInterrupt during training; a checkpoint was saved first (its path is
         ``exc.checkpoint``). It is a KeyboardInterrupt.
     """
-    if algo not in ALGOS:
-        raise AgentError(f"algo must be one of {ALGOS}, got {algo!r}")
-    timesteps = _check_count(timesteps, "timesteps")
-    n_envs = _check_count(n_envs, "n_envs")
-    eval_freq = _check_count(eval_freq, "eval_freq", 0)
-    checkpoint_freq = _check_count(checkpoint_freq, "checkpoint_freq", 0)
-    eval_episodes = _check_count(eval_episodes, "eval_episodes")
-    if torch_threads is not None:
-        torch_threads = _check_count(torch_threads, "torch_threads")
-    if max_seconds is not None and not (max_seconds > 0 and math.isfinite(max_seconds)):
-        raise AgentError(f"max_seconds must be a positive number of seconds, got {max_seconds!r}")
-    base = None
-    if residual is not None:
-        from .residual import as_base, check_scale
-
-        base, residual_scale = as_base(residual), check_scale(residual_scale)
-    init = RESIDUAL_INIT_DEG if base is not None else 5.0
-    init = tuple(init if v is None else v for v in (init_angle_deg, init_rate_deg))
-    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v < 90 for v in init):
-        raise AgentError(f"init_angle_deg and init_rate_deg must be numbers in [0, 90), got {init!r}")
-
+    config = make_config(config, algo, timesteps, **settings)
     from heli_env.model_dir import EnvModel, load_env_model
 
     env_model = model if isinstance(model, EnvModel) else load_env_model(model)
-    try:
-        split = split_traces(env_model.n_traces, held_out_fraction, split_seed)
-        train_seg = as_segments(train_traces, split, "train")
-        eval_seg = as_segments(eval_traces, split, "held-out")
-    except ValueError as e:
-        raise AgentError(str(e)) from e
-
+    split, segments = _split(config, env_model)
     _sb3()
     import torch
 
-    path, run_dir, name = _out_paths(out)
     threads_before = torch.get_num_threads()
-    if torch_threads is not None:
-        torch.set_num_threads(torch_threads)
+    if config.torch_threads is not None:
+        torch.set_num_threads(config.torch_threads)
     try:
-        return _train(algo, env_model, timesteps, path, run_dir, name, seed, n_envs, eval_freq, checkpoint_freq,
-                      progress, split, train_seg, eval_seg, eval_episodes, episode_seconds, task, max_seconds,
-                      algo_kwargs, algo == "ppo" if normalize_reward is None else bool(normalize_reward), callbacks,
-                      verbose, (base, residual_scale), init)
+        return _train(config, env_model, _out_paths(out), split, segments, progress, verbose, callbacks)
     finally:
         torch.set_num_threads(threads_before)
 
 
-def _train(algo, env_model, timesteps, path, run_dir, name, seed, n_envs, eval_freq, checkpoint_freq, progress,
-           split, train_seg, eval_seg, eval_episodes, episode_seconds, task, max_seconds, algo_kwargs,
-           normalize_reward, callbacks, verbose, residual, init) -> TrainingResult:
-    sb3 = _sb3()
-    from stable_baselines3.common.callbacks import CallbackList
-    from stable_baselines3.common.utils import set_random_seed
-    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
-
-    from heli_env.tasks import TaskConfig
-    from heli_env.vector_env import HeliAttitudeVectorEnv
-
-    from ..sb3_training import (AtomicCheckpoint, AtomicEvalCallback, ObservationScaler, ProgressBar, WallClockLimit,
-                               save_atomically)
-    from .vec_env import GymnasiumVecEnv
-
-    set_random_seed(seed)
-    base, residual_scale = residual
-    setup = None
-    if base is not None:
-        from .residual import residual_env, residual_setup
-
-        setup = residual_setup(base, env_model, train_seg, seed)
-        if isinstance(task, str):
-            try:
-                task = TaskConfig(task=task, attitude_scale=setup["attitude_scale"], rate_scale=setup["rate_scale"])
-            except ValueError as e:
-                raise AgentError(str(e)) from e
-    try:  # bad task or episode length; episodes longer than the gust segments
-        kw = {"model": env_model, "task": task, "episode_seconds": episode_seconds, "init_angle_deg": init[0],
-              "init_rate_deg": init[1]}
-        venv = HeliAttitudeVectorEnv(n_envs, **kw)
-        needed = venv.spec_.needed
-        train_sampler = WindowSampler(env_model, train_seg, needed)
-        eval_sampler = WindowSampler(env_model, eval_seg, needed)
-        eval_venv = HeliAttitudeVectorEnv(eval_episodes, **kw)
+def _split(config: TrainConfig, env_model):
+    """The trace split and the (training, held-out) gust segments of a run; AgentError for a bad split or traces."""
+    try:
+        split = split_traces(env_model.n_traces, config.held_out_fraction, config.split_seed)
+        return split, (as_segments(config.train_traces, split, "train"),
+                       as_segments(config.eval_traces, split, "held-out"))
     except ValueError as e:
         raise AgentError(str(e)) from e
-    gamma = (algo_kwargs or {}).get("gamma", DEFAULT_KWARGS[algo]["gamma"])
-    env = GymnasiumVecEnv(venv, episode_options=train_sampler)
-    eval_env = GymnasiumVecEnv(eval_venv, episode_options=eval_sampler, fixed_seed=seed + 1000)
-    if base is not None:
-        env, eval_env = residual_env(env, base, residual_scale), residual_env(eval_env, base, residual_scale)
-    env, eval_env = VecMonitor(env), VecMonitor(eval_env)  # monitors the raw returns
-    if normalize_reward:  # the eval env is wrapped alike (EvalCallback syncs wrappers) but left raw
-        env = VecNormalize(env, norm_obs=False, norm_reward=True, gamma=gamma)
-        eval_env = VecNormalize(eval_env, training=False, norm_obs=False, norm_reward=False)
 
-    kwargs = {k: (dict(v) if isinstance(v, dict) else v) for k, v in DEFAULT_KWARGS[algo].items()}
-    for k, v in (algo_kwargs or {}).items():
-        kwargs[k] = {**kwargs.get(k, {}), **v} if k == "policy_kwargs" else v
-    kwargs["policy_kwargs"].setdefault("features_extractor_class", ObservationScaler)
-    if setup is not None and kwargs["policy_kwargs"]["features_extractor_class"] is ObservationScaler:
-        kwargs["policy_kwargs"].setdefault("features_extractor_kwargs", {"scale": setup["obs_scale"]})
-    agent = _algo_class(algo)("MlpPolicy", env, seed=seed, device="cpu", verbose=verbose, **kwargs)
+
+def _train(config: TrainConfig, env_model, out, split, segments, progress, verbose, callbacks) -> TrainingResult:
+    """Build the environments and the agent, then learn (:func:`_learn`); ``out`` is (agent zip, run folder, name)."""
+    from stable_baselines3.common.logger import configure
+    from stable_baselines3.common.utils import set_random_seed
+
+    set_random_seed(config.seed)
+    setup, task = _residual_setup(config, env_model, segments[0])
+    hyper = config.hyperparameters()
+    env, eval_env, dt = _environments(config, env_model, task, segments, hyper["gamma"])
+    _scale_observations(hyper, setup)
+    agent = _algo_class(config.algo)("MlpPolicy", env, seed=config.seed, device="cpu", verbose=verbose, **hyper)
     # SB3's own logger would make an empty SB3-<date> folder in the system's temp folder on
     # every run; its training statistics go to the run folder instead (progress.csv).
-    from stable_baselines3.common.logger import configure
+    agent.set_logger(configure(str(out[1]), ["csv"] + (["stdout"] if verbose else [])))
+    metadata = _metadata(config, env_model, split, segments, task, dt, setup, hyper)
+    return _learn(agent, config, out, metadata, (env, eval_env), progress, callbacks)
 
-    agent.set_logger(configure(str(run_dir), ["csv"] + (["stdout"] if verbose else [])))
 
-    metadata = jsonable({
-        "schema": AGENT_SCHEMA, "schema_version": AGENT_SCHEMA_VERSION, "algo": algo, "seed": seed,
+def _residual_setup(config: TrainConfig, env_model, train_seg):
+    """(scales, task): the residual's scales from its base's errors on the training gusts, and a named task
+    with its reward scaled by them; (None, ``config.task``) without a residual."""
+    if config.residual is None:
+        return None, config.task
+    from heli_env.tasks import TaskConfig
+
+    from .residual import residual_setup
+
+    setup = residual_setup(config.residual, env_model, train_seg, config.seed)
+    task = config.task
+    if isinstance(task, str):
+        try:
+            task = TaskConfig(task=task, attitude_scale=setup["attitude_scale"], rate_scale=setup["rate_scale"])
+        except ValueError as e:
+            raise AgentError(str(e)) from e
+    return setup, task
+
+
+def _environments(config: TrainConfig, env_model, task, segments, gamma: float):
+    """The training and evaluation ``VecEnv`` (residual, monitor and reward-normalising wrappers) and dt [s].
+
+    Training copies replay windows of the training segments; the evaluation copies replay
+    fixed windows of the held-out ones (``fixed_seed``), the same at every evaluation.
+    """
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    from heli_env.vector_env import HeliAttitudeVectorEnv
+
+    from .vec_env import GymnasiumVecEnv
+
+    init = config.init_ranges
+    try:  # bad task or episode length; episodes longer than the gust segments
+        kw = {"model": env_model, "task": task, "episode_seconds": config.episode_seconds,
+              "init_angle_deg": init[0], "init_rate_deg": init[1]}
+        venv = HeliAttitudeVectorEnv(config.n_envs, **kw)
+        needed = venv.spec_.needed
+        train_sampler = WindowSampler(env_model, segments[0], needed)
+        eval_sampler = WindowSampler(env_model, segments[1], needed)
+        eval_venv = HeliAttitudeVectorEnv(config.eval_episodes, **kw)
+    except ValueError as e:
+        raise AgentError(str(e)) from e
+    env = GymnasiumVecEnv(venv, episode_options=train_sampler)
+    eval_env = GymnasiumVecEnv(eval_venv, episode_options=eval_sampler, fixed_seed=config.seed + 1000)
+    if config.residual is not None:
+        from .residual import residual_env
+
+        base, scale = config.residual, config.residual_scale
+        env, eval_env = residual_env(env, base, scale), residual_env(eval_env, base, scale)
+    env, eval_env = VecMonitor(env), VecMonitor(eval_env)  # monitors the raw returns
+    if config.reward_normalized:  # the eval env is wrapped alike (EvalCallback syncs wrappers) but left raw
+        env = VecNormalize(env, norm_obs=False, norm_reward=True, gamma=gamma)
+        eval_env = VecNormalize(eval_env, training=False, norm_obs=False, norm_reward=False)
+    return env, eval_env, venv.spec_.dt
+
+
+def _scale_observations(hyper: dict, setup) -> None:
+    """Put :class:`controllers.sb3_training.ObservationScaler` in front of the policy unless another feature
+    extractor is asked for; a residual's scaler takes the observation scales of its ``setup``."""
+    from ..sb3_training import ObservationScaler
+
+    hyper["policy_kwargs"].setdefault("features_extractor_class", ObservationScaler)
+    if setup is not None and hyper["policy_kwargs"]["features_extractor_class"] is ObservationScaler:
+        hyper["policy_kwargs"].setdefault("features_extractor_kwargs", {"scale": setup["obs_scale"]})
+
+
+def _metadata(config: TrainConfig, env_model, split, segments, task, dt: float, setup, hyper: dict) -> dict:
+    """What the agent's zip carries in ``heli_agent.json``: algo, seed, model, split, settings, versions."""
+    sb3 = _sb3()
+    init = config.init_ranges
+    return jsonable({
+        "schema": AGENT_SCHEMA, "schema_version": AGENT_SCHEMA_VERSION, "algo": config.algo, "seed": config.seed,
         "model": str(env_model.path), "library_version": env_model.library_version,
         "trace_ids": list(env_model.trace_ids), "split": split.to_dict(),
-        "train_segments": [s.to_dict() for s in train_seg], "eval_segments": [s.to_dict() for s in eval_seg],
-        "task": task if isinstance(task, str) else dataclasses.asdict(task), "episode_seconds": episode_seconds,
-        "dt": venv.spec_.dt, "n_envs": n_envs, "normalize_reward": normalize_reward,
-        "init_angle_deg": init[0], "init_rate_deg": init[1],
-        "residual": None if base is None else residual_metadata(base, residual_scale, setup),
-        "hyperparameters": _plain(kwargs),
+        "train_segments": [s.to_dict() for s in segments[0]], "eval_segments": [s.to_dict() for s in segments[1]],
+        "task": task if isinstance(task, str) else dataclasses.asdict(task),
+        "episode_seconds": config.episode_seconds, "dt": dt, "n_envs": config.n_envs,
+        "normalize_reward": config.reward_normalized, "init_angle_deg": init[0], "init_rate_deg": init[1],
+        "residual": None if config.residual is None else residual_metadata(config.residual, config.residual_scale,
+                                                                            setup),
+        "hyperparameters": _plain(hyper),
         "versions": {"stable_baselines3": sb3.__version__, "torch": _torch_version()},
     })
+
+
+class _Callbacks(NamedTuple):
+    """The SB3 callbacks of one run: held-out evaluation (or None), checkpoints, progress bar, time budget
+    (or None), and all of them in the order they run, the caller's last."""
+
+    evaluation: object
+    checkpoint: object
+    bar: object
+    clock: object
+    all: list
+
+
+def _callbacks(config: TrainConfig, eval_env, out, metadata: dict, progress: bool, extra) -> _Callbacks:
+    """The run's callbacks: evaluations every ``eval_freq`` timesteps, checkpoints, bar, time budget, ``extra``."""
+    from ..sb3_training import AtomicCheckpoint, AtomicEvalCallback, ProgressBar, WallClockLimit
+
+    _, run_dir, name = out
     eval_cb = None
     cbs = []
-    if eval_freq:
-        eval_cb = AtomicEvalCallback(eval_env, run_dir, metadata, n_eval_episodes=eval_episodes,
-                                     eval_freq=max(eval_freq // n_envs, 1), deterministic=True, verbose=0, warn=False)
+    if config.eval_freq:
+        eval_cb = AtomicEvalCallback(eval_env, run_dir, metadata, n_eval_episodes=config.eval_episodes,
+                                     eval_freq=max(config.eval_freq // config.n_envs, 1), deterministic=True,
+                                     verbose=0, warn=False)
         cbs.append(eval_cb)
-    ckpt = AtomicCheckpoint(checkpoint_freq or 2 ** 62, run_dir / "checkpoints", name, metadata)
-    bar = ProgressBar(timesteps, progress, eval_cb, desc=f"{algo} {name}")
-    clock = WallClockLimit(max_seconds) if max_seconds is not None else None
-    cbs += [ckpt, bar] + ([clock] if clock else []) + list(callbacks)
+    ckpt = AtomicCheckpoint(config.checkpoint_freq or 2 ** 62, run_dir / "checkpoints", name, metadata)
+    bar = ProgressBar(config.timesteps, progress, eval_cb, desc=f"{config.algo} {name}")
+    clock = WallClockLimit(config.max_seconds) if config.max_seconds is not None else None
+    cbs += [ckpt, bar] + ([clock] if clock else []) + list(extra)
+    return _Callbacks(eval_cb, ckpt, bar, clock, cbs)
 
+
+def _learn(agent, config: TrainConfig, out, metadata: dict, envs, progress: bool, extra) -> TrainingResult:
+    """``agent.learn`` with the run's callbacks, then the agent and the record saved; on Ctrl-C a checkpoint
+    and the record are saved first and :class:`TrainingInterrupted` raised."""
+    from stable_baselines3.common.callbacks import CallbackList
+
+    from ..sb3_training import save_atomically
+
+    path, run_dir, _ = out
+    cb = _callbacks(config, envs[1], out, metadata, progress, extra)
     t0 = time.perf_counter()
     try:
-        agent.learn(total_timesteps=timesteps, callback=CallbackList(cbs), progress_bar=False)
+        agent.learn(total_timesteps=config.timesteps, callback=CallbackList(cb.all), progress_bar=False)
     except KeyboardInterrupt as e:
         seconds = time.perf_counter() - t0
-        saved = ckpt.save("_interrupted")
-        _write_record(run_dir, metadata, agent, seconds, eval_cb, ckpt, clock, interrupted=True, path=None)
+        saved = cb.checkpoint.save("_interrupted")
+        _write_record(run_dir, metadata, agent, seconds, cb, interrupted=True, path=None)
         raise TrainingInterrupted(saved, int(agent.num_timesteps)) from e
     finally:
-        bar.close()
-        env.close()
-        eval_env.close()
+        cb.bar.close()
+        for env in envs:
+            env.close()
     seconds = time.perf_counter() - t0
     metadata = {**metadata, "timesteps": int(agent.num_timesteps), "train_seconds": seconds}
     save_atomically(agent, path, metadata)
-    record = _write_record(run_dir, metadata, agent, seconds, eval_cb, ckpt, clock, interrupted=False, path=path)
+    record = _write_record(run_dir, metadata, agent, seconds, cb, interrupted=False, path=path)
     best = run_dir / "best_model.zip"
-    return TrainingResult(path, algo, int(agent.num_timesteps), seconds, bool(clock and clock.reached), run_dir,
-                          list(ckpt.paths), best if best.exists() else None, record["evaluations"], metadata, agent)
+    return TrainingResult(path, config.algo, int(agent.num_timesteps), seconds, bool(cb.clock and cb.clock.reached),
+                          run_dir, list(cb.checkpoint.paths), best if best.exists() else None, record["evaluations"],
+                          metadata, agent)
 
 
 def _plain(value):
@@ -383,16 +363,18 @@ def _torch_version() -> str:
     return f"{torch.__version__} ({torch.get_num_threads()} threads)"
 
 
-def _write_record(run_dir, metadata, agent, seconds, eval_cb, ckpt, clock, interrupted, path) -> dict:
+def _write_record(run_dir, metadata, agent, seconds, cb: _Callbacks, interrupted, path) -> dict:
+    """Write ``training.json``: settings, timing, held-out evaluations, checkpoints; returns what it wrote."""
     evals = []
-    if eval_cb is not None:
-        for t, r in zip(eval_cb.evaluations_timesteps, eval_cb.evaluations_results):
+    if cb.evaluation is not None:
+        for t, r in zip(cb.evaluation.evaluations_timesteps, cb.evaluation.evaluations_results):
             evals.append([int(t), float(sum(r) / len(r)), float(_std(r))])
     record = jsonable({
         **metadata, "agent": None if path is None else str(path), "timesteps_done": int(agent.num_timesteps),
         "seconds": seconds, "steps_per_second": agent.num_timesteps / seconds if seconds > 0 else None,
-        "cpu_count": os.cpu_count(), "interrupted": interrupted, "stopped_by_time": bool(clock and clock.reached),
-        "evaluations": evals, "checkpoints": [str(p) for p in ckpt.paths],
+        "cpu_count": os.cpu_count(), "interrupted": interrupted,
+        "stopped_by_time": bool(cb.clock and cb.clock.reached), "evaluations": evals,
+        "checkpoints": [str(p) for p in cb.checkpoint.paths],
     })
     write_text(Path(run_dir) / "training.json", json.dumps(record, indent=1, allow_nan=False) + "\n")
     return record

@@ -1,0 +1,202 @@
+"""The settings of one RL training run: :class:`TrainConfig`, checked once where it is made.
+
+:func:`controllers.rl.train_agent` and :func:`controllers.rl.train_seeds` take a
+``TrainConfig`` (or its fields as keywords, :func:`make_config`) instead of two
+dozen loose arguments passed from function to function. What can be checked
+without the model is checked in ``__post_init__``: counts, time budget, the
+residual's base and bound, initial ranges. What needs the model's library (the
+trace split, the traces, the task, episodes no longer than the gust segments) is
+checked when training starts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import numbers
+from dataclasses import dataclass
+
+from ..errors import AgentError
+from .agent_file import ALGOS
+from .residual import RESIDUAL_INIT_DEG, RESIDUAL_SCALE, as_base, check_scale
+
+DEFAULT_KWARGS = {
+    # A rollout of 512 steps x 8 copies (41 s of flight), a 1 s horizon (gamma 0.99 at 100 Hz),
+    # an initial action noise of std 0.37 stick (log std -1) rather than SB3's 1.
+    "ppo": {"n_steps": 512, "batch_size": 256, "n_epochs": 10, "learning_rate": 3e-4, "gamma": 0.99,
+            "gae_lambda": 0.95, "clip_range": 0.2, "ent_coef": 0.0,
+            "policy_kwargs": {"net_arch": [64, 64], "log_std_init": -1.0}},
+    # One gradient step per vector step (8 transitions); small networks for a 12-dimensional state.
+    "sac": {"buffer_size": 200_000, "learning_starts": 2_000, "batch_size": 256, "learning_rate": 3e-4,
+            "gamma": 0.99, "tau": 0.005, "train_freq": 1, "gradient_steps": 1,
+            "policy_kwargs": {"net_arch": [64, 64]}},
+}
+"""Hyperparameters :func:`train_agent` starts from; ``algo_kwargs`` override them (``policy_kwargs`` merged)."""
+
+INIT_DEG = 5.0
+"""Default initial roll/pitch range [deg] and rate range [deg/s] of episodes without a residual (the env's)."""
+
+
+def _check_count(value, name, minimum=1):
+    whole = isinstance(value, numbers.Integral) or (isinstance(value, float) and value.is_integer())
+    if isinstance(value, bool) or not whole or value < minimum:
+        raise AgentError(f"{name} must be a whole number >= {minimum}, got {value!r}")
+    return int(value)
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Settings of one PPO or SAC training run.
+
+    Parameters
+    ----------
+    algo : {"ppo", "sac"}
+        The algorithm.
+    timesteps : int
+        Environment steps to train for, summed over the copies [steps], >= 1.
+    seed : int
+        Seeds Python, numpy and torch, the network, the environments (copy ``i``
+        gets ``seed + i``) and the draw of gust windows.
+    n_envs : int
+        Environment copies stepped as one batch, >= 1.
+    episode_seconds : float
+        Episode length [s].
+    task : str or heli_env.tasks.TaskConfig
+        Environment task ("hold", "track", "rate").
+    init_angle_deg : float, optional
+        Initial roll/pitch range of training and evaluation episodes [deg], in
+        [0, 90). Default 5 (the env's), 0.5 with ``residual``.
+    init_rate_deg : float, optional
+        Initial rate range [deg/s], in [0, 90). Default as ``init_angle_deg``.
+    train_traces, eval_traces : None, str, or sequence of int / TraceSegment
+        Gust segments of training episodes and of evaluations. Default: the
+        training and held-out sides of the split.
+    held_out_fraction : float
+        Fraction of the library's traces held out, in (0, 1) (:func:`controllers.trace_split.split_traces`).
+    split_seed : int
+        Seed of the held-out choice.
+    eval_freq : int
+        Timesteps between held-out evaluations [steps], >= 0 (0: none).
+    eval_episodes : int
+        Held-out episodes per evaluation (fixed windows, the same at every evaluation), >= 1.
+    checkpoint_freq : int
+        Timesteps between checkpoints [steps], >= 0 (0: none besides the one an interrupt writes).
+    max_seconds : float, optional
+        Wall-time budget of training [s], > 0; training stops at whichever of
+        ``timesteps`` and the budget comes first.
+    algo_kwargs : dict, optional
+        Overrides of :data:`DEFAULT_KWARGS` (``policy_kwargs`` merged key by key).
+    normalize_reward : bool, optional
+        Divide training rewards by a running estimate of the discounted return's
+        standard deviation (SB3 ``VecNormalize(norm_obs=False)``). Default: True for PPO,
+        whose value function otherwise chases returns of -1e2 to -1e5 (a spinning
+        yaw costs 324 per step), False for SAC. Observations are never normalised
+        (the policy scales them itself), so the saved agent needs no statistics.
+    torch_threads : int, optional
+        torch threads during training (restored after), >= 1; None leaves torch's
+        setting. One is fastest for these small networks: on 2 cores shared with
+        other work, two threads ran PPO 20 times slower than one (thread
+        contention), and a fixed count keeps results reproducible.
+    residual : PDController or path of a PD controller JSON, optional
+        Train a residual on this PD instead of a whole policy
+        (:mod:`controllers.rl.residual`): the env receives
+        ``clip(PD(obs) + residual_scale * action, -1, 1)``. Unless given, the task's
+        reward scales, the observation scales (``policy_kwargs``'
+        ``features_extractor_kwargs``) and the initial ranges follow the PD's own
+        error level on the training gusts. A path is read here: the attribute is
+        the :class:`~controllers.pd.PDController`.
+    residual_scale : float
+        Bound of the residual [stick], in (0, 2]; checked only with ``residual``.
+
+    Raises
+    ------
+    AgentError
+        (a ValueError) Unknown algorithm, bad counts or time budget, initial ranges
+        outside [0, 90), or a bad residual base or bound.
+    FileNotFoundError
+        ``residual`` names no file.
+    """
+
+    algo: str = "ppo"
+    timesteps: int = 200_000
+    seed: int = 0
+    n_envs: int = 8
+    episode_seconds: float = 30.0
+    task: object = "hold"
+    init_angle_deg: float | None = None
+    init_rate_deg: float | None = None
+    train_traces: object = None
+    eval_traces: object = None
+    held_out_fraction: float = 0.25
+    split_seed: int = 0
+    eval_freq: int = 50_000
+    eval_episodes: int = 4
+    checkpoint_freq: int = 100_000
+    max_seconds: float | None = None
+    algo_kwargs: dict | None = None
+    normalize_reward: bool | None = None
+    torch_threads: int | None = 1
+    residual: object = None
+    residual_scale: float = RESIDUAL_SCALE
+
+    def __post_init__(self):
+        if self.algo not in ALGOS:
+            raise AgentError(f"algo must be one of {ALGOS}, got {self.algo!r}")
+        for name, minimum in (("timesteps", 1), ("n_envs", 1), ("eval_freq", 0), ("checkpoint_freq", 0),
+                              ("eval_episodes", 1)):
+            object.__setattr__(self, name, _check_count(getattr(self, name), name, minimum))
+        if self.torch_threads is not None:
+            object.__setattr__(self, "torch_threads", _check_count(self.torch_threads, "torch_threads"))
+        if self.max_seconds is not None and not (self.max_seconds > 0 and math.isfinite(self.max_seconds)):
+            raise AgentError(f"max_seconds must be a positive number of seconds, got {self.max_seconds!r}")
+        if self.residual is not None:
+            object.__setattr__(self, "residual", as_base(self.residual))
+            object.__setattr__(self, "residual_scale", check_scale(self.residual_scale))
+        init = self.init_ranges
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v < 90 for v in init):
+            raise AgentError(f"init_angle_deg and init_rate_deg must be numbers in [0, 90), got {init!r}")
+
+    @property
+    def init_ranges(self) -> tuple:
+        """(roll/pitch range [deg], rate range [deg/s]) of the episodes' starts, defaults filled in."""
+        default = RESIDUAL_INIT_DEG if self.residual is not None else INIT_DEG
+        return tuple(default if v is None else v for v in (self.init_angle_deg, self.init_rate_deg))
+
+    @property
+    def reward_normalized(self) -> bool:
+        """Whether training rewards are normalised (``normalize_reward``, its default filled in)."""
+        return self.algo == "ppo" if self.normalize_reward is None else bool(self.normalize_reward)
+
+    def hyperparameters(self) -> dict:
+        """The algorithm's :data:`DEFAULT_KWARGS` with ``algo_kwargs`` over them (``policy_kwargs`` merged); a copy."""
+        kwargs = {k: (dict(v) if isinstance(v, dict) else v) for k, v in DEFAULT_KWARGS[self.algo].items()}
+        for k, v in (self.algo_kwargs or {}).items():
+            kwargs[k] = {**kwargs.get(k, {}), **v} if k == "policy_kwargs" else v
+        return kwargs
+
+
+def make_config(config: TrainConfig | None = None, algo: str | None = None, timesteps: int | None = None,
+                **settings) -> TrainConfig:
+    """``config`` (default ``TrainConfig()``) with the given fields replaced and checked again.
+
+    ``algo`` and ``timesteps`` left None keep the config's (they are the
+    positional arguments of :func:`controllers.rl.train_agent`).
+
+    Raises
+    ------
+    TypeError
+        ``config`` is not a TrainConfig, or a keyword is not one of its fields.
+    AgentError
+        A bad setting (:class:`TrainConfig`).
+    """
+    if config is not None and not isinstance(config, TrainConfig):
+        raise TypeError(f"config must be a TrainConfig, got {type(config).__name__}")
+    fields = {f.name for f in dataclasses.fields(TrainConfig)}
+    unknown = sorted(set(settings) - fields)
+    if unknown:
+        raise TypeError(f"unknown training settings {', '.join(unknown)}; expected fields of TrainConfig "
+                        f"({', '.join(sorted(fields))})")
+    settings.update({k: v for k, v in (("algo", algo), ("timesteps", timesteps)) if v is not None})
+    if config is None:
+        return TrainConfig(**settings)
+    return dataclasses.replace(config, **settings) if settings else config
