@@ -22,8 +22,9 @@ directory written by ``heli identify``:
    count from the library's record of the source flights' durations; equal counts
    when unknown). The residual-based standard errors of the fit are never used:
    they are 4-6 times too small (see :mod:`identification.bootstrap`).
-4. **Drift and flags.** Per parameter Δ = new − old; it is flagged when
-   ``|Δ| > z·sqrt(se_old² + se_new²)`` (and ``|Δ| >= min_relative·|old|``), with
+4. **Drift and flags** (:mod:`identification.parameter_drift`). Per parameter
+   Δ = new − old; it is flagged when ``|Δ| > z·sqrt(se_old² + se_new²)`` (and
+   ``|Δ| >= min_relative·|old|``), with
    ``z = Φ⁻¹(1 − α/(2m))`` for the ``m`` parameters compared (Bonferroni: a false
    flag anywhere in the table has probability about α when nothing changed).
 5. **The refreshed model.** ``fit="auto"`` pools the previous and the new flights
@@ -40,27 +41,29 @@ directory written by ``heli identify``:
 6. **Provenance.** ``model.json`` gets a ``"refresh"`` entry (previous model's
    SHA-256 and history file, its sources, the new sources, the fit decision, the
    flags and the written model's bootstrap standard errors, which the next refresh
-   uses when these flights are gone); ``refresh.json`` and ``refresh.md`` hold the
-   drift table.
+   uses when these flights are gone); ``refresh.json`` and ``refresh.md``
+   (:mod:`identification.refresh_report`) hold the drift table.
 """
 
 from __future__ import annotations
 
 import datetime as _dt
 import json
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from .bootstrap import DEFAULT_REPLICATES, BootstrapResult, interval_bootstrap
 from model_store import ModelDir
 from model_store.model_file import MODEL_FILENAME, load_model
 
+from .bootstrap import DEFAULT_REPLICATES, BootstrapResult, interval_bootstrap
 from .errors import LibraryError, ModelFileError
 from .files import jsonable, keep_copy, sha256_of
-from .terms import AXES, TERMS
+from .parameter_drift import ParameterDrift  # noqa: F401  (re-exported: it lived here)
+from .parameter_drift import compared_parameters, critical_z, drift_table, fisher_result, previous_std_errors
+from .refresh_report import refresh_markdown
+from .terms import AXES
 
 REFRESH_SCHEMA = "heli-env/refresh"
 REFRESH_SCHEMA_VERSION = 1
@@ -80,53 +83,6 @@ class DuplicateFlightError(LibraryError):
 
 
 # ------------------------------------------------------------------ results
-@dataclass(frozen=True)
-class ParameterDrift:
-    """One row of the drift table.
-
-    Attributes
-    ----------
-    name, unit : str
-        Parameter (the paper's name) and its unit.
-    old, new : float
-        Value in the current model and fitted on the new flights alone.
-    delta : float
-        ``new - old``.
-    relative : float
-        ``delta / |old|`` (NaN when old is 0).
-    se_old, se_new : float
-        Standard errors [parameter unit]; ``se_old_source`` says where the first came from.
-    se_old_source : str
-        ``"bootstrap"``, ``"recorded bootstrap"`` or ``"scaled from the new flights"``.
-    ci_old, ci_new : tuple of float
-        Percentile bootstrap intervals (``ci_old`` NaN unless the old flights were bootstrapped).
-    z : float
-        ``|delta| / sqrt(se_old² + se_new²)``.
-    threshold : float
-        Critical ``z`` of the flag.
-    flagged : bool
-        Significant change (see :func:`refresh_model`).
-    """
-
-    name: str
-    unit: str
-    old: float
-    new: float
-    delta: float
-    relative: float
-    se_old: float
-    se_new: float
-    se_old_source: str
-    ci_old: tuple
-    ci_new: tuple
-    z: float
-    threshold: float
-    flagged: bool
-
-    def to_dict(self) -> dict:
-        return jsonable(self.__dict__)
-
-
 @dataclass
 class RefreshResult:
     """What :func:`refresh_model` found and wrote.
@@ -185,44 +141,6 @@ def estimator_of(doc: dict, where: str = "model.json") -> str:
         raise RefreshError(f"{where}: identified by {method!r}; refresh re-identifies with the maximum-likelihood "
                            "or the integral method only")
     return est
-
-
-def fisher_result(identifier, names) -> BootstrapResult:
-    """The maximum-likelihood fit's uncertainty in the drift table's form: Fisher standard errors, 95 % normal intervals."""
-    from scipy import stats
-
-    est, se = {}, {}
-    for fit in identifier.axes_.values():
-        est.update(fit.params)
-        se.update(fit.std_errors)
-    z = float(stats.norm.ppf(0.975))
-    n = sum(int(round(f.duration)) for f in identifier.flights_)
-    return FisherResult(tuple(names), {k: est[k] for k in names}, np.empty((0, len(names))),
-                        {k: se[k] for k in names}, {k: (est[k] - z * se[k], est[k] + z * se[k]) for k in names},
-                        0.95, 0, 0, n, 0, None, tuple(identifier.params_.taus))
-
-
-class FisherResult(BootstrapResult):
-    """Uncertainty from the Fisher information of a maximum-likelihood fit (no replicates)."""
-
-    def to_dict(self) -> dict:
-        out = super().to_dict()
-        out["method"] = "Fisher information of the innovations (maximum likelihood)"
-        for k in ("n_replicates", "n_failed", "block_intervals", "seed"):
-            out.pop(k)
-        out["n_seconds"] = out.pop("n_intervals")
-        return out
-
-
-def compared_parameters(identifier, estimator: str) -> list[str]:
-    """Parameters the drift table compares: every fitted one, less the offsets kd of a maximum-likelihood fit.
-
-    With a wind state in the model the offsets are each flight's trim plus that day's mean wind
-    (:attr:`identification.ml_estimator.MLAxisFit.flight_offsets`): they change from flight to flight
-    without the aircraft changing, so they are reported per flight and not flagged.
-    """
-    names = [k for fit in identifier.axes_.values() for k in fit.params]
-    return [k for k in names if not (estimator == "ml" and TERMS[k].effect == "offset")]
 
 
 def identifier_settings(doc: dict, where: str = "model.json") -> tuple[str, dict]:
@@ -339,85 +257,15 @@ def _keep_in_history(root: Path) -> list[Path]:
     return [keep_copy(path) for path in files if path.is_file()]
 
 
-def critical_z(alpha: float, m: int) -> float:
-    """Two-sided Bonferroni critical value ``Φ⁻¹(1 − α/(2m))``."""
-    from scipy import stats
-
-    return float(stats.norm.ppf(1.0 - alpha / (2.0 * max(int(m), 1))))
-
-
-def drift_table(old_values: dict, new: BootstrapResult, se_old: dict, se_old_source: str, ci_old: dict | None,
-                z_crit: float, min_relative: float = 0.0) -> list[ParameterDrift]:
-    """Rows of the drift table for the parameters ``new`` bootstrapped (vectorised over parameters)."""
-    names = list(new.names)
-    old = np.array([float(old_values[k]) for k in names])
-    est = np.array([float(new.estimate[k]) for k in names])
-    s_old = np.array([float(se_old[k]) for k in names])
-    s_new = np.array([float(new.std_errors[k]) for k in names])
-    delta = est - old
-    with np.errstate(divide="ignore", invalid="ignore"):
-        rel = np.where(old != 0, delta / np.abs(old), np.nan)
-        se = np.hypot(s_old, s_new)
-        z = np.where(se > 0, np.abs(delta) / se, np.where(delta != 0, np.inf, 0.0))
-    flagged = (z > z_crit) & (np.abs(delta) >= min_relative * np.abs(old))
-    nan2 = (float("nan"), float("nan"))
-    return [
-        ParameterDrift(k, TERMS[k].unit, float(old[i]), float(est[i]), float(delta[i]), float(rel[i]),
-                       float(s_old[i]), float(s_new[i]), se_old_source,
-                       tuple(ci_old[k]) if ci_old else nan2, tuple(new.ci[k]), float(z[i]), z_crit,
-                       bool(flagged[i]))
-        for i, k in enumerate(names)
-    ]
-
-
-def _previous_se(doc: dict, names, new: BootstrapResult, library_entries, old_sources):
-    """Standard errors of the current model when its flights are not at hand (module docstring, step 3)."""
-    record = (doc.get("refresh") or {}).get("bootstrap") or {}
-    recorded = record.get("std_errors") or {}
-    if all(isinstance(recorded.get(k), (int, float)) for k in names):
-        label = "recorded Fisher information" if str(record.get("method", "")).startswith("Fisher") else \
-            "recorded bootstrap"
-        return {k: float(recorded[k]) for k in names}, label, None
-    if estimator_of(doc) == "ml":  # the fit's own Fisher errors, recorded by heli identify
-        fisher = {}
-        for axis in ((doc.get("fit_statistics") or {}).get("axes") or {}).values():
-            fisher.update(axis.get("std_errors") or {})
-        if all(isinstance(fisher.get(k), (int, float)) for k in names):
-            return {k: float(fisher[k]) for k in names}, "Fisher information recorded in model.json", None
-    durations = {}
-    for e in library_entries:
-        sha = (e.get("source") or {}).get("sha256")
-        if sha and e.get("duration_s"):
-            durations[sha] = float(e["duration_s"])
-    shas = [s.get("sha256") for s in old_sources]
-    interval = float(((doc.get("identification") or {}).get("interval")) or 1.0)
-    if shas and all(s in durations for s in shas):
-        n_old = sum(math.floor(durations[s] / interval + 1e-9) for s in shas)
-        ratio = math.sqrt(new.n_intervals / max(n_old, 1))
-        note = (f"previous standard errors scaled from the new flights' bootstrap by sqrt({new.n_intervals}/{n_old}) "
-                "intervals (previous flights not at hand; their durations from the disturbance library)")
-    else:
-        ratio = 1.0
-        note = ("previous standard errors taken equal to the new flights' bootstrap (previous flights not at hand "
-                "and their durations unknown)")
-    return {k: float(new.std_errors[k]) * ratio for k in names}, "scaled from the new flights", note
-
-
 # ------------------------------------------------------------------ the refresh
-def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "auto",
-                  n_replicates: int = DEFAULT_REPLICATES, block: int = 1, seed: int = 0, alpha: float = 0.05,
-                  min_relative: float = 0.0, plots: bool = True, progress: bool | None = None,
-                  backend=None, wait: bool = True) -> RefreshResult:
-    """Refresh the model in ``model_dir`` with new flights (module docstring).
+@dataclass(frozen=True)
+class RefreshSettings:
+    """How :func:`refresh_model` judges the drift and refits the model (module docstring).
 
-    Parameters
+    Attributes
     ----------
-    model_dir : str or Path
-        A directory written by ``heli identify`` (``model.json``, optionally ``disturbances/``).
-    new_flights : sequence of path
-        Canonical flight logs not yet in the model.
     previous_flights : sequence of path
-        Where the current model's source flights are, if not in ``model_dir`` or beside the new flights.
+        Where the current model's source flights are, if not in the model directory or beside the new flights.
     fit : {"auto", "pooled", "new"}
         Which flights the refreshed model is fitted on (module docstring, step 5).
     n_replicates : int
@@ -437,11 +285,54 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
     backend : None, {"local", "ray"} or identification.backends.Backend
         Where the new flights' winds are identified, one task per flight
         (:func:`identification.report.identify_and_report`); None: in this process.
+
+    Raises
+    ------
+    RefreshError
+        ``fit`` not one of :data:`FIT_CHOICES`, ``alpha`` outside (0, 1) or a negative ``min_relative``.
+    """
+
+    previous_flights: tuple = ()
+    fit: str = "auto"
+    n_replicates: int = DEFAULT_REPLICATES
+    block: int = 1
+    seed: int = 0
+    alpha: float = 0.05
+    min_relative: float = 0.0
+    plots: bool = True
+    progress: bool | None = None
+    backend: object = None
+
+    def __post_init__(self):
+        if self.fit not in FIT_CHOICES:
+            raise RefreshError(f"fit must be one of {FIT_CHOICES}, got {self.fit!r}")
+        if not 0.0 < self.alpha < 1.0:
+            raise RefreshError(f"alpha must lie in (0, 1), got {self.alpha!r}")
+        if not self.min_relative >= 0.0:
+            raise RefreshError(f"min_relative must be >= 0, got {self.min_relative!r}")
+
+
+def refresh_model(model_dir, new_flights, *, settings: RefreshSettings | None = None, wait: bool = True,
+                  **options) -> RefreshResult:
+    """Refresh the model in ``model_dir`` with new flights (module docstring).
+
+    Parameters
+    ----------
+    model_dir : str or Path
+        A directory written by ``heli identify`` (``model.json``, optionally ``disturbances/``).
+    new_flights : sequence of path
+        Canonical flight logs not yet in the model.
+    settings : RefreshSettings, optional
+        How the drift is judged and the model refitted; default :class:`RefreshSettings`'s.
     wait : bool
         Wait for another command writing ``model_dir`` (default, saying so), or raise
         :class:`~identification.errors.ModelDirBusyError`. The folder is locked from reading the current model
         to writing the refreshed one, and everything is written as one transaction
         (:class:`model_store.ModelDir`): after a crash it holds the model before or after the refresh.
+    **options
+        Fields of :class:`RefreshSettings` (``previous_flights``, ``fit``, ``n_replicates``, ``block``,
+        ``seed``, ``alpha``, ``min_relative``, ``plots``, ``progress``, ``backend``), replacing those of
+        ``settings``.
 
     Raises
     ------
@@ -459,12 +350,7 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
     FlightLogError, IdentifiabilityError
         A new flight cannot be read or identified.
     """
-    if fit not in FIT_CHOICES:
-        raise RefreshError(f"fit must be one of {FIT_CHOICES}, got {fit!r}")
-    if not 0.0 < alpha < 1.0:
-        raise RefreshError(f"alpha must lie in (0, 1), got {alpha!r}")
-    if not min_relative >= 0.0:
-        raise RefreshError(f"min_relative must be >= 0, got {min_relative!r}")
+    settings = RefreshSettings(**options) if settings is None else replace(settings, **options)
     new_paths = [Path(p) for p in new_flights]
     if not new_paths:
         raise RefreshError("expected at least one new flight, got none")
@@ -475,257 +361,212 @@ def refresh_model(model_dir, new_flights, *, previous_flights=(), fit: str = "au
     for p in new_paths:
         if not p.is_file():
             raise FileNotFoundError(f"new flight {str(p)!r} does not exist")
-    options = dict(previous_flights=previous_flights, fit=fit, n_replicates=n_replicates, block=block, seed=seed,
-                   alpha=alpha, min_relative=min_relative, plots=plots, progress=progress, backend=backend)
     with ModelDir(root).transaction(wait=wait, what="refresh") as tx:
-        result = _refresh(tx, new_paths, **options)
+        result = _Refresh(tx, new_paths, settings).run()
     if result.run.figures:
         result.paths.update(result.run.draw_figures())
     return result
 
 
-def _refresh(tx, new_paths, *, previous_flights, fit, n_replicates, block, seed, alpha, min_relative, plots, progress,
-             backend) -> RefreshResult:
-    """The refresh of :func:`refresh_model` inside its transaction ``tx``: read, compute, stage the files."""
+def _read_flights(paths, desc: str, show: bool) -> list:
+    """Read ``paths`` with a bar only on a terminal (``disable=None``: tqdm's own check; off one, a failing
+    read's error would land on the bar's line), closed on an error too."""
     from tqdm import tqdm
 
     from .io import read_flight
-    from .report import identify_and_report, make_identifier, source_entry
 
-    root = tx.root
-    model_path = root / MODEL_FILENAME
-    if tx.base.params is None:
-        load_model(model_path)  # raises the reader's error
-    old_params, doc = tx.base.params, tx.base.document
-    structure, kw = identifier_settings(doc, str(model_path))
-    old_sources = list((doc.get("provenance") or {}).get("sources") or [])
-    entries, previous_version = tx.base.entries, tx.base.library_version
+    with tqdm(paths, desc=desc, unit="flight", disable=None if show else True) as bar:
+        return [read_flight(p) for p in bar]
 
-    show = (len(new_paths) > 1) if progress is None else progress
-    digests = [sha256_of(p) for p in new_paths]
-    _check_new_flights(new_paths, digests, old_sources, entries)
-    # the bar only on a terminal (disable=None: tqdm's own check; off one a failing read's error would land on
-    # the bar's line), closed on an error too
-    with tqdm(new_paths, desc="reading new flights", unit="flight", disable=None if show else True) as bar:
-        flights = [read_flight(p) for p in bar]
 
-    # -- uncertainty: the new flights alone, and the previous flights when at hand
-    seeds = np.random.SeedSequence(seed).spawn(3)
-    estimator = estimator_of(doc, str(model_path))
+@dataclass
+class _Previous:
+    """The current model's side of the drift table: its source flights and their uncertainty (step 3)."""
 
-    def identifier():
+    found: list
+    missing: list
+    flights: list
+    bootstrap: BootstrapResult | None
+    std_errors: dict
+    source: str
+    ci: dict | None
+    notes: list
+
+
+class _Refresh:
+    """One refresh of :func:`refresh_model` inside its transaction ``tx``: read, compute, stage the files.
+
+    The model directory is read once here; :meth:`run` takes the steps of the module docstring.
+    """
+
+    def __init__(self, tx, new_paths, settings: RefreshSettings):
+        self.tx, self.new_paths, self.settings = tx, new_paths, settings
+        self.model_path = tx.root / MODEL_FILENAME
+        if tx.base.params is None:
+            load_model(self.model_path)  # raises the reader's error
+        self.doc = tx.base.document
+        self.structure, self.kw = identifier_settings(self.doc, str(self.model_path))
+        self.estimator = estimator_of(self.doc, str(self.model_path))
+        self.old_sources = list((self.doc.get("provenance") or {}).get("sources") or [])
+        self.show = (len(new_paths) > 1) if settings.progress is None else settings.progress
+        self.seeds = np.random.SeedSequence(settings.seed).spawn(3)
+
+    def identifier(self):
+        """An unfitted identifier of the model's method, structure and settings."""
+        from .report import make_identifier
+
         # the drift table compares the same parameters on both sides: no term selection there
-        return make_identifier(estimator, structure, **{k: v for k, v in kw.items() if k != "select_terms"})
+        return make_identifier(self.estimator, self.structure,
+                               **{k: v for k, v in self.kw.items() if k != "select_terms"})
 
-    def uncertainty(fitted, fit_flights, seq, desc):
-        if estimator == "ml":
-            return fisher_result(fitted, compared_parameters(fitted, estimator))
-        return interval_bootstrap(fit_flights, fitted, n_replicates, block, seq, progress=bool(show), desc=desc)
+    def uncertainty(self, fitted, flights, seq, desc: str) -> BootstrapResult:
+        """Standard errors of a fit: Fisher information (maximum likelihood) or the interval bootstrap."""
+        if self.estimator == "ml":
+            return fisher_result(fitted, compared_parameters(fitted, self.estimator))
+        s = self.settings
+        return interval_bootstrap(flights, fitted, s.n_replicates, s.block, seq, progress=bool(self.show), desc=desc)
 
-    new_ident = identifier().fit(flights)
-    boot_new = uncertainty(new_ident, flights, seeds[0], "bootstrap (new flights)")
-    names = list(boot_new.names)
-    search = [root] + list(dict.fromkeys(p.resolve().parent for p in new_paths))
-    found, missing = find_source_flights(old_sources, search, previous_flights)
-    have_old = bool(old_sources) and not missing
-    notes = []
-    boot_old, old_flights = None, []
-    if have_old:
-        old_flights = [read_flight(s["path"]) for s in tqdm(found, desc="reading previous flights", unit="flight",
-                                                            disable=None if show else True)]
-        old_ident = identifier().fit(old_flights)
-        boot_old = uncertainty(old_ident, old_flights, seeds[1], "bootstrap (previous flights)")
+    def run(self) -> RefreshResult:
+        """Steps 1-6 of the module docstring; the files are staged in the transaction."""
+        s = self.settings
+        digests = [sha256_of(p) for p in self.new_paths]
+        _check_new_flights(self.new_paths, digests, self.old_sources, self.tx.base.entries)
+        flights = _read_flights(self.new_paths, "reading new flights", self.show)
+        new_ident = self.identifier().fit(flights)
+        boot_new = self.uncertainty(new_ident, flights, self.seeds[0], "bootstrap (new flights)")
+        names = list(boot_new.names)
+        previous = self.previous(names, boot_new)
+        z_crit = critical_z(s.alpha, len(names))
+        drift = drift_table(self.tx.base.params.values(), boot_new, previous.std_errors, previous.source,
+                            previous.ci, z_crit, s.min_relative)
+        flagged = [r.name for r in drift if r.flagged]
+        mode, reason = self.choose_fit(previous, flagged)
+        fit_flights = flights + (previous.flights if mode == "pooled" else [])
+        boot_model = boot_new
+        if mode == "pooled":
+            pooled = self.identifier() if self.estimator == "integral" else self.identifier().fit(fit_flights)
+            boot_model = self.uncertainty(pooled, fit_flights, self.seeds[2], "bootstrap (refreshed model)")
+        criterion = {"alpha": s.alpha, "z": z_crit, "n_parameters": len(names), "min_relative": s.min_relative,
+                     "rule": "|new - old| > z * sqrt(se_old^2 + se_new^2), z = Phi^-1(1 - alpha / (2 m))"
+                     + (" and |new - old| >= min_relative * |old|" if s.min_relative > 0 else "")}
+        result = RefreshResult(drift, criterion, mode, reason, {"found": previous.found, "missing": previous.missing},
+                               boot_new, previous.bootstrap, boot_model, None, None, {}, previous.notes)
+        self.stage(result, fit_flights, digests, flights, new_ident)
+        return result
+
+    def previous(self, names, boot_new: BootstrapResult) -> _Previous:
+        """The current model's uncertainty: its flights refitted and bootstrapped when all are at hand, else
+        what ``model.json`` recorded or the new flights' scaled (module docstring, step 3)."""
+        search = [self.tx.root] + list(dict.fromkeys(p.resolve().parent for p in self.new_paths))
+        found, missing = find_source_flights(self.old_sources, search, self.settings.previous_flights)
+        if not (self.old_sources and not missing):
+            se_old, se_source, note = previous_std_errors(self.doc, names, boot_new, self.tx.base.entries,
+                                                          self.old_sources, self.estimator)
+            return _Previous(found, missing, [], None, se_old, se_source, None, [note] if note else [])
+        old_flights = _read_flights([f["path"] for f in found], "reading previous flights", self.show)
+        old_ident = self.identifier().fit(old_flights)
+        boot_old = self.uncertainty(old_ident, old_flights, self.seeds[1], "bootstrap (previous flights)")
+        old_params = self.tx.base.params
         diff = max((abs(old_ident.params_.get(k) - old_params.get(k)) / max(abs(old_params.get(k)), 1e-12)
                     for k in names), default=0.0)
+        notes = []
         if diff > REPRODUCE_RTOL:
             notes.append(f"refitting the previous flights gives parameters up to {diff:.2g} (relative) away from "
                          "model.json; the table compares against model.json and takes its uncertainty from the refit")
-        se_old, se_source, ci_old = (dict(boot_old.std_errors), "bootstrap" if estimator == "integral" else "Fisher",
-                                     dict(boot_old.ci))
-    else:
-        se_old, se_source, note = _previous_se(doc, names, boot_new, entries, old_sources)
-        ci_old = None
-        if note:
-            notes.append(note)
-    z_crit = critical_z(alpha, len(names))
-    old_values = old_params.values()
-    drift = drift_table(old_values, boot_new, se_old, se_source, ci_old, z_crit, min_relative)
-    flagged = [r.name for r in drift if r.flagged]
+        return _Previous(found, missing, old_flights, boot_old, dict(boot_old.std_errors),
+                         "bootstrap" if self.estimator == "integral" else "Fisher", dict(boot_old.ci), notes)
 
-    # -- which flights the refreshed model is fitted on
-    if fit == "pooled" and not have_old:
-        raise RefreshError(
-            "fit='pooled' needs the previous model's flights; not found: "
-            + ", ".join(f"{m.get('file')} (SHA-256 {str(m.get('sha256'))[:12]}…)" for m in missing)
-            + (" (model.json records no sources)" if not old_sources else "")
-            + "; pass them with --previous-flights or refresh with --fit new"
+    def choose_fit(self, previous: _Previous, flagged) -> tuple[str, str]:
+        """Which flights the refreshed model is fitted on, and why (module docstring, step 5)."""
+        fit, missing = self.settings.fit, previous.missing
+        have_old = bool(self.old_sources) and not missing
+        if fit == "pooled" and not have_old:
+            raise RefreshError(
+                "fit='pooled' needs the previous model's flights; not found: "
+                + ", ".join(f"{m.get('file')} (SHA-256 {str(m.get('sha256'))[:12]}…)" for m in missing)
+                + (" (model.json records no sources)" if not self.old_sources else "")
+                + "; pass them with --previous-flights or refresh with --fit new"
+            )
+        if fit == "pooled":
+            return "pooled", "pooled on request (--fit pooled)"
+        if fit == "new":
+            return "new", "new flights alone on request (--fit new)"
+        if not have_old:
+            return "new", ("new flights alone: the previous flights are not at hand ("
+                           + ", ".join(str(m.get("file")) for m in missing) + " missing)"
+                           if self.old_sources else "new flights alone: model.json records no source flights")
+        if flagged:
+            return "new", ("new flights alone: " + ", ".join(flagged) + " changed significantly, so the previous "
+                           "flights no longer describe this aircraft")
+        return "pooled", "pooled previous and new flights: no parameter changed significantly"
+
+    def stage(self, result: RefreshResult, fit_flights, digests, flights, new_ident) -> None:
+        """Step 6: keep the files a refresh replaces in ``history/``, identify and report the refreshed model
+        with the new flights' winds as a library version (:func:`identification.report.identify_and_report`),
+        and write ``refresh.json`` and ``refresh.md``; all is committed when the transaction ends. Sets
+        ``result.run``, ``result.library_version`` and ``result.paths``."""
+        from .report import identify_and_report, source_entry
+
+        tx, s = self.tx, self.settings
+        pooled = result.fit == "pooled"
+        kept = _keep_in_history(tx.root)
+        old_digest = tx.base.model_sha256
+        new_sources = [source_entry(p, sha) for p, sha in zip(self.new_paths, digests)]
+        created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+        record = {
+            "created": created,
+            "previous_model": {"sha256": old_digest, "kept_as": f"history/model-{old_digest[:12]}.json",
+                               "sources": self.old_sources},
+            "new_sources": new_sources,
+            "fit": result.fit, "reason": result.reason, "flagged": result.flagged,
+            "drift_file": "refresh.json",
+            "bootstrap": result.bootstrap_model.to_dict(),
+        }
+        fit_paths = [str(p) for p in self.new_paths] + (
+            [f["path"] for f in result.previous_flights["found"]] if pooled else [])
+        run = identify_and_report(
+            fit_flights, tx.root, coupled=self.structure == "coupled",
+            sources=new_sources + (self.old_sources if pooled else []), identifier_kwargs=self.kw,
+            flight_paths=fit_paths, plots=s.plots, disturbances=True, progress=self.show,
+            wind_flights=range(len(flights)), model_extra={"refresh": record}, backend=s.backend,
+            method=self.estimator, transaction=tx, draw_figures=False,
         )
-    if fit == "pooled":
-        mode, reason = "pooled", "pooled on request (--fit pooled)"
-    elif fit == "new":
-        mode, reason = "new", "new flights alone on request (--fit new)"
-    elif not have_old:
-        mode, reason = "new", ("new flights alone: the previous flights are not at hand ("
-                               + ", ".join(str(m.get("file")) for m in missing) + " missing)"
-                               if old_sources else "new flights alone: model.json records no source flights")
-    elif flagged:
-        mode, reason = "new", ("new flights alone: " + ", ".join(flagged) + " changed significantly, so the previous "
-                               "flights no longer describe this aircraft")
-    else:
-        mode, reason = "pooled", "pooled previous and new flights: no parameter changed significantly"
-    fit_flights = flights + (old_flights if mode == "pooled" else [])
-    fit_paths = [str(p) for p in new_paths] + ([s["path"] for s in found] if mode == "pooled" else [])
-    boot_model = boot_new
-    if mode == "pooled":
-        pooled = identifier() if estimator == "integral" else identifier().fit(fit_flights)
-        boot_model = uncertainty(pooled, fit_flights, seeds[2], "bootstrap (refreshed model)")
+        result.run, result.library_version = run, run.library_version
+        doc_out = self.document(result, record, flights, new_ident, kept)
+        paths = dict(run.paths)
+        paths["refresh_json"] = tx.write_report("refresh.json",
+                                                json.dumps(jsonable(doc_out), indent=2, allow_nan=False) + "\n")
+        paths["refresh_md"] = tx.write_report("refresh.md", refresh_markdown(result, doc_out))
+        result.paths = paths
 
-    # -- stage: the files a refresh replaces are kept in history/, the model + report + library version
-    # (identify_and_report) and the drift files are committed together when the transaction ends
-    kept = _keep_in_history(root)
-    old_digest = tx.base.model_sha256
-    new_sources = [source_entry(p, sha) for p, sha in zip(new_paths, digests)]
-    sources = new_sources + (old_sources if mode == "pooled" else [])
-    created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
-    record = {
-        "created": created,
-        "previous_model": {"sha256": old_digest, "kept_as": f"history/model-{old_digest[:12]}.json",
-                           "sources": old_sources},
-        "new_sources": new_sources,
-        "fit": mode, "reason": reason, "flagged": flagged,
-        "drift_file": "refresh.json",
-        "bootstrap": boot_model.to_dict(),
-    }
-    run = identify_and_report(
-        fit_flights, root, coupled=structure == "coupled", sources=sources, identifier_kwargs=kw,
-        flight_paths=fit_paths, plots=plots, disturbances=True, progress=show,
-        wind_flights=range(len(flights)), model_extra={"refresh": record}, backend=backend, method=estimator,
-        transaction=tx, draw_figures=False,
-    )
-    library_version = run.library_version
-    paths = dict(run.paths)
-    result = RefreshResult(
-        drift, {"alpha": alpha, "z": z_crit, "n_parameters": len(names), "min_relative": min_relative,
-                "rule": "|new - old| > z * sqrt(se_old^2 + se_new^2), z = Phi^-1(1 - alpha / (2 m))"
-                + (" and |new - old| >= min_relative * |old|" if min_relative > 0 else "")},
-        mode, reason, {"found": found, "missing": missing}, boot_new, boot_old, boot_model, run, library_version,
-        paths, notes,
-    )
-    taus = {"previous": dict(zip(AXES, old_params.taus)), "new flights": dict(zip(AXES, new_ident.params_.taus)),
-            "refreshed": dict(zip(AXES, run.params.taus))}
-    doc_out = {
-        "schema": REFRESH_SCHEMA, "schema_version": REFRESH_SCHEMA_VERSION, "created": created,
-        "model_dir": str(root), "structure": structure,
-        "previous_model": record["previous_model"],
-        "new_flights": [s | {"duration_s": f.duration} for s, f in zip(new_sources, flights)],
-        "previous_flights": {"found": found, "missing": missing},
-        "criterion": result.criterion,
-        "bootstrap_seed": seed,
-        "drift": [r.to_dict() for r in drift],
-        "flagged": flagged,
-        "servo_delay_s": taus,
-        "fit": mode, "reason": reason,
-        "refreshed_parameters": {k: run.params.get(k) for k in names},
-        "estimator": estimator,
-        "flight_offsets": ({a: {"new flights": list(f.flight_offsets)} for a, f in new_ident.axes_.items()}
-                           if estimator == "ml" else None),
-        "bootstrap": {"new": boot_new.to_dict(), "previous": boot_old.to_dict() if boot_old else None,
-                      "refreshed": boot_model.to_dict()},
-        "library": {"previous_version": previous_version, "version": library_version,
-                    "added": [p.source for p in run.disturbances]},
-        "model_sha256": tx.model_sha256,
-        "kept_in_history": [str(p.relative_to(root)) for p in kept],
-        "notes": notes,
-    }
-    paths["refresh_json"] = tx.write_report("refresh.json",
-                                            json.dumps(jsonable(doc_out), indent=2, allow_nan=False) + "\n")
-    paths["refresh_md"] = tx.write_report("refresh.md", refresh_markdown(result, doc_out))
-    result.paths = paths
-    return result
-
-
-# ------------------------------------------------------------------ report
-def _fmt(v: float, digits: int = 4) -> str:
-    return "—" if v is None or not np.isfinite(v) else f"{v:.{digits}f}"
-
-
-def refresh_markdown(result: RefreshResult, doc: dict) -> str:
-    """``refresh.md``: what was compared, the drift table, the decision and what the library gained."""
-    level = result.bootstrap_new.level
-    crit = result.criterion
-    rows = []
-    for r in result.drift:
-        rel = "—" if not np.isfinite(r.relative) else f"{100 * r.relative:+.1f}"
-        rows.append(
-            f"| {r.name} | {r.unit} | {_fmt(r.old)} | {_fmt(r.se_old)} | [{_fmt(r.ci_old[0])}, {_fmt(r.ci_old[1])}] "
-            f"| {_fmt(r.new)} | {_fmt(r.se_new)} | [{_fmt(r.ci_new[0])}, {_fmt(r.ci_new[1])}] | {r.delta:+.4f} | {rel} "
-            f"| {r.z:.2f} | {'**yes**' if r.flagged else 'no'} |"
-        )
-    b = result.bootstrap_new
-    prev = doc["previous_flights"]
-    lines = [
-        "# Model refresh",
-        "",
-        f"{doc['created']}: `{MODEL_FILENAME}` ({doc['structure']}, SHA-256 `{doc['previous_model']['sha256'][:12]}…`, "
-        f"kept as `{doc['previous_model']['kept_as']}`) refreshed with:",
-        "",
-    ]
-    lines += [f"- `{s['file']}` ({s['duration_s']:.1f} s, SHA-256 `{s['sha256'][:12]}…`)" for s in doc["new_flights"]]
-    lines += ["", "Previous flights: "
-              + (", ".join(f"`{f['file']}` found at `{f['path']}`" for f in prev["found"]) or "none found")
-              + ("; missing: " + ", ".join(f"`{m['file']}`" for m in prev["missing"]) if prev["missing"] else "")
-              + ".", ""]
-    lines += [
-        "## Parameter drift",
-        "",
-        f"Old: `{MODEL_FILENAME}` before the refresh (standard error: {result.drift[0].se_old_source if result.drift else '—'}). "
-        "New: the same structure and settings identified on the new flights alone. "
-        + (f"Standard errors and {100 * level:.0f} % percentile intervals from a moving-block bootstrap over the "
-           f"integral method's intervals ({b.n_intervals} in the new flights; {b.n_replicates} replicates, blocks "
-           f"of {b.block} interval(s), seed {doc['bootstrap_seed']}; servo delay held at the identified value)."
-           if doc.get("estimator", "integral") == "integral" else
-           "Standard errors from the Fisher information of the maximum-likelihood fit, 95 % normal intervals. "
-           "The offsets kd are not compared: with a wind state in the model they are each flight's trim plus "
-           "that day's mean wind, and differ between flights of an unchanged aircraft (per-flight values in "
-           "`refresh.json` under `flight_offsets`)."),
-        "",
-        f"Flag: |Δ| > z·√(se_old² + se_new²) with z = {crit['z']:.2f} = Φ⁻¹(1 − α/(2m)), α = {crit['alpha']:g} "
-        f"family-wise over m = {crit['n_parameters']} parameters (Bonferroni)"
-        + (f", and |Δ| ≥ {100 * crit['min_relative']:g} % of |old|" if crit["min_relative"] > 0 else "") + ".",
-        "",
-        "| Parameter | Unit | Old | se old | CI old | New flights | se new | CI new | Δ | Δ (%) | z | Flag |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
-        *rows,
-        "",
-    ]
-    taus = doc["servo_delay_s"]
-    if any(v for d in taus.values() for v in d.values()):
-        lines += ["Servo delay (s; not bootstrapped, held fixed in the replicates): "
-                  + "; ".join(f"{lab} " + ", ".join(f"{a} {v:.3f}" for a, v in d.items()) for lab, d in taus.items()),
-                  ""]
-    flagged = result.flagged
-    lines += [
-        "**Changed:** " + (", ".join(flagged) if flagged else "nothing beyond what the uncertainty explains") + ".",
-        "",
-        "## The refreshed model",
-        "",
-        f"Fitted on {'the previous and the new flights pooled' if result.fit == 'pooled' else 'the new flights alone'}"
-        f" — {result.reason}. Its parameters and validation are in `report.md`; the "
-        f"{'bootstrap' if doc.get('estimator', 'integral') == 'integral' else 'Fisher'} standard errors are "
-        f"recorded in `{MODEL_FILENAME}` under `refresh.bootstrap`.",
-        "",
-        "| Parameter | Refreshed | se |",
-        "|---|---|---|",
-        *[f"| {k} | {v:.4f} | {_fmt(result.bootstrap_model.std_errors.get(k, float('nan')))} |"
-          for k, v in doc["refreshed_parameters"].items()],
-        "",
-        "## Disturbance library",
-        "",
-        f"Each new flight's wind was identified with the refreshed model (eqs. 41-47) and appended as version "
-        f"{doc['library']['version']} (previous version {doc['library']['previous_version']}, kept). Traces already "
-        "in the library stay as they were identified (their manifest entries name the model used).",
-        "",
-    ]
-    if result.notes:
-        lines += ["## Notes", ""] + [f"- {n}" for n in result.notes] + [""]
-    return "\n".join(lines)
+    def document(self, result: RefreshResult, record: dict, flights, new_ident, kept) -> dict:
+        """``refresh.json``: the drift table with what it compared, the decision and the library's new version."""
+        tx, run = self.tx, result.run
+        old_params = tx.base.params
+        taus = {"previous": dict(zip(AXES, old_params.taus)), "new flights": dict(zip(AXES, new_ident.params_.taus)),
+                "refreshed": dict(zip(AXES, run.params.taus))}
+        return {
+            "schema": REFRESH_SCHEMA, "schema_version": REFRESH_SCHEMA_VERSION, "created": record["created"],
+            "model_dir": str(tx.root), "structure": self.structure,
+            "previous_model": record["previous_model"],
+            "new_flights": [s | {"duration_s": f.duration} for s, f in zip(record["new_sources"], flights)],
+            "previous_flights": result.previous_flights,
+            "criterion": result.criterion,
+            "bootstrap_seed": self.settings.seed,
+            "drift": [r.to_dict() for r in result.drift],
+            "flagged": result.flagged,
+            "servo_delay_s": taus,
+            "fit": result.fit, "reason": result.reason,
+            "refreshed_parameters": {k: run.params.get(k) for k in result.bootstrap_new.names},
+            "estimator": self.estimator,
+            "flight_offsets": ({a: {"new flights": list(f.flight_offsets)} for a, f in new_ident.axes_.items()}
+                               if self.estimator == "ml" else None),
+            "bootstrap": {"new": result.bootstrap_new.to_dict(),
+                          "previous": result.bootstrap_old.to_dict() if result.bootstrap_old else None,
+                          "refreshed": result.bootstrap_model.to_dict()},
+            "library": {"previous_version": tx.base.library_version, "version": run.library_version,
+                        "added": [p.source for p in run.disturbances]},
+            "model_sha256": tx.model_sha256,
+            "kept_in_history": [str(p.relative_to(tx.root)) for p in kept],
+            "notes": result.notes,
+        }
