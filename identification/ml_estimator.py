@@ -22,8 +22,9 @@ prediction errors (innovations), and the likelihood, with the noise scale
 concentrated out, is minimised over the damping and the wind model
 (``scipy.optimize.least_squares``) while the parameters that enter linearly
 (control gain, offsets, couplings, added terms) are solved exactly at every
-step (variable projection). The innovations are computed by linear filters
-(``scipy.signal.lfilter``), never by a Python loop over samples.
+step (variable projection, :mod:`identification.axis_likelihood`). The
+innovations are computed by linear filters (``scipy.signal.lfilter``), never by
+a Python loop over samples.
 
 The result is consistent under closed-loop piloting: the pilot's stick may
 depend on past gusts, because the filter predicts the gust from the past
@@ -44,19 +45,19 @@ import time as _time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy import optimize, signal
+from scipy import optimize
 from threadpoolctl import threadpool_limits
 
 from heli_core.params import ModelParams
 from heli_core.servo import pade_filter
 from heli_core.terms import AXES, DECOUPLED, FEATURES, RATE_DEPENDENCE, STICK_ROW, TERMS
 
+from .axis_likelihood import AxisData, AxisLikelihood, simulation_r2
 from .errors import IdentifiabilityError, NotFittedError
 from .fit_warnings import require_moving_sticks
 from .flight import Flight
 from .integral_method import IntegralIdentifier
-from .state_space import (N_NONLINEAR, WIND_MODELS, ZETA_BOUNDS, discrete_model, innovation_filters, kalman,
-                          rts_smooth, servo_increments, strictly_proper_tf, wind_block)
+from .state_space import N_NONLINEAR, WIND_MODELS, ZETA_BOUNDS, rts_smooth, wind_block
 from .vibration import remove_vibration_lines
 
 OWN_RATE = ("p", "q", "r")
@@ -81,9 +82,6 @@ MAX_DELAY = 0.6
 MAX_SHIFT = 0.6
 """Largest input shift (a log whose input column lags the response) searched [s]."""
 
-MIN_SERVO_DELAY = 1e-4
-"""Delays below this are no delay (the Padé servo of eq. 31 degenerates at zero) [s]."""
-
 SUPPORT_Z = 3.0
 """With ``select_terms``: a term beyond the decoupled model is kept when ``|value| >= SUPPORT_Z * se``
 (two-sided 0.3 % level, about Bonferroni 1 % over the coupled model's five extra terms)."""
@@ -91,94 +89,7 @@ SUPPORT_Z = 3.0
 TIME_CONSTANT_BOUNDS = ((0.8, 120.0), (0.02, 0.8))
 """Bounds of the slow and the fast gust time constants [s]."""
 
-
-# ------------------------------------------------------------------ one axis
-@dataclass
-class _AxisData:
-    """Signals of one axis over one or more flights, as the likelihood needs them."""
-
-    y: list           # measured rate per flight (n_f,)
-    regressors: list  # per flight (m, n_f): sign * feature, one offset column per flight
-    names: tuple      # parameter names of the regressors (offsets as "kd1@0", "kd1@1", ...)
-    dt: float
-    hold: str
-    burn: int
-    wind_model: str = "gm2"
-    servo_row: int | None = None  # regressor driven through the servo (eq. 31), or None
-    servo_sticks: list | None = None  # the raw stick per flight for that regressor (sign applied)
-    tau: float = 0.0
-    causal_rows: tuple = ()  # regressors made of measured rates: held over the sample, never interpolated
-    rebuild: object = None  # shift (s, < 0: the log's input lags) -> regressors with the axis' stick advanced
-
-
-class _AxisLikelihood:
-    """The concentrated innovation likelihood of one axis, with the linear parameters projected out."""
-
-    def __init__(self, data: _AxisData, free_tau: bool = False):
-        self.data = data
-        self.free_tau = free_tau
-        self.nw = N_NONLINEAR[data.wind_model]
-        """Length of the damping-and-wind part of the search vector; the servo delay follows when ``free_tau``."""
-
-    def unpack(self, x):
-        """(damping, T_slow, T_fast, var_slow/R, var_fast/R, zeta) from the search vector."""
-        damping, lts, ltf, lqs, lqf = x[:5]
-        zeta = float(np.exp(x[5])) if self.nw > 5 else 1.0
-        return (float(damping), float(np.exp(lts)), float(np.exp(ltf)), float(np.exp(lqs)), float(np.exp(lqf)),
-                zeta)
-
-    def tau_of(self, x) -> float:
-        """The alignment at ``x`` [s]: searched with the rest when ``free_tau``, else the data's servo delay.
-
-        A positive alignment is the Padé servo delay of eq. (31); a negative one (searched only) a log whose
-        input column lags the response, corrected by advancing the axis' stick.
-        """
-        return float(x[self.nw]) if self.free_tau else self.data.tau
-
-    def discrete(self, x):
-        return discrete_model(*self.unpack(x), self.data.dt, self.data.hold, self.data.wind_model)
-
-    def filtered(self, x):
-        """Innovation-domain measurements ``y~`` (n,) and regressors ``Z`` (m, n), burn-in removed, and ``S``."""
-        d = self.data
-        Ad, g0, g1, Qd = self.discrete(x)
-        _, L, S = kalman(Ad, Qd)
-        b_y, b_u, a = innovation_filters(Ad, g0, g1, L)
-        if d.causal_rows:  # a measured rate at k+1 carries the noise of y[k+1]: only u[k] may predict y[k+1]
-            b_c, _ = strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), g0 + g1)
-        tau = self.tau_of(x)
-        regressors = d.rebuild(tau) if tau < -MIN_SERVO_DELAY else d.regressors
-        servo = d.servo_row is not None and tau > MIN_SERVO_DELAY
-        if servo:
-            b_v, _ = strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), np.eye(Ad.shape[0])[0])
-        ys, zs = [], []
-        for i, (y, X) in enumerate(zip(d.y, regressors)):
-            ys.append((y - signal.lfilter(b_y, a, y))[d.burn:])
-            Z = signal.lfilter(b_u, a, X, axis=-1)
-            for r in d.causal_rows:
-                Z[r] = signal.lfilter(b_c, a, X[r])
-            if servo:
-                v = servo_increments(d.servo_sticks[i], x[0], tau, d.dt, d.hold)
-                Z[d.servo_row] = signal.lfilter(b_v, a, v)
-            zs.append(Z[:, d.burn:])
-        return np.concatenate(ys), np.concatenate(zs, axis=1), S
-
-    def solve_linear(self, x):
-        """Innovations ``e``, the linear parameters ``theta`` minimising them at the nonlinear ``x``, and ``S``."""
-        yt, Z, S = self.filtered(x)
-        # normal equations of the column-scaled problem (a few columns, tens of thousands of rows)
-        G = Z @ Z.T
-        scale = np.sqrt(np.maximum(np.diag(G), 1e-300))
-        theta = np.linalg.lstsq(G / np.outer(scale, scale), (Z @ yt) / scale, rcond=None)[0] / scale
-        return yt - theta @ Z, theta, S
-
-    def residual(self, x):
-        return self.solve_linear(x)[0]
-
-    def residual_at(self, x, theta):
-        """Innovations at ``x`` with the linear parameters held at ``theta``."""
-        yt, Z, _ = self.filtered(x)
-        return yt - theta @ Z
+_AxisLikelihood = AxisLikelihood  # the likelihood diagnosis imports it by its name from before it moved
 
 
 @dataclass(frozen=True)
@@ -435,10 +346,10 @@ class MaximumLikelihoodIdentifier:
             sign = TERMS[linear[command]].sign
             servo_sticks = [sign * np.asarray(f.sticks[STICK_ROW[a]], dtype=float) for f in flights]
         causal = tuple(j for j, p in enumerate(linear) if TERMS[p].feature in RATE_DEPENDENCE)
-        return _AxisData(ys, Xs, reg_names, flights[0].dt, self.input_hold, burn, wind_model, command,
+        return AxisData(ys, Xs, reg_names, flights[0].dt, self.input_hold, burn, wind_model, command,
                          servo_sticks, float(tau), causal, regressors), damping_name
 
-    def _search(self, like: _AxisLikelihood, x0, free_damping: bool, max_nfev=None, tau0: float = 0.0):
+    def _search(self, like: AxisLikelihood, x0, free_damping: bool, max_nfev=None, tau0: float = 0.0):
         """Search the damping and the wind model (and the delay when ``like.free_tau``) from ``x0``, the
         damping-and-wind part of a search vector (of either wind model) and ``tau0``."""
         lo = np.array([-2.0, np.log(TIME_CONSTANT_BOUNDS[0][0]), np.log(TIME_CONSTANT_BOUNDS[1][0]),
@@ -474,7 +385,7 @@ class MaximumLikelihoodIdentifier:
         """
         out = {}
         for kind in models:
-            like = _AxisLikelihood(self._axis_data(a, axis_params, flights, burn, tau, kind)[0], free_tau)
+            like = AxisLikelihood(self._axis_data(a, axis_params, flights, burn, tau, kind)[0], free_tau)
             res = self._search(like, x0[kind] if isinstance(x0, dict) else x0, free, max_nfev, tau)
             n = sum(len(y) - like.data.burn for y in like.data.y)
             # Akaike: the concentrated NLL is n/2 log(2 cost / n) + const; one parameter more costs 1
@@ -504,7 +415,7 @@ class MaximumLikelihoodIdentifier:
             kind = min(undelayed, key=lambda k: undelayed[k][3])
             xb = undelayed[kind][1]
             for tau in grid:
-                like = _AxisLikelihood(self._axis_data(a, axis_params, flights, burn, float(tau), kind)[0])
+                like = AxisLikelihood(self._axis_data(a, axis_params, flights, burn, float(tau), kind)[0])
                 e = like.residual(xb)
                 profile.append((float(tau), 0.5 * float(e @ e)))
             tau0 = min(profile, key=lambda p: p[1])[0]
@@ -522,7 +433,7 @@ class MaximumLikelihoodIdentifier:
             cost, x, kind, tau = self._best(a, axis_params, flights, burn, float(delay), x0, models, free)
         data, _ = self._axis_data(a, axis_params, flights, burn, tau, kind)
         free_tau = delay == "auto"
-        like = _AxisLikelihood(data, free_tau)
+        like = AxisLikelihood(data, free_tau)
         x = np.append(x, tau) if free_tau else x
         e, theta, S = like.solve_linear(x)
         n_burnt = int(sum(len(y) - burn for y in data.y))
@@ -535,25 +446,8 @@ class MaximumLikelihoodIdentifier:
         data = like.data
         n = e.size
         mse = float(np.mean(e ** 2))
-        # Fisher information (Gauss-Newton): de/dx by central differences, de/dtheta = -Z.
-        _, Z, _ = like.filtered(x)
         nx = len(x)
-        J = np.empty((n, nx + Z.shape[0]))
-        for j in range(nx):
-            h = 1e-5 * max(1.0, abs(x[j]))
-            xp, xm = x.copy(), x.copy()
-            xp[j] += h
-            xm[j] -= h
-            J[:, j] = (like.residual_at(xp, theta) - like.residual_at(xm, theta)) / (2 * h)
-        J[:, nx:] = -Z.T
-        if damping_name is None:
-            J[:, 0] = 0.0
-        F = J.T @ J
-        dscale = np.sqrt(np.maximum(np.diag(F), 1e-300))
-        Fn = F / np.outer(dscale, dscale)
-        w = np.linalg.eigvalsh(Fn)
-        cond = float(w[-1] / max(w[0], 1e-300))
-        se = np.sqrt(np.maximum(np.diag(np.linalg.pinv(Fn)) * mse, 0.0)) / dscale
+        se, cond = like.fisher(x, theta, mse, free_damping=damping_name is not None)
         damping, ts, tf, qs, qf, zeta = like.unpack(x)
         R = mse / S
         params, std = {}, {}
@@ -593,7 +487,7 @@ class MaximumLikelihoodIdentifier:
         yall = np.concatenate([y[data.burn:] for y in data.y])
         ss = float(np.sum((yall - yall.mean()) ** 2)) or 1.0
         return MLAxisFit(
-            AXES[a], params, std, tau, cond, _simulation_r2(data, damping, theta),
+            AXES[a], params, std, tau, cond, simulation_r2(data, damping, theta),
             (float(np.mean(like.residual(np.asarray(x)) ** 2)), mse), wind, float(np.sqrt(R)),
             float(0.5 * n * (np.log(2 * np.pi * mse) + 1.0)), int(n), offs, 1.0 - float(e @ e) / ss,
             profile, state=np.asarray(x[:like.nw], dtype=float))
@@ -640,7 +534,7 @@ class MaximumLikelihoodIdentifier:
                 if index is not None:
                     shift = fit.flight_offsets[index] - fit.params[off_name]
                 drive = drive + fit.params[off_name] + shift
-            states = rts_smooth(data.y[0], drive, *_AxisLikelihood(data).unpack(fit.state), data.dt, data.hold,
+            states = rts_smooth(data.y[0], drive, *AxisLikelihood(data).unpack(fit.state), data.dt, data.hold,
                                 fit.wind["model"])
             _, cw, _ = wind_block(fit.wind["model"], 1.0, 1.0)  # the same sum for every T, zeta
             out[a] = cw @ states[1:] + shift
@@ -661,29 +555,3 @@ class MaximumLikelihoodIdentifier:
             }
             for name, f in self.axes_.items()
         }
-
-
-def _simulation_r2(data: _AxisData, damping: float, theta) -> float:
-    """R^2 of the wind- and noise-free response to the inputs, each flight started at its first sample."""
-    dt = data.dt
-    ad = float(np.exp(-damping * dt))
-    if abs(damping) > 1e-9:
-        g = (1.0 - ad) / damping
-        g1 = (dt - g) / (damping * dt) if data.hold == "linear" else 0.0
-    else:
-        g, g1 = dt, (dt / 2 if data.hold == "linear" else 0.0)
-    g0 = g - g1
-    num = den = 0.0
-    for y, X in zip(data.y, data.regressors):
-        u = theta @ X
-        sim = np.empty_like(y)
-        sim[0] = y[0]
-        sim[1:] = signal.lfilter([1.0], [1.0, -ad], g0 * u[:-1] + g1 * u[1:], zi=[ad * y[0]])[0]
-        err = (y - sim)[data.burn:]
-        yc = y[data.burn:] - np.mean(y[data.burn:])
-        num += float(err @ err)
-        den += float(yc @ yc)
-    return 1.0 - num / (den or 1.0)
-
-
-# ------------------------------------------------------------------ smoother
