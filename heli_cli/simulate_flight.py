@@ -103,6 +103,9 @@ def run(args) -> int:
     if args.effect:
         scale = f" (x{args.effect_scale:g})" if args.effect_scale != 1.0 else ""
         print(f"hidden effects: {', '.join(args.effect)}{scale}")
+    if f.metadata.get("input_hold") == "zoh":  # a CSV does not carry it: say how to read the sticks
+        print("the sticks are a flight controller's commands, held over each sample: identify and diagnose "
+              "this log with --input-hold zoh")
     return 0
 
 

@@ -489,7 +489,8 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
         "format": "synthetic",
         "seed": int(seed),
         "effects": list(effects),
-        "input_source": "pilot sticks",
+        "input_source": "flight controller commands" if cfg.pilot == "autopilot" else "pilot sticks",
+        "input_hold": "zoh" if cfg.pilot == "autopilot" else "linear",
     }
     logged = np.ascontiguousarray(sticks.T)
     shift = int(round(cfg.input_shift * fs))

@@ -83,9 +83,8 @@ def _one(job):
     name, seed, duration, cell = job
     with threadpool_limits(limits=1, user_api="blas"):
         sim, flight = _flight(name, seed, duration, cell)
-        hold = "zoh" if getattr(sim.config, "pilot", "pid") == "autopilot" else "linear"
         t0 = time.perf_counter()
-        d = LikelihoodDiagnoser(input_hold=hold).fit(flight)
+        d = LikelihoodDiagnoser().fit(flight)  # not told the truth: the sticks' hold is chosen by likelihood too
         seconds = time.perf_counter() - t0
     found = {}
     for s in d.steps_:

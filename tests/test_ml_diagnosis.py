@@ -123,3 +123,22 @@ def test_log_whose_input_lags_is_named_as_a_negative_alignment():
     assert d.effects_found_ == [("servo_delay", "roll")]
     assert d.alignment_[0] == pytest.approx(-0.3, abs=0.01)
     assert d.params_.tau_roll == 0.0  # a log correction, not a servo delay of the aircraft
+
+
+def test_a_flight_controllers_log_is_read_with_held_sticks_and_no_sub_sample_delay():
+    # the autopilot bench cell: commands held over each sample and a loop closed within one sample. Read
+    # as interpolated, or with a timing change below two samples read as a servo delay, its effect-free
+    # flights named a servo delay in 4 of 5 (scripts/likelihood_diagnosis_study.py --null-cells)
+    from identification.bench import bench_flight
+    from identification.ml_diagnosis import hold_of
+
+    flight = bench_flight("broadband-autopilot", 1, 120.0).flight
+    assert hold_of(flight) == "zoh" and hold_of(simulate_flight(20, seed=1).flight) == "linear"
+    assert hold_of(flight.with_metadata(input_hold="spline")) == "linear"  # what it cannot read: a pilot's hand
+    d = LikelihoodDiagnoser(axes=("yaw",)).fit(flight)
+    assert d.input_hold_ == "zoh" and d.summary()["input_hold"] == "zoh"
+    assert d.verdict_ == "none"
+    delay = [r for r in d.rounds_[0] if r["effect"] == "servo_delay"][0]
+    assert delay["lr"] > delay["threshold"] and "below a log's timing resolution" in delay["implausible"]
+    with pytest.raises(ValueError, match="input_hold"):
+        LikelihoodDiagnoser(input_hold="cubic").fit(flight)
