@@ -394,10 +394,10 @@ def identify_disturbance(flight: Flight, params: ModelParams, interval: float | 
         trace, kd = _smoother_trace(wind_torque, params, kd, rows, data.n)
         for a, i in zip(axes, rows):
             statistics[a].update(_smoother_statistics(trace[i], ud[i, which]))
-    starts = np.arange(torque.shape[1]) * N
     profile = DisturbanceProfile(
         axes=axes, interval=round(N * (1.0 / data.sample_rate), 12), samples_per_interval=N,
-        sample_rate=round(float(data.sample_rate), 9), time=np.asarray(flight.time), interval_starts=data.time[starts],
+        sample_rate=round(float(data.sample_rate), 9), time=np.asarray(flight.time),
+        interval_starts=data.time[np.arange(torque.shape[1]) * N],
         torque=torque, kd=kd, control_gains=params.control_gains, ud_raw=ud_raw, ud=ud, trace=trace,
         collective=np.asarray(data.sticks[2], dtype=float), sticks=stick, passes=tuple(int(p) for p in passes),
         smoothing=smoothing, smoothing_cost=cost, statistics=statistics, params=params,
