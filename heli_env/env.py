@@ -14,7 +14,7 @@ from heli_core.quaternion import euler_from_quaternion_scalar, quaternion_from_e
 
 from .errors import ActionError
 from .spec import MAX_RATE, build_spec, real_actions, reset_options
-from .tasks import draw_episode, reward_from_sums, wrap
+from .tasks import draw_episode, line_phases, reward_from_sums, wrap
 
 OBS_DIM = 12
 
@@ -92,8 +92,10 @@ class HeliAttitudeEnv(gym.Env):
     | 6-8 | rate error: reference rate − (p, q, r) | rad/s | ±35 (clipped) |
     | 9-11 | previous action (lat, lon, ped) | stick | ±1 |
 
-    With ``obs_noise`` the measured attitude and rates carry white Gaussian noise
-    (drawn from ``np_random``); the reward, termination and ``info`` use the true state.
+    The attitude and rates are measured through the model's identified sensors
+    (``model.json["sensors"]``: white noise on the attitude estimate and the gyros, the gyros'
+    vibration lines at a random phase per episode; all drawn from ``np_random``), or through
+    ``obs_noise``; the reward, termination and ``info`` use the true state.
 
     ## Rewards
 
@@ -117,7 +119,7 @@ class HeliAttitudeEnv(gym.Env):
 
     ```python
     gymnasium.make("HeliAttitude-v0", model=None, task="hold", reference="mixed", dt=0.01,
-                   episode_seconds=30.0, collective="trace", gust_scale=1.0, obs_noise=0.0,
+                   episode_seconds=30.0, collective="trace", gust_scale=1.0, obs_noise="model",
                    action_delay=0, init_angle_deg=5.0, init_rate_deg=5.0, library_version=None,
                    render_mode=None)
     ```
@@ -130,7 +132,9 @@ class HeliAttitudeEnv(gym.Env):
     * ``collective``: "trace" follows the collective recorded with the gust (the yaw
       model needs it, eq. 21); a number holds it constant.
     * ``gust_scale``: multiplies the replayed gust; 0 switches gusts off.
-    * ``obs_noise``: a standard deviation, or (attitude rad, rate rad/s).
+    * ``obs_noise``: "model" (the model's identified sensors; none for a model without them), a
+      standard deviation, (attitude rad, rate rad/s) white-noise stds, or a
+      :class:`heli_core.sensors.SensorModel`.
     * ``action_delay``: whole control periods between an action and its effect.
 
     ``reset(options=...)`` accepts ``trace`` (library index) and ``offset``
@@ -147,7 +151,7 @@ class HeliAttitudeEnv(gym.Env):
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
 
     def __init__(self, model=None, task="hold", reference="mixed", dt: float = 0.01, episode_seconds: float = 30.0,
-                 collective="trace", gust_scale: float = 1.0, obs_noise=0.0, action_delay: int = 0,
+                 collective="trace", gust_scale: float = 1.0, obs_noise="model", action_delay: int = 0,
                  init_angle_deg: float = 5.0, init_rate_deg: float = 5.0, library_version=None,
                  render_mode: str | None = None):
         self.spec_ = build_spec(model, task, reference, dt, episode_seconds, collective, gust_scale, obs_noise,
@@ -159,6 +163,7 @@ class HeliAttitudeEnv(gym.Env):
         self.action_space = action_space()
         self.metadata = {**self.metadata, "render_fps": int(round(1.0 / dt)) if dt >= 0.04 else 25}
         self._x = None
+        self._line_phase = None
         self._renderer = None
 
     # ----------------------------------------------------------------- API
@@ -174,6 +179,7 @@ class HeliAttitudeEnv(gym.Env):
         ep = draw_episode(self.np_random, s.task, s.model.n_traces, s.model.lengths, s.needed, s.episode_steps,
                           s.dt, s.init_angle, s.init_rate, options)
         self._episode = ep
+        self._line_phase = line_phases(self.np_random, len(s.line_axis)) if s.line_axis else None
         self._gust = gust
         self._base = int(s.model.starts[ep.trace]) + ep.offset
         self._end = int(s.model.starts[ep.trace] + s.model.lengths[ep.trace])  # exclusive
@@ -270,12 +276,19 @@ class HeliAttitudeEnv(gym.Env):
         shown, e_rate = self._error_terms(ref_att, ref_rate, phi, theta, psi, p, q, r)
         self._errors = ((0.0, 0.0, 0.0) if s.task.task == "rate" else shown, e_rate)
         m_shown, m_rate, mp, mq, mr = shown, e_rate, p, q, r
-        if s.obs_noise[0] or s.obs_noise[1]:
+        if s.measured:
             n = self.np_random.normal(0.0, 1.0, 6)
             na, nr = s.obs_noise
-            mp, mq, mr = p + nr * n[3], q + nr * n[4], r + nr * n[5]
-            m_shown, m_rate = self._error_terms(ref_att, ref_rate, phi + na * n[0], theta + na * n[1],
-                                                psi + na * n[2], mp, mq, mr)
+            mp, mq, mr = p + nr[0] * n[3], q + nr[1] * n[4], r + nr[2] * n[5]
+            if self._line_phase is not None:  # the gyros' vibration lines, each at its episode's phase
+                lines = [0.0, 0.0, 0.0]
+                k = self._k
+                for i, (axis, amp) in enumerate(zip(s.line_axis, s.line_amp)):
+                    c, si = self._line_phase[i]
+                    lines[axis] += amp * (float(s.line_sin[i, k]) * c + float(s.line_cos[i, k]) * si)
+                mp, mq, mr = mp + lines[0], mq + lines[1], mr + lines[2]
+            m_shown, m_rate = self._error_terms(ref_att, ref_rate, phi + na[0] * n[0], theta + na[1] * n[1],
+                                                psi + na[2] * n[2], mp, mq, mr)
             m_shown = (wrap(m_shown[0]), wrap(m_shown[1]), wrap(m_shown[2]))  # noise may cross +-pi
         a = self._prev
         lim = MAX_RATE

@@ -18,9 +18,11 @@ from pathlib import Path
 import numpy as np
 
 from heli_core.params import ModelParams
+from heli_core.sensors import SensorModel
 from model_store import MODEL_FILENAME, ModelDir
 from model_store.disturbance_library import LIBRARY_DIRNAME
 from model_store.errors import LibraryError, ModelFileError
+from model_store.model_file import sensors_from_document
 
 from .errors import EnvModelError
 
@@ -81,6 +83,15 @@ class EnvModel:
     @property
     def n_traces(self) -> int:
         return int(self.starts.size)
+
+    @cached_property
+    def sensors(self) -> SensorModel:
+        """The gyros' and the attitude estimate's noise and lines identified with the model
+        (``model.json["sensors"]``; silent for a model written without them)."""
+        try:
+            return sensors_from_document(self.document, str(self.path / MODEL_FILENAME))
+        except ModelFileError as e:
+            raise EnvModelError(str(e)) from e
 
     @cached_property
     def torque(self) -> np.ndarray:
@@ -155,7 +166,9 @@ def load_env_model(path=None, library_version: int | None = None) -> EnvModel:
         a.setflags(write=False)
     ids = tuple(str(t.metadata.get("id", i)) for i, t in enumerate(traces))
     sources = tuple(str((t.metadata.get("source") or {}).get("name", "")) for t in traces)
-    return EnvModel(params, root, doc, ud, gains, col, starts, lengths, float(rates[0]), ids, sources, int(version))
+    model = EnvModel(params, root, doc, ud, gains, col, starts, lengths, float(rates[0]), ids, sources, int(version))
+    model.sensors  # a malformed sensors entry is refused here, naming the file, not at the first step
+    return model
 
 
 def _trace_gains(entry: dict, params: ModelParams, lib_dir: Path) -> np.ndarray:

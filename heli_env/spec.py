@@ -16,6 +16,7 @@ import numpy as np
 
 from heli_core.discrete import discrete_kernel
 from heli_core.physics import trim_sticks
+from heli_core.sensors import SensorModel
 
 from .errors import ActionError, OptionError
 from .model_dir import EnvModel, load_env_model
@@ -37,7 +38,9 @@ class EnvSpec:
     needed: int  # trace samples a full episode uses
     collective: object  # "trace" or a float
     gust_scale: float
-    obs_noise: tuple  # (attitude [rad], rate [rad/s]) standard deviations
+    sensors: SensorModel  # what the observation measures through (noise and gyro lines)
+    line_sin: np.ndarray  # (n_lines, episode_steps + 1) sin(w t) of each gyro line at every step
+    line_cos: np.ndarray  # (n_lines, episode_steps + 1) cos(w t)
     action_delay: int
     init_angle: float
     init_rate: float
@@ -45,6 +48,27 @@ class EnvSpec:
     torque: np.ndarray  # (3, total) k * u_d, each trace with the gains it was identified with
     trim: np.ndarray  # (3, total) trim lat, lon, ped at each recorded collective
     col: np.ndarray  # (total,) collective applied at each library sample
+
+
+    @property
+    def measured(self) -> bool:
+        """The observation carries sensor noise or lines (the reward and the info never do)."""
+        return not self.sensors.silent
+
+    @property
+    def obs_noise(self) -> tuple:
+        """(attitude [rad], rate [rad/s]) white-noise standard deviations, each per axis."""
+        return self.sensors.attitude_noise, self.sensors.gyro_noise
+
+    @property
+    def line_axis(self) -> tuple:
+        """Axis index of each gyro line."""
+        return tuple(int(a) for a in self.sensors.line_arrays()[0])
+
+    @property
+    def line_amp(self) -> tuple:
+        """Amplitude of each gyro line [rad/s]."""
+        return tuple(float(a) for a in self.sensors.line_arrays()[2])
 
 
 MAX_GUST_SCALE = 100.0
@@ -118,8 +142,29 @@ def reset_options(options, default_gust: float, extra=()) -> tuple[dict, float]:
     return dict(options), (gust if gusts else 0.0)
 
 
+def measurement_model(obs_noise, model: EnvModel) -> SensorModel:
+    """The sensors an environment measures through: ``"model"`` the model's identified ones
+    (``model.json["sensors"]``, silent when it has none), a :class:`~heli_core.sensors.SensorModel`, a
+    standard deviation for attitude [rad] and rates [rad/s] alike, or a pair (attitude, rate), white only."""
+    if isinstance(obs_noise, str):
+        if obs_noise != "model":
+            raise ValueError(f"obs_noise must be 'model', a std, (attitude rad, rate rad/s) stds or a SensorModel, "
+                             f"got {obs_noise!r}")
+        return model.sensors
+    if isinstance(obs_noise, SensorModel):
+        return obs_noise
+    noise = (obs_noise, obs_noise) if np.ndim(obs_noise) == 0 else tuple(obs_noise)
+    try:
+        noise = tuple(float(v) for v in noise)
+    except (TypeError, ValueError):
+        noise = ()
+    if len(noise) != 2 or any(not (v >= 0 and math.isfinite(v)) for v in noise):
+        raise ValueError(f"obs_noise must be 'model', a std or (attitude rad, rate rad/s) stds >= 0, got {obs_noise!r}")
+    return SensorModel(gyro_noise=(noise[1],) * 3, attitude_noise=(noise[0],) * 3)
+
+
 def build_spec(model=None, task="hold", reference="mixed", dt: float = 0.01, episode_seconds: float = 30.0,
-               collective="trace", gust_scale: float = 1.0, obs_noise=(0.0, 0.0), action_delay: int = 0,
+               collective="trace", gust_scale: float = 1.0, obs_noise="model", action_delay: int = 0,
                init_angle_deg: float = 5.0, init_rate_deg: float = 5.0, library_version=None) -> EnvSpec:
     """Validate the environment arguments (see :class:`heli_env.env.HeliAttitudeEnv`) and precompute."""
     env_model = model if isinstance(model, EnvModel) else load_env_model(model, library_version)
@@ -141,9 +186,10 @@ def build_spec(model=None, task="hold", reference="mixed", dt: float = 0.01, epi
                               ("init_rate_deg", init_rate_deg, MAX_INIT_RATE_DEG)):
         if not (_real(value) and 0 <= value <= high):
             raise OptionError(f"{name} must be a number in [0, {high:g}], got {value!r}")
-    noise = (float(obs_noise), float(obs_noise)) if np.ndim(obs_noise) == 0 else tuple(float(v) for v in obs_noise)
-    if len(noise) != 2 or any(not (v >= 0 and math.isfinite(v)) for v in noise):
-        raise ValueError(f"obs_noise must be a std or (attitude rad, rate rad/s) stds >= 0, got {obs_noise!r}")
+    sensors = measurement_model(obs_noise, env_model)
+    omega = sensors.line_arrays()[1]
+    phase = omega[:, None] * (np.arange(episode_steps + 1) * float(dt))[None, :]
+    line_sin, line_cos = np.sin(phase), np.cos(phase)  # one table both environments read: identical values
     if int(action_delay) != action_delay or action_delay < 0:
         raise ValueError(f"action_delay must be a whole number of steps >= 0, got {action_delay!r}")
     params = env_model.params
@@ -158,12 +204,13 @@ def build_spec(model=None, task="hold", reference="mixed", dt: float = 0.01, epi
     if not np.all(np.isfinite(trim)):
         raise ValueError("the model has a zero control gain on some axis; it cannot be trimmed")
     torque = env_model.torque  # read-only already (EnvModel caches it)
-    for a in (trim, col):
+    for a in (trim, col, line_sin, line_cos):
         a.setflags(write=False)
     return EnvSpec(
         model=env_model, task=cfg, dt=float(dt), ratio=ratio, episode_steps=episode_steps,
         needed=episode_steps * ratio + 1, collective=collective if collective == "trace" else float(collective),
-        gust_scale=float(gust_scale), obs_noise=noise, action_delay=int(action_delay),
+        gust_scale=float(gust_scale), sensors=sensors, line_sin=line_sin, line_cos=line_cos,
+        action_delay=int(action_delay),
         init_angle=math.radians(init_angle_deg), init_rate=math.radians(init_rate_deg),
         dstep=discrete_kernel(params, float(dt))[0], torque=torque, trim=trim, col=col,
     )

@@ -195,3 +195,14 @@ def reward_from_sums(cfg: TaskConfig, att2, rate2, effort2):
     """
     ca, cr, cu = reward_coefficients(cfg)
     return -(ca * att2 + cr * rate2 + cu * effort2)
+
+
+def line_phases(rng: np.random.Generator, n_lines: int) -> list:
+    """A uniform random phase per gyro vibration line, as its (cos, sin) pair, drawn from ``rng``.
+
+    Drawn as a normalised Gaussian pair, so that a line reads ``sin(w t) cos + cos(w t) sin`` with only
+    products and sums: the single and the vector environment compute it bit for bit alike.
+    """
+    g = rng.normal(0.0, 1.0, (n_lines, 2))
+    norm = np.sqrt(g[:, 0] * g[:, 0] + g[:, 1] * g[:, 1])
+    return (g / norm[:, None]).tolist()

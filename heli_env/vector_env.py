@@ -18,7 +18,7 @@ from .env import OBS_DIM, action_space, observation_space
 from .errors import ActionError
 from .kernels import ROW_PAD, advance_kernel, batch_rows, clip_actions, euler_arguments_kernel, observe_kernel
 from .spec import MAX_RATE, build_spec, real_actions, reset_options
-from .tasks import N_SINES, draw_episode, reward_coefficients
+from .tasks import N_SINES, draw_episode, line_phases, reward_coefficients
 
 THREADED_FROM = 256
 """Copies from which the default ``threads`` is numba's thread count (all cores). Measured step
@@ -55,7 +55,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
     metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP, "render_fps": 25}
 
     def __init__(self, num_envs: int = 1, model=None, task="hold", reference="mixed", dt: float = 0.01,
-                 episode_seconds: float = 30.0, collective="trace", gust_scale: float = 1.0, obs_noise=0.0,
+                 episode_seconds: float = 30.0, collective="trace", gust_scale: float = 1.0, obs_noise="model",
                  action_delay: int = 0, init_angle_deg: float = 5.0, init_rate_deg: float = 5.0,
                  library_version=None, render_mode: str | None = None, threads: int | None = None):
         if int(num_envs) != num_envs or num_envs < 1:
@@ -82,7 +82,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._x = None  # (N_STATE, n) once reset
         self._advance = advance_kernel(s.model.params, s.dt)
         self._euler_arguments = euler_arguments_kernel()
-        self._observe_loop = observe_kernel(s.task.task, bool(s.obs_noise[0] or s.obs_noise[1]))
+        self._observe_loop = observe_kernel(s.task.task, s.measured)
         self._trig = batch_rows(5, n)  # arguments of atan2 / asin / atan2 (eqs. 27-29)
         self._att = batch_rows(3, n)  # roll, pitch, yaw [rad]
         self._coef = np.array(reward_coefficients(s.task))
@@ -105,6 +105,10 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._amp = np.zeros((3, N_SINES, n))
         self._freq = np.zeros((3, N_SINES, n))
         self._phase = np.zeros((3, N_SINES, n))
+        self._line_cos = np.zeros((len(s.line_axis), n))  # each gyro line's phase per copy, as (cos, sin)
+        self._line_sin = np.zeros((len(s.line_axis), n))
+        self._att_noise = np.array(s.obs_noise[0])[:, None]
+        self._rate_noise = np.array(s.obs_noise[1])[:, None]
         self._ones = np.ones(n, dtype=bool)
         self._renderer = None
         self._history = []
@@ -156,6 +160,10 @@ class HeliAttitudeVectorEnv(VectorEnv):
                             s.dt, s.init_angle, s.init_rate, options) for i in which.tolist()]
         if not eps:
             return
+        if s.line_axis:  # drawn after the episode, from the copy's generator, as the single env does
+            phases = np.array([line_phases(self._rngs[i], len(s.line_axis)) for i in which.tolist()])
+            self._line_cos[:, which] = phases[:, :, 0].T
+            self._line_sin[:, which] = phases[:, :, 1].T
         traces = np.array([ep.trace for ep in eps], dtype=np.int64)
         base = s.model.starts[traces] + np.array([ep.offset for ep in eps], dtype=np.int64)
         stop = np.minimum(s.model.starts[traces] + s.model.lengths[traces], base + s.needed)
@@ -252,11 +260,16 @@ class HeliAttitudeVectorEnv(VectorEnv):
         ref_att, ref_rate = self._reference(t)
         # Reward, termination and info score the true state; only the observation is measured.
         meas_att = meas_rate = self._no_meas
-        if s.obs_noise[0] or s.obs_noise[1]:
+        if s.measured:
             noise = np.stack([rng.normal(0.0, 1.0, 6) for rng in self._rngs], axis=1)
-            na, nr = s.obs_noise
-            meas_att = att + na * noise[0:3]
-            meas_rate = x[0:3] + nr * noise[3:6]
+            meas_att = att + self._att_noise * noise[0:3]
+            meas_rate = x[0:3] + self._rate_noise * noise[3:6]
+            if s.line_axis:  # the gyros' vibration lines, each copy at its episode's phase
+                k = np.minimum(self._k, s.line_sin.shape[1] - 1)
+                lines = np.zeros((3, n))
+                for i, (axis, amp) in enumerate(zip(s.line_axis, s.line_amp)):
+                    lines[axis] += amp * (s.line_sin[i, k] * self._line_cos[i] + s.line_cos[i, k] * self._line_sin[i])
+                meas_rate = meas_rate + lines
         obs = np.empty((n, OBS_DIM), dtype=np.float32)
         deg_att = batch_rows(3, n, fill=None)
         deg_rate = batch_rows(3, n, fill=None)

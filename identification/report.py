@@ -27,6 +27,7 @@ from .flight import Flight
 from .fit_warnings import fit_warnings
 from .integral_method import IntegralIdentifier
 from .model import ModelParams
+from .sensors import identify_sensors
 from .synthetic import load_truth, truth_paths
 from .terms import AXES, BASE_PARAMS, TERMS
 from .validation import ValidationResult, plot_attitude_fit, plot_rate_fit, validate_models
@@ -317,7 +318,7 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
         filter_settings=first.metadata.get("prefilter"), identification=settings,
         fit_statistics={"axes": ident.summary(), "validation": validation.to_dict(),
                         "fit_time_s": ident.fit_time_},
-        sources=sources, extra=model_extra,
+        sources=sources, extra=model_extra, sensors=identify_sensors(flights),
     )
     figures = []
     if plots:

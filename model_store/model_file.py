@@ -9,6 +9,8 @@ Schema (``schema_version`` 1)::
       "parameters": {"k1": 0.0, "k2": 1.3475, ..., "kd3": 0.0964},   # all 15 of eqs. (18), (21)
       "added_terms": {"nld1": 0.2},          # catalogue terms beyond the paper's model
       "servo_delay_s": {"roll": 0.0, "pitch": 0.0, "yaw": 0.0},       # eq. (31)
+      "sensors": {"gyro_noise_rad_s": {...}, "attitude_noise_rad": {...},   # optional: what the
+                  "gyro_lines": [{"axis", "frequency_hz", "amplitude_rad_s"}]},  # env measures through
       "units": {"k2": "rad/s^2", ...},
       "sample_rate_hz": 100.0,
       "filter": {...} | null,                # Section 3.1 prefilter settings
@@ -30,6 +32,7 @@ from pathlib import Path
 from .errors import ModelFileError
 from heli_core.files import jsonable, keep_copy, write_text
 from heli_core.params import ModelParams
+from heli_core.sensors import SensorModel
 from heli_core.terms import AXES, BASE_PARAMS, EXTRA_PARAMS, TERMS
 
 SCHEMA = "heli-env/model"
@@ -48,8 +51,9 @@ def _version() -> str:
 
 def model_document(params: ModelParams, *, structure: str = "custom", sample_rate: float | None = None,
                    filter_settings=None, identification=None, fit_statistics=None, sources=(),
-                   extra=None) -> dict:
-    """Build the JSON document of a model (see the module docstring)."""
+                   extra=None, sensors: SensorModel | None = None) -> dict:
+    """Build the JSON document of a model (see the module docstring); ``sensors`` (identified from the
+    flights, :mod:`identification.sensors`) is stored when given."""
     values = params.values()
     doc = {
         "schema": SCHEMA,
@@ -69,9 +73,25 @@ def model_document(params: ModelParams, *, structure: str = "custom", sample_rat
             "heli_env": _version(),
         },
     }
+    if sensors is not None:
+        doc["sensors"] = sensors.to_dict()
     if extra:
         doc.update(extra)
     return doc
+
+
+def sensors_from_document(doc: dict, where: str = "model") -> SensorModel:
+    """The :class:`~heli_core.sensors.SensorModel` of a model document (silent when it has none).
+
+    Raises
+    ------
+    ModelFileError
+        A malformed ``"sensors"`` entry (the message names the field).
+    """
+    try:
+        return SensorModel.from_dict(doc.get("sensors"))
+    except ValueError as e:
+        raise ModelFileError(f"{where}: {e}") from None
 
 
 def save_model(path, params: ModelParams, **kwargs) -> Path:

@@ -467,8 +467,8 @@ def test_env_model_error_is_a_value_error():
         ({"task": "hover"}, r"task must be one of \('hold', 'track', 'rate'\)"),
         ({"task": "track", "reference": "zigzag"}, "reference must be one of"),
         ({"episode_seconds": 0.0}, "episode_seconds must be positive"),
-        ({"obs_noise": -0.1}, "obs_noise must be a std"),
-        ({"obs_noise": (0.1, 0.2, 0.3)}, "obs_noise must be a std"),
+        ({"obs_noise": -0.1}, "obs_noise must be .model., a std"),
+        ({"obs_noise": (0.1, 0.2, 0.3)}, "obs_noise must be .model., a std"),
         ({"action_delay": -1}, "action_delay must be a whole number"),
         ({"action_delay": 1.5}, "action_delay must be a whole number"),
         ({"collective": 1.5}, "collective must be 'trace' or a stick value"),
@@ -750,3 +750,50 @@ def test_replayed_gusts_in_the_model_s_stick_units(tmp_path, default_model):
     assert_allclose(moved.replay_ud * moved.params.control_gains[:, None], default_model.torque, rtol=1e-14)
     assert_allclose(moved.replay_ud[0], default_model.ud[0] / 1.3, rtol=1e-14)
     assert np.array_equal(moved.replay_ud[1], default_model.ud[1])
+
+
+def _model_with_sensors(tmp_path, sensors):
+    """A copy of the shipped model directory whose model.json records ``sensors`` (one transaction)."""
+    import json
+    import shutil
+
+    from heli_env.model_dir import default_model_dir
+    from model_store import ModelDir
+
+    root = tmp_path / "model"
+    shutil.copytree(default_model_dir(), root)
+    doc = json.loads((root / "model.json").read_text())
+    doc["sensors"] = sensors
+    with ModelDir(root).transaction() as tx:
+        tx.write_model_document(doc)
+    return root
+
+
+def test_the_env_measures_through_the_models_identified_sensors(tmp_path):
+    from heli_core.sensors import GyroLine, SensorModel
+
+    sensors = SensorModel((0.01, 0.02, 0.03), (0.004, 0.002, 0.001), (GyroLine("pitch", 30.0, 0.05),))
+    root = _model_with_sensors(tmp_path, sensors.to_dict())
+    env = HeliAttitudeEnv(model=root)  # obs_noise="model" by default
+    assert env.spec_.sensors == sensors and env.model.sensors == sensors
+    actions = _random_actions(2000, seed=3)
+    clean = _rollout(HeliAttitudeEnv(model=root, obs_noise=0.0, episode_seconds=30.0), actions, seed=5)
+    noisy = _rollout(HeliAttitudeEnv(model=root, episode_seconds=30.0), actions, seed=5)
+    assert np.array_equal(np.array(clean["x"]), np.array(noisy["x"]))
+    diff = np.array(noisy["obs"], dtype=float) - np.array(clean["obs"], dtype=float)
+    assert_allclose(diff[:, 0:3].std(axis=0), [0.004, 0.002, 0.001], rtol=0.1)
+    assert_allclose(diff[:, [3, 5]].std(axis=0), [0.01, 0.03], rtol=0.1)
+    # pitch: white noise plus the 30 Hz line (a sinusoid of amplitude A has std A / sqrt(2))
+    assert_allclose(diff[:, 4].std(), np.hypot(0.02, 0.05 / np.sqrt(2)), rtol=0.1)
+    spectrum = np.abs(np.fft.rfft(diff[:, 4]))
+    assert np.fft.rfftfreq(diff.shape[0], 0.01)[np.argmax(spectrum)] == pytest.approx(30.0, abs=0.1)
+    # the model without sensors is measured exactly, as before
+    assert HeliAttitudeEnv().spec_.sensors.silent
+
+
+def test_a_malformed_sensors_entry_is_refused_naming_the_file(tmp_path):
+    from heli_env.errors import EnvModelError
+
+    root = _model_with_sensors(tmp_path, {"gyro_noise_rad_s": {"roll": -1.0}})
+    with pytest.raises(EnvModelError, match=r"model\.json.*standard deviations >= 0"):
+        HeliAttitudeEnv(model=root)
