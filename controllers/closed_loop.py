@@ -10,13 +10,11 @@ theory for every gain pair (paper Section 4 proposal):
   transfer function from the equivalent stick ``u_d`` (eq. 42) to the attitude
   error, the rate error and the stick.
 
-The plant is the package's one physics core (:mod:`heli_core.physics`):
-its right-hand side is differentiated numerically about hover at the trim
-(rates 0, servo settled on the trim sticks, level attitude, the given
-collective), which picks up every term of the model — the decoupled eqs.
-(18), (21), coupling, the Padé servo of eq. (31), collective-scheduled gains —
-and the attitude of eq. (25) is linearised at level flight (Euler rates equal
-body rates). For the decoupled model each axis is ``k·Padé(servo)/(s(s+k_damp))``
+The plant is the package's one linearisation of the physics core
+(:func:`heli_core.linear.hover_linearisation`: about hover at the trim for the
+given collective, every term of the model — the decoupled eqs. (18), (21),
+coupling, the Padé servo of eq. (31), collective-scheduled gains — and the
+attitude of eq. (25) at level flight). For the decoupled model each axis is ``k·Padé(servo)/(s(s+k_damp))``
 from stick to angle. It is sampled by a zero-order hold at the control
 period (``control.c2d``, the digital autopilot holds its stick over the period,
 as the environments do). The physics core's discrete step integrates the
@@ -37,9 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from heli_core.physics import kernel, trim_sticks
-from heli_core.servo import servo_coefficients
-from heli_core.terms import AXES, STICK_ROW
+from heli_core.linear import hover_linearisation
+from heli_core.terms import AXES
 
 from .errors import SweepError
 STABILITY_MARGIN = 1e-9
@@ -134,55 +131,20 @@ class HoverPlant:
 
 
 def hover_plant(params, dt: float, collective: float = 0.0) -> HoverPlant:
-    """Linearise the physics core about hover at the trim and sample it at ``dt`` (zero-order hold).
-
-    The Jacobians of the core's right-hand side (eqs. 18, 21, 31) are taken by
-    central differences (exact for its linear terms, and for products of two
-    variables; ``p|p|`` has zero slope at rest). The attitude rows are the
-    level-flight linearisation of eq. (25): roll', pitch', yaw' = p, q, r.
-    """
+    """The physics core linearised about hover at the trim (:func:`heli_core.linear.hover_linearisation`, the
+    package's one linearisation, which the PD design reads too) and sampled at ``dt`` (zero-order hold)."""
     import control
 
     gains = params.control_gains
     if np.any(gains == 0.0):
         raise SweepError(f"the model has a zero control gain (k2, k6, k10 = {gains.tolist()}); it cannot be controlled")
-    rhs = kernel(params)[0]["rhs"]
-    trim = [float(v) for v in trim_sticks(params, float(collective))]
-    delayed = [i for i, tau in enumerate(params.taus) if servo_coefficients(tau)[0] != 0.0]
-    x0 = [0.0, 0.0, 0.0, trim[0], trim[1], trim[2], 1.0, 0.0, 0.0, 0.0]
-    u0 = [trim[0], trim[1], float(collective), trim[2]]
-    d0 = [0.0, 0.0, 0.0]
-    state_vars = [0, 1, 2] + [3 + i for i in delayed]  # core state indices kept (rates, delayed servos)
-    rows = state_vars  # derivatives kept
-
-    def jac(kind, index):
-        h = 1e-6
-        out = []
-        for s in (h, -h):
-            x, u, d = list(x0), list(u0), list(d0)
-            {"x": x, "u": u, "d": d}[kind][index] += s
-            out.append(np.array(rhs(tuple(x), tuple(u), tuple(d)), dtype=float))
-        return ((out[0] - out[1]) / (2 * h))[rows]
-
-    m = len(state_vars)
-    n = m + 3
-    Ac = np.zeros((n, n))
-    Buc = np.zeros((n, 3))
-    Bwc = np.zeros((n, 3))
-    for j, v in enumerate(state_vars):
-        Ac[:m, j] = jac("x", v)
-    for i in range(3):
-        Buc[:m, i] = jac("u", STICK_ROW[i])
-        Bwc[:m, i] = jac("d", i) * gains[i]  # torque k*u_d per unit equivalent stick, eq. (42)
-        Ac[m + i, i] = 1.0  # level-flight attitude kinematics, eq. (25)
-    Ac[np.abs(Ac) < 1e-9] = 0.0
-    Buc[np.abs(Buc) < 1e-9] = 0.0
-    Bwc[np.abs(Bwc) < 1e-9] = 0.0
-    sysd = control.c2d(control.ss(Ac, np.hstack([Buc, Bwc]), np.eye(n), np.zeros((n, 6))), dt, method="zoh")
+    lin = hover_linearisation(params, float(collective))
+    n = lin.A.shape[0]
+    Bwc = lin.Bd * gains[None, :]  # torque k*u_d per unit equivalent stick, eq. (42)
+    sysd = control.c2d(control.ss(lin.A, np.hstack([lin.Bu, Bwc]), np.eye(n), np.zeros((n, 6))), dt, method="zoh")
     B = np.asarray(sysd.B)
-    names = ("p", "q", "r") + tuple(f"servo_{AXES[i]}" for i in delayed) + ("roll", "pitch", "yaw")
-    return HoverPlant(params, float(dt), float(collective), np.asarray(sysd.A), B[:, :3], B[:, 3:], Ac, Buc, Bwc,
-                      names, np.arange(3), np.arange(m, m + 3), np.sign(gains))
+    return HoverPlant(params, float(dt), float(collective), np.asarray(sysd.A), B[:, :3], B[:, 3:], lin.A, lin.Bu,
+                      Bwc, lin.states, lin.rate_idx, lin.angle_idx, np.sign(gains))
 
 
 def nominal_gains(plant: HoverPlant, bandwidth: float = 4.0, damping: float = 0.7) -> np.ndarray:

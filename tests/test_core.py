@@ -240,3 +240,30 @@ def test_discrete_step_follows_rk4():
     reference = np.array(step(tuple(x), tuple(u), tuple(d), params, 0.01, substeps=20))
     assert_allclose(exact[:6], reference[:6], rtol=0, atol=5e-5)  # products held over 10 ms: first order in dt
     assert_allclose(exact[6:], reference[6:], rtol=0, atol=2e-5)  # turned by the mean of two rates
+
+
+def test_one_linearisation_for_design_and_for_the_sweep():
+    """The PD design's axis plant and the sweep's hover plant are blocks of heli_core.linear's one
+    linearisation; it holds the decoupled eqs. (18), (21), the Padé servo (31) and the gain the
+    collective schedules (u·col), which the previous design-side linearisation left out."""
+    from controllers.closed_loop import hover_plant
+    from controllers.pd.linearisation import _axis_ss
+    from heli_core.linear import hover_linearisation
+    from heli_core.servo import servo_coefficients
+    from identification.synthetic import PAPER_PARAMS
+
+    params = PAPER_PARAMS.with_values(gs1=-0.6, k4=0.8, tau_pitch=0.05)
+    lin = hover_linearisation(params, 0.3)
+    assert lin.states == ("p", "q", "r", "servo_pitch", "roll", "pitch", "yaw")
+    assert lin.A[0, 0] == pytest.approx(-2.4208, rel=1e-8) and lin.A[0, 1] == pytest.approx(0.8, rel=1e-8)
+    assert lin.Bu[0, 0] == pytest.approx(1.3475 - 0.6 * 0.3, rel=1e-8)  # k2 + gs1·col at this collective
+    d1, n1, n2 = servo_coefficients(0.05)
+    assert lin.A[3, 3] == pytest.approx(-1.0 / d1, rel=1e-8)  # the pitch servo's Padé pole
+    plant = hover_plant(params, 0.01, 0.3)
+    np.testing.assert_array_equal(plant.Ac, lin.A)
+    np.testing.assert_array_equal(plant.Buc, lin.Bu)
+    A, B, C = _axis_ss(params, 1)  # pitch at collective 0: its own block of the same linearisation
+    A0, B0, states = hover_linearisation(params, 0.0).axis_block(1)
+    np.testing.assert_array_equal(A, A0)
+    np.testing.assert_array_equal(B, B0)
+    assert states == ["q", "servo_pitch", "pitch"] and A.shape == (3, 3)

@@ -8,8 +8,8 @@ rest (zero rates, servo settled, collective 0). For roll, eq. (18) gives::
     phi' = p
 
 and pitch and yaw the same with (k6, k7, tau_pitch) and (k10, k11, tau_yaw) of
-eq. (21). The matrices come from :func:`heli_core.discrete.linear_structure`,
-the package's one statement of the physics, and keep only the axis' own block:
+eq. (21). The matrices come from :func:`heli_core.linear.hover_linearisation`,
+the package's one linearisation of the physics core, and keep only the axis' own block:
 the flybar cross-coupling (k4, k8) and the gyroscopic products (k1, k5, k9) are
 left out (per-axis design on the decoupled part; the paper finds the coupling
 "swamped by wind disturbance", Section 3), and so are the collective-scheduled
@@ -29,9 +29,9 @@ import warnings
 import control
 import numpy as np
 
-from heli_core.discrete import linear_structure
+from heli_core.linear import hover_linearisation
 from heli_core.params import ModelParams
-from heli_core.terms import AXES, STICK_ROW
+from heli_core.terms import AXES
 
 
 def _axis_index(axis) -> int:
@@ -76,23 +76,14 @@ def _axis_ss(params: ModelParams, axis: int):
     """Continuous state space of one decoupled axis, eqs. (18), (21), (31).
 
     States ``(rate, [servo z], angle)``, inputs ``(stick u, torque d)``, outputs
-    ``(angle, rate)``. The servo state appears only when the axis has a delay.
+    ``(angle, rate)``. The servo state appears only when the axis has a delay. The axis'
+    own block of the package's one linearisation (:func:`heli_core.linear.hover_linearisation`)
+    at collective 0.
     """
-    A6, B6, _, _ = linear_structure(params)
-    i, j = axis, STICK_ROW[axis]
-    servo = A6[3 + i, 3 + i] != 0.0
-    if servo:
-        A = np.array([[A6[i, i], A6[i, 3 + i], 0.0],
-                      [0.0, A6[3 + i, 3 + i], 0.0],
-                      [1.0, 0.0, 0.0]])
-        B = np.array([[B6[i, j], B6[i, 5 + i]],
-                      [B6[3 + i, j], 0.0],
-                      [0.0, 0.0]])
-        C = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
-    else:
-        A = np.array([[A6[i, i], 0.0], [1.0, 0.0]])
-        B = np.array([[B6[i, j], B6[i, 5 + i]], [0.0, 0.0]])
-        C = np.array([[0.0, 1.0], [1.0, 0.0]])
+    A, B, states = hover_linearisation(params, 0.0).axis_block(axis)
+    C = np.zeros((2, A.shape[0]))
+    C[0, -1] = 1.0  # angle
+    C[1, 0] = 1.0  # rate
     return A, B, C
 
 
