@@ -25,6 +25,8 @@ yaw [rad/s^2], i.e. the ``k2*u_d`` part of eq. (42) (the constant offsets
 
 from __future__ import annotations
 
+import warnings
+
 from functools import lru_cache
 
 import numpy as np
@@ -275,7 +277,8 @@ def trim_sticks(params: ModelParams, col):
     return tuple(out)
 
 
-def simulate(params: ModelParams, time, sticks, disturbance=None, x0=None, substeps: int = 1):
+def simulate(params: ModelParams, time, sticks, torque=None, x0=None, substeps: int = 1, *,
+             disturbance=None):
     """Forward-simulate the model with measured inputs (zero-order hold between samples).
 
     RK4 (:func:`step`) over eqs. (18), (21), (31), (25)-(26), the paper's numerical
@@ -288,18 +291,24 @@ def simulate(params: ModelParams, time, sticks, disturbance=None, x0=None, subst
         Sample times [s], uniformly spaced.
     sticks : ndarray, shape (4, n)
         lat, lon, col, ped in [-1, 1].
-    disturbance : ndarray, shape (3, n), optional
-        Wind torque per inertia [rad/s^2] held over each sample interval.
+    torque : ndarray, shape (3, n), optional
+        Wind torque per inertia ``k·u_d`` [rad/s^2] held over each sample interval (eq. 42).
     x0 : ndarray, shape (N_STATE,), optional
         Initial state; default rest, level, servo settled on the first sticks.
     substeps : int
         RK4 sub-steps per sample interval.
+    disturbance : ndarray, optional
+        Deprecated name of ``torque`` (in the package's words a disturbance is u_d, in stick units).
 
     Returns
     -------
     ndarray, shape (N_STATE, n)
         State at every sample time; NaN from the sample where the simulation diverged.
     """
+    if disturbance is not None:
+        warnings.warn("simulate(disturbance=...) is deprecated: the argument is the wind torque k*u_d [rad/s^2], "
+                      "pass it as torque=...", DeprecationWarning, stacklevel=2)
+        torque = disturbance if torque is None else torque
     time = np.asarray(time, dtype=float)
     sticks = np.asarray(sticks, dtype=float)
     n = time.size
@@ -308,7 +317,7 @@ def simulate(params: ModelParams, time, sticks, disturbance=None, x0=None, subst
         x0 = initial_state(sticks=sticks[list(STICK_ROW), 0])
     x = tuple(float(v) for v in x0)
     u_rows = sticks.T.tolist()
-    d_rows = None if disturbance is None else np.asarray(disturbance, dtype=float).T.tolist()
+    d_rows = None if torque is None else np.asarray(torque, dtype=float).T.tolist()
     rk4 = kernel(params)[0]["rk4"]
     h = dt / substeps
     out = np.empty((n, N_STATE))

@@ -563,7 +563,7 @@ def simulate_with_disturbance(profile: DisturbanceProfile, flight: Flight) -> Va
     if flight.n != profile.time.size:
         raise DisturbanceError(f"flight has {flight.n} samples, the profile {profile.time.size}")
     models = {MODEL_LABELS[0]: profile.params, MODEL_LABELS[1]: profile.simulation_params()}
-    return validate_models(flight, models, disturbance={MODEL_LABELS[1]: profile.torque_trace})
+    return validate_models(flight, models, torque={MODEL_LABELS[1]: profile.torque_trace})
 
 
 def compare_with_truth(profile: DisturbanceProfile, true_ud) -> dict[str, dict[str, float]]:

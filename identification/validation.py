@@ -21,6 +21,8 @@ every array going in is in radians (rad/s for rates).
 
 from __future__ import annotations
 
+import warnings
+
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -319,7 +321,8 @@ def _disturbance_per_model(disturbance, models, n: int) -> dict[str, np.ndarray]
     return {}
 
 
-def validate_models(flight: Flight, models: dict[str, ModelParams], rates=None, disturbance=None) -> ValidationResult:
+def validate_models(flight: Flight, models: dict[str, ModelParams], rates=None, torque=None, *,
+                    disturbance=None) -> ValidationResult:
     """Forward-simulate models with the flight's sticks and compare them with the flight.
 
     Each model is simulated with :func:`identification.model.simulate` (eqs. 18,
@@ -338,10 +341,12 @@ def validate_models(flight: Flight, models: dict[str, ModelParams], rates=None, 
         Measured p, q, r to compare against [rad/s], e.g. low-pass filtered as in
         Fig. 8(b); default ``flight.rates``. The simulations start from its
         first sample.
-    disturbance : array_like, shape (3, n), or dict of str to such arrays, optional
-        Wind torque per inertia on roll, pitch, yaw [rad/s^2] (eq. 42,
+    torque : array_like, shape (3, n), or dict of str to such arrays, optional
+        Wind torque per inertia ``k·u_d`` on roll, pitch, yaw [rad/s^2] (eq. 42,
         Section 3.4), applied to every model, or per model label (a label
-        missing from the dict is simulated without disturbance).
+        missing from the dict is simulated without wind).
+    disturbance : optional
+        Deprecated name of ``torque``.
 
     Returns
     -------
@@ -365,12 +370,16 @@ def validate_models(flight: Flight, models: dict[str, ModelParams], rates=None, 
             raise TypeError(f"model {label!r} must be a ModelParams, got {type(params).__name__}")
     n = flight.n
     measured = flight.rates if rates is None else _as_histories("rates", rates, n)
-    dist = _disturbance_per_model(disturbance, models, n)
+    if disturbance is not None:
+        warnings.warn("validate_models(disturbance=...) is deprecated: the argument is the wind torque k*u_d "
+                      "[rad/s^2], pass it as torque=...", DeprecationWarning, stacklevel=2)
+        torque = disturbance if torque is None else torque
+    dist = _disturbance_per_model(torque, models, n)
 
     x0 = initial_state(rates=measured[:, 0], euler=flight.attitude[:, 0], sticks=flight.sticks[list(STICK_ROW), 0])
     simulated, sim_att, rate_stats, att_stats = {}, {}, {}, {}
     for label, params in models.items():
-        state = simulate(params, flight.time, flight.sticks, disturbance=dist.get(label), x0=x0)
+        state = simulate(params, flight.time, flight.sticks, torque=dist.get(label), x0=x0)
         _check_bounded(label, params, flight.time, state[:3])
         simulated[label] = state[:3]
         sim_att[label] = euler_from_quaternion(state[QUAT])

@@ -98,7 +98,7 @@ def test_eq46_recovers_a_known_piecewise_constant_torque():
     steps = rng.normal(0, 0.05, (3, time.size // 20 + 1))
     ud = np.repeat(steps, 20, axis=1)[:, : time.size]
     torque = params.control_gains[:, None] * ud
-    state = simulate(params, time, sticks, disturbance=torque, substeps=8)
+    state = simulate(params, time, sticks, torque=torque, substeps=8)
     flight = make_flight(time, state[:3], sticks)
     prof = identify_disturbance(flight, params, interval=0.2, prefilter=False, smoothing=0, simulate=False)
     want = steps[:, : prof.n_intervals]

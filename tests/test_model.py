@@ -195,7 +195,7 @@ def test_constant_disturbance_is_a_torque_per_inertia():
     params = ModelParams(k3=2.0, k7=2.0, k11=4.0)
     t = 0.01 * np.arange(1001)
     dist = np.tile([[0.6], [-0.6], [0.8]], t.size)
-    x = simulate(params, t, np.zeros((4, t.size)), disturbance=dist)
+    x = simulate(params, t, np.zeros((4, t.size)), torque=dist)
     assert_allclose(x[RATES, -1], [0.3, -0.3, 0.2], rtol=0, atol=1e-6)
 
 
@@ -371,3 +371,17 @@ def test_detrend_period_sets_the_breaks():
     trend = np.interp(t, [0, 5, 10, 15, 20], [0, 1, 0, 1, 0])
     assert_allclose(detrend_piecewise(t, trend, period=5.0), 0.0, atol=1e-9)
     assert np.abs(detrend_piecewise(t, trend, period=10.0)).max() > 0.1
+
+
+def test_the_old_disturbance_keyword_is_a_deprecated_name_of_the_wind_torque():
+    from heli_core.physics import simulate as core_simulate
+
+    t = np.arange(200) * 0.01
+    sticks = np.zeros((4, t.size))
+    torque = np.full((3, t.size), 0.5)
+    from identification.synthetic import PAPER_PARAMS as PAPER
+
+    new = core_simulate(PAPER, t, sticks, torque=torque)
+    with pytest.warns(DeprecationWarning, match="torque"):
+        old = core_simulate(PAPER, t, sticks, disturbance=torque)
+    np.testing.assert_array_equal(new, old)

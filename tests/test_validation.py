@@ -46,7 +46,7 @@ def truth_flight():
     time = np.arange(0.0, 40.0, 0.02)
     sticks = _sticks(time, rng)
     gust = 0.3 * np.sin(2 * np.pi * 0.3 * time + rng.uniform(0, 2 * np.pi, size=(3, 1)))
-    state = simulate(PAPER, time, sticks, disturbance=gust)
+    state = simulate(PAPER, time, sticks, torque=gust)
     att = euler_from_quaternion(state[QUAT])
     flight = make_flight(time, state[:3], sticks, attitude=att, metadata={"source": "test"})
     return flight, gust
@@ -56,7 +56,7 @@ def truth_flight():
 def two_model_result(truth_flight):
     flight, gust = truth_flight
     perturbed = dataclasses.replace(PAPER, k2=1.6, k3=3.0, k7=2.0, k10=11.0)
-    return validate_models(flight, {"true": PAPER, "perturbed": perturbed}, disturbance=gust)
+    return validate_models(flight, {"true": PAPER, "perturbed": perturbed}, torque=gust)
 
 
 # ------------------------------------------------------------------ statistics
@@ -165,7 +165,7 @@ def test_validate_without_disturbance_is_worse(truth_flight):
     res = validate_models(flight, {"no wind": PAPER})
     assert res.between is None
     assert all(res.rate_stats["no wind"][a]["mae_deg_s"] > 0.1 for a in AXES)
-    per_model = validate_models(flight, {"wind": PAPER, "calm": PAPER}, disturbance={"wind": gust})
+    per_model = validate_models(flight, {"wind": PAPER, "calm": PAPER}, torque={"wind": gust})
     assert_allclose(per_model.rate_stats["wind"]["roll"]["mae_deg_s"], 0.0, atol=1e-9)
     assert_allclose(per_model.rate_stats["calm"]["roll"]["mae_deg_s"],
                     res.rate_stats["no wind"]["roll"]["mae_deg_s"], rtol=1e-12)
@@ -174,7 +174,7 @@ def test_validate_without_disturbance_is_worse(truth_flight):
 def test_validate_compares_against_given_rates(truth_flight):
     flight, gust = truth_flight
     offset = np.array([[1.0], [-2.0], [3.0]]) * DEG
-    res = validate_models(flight, {"true": PAPER}, rates=flight.rates + offset, disturbance=gust)
+    res = validate_models(flight, {"true": PAPER}, rates=flight.rates + offset, torque=gust)
     # the simulation starts from rates[:, 0], so the model carries the offset at t=0 only;
     # damping removes it within a few seconds and the error settles at |offset|
     tail = np.abs(np.degrees(res.measured_rates - res.simulated["true"]))[:, res.time > 10.0]
@@ -190,7 +190,7 @@ def test_validate_bad_inputs(truth_flight):
     with pytest.raises(ValueError, match=r"rates must have shape \(3, 2000\)"):
         validate_models(flight, {"m": PAPER}, rates=flight.rates[:, :10])
     with pytest.raises(ValueError, match="disturbance given for unknown model"):
-        validate_models(flight, {"m": PAPER}, disturbance={"other": np.zeros((3, flight.n))})
+        validate_models(flight, {"m": PAPER}, torque={"other": np.zeros((3, flight.n))})
 
 
 def test_a_diverging_model_is_named_with_its_cause(truth_flight):
