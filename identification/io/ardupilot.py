@@ -181,6 +181,43 @@ def load_ardupilot(path, allow_damaged: bool = False) -> RawLog:
         No IMU gyro or ATT messages.
     """
     path = Path(path)
+    cols, params, texts, tolerated, damage, meta_end = _parse(path, allow_damaged)
+    imu, att = cols.get("IMU"), cols.get("ATT")
+    if imu is None or "GyrX" not in imu:
+        raise MissingStreamError(f"{path}: no body rates: expected IMU messages with GyrX/GyrY/GyrZ")
+    rates = make_stream(imu["t"], [imu["GyrX"], imu["GyrY"], imu["GyrZ"]], "IMU.Gyr")
+    if rates is None:
+        raise MissingStreamError(f"{path}: fewer than 2 usable IMU samples")
+    attitude = None
+    if att is not None:
+        attitude = make_stream(att["t"], np.radians([att["Roll"], att["Pitch"], att["Yaw"]]), "ATT", angles=True)
+    accel = make_stream(imu["t"], [imu["AccX"], imu["AccY"], imu["AccZ"]], "IMU.Acc")
+
+    firmware, vehicle, heli = _vehicle(texts, params)
+    if vehicle in ("fixed-wing", "ground vehicle"):
+        tolerated.append(f"{firmware}: a {vehicle}, not a rotorcraft; the attitude models of this package describe "
+                         "hovering helicopters, so read identification results of this log with care")
+    inputs, notes, unavailable = {}, {}, {}
+    _sticks(cols.get("RCIN"), params, inputs, notes, unavailable)
+    _controller(cols.get("RATE"), inputs, notes, unavailable)
+    power, altitude = _power_and_altitude(cols.get("CTUN"))
+    servos = _servos(cols.get("RCOU"), heli, firmware, vehicle, unavailable)
+    inputs = {k: v for k, v in inputs.items() if v is not None}
+    if not inputs and servos is None:
+        raise MissingStreamError(f"{path}: no input stream: expected RATE (controller), RCIN (sticks) or, on a "
+                                 "helicopter, RCOU (servos) messages with at least 2 samples")
+    default = "servos" if servos is not None else ("controller" if "controller" in inputs else "sticks")
+    meta = {"firmware": firmware, "frame": params.get("FRAME"), "parser": "pymavlink DFReader", **meta_end}
+    return RawLog(path=path, format="ardupilot-dataflash", vehicle=vehicle, rates=rates, attitude=attitude,
+                  inputs=inputs, input_notes=notes, unavailable=unavailable, default_input=default, servos=servos,
+                  segment_signals=SegmentSignals(power=power, accel=accel, altitude=altitude,
+                                                 power_name=f"throttle output ({power.name})" if power else
+                                                 "throttle output"),
+                  metadata=meta, damage=damage, notes=tolerated)
+
+
+def _parse(path: Path, allow_damaged: bool):
+    """The log read by pymavlink: (columns, parameters, texts, notes, damage, metadata of how it ends)."""
     mavlink = require("pymavlink.DFReader", "logs")
     where = locate(path)
     if where.format != "ardupilot-dataflash":
@@ -204,92 +241,82 @@ def load_ardupilot(path, allow_damaged: bool = False) -> RawLog:
     if clock:
         tolerated.append(describe(clock))
         meta_end["clock"] = clock
+    return cols, params, texts, tolerated, damage, meta_end
 
-    imu, att = cols.get("IMU"), cols.get("ATT")
-    if imu is None or "GyrX" not in imu:
-        raise MissingStreamError(f"{path}: no body rates: expected IMU messages with GyrX/GyrY/GyrZ")
-    rates = make_stream(imu["t"], [imu["GyrX"], imu["GyrY"], imu["GyrZ"]], "IMU.Gyr")
-    if rates is None:
-        raise MissingStreamError(f"{path}: fewer than 2 usable IMU samples")
-    attitude = None
-    if att is not None:
-        attitude = make_stream(att["t"], np.radians([att["Roll"], att["Pitch"], att["Yaw"]]), "ATT", angles=True)
-    accel = make_stream(imu["t"], [imu["AccX"], imu["AccY"], imu["AccZ"]], "IMU.Acc")
 
+def _vehicle(texts: list, params: dict) -> tuple[str, str, bool]:
+    """(firmware string, vehicle, whether a helicopter) from the log's texts and parameters."""
     firmware = next((t for t in texts if "Copter" in t or "Plane" in t or "Rover" in t), "ArduPilot")
     heli = ("heli" in firmware.lower() or any(k.startswith(("H_SW", "H_SV", "H_COL")) for k in params)
             or params.get("FRAME_CLASS") == 6)
     vehicle = ("helicopter" if heli else "fixed-wing" if "Plane" in firmware
                else "ground vehicle" if "Rover" in firmware else "multirotor")
-    if vehicle in ("fixed-wing", "ground vehicle"):
-        tolerated.append(f"{firmware}: a {vehicle}, not a rotorcraft; the attitude models of this package describe "
-                         "hovering helicopters, so read identification results of this log with care")
+    return firmware, vehicle, heli
 
-    inputs, notes, unavailable = {}, {}, {}
-    rcin = cols.get("RCIN")
-    if rcin is not None:
-        chan = {a: _channel(params.get(f"RCMAP_{a}"), d) for a, d in
-                (("ROLL", 1), ("PITCH", 2), ("THROTTLE", 3), ("YAW", 4))}
 
-        def rc(axis):
-            n = chan[axis]
-            p = lambda k, d: params.get(f"RC{n}_{k}", d)  # noqa: E731
-            return n, rcin.get(f"C{n}"), p("MIN", 1100.0), p("TRIM", 1500.0), p("MAX", 1900.0), p("REV", 1.0)
-
-        parts = {a: rc(a) for a in chan}
-        if all(v[1] is not None for v in parts.values()):
-            lat = _rc_norm(*parts["ROLL"][1:])
-            lon = _rc_norm(*parts["PITCH"][1:])
-            ped = _rc_norm(*parts["YAW"][1:])
-            n, pwm, lo, _, hi, rev = parts["THROTTLE"]
-            col = 2.0 * (pwm - lo) / max(hi - lo, 1.0) - 1.0
-            inputs["sticks"] = make_stream(rcin["t"], [lat, lon, col, ped], "RCIN")
-            notes["sticks"] = (f"RCIN C{chan['ROLL']}->lat, C{chan['PITCH']}->lon, C{chan['THROTTLE']}->col, "
-                               f"C{chan['YAW']}->ped (RCMAP_*), normalised by RC<n>_MIN/TRIM/MAX/REV to -1..1")
-        else:
-            unavailable["sticks"] = "RCIN lacks the channels RCMAP_* names"
-    else:
+def _sticks(rcin, params: dict, inputs: dict, notes: dict, unavailable: dict) -> None:
+    """The sticks from ``RCIN`` mapped by ``RCMAP_*`` and normalised by ``RC<n>_*`` (into ``inputs``)."""
+    if rcin is None:
         unavailable["sticks"] = "no RCIN messages"
-    rate = cols.get("RATE")
-    power = None
-    if rate is not None and "ROut" in rate:
-        legacy = np.nanmax(np.abs(np.concatenate([rate["ROut"], rate["POut"]]))) > 1.5
-        s_rp, s_y, s_t = (LEGACY_RP_SCALE, LEGACY_YAW_SCALE, LEGACY_THROTTLE_SCALE) if legacy else (1.0, 1.0, 1.0)
-        thr = rate["AOut"] / s_t
-        inputs["controller"] = make_stream(
-            rate["t"], [rate["ROut"] / s_rp, rate["POut"] / s_rp, 2.0 * thr - 1.0, rate["YOut"] / s_y], "RATE")
-        notes["controller"] = (f"RATE ROut/{s_rp:g}->lat, POut/{s_rp:g}->lon, 2*AOut/{s_t:g}-1->col, "
-                               f"YOut/{s_y:g}->ped (rate-controller outputs"
-                               f"{', ArduCopter <= 3.3 motor-mix units' if legacy else ''})")
-    else:
-        unavailable["controller"] = "no RATE messages (LOG_BITMASK without the rate-controller bit)"
-    ctun = cols.get("CTUN")
-    if ctun is not None:
-        thr = ctun.get("ThO") if "ThO" in ctun and np.isfinite(ctun["ThO"]).any() else ctun.get("ThrOut")
-        if thr is not None and np.isfinite(thr).any():
-            thr = thr / (LEGACY_THROTTLE_SCALE if np.nanmax(thr) > 1.5 else 1.0)
-            power = make_stream(ctun["t"], thr, "CTUN.ThrOut")
-    altitude = make_stream(ctun["t"], ctun["Alt"], "CTUN.Alt") if ctun is not None and "Alt" in ctun else None
+        return
+    chan = {a: _channel(params.get(f"RCMAP_{a}"), d) for a, d in
+            (("ROLL", 1), ("PITCH", 2), ("THROTTLE", 3), ("YAW", 4))}
 
-    servos = None
-    rcou = cols.get("RCOU")
+    def rc(axis):
+        n = chan[axis]
+        p = lambda k, d: params.get(f"RC{n}_{k}", d)  # noqa: E731
+        return n, rcin.get(f"C{n}"), p("MIN", 1100.0), p("TRIM", 1500.0), p("MAX", 1900.0), p("REV", 1.0)
+
+    parts = {a: rc(a) for a in chan}
+    if not all(v[1] is not None for v in parts.values()):
+        unavailable["sticks"] = "RCIN lacks the channels RCMAP_* names"
+        return
+    lat = _rc_norm(*parts["ROLL"][1:])
+    lon = _rc_norm(*parts["PITCH"][1:])
+    ped = _rc_norm(*parts["YAW"][1:])
+    n, pwm, lo, _, hi, rev = parts["THROTTLE"]
+    col = 2.0 * (pwm - lo) / max(hi - lo, 1.0) - 1.0
+    inputs["sticks"] = make_stream(rcin["t"], [lat, lon, col, ped], "RCIN")
+    notes["sticks"] = (f"RCIN C{chan['ROLL']}->lat, C{chan['PITCH']}->lon, C{chan['THROTTLE']}->col, "
+                       f"C{chan['YAW']}->ped (RCMAP_*), normalised by RC<n>_MIN/TRIM/MAX/REV to -1..1")
+
+
+def _controller(rate, inputs: dict, notes: dict, unavailable: dict) -> None:
+    """The rate controller's outputs from ``RATE``, in either generation's units (into ``inputs``)."""
+    if rate is None or "ROut" not in rate:
+        unavailable["controller"] = "no RATE messages (LOG_BITMASK without the rate-controller bit)"
+        return
+    legacy = np.nanmax(np.abs(np.concatenate([rate["ROut"], rate["POut"]]))) > 1.5
+    s_rp, s_y, s_t = (LEGACY_RP_SCALE, LEGACY_YAW_SCALE, LEGACY_THROTTLE_SCALE) if legacy else (1.0, 1.0, 1.0)
+    thr = rate["AOut"] / s_t
+    inputs["controller"] = make_stream(
+        rate["t"], [rate["ROut"] / s_rp, rate["POut"] / s_rp, 2.0 * thr - 1.0, rate["YOut"] / s_y], "RATE")
+    notes["controller"] = (f"RATE ROut/{s_rp:g}->lat, POut/{s_rp:g}->lon, 2*AOut/{s_t:g}-1->col, "
+                           f"YOut/{s_y:g}->ped (rate-controller outputs"
+                           f"{', ArduCopter <= 3.3 motor-mix units' if legacy else ''})")
+
+
+def _power_and_altitude(ctun):
+    """The throttle output (power) and the height from ``CTUN``, each a stream or None."""
+    if ctun is None:
+        return None, None
+    power = None
+    thr = ctun.get("ThO") if "ThO" in ctun and np.isfinite(ctun["ThO"]).any() else ctun.get("ThrOut")
+    if thr is not None and np.isfinite(thr).any():
+        thr = thr / (LEGACY_THROTTLE_SCALE if np.nanmax(thr) > 1.5 else 1.0)
+        power = make_stream(ctun["t"], thr, "CTUN.ThrOut")
+    altitude = make_stream(ctun["t"], ctun["Alt"], "CTUN.Alt") if "Alt" in ctun else None
+    return power, altitude
+
+
+def _servos(rcou, heli: bool, firmware: str, vehicle: str, unavailable: dict):
+    """A helicopter's swash servos from ``RCOU``, or None (with the reason in ``unavailable``)."""
     if heli and rcou is not None:
-        servos = make_stream(rcou["t"], [rcou["C1"], rcou["C2"], rcou["C3"], rcou["C4"]], "RCOU.C1-C4")
-    elif not heli:
+        return make_stream(rcou["t"], [rcou["C1"], rcou["C2"], rcou["C3"], rcou["C4"]], "RCOU.C1-C4")
+    if not heli:
         outputs = "control-surface servos" if vehicle == "fixed-wing" else "motor outputs"
         unavailable["servos"] = (f"{firmware} {vehicle} log: RCOU holds {outputs}, not swash-plate servos of "
                                  "eqs. 65-67; use inputs='controller' (the rate controller's outputs) or 'sticks'")
     else:
         unavailable["servos"] = "no RCOU messages"
-    inputs = {k: v for k, v in inputs.items() if v is not None}
-    if not inputs and servos is None:
-        raise MissingStreamError(f"{path}: no input stream: expected RATE (controller), RCIN (sticks) or, on a "
-                                 "helicopter, RCOU (servos) messages with at least 2 samples")
-    default = "servos" if servos is not None else ("controller" if "controller" in inputs else "sticks")
-    meta = {"firmware": firmware, "frame": params.get("FRAME"), "parser": "pymavlink DFReader", **meta_end}
-    return RawLog(path=path, format="ardupilot-dataflash", vehicle=vehicle, rates=rates, attitude=attitude,
-                  inputs=inputs, input_notes=notes, unavailable=unavailable, default_input=default, servos=servos,
-                  segment_signals=SegmentSignals(power=power, accel=accel, altitude=altitude,
-                                                 power_name=f"throttle output ({power.name})" if power else
-                                                 "throttle output"),
-                  metadata=meta, damage=damage, notes=tolerated)
+    return None

@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import logging
 import struct
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -141,8 +142,34 @@ def _drop_leading_event(data: bytes) -> bytes:
     return data[:pos] + data[end:]
 
 
-def _decode(path: Path, span: Span, size: int, allow_damaged: bool, where: str, hint: str = ""):
-    """Decode one log of the file: (headers, columns, notes, damage, events, metadata).
+@dataclass
+class _Decoded:
+    """One log of a blackbox file as orangebox decoded it.
+
+    Attributes
+    ----------
+    headers : dict
+        The log's header lines (``H name:value``).
+    columns : dict of str to ndarray (n,)
+        Each main-frame field over the decoded frames.
+    notes, damage : list of str
+        What the import tolerated, and what it found corrupt (:class:`~identification.io.raw_log.RawLog`).
+    events : list of str
+        Names of the log's event frames.
+    metadata : dict
+        How the log ends (a cut last frame, padding, a clock restart).
+    """
+
+    headers: dict
+    columns: dict
+    notes: list
+    damage: list
+    events: list
+    metadata: dict
+
+
+def _decode(path: Path, span: Span, size: int, allow_damaged: bool, where: str, hint: str = "") -> _Decoded:
+    """Decode one log of the file.
 
     ``where`` names the log in messages; ``hint`` is appended to a refusal (another log to try).
     """
@@ -201,7 +228,7 @@ def _decode(path: Path, span: Span, size: int, allow_damaged: bool, where: str, 
             f"once, or logging never started); expected a flight{hint}")
     data = np.array(rows, dtype=float).T
     cols = {name: data[i] for i, name in enumerate(names)}
-    return parser.headers, cols, notes, damage, events, meta
+    return _Decoded(parser.headers, cols, notes, damage, events, meta)
 
 
 def blackbox_spans(path) -> tuple:
@@ -225,11 +252,11 @@ def _decode_log(path: Path, allow_damaged: bool, index: int) -> RawLog:
     span = spans[index - 1]
     name = f"{path} (log {index} of {len(spans)})" if len(spans) > 1 else str(path)
     hint = "; choose another log with --log N (heli import --list shows them)" if len(spans) > 1 else ""
-    hdr, c, notes, damage, events, meta_end = _decode(path, span, where.size, allow_damaged, name, hint)
+    decoded = _decode(path, span, where.size, allow_damaged, name, hint)
     if span.padding_note():
-        notes.insert(0, span.padding_note())
-        meta_end["padding"] = {"before": span.lead, "after": span.trail}
-    return _raw_from_columns(path, name, hdr, c, notes, damage, events, index, len(spans), meta_end)
+        decoded.notes.insert(0, span.padding_note())
+        decoded.metadata["padding"] = {"before": span.lead, "after": span.trail}
+    return _raw_from_columns(path, name, decoded, index, len(spans))
 
 
 def load_blackbox(path, allow_damaged: bool = False, log: int | None = None) -> RawLog:
@@ -345,10 +372,49 @@ def _num(hdr: dict, key: str, default: float) -> float:
     return v if np.isfinite(v) else default
 
 
-def _raw_from_columns(path, name, hdr, c, tolerated, damage, events, index, count, meta_end) -> RawLog:
-    """Map a decoded log's columns to the canonical streams (table in the module docstring)."""
+def _raw_from_columns(path, name: str, log: _Decoded, index: int, count: int) -> RawLog:
+    """Map a decoded log's columns to the canonical streams (table in the module docstring).
+
+    ``name`` names the log in messages; ``index`` is its number (from 1) among the ``count`` logs of the file.
+    """
+    hdr = log.headers
     firmware = str(hdr.get("Firmware type", "Betaflight"))
     rotorflight = "rotorflight" in firmware.lower()
+    t, c, rates = _clock_and_rates(name, log)
+    attitude = _attitude(c, t)
+    inputs, notes, unavailable = _inputs(c, t, rotorflight)
+    servos = None
+    if rotorflight:
+        if all(f"servo[{i}]" in c for i in range(4)):
+            servos = make_stream(t, _cols(c, "servo", 4), "servo[0..3]")
+        else:
+            unavailable["servos"] = ("this Rotorflight log has no servo[0..3] fields (enable servos in the "
+                                     "blackbox field mask); use inputs='controller' (mixer inputs)")
+    else:
+        unavailable["servos"] = (f"{firmware} multirotor log: motor outputs are not swash-plate servos of "
+                                 "eqs. 65-67; use inputs='controller' (the PID sum)")
+    signals = _segment_signals(c, t, hdr, rotorflight)
+    inputs = {k: v for k, v in inputs.items() if v is not None}
+    if not inputs and servos is None:
+        raise MissingStreamError(f"{name}: no input stream: expected rcCommand[0..3] (sticks), axisP/I/D (controller, "
+                                 "Betaflight) or mixer[0..3] (controller, Rotorflight) fields")
+    default = "servos" if servos is not None else ("controller" if "controller" in inputs else "sticks")
+    meta = {"firmware": str(hdr.get("Firmware revision", firmware)), "craft": hdr.get("Craft name"),
+            "logs_in_file": int(count), "log_index": int(index), "events": sorted(set(log.events)),
+            "parser": "orangebox", **log.metadata}
+    return RawLog(path=path, format="rotorflight-blackbox" if rotorflight else "betaflight-blackbox",
+                  vehicle="helicopter" if rotorflight else "multirotor", rates=rates,
+                  attitude=attitude, inputs=inputs, input_notes=notes, unavailable=unavailable,
+                  default_input=default, servos=servos, segment_signals=signals, metadata=meta,
+                  damage=log.damage, notes=log.notes)
+
+
+def _clock_and_rates(name: str, log: _Decoded):
+    """(time [s] on a continued clock, the columns of the frames kept on it, the body rates).
+
+    A restart or wrap-around of the clock is recorded in ``log.notes`` and ``log.metadata["clock"]``.
+    """
+    c, hdr = log.columns, log.headers
     gyro = _cols(c, "gyroADC", 3)
     if "time" not in c or gyro is None:
         raise MissingStreamError(f"{name}: the blackbox log lacks the time or gyroADC[0..2] fields")
@@ -356,33 +422,39 @@ def _raw_from_columns(path, name, hdr, c, tolerated, damage, events, index, coun
     if not keep.all():
         c = {k: v[keep] for k, v in c.items()}
         gyro = _cols(c, "gyroADC", 3)
-    t = clock
     if restarts:
-        tolerated.append(describe(restarts))
-        meta_end["clock"] = restarts
+        log.notes.append(describe(restarts))
+        log.metadata["clock"] = restarts
     scale = _float_bits(hdr.get("gyro_scale", 1065353216))
     to_rad = np.radians(1.0) if abs(scale - 1.0) < 1e-6 else scale * 1e6  # deg/s, or Cleanflight rad/us units
     # Yaw: the blackbox logs yaw rate positive nose-left; canonical r is positive nose-right.
     sign = np.array([1.0, 1.0, -1.0])
-    rates = make_stream(t, sign[:, None] * to_rad * np.array(gyro), "gyroADC")
+    rates = make_stream(clock, sign[:, None] * to_rad * np.array(gyro), "gyroADC")
     if rates is None:
         raise MissingStreamError(f"{name}: fewer than 2 frames with increasing time")
+    return clock, c, rates
 
-    attitude = None
+
+def _attitude(c: dict, t):
+    """Rotorflight's ``attitude`` or Betaflight's ``imuQuaternion`` as ZYX Euler angles (yaw negated), or None."""
     if _cols(c, "attitude", 3) is not None:
         ang = np.radians(np.array(_cols(c, "attitude", 3)) / 10.0)
-        attitude = make_stream(t, ang, "attitude (decidegrees)", angles=True)
-    elif _cols(c, "imuQuaternion", 3) is not None:
+        return make_stream(t, ang, "attitude (decidegrees)", angles=True)
+    if _cols(c, "imuQuaternion", 3) is not None:
         x, y, z = (v / QUAT_SCALE for v in _cols(c, "imuQuaternion", 3))
         w = np.sqrt(np.clip(1.0 - x * x - y * y - z * z, 0.0, 1.0))
         roll = np.arctan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
         pitch = np.arcsin(np.clip(2.0 * (w * y - x * z), -1.0, 1.0))
         yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-        attitude = make_stream(t, [roll, pitch, -yaw], "imuQuaternion", angles=True)
+        return make_stream(t, [roll, pitch, -yaw], "imuQuaternion", angles=True)
+    return None
 
+
+def _inputs(c: dict, t, rotorflight: bool) -> tuple[dict, dict, dict]:
+    """The sticks (``rcCommand``) and the controller (mixer inputs or PID sum): (inputs, notes, unavailable)."""
     inputs, notes, unavailable = {}, {}, {}
-    rc = [c.get(f"rcCommand[{i}]") for i in range(5)]
-    if all(r is not None for r in rc[:4]):
+    rc = [c.get(f"rcCommand[{i}]") for i in range(4)]
+    if all(r is not None for r in rc):
         if rotorflight:
             col = rc[3] / RC_SCALE
             col_note = "rcCommand[3]/500 (collective)"
@@ -401,36 +473,30 @@ def _raw_from_columns(path, name, hdr, c, tolerated, damage, events, index, coun
                                    "-mixer[2]/1000->ped (stabilised mixer inputs)")
         else:
             unavailable["controller"] = "no mixer fields in this Rotorflight log"
-    else:
+    elif "axisP[0]" in c and "sticks" in inputs:
         def pid(axis):
             parts = [c.get(f"axis{k}[{axis}]") for k in "PIDF"]
             return sum(p for p in parts if p is not None) / PID_SCALE
 
-        if "axisP[0]" in c and "sticks" in inputs:
-            throttle = (rc[3] - 1500.0) / RC_SCALE
-            inputs["controller"] = make_stream(t, [pid(0), pid(1), throttle, -pid(2)], "PID sum")
-            notes["controller"] = ("(axisP+axisI+axisD+axisF)/1000 per axis -> lat, lon, -yaw -> ped "
-                                   "(mixer units, limit +-0.5); col = (rcCommand[3]-1500)/500 (throttle)")
-        else:
-            unavailable["controller"] = "no axisP/I/D fields"
-
-    servos = None
-    if rotorflight:
-        if all(f"servo[{i}]" in c for i in range(4)):
-            servos = make_stream(t, _cols(c, "servo", 4), "servo[0..3]")
-        else:
-            unavailable["servos"] = ("this Rotorflight log has no servo[0..3] fields (enable servos in the "
-                                     "blackbox field mask); use inputs='controller' (mixer inputs)")
+        throttle = (rc[3] - 1500.0) / RC_SCALE
+        inputs["controller"] = make_stream(t, [pid(0), pid(1), throttle, -pid(2)], "PID sum")
+        notes["controller"] = ("(axisP+axisI+axisD+axisF)/1000 per axis -> lat, lon, -yaw -> ped "
+                               "(mixer units, limit +-0.5); col = (rcCommand[3]-1500)/500 (throttle)")
     else:
-        unavailable["servos"] = (f"{firmware} multirotor log: motor outputs are not swash-plate servos of "
-                                 "eqs. 65-67; use inputs='controller' (the PID sum)")
+        unavailable["controller"] = "no axisP/I/D fields"
+    return inputs, notes, unavailable
 
+
+def _segment_signals(c: dict, t, hdr: dict, rotorflight: bool) -> SegmentSignals:
+    """What the airborne detector reads: power (throttle x collective, or mean motor output), accelerometer,
+    barometric height."""
     motors = [c[k] for k in (f"motor[{i}]" for i in range(8)) if k in c]
     power, power_name = None, "throttle"
+    throttle, collective = c.get("rcCommand[4]"), c.get("rcCommand[3]")
     if rotorflight:
-        if rc[4] is not None and rc[3] is not None:
+        if throttle is not None and collective is not None:
             # Lift needs both a spooled rotor (throttle) and positive collective.
-            power = make_stream(t, np.clip(rc[4] / 1000.0, 0, 1) * np.clip(rc[3] / RC_SCALE, 0, 1),
+            power = make_stream(t, np.clip(throttle / 1000.0, 0, 1) * np.clip(collective / RC_SCALE, 0, 1),
                                 "throttle x positive collective")
             power_name = "throttle x positive collective"
     elif motors:
@@ -450,17 +516,4 @@ def _raw_from_columns(path, name, hdr, c, tolerated, damage, events, index, coun
         accel = make_stream(t, 9.80665 / one_g * np.array(acc) * np.array([[1.0], [1.0], [-1.0]]),
                             "accSmooth (z negated)")
     altitude = make_stream(t, c["baroAlt"] / 100.0, "baroAlt") if "baroAlt" in c else None
-
-    inputs = {k: v for k, v in inputs.items() if v is not None}
-    if not inputs and servos is None:
-        raise MissingStreamError(f"{name}: no input stream: expected rcCommand[0..3] (sticks), axisP/I/D (controller, "
-                                 "Betaflight) or mixer[0..3] (controller, Rotorflight) fields")
-    default = "servos" if servos is not None else ("controller" if "controller" in inputs else "sticks")
-    meta = {"firmware": str(hdr.get("Firmware revision", firmware)), "craft": hdr.get("Craft name"),
-            "logs_in_file": int(count), "log_index": int(index), "events": sorted(set(events)),
-            "parser": "orangebox", **meta_end}
-    return RawLog(path=path, format="rotorflight-blackbox" if rotorflight else "betaflight-blackbox",
-                  vehicle="helicopter" if rotorflight else "multirotor", rates=rates, attitude=attitude,
-                  inputs=inputs, input_notes=notes, unavailable=unavailable, default_input=default, servos=servos,
-                  segment_signals=SegmentSignals(power=power, accel=accel, altitude=altitude, power_name=power_name),
-                  metadata=meta, damage=damage, notes=tolerated)
+    return SegmentSignals(power=power, accel=accel, altitude=altitude, power_name=power_name)

@@ -227,6 +227,28 @@ def load_px4(path, allow_damaged: bool = False) -> RawLog:
     """
     path = Path(path)
     pyulog = require("pyulog", "logs")
+    ulog, damage, tolerated, meta_end = _parse(path, pyulog, allow_damaged)
+    rates, attitude = _rates_and_attitude(ulog, path)
+    inputs, notes, unavailable, power = _inputs(ulog, path)
+    status, _ = _topic(ulog, "vehicle_status")
+    mav_type = int(status["system_type"][0]) if _has(status, "system_type") else None
+    vehicle = {MAV_TYPE_HELICOPTER: "helicopter", 1: "fixed-wing"}.get(mav_type, "multirotor")
+    unavailable["servos"] = (f"PX4 {vehicle} log: PX4's mixer outputs are not swash-plate servos of eqs. 65-67; "
+                             "use inputs='controller' (the rate controller's torque demand)")
+    meta = {
+        "firmware": f"PX4 {ulog.msg_info_dict.get('ver_sw', '?')}",
+        "mav_type": mav_type,
+        "parser": f"pyulog {getattr(pyulog, '__version__', '?')}",
+        **meta_end,
+    }
+    return RawLog(path=path, format="px4-ulog", vehicle=vehicle, rates=rates, attitude=attitude, inputs=inputs,
+                  input_notes=notes, unavailable=unavailable,
+                  default_input="controller" if "controller" in inputs else "sticks",
+                  segment_signals=_segment_signals(ulog, power), metadata=meta, damage=damage, notes=tolerated)
+
+
+def _parse(path: Path, pyulog, allow_damaged: bool):
+    """The log's sound bytes parsed by pyulog: (ULog, damage, notes, metadata of how the file ends)."""
     where = locate(path)
     if where.format != "px4-ulog":
         head = path.read_bytes()[:16]
@@ -249,7 +271,11 @@ def load_px4(path, allow_damaged: bool = False) -> RawLog:
         damage.append("pyulog reports corrupt data inside the log ("
                       + ("; ".join(p for p in printed[:2] if p) or "messages it could not decode") + ")")
     check_damage(damage, path, allow_damaged, "PX4 ULog")
+    return ulog, damage, tolerated, meta_end
 
+
+def _rates_and_attitude(ulog, path: Path):
+    """The body rates (``vehicle_angular_velocity``, else ``sensor_combined``) and the attitude, or None."""
     rates = None
     d, src = _topic(ulog, "vehicle_angular_velocity")
     if _has(d, "xyz[0]", "xyz[1]", "xyz[2]"):
@@ -266,9 +292,34 @@ def load_px4(path, allow_damaged: bool = False) -> RawLog:
     if _has(d, "q[0]", "q[1]", "q[2]", "q[3]"):
         q = np.array([d[f"q[{i}]"] for i in range(4)], dtype=float)
         attitude = make_stream(_t(d), euler_from_quaternion(q), src("q"), angles=True)
+    return rates, attitude
 
+
+def _inputs(ulog, path: Path):
+    """The input streams, their notes, why a source is unavailable, and the thrust demand (power) or None."""
     inputs, notes, unavailable = {}, {}, {}
-    power = None
+    sticks = _sticks(ulog, notes)
+    if sticks is not None:
+        inputs["sticks"] = sticks
+    else:
+        unavailable["sticks"] = "no manual_control_setpoint topic with at least 2 samples"
+    controller, power = _controller(ulog, notes)
+    if controller is not None:
+        inputs["controller"] = controller
+    else:
+        unavailable["controller"] = ("neither actuator_controls_0 nor vehicle_torque_setpoint + "
+                                     "vehicle_thrust_setpoint is logged with at least 2 samples")
+    if power is None and "sticks" in inputs:
+        power = make_stream(inputs["sticks"].time, (inputs["sticks"].values[2] + 1.0) / 2.0,
+                            "manual_control_setpoint throttle")
+    if not inputs:
+        raise MissingStreamError(f"{path}: no input stream: expected actuator_controls_0, vehicle_torque_setpoint "
+                                 "+ vehicle_thrust_setpoint (controller) or manual_control_setpoint (sticks)")
+    return inputs, notes, unavailable, power
+
+
+def _sticks(ulog, notes: dict):
+    """The pilot's sticks from ``manual_control_setpoint`` (either generation of its fields), or None."""
     m, src = _topic(ulog, "manual_control_setpoint")
     if _has(m, "roll", "pitch", "yaw", "throttle"):  # PX4 >= 1.14: roll, pitch, yaw, throttle all -1..1
         lat, lon, ped, col = m["roll"], -np.asarray(m["pitch"], float), m["yaw"], m["throttle"]
@@ -279,13 +330,13 @@ def load_px4(path, allow_damaged: bool = False) -> RawLog:
         col = 2.0 * np.asarray(m["z"], float) - 1.0
         notes["sticks"] = "manual_control_setpoint: lat=y, lon=-x (stick forward = nose down), col=2z-1, ped=r"
     else:
-        m = None
-    if m is not None:
-        s = make_stream(_t(m), [lat, lon, col, ped], src("*"))
-        if s is not None:
-            inputs["sticks"] = s
-    if "sticks" not in inputs:
-        unavailable["sticks"] = "no manual_control_setpoint topic with at least 2 samples"
+        return None
+    return make_stream(_t(m), [lat, lon, col, ped], src("*"))
+
+
+def _controller(ulog, notes: dict):
+    """The rate controller's demand (``actuator_controls_0``, else the torque and thrust setpoints) and its
+    thrust as power: (stream or None, power or None)."""
     c, src = _topic(ulog, "actuator_controls_0")
     ts, src_ts = _topic(ulog, "vehicle_torque_setpoint")
     th, src_th = _topic(ulog, "vehicle_thrust_setpoint")
@@ -296,8 +347,7 @@ def load_px4(path, allow_damaged: bool = False) -> RawLog:
         notes["controller"] = ("actuator_controls_0: lat=control[0] (roll torque), lon=control[1] (pitch torque), "
                                "col=2*control[3]-1 (thrust), ped=control[2] (yaw torque); all -1..1")
         if s is not None:
-            inputs["controller"] = s
-            power = make_stream(_t(c), thrust, src("control[3]"))
+            return s, make_stream(_t(c), thrust, src("control[3]"))
     elif _has(ts, "xyz[0]", "xyz[1]", "xyz[2]") and _has(th, "xyz[2]"):
         tt, tth = _t(ts), _t(th)
         up = -np.asarray(th["xyz[2]"], float)
@@ -308,23 +358,12 @@ def load_px4(path, allow_damaged: bool = False) -> RawLog:
             notes["controller"] = ("vehicle_torque_setpoint.xyz -> lat, lon, ped (-1..1); "
                                    "col = 2*(-vehicle_thrust_setpoint.xyz[2]) - 1")
             if s is not None:
-                inputs["controller"] = s
-                power = thrust_stream
-    if "controller" not in inputs:
-        unavailable["controller"] = ("neither actuator_controls_0 nor vehicle_torque_setpoint + "
-                                     "vehicle_thrust_setpoint is logged with at least 2 samples")
-    if power is None and "sticks" in inputs:
-        power = make_stream(inputs["sticks"].time, (inputs["sticks"].values[2] + 1.0) / 2.0,
-                            "manual_control_setpoint throttle")
-    if not inputs:
-        raise MissingStreamError(f"{path}: no input stream: expected actuator_controls_0, vehicle_torque_setpoint "
-                                 "+ vehicle_thrust_setpoint (controller) or manual_control_setpoint (sticks)")
+                return s, thrust_stream
+    return None, None
 
-    status, _ = _topic(ulog, "vehicle_status")
-    mav_type = int(status["system_type"][0]) if _has(status, "system_type") else None
-    vehicle = {MAV_TYPE_HELICOPTER: "helicopter", 1: "fixed-wing"}.get(mav_type, "multirotor")
-    unavailable["servos"] = (f"PX4 {vehicle} log: PX4's mixer outputs are not swash-plate servos of eqs. 65-67; "
-                             "use inputs='controller' (the rate controller's torque demand)")
+
+def _segment_signals(ulog, power) -> SegmentSignals:
+    """What the airborne detector reads: thrust demand, accelerometer, height, armed state."""
     sc, src = _topic(ulog, "sensor_combined")
     accel = None
     if _has(sc, "accelerometer_m_s2[0]", "accelerometer_m_s2[1]", "accelerometer_m_s2[2]"):
@@ -335,16 +374,5 @@ def load_px4(path, allow_damaged: bool = False) -> RawLog:
         altitude = make_stream(_t(lp), -np.asarray(lp["z"], float), src("-z"))
     armed, src = _topic(ulog, "actuator_armed")
     armed = make_stream(_t(armed), armed["armed"], src("armed")) if _has(armed, "armed") else None
-    default = "controller" if "controller" in inputs else "sticks"
-    meta = {
-        "firmware": f"PX4 {ulog.msg_info_dict.get('ver_sw', '?')}",
-        "mav_type": mav_type,
-        "parser": f"pyulog {getattr(pyulog, '__version__', '?')}",
-        **meta_end,
-    }
-    return RawLog(path=path, format="px4-ulog", vehicle=vehicle, rates=rates, attitude=attitude, inputs=inputs,
-                  input_notes=notes, unavailable=unavailable, default_input=default,
-                  segment_signals=SegmentSignals(power=power, accel=accel, altitude=altitude, armed=armed,
-                                                 power_name=f"thrust demand ({power.name})" if power else
-                                                 "thrust demand"),
-                  metadata=meta, damage=damage, notes=tolerated)
+    return SegmentSignals(power=power, accel=accel, altitude=altitude, armed=armed,
+                          power_name=f"thrust demand ({power.name})" if power else "thrust demand")

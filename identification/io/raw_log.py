@@ -287,32 +287,10 @@ def to_flight(raw: RawLog, inputs: str | None = None, segment=None, rate: float 
     warnings = list(raw.notes)
     used = [raw.rates, input_stream] + ([raw.attitude] if raw.attitude is not None else [])
     what = f"rates, {'attitude and ' if raw.attitude is not None else ''}{source}"
-    t0 = max(s.time[0] for s in used)
-    t1 = min(s.time[-1] for s in used)
     grid_rate = float(rate) if rate is not None else min(raw.rates.rate, DEFAULT_MAX_RATE)
     if not (np.isfinite(grid_rate) and grid_rate > 0):
         raise SegmentError(f"grid rate must be a positive number of Hz, got {rate!r}")
-    if t1 - t0 < 2.0 / grid_rate:
-        spans = ", ".join(f"{s.name} {s.span[0]:.3f}..{s.span[1]:.3f} s" for s in used)
-        others = [k for k in raw.inputs if k != source]
-        hint = f"; another input source may cover more (--inputs {'|'.join(others)})" if others else ""
-        raise MissingStreamError(
-            f"{raw.path}: the {what} streams overlap for {max(t1 - t0, 0.0):.3f} s only ({spans}){hint}"
-        )
-    if mode == "range":  # only the asked-for part of the clock is gridded
-        t0, t1 = max(t0, span[0] - 1.0 / grid_rate), min(t1, span[1] + 1.0 / grid_rate)
-        if t1 - t0 < 2.0 / grid_rate:
-            raise SegmentError(
-                f"{raw.path}: segment {span[0]}:{span[1]} s lies outside the log's data, which spans "
-                f"{max(s.time[0] for s in used):.3f}:{min(s.time[-1] for s in used):.3f} s (the log's own clock); "
-                "pass --segment all for the whole log"
-            )
-    elif (t1 - t0) > MAX_SPAN_FACTOR * _covered_s(raw.rates) + 3600.0:
-        raise DamagedLogError(
-            f"{raw.path}: the log's time stamps span {t1 - t0:.4g} s but its gyro stream ({raw.rates.name}) covers "
-            f"only {_covered_s(raw.rates):.4g} s of it: the clock is corrupt; choose a stretch with --segment T0:T1"
-        )
-    grid = uniform_grid(t0, t1, grid_rate)
+    grid = _grid(raw, used, what, source, span, grid_rate)
     valid = np.ones(grid.size, dtype=bool)
     for s in used:
         valid &= valid_on_grid(grid, s)
@@ -326,24 +304,8 @@ def to_flight(raw: RawLog, inputs: str | None = None, segment=None, rate: float 
     if mode == "auto":
         detection = detect_airborne(grid, raw.segment_signals, rates, att, valid, source=str(raw.path))
         i0, i1 = detection.start, detection.stop
-    elif mode == "all":
-        runs = valid_runs(valid)
-        i0, i1 = runs[np.argmax(runs[:, 1] - runs[:, 0])]
     else:
-        a, b = span
-        if a < grid[0] - 1.5 / grid_rate or b > grid[-1] + 1.5 / grid_rate:
-            raise SegmentError(
-                f"{raw.path}: segment {a}:{b} s lies outside the log's data, which spans "
-                f"{grid[0]:.3f}:{grid[-1]:.3f} s (the log's own clock); pass --segment all for the whole log"
-            )
-        i0 = int(np.searchsorted(grid, a - 1e-9))
-        i1 = int(np.searchsorted(grid, b + 1e-9))
-        if not valid[i0:i1].all():
-            bad = i0 + int(np.argmin(valid[i0:i1]))
-            raise SegmentError(
-                f"{raw.path}: segment {a}:{b} s spans a gap in the logged data at t={grid[bad]:.3f} s; "
-                "choose a segment inside one continuous stretch (--segment all takes the longest)"
-            )
+        i0, i1 = _chosen_rows(raw, mode, span, grid, grid_rate, valid)
     sl = slice(int(i0), int(i1))
     if i1 - i0 < 2:
         if mode == "all":
@@ -358,28 +320,8 @@ def to_flight(raw: RawLog, inputs: str | None = None, segment=None, rate: float 
     if att is None:
         warnings.append("the log has no attitude stream (older firmware): the attitude is reconstructed from the "
                         "rates (eqs. 25-29), starting level")
-
-    meta = {
-        "source": raw.path.name,
-        "sha256": sha256_of(raw.path),
-        "format": raw.format,
-        "vehicle": raw.vehicle,
-        "input_source": source,
-        "input_mapping": raw.input_notes.get(source, extra_meta.get("servo_calibration", {}).get("name", "")),
-        "inputs_clipped": clipped,
-        "units": {"time": "s (the log's own clock)", "rates": "rad/s", "attitude": "rad", "sticks": "[-1, 1]"},
-        "resampling": {
-            "rate_hz": grid_rate,
-            "method": "linear interpolation; zero-phase 4th-order Butterworth at 0.4x the grid rate on faster "
-                      "streams first; angles unwrapped",
-            "streams": {s.name: round(s.rate, 3) for s in used},
-            "dropped_samples": {s.name: s.dropped for s in used if s.dropped},
-        },
-        "segment": [float(grid[i0]), float(grid[i1 - 1])],
-        "segment_mode": mode,
-        **{k: v for k, v in raw.metadata.items()},
-        **extra_meta,
-    }
+    meta = _provenance(raw, source, extra_meta, clipped, _resampling(used, grid_rate),
+                       [float(grid[i0]), float(grid[i1 - 1])], mode)
     if detection is not None:
         meta["airborne_detection"] = detection.summary()
     if raw.damage:
@@ -388,6 +330,102 @@ def to_flight(raw: RawLog, inputs: str | None = None, segment=None, rate: float 
         meta["import_warnings"] = warnings
     return make_flight(grid[sl], rates[:, sl], sticks, attitude=None if att is None else att[:, sl], metadata=meta,
                        units_from=f"{raw.format} log")
+
+
+def _grid(raw: RawLog, used: list, what: str, source: str, span, grid_rate: float) -> np.ndarray:
+    """The uniform grid [s] over the time all ``used`` streams cover (only ``span`` of it when one is asked for).
+
+    Raises
+    ------
+    MissingStreamError
+        The streams overlap for less than two grid steps.
+    SegmentError
+        ``span`` lies outside the log's data.
+    DamagedLogError
+        The streams span far more time than the gyro stream covers (a corrupt clock).
+    """
+    t0 = max(s.time[0] for s in used)
+    t1 = min(s.time[-1] for s in used)
+    if t1 - t0 < 2.0 / grid_rate:
+        spans = ", ".join(f"{s.name} {s.span[0]:.3f}..{s.span[1]:.3f} s" for s in used)
+        others = [k for k in raw.inputs if k != source]
+        hint = f"; another input source may cover more (--inputs {'|'.join(others)})" if others else ""
+        raise MissingStreamError(
+            f"{raw.path}: the {what} streams overlap for {max(t1 - t0, 0.0):.3f} s only ({spans}){hint}"
+        )
+    if span is not None:  # only the asked-for part of the clock is gridded
+        t0, t1 = max(t0, span[0] - 1.0 / grid_rate), min(t1, span[1] + 1.0 / grid_rate)
+        if t1 - t0 < 2.0 / grid_rate:
+            raise SegmentError(
+                f"{raw.path}: segment {span[0]}:{span[1]} s lies outside the log's data, which spans "
+                f"{max(s.time[0] for s in used):.3f}:{min(s.time[-1] for s in used):.3f} s (the log's own clock); "
+                "pass --segment all for the whole log"
+            )
+    elif (t1 - t0) > MAX_SPAN_FACTOR * _covered_s(raw.rates) + 3600.0:
+        raise DamagedLogError(
+            f"{raw.path}: the log's time stamps span {t1 - t0:.4g} s but its gyro stream ({raw.rates.name}) covers "
+            f"only {_covered_s(raw.rates):.4g} s of it: the clock is corrupt; choose a stretch with --segment T0:T1"
+        )
+    return uniform_grid(t0, t1, grid_rate)
+
+
+def _chosen_rows(raw: RawLog, mode: str, span, grid: np.ndarray, grid_rate: float, valid: np.ndarray):
+    """Rows (i0, i1) of the grid of segment ``"all"`` (the longest run without a gap) or of ``span``.
+
+    Raises
+    ------
+    SegmentError
+        ``span`` lies outside the grid or spans a gap in the data.
+    """
+    if mode == "all":
+        runs = valid_runs(valid)
+        return runs[np.argmax(runs[:, 1] - runs[:, 0])]
+    a, b = span
+    if a < grid[0] - 1.5 / grid_rate or b > grid[-1] + 1.5 / grid_rate:
+        raise SegmentError(
+            f"{raw.path}: segment {a}:{b} s lies outside the log's data, which spans "
+            f"{grid[0]:.3f}:{grid[-1]:.3f} s (the log's own clock); pass --segment all for the whole log"
+        )
+    i0 = int(np.searchsorted(grid, a - 1e-9))
+    i1 = int(np.searchsorted(grid, b + 1e-9))
+    if not valid[i0:i1].all():
+        bad = i0 + int(np.argmin(valid[i0:i1]))
+        raise SegmentError(
+            f"{raw.path}: segment {a}:{b} s spans a gap in the logged data at t={grid[bad]:.3f} s; "
+            "choose a segment inside one continuous stretch (--segment all takes the longest)"
+        )
+    return i0, i1
+
+
+def _resampling(used: list, grid_rate: float) -> dict:
+    """How the streams were put on the grid (``metadata["resampling"]``)."""
+    return {
+        "rate_hz": grid_rate,
+        "method": "linear interpolation; zero-phase 4th-order Butterworth at 0.4x the grid rate on faster "
+                  "streams first; angles unwrapped",
+        "streams": {s.name: round(s.rate, 3) for s in used},
+        "dropped_samples": {s.name: s.dropped for s in used if s.dropped},
+    }
+
+
+def _provenance(raw: RawLog, source: str, extra_meta: dict, clipped: dict, resampling: dict, segment: list,
+                mode: str) -> dict:
+    """The flight's metadata: where it came from, how its inputs were mapped and clipped, resampled, cut."""
+    return {
+        "source": raw.path.name,
+        "sha256": sha256_of(raw.path),
+        "format": raw.format,
+        "vehicle": raw.vehicle,
+        "input_source": source,
+        "input_mapping": raw.input_notes.get(source, extra_meta.get("servo_calibration", {}).get("name", "")),
+        "inputs_clipped": clipped,
+        "units": {"time": "s (the log's own clock)", "rates": "rad/s", "attitude": "rad", "sticks": "[-1, 1]"},
+        "resampling": resampling,
+        "segment": segment,
+        "segment_mode": mode,
+        **{k: v for k, v in raw.metadata.items()},
+        **extra_meta,
+    }
 
 
 def rate_attitude_agreement(flight: Flight, cutoff_hz: float = 2.0) -> dict:
