@@ -396,27 +396,43 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
     if duration is not None and duration != cfg.duration:
         cfg = FlightConfig(**{**asdict(cfg), "duration": float(duration)})
     params = truth_params(effects, truth or PAPER_PARAMS, effect_scale)
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(seed)  # draws in a fixed order: wind, collective, jitter, then the sensors
     fs = cfg.sample_rate
-    dt = 1.0 / fs
     n = int(round(cfg.duration * fs)) + 1
-    time = np.arange(n) * dt
-
-    gains = params.control_gains
-    level = np.broadcast_to(np.asarray(cfg.wind_level, dtype=float), (3,))
-    if cfg.wind_model == "lowpass" and cfg.wind_slow_fraction == 0:  # today's flights, draw for draw
-        wind = np.array([coloured_noise(rng, n, fs, cfg.wind_corner_hz, lv / 1.6449) for lv in level])
-    else:
-        wind = np.array([gust_trace(rng, n, fs, cfg, lv / 1.6449) for lv in level])
-    torque = gains[:, None] * wind
-
+    time = np.arange(n) * (1.0 / fs)
+    wind = _wind(rng, n, cfg)
+    torque = params.control_gains[:, None] * wind
     # Collective: slow wander plus occasional climbs, kept inside the stick range.
     col = cfg.collective_trim + coloured_noise(rng, n, fs, 0.05, cfg.collective_wander)
     col = np.clip(col, -1.0, 1.0)
     jitter = np.array([coloured_noise(rng, n, fs, 2.0, cfg.stick_noise) for _ in range(3)])
-    sweeps = sweep_schedule(time, cfg)
+    states, sticks = _fly(params, cfg, sweep_schedule(time, cfg), jitter, col, torque)
+    true_rates = states[:, :3].T
+    rates, att = _sensors(rng, cfg, time, true_rates, euler_from_quaternion(states[:, 6:10].T))
+    flight = _logged_flight(cfg, seed, effects, time, rates, att, sticks)
+    return SyntheticFlight(flight, params, wind, torque, true_rates, cfg, int(seed), tuple(effects), float(effect_scale))
 
-    # Pilot: PID on the delayed angle, scaled by the control gain he has learnt.
+
+def _wind(rng: np.random.Generator, n: int, cfg: FlightConfig) -> np.ndarray:
+    """The equivalent cyclic wind input u_d of eq. (42) per axis, shape (3, n), at ``cfg.wind_level``."""
+    level = np.broadcast_to(np.asarray(cfg.wind_level, dtype=float), (3,))
+    if cfg.wind_model == "lowpass" and cfg.wind_slow_fraction == 0:  # today's flights, draw for draw
+        return np.array([coloured_noise(rng, n, cfg.sample_rate, cfg.wind_corner_hz, lv / 1.6449) for lv in level])
+    return np.array([gust_trace(rng, n, cfg.sample_rate, cfg, lv / 1.6449) for lv in level])
+
+
+def _fly(params: ModelParams, cfg: FlightConfig, sweeps, jitter, col, torque) -> tuple[np.ndarray, np.ndarray]:
+    """Fly the truth model with the pilot in the loop: states (n, 10) and the sticks he logged (n, 4).
+
+    The pilot (module docstring) holds the attitude with a PID on the angle (``"pid"``) or a PD on angle and
+    rate (``"pd"``, ``"autopilot"``) seen ``delay`` samples ago, scaled by the control gain he has learnt,
+    and adds the ``sweeps`` and his ``jitter`` (3, n); ``col`` (n,) is the collective and ``torque`` (3, n)
+    the wind [rad/s^2].
+    """
+    n = col.size
+    fs = cfg.sample_rate
+    dt = 1.0 / fs
+    gains = params.control_gains
     wn = cfg.pilot_bandwidth
     kp, kdr, ki = wn**2, 1.4 * wn, 0.3 * wn**3
     if cfg.pilot != "pid":  # PD on attitude and rate; the trim is known, not integrated
@@ -439,6 +455,7 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
     jitter_l = jitter.T.tolist()
     col_l = col.tolist()
     torque_l = torque.T.tolist()
+
     def _pilot(k, ahead):
         """Sticks at sample k from what the pilot saw ``delay`` samples earlier."""
         seen_ang = hist_ang[-1 - delay + ahead]
@@ -471,9 +488,13 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
             x = rk4(x, uj, torque_l[k], h)
         if len(hist_ang) > 4 * (delay + 2):
             del hist_ang[: -(delay + 2)], hist_rate[: -(delay + 2)]
+    return states, sticks
 
-    true_rates = states[:, :3].T
-    true_att = euler_from_quaternion(states[:, 6:10].T)
+
+def _sensors(rng: np.random.Generator, cfg: FlightConfig, time, true_rates, true_att):
+    """What the gyro and the attitude sensor log: noise, rotor vibration and ``cfg.vibration_lines`` added,
+    yaw wrapped to (-pi, pi]. Returns (rates, attitude), each (3, n)."""
+    n = time.size
     phase = rng.uniform(0, 2 * np.pi, size=(3, 2))
     vib = sum(
         cfg.vibration / (j + 1) * np.sin(2 * np.pi * (j + 1) * cfg.rotor_hz * time[None, :] + phase[:, j : j + 1])
@@ -484,6 +505,11 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
     for hz, amp in cfg.vibration_lines:  # drawn after today's sensor noise: default flights unchanged
         rates = rates + amp * np.sin(2 * np.pi * float(hz) * time[None, :] + rng.uniform(0, 2 * np.pi, (3, 1)))
     att[2] = np.angle(np.exp(1j * att[2]))
+    return rates, att
+
+
+def _logged_flight(cfg: FlightConfig, seed, effects, time, rates, att, sticks) -> Flight:
+    """The :class:`Flight` the logger wrote: sticks (n, 4) shifted by ``cfg.input_shift``, provenance."""
     meta = {
         "source": f"synthetic seed={seed}",
         "format": "synthetic",
@@ -493,10 +519,10 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
         "input_hold": "zoh" if cfg.pilot == "autopilot" else "linear",
     }
     logged = np.ascontiguousarray(sticks.T)
-    shift = int(round(cfg.input_shift * fs))
+    n = time.size
+    shift = int(round(cfg.input_shift * cfg.sample_rate))
     if shift:  # the log's stick column recorded late (> 0) or early (< 0), edges held
         idx = np.clip(np.arange(n) - shift, 0, n - 1)
         logged = np.ascontiguousarray(logged[:, idx])
-        meta["input_shift_s"] = shift / fs
-    flight = make_flight(time, rates, logged, attitude=att, metadata=meta)
-    return SyntheticFlight(flight, params, wind, torque, true_rates, cfg, int(seed), tuple(effects), float(effect_scale))
+        meta["input_shift_s"] = shift / cfg.sample_rate
+    return make_flight(time, rates, logged, attitude=att, metadata=meta)
