@@ -21,6 +21,13 @@ Where the two disagree (saturation, non-Gaussian gusts, model non-linearity)
 the result flags it. :mod:`controllers.flight_test` checks the prediction
 against flights of the truth model in fresh wind.
 
+Beside the errors stand each pair's gain and phase margins
+(:mod:`controllers.sweep_margins`), so the report can name the best pair and
+the best *robust* one (6 dB, 45°). A grid whose best pair lies on an edge grows
+past it until the best pair is interior or a limit holds
+(:mod:`controllers.sweep_extend`): the grid a user types need not contain the
+optimum.
+
 The replay
 ----------
 (:mod:`controllers.replay`; windows from :mod:`controllers.sweep_inputs`, statistics by
@@ -58,19 +65,23 @@ from .closed_loop import (
 )
 from .errors import SweepError
 from .metrics import histogram_edges
+from .sweep_extend import EXTENSION_VALUES, MAX_EXTENSIONS, PairBlock, best_index, extend_grid
 from .sweep_inputs import check_gains, check_pairs, load_model, parse_range, prepare
+from .sweep_margins import (MARGIN_COLUMNS, ROBUST_GAIN_MARGIN_DB, ROBUST_PHASE_MARGIN_DEG, loop_margins,
+                            robust)
 from .sweep_replay import MAX_ANGLE_DEG, TASK_STATES, TD_COLUMNS, check_chunk_pairs, chunks, replay, replay_on
 
-__all__ = ["COLUMNS", "FD_COLUMNS", "MAX_ANGLE_DEG", "TASK_STATES", "TD_COLUMNS", "SweepConfig", "SweepResult",
-           "check_gains", "parse_range", "sweep_gains", "sweep_pairs"]
+__all__ = ["COLUMNS", "FD_COLUMNS", "MAX_ANGLE_DEG", "MAX_EXTENSIONS", "ROBUST_GAIN_MARGIN_DB",
+           "ROBUST_PHASE_MARGIN_DEG", "TASK_STATES", "TD_COLUMNS", "SweepConfig", "SweepResult", "check_gains",
+           "parse_range", "sweep_gains", "sweep_pairs"]
 
 _DEG = 180.0 / math.pi
 _prepare, _chunks, _load = prepare, chunks, load_model  # names kept for scripts/bench.py and users' imports
 
 FD_COLUMNS = ("pred_att_rms_deg", "pred_att_p50_deg", "pred_att_p90_deg", "pred_att_p99_deg", "pred_rate_rms_dps",
               "pred_rate_p50_dps", "pred_rate_p90_dps", "pred_rate_p99_dps", "pred_stick_rms")
-COLUMNS = ("kp", "kd", "status", "max_pole", "settle_s") + TD_COLUMNS + FD_COLUMNS + (
-    "att_p90_rel_diff", "rate_p90_rel_diff", "disagree")
+COLUMNS = ("kp", "kd", "status", "max_pole", "settle_s") + MARGIN_COLUMNS + TD_COLUMNS + FD_COLUMNS + (
+    "att_p90_rel_diff", "rate_p90_rel_diff", "disagree", "extension_round")
 """Columns of the result table, one row per gain pair (Kp-major order).
 
 ``att_*`` |attitude error| [deg], ``rate_*`` |rate error| [deg/s], ``stick_*`` the
@@ -82,7 +93,10 @@ of the p90s; ``status`` "stable", "unstable" (closed-loop poles; not simulated) 
 "diverged" (left ±60°); ``max_pole`` the spectral radius of the discrete closed loop and
 ``settle_s`` the 2 % settling time of its slowest mode, ``-4 dt / ln(max_pole)`` [s] (a loop
 slower than the windows never reaches the stationary distribution the frequency domain
-predicts)."""
+predicts); ``gain_margin_db`` [dB] and ``phase_margin_deg`` [deg] the margins of the same sampled
+loop broken at the swept stick (:func:`controllers.sweep_margins.loop_margins`; inf where the loop
+never crosses, negative for an unstable pair); ``extension_round`` 0 for the grid asked for, k for
+the pairs added by the k-th extension of the grid (:mod:`controllers.sweep_extend`)."""
 
 
 
@@ -116,6 +130,10 @@ class SweepConfig:
     max_batch : int
     backend : None, str or Backend
     chunk_pairs : int, optional
+    extend : bool
+        Grow a grid whose best pair lies on an edge (grids only).
+    max_extensions : int
+        Rounds of growth at most.
     """
 
     axis: object = "roll"
@@ -133,6 +151,8 @@ class SweepConfig:
     max_batch: int = 4096
     backend: object = None
     chunk_pairs: int | None = None
+    extend: bool = True
+    max_extensions: int = MAX_EXTENSIONS
 
 
 # ------------------------------------------------------------------- result
@@ -144,7 +164,8 @@ class SweepResult:
     ----------
     axis : str
     kp_values, kd_values : ndarray
-        The grid [stick/rad], [stick/(rad/s)].
+        The grid [stick/rad], [stick/(rad/s)], grown where the sweep extended it (the grid asked for
+        is ``settings["extension"]["kp_asked"]``, ``["kd_asked"]``).
     table : dict of str -> ndarray (n_pairs,)
         :data:`COLUMNS`.
     hist_edges : ndarray (n_bins + 1,)
@@ -158,7 +179,9 @@ class SweepResult:
     psd_freq, psd : ndarray
         The Welch spectrum of u_d used by the prediction [Hz], (3, nf) [stick²/Hz].
     settings : dict
-        Model, dt, duration, seed, nominal gains, tolerance, timing.
+        Model, dt, duration, seed, nominal gains, tolerance, timing, and ``extension``: the grid asked
+        for, the rounds of growth (edges, gains and pairs added, the best pair before each) and why the
+        growth stopped (:data:`controllers.sweep_extend.STOPS`, in words under ``stop_detail``).
     samples : dict of int -> (att_err_deg, rate_err_deg_s, stick)
         Signed per-sample errors of each pair, only with ``keep_samples=True``.
     """
@@ -209,10 +232,22 @@ class SweepResult:
 
     def best(self, by: str = "att_p90_deg") -> dict | None:
         """The stable, simulated pair with the smallest ``by`` (default p90 |attitude error|), or None."""
-        v = np.where(self.stable, np.asarray(self.table[by], dtype=float), np.nan)
-        if not np.any(np.isfinite(v)):
-            return None
-        return self.row(int(np.nanargmin(v)))
+        i = best_index(self.table, by)
+        return None if i is None else self.row(i)
+
+    def best_robust(self, by: str = "att_p90_deg", min_gain_margin_db: float = ROBUST_GAIN_MARGIN_DB,
+                    min_phase_margin_deg: float = ROBUST_PHASE_MARGIN_DEG) -> dict | None:
+        """:meth:`best` among the pairs that keep ``min_gain_margin_db`` [dB] and ``min_phase_margin_deg``
+        [deg] (default 6 dB and 45°), or None when no stable pair does."""
+        keeps = robust(self.table["gain_margin_db"], self.table["phase_margin_deg"], min_gain_margin_db,
+                       min_phase_margin_deg)
+        i = best_index(self.table, by, among=keeps)
+        return None if i is None else self.row(i)
+
+    @property
+    def extension(self) -> dict:
+        """``settings["extension"]``: the grid asked for, the rounds of growth and why it stopped."""
+        return self.settings["extension"]
 
     def to_csv(self, path):
         """Write the table as CSV (one row per pair; NaN for what was not simulated), atomically."""
@@ -263,9 +298,15 @@ def _scalar(v):
 def sweep_gains(model, kp_values, kd_values, axis="roll", duration: float | None = 60.0, dt: float = 0.01,
                 seed: int = 0, traces=None, windows: int | None = None, progress: bool = True, nominal=None,
                 agree_tol: float = 0.2, keep_samples: bool = False, hist_max_deg: float = 30.0,
-                hist_bins: int = 120, max_batch: int = 4096, backend=None, chunk_pairs: int | None = None
-                ) -> SweepResult:
+                hist_bins: int = 120, max_batch: int = 4096, backend=None, chunk_pairs: int | None = None,
+                extend: bool = True, max_extensions: int = MAX_EXTENSIONS) -> SweepResult:
     """Predict the error distribution of every PD gain pair of a Kp × Kd grid (paper Section 4).
+
+    Each pair's gain and phase margins come beside its errors (:meth:`SweepResult.best_robust`
+    picks among the pairs that keep 6 dB and 45°). When the best pair lies on an edge of the
+    grid, the grid grows past that edge and the new pairs are swept on the same windows, until
+    the best pair is interior, the pair beyond is unstable, or ``max_extensions`` rounds ran
+    (:mod:`controllers.sweep_extend`; ``extend=False`` sweeps the grid as given).
 
     Parameters
     ----------
@@ -313,6 +354,13 @@ def sweep_gains(model, kp_values, kd_values, axis="roll", duration: float | None
         result is the same, bit for bit, on every backend and worker count.
     chunk_pairs : int, optional
         Pairs per task with a backend (default :data:`TASK_STATES` // windows).
+    extend : bool
+        Grow the grid while its best pair lies on an edge (default True). The grid gains
+        :data:`~controllers.sweep_extend.EXTENSION_VALUES` values past that edge per round, its last
+        ratio continued (:func:`~controllers.sweep_extend.continuation`); ``settings["extension"]``
+        and the ``extension_round`` column record what was added and why the growth stopped.
+    max_extensions : int
+        Rounds of growth at most (default :data:`MAX_EXTENSIONS`), >= 0.
 
     Returns
     -------
@@ -329,28 +377,28 @@ def sweep_gains(model, kp_values, kd_values, axis="roll", duration: float | None
         A backend's worker died more often than its retries allow.
     """
     cfg = SweepConfig(axis, duration, dt, seed, traces, windows, progress, nominal, agree_tol, keep_samples,
-                      hist_max_deg, hist_bins, max_batch, backend, chunk_pairs)
+                      hist_max_deg, hist_bins, max_batch, backend, chunk_pairs, extend, max_extensions)
     kp_values = check_gains(kp_values, "kp_values")
     kd_values = check_gains(kd_values, "kd_values")
-    KP, KD = np.meshgrid(kp_values, kd_values, indexing="ij")
-    return _sweep(model, KP.ravel(), KD.ravel(), kp_values, kd_values, "grid", cfg)
-
+    return _sweep(model, kp_values, kd_values, "grid", cfg)
 
 
 def sweep_pairs(model, pairs, axis="roll", duration: float | None = 60.0, dt: float = 0.01, seed: int = 0,
                 traces=None, windows: int | None = None, progress: bool = True, nominal=None,
                 agree_tol: float = 0.2, keep_samples: bool = False, hist_max_deg: float = 30.0,
-                hist_bins: int = 120, max_batch: int = 4096, backend=None, chunk_pairs: int | None = None
-                ) -> SweepResult:
+                hist_bins: int = 120, max_batch: int = 4096, backend=None, chunk_pairs: int | None = None,
+                extend: bool = True, max_extensions: int = MAX_EXTENSIONS) -> SweepResult:
     """:func:`sweep_gains` on a list of ``(kp, kd)`` pairs instead of a grid (same arguments).
 
     The table rows follow ``pairs``; ``kp_values``/``kd_values`` hold each pair's
-    gains and :meth:`SweepResult.grid` is not available.
+    gains and :meth:`SweepResult.grid` is not available. A list has no edges to grow:
+    ``extend`` and ``max_extensions`` are accepted (so one :class:`SweepConfig` runs
+    either function) and the extension is recorded as ``"disabled"``.
     """
     cfg = SweepConfig(axis, duration, dt, seed, traces, windows, progress, nominal, agree_tol, keep_samples,
-                      hist_max_deg, hist_bins, max_batch, backend, chunk_pairs)
+                      hist_max_deg, hist_bins, max_batch, backend, chunk_pairs, extend, max_extensions)
     _, kp, kd = check_pairs(pairs)
-    return _sweep(model, kp, kd, kp, kd, "pairs", cfg)
+    return _sweep(model, kp, kd, "pairs", cfg)
 
 
 def _make_backend(backend):
@@ -373,6 +421,11 @@ def _check_settings(cfg: SweepConfig, be) -> np.ndarray:
     """Check the sweep's own settings (before any work); the histogram edges."""
     if be is not None:
         check_chunk_pairs(cfg.chunk_pairs)
+    if not isinstance(cfg.extend, (bool, np.bool_)):
+        raise SweepError(f"extend must be True or False, got {cfg.extend!r}")
+    m = cfg.max_extensions
+    if not (isinstance(m, (int, np.integer)) and not isinstance(m, bool) and m >= 0):
+        raise SweepError(f"max_extensions must be a whole number >= 0, got {m!r}")
     agree_tol = cfg.agree_tol
     if not (isinstance(agree_tol, (int, float)) and agree_tol > 0 and math.isfinite(agree_tol)):
         raise SweepError(f"agree_tol must be a positive fraction, got {agree_tol!r}")
@@ -393,27 +446,75 @@ def _plant_and_nominal(rp, nominal):
     return plant, nominal
 
 
-def _time_domain(be, rp, kp, kd, stable, nominal, cfg: SweepConfig, edges, table, hist, overflow, status):
-    """Replay the stable pairs (here or on ``be``), filling the table's time-domain columns in place.
+@dataclass(eq=False)
+class _Run:
+    """What every batch of pairs of one sweep shares (windows, plant, spectrum, backend), and what they took."""
 
-    Returns the samples kept, where the replay ran and in how many tasks.
-    """
-    idx = np.flatnonzero(stable)
-    if not idx.size:
-        return {}, "in-process", 1
-    if be is None:
-        st, h, o, div, smp = replay(rp, kp[idx], kd[idx], nominal, cfg.keep_samples, cfg.progress,
-                                    cfg.max_batch, edges)
-        where, n_tasks = "in-process", 1
-    else:
-        st, h, o, div, smp, n_tasks = replay_on(be, rp, kp[idx], kd[idx], nominal, cfg.keep_samples,
-                                                cfg.progress, cfg.max_batch, edges, cfg.chunk_pairs)
-        where = be.describe()
-    for c in TD_COLUMNS:
-        table[c][idx] = st[c]
-    hist[idx], overflow[idx] = h, o
-    status[idx[div]] = "diverged"
-    return {int(idx[j]): v for j, v in smp.items()}, where, n_tasks
+    rp: object
+    plant: object
+    nominal: np.ndarray
+    freq: np.ndarray
+    psd: np.ndarray
+    hist_edges: np.ndarray
+    be: object
+    cfg: SweepConfig
+    seconds: dict
+    tasks: int = 0
+    where: str = "in-process"
+
+    def evaluate(self, kp: np.ndarray, kd: np.ndarray) -> PairBlock:
+        """Poles, margins, the frequency-domain prediction and the replay of the pairs ``(kp[g], kd[g])``."""
+        ax, G, dt = self.rp.axis, kp.size, self.rp.dt
+        t0 = time.perf_counter()
+        max_pole, stable = closed_loop_poles(self.plant, ax, kp, kd, self.nominal)
+        gm, pm = loop_margins(self.plant, ax, kp, kd, self.nominal)
+        sigma = predict_std(self.plant, ax, kp, kd, self.nominal, self.freq, self.psd)
+        self.seconds["frequency_domain"] += time.perf_counter() - t0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            settle = np.where(stable, -4.0 * dt / np.log(np.minimum(max_pole, 1.0)), np.inf)
+        table = {"kp": kp, "kd": kd, "max_pole": max_pole, "settle_s": settle, "gain_margin_db": gm,
+                 "phase_margin_deg": pm}
+        table.update({c: np.full(G, np.nan) for c in TD_COLUMNS})
+        block = PairBlock(table, np.zeros((G, self.hist_edges.size - 1), dtype=np.int64), np.zeros(G, dtype=np.int64))
+        status = np.where(stable, "stable", "unstable").astype(object)
+        t0 = time.perf_counter()
+        self._time_domain(kp, kd, stable, block, status)
+        self.seconds["time_domain"] += time.perf_counter() - t0
+        _predicted(table, sigma, self.cfg.agree_tol)
+        table["status"] = status
+        table["extension_round"] = np.zeros(G, dtype=np.int64)
+        return block
+
+    def _time_domain(self, kp, kd, stable, block: PairBlock, status) -> None:
+        """Replay the stable pairs (here or on the backend), filling ``block`` and ``status`` in place."""
+        idx = np.flatnonzero(stable)
+        if not idx.size:
+            return
+        cfg, rp = self.cfg, self.rp
+        if self.be is None:
+            st, h, o, div, smp = replay(rp, kp[idx], kd[idx], self.nominal, cfg.keep_samples, cfg.progress,
+                                        cfg.max_batch, self.hist_edges)
+            self.tasks += 1
+        else:
+            st, h, o, div, smp, n_tasks = replay_on(self.be, rp, kp[idx], kd[idx], self.nominal, cfg.keep_samples,
+                                                    cfg.progress, cfg.max_batch, self.hist_edges, cfg.chunk_pairs)
+            self.tasks += n_tasks
+            self.where = self.be.describe()
+        for c in TD_COLUMNS:
+            block.table[c][idx] = st[c]
+        block.hist[idx], block.overflow[idx] = h, o
+        status[idx[div]] = "diverged"
+        block.samples = {int(idx[j]): v for j, v in smp.items()}
+
+    def beyond_fault(self, kp: float, kd: float) -> str | None:
+        """What keeps the grid from growing towards ``(kp, kd)``: instability, no margin; None if nothing."""
+        _, stable = closed_loop_poles(self.plant, self.rp.axis, [kp], [kd], self.nominal)
+        if not stable[0]:
+            return "unstable"
+        gm, pm = loop_margins(self.plant, self.rp.axis, [kp], [kd], self.nominal)
+        if gm[0] <= 0.0 or pm[0] <= 0.0:
+            return f"without margin (gain margin {gm[0]:.2f} dB, phase margin {pm[0]:.1f}°)"
+        return None
 
 
 def _predicted(table: dict, sigma: np.ndarray, agree_tol: float) -> None:
@@ -444,37 +545,43 @@ def _settings(rp, cfg: SweepConfig, layout, nominal, plant, freq, psd, seconds, 
     }
 
 
-def _sweep(model, kp, kd, kp_values, kd_values, layout, cfg: SweepConfig) -> SweepResult:
+def _grown(run: _Run, kp_values, kd_values, layout, cfg: SweepConfig):
+    """Sweep the grid (or the pairs) and grow a grid while its best pair lies on an edge.
+
+    Returns ``(kp_values, kd_values, block, extension record)``.
+    """
+    record = {"enabled": bool(cfg.extend) and layout == "grid", "max_extensions": int(cfg.max_extensions),
+              "values_per_round": EXTENSION_VALUES, "kp_asked": kp_values.tolist(), "kd_asked": kd_values.tolist()}
+    if layout != "grid":
+        block = run.evaluate(kp_values, kd_values)
+        return kp_values, kd_values, block, {**record, "rounds": [], "stop": "disabled",
+                                             "stop_detail": "a list of pairs has no edges to grow"}
+    KP, KD = np.meshgrid(kp_values, kd_values, indexing="ij")
+    block = run.evaluate(KP.ravel(), KD.ravel())
+    kp_values, kd_values, block, grown = extend_grid(kp_values, kd_values, block, run.evaluate, run.beyond_fault,
+                                                     cfg.max_extensions if cfg.extend else 0)
+    if not cfg.extend and grown["stop"] == "limit":
+        grown.update(stop="disabled", stop_detail=grown["stop_detail"] + " (extension off)")
+    return kp_values, kd_values, block, {**record, **grown}
+
+
+def _sweep(model, kp_values, kd_values, layout, cfg: SweepConfig) -> SweepResult:
     t_start = time.perf_counter()
     be = None if cfg.backend is None else _make_backend(cfg.backend)  # check before any work
     try:
-        edges = _check_settings(cfg, be)
+        hist_edges = _check_settings(cfg, be)
         rp = prepare(model, cfg.axis, cfg.duration, cfg.dt, cfg.seed, cfg.traces, cfg.windows)
         plant, nominal = _plant_and_nominal(rp, cfg.nominal)
-        ax, G = rp.axis, kp.size
         t0 = time.perf_counter()
-        max_pole, stable = closed_loop_poles(plant, ax, kp, kd, nominal)
         freq, psd = disturbance_spectrum(rp.env_model, rp.dt)
-        sigma = predict_std(plant, ax, kp, kd, nominal, freq, psd)
-        t_fd = time.perf_counter() - t0
-
-        with np.errstate(divide="ignore", invalid="ignore"):
-            settle = np.where(stable, -4.0 * rp.dt / np.log(np.minimum(max_pole, 1.0)), np.inf)
-        table = {"kp": kp, "kd": kd, "max_pole": max_pole, "settle_s": settle}
-        table.update({c: np.full(G, np.nan) for c in TD_COLUMNS})
-        hist = np.zeros((G, edges.size - 1), dtype=np.int64)
-        overflow = np.zeros(G, dtype=np.int64)
-        status = np.where(stable, "stable", "unstable").astype(object)
-        t0 = time.perf_counter()
-        samples, where, n_tasks = _time_domain(be, rp, kp, kd, stable, nominal, cfg, edges, table, hist,
-                                               overflow, status)
-        t_td = time.perf_counter() - t0
-        _predicted(table, sigma, cfg.agree_tol)
-        table["status"] = status
-        seconds = {"total": time.perf_counter() - t_start, "time_domain": t_td, "frequency_domain": t_fd}
-        settings = _settings(rp, cfg, layout, nominal, plant, freq, psd, seconds, where, n_tasks)
-        return SweepResult(AXES[ax], np.asarray(kp_values), np.asarray(kd_values), table, edges, hist, overflow,
-                           rp.windows, freq, psd, settings, samples)
+        run = _Run(rp, plant, nominal, freq, psd, hist_edges, be, cfg,
+                   {"time_domain": 0.0, "frequency_domain": time.perf_counter() - t0})
+        kp_values, kd_values, block, extension = _grown(run, kp_values, kd_values, layout, cfg)
+        seconds = {"total": time.perf_counter() - t_start, **run.seconds}
+        settings = _settings(rp, cfg, layout, nominal, plant, freq, psd, seconds, run.where, run.tasks)
+        settings["extension"] = extension
+        return SweepResult(AXES[rp.axis], np.asarray(kp_values), np.asarray(kd_values), block.table, hist_edges,
+                           block.hist, block.overflow, rp.windows, freq, psd, settings, block.samples)
     finally:
         if be is not cfg.backend:  # made here from a name: release it
             be.close()

@@ -21,9 +21,17 @@ def write_csv(result, path):
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(COLUMNS)
     for row in result.rows():
-        w.writerow([("" if isinstance(v, float) and not math.isfinite(v) else
-                     (f"{v:.6g}" if isinstance(v, float) else v)) for v in (row[c] for c in COLUMNS)])
+        w.writerow([_csv_cell(row[c]) for c in COLUMNS])
     return write_text(path, buf.getvalue())
+
+
+def _csv_cell(v):
+    """Floats to 6 digits; NaN (not computed) empty, an infinite margin or settling time ``inf``."""
+    if not isinstance(v, float):
+        return v
+    if math.isnan(v):
+        return ""
+    return f"{v:.6g}"  # 'inf', '-inf'
 
 
 def write_json(result, path):
@@ -31,7 +39,7 @@ def write_json(result, path):
 
     doc = {
         "schema": "heli-env/gain-sweep",
-        "schema_version": 1,
+        "schema_version": 2,  # 2: margins, extension_round and settings["extension"]; the grid may have grown
         "settings": result.settings,
         "kp_values": result.kp_values.tolist(),
         "kd_values": result.kd_values.tolist(),
@@ -48,23 +56,29 @@ def write_json(result, path):
 
 
 def _fmt(v, spec=".3f"):
-    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+    if v is None or (isinstance(v, float) and math.isnan(v)):
         return "—"
+    if isinstance(v, float) and math.isinf(v):
+        return "∞" if v > 0 else "−∞"
     return format(v, spec)
 
 
+def _margins(row) -> str:
+    gm, pm = row["gain_margin_db"], row["phase_margin_deg"]
+    return f"{_fmt(gm, '.1f')} dB / {_fmt(pm, '.0f')}°"
+
+
 def _note(row, duration):
-    notes = []
+    notes = [f"added by extension {row['extension_round']}"] if row["extension_round"] else []
     if row["status"] != "stable":
-        return row["status"]
+        return "; ".join([row["status"]] + notes)
     if row["disagree"]:
+        why = []
         if row["saturation"] > 0.005:
-            notes.append(f"saturated {100 * row['saturation']:.1f} % of the time")
+            why.append(f"saturated {100 * row['saturation']:.1f} % of the time")
         if row["settle_s"] > 0.25 * duration:
-            notes.append(f"lightly damped: settles in {row['settle_s']:.0f} s, windows are {duration:g} s")
-        if not notes:
-            notes.append("non-Gaussian gusts or non-linear model")
-        notes[0] = "disagree: " + notes[0]
+            why.append(f"lightly damped: settles in {row['settle_s']:.0f} s, windows are {duration:g} s")
+        notes.append("disagree: " + ("; ".join(why) or "non-Gaussian gusts or non-linear model"))
     return "; ".join(notes)
 
 
@@ -75,7 +89,6 @@ def markdown(result, max_rows: int = 400) -> str:
     n_unst = int(np.sum(st == "unstable"))
     n_div = int(np.sum(st == "diverged"))
     n_dis = int(np.sum(result.table["disagree"]))
-    best = result.best()
     tol = s["agree_tol"]
     lines = [
         f"# Gain sweep — {result.axis}",
@@ -101,10 +114,7 @@ def markdown(result, max_rows: int = 400) -> str:
         f"diverged in replay: {n_div}",
         f"- time and frequency domain disagree (p90 > {100 * tol:.0f} %): {n_dis}",
     ]
-    if best:
-        lines.append(f"- best pair by p90 |attitude error|: **Kp = {best['kp']:.4g}, Kd = {best['kd']:.4g}** — "
-                     f"p90 {best['att_p90_deg']:.3f}° (predicted {best['pred_att_p90_deg']:.3f}°), "
-                     f"p90 |rate error| {best['rate_p90_dps']:.3f}°/s, RMS stick {best['stick_rms']:.3f}")
+    lines += _grid_lines(result) + _best_lines(result)
     sec = s.get("seconds", {})
     if sec:
         lines.append(f"- run time: {sec.get('total', float('nan')):.2f} s (time domain "
@@ -114,16 +124,19 @@ def markdown(result, max_rows: int = 400) -> str:
         "",
         "## Per gain pair",
         "",
-        "|attitude error| [deg] and |rate error| [deg/s]: time domain / frequency domain.",
+        "|attitude error| [deg] and |rate error| [deg/s]: time domain / frequency domain; margins of the "
+        "sampled loop broken at the swept stick: gain [dB] / phase [deg].",
         "",
-        "| Kp | Kd | p50 att | p90 att | p99 att | Δp90 att | p90 rate | Δp90 rate | RMS stick | sat. % | note |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+        "| Kp | Kd | p50 att | p90 att | p99 att | Δp90 att | p90 rate | Δp90 rate | RMS stick | sat. % | margins "
+        "| note |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     rows = result.rows()
     for row in rows[:max_rows]:
         if row["status"] == "unstable":
-            lines.append(f"| {row['kp']:.4g} | {row['kd']:.4g} | — | — | — | — | — | — | — | — | unstable "
-                         f"(max pole {row['max_pole']:.4f}) |")
+            note = _note(row, s["duration"]).replace("unstable", f"unstable (max pole {row['max_pole']:.4f})", 1)
+            lines.append(f"| {row['kp']:.4g} | {row['kd']:.4g} | — | — | — | — | — | — | — | — | {_margins(row)} "
+                         f"| {note} |")
             continue
         note = _note(row, s["duration"])
         note = f"**{note}**" if row["disagree"] else note
@@ -136,19 +149,80 @@ def markdown(result, max_rows: int = 400) -> str:
             f"| {_fmt(row['rate_p90_dps'])} / {_fmt(row['pred_rate_p90_dps'])} "
             f"| {_fmt(100 * row['rate_p90_rel_diff'], '+.1f')} % "
             f"| {_fmt(row['stick_rms'])} / {_fmt(row['pred_stick_rms'])} "
-            f"| {_fmt(100 * row['saturation'], '.1f')} | {note} |")
+            f"| {_fmt(100 * row['saturation'], '.1f')} | {_margins(row)} | {note} |")
     if len(rows) > max_rows:
         lines.append(f"\n({len(rows) - max_rows} more rows in sweep.csv)")
     return "\n".join(lines) + "\n"
 
 
-def _edges(values):
-    v = np.asarray(values, dtype=float)
-    if v.size == 1:
-        h = 0.5 * abs(v[0]) or 0.5
-        return np.array([v[0] - h, v[0] + h])
-    mid = 0.5 * (v[1:] + v[:-1])
-    return np.concatenate([[v[0] - (mid[0] - v[0])], mid, [v[-1] + (v[-1] - mid[-1])]])
+def _span(values) -> str:
+    return f"{values[0]:.4g} … {values[-1]:.4g}" if len(values) > 1 else f"{values[0]:.4g}"
+
+
+def _grid_lines(result) -> list:
+    """The summary's line on the grid: asked for, grown, and why the growth stopped."""
+    ext = result.settings.get("extension")
+    if not result.is_grid or ext is None:
+        return []
+    kp0, kd0 = ext["kp_asked"], ext["kd_asked"]
+    line = f"- grid: {len(kp0)} × {len(kd0)} pairs asked for (Kp {_span(kp0)}, Kd {_span(kd0)})"
+    rounds = ext["rounds"]
+    if rounds:
+        added = sum(r["pairs_added"] for r in rounds)
+        line += (f"; its best pair lay on an edge, so it grew {len(rounds)} time{'s' * (len(rounds) != 1)} "
+                 f"({ext['values_per_round']} gains past the edge each time, the grid's last ratio continued) to "
+                 f"{result.kp_values.size} × {result.kd_values.size} (Kp {_span(result.kp_values)}, "
+                 f"Kd {_span(result.kd_values)}; {added} pairs added)")
+    stop = {"interior": "the best pair is interior", "unstable beyond": "the stability boundary is reached",
+            "bound": "no edge left to grow", "limit": f"limit of {ext['max_extensions']} extensions reached",
+            "no stable pair": "no stable pair", "disabled": "extension off"}[ext["stop"]]
+    return [line + f". Stopped: **{stop}** — {ext['stop_detail']}."]
+
+
+def pair_summary(row, deg: str = "°", emphasis: str = "") -> str:
+    """One pair in a line: gains (between ``emphasis``), p90s in both domains, stick, margins (units ``deg``)."""
+    return (f"{emphasis}Kp = {row['kp']:.4g}, Kd = {row['kd']:.4g}{emphasis}: p90 {row['att_p90_deg']:.3g}{deg} "
+            f"(frequency domain {row['pred_att_p90_deg']:.3g}{deg}), p90 |rate error| {row['rate_p90_dps']:.3g}"
+            f"{deg}/s, RMS stick {row['stick_rms']:.3f}, gain margin {_fmt(row['gain_margin_db'], '.1f')} dB, "
+            f"phase margin {_fmt(row['phase_margin_deg'], '.1f')}{deg}")
+
+
+def _best_lines(result) -> list:
+    """The summary's lines on the best pair (and the grid's own best before it grew) and the best robust pair."""
+    from .sweep_margins import ROBUST_GAIN_MARGIN_DB, ROBUST_PHASE_MARGIN_DEG
+
+    best, rob = result.best(), result.best_robust()
+    if best is None:
+        return ["- no stable pair"]
+    lines = [f"- best pair by p90 |attitude error|: {pair_summary(best, emphasis='**')}"]
+    rounds = (result.settings.get("extension") or {}).get("rounds")
+    if rounds:
+        b = rounds[0]["best_before"]
+        lines[0] += f" (the grid asked for had Kp = {b['kp']:.4g}, Kd = {b['kd']:.4g}: p90 {b['att_p90_deg']:.3g}°)"
+    need = f"gain margin ≥ {ROBUST_GAIN_MARGIN_DB:g} dB and phase margin ≥ {ROBUST_PHASE_MARGIN_DEG:g}°"
+    if rob is None:
+        lines.append(f"- best robust pair ({need}): none — no stable pair keeps both margins")
+    elif (rob["kp"], rob["kd"]) == (best["kp"], best["kd"]):
+        lines.append(f"- best robust pair ({need}): the best pair itself")
+    else:
+        lines.append(f"- best robust pair ({need}): {pair_summary(rob, emphasis='**')}")
+    return lines
+
+
+def _asked_block(result):
+    """(Kp rows, Kd columns) slices of the grid asked for inside an extended grid; None if it did not grow."""
+    ext = result.settings.get("extension") or {}
+    if not ext.get("rounds"):
+        return None
+    rows = np.searchsorted(result.kp_values, ext["kp_asked"][0])
+    cols = np.searchsorted(result.kd_values, ext["kd_asked"][0])
+    return slice(rows, rows + len(ext["kp_asked"])), slice(cols, cols + len(ext["kd_asked"]))
+
+
+def _gain_ticks(set_ticks, values, most: int = 10) -> None:
+    """Ticks on the cells of about ``most`` gains, labelled with their values."""
+    idx = np.arange(0, values.size, max(1, -(-values.size // most)))
+    set_ticks(idx, [f"{v:.3g}" for v in values[idx]])
 
 
 def plot_heatmap(result, path):
@@ -172,8 +246,12 @@ def plot_heatmap(result, path):
     if finite.size and finite.min() > 0 and finite.max() > finite.min():
         norm = LogNorm(vmin=finite.min(), vmax=finite.max())
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.8), sharey=True, constrained_layout=True)
-    xe, ye = _edges(kd), _edges(kp)
-    best = result.best()
+    # one cell per pair, whatever the spacing (an extended grid continues geometrically), gains on the ticks
+    xe, ye = np.arange(kd.size + 1) - 0.5, np.arange(kp.size + 1) - 0.5
+    best, robust, asked = result.best(), result.best_robust(), _asked_block(result)
+    if robust is not None and best is not None and (robust["kp"], robust["kd"]) == (best["kp"], best["kd"]):
+        robust = best
+    cell = {id(r): divmod(result.index(r["kp"], r["kd"]), kd.size)[::-1] for r in (best, robust) if r}
     for ax, data, title in ((axes[0], td, "time domain (replayed gusts)"),
                             (axes[1], fd, "frequency domain (Welch × |H|², Gaussian)")):
         mesh = ax.pcolormesh(xe, ye, np.ma.masked_invalid(data), cmap="viridis", norm=norm, shading="flat")
@@ -183,11 +261,20 @@ def plot_heatmap(result, path):
         if kp.size > 1 and kd.size > 1:
             rho = result.grid("max_pole").astype(float)
             if np.nanmin(rho) < 1.0 < np.nanmax(rho):
-                ax.contour(kd, kp, rho, levels=[1.0], colors="red", linewidths=1.5)
+                ax.contour(np.arange(kd.size), np.arange(kp.size), rho, levels=[1.0], colors="red",
+                           linewidths=1.5)
+        if asked is not None:  # the grid asked for, inside the grown one
+            ax.add_patch(Rectangle((xe[asked[1].start], ye[asked[0].start]),
+                                   xe[asked[1].stop] - xe[asked[1].start], ye[asked[0].stop] - ye[asked[0].start],
+                                   fill=False, edgecolor="white", linestyle="--", linewidth=1.2))
+        if robust and robust is not best:
+            ax.plot(*cell[id(robust)], marker="D", color="white", markersize=8, markeredgecolor="black")
         if best:
-            ax.plot(best["kd"], best["kp"], marker="*", color="white", markersize=14, markeredgecolor="black")
+            ax.plot(*cell[id(best)], marker="*", color="white", markersize=14, markeredgecolor="black")
         ax.set_title(title)
         ax.set_xlabel("Kd [stick/(rad/s)]")
+        _gain_ticks(ax.set_xticks, kd)
+    _gain_ticks(axes[0].set_yticks, kp)
     axes[0].set_ylabel("Kp [stick/rad]")
     cb = fig.colorbar(mesh, ax=axes, shrink=0.9)
     cb.set_label(f"p90 |{result.axis} attitude error| [deg]")
@@ -195,7 +282,12 @@ def plot_heatmap(result, path):
                plt.Line2D([], [], color="red", label="stability boundary |z| = 1"),
                plt.Line2D([], [], marker="*", color="white", markeredgecolor="black", linestyle="",
                           markersize=12, label="best p90 (time domain)")]
-    fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=8)
+    if robust is not None and robust is not best:
+        handles.append(plt.Line2D([], [], marker="D", color="white", markeredgecolor="black", linestyle="",
+                                  markersize=7, label="best p90 with 6 dB and 45° of margin"))
+    if asked is not None:
+        handles.append(Patch(fill=False, edgecolor="0.3", linestyle="--", label="grid asked for (then extended)"))
+    fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 3), fontsize=8)
     fig.suptitle(f"PD gain sweep on {result.axis}: p90 |attitude error|")
     return save_figure(fig, path, dpi=110)
 

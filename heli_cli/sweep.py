@@ -7,6 +7,8 @@ from pathlib import Path
 from .argtypes import number, output_path, seed, whole
 
 DEFAULT_OUT = "sweep"
+MAX_EXTENSIONS = 4
+"""Default of --max-extensions (controllers.sweep_extend.MAX_EXTENSIONS, not imported here: the parser stays light)."""
 
 
 def backend_from_args(args):
@@ -24,7 +26,11 @@ def register(sub):
         "nominal PD gains) against windows of the model's disturbance library, replayed through the physics "
         "core (time domain), and predict the same error distribution from the library's Welch spectrum through "
         "the linearised closed loop (frequency domain). Unstable pairs (closed-loop poles) are reported, not "
-        "simulated. Writes DIR/sweep.csv, sweep.json, heatmap.png, histograms.png and sweep.md. With --flights N "
+        "simulated; every pair's gain and phase margins stand beside its errors, and the report names the best "
+        "pair and the best one keeping 6 dB and 45 deg. When the best pair lies on an edge of the grid, the grid "
+        "grows past that edge (3 gains at a time, its last ratio continued) until the best pair is interior, the "
+        "pair beyond is unstable, or --max-extensions rounds ran (--no-extend: the grid as given). "
+        "Writes DIR/sweep.csv, sweep.json, heatmap.png, histograms.png and sweep.md. With --flights N "
         "the prediction is checked against N fresh-wind flights of the truth model per chosen pair "
         "(KS statistics; DIR/flight_tests.json).",
     )
@@ -41,6 +47,10 @@ def register(sub):
                    default=0.01, help="control period in seconds (default 0.01)")
     p.add_argument("--windows", type=whole(1), default=None,
                    help="number of (trace, offset) gust windows (default one per library trace)")
+    p.add_argument("--no-extend", action="store_true",
+                   help="sweep the grid as given, even when its best pair lies on an edge")
+    p.add_argument("--max-extensions", type=whole(0), default=MAX_EXTENSIONS, metavar="N",
+                   help=f"rounds of growth past an edge at most (default {MAX_EXTENSIONS})")
     p.add_argument("--seed", type=seed(), default=0, help="seed of the window offsets and flights (default 0)")
     p.add_argument("--out", default=DEFAULT_OUT, type=output_path, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
     p.add_argument("--no-plots", action="store_true", help="do not draw heatmap.png and histograms.png")
@@ -62,7 +72,7 @@ def register(sub):
 def run(args) -> int:
     from controllers.errors import SweepError
     from controllers.sweep import parse_range, sweep_gains
-    from controllers.sweep_report import default_pairs
+    from controllers.sweep_report import default_pairs, pair_summary
 
     kp = parse_range(args.kp, "--kp")
     kd = parse_range(args.kd, "--kd")
@@ -75,7 +85,8 @@ def run(args) -> int:
     progress.stage(f"sweeping {len(kp)} x {len(kd)} gain pairs on {args.axis} in the model's gusts")
     try:
         result = sweep_gains(args.model, kp, kd, axis=args.axis, duration=args.duration, dt=args.dt,
-                             seed=args.seed, windows=args.windows, progress=not args.quiet, backend=backend)
+                             seed=args.seed, windows=args.windows, progress=not args.quiet, backend=backend,
+                             extend=not args.no_extend, max_extensions=args.max_extensions)
     finally:
         backend.close()
     out = Path(args.out)
@@ -114,10 +125,12 @@ def run(args) -> int:
           f"{result.settings['backend']} ({result.settings['tasks']} task{'s' if result.settings['tasks'] != 1 else ''})")
     print(f"unstable (closed-loop poles, not simulated): {n_unstable}; diverged: {int((st == 'diverged').sum())}; "
           f"time/frequency domain disagree: {int(result.table['disagree'].sum())}")
+    _print_extension(result)
     if best:
-        print(f"best by p90 |attitude error|: Kp = {best['kp']:.4g}, Kd = {best['kd']:.4g}: p90 "
-              f"{best['att_p90_deg']:.3f} deg (frequency domain {best['pred_att_p90_deg']:.3f} deg), "
-              f"p90 |rate error| {best['rate_p90_dps']:.3f} deg/s, RMS stick {best['stick_rms']:.3f}")
+        print(f"best by p90 |attitude error|: {pair_summary(best, ' deg')}")
+        robust = result.best_robust()
+        print("best with gain margin >= 6 dB and phase margin >= 45 deg: "
+              + ("none" if robust is None else pair_summary(robust, ' deg')))
     else:
         print("no stable gain pair in the grid")
     if flights is not None:
@@ -131,3 +144,16 @@ def run(args) -> int:
     figures = [paths[k] for k in ("heatmap", "histograms") if k in paths]
     print(f"wrote {write_html_report(paths['report'], figures=figures)}")
     return 0
+
+
+def _print_extension(result) -> None:
+    """How the grid grew and why it stopped, in one or two lines."""
+    ext = result.extension
+    rounds = ext["rounds"]
+    if rounds:
+        b = rounds[0]["best_before"]
+        print(f"grid grown {len(rounds)} time{'s' * (len(rounds) != 1)} from {len(ext['kp_asked'])} x "
+              f"{len(ext['kd_asked'])} to {result.kp_values.size} x {result.kd_values.size} "
+              f"({sum(r['pairs_added'] for r in rounds)} pairs added; the grid asked for had its best at "
+              f"Kp = {b['kp']:.4g}, Kd = {b['kd']:.4g}, p90 {b['att_p90_deg']:.3g} deg)")
+    print(f"extension stopped: {ext['stop']}: {ext['stop_detail']}")

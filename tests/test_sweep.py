@@ -34,7 +34,11 @@ def delayed(shipped):
 
 @pytest.fixture(scope="session")
 def small_sweep(delayed):
-    """A 4 x 3 grid across the stability boundary of the delayed model, 3 windows of 10 s."""
+    """A 4 x 3 grid across the stability boundary of the delayed model, 3 windows of 10 s.
+
+    Its best pair, (40, 3), lies on the grid's upper Kd edge and Kp row below the boundary, so the
+    sweep grows it once to 7 x 6 (Kp up to 320, Kd up to 81), where the best pair (80, 9) is interior.
+    """
     return sweep_gains(delayed, [0.0, 5.0, 20.0, 40.0], [0.0, 1.0, 3.0], duration=10.0, windows=3, seed=7,
                        progress=False)
 
@@ -48,6 +52,9 @@ def test_sweep_is_deterministic_for_a_seed(delayed, small_sweep):
     again = sweep_gains(delayed, [0.0, 5.0, 20.0, 40.0], [0.0, 1.0, 3.0], duration=10.0, windows=3, seed=7,
                         progress=False)
     assert again.windows == small_sweep.windows
+    assert again.extension == small_sweep.extension and len(again.extension["rounds"]) == 2  # grown alike
+    assert_array_equal(again.kp_values, small_sweep.kp_values)
+    assert_array_equal(again.kd_values, small_sweep.kd_values)
     for c, v in _numeric(small_sweep).items():
         assert_array_equal(_numeric(again)[c], v, err_msg=c)
     assert_array_equal(again.hist_counts, small_sweep.hist_counts)
@@ -415,7 +422,23 @@ def test_cli_writes_the_outputs(tmp_path, capsys):
     assert sorted(p.name for p in out.iterdir()) == ["heatmap.png", "histograms.png", "sweep.csv", "sweep.html",
                                                      "sweep.json", "sweep.md"]
     text = capsys.readouterr().out
-    assert "best by p90" in text and "unstable (closed-loop poles, not simulated): 0" in text
+    assert "best by p90" in text and "best with gain margin >= 6 dB and phase margin >= 45 deg: Kp = " in text
+    # the 2 x 2 grid's best pair is its corner (4, 1): the grid grows until the best pair is interior
+    assert "grid grown 2 times from 2 x 2 to 8 x 8" in text and "extension stopped: interior" in text
+    rows = list(csv.DictReader((out / "sweep.csv").open()))
+    assert len(rows) == 64 and {r["extension_round"] for r in rows} == {"0", "1", "2"}
+
+
+def test_cli_no_extend_sweeps_the_grid_as_given(tmp_path, capsys):
+    out = tmp_path / "sw"
+    assert main(["sweep", "--kp", "1:4:2", "--kd", "0:1:2", "--duration", "2", "--windows", "1", "--out", str(out),
+                 "--no-extend", "--no-plots", "-q"]) == 0
+    rows = list(csv.DictReader((out / "sweep.csv").open()))
+    assert [(r["kp"], r["kd"], r["extension_round"]) for r in rows] == [
+        ("1", "0", "0"), ("1", "1", "0"), ("4", "0", "0"), ("4", "1", "0")]
+    text = capsys.readouterr().out
+    assert "extension stopped: disabled: the best pair (Kp 4, Kd 1) lies on the upper Kp edge and the upper Kd " \
+           "edge (extension off)" in text
 
 
 @pytest.mark.parametrize("argv, match", [
@@ -525,3 +548,112 @@ def test_gain_matrices_are_the_slopes_of_the_pd_law(shipped):
         u = [cl.pd_command(p, d, plant.signs[i], -x[plant.angle_idx[i]], -x[plant.rate_idx[i]])
              for i, (p, d) in enumerate(gains)]
         assert_allclose(-K[g] @ x, u, rtol=1e-12, atol=1e-15)
+
+
+# ------------------------------------------------------------- the grid grows past an edge; margins
+def _assert_same_rows(a, b, rows_a=slice(None), rows_b=slice(None)):
+    for c, v in _numeric(a).items():
+        assert_array_equal(_numeric(b)[c][rows_b], v[rows_a], err_msg=c)
+    assert_array_equal(b.table["status"][rows_b], a.table["status"][rows_a])
+    assert_array_equal(b.hist_counts[rows_b], a.hist_counts[rows_a])
+
+
+def test_a_grid_whose_best_pair_is_on_an_edge_grows_until_it_is_interior(small_sweep):
+    ext = small_sweep.extension
+    assert ext["kp_asked"] == [0.0, 5.0, 20.0, 40.0] and ext["kd_asked"] == [0.0, 1.0, 3.0]
+    # the grid asked for had its best pair, (40, 3), on the upper Kd edge (and (80, 3) beyond Kp is unstable)
+    assert ext["rounds"][0]["best_before"]["kp"] == 40.0 and ext["rounds"][0]["best_before"]["kd"] == 3.0
+    assert [r["edges"] for r in ext["rounds"]] == [["upper Kd edge"], ["upper Kp edge"]]
+    assert_allclose(small_sweep.kd_values, [0, 1, 3, 9, 27, 81])  # the grid's last ratio (3) continued
+    assert_allclose(small_sweep.kp_values, [0, 5, 20, 40, 80, 160, 320])  # ... and here 2
+    assert ext["stop"] == "interior"
+    best = small_sweep.best()
+    i, j = divmod(small_sweep.index(best["kp"], best["kd"]), small_sweep.kd_values.size)
+    assert 0 < i < small_sweep.kp_values.size - 1 and 0 < j < small_sweep.kd_values.size - 1
+    assert best["att_p90_deg"] < ext["rounds"][0]["best_before"]["att_p90_deg"]
+    # the pairs added are recorded, by round
+    rounds = small_sweep.grid("extension_round")
+    assert (rounds[:4, :3] == 0).all() and (rounds[:4, 3:] == 1).all() and (rounds[4:] == 2).all()
+    assert [r["pairs_added"] for r in ext["rounds"]] == [12, 18] and small_sweep.n_pairs == 42
+    assert "grew 2 times" in small_sweep.to_markdown() and "added by extension 2" in small_sweep.to_markdown()
+
+
+def test_the_grown_grid_equals_a_sweep_of_the_final_grid(delayed, small_sweep):
+    """Rows are computed pair by pair on the same windows: growing changes no number."""
+    once = sweep_gains(delayed, small_sweep.kp_values, small_sweep.kd_values, duration=10.0, windows=3, seed=7,
+                       progress=False, extend=False)
+    once.table["extension_round"] = small_sweep.table["extension_round"]  # the one column that differs
+    _assert_same_rows(small_sweep, once)
+
+
+def test_extend_false_sweeps_the_grid_as_given(delayed, small_sweep):
+    r = sweep_gains(delayed, [0.0, 5.0, 20.0, 40.0], [0.0, 1.0, 3.0], duration=10.0, windows=3, seed=7,
+                    progress=False, extend=False)
+    assert_array_equal(r.kp_values, [0, 5, 20, 40]) and r.n_pairs == 12
+    assert r.extension["rounds"] == [] and r.extension["stop"] == "disabled"
+    assert "lies on the upper Kd edge" in r.extension["stop_detail"]
+    assert not r.table["extension_round"].any()
+    asked = np.flatnonzero(small_sweep.table["extension_round"] == 0)
+    _assert_same_rows(r, small_sweep, rows_b=asked)
+    again = sweep_gains(delayed, [0.0, 5.0, 20.0, 40.0], [0.0, 1.0, 3.0], duration=10.0, windows=3, seed=7,
+                        progress=False, max_extensions=0)
+    assert again.n_pairs == 12 and again.extension["stop"] == "limit"
+
+
+def test_extension_stops_where_the_pair_beyond_is_unstable_or_at_the_limit(delayed, shipped):
+    # Kd given as one value; beyond the best Kp, 40, the delayed model's loop is unstable at Kp 80
+    r = sweep_gains(delayed, [5.0, 20.0, 40.0], [3.0], duration=2.0, windows=1, progress=False)
+    assert r.extension["stop"] == "unstable beyond" and r.n_pairs == 3
+    assert "upper Kp edge (Kp 80, Kd 3 beyond it is unstable)" in r.extension["stop_detail"]
+    assert "only Kd value (the axis was given as one value)" in r.extension["stop_detail"]
+    # the shipped model (no delay) stays stable far beyond: one round is not enough
+    r = sweep_gains(shipped, [1.0, 2.0], [0.5, 1.0], duration=2.0, windows=1, progress=False, max_extensions=1)
+    assert r.extension["stop"] == "limit" and len(r.extension["rounds"]) == 1
+    assert_allclose(r.kp_values, [1, 2, 4, 8, 16]) and r.best()["kp"] == 16.0
+
+
+def test_continuation_of_a_grid_axis():
+    from controllers.sweep_extend import continuation
+
+    assert_allclose(continuation([1.0, 2.0, 4.0], "high")[0], [8, 16, 32])
+    assert_allclose(continuation([1.0, 2.0, 4.0], "low")[0], [0.125, 0.25, 0.5])
+    assert_allclose(continuation([0.0, 5.0, 10.0], "high")[0], [20, 40, 80])
+    assert_allclose(continuation([0.0, 1.0], "high")[0], [2, 4, 8])  # no ratio from 0: doubling
+    assert continuation([0.0, 1.0], "low") == (None, "no gain below 0")
+    assert continuation([3.0], "high")[0] is None and continuation([2.0, 1.0], "high")[0] is None
+
+
+@pytest.mark.parametrize("kwargs, match", [({"max_extensions": -1}, "max_extensions"),
+                                           ({"max_extensions": 1.5}, "max_extensions"),
+                                           ({"extend": "yes"}, "extend must be True or False")])
+def test_bad_extension_settings_raise(shipped, kwargs, match):
+    with pytest.raises(SweepError, match=match):
+        sweep_gains(shipped, [1.0], [1.0], duration=1.0, progress=False, **kwargs)
+
+
+def test_margins_are_the_pd_loop_analysis_margins(delayed, small_sweep):
+    """Every pair's margins equal controllers.pd.loop_analysis on the decoupled model (stable or not)."""
+    from controllers.pd import loop_analysis
+
+    for kp, kd in ((5.0, 1.0), (20.0, 3.0), (80.0, 9.0), (40.0, 0.0), (320.0, 81.0)):
+        row = small_sweep.row(small_sweep.index(kp, kd))
+        la = loop_analysis(delayed.params, "roll", kp, kd, 0.01)
+        assert_allclose(row["gain_margin_db"], la.gain_margin_db, rtol=1e-6, err_msg=(kp, kd))
+        assert_allclose(row["phase_margin_deg"], la.phase_margin, rtol=1e-6, err_msg=(kp, kd))
+        assert (row["status"] == "unstable") == (not la.stable)
+    assert np.all((small_sweep.table["gain_margin_db"] > 0) | ~small_sweep.stable)
+
+
+def test_the_best_robust_pair_keeps_the_margins(small_sweep, tmp_path):
+    rob = small_sweep.best_robust()
+    assert rob["status"] == "stable" and rob["gain_margin_db"] >= 6.0 and rob["phase_margin_deg"] >= 45.0
+    assert (rob["kp"], rob["kd"]) == (5.0, 3.0)  # the best pair, (80, 9), keeps 1.3 dB and 4.5°
+    t = small_sweep.table
+    keeps = small_sweep.stable & (t["gain_margin_db"] >= 6.0) & (t["phase_margin_deg"] >= 45.0)
+    assert rob["att_p90_deg"] == np.nanmin(t["att_p90_deg"][keeps])
+    assert small_sweep.best_robust(min_gain_margin_db=40.0) is None
+    md = small_sweep.to_markdown()
+    assert "best robust pair (gain margin ≥ 6 dB and phase margin ≥ 45°): **Kp = 5, Kd = 3**" in md
+    rows = list(csv.DictReader(open(small_sweep.to_csv(tmp_path / "s.csv"))))
+    zero = rows[small_sweep.index(0.0, 0.0)]  # no loop at all: margins infinite
+    assert (zero["gain_margin_db"], zero["phase_margin_deg"]) == ("inf", "inf")
