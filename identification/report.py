@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import contextlib
 import sys
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, fields, replace
 from functools import partial
 from pathlib import Path
 
@@ -21,16 +22,26 @@ import numpy as np
 from model_store import ModelDir
 from model_store.model_file import model_document
 
-from .disturbance import compare_with_truth, figure_names, identify_disturbance, save_figures
+from .disturbance import identify_disturbance
 from .files import sha256_of
-from .flight import Flight
 from .fit_warnings import fit_warnings
+from .flight import Flight
+from .identify_report import (  # noqa: F401  (the tables are re-exported: they lived here)
+    ReportContent,
+    fit_figures,
+    fit_table,
+    method_sentence,
+    parameter_table,
+    report_markdown,
+    wind_figures,
+    wind_section,
+    wind_table,
+)
 from .integral_method import IntegralIdentifier
 from .model import ModelParams
 from .sensors import identify_sensors
 from .synthetic import load_truth, truth_paths
-from .terms import AXES, BASE_PARAMS, TERMS
-from .validation import ValidationResult, plot_attitude_fit, plot_rate_fit, validate_models
+from .validation import ValidationResult, validate_models
 
 
 class PendingFigures:
@@ -112,59 +123,6 @@ def _true_wind(path, flight: Flight):
     return wind if wind.shape == (3, flight.n) else None
 
 
-def parameter_table(identifiers: dict, truth: ModelParams | None) -> str:
-    """Markdown table of identified parameters (decoupled and coupled, ± standard error, truth)."""
-    labels = list(identifiers)
-    header = ["Parameter", "Unit"] + [f"{lab}" for lab in labels]
-    if truth is not None:
-        header += ["Truth"] + [f"{lab} error (%)" for lab in labels]
-    rows = []
-    names = list(BASE_PARAMS) + sorted({k for ident in identifiers.values() for k, _ in ident.params_.extra})
-    for name in names:
-        cells, vals = [], []
-        for lab in labels:
-            ident = identifiers[lab]
-            fit = ident.axes_.get(AXES[TERMS[name].axis])
-            if fit is None or name not in fit.params:
-                cells.append("—")
-                vals.append(None)
-                continue
-            v, se = fit.params[name], fit.std_errors.get(name, float("nan"))
-            cells.append(f"{v:.4f} ± {se:.4f}" if np.isfinite(se) else f"{v:.4f}")
-            vals.append(v)
-        if all(v is None for v in vals):
-            continue
-        row = [name, TERMS[name].unit] + cells
-        if truth is not None:
-            tv = truth.get(name)
-            row.append(f"{tv:.4f}")
-            for v in vals:
-                row.append("—" if v is None or tv == 0 else f"{100 * (v - tv) / tv:+.1f}")
-        rows.append(row)
-    for axis in AXES:
-        taus = [identifiers[lab].params_.taus[AXES.index(axis)] for lab in labels]
-        if any(taus):
-            row = [f"tau_{axis}", "s"] + [f"{t:.3f}" for t in taus]
-            if truth is not None:
-                tv = truth.taus[AXES.index(axis)]
-                row += [f"{tv:.3f}"] + ["—" for _ in labels]
-            rows.append(row)
-    lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * len(header)) + "|"]
-    lines += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(lines)
-
-
-def fit_table(identifiers: dict) -> str:
-    """Markdown table of fit statistics per model and axis."""
-    lines = ["| Model | Axis | R² | R² of | Condition number | Servo delay (s) |", "|---|---|---|---|---|---|"]
-    for lab, ident in identifiers.items():
-        what = ("the sticks-only simulation" if getattr(ident, "method", "").startswith("maximum")
-                else f"the integral fit ({len(next(iter(ident.axes_.values())).history)} iterations)")
-        for axis, fit in ident.axes_.items():
-            lines.append(f"| {lab} | {axis} | {fit.r2:.4f} | {what} | {fit.condition:.3g} | {fit.delay:.3f} |")
-    return "\n".join(lines)
-
-
 METHODS = ("ml", "integral")
 """Estimators ``heli identify`` offers: the maximum-likelihood filter-error fit with a stochastic wind
 (:class:`~identification.ml_estimator.MaximumLikelihoodIdentifier`, the default) and the integral method
@@ -198,57 +156,12 @@ def identification_settings(ident) -> dict:
     return settings
 
 
-def method_sentence(ident) -> str:
-    """One sentence of the report saying how the model was identified."""
-    from .ml_estimator import MaximumLikelihoodIdentifier
+@dataclass(frozen=True)
+class IdentifyOptions:
+    """Settings of :func:`identify_and_report` (everything but the flights and the folder).
 
-    if isinstance(ident, MaximumLikelihoodIdentifier):
-        winds = ", ".join(f"{a} {f.wind['model']}" for a, f in ident.axes_.items())
-        return ("Method: maximum likelihood (filter-error / prediction-error method): per axis the rate, a slow and "
-                "a fast Gauss-Markov gust entering as torque, white gyro noise; exact discretisation with the "
-                f"sticks {'linearly interpolated' if ident.input_hold == 'linear' else 'held'} between samples, "
-                "steady-state Kalman filter, innovations minimised over the damping and the wind model with the "
-                f"linear parameters projected out; gust models chosen by likelihood ({winds}); standard errors "
-                "from the Fisher information; no prefilter (vibration lines removed by regression on their "
-                "sinusoids). The integral method of Fig. 5 is its starting point and is shown for comparison.")
-    return ("Method: integral-based identification (paper Section 2.5.2, Fig. 5) with "
-            f"{ident.interval:g} s intervals, per-interval initial values (eq. 34), "
-            + ("a per-interval polynomial disturbance of degree "
-               f"{ident.disturbance_order} (generalising eq. 43)" if ident.offsets == "per_interval"
-               else "one constant offset")
-            + (f", zero-phase FIR prefilter {ident.pass_hz:g}/{ident.stop_hz:g} Hz (Section 3.1)"
-               if ident.prefilter else "") + ".")
-
-
-def wind_table(ident) -> str:
-    """Markdown table of the maximum-likelihood wind model and noise per axis (empty for the integral method)."""
-    if not hasattr(ident, "axes_") or not all(hasattr(f, "wind") for f in ident.axes_.values()):
-        return ""
-    lines = ["| Axis | gust model | T slow (s) | T fast (s) | torque std slow / fast (rad/s²) | u_d std slow / fast "
-             "| gyro noise (deg/s) | one-step R² |", "|---|---|---|---|---|---|---|---|"]
-    for axis, f in ident.axes_.items():
-        w = f.wind
-        ud = " / ".join("—" if v is None else f"{v:.4f}" for v in w["ud_std"])
-        lines.append(
-            f"| {axis} | {w['model']} | {w['time_constants_s'][0]:.2f} ± {w['time_constants_se_s'][0]:.2f} "
-            f"| {w['time_constants_s'][1]:.3f} ± {w['time_constants_se_s'][1]:.3f} "
-            f"| {w['torque_std'][0]:.4f} / {w['torque_std'][1]:.4f} | {ud} | {np.degrees(f.noise_std):.3f} "
-            f"| {f.prediction_r2:.4f} |")
-    return "\n".join(lines)
-
-
-def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), identifier_kwargs=None,
-                        flight_paths=None, plots: bool = True, disturbances: bool = True,
-                        progress: bool | None = None, wind_flights=None, model_extra=None,
-                        backend=None, method: str = "ml", draw_figures: bool = True,
-                        stage=None, transaction=None, wait: bool = True) -> IdentificationRun:
-    """Identify, validate and write ``model.json`` + ``report.md`` (+ figures) into ``out_dir``.
-
-    Parameters
+    Attributes
     ----------
-    flights : Flight or list of Flight
-        Flights to identify from (pooled).
-    out_dir : str or Path
     coupled : bool
         Write the coupled model (k1 ... k12) instead of the decoupled one.
     sources : sequence of dict
@@ -291,80 +204,135 @@ def identify_and_report(flights, out_dir, *, coupled: bool = False, sources=(), 
         Without ``transaction``: wait for another command writing ``out_dir`` (default), or raise
         :class:`~identification.errors.ModelDirBusyError`.
     """
-    stage = stage or (lambda text: None)
+
+    coupled: bool = False
+    sources: Sequence = ()
+    identifier_kwargs: dict | None = None
+    flight_paths: Sequence | None = None
+    plots: bool = True
+    disturbances: bool = True
+    progress: bool | None = None
+    wind_flights: Sequence | None = None
+    model_extra: dict | None = None
+    backend: object = None
+    method: str = "ml"
+    draw_figures: bool = True
+    stage: Callable[[str], None] | None = None
+    transaction: object = None
+    wait: bool = True
+
+    def say(self, text: str) -> None:
+        """Tell :attr:`stage` that a step starts (nothing without one)."""
+        if self.stage is not None:
+            self.stage(text)
+
+
+def identify_and_report(flights, out_dir, options: IdentifyOptions | None = None, **settings) -> IdentificationRun:
+    """Identify, validate and write ``model.json`` + ``report.md`` (+ figures) into ``out_dir``.
+
+    Parameters
+    ----------
+    flights : Flight or list of Flight
+        Flights to identify from (pooled).
+    out_dir : str or Path
+    options : IdentifyOptions, optional
+        The settings (default :class:`IdentifyOptions`).
+    **settings
+        Any field of :class:`IdentifyOptions` by keyword (``coupled=True``, ``method="integral"``, ...),
+        in place of ``options`` or overriding its fields.
+    """
+    opts = _options(options, settings)
     flights = [flights] if isinstance(flights, Flight) else list(flights)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    kw = dict(identifier_kwargs or {})
-    how = "by maximum likelihood" if method == "ml" else "by the integral method"
-    stage(f"fitting the decoupled and coupled models {how} ({sum(f.duration for f in flights):.0f} s of flight)")
-    identifiers = {
-        "decoupled": make_identifier(method, "decoupled", **kw).fit(flights),
-        "coupled": make_identifier(method, "coupled", **({**kw, "select_terms": True} if method == "ml" else kw)
-                                   ).fit(flights),
-    }
-    chosen = "coupled" if coupled else "decoupled"
-    first = identifiers[chosen].flights_[0]  # filtered as identified
-    # the share of each axis' rate the sticks explain: the ML fit's simulation, the integral fit's R²
-    warnings = fit_warnings(flights, {a: f.r2 for a, f in identifiers[chosen].axes_.items()})
-    stage("validating both models by forward simulation")
-    validation = validate_models(first, {lab: ident.params_ for lab, ident in identifiers.items()})
-    truth = _truth_of(flights[0], (flight_paths or [None])[0])
-
+    identifiers = _fit_models(flights, opts)
+    chosen = "coupled" if opts.coupled else "decoupled"
     ident = identifiers[chosen]
-    settings = identification_settings(ident)
+    first = ident.flights_[0]  # filtered as identified
+    # the share of each axis' rate the sticks explain: the ML fit's simulation, the integral fit's R²
+    warnings = fit_warnings(flights, {a: f.r2 for a, f in ident.axes_.items()})
+    opts.say("validating both models by forward simulation")
+    validation = validate_models(first, {lab: fitted.params_ for lab, fitted in identifiers.items()})
+    truth = _truth_of(flights[0], (opts.flight_paths or [None])[0])
     document = model_document(
         ident.params_, structure=chosen, sample_rate=first.sample_rate,
-        filter_settings=first.metadata.get("prefilter"), identification=settings,
+        filter_settings=first.metadata.get("prefilter"), identification=identification_settings(ident),
         fit_statistics={"axes": ident.summary(), "validation": validation.to_dict(),
                         "fit_time_s": ident.fit_time_},
-        sources=sources, extra=model_extra, sensors=identify_sensors(flights),
+        sources=opts.sources, extra=opts.model_extra, sensors=identify_sensors(flights),
     )
-    figures = []
-    if plots:
-        figures.append(partial(_fit_figures, validation, out))
-    profiles, dist_md = [], []
-    if disturbances:
-        profiles, dist_md = _winds(ident, flights, flight_paths, wind_flights, chosen, out, plots, figures, progress,
-                                   backend, stage)
+    figures = [partial(fit_figures, validation, out)] if opts.plots else []
+    profiles, wind_sections = _winds(ident, flights, out, opts, figures) if opts.disturbances else ([], [])
     reference = None
-    if method == "ml":
-        stage("fitting the integral method for comparison")
+    if opts.method == "ml":
+        opts.say("fitting the integral method for comparison")
         reference = IntegralIdentifier(structure=chosen).fit(flights)
-    writing = (contextlib.nullcontext(transaction) if transaction is not None
-               else ModelDir(out).transaction(wait=wait, what="identify"))
-    with writing as tx:
-        model_path = tx.write_model_document(document)
-        library_version = tx.add_traces(profiles) if profiles else None
-        paths = {"model": model_path}
-        if disturbances:
-            paths["library"] = out / "disturbances"
-        md = _report_markdown(flights, identifiers, chosen, ident, model_path, sources, warnings, truth, method,
-                              validation, plots, disturbances, library_version, dist_md, reference)
-        paths["report"] = tx.write_report("report.md", md)
+    content = partial(ReportContent, flights, identifiers, chosen, sources=opts.sources, warnings=warnings,
+                      truth=truth, method=opts.method, validation=validation, plots=opts.plots,
+                      disturbances=opts.disturbances, wind_sections=wind_sections, reference=reference)
+    paths, library_version = _write(out, document, profiles, opts, content)
     run = IdentificationRun(identifiers, chosen, validation, truth, paths, profiles, library_version, warnings,
                             figures)
-    if draw_figures and figures:
-        stage("drawing the figures")
+    if opts.draw_figures and figures:
+        opts.say("drawing the figures")
         run.draw_figures()
     return run
 
 
-def _winds(ident, flights, flight_paths, wind_flights, chosen, out, plots, figures, progress, backend, stage):
+def _options(options: IdentifyOptions | None, settings: dict) -> IdentifyOptions:
+    """``options`` with the keyword ``settings`` of :func:`identify_and_report` applied."""
+    known = {f.name for f in fields(IdentifyOptions)}
+    for name in settings:
+        if name not in known:
+            raise TypeError(f"identify_and_report() got an unexpected keyword argument {name!r}")
+    return replace(options or IdentifyOptions(), **settings)
+
+
+def _fit_models(flights: list, opts: IdentifyOptions) -> dict:
+    """The decoupled and the coupled model fitted by ``opts.method`` (the coupled ML fit selects its terms)."""
+    kw = dict(opts.identifier_kwargs or {})
+    how = "by maximum likelihood" if opts.method == "ml" else "by the integral method"
+    opts.say(f"fitting the decoupled and coupled models {how} ({sum(f.duration for f in flights):.0f} s of flight)")
+    coupled_kw = {**kw, "select_terms": True} if opts.method == "ml" else kw
+    return {
+        "decoupled": make_identifier(opts.method, "decoupled", **kw).fit(flights),
+        "coupled": make_identifier(opts.method, "coupled", **coupled_kw).fit(flights),
+    }
+
+
+def _write(out: Path, document: dict, profiles: list, opts: IdentifyOptions, content) -> tuple[dict, int | None]:
+    """Write ``model.json``, the wind traces and ``report.md`` as one transaction of ``out`` (or into
+    ``opts.transaction``): (paths, library version). ``content(model_path=, library_version=)`` is the
+    :class:`ReportContent` of the report."""
+    writing = (contextlib.nullcontext(opts.transaction) if opts.transaction is not None
+               else ModelDir(out).transaction(wait=opts.wait, what="identify"))
+    with writing as tx:
+        model_path = tx.write_model_document(document)
+        library_version = tx.add_traces(profiles) if profiles else None
+        paths = {"model": model_path}
+        if opts.disturbances:
+            paths["library"] = out / "disturbances"
+        md = report_markdown(content(model_path=model_path, library_version=library_version))
+        paths["report"] = tx.write_report("report.md", md)
+    return paths, library_version
+
+
+def _winds(ident, flights: list, out: Path, opts: IdentifyOptions, figures: list) -> tuple[list, list]:
     """Each chosen flight's wind profile (eqs. 41-47) and its section of ``report.md``; queues its figures."""
     from tqdm import tqdm
 
-    profiles, dist_md = [], []
-    names = [Path(p).name for p in (flight_paths or [])] or [f"flight {i + 1}" for i in range(len(flights))]
-    chosen_flights = range(len(flights)) if wind_flights is None else [int(i) for i in wind_flights]
-    show = (len(chosen_flights) > 1) if progress is None else progress
+    profiles, sections = [], []
+    paths = opts.flight_paths
+    names = [Path(p).name for p in (paths or [])] or [f"flight {i + 1}" for i in range(len(flights))]
+    chosen_flights = range(len(flights)) if opts.wind_flights is None else [int(i) for i in opts.wind_flights]
+    show = (len(chosen_flights) > 1) if opts.progress is None else opts.progress
     done = None
-    stage(f"identifying the wind of {len(chosen_flights)} flight{'s' if len(chosen_flights) != 1 else ''}")
+    opts.say(f"identifying the wind of {len(chosen_flights)} flight{'s' if len(chosen_flights) != 1 else ''}")
     winds = {i: ident.wind_torque(i) for i in chosen_flights} if hasattr(ident, "wind_torque") else {}
-    if backend is not None:
+    if opts.backend is not None:
         from .fleet import disturbances_of
 
-        done = disturbances_of([flights[i] for i in chosen_flights], ident.params_, backend=backend,
+        done = disturbances_of([flights[i] for i in chosen_flights], ident.params_, backend=opts.backend,
                                progress=show, wind_torques=[winds.get(i) for i in chosen_flights])
     for n, i in enumerate(tqdm(chosen_flights, desc="disturbance profiles", unit="flight", leave=False,
                                disable=not show or done is not None or not sys.stderr.isatty())):
@@ -373,81 +341,12 @@ def _winds(ident, flights, flight_paths, wind_flights, chosen, out, plots, figur
                    else done[n])
         profiles.append(profile)
         prefix = f"disturbance_{i + 1}" if len(flights) > 1 else "disturbance"
-        section = [profile.markdown(title=f"{names[i]}: wind disturbance (Sections 2.5.3, 3.3)")]
-        true_ud = _true_wind(flight_paths[i] if flight_paths else None, flight)
-        if true_ud is not None:
-            cmp = compare_with_truth(profile, true_ud)
-            section += ["", "Against the true wind of this synthetic flight:", "",
-                        "| Axis | correlation | RMS error | RMS of the true wind |", "|---|---|---|---|"]
-            section += [f"| {a} | {v['correlation']:.3f} | {v['rms_error']:.4f} | {v['rms_truth']:.4f} |"
-                        for a, v in cmp.items()]
-        if plots:
-            figures.append(partial(_wind_figures, profile, out, true_ud, prefix))
-            section += [""] + [f"![{k}]({prefix}_{k}.png)" for k in figure_names(profile)]
-        dist_md += section + [""]
-    return profiles, dist_md
-
-
-def _report_markdown(flights, identifiers, chosen, ident, model_path, sources, warnings, truth, method, validation,
-                     plots, disturbances, library_version, dist_md, reference) -> str:
-    """The text of ``report.md`` (``reference``: the integral method's fit shown beside a maximum-likelihood one)."""
-    first = identifiers[chosen].flights_[0]
-    n_total = sum(f.n for f in flights)
-    dur = sum(f.duration for f in flights)
-    src_lines = "\n".join(f"- `{s.get('file')}` (SHA-256 `{s.get('sha256', '')[:16]}…`)" for s in sources) or "- (in memory)"
-    md = [
-        "# Identification report",
-        "",
-        f"Model written: `{model_path.name}` ({chosen}). Flights: {len(flights)}, {dur:.1f} s, {n_total} samples at "
-        f"{first.sample_rate:.1f} Hz.",
-        "",
-        src_lines,
-        "",
-        method_sentence(ident),
-        "",
-    ]
-    if warnings:
-        md += ["## Warnings", ""] + [f"- {w}" for w in warnings] + [""]
-    md += [
-        "## Identified parameters",
-        "",
-        parameter_table(identifiers, truth),
-        "",
-    ]
-    if method == "ml":
-        dropped = [p for f in identifiers["coupled"].axes_.values() for p in f.dropped]
-        if dropped:
-            md += [f"Coupled model: {', '.join(dropped)} left out (—): the data do not support them "
-                   "(|value| < 3 standard errors; each dropped in turn, weakest first, and the axis refitted).", ""]
-        wind_md = wind_table(ident)
-        md += ["## Wind model and sensor noise (maximum likelihood)", "", wind_md, "",
-               "## The integral method (Fig. 5) on the same flights, for comparison", "",
-               parameter_table({f"integral ({chosen})": reference}, truth), ""]
-    md += [
-        "## Fit statistics",
-        "",
-        fit_table(identifiers),
-        "",
-        "## Validation by forward simulation (no disturbance)",
-        "",
-        validation.markdown(),
-    ]
-    if plots:
-        md += ["![Measured vs modelled body rates](rates.png)", "", "![Detrended attitude](attitude.png)", ""]
-    if disturbances:
-        md += ["## Wind disturbance (eqs. 41-47)", "",
-               f"Identified with the {chosen} model and appended to the disturbance library "
-               f"`disturbances/` as version {library_version}.", ""] + dist_md
-    return "\n".join(md) + "\n"
-
-
-def _fit_figures(validation, out: Path) -> dict:
-    return {"rates_png": plot_rate_fit(validation, out / "rates.png"),
-            "attitude_png": plot_attitude_fit(validation, out / "attitude.png")}
-
-
-def _wind_figures(profile, out: Path, true_ud, prefix: str) -> dict:
-    return {f"{prefix}_{k}": v for k, v in save_figures(profile, out, true_ud=true_ud, prefix=prefix).items()}
+        true_ud = _true_wind(paths[i] if paths else None, flight)
+        if opts.plots:
+            figures.append(partial(wind_figures, profile, out, true_ud, prefix))
+        sections += wind_section(profile, f"{names[i]}: wind disturbance (Sections 2.5.3, 3.3)", true_ud,
+                                 prefix if opts.plots else None)
+    return profiles, sections
 
 
 def source_entry(path, sha256: str | None = None) -> dict:
