@@ -176,6 +176,18 @@ def hold_of(flight: Flight) -> str:
     return hold if hold in ("linear", "zoh") else "linear"
 
 
+def _starting_structure(model: ModelParams | None) -> tuple[dict, list]:
+    """Per axis the terms the diagnosis starts from (the paper's decoupled model, or ``model``'s nonzero
+    terms), and the alignments (``model``'s servo delays)."""
+    structure = {a: tuple(DECOUPLED[a]) for a in range(3)}
+    if model is None:
+        return structure, [0.0, 0.0, 0.0]
+    values = model.values()
+    for a in range(3):
+        structure[a] = tuple(p for p, v in values.items() if TERMS[p].axis == a and (v != 0.0 or p in DECOUPLED[a]))
+    return structure, list(model.taus)
+
+
 def _fresh(x) -> np.ndarray:
     """A second start for a search: the damping of ``x`` with the wind model's default starting values."""
     return np.array([max(float(x[0]), 0.5), np.log(4.0), np.log(0.3), np.log(100.0), np.log(100.0)])
@@ -355,14 +367,7 @@ class LikelihoodDiagnoser:
         self._fs = flight.sample_rate
         self._burn = int(round(BURN_IN * self._fs))
         self._shift_cache = {}
-        structure = {a: tuple(DECOUPLED[a]) for a in range(3)}
-        alignment = [0.0, 0.0, 0.0]
-        if model is not None:
-            values = model.values()
-            for a in range(3):
-                names = tuple(p for p, v in values.items() if TERMS[p].axis == a and (v != 0.0 or p in DECOUPLED[a]))
-                structure[a] = names
-            alignment = list(model.taus)
+        structure, alignment = _starting_structure(model)
         self.closed_loop_ = {AXES[a]: closed_loop_share(flight, a) for a in range(3)}
         if flight.duration < self.min_duration:
             self.verdict_ = UNDECIDED
@@ -371,87 +376,101 @@ class LikelihoodDiagnoser:
             self.params_ = model or ModelParams()
             self.alignment_ = tuple(alignment)
             return
-        start = self._ident.__class__(input_hold=self.input_hold_, structure=structure, delay=[max(v, 0.0) for v in
-                                      alignment], axes=self.axes, wind_model="auto")
-        start.remove_vibration = False  # cleaned above
+        current = self._baseline(cleaned, structure, alignment)
+        self.baseline_ = dict(current)
+        todo = list(self.axes)
+        for rnd in range(1, self.max_rounds + 1):
+            rows = []
+            todo = [axis for axis in todo if self._round_on_axis(rnd, axis, current, rows)]
+            self.rounds_.append(rows)
+            if not todo:
+                break
+        self.final_ = current
+        self.alignment_ = tuple(current[a].alignment if a in current else alignment[i] for i, a in enumerate(AXES))
+        self._final_fit(cleaned, current)
+        self.verdict_ = "found" if self.steps_ else NONE
+
+    def _baseline(self, cleaned: Flight, structure: dict, alignment: list) -> dict:
+        """Each diagnosed axis' starting structure fitted in full, scored by the candidates' likelihood."""
+        start = MaximumLikelihoodIdentifier(input_hold=self.input_hold_, structure=structure,
+                                            delay=[max(v, 0.0) for v in alignment], axes=self.axes,
+                                            wind_model="auto")
+        start.remove_vibration = False  # cleaned already
         start._fit([cleaned] if min(alignment) >= 0 else [shift_inputs(cleaned, [min(v, 0.0) for v in alignment])])
         current = {}
         for axis in self.axes:
             a = AXES.index(axis)
             fit = start.axes_[axis]  # the same likelihood as the candidates': evaluated here, on the same data
             current[axis] = self._score(a, structure[a], alignment[a], fit.state, (fit.wind["model"],), 0)
-        self.baseline_ = dict(current)
-        todo = list(self.axes)
-        for rnd in range(1, self.max_rounds + 1):
-            rows, changed = [], []
-            for axis in todo:
-                a = AXES.index(axis)
-                base = current[axis]
-                # the base searched with the candidates' budget too, so that a candidate gains only by its terms;
-                # a servo delay found earlier is searched again with the rest (and with every candidate)
-                # and from the fresh start the alignment candidate also gets (else that start alone could
-                # win it a likelihood ratio)
-                free_tau = (SERVO_DELAY, axis) in self.effects_found_
-                # (with every gust model, as the alignment candidate: switching models alone cannot win LR)
-                tries = [base] + [self._score(a, base.names, base.alignment, start, WIND_MODELS, 3 * NFEV, free_tau)
-                                  for start in (base.x, _fresh(base.x))]
-                base = current[axis] = self._describe(a, min(tries, key=lambda sc: sc.nll))
-                cands = []
-                for name, effect in CATALOGUE.items():
-                    if effect.is_alignment:
-                        if (name, axis) in self.effects_found_:
-                            continue  # found in an earlier round: refined in the final fit, not added twice
-                        sc = self._alignment_candidate(a, base)
-                        k = 1
-                    else:
-                        add = tuple(p for p in effect.terms_on(a) if p not in base.names)
-                        if not add:
-                            continue
-                        sc = self._score(a, base.names + add, base.alignment, base.x, (base.kind,), NFEV, free_tau)
-                        k = len(add)
-                    cands.append((name, k, sc, 2.0 * (base.nll - sc.nll)))
-                m = max(len(cands), 1)
-                scored = []
-                for name, k, sc, lr in cands:
-                    thr = self.threshold(m, k, alignment=CATALOGUE[name].is_alignment)
-                    why = self._implausible(a, base, sc)
-                    if why is None:  # an unphysical fit is reported, never accepted nor runner-up
-                        scored.append((lr / thr, name, k, sc, lr, thr))
-                    rows.append({"round": rnd, "axis": axis, "effect": name, "lr": float(lr), "threshold": thr,
-                                 "n_parameters": k, "alignment_s": sc.alignment,
-                                 "accepted": bool(lr > thr and why is None), "implausible": why})
-                scored.sort(key=lambda r: -r[0])
-                if not scored or scored[0][0] <= 1.0:
+        return current
+
+    def _round_on_axis(self, rnd: int, axis: str, current: dict, rows: list) -> bool:
+        """One round on one axis: every candidate scored into ``rows``, the best accepted one added to
+        ``current``. True when the axis changed."""
+        a = AXES.index(axis)
+        base = current[axis]
+        # the base searched with the candidates' budget too, so that a candidate gains only by its terms;
+        # a servo delay found earlier is searched again with the rest (and with every candidate)
+        # and from the fresh start the alignment candidate also gets (else that start alone could
+        # win it a likelihood ratio), with every gust model (switching models alone cannot win LR)
+        free_tau = (SERVO_DELAY, axis) in self.effects_found_
+        tries = [base] + [self._score(a, base.names, base.alignment, start, WIND_MODELS, 3 * NFEV, free_tau)
+                          for start in (base.x, _fresh(base.x))]
+        base = current[axis] = self._describe(a, min(tries, key=lambda sc: sc.nll))
+        cands = self._candidates(a, axis, base, free_tau)
+        m = max(len(cands), 1)
+        scored = []
+        for name, k, sc, lr in cands:
+            thr = self.threshold(m, k, alignment=CATALOGUE[name].is_alignment)
+            why = self._implausible(a, base, sc)
+            if why is None:  # an unphysical fit is reported, never accepted nor runner-up
+                scored.append((lr / thr, name, k, sc, lr, thr))
+            rows.append({"round": rnd, "axis": axis, "effect": name, "lr": float(lr), "threshold": thr,
+                         "n_parameters": k, "alignment_s": sc.alignment,
+                         "accepted": bool(lr > thr and why is None), "implausible": why})
+        scored.sort(key=lambda r: -r[0])
+        if not scored or scored[0][0] <= 1.0:
+            return False
+        _, name, k, sc, lr, thr = scored[0]
+        runner = scored[1] if len(scored) > 1 else None
+        after = self._describe(a, sc)
+        added = {p: v for p, v in after.params.items() if p not in base.names}
+        if name == SERVO_DELAY:
+            added = {"alignment_s": after.alignment}
+        self.steps_.append(LikelihoodStep(rnd, axis, name, added, float(lr), thr, runner[1] if runner else None,
+                                          float(runner[4]) if runner else None, dict(base.r2), dict(after.r2)))
+        self.effects_found_.append((name, axis))
+        current[axis] = after
+        return True
+
+    def _candidates(self, a: int, axis: str, base: AxisScore, free_tau: bool) -> list:
+        """``(effect, added parameters, score, LR)`` of every catalogue candidate on an axis."""
+        cands = []
+        for name, effect in CATALOGUE.items():
+            if effect.is_alignment:
+                if (name, axis) in self.effects_found_:
+                    continue  # found in an earlier round: refined in the final fit, not added twice
+                sc = self._alignment_candidate(a, base)
+                k = 1
+            else:
+                add = tuple(p for p in effect.terms_on(a) if p not in base.names)
+                if not add:
                     continue
-                _, name, k, sc, lr, thr = scored[0]
-                runner = scored[1] if len(scored) > 1 else None
-                after = self._describe(a, sc)
-                added = {p: v for p, v in after.params.items() if p not in base.names}
-                if name == SERVO_DELAY:
-                    added = {"alignment_s": after.alignment}
-                self.steps_.append(LikelihoodStep(rnd, axis, name, added, float(lr), thr,
-                                                  runner[1] if runner else None,
-                                                  float(runner[4]) if runner else None, dict(base.r2),
-                                                  dict(after.r2)))
-                self.effects_found_.append((name, axis))
-                current[axis] = after
-                changed.append(axis)
-            self.rounds_.append(rows)
-            todo = changed
-            if not todo:
-                break
-        self.final_ = current
-        self.alignment_ = tuple(current[a].alignment if a in current else alignment[i] for i, a in enumerate(AXES))
-        # the final structure fitted in full (every search to convergence) on the aligned flight
+                sc = self._score(a, base.names + add, base.alignment, base.x, (base.kind,), NFEV, free_tau)
+                k = len(add)
+            cands.append((name, k, sc, 2.0 * (base.nll - sc.nll)))
+        return cands
+
+    def _final_fit(self, cleaned: Flight, current: dict):
+        """The final structure fitted in full (every search to convergence) on the aligned flight; a delay
+        found stays as found (searching it again would change the structure's meaning)."""
         final = MaximumLikelihoodIdentifier(structure={AXES.index(a): sc.names for a, sc in current.items()},
                                             delay=[max(v, 0.0) for v in self.alignment_], axes=tuple(current),
                                             input_hold=self.input_hold_, remove_vibration=False)
-        # (a delay found here stays as found: searching it again would change the structure's meaning)
         shifts = [min(v, 0.0) for v in self.alignment_]
         final._fit([shift_inputs(cleaned, shifts) if min(shifts) < 0 else cleaned])
         self.identifier_ = final
         self.params_ = final.params_
-        self.verdict_ = "found" if self.steps_ else NONE
 
     def threshold(self, m: int, k: int, alignment: bool = False) -> float:
         """Acceptance threshold of a candidate adding ``k`` parameters among ``m`` tried on the axis (the
