@@ -57,15 +57,15 @@ def _responses(loop, w, dt):
     A_o, b, c_angle, c_rate = loop
     n = A_o.shape[0]
     z = np.exp(1j * np.ravel(w) * dt)
-    X = np.linalg.solve(z[:, None, None] * np.eye(n) - A_o, np.broadcast_to(b, (z.size, n)).astype(complex)[..., None])
-    X = X[..., 0]
+    rhs = np.broadcast_to(b, (z.size, n)).astype(complex)[..., None]
+    X = np.linalg.solve(z[:, None, None] * np.eye(n) - A_o, rhs)[..., 0]
     return (X @ c_angle).reshape(np.shape(w)), (X @ c_rate).reshape(np.shape(w))
 
 
 def _crossings(loop, dt, kp, kd, part, grid, h_angle, h_rate):
     """Frequencies where ``part(L)`` changes sign between grid points, refined by bisection.
 
-    Returns ``(pair index, ω, L(ω))`` arrays, one entry per crossing.
+    Returns ``(pair index, L at the crossing)`` arrays, one entry per crossing.
     """
     values = part(kp[:, None] * h_angle[None] + kd[:, None] * h_rate[None])
     g, f = np.nonzero(values[:, :-1] * values[:, 1:] < 0.0)
@@ -77,9 +77,8 @@ def _crossings(loop, dt, kp, kd, part, grid, h_angle, h_rate):
         a, r = _responses(loop, mid, dt)
         same = np.sign(part(p * a + d * r)) == s_lo
         lo, hi = np.where(same, mid, lo), np.where(same, hi, mid)
-    w = 0.5 * (lo + hi)
-    a, r = _responses(loop, w, dt)
-    return g, w, p * a + d * r
+    a, r = _responses(loop, 0.5 * (lo + hi), dt)
+    return g, p * a + d * r
 
 
 def _gain_part(L):
@@ -87,13 +86,13 @@ def _gain_part(L):
 
 
 def _nearest(values, pair, n_pairs, key):
-    """Per pair, the value of ``values`` whose ``key`` is smallest; +inf where a pair has none."""
+    """Per pair, the entry of ``values`` (one per crossing, of pair ``pair``) with the smallest ``key``;
+    +inf where a pair has no crossing."""
     out = np.full(n_pairs, math.inf)
-    best = np.full(n_pairs, math.inf)
-    for i, v in zip(pair, values):  # a handful of crossings per pair
-        k = key(v)
-        if k < best[i]:
-            best[i], out[i] = k, v
+    if values.size:
+        order = np.lexsort((key, pair))  # by pair, then by key
+        pairs, first = np.unique(pair[order], return_index=True)
+        out[pairs] = values[order][first]
     return out
 
 
@@ -132,17 +131,16 @@ def loop_margins(plant, axis, kp, kd, nominal) -> tuple[np.ndarray, np.ndarray]:
     for start in range(0, kp.size, _PAIRS_PER_CHUNK):
         sl = slice(start, min(kp.size, start + _PAIRS_PER_CHUNK))
         p, d = kp[sl], kd[sl]
-        g, _, L = _crossings(loop, dt, p, d, np.imag, grid, h_angle, h_rate)
+        g, L = _crossings(loop, dt, p, d, np.imag, grid, h_angle, h_rate)
         left = L.real < 0.0  # the negative real axis; the Nyquist end point is real, counted on its own
         at_nyq = p * h_angle[-1].real + d * h_rate[-1].real
         g = np.concatenate([g[left], np.flatnonzero(at_nyq < 0.0)])
-        with np.errstate(divide="ignore"):
-            factors = 1.0 / np.abs(np.concatenate([L[left], at_nyq[at_nyq < 0.0]]))
-        gm[sl] = _nearest(factors, g, p.size, lambda v: abs(math.log(v)) if v > 0 else math.inf)
-        g, _, L = _crossings(loop, dt, p, d, _gain_part, grid, h_angle, h_rate)
-        pm[sl] = _nearest(np.remainder(np.angle(L, deg=True), 360.0) - 180.0, g, p.size, abs)
-    with np.errstate(divide="ignore"):
-        return np.where(np.isfinite(gm), 20.0 * np.log10(gm), math.inf), pm
+        factors = 1.0 / np.abs(np.concatenate([L[left], at_nyq[at_nyq < 0.0]]))  # L < 0 there: finite
+        gm[sl] = _nearest(factors, g, p.size, np.abs(np.log(factors)))  # nearest to 1 on a log scale
+        g, L = _crossings(loop, dt, p, d, _gain_part, grid, h_angle, h_rate)
+        phase = np.remainder(np.angle(L, deg=True), 360.0) - 180.0
+        pm[sl] = _nearest(phase, g, p.size, np.abs(phase))
+    return 20.0 * np.log10(gm), pm  # inf stays inf
 
 
 def robust(gain_margin_db, phase_margin_deg, min_gain_margin_db: float = ROBUST_GAIN_MARGIN_DB,
