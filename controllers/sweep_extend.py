@@ -166,6 +166,21 @@ def _best_summary(table, i) -> dict:
     return {"kp": float(table["kp"][i]), "kd": float(table["kd"][i]), "att_p90_deg": float(table["att_p90_deg"][i])}
 
 
+def _open_edges(edges, kp, kd, beyond_fault):
+    """The edges the grid can grow past from ``(kp, kd)``, and ``(stop, words)`` for each held one."""
+    open_edges, held = [], []
+    for e in edges:
+        fault = e.why if e.values is None else beyond_fault(*e.beyond(kp, kd))
+        if fault is None:
+            open_edges.append(e)
+        elif e.values is None:
+            held.append(("bound", f"the {e.name} ({fault})"))
+        else:
+            held.append(("unstable beyond", "the {} (Kp {:.4g}, Kd {:.4g} beyond it is {})".format(
+                e.name, *e.beyond(kp, kd), fault)))
+    return open_edges, held
+
+
 def extend_grid(kp_values, kd_values, block: PairBlock, evaluate, beyond_fault, max_extensions: int,
                 n: int = EXTENSION_VALUES):
     """Grow a swept grid until its best pair is interior or a limit holds (see the module docstring).
@@ -204,16 +219,7 @@ def extend_grid(kp_values, kd_values, block: PairBlock, evaluate, beyond_fault, 
         if not edges:
             stop, detail = "interior", f"the best pair (Kp {kp:.4g}, Kd {kd:.4g}) is inside the grid"
             break
-        open_edges, held = [], []
-        for e in edges:
-            fault = e.why if e.values is None else beyond_fault(*e.beyond(kp, kd))
-            if fault is None:
-                open_edges.append(e)
-            elif e.values is None:
-                held.append(("bound", f"the {e.name} ({fault})"))
-            else:
-                held.append(("unstable beyond", "the {} (Kp {:.4g}, Kd {:.4g} beyond it is {})".format(
-                    e.name, *e.beyond(kp, kd), fault)))
+        open_edges, held = _open_edges(edges, kp, kd, beyond_fault)
         where = f"the best pair (Kp {kp:.4g}, Kd {kd:.4g}) lies on " + " and ".join(
             [f"the {e.name}" for e in open_edges] + [h[1] for h in held])
         if not open_edges:
