@@ -311,8 +311,6 @@ class Diagnoser:
             The starting structure cannot be identified from the flight at all
             (an axis never excited, a flight shorter than two intervals).
         """
-        from tqdm import tqdm
-
         names = self._check_settings()
         if not isinstance(flight, Flight):
             raise TypeError(f"flight must be a Flight, got {type(flight).__name__}")
@@ -344,8 +342,23 @@ class Diagnoser:
             return self
         held = HeldOut(fl, self.folds, self.window, interval=self.interval)
         self.held_ = held
-        base = held.score(spec)
-        self.baseline_score_ = base
+        self.baseline_score_ = held.score(spec)
+        spec, score, whole_fit, best_r2, undecided = self._search(held, spec, names)
+        self._conclude(spec, score, best_r2, undecided)
+        self._finish(whole_fit)
+        return self
+
+    def _search(self, held: HeldOut, spec: Spec, names) -> tuple:
+        """Rounds of add-and-rescore (steps 2-5 of the module docstring), recording :attr:`steps_` and
+        :attr:`rounds_`.
+
+        Returns
+        -------
+        (Spec, Score, IntegralIdentifier, ndarray (3,), dict)
+            The final structure, its held-out score and its whole-flight fit; the best held-out R² per axis of
+            any candidate; the axes found too poorly excited to decide.
+        """
+        base = self.baseline_score_
         axes = list(range(3))
         best_r2 = base.r2().copy()
         undecided = {}
@@ -354,50 +367,71 @@ class Diagnoser:
             todo = self._candidates(spec, axes, names)
             if not todo:
                 break
-            cands = []
-            for effect, a in tqdm(todo, desc=f"diagnose round {rnd}", unit="candidate", leave=False,
-                                  disable=not self.progress or not sys.stderr.isatty()):
-                c = self._evaluate(held, spec, base, effect, a)
-                if c is not None:
-                    cands.append(c)
-                    best_r2[a] = max(best_r2[a], c.score.r2()[a])
+            cands = self._score_candidates(held, spec, base, todo, rnd, best_r2)
             self.rounds_.append([c.row() for c in cands])
-            winners = []
-            for a in axes:
-                on_axis = sorted((c for c in cands if c.axis == a), key=lambda c: -c.gain)
-                if not on_axis:
-                    continue
-                threshold = self.alpha / len(on_axis)
-                best = on_axis[0]
-                if best.gain < self.min_gain or best.p_value > threshold:
-                    continue
-                if best_r2[a] < self.min_r2:
-                    undecided[AXES[a]] = self._poor_excitation(a, best, best_r2[a])
-                    continue
-                runner = on_axis[1] if len(on_axis) > 1 else None
-                winners.append((best, runner, threshold))
+            winners = self._winners(cands, axes, best_r2, undecided)
             if not winners:
                 break
-            new_spec = spec
-            for best, _, _ in winners:
-                a = best.axis
-                if CATALOGUE[best.effect].is_alignment:
-                    self._aligned.add(a)
-                new_spec = (new_spec.with_alignment(a, best.spec.alignment[a]) if CATALOGUE[best.effect].is_alignment
-                            else new_spec.with_terms(a, CATALOGUE[best.effect].terms_on(a)))
-            whole_fit = HeldOut.fit_whole(fl, new_spec, self.interval)
+            new_spec = self._with_winners(spec, winners)
+            whole_fit = HeldOut.fit_whole(self.flight_, new_spec, self.interval)
             for best, runner, threshold in winners:
                 self.steps_.append(self._step(rnd, best, runner, threshold, base, whole_fit.params_))
             spec = new_spec
             base = held.score(spec)
             axes = sorted({best.axis for best, _, _ in winners})
+        return spec, base, whole_fit, best_r2, undecided
+
+    def _score_candidates(self, held: HeldOut, spec: Spec, base: Score, todo, rnd: int, best_r2) -> list[Candidate]:
+        """Every (effect, axis) of ``todo`` fitted and scored; raises ``best_r2`` (3,) to the best seen."""
+        from tqdm import tqdm
+
+        cands = []
+        for effect, a in tqdm(todo, desc=f"diagnose round {rnd}", unit="candidate", leave=False,
+                              disable=not self.progress or not sys.stderr.isatty()):
+            c = self._evaluate(held, spec, base, effect, a)
+            if c is not None:
+                cands.append(c)
+                best_r2[a] = max(best_r2[a], c.score.r2()[a])
+        return cands
+
+    def _winners(self, cands: list[Candidate], axes, best_r2, undecided: dict) -> list[tuple]:
+        """Per axis, the significant candidate of the largest gain with its runner-up and p threshold
+        (step 3); an axis whose best model explains too little is put in ``undecided`` instead."""
+        winners = []
+        for a in axes:
+            on_axis = sorted((c for c in cands if c.axis == a), key=lambda c: -c.gain)
+            if not on_axis:
+                continue
+            threshold = self.alpha / len(on_axis)
+            best = on_axis[0]
+            if best.gain < self.min_gain or best.p_value > threshold:
+                continue
+            if best_r2[a] < self.min_r2:
+                undecided[AXES[a]] = self._poor_excitation(a, best, best_r2[a])
+                continue
+            runner = on_axis[1] if len(on_axis) > 1 else None
+            winners.append((best, runner, threshold))
+        return winners
+
+    def _with_winners(self, spec: Spec, winners: list[tuple]) -> Spec:
+        """``spec`` with every winner's effect added (step 4)."""
+        for best, _, _ in winners:
+            a = best.axis
+            if CATALOGUE[best.effect].is_alignment:
+                self._aligned.add(a)
+            spec = (spec.with_alignment(a, best.spec.alignment[a]) if CATALOGUE[best.effect].is_alignment
+                    else spec.with_terms(a, CATALOGUE[best.effect].terms_on(a)))
+        return spec
+
+    def _conclude(self, spec: Spec, score: Score, best_r2, undecided: dict) -> None:
+        """Set the verdict, the final structure and score, and the evidence of the undecided axes."""
         for a in range(3):
             if best_r2[a] < self.min_r2 and AXES[a] not in undecided:
                 undecided[AXES[a]] = self._poor_excitation(a, None, best_r2[a])
         self.evidence_["held_out_r2_best"] = {AXES[a]: float(best_r2[a]) for a in range(3)}
         self.evidence_["undecided_axes"] = undecided
         self.spec_ = spec
-        self.final_score_ = base
+        self.final_score_ = score
         if self.steps_:
             self.verdict_ = "found"
         elif undecided:
@@ -405,8 +439,6 @@ class Diagnoser:
             self.evidence_["reason"] = "; ".join(f"{k}: {v['reason']}" for k, v in undecided.items())
         else:
             self.verdict_ = NONE
-        self._finish(whole_fit)
-        return self
 
     def _poor_excitation(self, axis: int, cand: Candidate | None, r2: float) -> dict:
         stick = self.flight_.sticks[("lat", "lon", "col", "ped").index(INPUT_FOR_AXIS[axis])]

@@ -30,6 +30,7 @@ from model_store.model_file import model_document as new_model_document
 
 from .diagnose import Diagnoser, heldout_stats
 from .effects import CATALOGUE, alignment_parts, shift_inputs
+from .figures import DPI, pyplot
 from .files import jsonable, save_figure, write_text
 from .flight import Flight
 from .model import ModelParams
@@ -200,9 +201,7 @@ def diagnosis_markdown(d: Diagnoser, doc: dict, figures: dict) -> str:
 # ------------------------------------------------------------------------- plots
 def plot_residual_tests(d: Diagnoser, path):
     """Per axis: autocorrelation and cross-correlation with the own stick (before/after), error per band."""
-    from .validation import _pyplot
-
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(3, 3, figsize=(14, 10))
     for i, axis in enumerate(AXES):
         for label, style in (("before", "C3"), ("after", "C0")):
@@ -230,7 +229,7 @@ def plot_residual_tests(d: Diagnoser, path):
     axes[-1, 1].set_xlabel("lag k [s] (k > 0: stick leads)")
     fig.suptitle("Held-out forward-simulation residual tests, before and after the diagnosis", fontsize=12)
     fig.tight_layout()
-    return save_figure(fig, path, dpi=110)
+    return save_figure(fig, path, dpi=DPI)
 
 
 def plot_worst_windows(d: Diagnoser, path):
@@ -239,9 +238,7 @@ def plot_worst_windows(d: Diagnoser, path):
     The y-axis spans the measured and simulated rates; a simulation that diverges in the window is
     clipped and its legend entry says how far it went (:func:`window_limits`).
     """
-    from .validation import _pyplot
-
-    plt = _pyplot()
+    plt = pyplot()
     b, a = d.baseline_score_, d.final_score_
     held = d.held_
     fig, axes = plt.subplots(3, 2, figsize=(14, 9))
@@ -264,7 +261,7 @@ def plot_worst_windows(d: Diagnoser, path):
     fig.suptitle("Worst held-out windows of the model before the diagnosis (each simulated from measured state)",
                  fontsize=12)
     fig.tight_layout()
-    return save_figure(fig, path, dpi=110)
+    return save_figure(fig, path, dpi=DPI)
 
 
 def window_limits(measured, simulated: dict, pad: float = 0.1, diverged: float = 3.0):

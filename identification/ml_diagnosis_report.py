@@ -25,6 +25,7 @@ from model_store.model_file import model_document as new_model_document
 
 from .diagnose_report import DiagnosisRun, write_diagnosis
 from .effects import CATALOGUE, alignment_parts, describe, shift_inputs
+from .figures import pyplot
 from .files import jsonable, save_figure
 from .flight import Flight
 from .ml_diagnosis import AHEAD_S, LikelihoodDiagnoser
@@ -111,9 +112,7 @@ def plot_statistics(d: LikelihoodDiagnoser, path) -> Path | None:
     """Bar chart: each candidate's LR over its threshold per axis (round 1; 1 = the acceptance line)."""
     if not d.rounds_:
         return None
-    from .validation import _pyplot
-
-    plt = _pyplot()
+    plt = pyplot()
     rows = d.rounds_[0]
     effects = list(CATALOGUE)
     fig, axes = plt.subplots(1, 3, figsize=(12, 3.6), sharey=True)
