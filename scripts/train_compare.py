@@ -46,7 +46,7 @@ import numpy as np
 
 from controllers.evaluate import comparison_markdown, evaluate_agent, plot_episode
 from controllers.pd import PDController, PDGains, design_gains, loop_analysis
-from controllers.rl import split_traces, train_agent
+from controllers.rl import load_agent, split_traces, train_agent
 from controllers.sweep import sweep_pairs
 from controllers.trace_split import draw_windows
 from heli_env import load_env_model
@@ -120,7 +120,7 @@ def swept_gains(env_model, split, design: PDGains, n: int, seconds: float, windo
     return PDGains(kp, kd), PDGains(rkp, rkd), rows, wins
 
 
-def main(argv=None) -> int:
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--model", default=None, help="model directory (default: the shipped model)")
     ap.add_argument("--out", default="compare-out")
@@ -138,6 +138,11 @@ def main(argv=None) -> int:
                     help="the swept PD a residual trains on (default robust: the best pair with 6 dB / 45 deg margins)")
     ap.add_argument("--residual-scale", type=float, default=0.05, help="bound of the residual in stick (default 0.05)")
     ap.add_argument("--no-progress", action="store_true")
+    return ap
+
+
+def main(argv=None) -> int:
+    ap = _parser()
     args = ap.parse_args(argv)
     out = Path(args.out)
     env_model = load_env_model(args.model)
@@ -151,6 +156,37 @@ def main(argv=None) -> int:
     swept, robust, sweep_rows, sweep_windows = swept_gains(env_model, split, design, args.grid, 30.0, 4, args.seed)
     print(f"PD sweep ({args.grid} x {args.grid} + 9 x 9 pairs per axis on {len(sweep_windows)} training windows): "
           f"{time.perf_counter() - t0:.1f} s")
+    agents = _pd_agents(env_model, out, (design, swept, robust), sweep_rows)
+    training = _train(ap, args, env_model, agents, out)
+
+    results = []
+    for name, agent in agents:
+        r = evaluate_agent(agent, env_model, traces="held-out", split=split,
+                           episodes_per_trace=args.episodes_per_trace, seed=args.seed + 1, name=name)
+        results.append(r)
+    ep = results[1].representative_episode()
+    paths = [plot_episode(results, out / "episode.png", ep)]
+    for r in results:
+        paths.append(r.plot_episode(out / f"episode_{r.name.lower().replace(' ', '_')}.png", ep))
+
+    notes = _training_notes(args, training, agents) + _goal_notes(results) + _sweep_notes(sweep_rows, swept, robust)
+    notes += ["", f"Representative episode (median RMS error of the best swept PD): {ep}; `episode.png`."]
+    md = comparison_markdown(results, notes=notes)
+    paths.append(write_text(out / "comparison.md", md))
+    doc = jsonable({"split": split.to_dict(), "training": training, "sweep": sweep_rows,
+                    "sweep_windows": sweep_windows, "representative_episode": ep,
+                    "results": [r.to_dict() for r in results]})
+    paths.append(write_text(out / "comparison.json", json.dumps(doc, indent=1, allow_nan=False) + "\n"))
+    print(md)
+    for p in paths:
+        print(f"wrote {p}")
+    return 0
+
+
+def _pd_agents(env_model, out: Path, gains: tuple, sweep_rows: dict) -> list:
+    """The designed, best swept and robust swept PD controllers of ``gains`` as (name, controller), each
+    saved in ``out``."""
+    design, swept, robust = gains
     agents = [("PD designed", PDController.from_model(env_model.params, design)),
               ("PD best swept", PDController.from_model(env_model.params, swept)),
               ("PD robust swept", PDController.from_model(env_model.params, robust))]
@@ -160,7 +196,12 @@ def main(argv=None) -> int:
     agents[2][1].save(out / "pd_robust.json", {"model": str(env_model.path), "how": "per-axis sweep on training "
                                                f"windows, gain margin >= {MIN_GAIN_MARGIN_DB} dB and phase margin "
                                                f">= {MIN_PHASE_MARGIN_DEG} deg", "sweep": sweep_rows})
+    return agents
 
+
+def _train(ap, args, env_model, agents: list, out: Path) -> dict:
+    """Train each algorithm of ``--algos`` within the budget; append the trained agents to ``agents``.
+    Returns the training record per algorithm."""
     training = {}
     for algo in [a.strip() for a in args.algos.split(",") if a.strip()]:
         base, _, residual = algo.partition("-")
@@ -177,37 +218,38 @@ def main(argv=None) -> int:
                           "evaluations": res.evaluations, "agent": str(res.path)}
         print(f"  {algo.upper()}: {res.timesteps} timesteps in {res.seconds:.1f} s "
               f"({res.steps_per_second:.0f} steps/s)")
-        from controllers.rl import load_agent
-
         agents.append((algo.upper(), load_agent(res.path)))
+    return training
 
-    results = []
-    for name, agent in agents:
-        r = evaluate_agent(agent, env_model, traces="held-out", split=split,
-                           episodes_per_trace=args.episodes_per_trace, seed=args.seed + 1, name=name)
-        results.append(r)
-    ep = results[1].representative_episode()
-    paths = [plot_episode(results, out / "episode.png", ep)]
-    for r in results:
-        paths.append(r.plot_episode(out / f"episode_{r.name.lower().replace(' ', '_')}.png", ep))
 
-    pds = results[1:3]
+def _training_notes(args, training: dict, agents: list) -> list[str]:
+    """comparison.md's lines on the training budget and runs, and the PD gains compared."""
     notes = [f"Training on {os.cpu_count()} cores, one torch thread, {args.n_envs} environment copies, seed "
              f"{args.seed}; budget {args.minutes:g} min per algorithm:", ""]
     for algo, t in training.items():
         notes.append(f"- {algo.upper()}: {t['timesteps']} timesteps in {t['seconds']:.0f} s "
                      f"({t['steps_per_second']:.0f} steps/s){' (time budget reached)' if t['stopped_by_time'] else ''}")
-    notes += ["", f"PD designed: {agents[0][1]!r}", f"PD best swept (per axis, on training windows): "
-              f"{agents[1][1]!r}", f"PD robust swept (the same, among pairs with gain margin >= "
-              f"{MIN_GAIN_MARGIN_DB:g} dB and phase margin >= {MIN_PHASE_MARGIN_DEG:g} deg): {agents[2][1]!r}", "",
-              "Goal (issue 5): an RL agent with p90 |attitude error| at or below the swept PD's on every axis:", ""]
+    return notes + ["", f"PD designed: {agents[0][1]!r}", f"PD best swept (per axis, on training windows): "
+                    f"{agents[1][1]!r}", f"PD robust swept (the same, among pairs with gain margin >= "
+                    f"{MIN_GAIN_MARGIN_DB:g} dB and phase margin >= {MIN_PHASE_MARGIN_DEG:g} deg): {agents[2][1]!r}",
+                    ""]
+
+
+def _goal_notes(results: list) -> list[str]:
+    """Whether each RL agent meets issue 5's goal against each swept PD (p90 |attitude error| per axis)."""
+    notes = ["Goal (issue 5): an RL agent with p90 |attitude error| at or below the swept PD's on every axis:", ""]
     for r in results[3:]:
-        for pd_res in pds:
+        for pd_res in results[1:3]:
             met = all(r.metrics[a]["att_p90_deg"] <= pd_res.metrics[a]["att_p90_deg"] for a in AXES)
             ratio = " / ".join(f"{r.metrics[a]['att_p90_deg'] / pd_res.metrics[a]['att_p90_deg']:.2f}" for a in AXES)
             notes.append(f"- {r.name} vs {pd_res.name}: {'met' if met else 'NOT met'} (p90 ratio, roll/pitch/yaw: "
                          f"{ratio})")
-    notes += ["", "Swept pairs (sweep on training windows; margins of the sampled loop):", ""]
+    return notes
+
+
+def _sweep_notes(sweep_rows: dict, swept: PDGains, robust: PDGains) -> list[str]:
+    """The swept pairs per axis with the margins of their sampled loops."""
+    notes = ["", "Swept pairs (sweep on training windows; margins of the sampled loop):", ""]
     for i, (ax, row) in enumerate(sweep_rows.items()):
         for label, gains, key in (("best", swept, "margins"), ("robust", robust, "robust_margins")):
             m = row[key] or {}
@@ -217,17 +259,7 @@ def main(argv=None) -> int:
                          " deg" + (f" ({row['stable']} of {row['pairs']} pairs stable)" if label == "best" else "")
                          + (" — AT THE GRID'S EDGE: higher gains would score better still"
                             if label == "best" and row["at_grid_edge"] else ""))
-    notes += ["", f"Representative episode (median RMS error of the best swept PD): {ep}; `episode.png`."]
-    md = comparison_markdown(results, notes=notes)
-    paths.append(write_text(out / "comparison.md", md))
-    doc = jsonable({"split": split.to_dict(), "training": training, "sweep": sweep_rows,
-                    "sweep_windows": sweep_windows, "representative_episode": ep,
-                    "results": [r.to_dict() for r in results]})
-    paths.append(write_text(out / "comparison.json", json.dumps(doc, indent=1, allow_nan=False) + "\n"))
-    print(md)
-    for p in paths:
-        print(f"wrote {p}")
-    return 0
+    return notes
 
 
 if __name__ == "__main__":
