@@ -255,7 +255,7 @@ def detect_airborne(grid: np.ndarray, signals: SegmentSignals, rates: np.ndarray
         "criteria_share": {k: round(float(v.mean()), 4) for k, v in crit.items()},
     }
     if not len(long):
-        raise NotAirborneError(_not_airborne_message(source, grid, valid, runs, fs, f, figures, signals, quiet))
+        raise NotAirborneError(_not_airborne_message(source, grid, valid, runs, f, figures, signals))
     lengths = long[:, 1] - long[:, 0]
     a, b = long[int(np.argmax(lengths))]
     trim = int(round(TRIM_S * fs))
@@ -280,7 +280,11 @@ def _armed_note(signals: SegmentSignals, grid: np.ndarray) -> str:
     return f"; armed for {float(dt[on].sum()):.1f} s ({armed.name})"
 
 
-def _not_airborne_message(source, grid, valid, runs, fs, f, figures, signals, quiet) -> str:
+def _not_airborne_message(source, grid, valid, runs, f, figures, signals) -> str:
+    """Why no airborne run was found: too little continuous data, or the criteria none of the runs met
+    (``f``: :func:`airborne_features`; ``figures``: the peaks :func:`detect_airborne` records)."""
+    fs = 1.0 / float(grid[1] - grid[0])
+    quiet = f["vibration_quiet"]
     best = float((runs[:, 1] - runs[:, 0]).max() / fs) if runs.size else 0.0
     longest_data = float((valid_runs(valid)[:, 1] - valid_runs(valid)[:, 0]).max() / fs)
     if longest_data < MIN_AIRBORNE_S:
