@@ -187,7 +187,7 @@ def bench_sweep(repeats: int) -> dict:
     kp, kd = np.linspace(0.5, 10.0, 20), np.linspace(0.0, 3.0, 20)
 
     def run():
-        return sweep_gains(None, kp, kd, duration=60.0, dt=0.01, windows=10, seed=0, progress=False)
+        return sweep_gains(None, kp, kd, duration=60.0, dt=0.01, windows=10, seed=0, progress=False, extend=False)
 
     t0 = time.perf_counter()
     result = run()  # cold: imports python-control and scipy.signal, compiles the model
@@ -256,7 +256,8 @@ def bench_backends(repeats: int) -> dict:
     n_rep = max(3, repeats // 10)
 
     def run(backend):
-        return sweep_gains(None, kp, kd, duration=60.0, dt=0.01, windows=10, seed=0, progress=False, backend=backend)
+        return sweep_gains(None, kp, kd, duration=60.0, dt=0.01, windows=10, seed=0, progress=False, backend=backend,
+                           extend=False)
 
     ref = run(None)  # warm-up and the reference table
     ray_be = RayBackend(num_cpus=2)

@@ -29,7 +29,7 @@ from identification.fleet import disturbances_of, identify_each
 from identification.synthetic import simulate_flight
 
 GRID = dict(kp_values=[0.0, 5.0, 20.0, 40.0], kd_values=[0.0, 1.0, 3.0])
-SWEEP = dict(duration=10.0, windows=3, seed=7, progress=False, keep_samples=True)
+SWEEP = dict(duration=10.0, windows=3, seed=7, progress=False, keep_samples=True, extend=False)  # one batch of tasks
 
 
 # ------------------------------------------------------------------------------------------ helpers
