@@ -1,7 +1,13 @@
 """Fixtures shared by the test files.
 
-``shipped`` is the model that ships with heli-env (``heli_env/data``), loaded once per session.
+``shipped`` is the model that ships with heli-env (``heli_env/data``), loaded once per session: identified
+from realistic flights (servo delay, sensor noise and vibration lines). ``ideal_model_dir`` is the model that
+shipped before it (identified from flights with no servo delay, measured exactly): tests whose subject is the
+machinery of the sweep, the evaluator or the training, rather than the realistic world, fly it.
 """
+
+from pathlib import Path
+
 
 import pytest
 
@@ -13,3 +19,17 @@ def shipped():
     """The shipped model as the env loads it (an :class:`heli_env.spec.EnvModel`)."""
     return load_env_model()
 
+
+IDEAL_MODEL_DIR = Path(__file__).parent / "data" / "ideal_model"
+
+
+@pytest.fixture(scope="session")
+def ideal_model_dir():
+    """The model directory of the previous shipped model (no servo delay, no sensors; read only)."""
+    return IDEAL_MODEL_DIR
+
+
+@pytest.fixture(scope="session")
+def ideal(ideal_model_dir):
+    """:func:`ideal_model_dir` as the env loads it."""
+    return load_env_model(ideal_model_dir)

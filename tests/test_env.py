@@ -485,7 +485,7 @@ def test_bad_constructor_arguments_raise(kwargs, match):
 
 def test_observation_noise_changes_observations_not_the_state():
     actions = _random_actions(400, seed=2)
-    clean = _rollout(HeliAttitudeEnv(), actions, seed=8)
+    clean = _rollout(HeliAttitudeEnv(obs_noise=0.0), actions, seed=8)
     noisy = _rollout(HeliAttitudeEnv(obs_noise=(0.02, 0.05)), actions, seed=8)
     assert np.array_equal(np.array(clean["x"]), np.array(noisy["x"]))  # same episode, same dynamics
     diff = np.array(noisy["obs"], dtype=float) - np.array(clean["obs"], dtype=float)
@@ -528,7 +528,7 @@ def _wrap(a):
 
 @pytest.mark.parametrize("reference", ["steps", "smooth"])
 def test_track_observes_reference_minus_attitude(reference):
-    env = HeliAttitudeEnv(task="track", reference=reference, episode_seconds=8.0)
+    env = HeliAttitudeEnv(task="track", reference=reference, episode_seconds=8.0, obs_noise=0.0)
     env.reset(seed=21)
     ep, cfg = env._episode, env.spec_.task
     assert ep.smooth == (reference == "smooth")
@@ -615,7 +615,8 @@ def _compare_with_rk4(params, seed, default_model):
     ids=["decoupled", "coupled", "servo-delay"],
 )
 def test_integration_matches_rk4_to_the_documented_error(default_model, effects, rate_tol, att_tol):
-    params = default_model.params.with_values(**{k: v for e in effects for k, v in EFFECTS[e].items()})
+    undelayed = default_model.params.with_values(tau_roll=0.0, tau_pitch=0.0, tau_yaw=0.0)  # the case sets its own
+    params = undelayed.with_values(**{k: v for e in effects for k, v in EFFECTS[e].items()})
     rate_err, att_err = _compare_with_rk4(params, seed=3, default_model=default_model)
     assert rate_err < rate_tol
     assert att_err < att_tol
@@ -787,8 +788,8 @@ def test_the_env_measures_through_the_models_identified_sensors(tmp_path):
     assert_allclose(diff[:, 4].std(), np.hypot(0.02, 0.05 / np.sqrt(2)), rtol=0.1)
     spectrum = np.abs(np.fft.rfft(diff[:, 4]))
     assert np.fft.rfftfreq(diff.shape[0], 0.01)[np.argmax(spectrum)] == pytest.approx(30.0, abs=0.1)
-    # the model without sensors is measured exactly, as before
-    assert HeliAttitudeEnv().spec_.sensors.silent
+    # measured exactly when asked
+    assert HeliAttitudeEnv(model=root, obs_noise=0.0).spec_.sensors.silent
 
 
 def test_a_malformed_sensors_entry_is_refused_naming_the_file(tmp_path):

@@ -131,9 +131,13 @@ def test_margins_match_hand_computation_sampled():
     assert not loop_analysis(SIMPLE.with_values(tau_roll=0.0), "roll", 1.01 * g * kp, 1.01 * g * kd).stable
 
 
-def test_disturbance_transfer_matches_physics_core(default_params):
-    """torque_to_angle replayed with control.forced_response equals the closed loop stepped by discrete_step."""
+@pytest.mark.parametrize("delayed, tol", [(False, 2e-4), (True, 2e-3)], ids=["no-servo-delay", "servo-delay"])
+def test_disturbance_transfer_matches_physics_core(default_params, delayed, tol):
+    """torque_to_angle replayed with control.forced_response equals the closed loop stepped by discrete_step
+    (with a servo delay the Padé state's initial value and the attitude's mean-rate rotation differ by more)."""
     params = default_params.with_values(kd1=0.0, kd2=0.0, kd3=0.0)  # no trim needed
+    if not delayed:
+        params = params.with_values(tau_roll=0.0, tau_pitch=0.0, tau_yaw=0.0)
     kp, kd = 30.0, 2.0
     an = loop_analysis(params, "roll", kp, kd, dt=DT)
     rng = np.random.default_rng(0)
@@ -148,7 +152,7 @@ def test_disturbance_transfer_matches_physics_core(default_params):
         assert abs(u) < 1  # linear range
         x = discrete_step(x, (u, 0.0, 0.0, 0.0), (d[k], 0.0, 0.0), params, DT)
     predicted = control.forced_response(an.torque_to_angle, T=np.arange(n) * DT, U=d).outputs
-    assert_allclose(angle, predicted, atol=2e-4 * np.max(np.abs(predicted)))
+    assert_allclose(angle, predicted, atol=tol * np.max(np.abs(predicted)))
     # the equivalent-stick channel is the same loop scaled by the control gain (eq. 42); DC: s/kp
     assert_allclose(an.ud_to_angle.dcgain(), an.sign / kp, rtol=1e-9)
     assert_allclose(an.ud_to_angle(np.exp(0.5j)), params.k2 * an.torque_to_angle(np.exp(0.5j)), rtol=1e-12)
@@ -193,7 +197,7 @@ def test_infeasible_request_says_best_margin(default_params):
 def _roll_run(params, base, kp, kd, seconds=10.0):
     """Gust-free hold in the environment with (kp, kd) on roll; |roll error| and |lat action| per step."""
     env = HeliAttitudeEnv(task="hold", gust_scale=0.0, episode_seconds=seconds, init_angle_deg=1.0,
-                          init_rate_deg=1.0)
+                          init_rate_deg=1.0, obs_noise=0.0)  # a decay by 1000 is seen below the sensor noise
     gains = PDGains(kp=(kp, base.kp[1], base.kp[2]), kd=(kd, base.kd[1], base.kd[2]))
     pol = PDController.from_model(params, gains)
     obs, _ = env.reset(seed=3)
@@ -208,12 +212,12 @@ def _roll_run(params, base, kp, kd, seconds=10.0):
 
 
 @pytest.mark.parametrize("scale_or_gains, continuous_says", [
-    (1.0, True),            # the proposed design
-    (40.0, True),           # just inside the gain margin (33 dB = 45x)
-    (50.0, True),           # just outside it: the sampled loop is unstable
-    ((2000.0, 0.0), True),  # high P: stable in continuous time, unstable sampled
+    (1.0, True),            # the proposed design (6 dB, 45 deg with the shipped model's 45 ms servo delay)
+    (5.0, True),            # just inside the gain margin (15.7 dB = 6.1x)
+    (7.0, True),            # just outside it: the sampled loop is unstable, the continuous one is not
+    ((2000.0, 0.0), False),  # high P
     ((0.0, 170.0), False),  # high D: the rate loop oscillates at the Nyquist frequency
-    ((20.0, 0.0), True),
+    ((20.0, 3.0), True),
 ])
 def test_predicted_stability_matches_environment(default_params, default_gains, scale_or_gains, continuous_says):
     """Stability predicted on the sampled loop agrees with the environment; the continuous analysis would not."""
@@ -236,7 +240,7 @@ def test_action_delay_boundary_matches_environment(default_params, default_gains
     g = factor * an0.gain_margin
     assert loop_analysis(default_params, "roll", g * kp0, g * kd0, delay_steps=3).stable is stable
     env = HeliAttitudeEnv(task="hold", gust_scale=0.0, episode_seconds=10.0, init_angle_deg=1.0, init_rate_deg=1.0,
-                          action_delay=3)
+                          action_delay=3, obs_noise=0.0)
     pol = PDController.from_model(default_params, PDGains(kp=(g * kp0, 0.0, 0.0), kd=(g * kd0, 0.0, 0.0)))
     obs, _ = env.reset(seed=3)
     first, act = abs(obs[0]), []

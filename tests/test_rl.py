@@ -289,8 +289,9 @@ BEST_PD = PDController(PDGains([360.0, 539.0, 66.0], [26.2, 39.4, 3.65]), [1, -1
 
 
 @pytest.fixture(scope="module")
-def residual_run(shipped, tmp_path_factory):
-    return _tiny("ppo", tmp_path_factory.mktemp("res") / "res", shipped, residual=BEST_PD, residual_scale=0.05)
+def residual_run(ideal, tmp_path_factory):
+    # BEST_PD is the previous shipped model's best pair: the model without a servo delay it was swept on
+    return _tiny("ppo", tmp_path_factory.mktemp("res") / "res", ideal, residual=BEST_PD, residual_scale=0.05)
 
 
 def test_residual_agent_is_the_pd_plus_a_bounded_correction(residual_run):
@@ -311,7 +312,7 @@ def test_residual_agent_is_the_pd_plus_a_bounded_correction(residual_run):
 def test_residual_training_scales_follow_the_pd_errors(residual_run):
     meta = agent_metadata(residual_run.path)
     setup = meta["residual"]["setup"]
-    # the best PD holds the shipped model's gusts to a few hundredths of a degree
+    # the best PD holds the ideal model's gusts to a few hundredths of a degree
     assert 0.005 < setup["error_deg"] < 0.1
     assert meta["task"]["attitude_scale"] == pytest.approx(2 * np.radians(setup["error_deg"]))
     assert meta["task"]["rate_scale"] == pytest.approx(meta["task"]["attitude_scale"] * setup["corner_rad_s"])
