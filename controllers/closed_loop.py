@@ -340,3 +340,44 @@ def predict_std(plant: HoverPlant, axis, kp, kd, nominal, freq, psd, n_freq: int
             out[gi] = (np.abs(H) ** 2 * SwT[:, None, :]).sum(axis=(0, 2))
     return np.sqrt(out)
 
+
+
+def sensor_noise_std(plant: HoverPlant, axis, kp, kd, nominal, sensors) -> np.ndarray:
+    """Standard deviations the sensors add to each gain pair's outputs, shape (G, 3), NaN where unstable.
+
+    The autopilot acts on the measured state, ``u = -K (x + n)``, so the noise enters the closed loop
+    through ``-Bu K``. White noise (``sensors.attitude_noise``, ``sensors.gyro_noise`` per axis, sampled
+    each period) gives the state covariance of the discrete Lyapunov equation
+    ``P = A_cl P A_clᵀ + Bn Σ Bnᵀ`` (scipy); the stick also carries ``K n`` itself, uncorrelated with the
+    state it acts on. Each vibration line (a sinusoid of amplitude ``a``, as the autopilot samples it)
+    adds ``a²/2 |H(e^{iωdt})|²``. Added in variance to :func:`predict_std`'s gust prediction.
+    """
+    from scipy.linalg import solve_discrete_lyapunov
+
+    ax = axis_index(axis)
+    K = gain_matrices(plant, ax, kp, kd, nominal)
+    G, n = K.shape[0], plant.n
+    C = _outputs(plant, ax, K)
+    N = np.zeros((n, 6))  # noise channels: attitude of each axis, then rate of each axis
+    for i in range(3):
+        N[plant.angle_idx[i], i] = 1.0
+        N[plant.rate_idx[i], 3 + i] = 1.0
+    Sigma = np.diag(np.square(np.concatenate([sensors.attitude_noise, sensors.gyro_noise])))
+    line_axis, line_omega, line_amp = sensors.line_arrays()
+    out = np.full((G, 3), np.nan)
+    for g in range(G):
+        A_cl = plant.A - plant.Bu @ K[g]
+        if np.max(np.abs(np.linalg.eigvals(A_cl))) >= 1.0 - STABILITY_MARGIN:
+            continue
+        Bn = -plant.Bu @ K[g] @ N  # (n, 6)
+        P = solve_discrete_lyapunov(A_cl, Bn @ Sigma @ Bn.T)
+        var = np.einsum("oi,ij,oj->o", C[g], P, C[g])
+        Kn = K[g] @ N  # the stick's own noise (row ax of -K n)
+        var[2] += Kn[ax] @ Sigma @ Kn[ax]
+        for a, w, amp in zip(line_axis, line_omega, line_amp):
+            z = np.exp(1j * w * plant.dt)
+            h = C[g] @ np.linalg.solve(z * np.eye(n) - A_cl, Bn[:, 3 + a])  # (3,) outputs
+            h[2] += -Kn[ax, 3 + a]  # the stick sees the line directly too
+            var += 0.5 * amp * amp * np.abs(h) ** 2
+        out[g] = np.sqrt(var)
+    return out

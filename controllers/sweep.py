@@ -62,6 +62,7 @@ from .closed_loop import (
     hover_plant,
     nominal_gains,
     predict_std,
+    sensor_noise_std,
 )
 from .errors import SweepError
 from .metrics import histogram_edges
@@ -134,6 +135,8 @@ class SweepConfig:
         Grow a grid whose best pair lies on an edge (grids only).
     max_extensions : int
         Rounds of growth at most.
+    sensors : bool
+        The autopilot reads the state through the model's identified sensors (``model.json["sensors"]``).
     """
 
     axis: object = "roll"
@@ -153,6 +156,7 @@ class SweepConfig:
     chunk_pairs: int | None = None
     extend: bool = True
     max_extensions: int = MAX_EXTENSIONS
+    sensors: bool = True
 
 
 # ------------------------------------------------------------------- result
@@ -299,7 +303,7 @@ def sweep_gains(model, kp_values, kd_values, axis="roll", duration: float | None
                 seed: int = 0, traces=None, windows: int | None = None, progress: bool = True, nominal=None,
                 agree_tol: float = 0.2, keep_samples: bool = False, hist_max_deg: float = 30.0,
                 hist_bins: int = 120, max_batch: int = 4096, backend=None, chunk_pairs: int | None = None,
-                extend: bool = True, max_extensions: int = MAX_EXTENSIONS) -> SweepResult:
+                extend: bool = True, max_extensions: int = MAX_EXTENSIONS, sensors: bool = True) -> SweepResult:
     """Predict the error distribution of every PD gain pair of a Kp × Kd grid (paper Section 4).
 
     Each pair's gain and phase margins come beside its errors (:meth:`SweepResult.best_robust`
@@ -377,7 +381,7 @@ def sweep_gains(model, kp_values, kd_values, axis="roll", duration: float | None
         A backend's worker died more often than its retries allow.
     """
     cfg = SweepConfig(axis, duration, dt, seed, traces, windows, progress, nominal, agree_tol, keep_samples,
-                      hist_max_deg, hist_bins, max_batch, backend, chunk_pairs, extend, max_extensions)
+                      hist_max_deg, hist_bins, max_batch, backend, chunk_pairs, extend, max_extensions, sensors)
     kp_values = check_gains(kp_values, "kp_values")
     kd_values = check_gains(kd_values, "kd_values")
     return _sweep(model, kp_values, kd_values, "grid", cfg)
@@ -387,7 +391,7 @@ def sweep_pairs(model, pairs, axis="roll", duration: float | None = 60.0, dt: fl
                 traces=None, windows: int | None = None, progress: bool = True, nominal=None,
                 agree_tol: float = 0.2, keep_samples: bool = False, hist_max_deg: float = 30.0,
                 hist_bins: int = 120, max_batch: int = 4096, backend=None, chunk_pairs: int | None = None,
-                extend: bool = True, max_extensions: int = MAX_EXTENSIONS) -> SweepResult:
+                extend: bool = True, max_extensions: int = MAX_EXTENSIONS, sensors: bool = True) -> SweepResult:
     """:func:`sweep_gains` on a list of ``(kp, kd)`` pairs instead of a grid (same arguments).
 
     The table rows follow ``pairs``; ``kp_values``/``kd_values`` hold each pair's
@@ -396,7 +400,7 @@ def sweep_pairs(model, pairs, axis="roll", duration: float | None = 60.0, dt: fl
     either function) and the extension is recorded as ``"disabled"``.
     """
     cfg = SweepConfig(axis, duration, dt, seed, traces, windows, progress, nominal, agree_tol, keep_samples,
-                      hist_max_deg, hist_bins, max_batch, backend, chunk_pairs, extend, max_extensions)
+                      hist_max_deg, hist_bins, max_batch, backend, chunk_pairs, extend, max_extensions, sensors)
     _, kp, kd = check_pairs(pairs)
     return _sweep(model, kp, kd, "pairs", cfg)
 
@@ -462,6 +466,12 @@ class _Run:
     tasks: int = 0
     where: str = "in-process"
 
+    @property
+    def sensors(self):
+        """The sensors the autopilot reads through (None: the true state)."""
+        inputs = self.rp.inputs
+        return None if inputs.att_noise is None else self.rp.env_model.sensors
+
     def evaluate(self, kp: np.ndarray, kd: np.ndarray) -> PairBlock:
         """Poles, margins, the frequency-domain prediction and the replay of the pairs ``(kp[g], kd[g])``."""
         ax, G, dt = self.rp.axis, kp.size, self.rp.dt
@@ -469,6 +479,8 @@ class _Run:
         max_pole, stable = closed_loop_poles(self.plant, ax, kp, kd, self.nominal)
         gm, pm = loop_margins(self.plant, ax, kp, kd, self.nominal)
         sigma = predict_std(self.plant, ax, kp, kd, self.nominal, self.freq, self.psd)
+        if self.sensors is not None:  # the noise the autopilot reads, added in variance to the gusts' errors
+            sigma = np.hypot(sigma, sensor_noise_std(self.plant, ax, kp, kd, self.nominal, self.sensors))
         self.seconds["frequency_domain"] += time.perf_counter() - t0
         with np.errstate(divide="ignore", invalid="ignore"):
             settle = np.where(stable, -4.0 * dt / np.log(np.minimum(max_pole, 1.0)), np.inf)
@@ -542,6 +554,7 @@ def _settings(rp, cfg: SweepConfig, layout, nominal, plant, freq, psd, seconds, 
         "linearised_at_collective": plant.collective,
         "ud_std": np.sqrt(np.sum(psd, axis=1) * df).tolist(),
         "seconds": seconds, "backend": where, "tasks": n_tasks,
+        "sensors": env_model.sensors.to_dict() if rp.inputs.att_noise is not None else None,
     }
 
 
@@ -570,7 +583,7 @@ def _sweep(model, kp_values, kd_values, layout, cfg: SweepConfig) -> SweepResult
     be = None if cfg.backend is None else _make_backend(cfg.backend)  # check before any work
     try:
         hist_edges = _check_settings(cfg, be)
-        rp = prepare(model, cfg.axis, cfg.duration, cfg.dt, cfg.seed, cfg.traces, cfg.windows)
+        rp = prepare(model, cfg.axis, cfg.duration, cfg.dt, cfg.seed, cfg.traces, cfg.windows, cfg.sensors)
         plant, nominal = _plant_and_nominal(rp, cfg.nominal)
         t0 = time.perf_counter()
         freq, psd = disturbance_spectrum(rp.env_model, rp.dt)

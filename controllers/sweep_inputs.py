@@ -228,8 +228,28 @@ def _window_steps(env_model, duration, dt, ratio, traces, windows):
     return steps, wins
 
 
-def prepare(model, axis, duration, dt, seed, traces, windows) -> LibraryReplay:
-    """Check the settings, choose the windows and gather their inputs (see :func:`controllers.sweep.sweep_gains`)."""
+def sensor_inputs(sensors, steps: int, W: int, dt: float, seed: int) -> tuple:
+    """The attitude and rate errors (3, steps, W) the autopilot reads through the model's sensors, or (None, None).
+
+    White noise per axis and each vibration line at a random phase per window, drawn from their own
+    generator (``seed`` and a tag: the windows drawn with ``seed`` stay as they were); every gain pair
+    flies the same noise (common random numbers: the pairs differ by their gains only).
+    """
+    if sensors is None or sensors.silent:
+        return None, None
+    rng = np.random.default_rng([int(seed), 0x5E45])
+    att = np.asarray(sensors.attitude_noise)[:, None, None] * rng.standard_normal((3, steps, W))
+    rate = np.asarray(sensors.gyro_noise)[:, None, None] * rng.standard_normal((3, steps, W))
+    t = np.arange(steps) * dt
+    for a, w, amp in zip(*sensors.line_arrays()):
+        phase = rng.uniform(0.0, 2.0 * np.pi, W)
+        rate[a] += amp * np.sin(w * t[:, None] + phase[None, :])
+    return att, rate
+
+
+def prepare(model, axis, duration, dt, seed, traces, windows, sensors: bool = True) -> LibraryReplay:
+    """Check the settings, choose the windows and gather their inputs (see :func:`controllers.sweep.sweep_gains`);
+    with ``sensors`` the autopilot reads the state through the model's identified sensors."""
     env_model = load_model(model)
     ax = axis_index(axis)
     ratio = _control_ratio(env_model, dt)
@@ -244,4 +264,6 @@ def prepare(model, axis, duration, dt, seed, traces, windows) -> LibraryReplay:
     if not np.all(np.isfinite(trim)):
         raise SweepError("the model cannot be trimmed (zero control gain on some axis)")
     torque = env_model.torque[:, idx]  # each trace's u_d with the gains it was identified with
-    return LibraryReplay(env_model, params, ax, float(dt), ratio, steps, wins, LoopInputs(trim, col, torque))
+    att_noise, rate_noise = sensor_inputs(env_model.sensors if sensors else None, steps, len(wins), float(dt), seed)
+    return LibraryReplay(env_model, params, ax, float(dt), ratio, steps, wins,
+                         LoopInputs(trim, col, torque, att_noise=att_noise, rate_noise=rate_noise))

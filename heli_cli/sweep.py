@@ -47,6 +47,9 @@ def register(sub):
                    default=0.01, help="control period in seconds (default 0.01)")
     p.add_argument("--windows", type=whole(1), default=None,
                    help="number of (trace, offset) gust windows (default one per library trace)")
+    p.add_argument("--no-sensors", action="store_true",
+                   help="the autopilot reads the true state (default: through the model's identified sensors, "
+                   "model.json['sensors']: gyro and attitude noise, vibration lines)")
     p.add_argument("--no-extend", action="store_true",
                    help="sweep the grid as given, even when its best pair lies on an edge")
     p.add_argument("--max-extensions", type=whole(0), default=MAX_EXTENSIONS, metavar="N",
@@ -86,7 +89,8 @@ def run(args) -> int:
     try:
         result = sweep_gains(args.model, kp, kd, axis=args.axis, duration=args.duration, dt=args.dt,
                              seed=args.seed, windows=args.windows, progress=not args.quiet, backend=backend,
-                             extend=not args.no_extend, max_extensions=args.max_extensions)
+                             extend=not args.no_extend, max_extensions=args.max_extensions,
+                             sensors=not args.no_sensors)
     finally:
         backend.close()
     out = Path(args.out)

@@ -31,8 +31,11 @@ def main(argv=None) -> int:
     out = Path(args.out)
     flight = out / "flight.csv"
     steps = [
-        ["simulate-flight", "--duration", str(args.duration), "--seed", str(args.seed), "--out", str(flight)],
-        ["identify", str(flight), "--out", str(out / "model")],
+        # a realistic flight (the bench's "independent" cell: a PD pilot fighting slow and broadband gusts, gyro
+        # noise and vibration lines) of an aircraft whose servos lag 40/40/25 ms, identified with its delay
+        ["simulate-flight", "--duration", str(args.duration), "--seed", str(args.seed), "--cell", "independent",
+         "--effect", "servo_delay", "--effect-scale", "0.5", "--out", str(flight)],
+        ["identify", str(flight), "--delay", "auto", "--out", str(out / "model")],
         ["design", "--model", str(out / "model"), "--out", str(out / "pd")],
         ["sweep", "--model", str(out / "model"), "--kp", "5:120:8", "--kd", "0:10:8", "--axis", "roll",
          "--duration", "30", "--out", str(out / "sweep")],

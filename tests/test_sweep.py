@@ -126,10 +126,11 @@ def test_pd_command_is_the_pd_controllers_law(shipped):
 def test_replay_equals_the_environment_under_the_same_pd_law(shipped):
     """The sweep's closed loop is the env's: same physics step, trim and stick clipping."""
     kp, kd = 3.0, 1.0
-    r = sweep_pairs(shipped, [(kp, kd)], duration=5.0, traces=[(1, 1234)], keep_samples=True, progress=False)
+    r = sweep_pairs(shipped, [(kp, kd)], duration=5.0, traces=[(1, 1234)], keep_samples=True, progress=False,
+                    sensors=False)  # the env below reads the true state too
     nominal = np.array(r.settings["nominal_gains"])
     signs = np.sign(shipped.params.control_gains)
-    env = HeliAttitudeEnv(model=shipped, init_angle_deg=0.0, init_rate_deg=0.0, episode_seconds=5.0)
+    env = HeliAttitudeEnv(model=shipped, init_angle_deg=0.0, init_rate_deg=0.0, episode_seconds=5.0, obs_noise=0.0)
     obs, _ = env.reset(seed=0, options={"trace": 1, "offset": 1234})
     gains = [(kp, kd), tuple(nominal[1]), tuple(nominal[2])]
     errs = [0.0]
@@ -485,7 +486,7 @@ def test_the_replay_with_zero_sensor_noise_flies_the_true_state(shipped):
     from controllers.replay import LoopInputs, fly, rk4_step
     from controllers.sweep_inputs import prepare
 
-    rp = prepare(shipped, "roll", 1.0, 0.01, 0, None, 2)
+    rp = prepare(shipped, "roll", 1.0, 0.01, 0, None, 2, sensors=False)
     quiet = LoopInputs(rp.inputs.trim, rp.inputs.col, rp.inputs.torque, np.zeros_like(rp.inputs.torque),
                        np.zeros_like(rp.inputs.torque))
     args = (0, np.array([3.0]), np.array([1.0]), np.array([[3.0, 1.0]] * 3), np.sign(shipped.params.control_gains))
@@ -658,3 +659,25 @@ def test_the_best_robust_pair_keeps_the_margins(small_sweep, tmp_path):
     rows = list(csv.DictReader(open(small_sweep.to_csv(tmp_path / "s.csv"))))
     zero = rows[small_sweep.index(0.0, 0.0)]  # no loop at all: margins infinite
     assert (zero["gain_margin_db"], zero["phase_margin_deg"]) == ("inf", "inf")
+
+
+def test_the_sweep_reads_the_state_through_the_models_sensors(shipped):
+    """The shipped model's sensors (white noise and vibration lines) in both domains: the replay's autopilot
+    reads them (same noise for every pair, drawn apart from the windows), the frequency domain adds their
+    variance; a high derivative gain pays for the gyro noise it amplifies, so the two domains agree on it."""
+    from controllers.sweep_inputs import prepare
+
+    rp = prepare(shipped, "roll", 5.0, 0.01, 3, None, 2)
+    quiet = prepare(shipped, "roll", 5.0, 0.01, 3, None, 2, sensors=False)
+    assert rp.windows == quiet.windows and quiet.inputs.rate_noise is None
+    lines = [ln.amplitude for ln in shipped.sensors.gyro_lines if ln.axis == "roll"]  # 27, 30, 40 Hz
+    expected = np.sqrt(shipped.sensors.gyro_noise[0] ** 2 + sum(a * a / 2 for a in lines))
+    assert np.std(rp.inputs.rate_noise[0]) == pytest.approx(expected, rel=0.1)
+    assert np.std(rp.inputs.att_noise[0]) == pytest.approx(shipped.sensors.attitude_noise[0], rel=0.1)
+    pairs = [(30.0, 1.0), (30.0, 12.0)]
+    on = sweep_pairs(shipped, pairs, duration=20.0, windows=2, progress=False)
+    off = sweep_pairs(shipped, pairs, duration=20.0, windows=2, progress=False, sensors=False)
+    assert on.settings["sensors"]["gyro_lines"] and off.settings["sensors"] is None
+    assert on.table["stick_rms"][1] > 2 * off.table["stick_rms"][1]  # kd x gyro noise on the stick
+    for r in (on, off):
+        assert_allclose(r.table["att_p90_deg"], r.table["pred_att_p90_deg"], rtol=0.2)
