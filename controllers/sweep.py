@@ -107,36 +107,60 @@ class SweepConfig:
     """Settings of a gain sweep: the keyword arguments of :func:`sweep_gains` and :func:`sweep_pairs`.
 
     The functions build one from their keywords; ``sweep_gains(model, kp, kd,
-    **dataclasses.asdict(config))`` runs a sweep from one. Each field is described
-    in :func:`sweep_gains`; they are checked when the sweep runs (:class:`SweepError`).
+    **dataclasses.asdict(config))`` runs a sweep from one. The fields are checked when the sweep
+    runs (:class:`SweepError`).
 
     Attributes
     ----------
     axis : {"roll", "pitch", "yaw"}
+        Axis swept; the other two are held by ``nominal`` gains.
     duration : float or None
-        Window length [s].
+        Length of each replayed window [s]; None replays each selected trace whole
+        (from its start, for the length of the shortest), or each explicit window
+        from its offset to the end of its trace (for the length of the shortest).
     dt : float
-        Control period [s].
+        Control period [s], a whole number of the traces' sample periods.
     seed : int
-    traces : sequence of int or of (trace, offset), optional
+        Seeds the window offsets (``numpy.random.Generator``); same seed, same result.
+    traces : sequence of int, or of (trace, offset), optional
+        Library traces to draw windows from (default all), or explicit windows.
     windows : int, optional
+        Number of (trace, offset) windows, spread round robin over ``traces`` with
+        distinct offsets per trace (default one per trace). Windows of one trace may
+        overlap when the trace is shorter than their total length.
     progress : bool
+        tqdm bar on stderr (when it is a terminal).
     nominal : array (3, 2), optional
-        Gains of the held axes [stick/rad, stick/(rad/s)].
+        (kp, kd) per axis for the held axes; default :func:`~controllers.closed_loop.nominal_gains`.
     agree_tol : float
+        Relative difference of the p90s above which time and frequency domain are flagged.
     keep_samples : bool
-    hist_max_deg : float
-        [deg]
-    hist_bins : int
+        Keep every pair's signed error samples in ``result.samples``.
+    hist_max_deg, hist_bins : float, int
+        Histogram: top edge [deg] and number of bins (the first bin is [0, 0.01°), the
+        others geometric up to ``hist_max_deg``).
     max_batch : int
-    backend : None, str or Backend
+        Pair × window states stepped at once (memory: ~12 bytes × steps each).
+    backend : None, {"local", "ray"} or identification.backends.Backend
+        Where the time-domain replay runs. None (default): in this process, as one
+        batch. Otherwise the stable pairs are split into chunks (``chunk_pairs``) run as
+        tasks of the backend (``"local"``: every core of this machine; ``"ray"``:
+        ``RAY_ADDRESS`` or a Ray instance started here, closed after the sweep). The
+        result is the same, bit for bit, on every backend and worker count.
     chunk_pairs : int, optional
+        Pairs per task with a backend (default :data:`TASK_STATES` // windows).
     extend : bool
-        Grow a grid whose best pair lies on an edge (grids only).
+        Grow the grid while its best pair lies on an edge (default True). The grid gains
+        :data:`~controllers.sweep_extend.EXTENSION_VALUES` values past that edge per round, its last
+        ratio continued (:func:`~controllers.sweep_extend.continuation`); ``settings["extension"]``
+        and the ``extension_round`` column record what was added and why the growth stopped.
     max_extensions : int
-        Rounds of growth at most.
+        Rounds of growth at most (default :data:`MAX_EXTENSIONS`), >= 0.
     sensors : bool
-        The autopilot reads the state through the model's identified sensors (``model.json["sensors"]``).
+        The autopilot reads the state through the model's identified sensors (``model.json["sensors"]``:
+        white noise and vibration lines, :func:`~controllers.sweep_inputs.sensor_inputs`) in the replay, and
+        their variance is added in the frequency domain (:func:`~controllers.closed_loop.sensor_noise_std`);
+        False: the true state (default True; a model without sensors reads the true state either way).
     """
 
     axis: object = "roll"
@@ -321,50 +345,9 @@ def sweep_gains(model, kp_values, kd_values, axis="roll", duration: float | None
         Proportional gains [stick/rad], >= 0.
     kd_values : sequence of float, shape (n_kd,)
         Derivative gains [stick/(rad/s)], >= 0.
-    axis : {"roll", "pitch", "yaw"}
-        Axis swept; the other two are held by ``nominal`` gains.
-    duration : float or None
-        Length of each replayed window [s]; None replays each selected trace whole
-        (from its start, for the length of the shortest), or each explicit window
-        from its offset to the end of its trace (for the length of the shortest).
-    dt : float
-        Control period [s], a whole number of the traces' sample periods.
-    seed : int
-        Seeds the window offsets (``numpy.random.Generator``); same seed, same result.
-    traces : sequence of int, or of (trace, offset), optional
-        Library traces to draw windows from (default all), or explicit windows.
-    windows : int, optional
-        Number of (trace, offset) windows, spread round robin over ``traces`` with
-        distinct offsets per trace (default one per trace). Windows of one trace may
-        overlap when the trace is shorter than their total length.
-    progress : bool
-        tqdm bar on stderr (when it is a terminal).
-    nominal : array (3, 2), optional
-        (kp, kd) per axis for the held axes; default :func:`~controllers.closed_loop.nominal_gains`.
-    agree_tol : float
-        Relative difference of the p90s above which time and frequency domain are flagged.
-    keep_samples : bool
-        Keep every pair's signed error samples in ``result.samples``.
-    hist_max_deg, hist_bins : float, int
-        Histogram: top edge [deg] and number of bins (the first bin is [0, 0.01°), the
-        others geometric up to ``hist_max_deg``).
-    max_batch : int
-        Pair × window states stepped at once (memory: ~12 bytes × steps each).
-    backend : None, {"local", "ray"} or identification.backends.Backend
-        Where the time-domain replay runs. None (default): in this process, as one
-        batch. Otherwise the stable pairs are split into chunks (``chunk_pairs``) run as
-        tasks of the backend (``"local"``: every core of this machine; ``"ray"``:
-        ``RAY_ADDRESS`` or a Ray instance started here, closed after the sweep). The
-        result is the same, bit for bit, on every backend and worker count.
-    chunk_pairs : int, optional
-        Pairs per task with a backend (default :data:`TASK_STATES` // windows).
-    extend : bool
-        Grow the grid while its best pair lies on an edge (default True). The grid gains
-        :data:`~controllers.sweep_extend.EXTENSION_VALUES` values past that edge per round, its last
-        ratio continued (:func:`~controllers.sweep_extend.continuation`); ``settings["extension"]``
-        and the ``extension_round`` column record what was added and why the growth stopped.
-    max_extensions : int
-        Rounds of growth at most (default :data:`MAX_EXTENSIONS`), >= 0.
+    axis, duration, dt, seed, traces, windows, progress, nominal, agree_tol, keep_samples, hist_max_deg,
+    hist_bins, max_batch, backend, chunk_pairs, extend, max_extensions, sensors :
+        The settings of :class:`SweepConfig`, described there.
 
     Returns
     -------
