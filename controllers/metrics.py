@@ -93,19 +93,14 @@ def error_metrics(att_err_deg, rate_err_deg_s, actions, saturated=None, hist_edg
         if sat.shape != att.shape:
             raise ValueError(f"saturated must have the samples' shape {att.shape}, got {sat.shape}")
     edges = histogram_edges() if hist_edges is None else np.asarray(hist_edges, dtype=float)
-    out = {}
-    for name, unit, data in (("att", "deg", att), ("rate", "dps", rate)):
-        out[f"{name}_rms_{unit}"] = np.sqrt(np.mean(data * data, axis=-1))
-        for q, v in zip(QUANTILES, np.percentile(data, QUANTILES, axis=-1)):
-            out[f"{name}_p{q}_{unit}"] = v
-    out["stick_rms"] = np.sqrt(np.mean(act * act, axis=-1))
-    out["stick_p99"] = np.percentile(act, 99, axis=-1)
-    out["saturation"] = np.mean(sat, axis=-1)
+    lead = att.shape[:-1]
+    counts, overflow = _histogram(att, edges)  # before the rows below are partitioned
+    rows = [np.array(a.reshape(-1, n)) for a in (att, rate, act)]  # copies: partitioned in place
+    out = {k: v.reshape(lead) for k, v in _statistics(*rows, np.mean(sat, axis=-1).reshape(-1)).items()}
     bad = ~(np.isfinite(att).all(axis=-1) & np.isfinite(rate).all(axis=-1) & np.isfinite(act).all(axis=-1))
     if np.any(bad):
         for k in METRIC_NAMES:
             out[k] = np.where(bad, np.nan, out[k])
-    counts, overflow = _histogram(att, edges)
     if att.ndim == 1:
         out = {k: float(v) for k, v in out.items()}
         counts, overflow = counts, int(overflow)
@@ -189,13 +184,21 @@ def error_metrics_inplace(att_deg: np.ndarray, rate_deg_s: np.ndarray, actions: 
     dict
         :data:`METRIC_NAMES` as arrays (rows,) plus ``hist_counts`` (rows, nb) and ``hist_overflow`` (rows,).
     """
+    counts, overflow = _geometric_histogram(att_deg, hist_edges)
+    return {"hist_counts": counts, "hist_overflow": overflow,
+            **_statistics(att_deg, rate_deg_s, actions, saturation)}
+
+
+def _statistics(att: np.ndarray, rate: np.ndarray, act: np.ndarray, saturation) -> dict:
+    """:data:`METRIC_NAMES` of rows (rows, n) of absolute samples, partitioning them in place: the one
+    definition of the metrics, which the evaluator (:func:`error_metrics`) and the sweep
+    (:func:`error_metrics_inplace`) both report."""
     out = {}
-    out["hist_counts"], out["hist_overflow"] = _geometric_histogram(att_deg, hist_edges)
-    for name, unit, data in (("att", "deg", att_deg), ("rate", "dps", rate_deg_s)):
+    for name, unit, data in (("att", "deg", att), ("rate", "dps", rate)):
         out[f"{name}_rms_{unit}"] = np.sqrt(np.mean(data * data, axis=1, dtype=np.float64))
         for q, row in zip(QUANTILES, percentiles_in_place(data, QUANTILES)):
             out[f"{name}_p{q}_{unit}"] = row
-    out["stick_rms"] = np.sqrt(np.mean(actions * actions, axis=1, dtype=np.float64))
-    out["stick_p99"] = percentiles_in_place(actions, (99,))[0]
-    out["saturation"] = saturation
+    out["stick_rms"] = np.sqrt(np.mean(act * act, axis=1, dtype=np.float64))
+    out["stick_p99"] = percentiles_in_place(act, (99,))[0]
+    out["saturation"] = np.asarray(saturation, dtype=np.float64)
     return out
