@@ -36,7 +36,6 @@ from heli_core.terms import AXES, STICK_ROW
 
 from .attitude import detrend_piecewise
 from .errors import SimulationDivergedError
-from .figures import pyplot as _pyplot  # noqa: F401  (the diagnosis reports import it from here)
 from .flight import Flight
 
 DETREND_PERIOD = 10.0
