@@ -160,40 +160,10 @@ class FlightTestResult:
         return out
 
     def to_markdown(self) -> str:
-        s = self.settings
-        w = s["wind"]
-        lines = [
-            f"## Prediction checked against flight tests ({self.axis})",
-            "",
-            f"{s['n_flights']} flights of {s['duration']:g} s per gain pair of the truth model "
-            f"(**{s['truth']}** parameters), RK4 with {s['substeps']} sub-steps, PD autopilot at dt = {s['dt']:g} s"
-            f"{' on noisy sensors' if s['sensors'] else ''}, in fresh coloured wind at the library's level "
-            f"(u_d std {', '.join(f'{v:.4f}' for v in w['std'])}) and bandwidth "
-            f"(corner {', '.join(f'{v:.3f}' for v in w['corner_hz'])} Hz, roll/pitch/yaw), seed {s['seed']}. "
-            f"Predictions: the library replayed through the identified model ({s['prediction']}).",
-            "",
-            "KS = largest gap between the measured and predicted CDFs of |error| (two-sample against the "
-            "time-domain samples; one-sample against the frequency-domain half-normal). "
-            f"Target: KS ≤ {KS_TARGET} (attitude, time domain) at stable gains — "
-            f"**{'met' if self.target_met else 'NOT met'}** (largest {self.max_ks:.3f}).",
-            "",
-            "| Kp | Kd | KS att | KS att (Gauss) | KS rate | KS rate (Gauss) | p50 att meas / td / fd | "
-            "p90 att meas / td / fd | p99 att meas / td / fd | p90 rate meas / td / fd |",
-            "|---:|---:|---:|---:|---:|---:|---|---|---|---|",
-        ]
-        for r in self.rows():
-            if r["status"] != "flown":
-                lines.append(f"| {r['kp']:.4g} | {r['kd']:.4g} | {r['status']} | | | | | | | |")
-                continue
-            cell = lambda a, b, c: f"{a:.3f} / {b:.3f} / {c:.3f}"  # noqa: E731
-            lines.append(
-                f"| {r['kp']:.4g} | {r['kd']:.4g} | {r['ks_att']:.3f} | {r['ks_att_gauss']:.3f} | "
-                f"{r['ks_rate']:.3f} | {r['ks_rate_gauss']:.3f} | "
-                f"{cell(r['att_p50_deg'], r['pred_td_att_p50_deg'], r['pred_fd_att_p50_deg'])} | "
-                f"{cell(r['att_p90_deg'], r['pred_td_att_p90_deg'], r['pred_fd_att_p90_deg'])} | "
-                f"{cell(r['att_p99_deg'], r['pred_td_att_p99_deg'], r['pred_fd_att_p99_deg'])} | "
-                f"{cell(r['rate_p90_dps'], r['pred_td_rate_p90_dps'], r['pred_fd_rate_p90_dps'])} |")
-        return "\n".join(lines) + "\n"
+        """The report section (:func:`controllers.sweep_report.flight_test_markdown`)."""
+        from .sweep_report import flight_test_markdown
+
+        return flight_test_markdown(self)
 
     def to_json(self, path):
         import json
@@ -364,7 +334,7 @@ def _compare(kp_all, kd_all, flyable, idx, att, rate, sat, n, prediction, pred_i
     for q in QUANTILES:
         cols += [f"att_p{q}_deg", f"pred_td_att_p{q}_deg", f"pred_fd_att_p{q}_deg",
                  f"rate_p{q}_dps", f"pred_td_rate_p{q}_dps", f"pred_fd_rate_p{q}_dps"]
-    cols += ["att_p90_err_td", "att_p90_err_fd"]
+    cols += ["att_p90_err_td", "att_p90_err_fd", "pred_settle_s"]
     table = {"kp": kp_all, "kd": kd_all, "status": np.where(flyable, "flown", "unstable").astype(object)}
     table.update({c: np.full(G, np.nan) for c in cols})
     samples = {}
@@ -389,6 +359,7 @@ def _compare(kp_all, kd_all, flyable, idx, att, rate, sat, n, prediction, pred_i
             table[f"pred_td_rate_p{q}_dps"][gi] = row[f"rate_p{q}_dps"]
             table[f"pred_fd_att_p{q}_deg"][gi] = row[f"pred_att_p{q}_deg"]
             table[f"pred_fd_rate_p{q}_dps"][gi] = row[f"pred_rate_p{q}_dps"]
+        table["pred_settle_s"][gi] = row["settle_s"]
         table["att_p90_err_td"][gi] = row["att_p90_deg"] / pm_a[1] - 1.0
         table["att_p90_err_fd"][gi] = row["pred_att_p90_deg"] / pm_a[1] - 1.0
     return table, samples

@@ -342,3 +342,68 @@ def plot_histograms(result, path, pairs=None):
     if pairs:
         ax.legend(fontsize=8, loc="upper left")
     return save_figure(fig, path, dpi=110)
+
+
+def flight_test_markdown(result) -> str:
+    """The flight tests' report section: settings, target, one row per pair, and for every pair that misses
+    the target the likely reason (a :class:`controllers.flight_test.FlightTestResult`)."""
+    from .flight_test import KS_TARGET
+
+    s = result.settings
+    w = s["wind"]
+    lines = [
+        f"## Prediction checked against flight tests ({result.axis})",
+        "",
+        f"{s['n_flights']} flights of {s['duration']:g} s per gain pair of the truth model "
+        f"(**{s['truth']}** parameters), RK4 with {s['substeps']} sub-steps, PD autopilot at dt = {s['dt']:g} s"
+        f"{' on noisy sensors' if s['sensors'] else ''}, in fresh coloured wind at the library's level "
+        f"(u_d std {', '.join(f'{v:.4f}' for v in w['std'])}) and bandwidth "
+        f"(corner {', '.join(f'{v:.3f}' for v in w['corner_hz'])} Hz, roll/pitch/yaw), seed {s['seed']}. "
+        f"Predictions: the library replayed through the identified model ({s['prediction']}).",
+        "",
+        "KS = largest gap between the measured and predicted CDFs of |error| (two-sample against the "
+        "time-domain samples; one-sample against the frequency-domain half-normal). "
+        f"Target: KS ≤ {KS_TARGET} (attitude, time domain) at stable gains — "
+        f"**{'met' if result.target_met else 'NOT met'}** (largest {result.max_ks:.3f}).",
+        "",
+        "| Kp | Kd | KS att | KS att (Gauss) | KS rate | KS rate (Gauss) | p50 att meas / td / fd | "
+        "p90 att meas / td / fd | p99 att meas / td / fd | p90 rate meas / td / fd |",
+        "|---:|---:|---:|---:|---:|---:|---|---|---|---|",
+    ]
+    for r in result.rows():
+        if r["status"] != "flown":
+            lines.append(f"| {r['kp']:.4g} | {r['kd']:.4g} | {r['status']} | | | | | | | |")
+            continue
+        cell = lambda a, b, c: f"{a:.3f} / {b:.3f} / {c:.3f}"  # noqa: E731
+        lines.append(
+            f"| {r['kp']:.4g} | {r['kd']:.4g} | {r['ks_att']:.3f} | {r['ks_att_gauss']:.3f} | "
+            f"{r['ks_rate']:.3f} | {r['ks_rate_gauss']:.3f} | "
+            f"{cell(r['att_p50_deg'], r['pred_td_att_p50_deg'], r['pred_fd_att_p50_deg'])} | "
+            f"{cell(r['att_p90_deg'], r['pred_td_att_p90_deg'], r['pred_fd_att_p90_deg'])} | "
+            f"{cell(r['att_p99_deg'], r['pred_td_att_p99_deg'], r['pred_fd_att_p99_deg'])} | "
+            f"{cell(r['rate_p90_dps'], r['pred_td_rate_p90_dps'], r['pred_fd_rate_p90_dps'])} |")
+    missed = [r for r in result.rows() if r["status"] == "flown" and r["ks_att"] > KS_TARGET]
+    if missed:
+        lines += ["", "Pairs that miss the target, and why:", ""]
+        lines += [f"- Kp {r['kp']:.4g}, Kd {r['kd']:.4g} (KS {r['ks_att']:.3f}): {miss_reason(r, s)}" for r in missed]
+    return "\n".join(lines) + "\n"
+
+
+SLOW_LOOP_FRACTION = 0.1
+"""A loop that settles in more than this share of a prediction window is read as slow."""
+
+
+def miss_reason(row: dict, settings: dict) -> str:
+    """The likely reason a flown pair's measured errors differ from the prediction."""
+    window = float(settings["duration"])
+    settle = row.get("pred_settle_s", float("nan"))
+    p90_err = row["att_p90_err_td"]
+    if math.isfinite(settle) and settle > SLOW_LOOP_FRACTION * window:
+        return (f"a slow loop (it settles in {settle:.1f} s): its error follows the slowest gusts, which the "
+                f"prediction's windows ({settings['prediction']}) sample poorly; sweep more or longer windows "
+                "(--windows, --duration)")
+    if row["saturation"] > 0.01:
+        return (f"the stick saturates {100 * row['saturation']:.1f} % of the time, where the replay and the "
+                "flights part ways")
+    return (f"the prediction's p90 is {100 * p90_err:+.0f} % off the flights': the identified model, its sensors "
+            "or the library's gusts differ from the truth's at these gains")

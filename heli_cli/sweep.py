@@ -141,6 +141,13 @@ def run(args) -> int:
         print(f"flight tests ({args.flights} x {args.duration:g} s per pair, {len(pairs)} pairs, truth "
               f"{args.truth}): largest KS {flights.max_ks:.3f} (target <= 0.1: "
               f"{'met' if flights.target_met else 'NOT met'})")
+        from controllers.flight_test import KS_TARGET
+        from controllers.sweep_report import miss_reason
+
+        for r in flights.rows():
+            if r["status"] == "flown" and r["ks_att"] > KS_TARGET:
+                print(f"  Kp {r['kp']:.4g}, Kd {r['kd']:.4g} misses it (KS {r['ks_att']:.3f}): "
+                      f"{miss_reason(r, flights.settings)}")
     for path in paths.values():
         print(f"wrote {path}")
     from .html_report import write_html_report  # sweep.md links no figure: the two are appended

@@ -681,3 +681,13 @@ def test_the_sweep_reads_the_state_through_the_models_sensors(shipped):
     assert on.table["stick_rms"][1] > 2 * off.table["stick_rms"][1]  # kd x gyro noise on the stick
     for r in (on, off):
         assert_allclose(r.table["att_p90_deg"], r.table["pred_att_p90_deg"], rtol=0.2)
+
+
+def test_a_pair_that_misses_the_ks_target_is_named_with_its_reason():
+    from controllers.sweep_report import miss_reason
+
+    settings = {"duration": 60.0, "prediction": "3 windows of 60 s"}
+    row = {"pred_settle_s": 12.4, "saturation": 0.0, "att_p90_err_td": 0.9}
+    assert miss_reason(row, settings).startswith("a slow loop (it settles in 12.4 s)")
+    assert "saturates 5.0 %" in miss_reason({**row, "pred_settle_s": 1.0, "saturation": 0.05}, settings)
+    assert "+90 % off" in miss_reason({**row, "pred_settle_s": 1.0}, settings)
