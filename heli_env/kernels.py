@@ -108,14 +108,20 @@ from numba import prange
 """
 
 
-def _compile(lines: list[str], name: str, tag: str):
+def _compile(lines: list[str], name: str, tag: str, parallel: bool = True):
     """numba-compile generated source; a loop written ``prange`` runs over copies on numba's threads.
+
+    With ``parallel=False`` the loops are compiled as plain ``range`` loops, so that numba never starts
+    its thread pool: idle pool threads spin, and two single-threaded vector envs in two processes on two
+    cores (two RL seeds side by side) each ran at a tenth of their speed alone until they did not.
 
     The source is written once to :func:`kernel_cache_dir` and imported from there, so
     that numba can cache the machine code (``cache=True``): a new process loads it in
     a fraction of a second instead of compiling for seconds. Where the folder cannot
     be written, the loop is compiled in memory.
     """
+    if not parallel:
+        lines = [line.replace("prange(", "range(") for line in lines]
     source = "\n".join(lines) + "\n"
     options = f"error_model='numpy', parallel={'prange(' in source}"
     module_source = f"{_MODULE_HEAD}\n@numba.njit({options}, cache=True)\n{source}"
@@ -139,7 +145,7 @@ def _compile(lines: list[str], name: str, tag: str):
 
 
 @lru_cache(maxsize=16)
-def advance_kernel(params: ModelParams, dt: float):
+def advance_kernel(params: ModelParams, dt: float, parallel: bool = True):
     """The compiled loop ``advance(table, base, k, last, ratio, act, gust, x, ud, trig)`` of one control period.
 
     For each copy ``i``: reads library row ``j = base[i] + min(k[i], last[i]) * ratio``
@@ -181,7 +187,7 @@ def advance_kernel(params: ModelParams, dt: float):
         *("        " + line for line in _EULER_ARGUMENTS),
         "    return touched",
     ]
-    return _compile(lines, "advance", "fused step")
+    return _compile(lines, "advance", "fused step", parallel)
 
 
 @lru_cache(maxsize=1)
@@ -209,7 +215,7 @@ def clip_actions(actions, out):
 
 
 @lru_cache(maxsize=8)
-def observe_kernel(task: str, noisy: bool):
+def observe_kernel(task: str, noisy: bool, parallel: bool = True):
     """The compiled loop ``observe(att, x, ref_att, ref_rate, meas_att, meas_rate, prev, max_rate, max_angle,
     coef, k, steps, obs, deg_att, deg_rate, reward, terminated, truncated)``, specialised on the task.
 
@@ -267,4 +273,4 @@ def observe_kernel(task: str, noisy: bool):
         "        terminated[i] = not ok",
         "        truncated[i] = ok and k[i] >= steps[i]",
     ]
-    return _compile(lines, "observe", f"observe {task}{' noisy' if noisy else ''}")
+    return _compile(lines, "observe", f"observe {task}{' noisy' if noisy else ''}", parallel)

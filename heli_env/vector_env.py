@@ -80,9 +80,9 @@ class HeliAttitudeVectorEnv(VectorEnv):
         # contiguous memory: trims (3), collective, gust torque (3), u_d (3).
         self._table = np.ascontiguousarray(np.vstack([s.trim, s.col[None, :], s.torque, s.model.ud]).T)
         self._x = None  # (N_STATE, n) once reset
-        self._advance = advance_kernel(s.model.params, s.dt)
+        self._advance = advance_kernel(s.model.params, s.dt, self._threads > 1)
         self._euler_arguments = euler_arguments_kernel()
-        self._observe_loop = observe_kernel(s.task.task, s.measured)
+        self._observe_loop = observe_kernel(s.task.task, s.measured, self._threads > 1)
         self._trig = batch_rows(5, n)  # arguments of atan2 / asin / atan2 (eqs. 27-29)
         self._att = batch_rows(3, n)  # roll, pitch, yaw [rad]
         self._coef = np.array(reward_coefficients(s.task))
@@ -147,7 +147,8 @@ class HeliAttitudeVectorEnv(VectorEnv):
         j = self._base + np.minimum(self._k, self._last) * s.ratio
         self._ud = batch_rows(3, n, fill=None)
         np.multiply(np.take(self._table, j, axis=0).T[7:10], self._gust, out=self._ud)  # the gust about to act
-        numba.set_num_threads(self._threads)
+        if self._threads > 1:  # (setting the count launches numba's pool, even to 1: single-threaded never does)
+            numba.set_num_threads(self._threads)
         obs, info, _, _, _ = self._observe()
         return obs, info
 
@@ -212,7 +213,8 @@ class HeliAttitudeVectorEnv(VectorEnv):
         else:
             self._prev, self._incoming = incoming, self._prev
         applied = self._prev  # the action that acts in this step, observed after it
-        numba.set_num_threads(self._threads)
+        if self._threads > 1:  # (setting the count launches numba's pool, even to 1: single-threaded never does)
+            numba.set_num_threads(self._threads)
         self._ud = ud = batch_rows(3, n, fill=None)  # the gust of this step, reported in info
         self._advance(self._table, self._base, self._k, self._last, s.ratio, applied, self._gust, self._x, ud,
                       self._trig)

@@ -22,6 +22,8 @@ Sections (``--only NAME`` runs one):
   a 64-core cluster.
 * ``cli`` — wall time of ``heli --help`` and of every ``heli COMMAND --help``, each
   a fresh process of the installed console script (target <= 0.5 s each, issue 18).
+* ``rl-seeds`` — PPO steps/s of one seed alone and of ``--seeds 0,1`` side by side on
+  the local backend, each seed's ratio to the one alone (target >= 0.8 on 2 cores, issue 17).
 
 Usage::
 
@@ -369,8 +371,35 @@ def bench_cli(repeats: int) -> dict:
     return out
 
 
+def bench_rl_seeds(repeats: int) -> dict:
+    """PPO steps/s of one training alone, then of ``--seeds 0,1`` on the local backend (2 workers), each with
+    the same wall-time budget (``max(20, repeats)`` seconds): the per-seed ratio (target >= 0.8 on 2 cores)."""
+    import json
+    import os
+    import tempfile
+    from pathlib import Path
+
+    from controllers.rl import train_agent, train_seeds
+
+    kw = dict(algo="ppo", timesteps=10**9, max_seconds=max(20.0, float(repeats)), progress=False)
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        train_agent(out=Path(tmp) / "one", seed=0, **kw)
+        alone = json.loads((Path(tmp) / "one_training" / "training.json").read_text())["steps_per_second"]
+        train_seeds(out=Path(tmp) / "two", seeds=(0, 1), backend="local", **kw)
+        side = [json.loads((Path(tmp) / f"two_seed{s}_training" / "training.json").read_text())["steps_per_second"]
+                for s in (0, 1)]
+    out["one seed alone [steps/s]"] = alone
+    for s, v in zip((0, 1), side):
+        out[f"--seeds 0,1, seed {s} [steps/s]"] = v
+    worst = min(side) / alone
+    out["per-seed ratio, worst (target >= 0.8 on 2 cores)"] = worst
+    out["cores"] = f"{os.cpu_count()}; {'met' if worst >= 0.8 else 'NOT met'}"
+    return out
+
+
 SECTIONS = {"identification": bench_identification, "physics": bench_physics, "env": bench_env, "sweep": bench_sweep,
-            "backends": bench_backends, "cli": bench_cli}
+            "backends": bench_backends, "cli": bench_cli, "rl-seeds": bench_rl_seeds}
 
 
 def main(argv=None):
