@@ -14,7 +14,7 @@ from heli_core.quaternion import euler_from_quaternion_scalar, quaternion_from_e
 
 from .errors import ActionError
 from .spec import MAX_RATE, build_spec, real_actions, reset_options
-from .tasks import draw_episode, line_phases, reward_from_sums, wrap
+from .tasks import NOISE_BLOCK, draw_episode, line_phases, reward_from_sums, wrap
 
 OBS_DIM = 12
 
@@ -163,7 +163,7 @@ class HeliAttitudeEnv(gym.Env):
         self.action_space = action_space()
         self.metadata = {**self.metadata, "render_fps": int(round(1.0 / dt)) if dt >= 0.04 else 25}
         self._x = None
-        self._line_phase = None
+        self._lines = None
         self._renderer = None
 
     # ----------------------------------------------------------------- API
@@ -179,7 +179,14 @@ class HeliAttitudeEnv(gym.Env):
         ep = draw_episode(self.np_random, s.task, s.model.n_traces, s.model.lengths, s.needed, s.episode_steps,
                           s.dt, s.init_angle, s.init_rate, options)
         self._episode = ep
-        self._line_phase = line_phases(self.np_random, len(s.line_axis)) if s.line_axis else None
+        self._lines = None
+        if s.line_axis:  # the gyros' vibration lines over the whole episode, each at its episode's phase
+            phase = line_phases(self.np_random, len(s.line_axis))
+            table = np.zeros((3, s.line_sin.shape[1]))
+            for i, (axis, amp) in enumerate(zip(s.line_axis, s.line_amp)):  # the vector env's order and operations
+                table[axis] += amp * (s.line_sin[i] * phase[i][0] + s.line_cos[i] * phase[i][1])
+            self._lines = table.T.tolist()
+        self._noise_used = NOISE_BLOCK  # a fresh block at the episode's first observation
         self._gust = gust
         self._base = int(s.model.starts[ep.trace]) + ep.offset
         self._end = int(s.model.starts[ep.trace] + s.model.lengths[ep.trace])  # exclusive
@@ -277,15 +284,15 @@ class HeliAttitudeEnv(gym.Env):
         self._errors = ((0.0, 0.0, 0.0) if s.task.task == "rate" else shown, e_rate)
         m_shown, m_rate, mp, mq, mr = shown, e_rate, p, q, r
         if s.measured:
-            n = self.np_random.normal(0.0, 1.0, 6)
+            if self._noise_used >= NOISE_BLOCK:
+                self._noise = self.np_random.normal(0.0, 1.0, (NOISE_BLOCK, 6)).tolist()
+                self._noise_used = 0
+            n = self._noise[self._noise_used]
+            self._noise_used += 1
             na, nr = s.obs_noise
             mp, mq, mr = p + nr[0] * n[3], q + nr[1] * n[4], r + nr[2] * n[5]
-            if self._line_phase is not None:  # the gyros' vibration lines, each at its episode's phase
-                lines = [0.0, 0.0, 0.0]
-                k = self._k
-                for i, (axis, amp) in enumerate(zip(s.line_axis, s.line_amp)):
-                    c, si = self._line_phase[i]
-                    lines[axis] += amp * (float(s.line_sin[i, k]) * c + float(s.line_cos[i, k]) * si)
+            if self._lines is not None:
+                lines = self._lines[self._k]
                 mp, mq, mr = mp + lines[0], mq + lines[1], mr + lines[2]
             m_shown, m_rate = self._error_terms(ref_att, ref_rate, phi + na[0] * n[0], theta + na[1] * n[1],
                                                 psi + na[2] * n[2], mp, mq, mr)

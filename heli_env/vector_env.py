@@ -18,7 +18,7 @@ from .env import OBS_DIM, action_space, observation_space
 from .errors import ActionError
 from .kernels import ROW_PAD, advance_kernel, batch_rows, clip_actions, euler_arguments_kernel, observe_kernel
 from .spec import MAX_RATE, build_spec, real_actions, reset_options
-from .tasks import N_SINES, draw_episode, line_phases, reward_coefficients
+from .tasks import N_SINES, NOISE_BLOCK, draw_episode, line_phases, reward_coefficients
 
 THREADED_FROM = 256
 """Copies from which the default ``threads`` is numba's thread count (all cores). Measured step
@@ -107,9 +107,12 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._phase = np.zeros((3, N_SINES, n))
         self._line_cos = np.zeros((len(s.line_axis), n))  # each gyro line's phase per copy, as (cos, sin)
         self._line_sin = np.zeros((len(s.line_axis), n))
+        self._noise = np.zeros((NOISE_BLOCK, 6, n)) if s.measured else None  # each copy's block of sensor noise
+        self._noise_used = np.full(n, NOISE_BLOCK, dtype=np.int64)  # steps of it used
         self._att_noise = np.array(s.obs_noise[0])[:, None]
         self._rate_noise = np.array(s.obs_noise[1])[:, None]
         self._ones = np.ones(n, dtype=bool)
+        self._copies = np.arange(n)
         self._renderer = None
         self._history = []
 
@@ -161,6 +164,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
                             s.dt, s.init_angle, s.init_rate, options) for i in which.tolist()]
         if not eps:
             return
+        self._noise_used[which] = NOISE_BLOCK  # a fresh block at the episode's first observation
         if s.line_axis:  # drawn after the episode, from the copy's generator, as the single env does
             phases = np.array([line_phases(self._rngs[i], len(s.line_axis)) for i in which.tolist()])
             self._line_cos[:, which] = phases[:, :, 0].T
@@ -263,7 +267,11 @@ class HeliAttitudeVectorEnv(VectorEnv):
         # Reward, termination and info score the true state; only the observation is measured.
         meas_att = meas_rate = self._no_meas
         if s.measured:
-            noise = np.stack([rng.normal(0.0, 1.0, 6) for rng in self._rngs], axis=1)
+            for i in np.flatnonzero(self._noise_used >= NOISE_BLOCK).tolist():  # as each single env draws them
+                self._noise[:, :, i] = self._rngs[i].normal(0.0, 1.0, (NOISE_BLOCK, 6))
+                self._noise_used[i] = 0
+            noise = self._noise[self._noise_used, :, self._copies].T  # (6, n): each copy's next step
+            self._noise_used += 1
             meas_att = att + self._att_noise * noise[0:3]
             meas_rate = x[0:3] + self._rate_noise * noise[3:6]
             if s.line_axis:  # the gyros' vibration lines, each copy at its episode's phase
