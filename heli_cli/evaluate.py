@@ -30,6 +30,9 @@ def register(sub):
     p.add_argument("--seed", type=seed(), default=0, help="seed of the gust windows (default 0)")
     p.add_argument("--out", default=DEFAULT_OUT, type=output_path, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
     p.add_argument("--no-plots", action="store_true", help="do not draw episode.png")
+    p.add_argument("--robustness", action="store_true",
+                   help="also fly the agent with 20 ms more servo delay and the control gains 20 %% lower and "
+                   "higher (same windows), and print the p90 degradation")
     p.set_defaults(func=run, out_kind="dir")
 
 
@@ -69,6 +72,15 @@ def run(args) -> int:
               f"{m['att_p90_deg']:.3f}, p99 {m['att_p99_deg']:.3f} deg; |rate error| p90 {m['rate_p90_dps']:.3f} "
               f"deg/s; stick RMS {m['stick_rms']:.3f}, saturated {100 * m['saturation']:.1f} %")
     print(f"  mean return {res.mean_return:.2f}; episodes ended early: {res.n_terminated}")
+    if args.robustness:
+        from controllers.robustness import robustness_check
+
+        check = robustness_check(agent, env_model, traces=args.traces, episodes_per_trace=args.episodes_per_trace,
+                                 episode_seconds=args.episode_seconds, seed=args.seed)
+        for case, r in check.items():
+            print(f"  {case:18s}: p90 " + ", ".join(f"{a} {r['p90_deg'][a]:.3f} deg (x{r['ratio'][a]:.2f})"
+                                                    for a in r["p90_deg"])
+                  + f"; ended early {r['ended_early']}")
     for path in paths:
         print(f"wrote {path}")
     from .html_report import write_html_report  # evaluation.md links no figure: episode.png is appended

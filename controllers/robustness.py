@@ -1,0 +1,62 @@
+"""How much worse an agent flies when the aircraft is not the model: extra servo delay, control gain off.
+
+:func:`robustness_check` evaluates one agent (a PD or an RL policy, through the one evaluator
+:func:`controllers.evaluate.evaluate_agent`) on the model as identified and on perturbed copies of it —
+by default 20 ms more servo delay on every axis (eq. 31), and the control gains (k2, k6, k10) 20 % lower
+and 20 % higher — on the same gust windows, and reports per case and axis the p90 |attitude error| and its
+ratio to the nominal one. An episode that ends early (|roll| or |pitch| beyond 60°) counts as a failure.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from heli_core.terms import AXES
+
+CASES = {"nominal": {}, "+20 ms servo delay": {"delay": 0.02}, "gain -20 %": {"gain": 0.8},
+         "gain +20 %": {"gain": 1.2}}
+"""The perturbations flown: extra servo delay [s] added to every axis, control-gain factor."""
+
+
+def perturbed(env_model, delay: float = 0.0, gain: float = 1.0):
+    """``env_model`` with ``delay`` seconds more servo delay on every axis and its control gains times ``gain``.
+
+    The library's gust torque stays the aircraft's (each trace keeps the gains it was identified with).
+    """
+    p = env_model.params
+    values = {f"tau_{axis}": tau + delay for axis, tau in zip(AXES, p.taus)}
+    values.update({name: gain * getattr(p, name) for name in ("k2", "k6", "k10")})
+    return dataclasses.replace(env_model, params=p.with_values(**values))
+
+
+def robustness_check(agent, model=None, cases=None, **evaluate_kwargs) -> dict:
+    """p90 |attitude error| per case and axis, its ratio to the nominal, and the episodes that ended early.
+
+    Parameters
+    ----------
+    agent : PD controller or policy with ``predict``
+    model : str, Path, EnvModel or None
+    cases : dict of str to dict, optional
+        Name → ``perturbed`` arguments (default :data:`CASES`); the first is the reference.
+    **evaluate_kwargs
+        Passed to :func:`controllers.evaluate.evaluate_agent` (traces, episodes_per_trace, seed, ...).
+
+    Returns
+    -------
+    dict
+        ``{case: {"p90_deg": {axis: float}, "ratio": {axis: float}, "ended_early": int}}``.
+    """
+    from heli_env.model_dir import EnvModel, load_env_model
+
+    from .evaluate import evaluate_agent
+
+    env_model = model if isinstance(model, EnvModel) else load_env_model(model)
+    cases = CASES if cases is None else cases
+    out, reference = {}, None
+    for name, change in cases.items():
+        res = evaluate_agent(agent, perturbed(env_model, **change), **evaluate_kwargs)
+        p90 = {axis: res.metrics[axis]["att_p90_deg"] for axis in AXES}
+        reference = reference or p90
+        out[name] = {"p90_deg": p90, "ratio": {a: p90[a] / reference[a] for a in AXES},
+                     "ended_early": res.n_terminated}
+    return out
