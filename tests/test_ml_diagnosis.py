@@ -24,6 +24,7 @@ def test_no_missing_effect_names_none():
     assert len(d.rounds_[0]) == 16  # 6 candidates on roll and pitch, 4 on yaw (k12 is in yaw's base)
 
 
+@pytest.mark.slow  # over 5 s: make test-slow
 def test_hidden_cross_coupling_is_named_on_its_axes(coupled_flight):
     d = LikelihoodDiagnoser().fit(coupled_flight.flight)
     assert d.verdict_ == "found"
@@ -80,6 +81,7 @@ def test_closed_loop_share_of_a_pilot_and_of_open_sweeps(coupled_flight):
     assert all(0.1 < s < 0.9 for s in shares)
 
 
+@pytest.mark.slow  # over 5 s: make test-slow
 def test_heli_diagnose_by_likelihood_writes_the_model(tmp_path, coupled_flight):
     from heli_cli.main import main
 

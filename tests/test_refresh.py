@@ -77,6 +77,7 @@ def _refresh_doc(out):
 # ---------------------------------------------------------------------------------------- the scenario
 
 
+@pytest.mark.slow  # over 5 s: make test-slow
 def test_changed_damping_is_flagged_and_nothing_else(refreshed):
     out, _ = refreshed
     doc = _refresh_doc(out)
@@ -158,6 +159,7 @@ def test_the_same_flight_twice_is_refused(model_dir, flights):
         refresh_model(model_dir, [flights["f3"], flights["f3"]], n_replicates=10, plots=False)
 
 
+@pytest.mark.slow  # over 5 s: make test-slow
 def test_unchanged_aircraft_is_pooled_without_flags(model_dir, flights):
     r = refresh_model(model_dir, [flights["f3"]], n_replicates=60, seed=0, plots=False, progress=False)
     assert r.flagged == [] and r.fit == "pooled"
@@ -170,6 +172,7 @@ def test_unchanged_aircraft_is_pooled_without_flags(model_dir, flights):
         assert r.bootstrap_model.std_errors[k] < r.bootstrap_new.std_errors[k]
 
 
+@pytest.mark.slow  # over 5 s: make test-slow
 def test_without_the_previous_flights_ml_uses_the_recorded_fisher_errors(model_dir, flights, tmp_path):
     lone = tmp_path / "elsewhere"
     lone.mkdir()
