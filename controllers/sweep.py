@@ -47,6 +47,8 @@ first sample of every window is the level start.
 
 from __future__ import annotations
 
+import dataclasses
+
 import math
 import time
 from dataclasses import dataclass, field
@@ -106,9 +108,9 @@ the pairs added by the k-th extension of the grid (:mod:`controllers.sweep_exten
 class SweepConfig:
     """Settings of a gain sweep: the keyword arguments of :func:`sweep_gains` and :func:`sweep_pairs`.
 
-    The functions build one from their keywords; ``sweep_gains(model, kp, kd,
-    **dataclasses.asdict(config))`` runs a sweep from one. The fields are checked when the sweep
-    runs (:class:`SweepError`).
+    ``sweep_gains(model, kp, kd, config)`` runs a sweep from one; keyword settings replace its fields
+    (``sweep_gains(model, kp, kd, windows=10)``). The fields are checked when the sweep runs
+    (:class:`SweepError`).
 
     Attributes
     ----------
@@ -323,11 +325,7 @@ def _scalar(v):
 
 
 # -------------------------------------------------------------------- sweep
-def sweep_gains(model, kp_values, kd_values, axis="roll", duration: float | None = 60.0, dt: float = 0.01,
-                seed: int = 0, traces=None, windows: int | None = None, progress: bool = True, nominal=None,
-                agree_tol: float = 0.2, keep_samples: bool = False, hist_max_deg: float = 30.0,
-                hist_bins: int = 120, max_batch: int = 4096, backend=None, chunk_pairs: int | None = None,
-                extend: bool = True, max_extensions: int = MAX_EXTENSIONS, sensors: bool = True) -> SweepResult:
+def sweep_gains(model, kp_values, kd_values, config: SweepConfig | None = None, **settings) -> SweepResult:
     """Predict the error distribution of every PD gain pair of a Kp × Kd grid (paper Section 4).
 
     Each pair's gain and phase margins come beside its errors (:meth:`SweepResult.best_robust`
@@ -345,9 +343,10 @@ def sweep_gains(model, kp_values, kd_values, axis="roll", duration: float | None
         Proportional gains [stick/rad], >= 0.
     kd_values : sequence of float, shape (n_kd,)
         Derivative gains [stick/(rad/s)], >= 0.
-    axis, duration, dt, seed, traces, windows, progress, nominal, agree_tol, keep_samples, hist_max_deg,
-    hist_bins, max_batch, backend, chunk_pairs, extend, max_extensions, sensors :
-        The settings of :class:`SweepConfig`, described there.
+    config : SweepConfig, optional
+        The sweep's settings (default ``SweepConfig()``), described there.
+    **settings
+        :class:`SweepConfig` fields replacing the config's (``axis="pitch", windows=10, ...``).
 
     Returns
     -------
@@ -363,18 +362,13 @@ def sweep_gains(model, kp_values, kd_values, axis="roll", duration: float | None
     identification.errors.TaskFailed
         A backend's worker died more often than its retries allow.
     """
-    cfg = SweepConfig(axis, duration, dt, seed, traces, windows, progress, nominal, agree_tol, keep_samples,
-                      hist_max_deg, hist_bins, max_batch, backend, chunk_pairs, extend, max_extensions, sensors)
+    cfg = sweep_config(config, settings)
     kp_values = check_gains(kp_values, "kp_values")
     kd_values = check_gains(kd_values, "kd_values")
     return _sweep(model, kp_values, kd_values, "grid", cfg)
 
 
-def sweep_pairs(model, pairs, axis="roll", duration: float | None = 60.0, dt: float = 0.01, seed: int = 0,
-                traces=None, windows: int | None = None, progress: bool = True, nominal=None,
-                agree_tol: float = 0.2, keep_samples: bool = False, hist_max_deg: float = 30.0,
-                hist_bins: int = 120, max_batch: int = 4096, backend=None, chunk_pairs: int | None = None,
-                extend: bool = True, max_extensions: int = MAX_EXTENSIONS, sensors: bool = True) -> SweepResult:
+def sweep_pairs(model, pairs, config: SweepConfig | None = None, **settings) -> SweepResult:
     """:func:`sweep_gains` on a list of ``(kp, kd)`` pairs instead of a grid (same arguments).
 
     The table rows follow ``pairs``; ``kp_values``/``kd_values`` hold each pair's
@@ -382,10 +376,28 @@ def sweep_pairs(model, pairs, axis="roll", duration: float | None = 60.0, dt: fl
     ``extend`` and ``max_extensions`` are accepted (so one :class:`SweepConfig` runs
     either function) and the extension is recorded as ``"disabled"``.
     """
-    cfg = SweepConfig(axis, duration, dt, seed, traces, windows, progress, nominal, agree_tol, keep_samples,
-                      hist_max_deg, hist_bins, max_batch, backend, chunk_pairs, extend, max_extensions, sensors)
+    cfg = sweep_config(config, settings)
     _, kp, kd = check_pairs(pairs)
     return _sweep(model, kp, kd, "pairs", cfg)
+
+
+def sweep_config(config: SweepConfig | None, settings: dict) -> SweepConfig:
+    """``config`` (default ``SweepConfig()``) with ``settings`` replacing its fields.
+
+    Raises
+    ------
+    TypeError
+        A setting that is not a field of :class:`SweepConfig` (the message lists them).
+    """
+    if config is not None and not isinstance(config, SweepConfig):
+        raise TypeError(f"config must be a SweepConfig (the settings go by keyword: axis=..., windows=...), "
+                        f"got {config!r}")
+    fields = [f.name for f in dataclasses.fields(SweepConfig)]
+    unknown = sorted(set(settings) - set(fields))
+    if unknown:
+        raise TypeError(f"unknown sweep settings {', '.join(unknown)}; expected fields of SweepConfig "
+                        f"({', '.join(fields)})")
+    return dataclasses.replace(config or SweepConfig(), **settings)
 
 
 def _make_backend(backend):

@@ -691,3 +691,18 @@ def test_a_pair_that_misses_the_ks_target_is_named_with_its_reason():
     assert miss_reason(row, settings).startswith("a slow loop (it settles in 12.4 s)")
     assert "saturates 5.0 %" in miss_reason({**row, "pred_settle_s": 1.0, "saturation": 0.05}, settings)
     assert "+90 % off" in miss_reason({**row, "pred_settle_s": 1.0}, settings)
+
+
+def test_a_sweep_takes_its_settings_as_one_config_or_by_keyword(shipped):
+    from controllers.sweep import SweepConfig
+
+    cfg = SweepConfig(duration=2.0, windows=1, progress=False, extend=False)
+    a = sweep_gains(shipped, [1.0, 3.0], [0.5], cfg)
+    b = sweep_gains(shipped, [1.0, 3.0], [0.5], duration=2.0, windows=1, progress=False, extend=False)
+    np.testing.assert_array_equal(a.table["att_p90_deg"], b.table["att_p90_deg"])
+    c = sweep_gains(shipped, [1.0, 3.0], [0.5], cfg, duration=3.0)  # a keyword replaces the config's field
+    assert c.settings["duration"] == pytest.approx(3.0)
+    with pytest.raises(TypeError, match="unknown sweep settings windowz"):
+        sweep_gains(shipped, [1.0], [0.5], windowz=3)
+    with pytest.raises(TypeError, match="config must be a SweepConfig"):
+        sweep_pairs(shipped, [(1.0, 0.5)], "roll")
