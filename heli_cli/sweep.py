@@ -138,16 +138,7 @@ def run(args) -> int:
     else:
         print("no stable gain pair in the grid")
     if flights is not None:
-        print(f"flight tests ({args.flights} x {args.duration:g} s per pair, {len(pairs)} pairs, truth "
-              f"{args.truth}): largest KS {flights.max_ks:.3f} (target <= 0.1: "
-              f"{'met' if flights.target_met else 'NOT met'})")
-        from controllers.flight_test import KS_TARGET
-        from controllers.sweep_report import miss_reason
-
-        for r in flights.rows():
-            if r["status"] == "flown" and r["ks_att"] > KS_TARGET:
-                print(f"  Kp {r['kp']:.4g}, Kd {r['kd']:.4g} misses it (KS {r['ks_att']:.3f}): "
-                      f"{miss_reason(r, flights.settings)}")
+        _print_flights(flights, args, len(pairs))
     for path in paths.values():
         print(f"wrote {path}")
     from .html_report import write_html_report  # sweep.md links no figure: the two are appended
@@ -155,6 +146,20 @@ def run(args) -> int:
     figures = [paths[k] for k in ("heatmap", "histograms") if k in paths]
     print(f"wrote {write_html_report(paths['report'], figures=figures)}")
     return 0
+
+
+def _print_flights(flights, args, n_pairs: int) -> None:
+    """The flight tests' verdict, and each pair that misses the KS target with its likely reason."""
+    from controllers.flight_test import KS_TARGET
+    from controllers.sweep_report import miss_reason
+
+    print(f"flight tests ({args.flights} x {args.duration:g} s per pair, {n_pairs} pairs, truth "
+          f"{args.truth}): largest KS {flights.max_ks:.3f} (target <= {KS_TARGET:g}: "
+          f"{'met' if flights.target_met else 'NOT met'})")
+    for r in flights.rows():
+        if r["status"] == "flown" and r["ks_att"] > KS_TARGET:
+            print(f"  Kp {r['kp']:.4g}, Kd {r['kd']:.4g} misses it (KS {r['ks_att']:.3f}): "
+                  f"{miss_reason(r, flights.settings)}")
 
 
 def _print_extension(result) -> None:
