@@ -14,8 +14,8 @@ The plant is the package's one linearisation of the physics core
 (:func:`heli_core.linear.hover_linearisation`: about hover at the trim for the
 given collective, every term of the model — the decoupled eqs. (18), (21),
 coupling, the Padé servo of eq. (31), collective-scheduled gains — and the
-attitude of eq. (25) at level flight). For the decoupled model each axis is ``k·Padé(servo)/(s(s+k_damp))``
-from stick to angle. It is sampled by a zero-order hold at the control
+attitude of eq. (25) at level flight). For the decoupled model each axis is
+``k·Padé(servo)/(s(s+k_damp))`` from stick to angle. It is sampled by a zero-order hold at the control
 period (``control.c2d``, the digital autopilot holds its stick over the period,
 as the environments do). The physics core's discrete step integrates the
 attitude with the mean of the start and end rates instead of exactly; the
@@ -339,7 +339,6 @@ def predict_std(plant: HoverPlant, axis, kp, kd, nominal, freq, psd, n_freq: int
             H = C[gi][None] @ X  # (F, 3, J)
             out[gi] = (np.abs(H) ** 2 * SwT[:, None, :]).sum(axis=(0, 2))
     return np.sqrt(out)
-
 
 
 def sensor_noise_std(plant: HoverPlant, axis, kp, kd, nominal, sensors) -> np.ndarray:
