@@ -8,8 +8,9 @@ The figures of the redesign (issue 14) are measured here, not counted by hand:
   not counted);
 * the package imports: every absolute import between the packages, the ones that go *upward* (against
   the data flow ``heli_core -> model_store -> identification -> heli_env -> controllers -> heli_cli``; none
-  allowed, except that ``heli_env`` may import only ``heli_core`` and ``model_store``), and the import depth
-  of each package (the longest chain of package-to-package imports below it);
+  allowed, except that ``heli_env`` may import only ``heli_core`` and ``model_store``), the import depth
+  of each package (the longest chain of package-to-package imports below it) and of the modules (the longest
+  chain of first-party module imports);
 * how many modules import each module from another package (fan-in).
 
 Usage::
@@ -86,6 +87,7 @@ def measure():
     sizes, functions, edges = {}, [], defaultdict(set)
     fan_in = Counter()
     known = {_dotted(p) for _, p in _modules()}
+    module_edges = defaultdict(set)  # first-party module -> first-party modules it imports
     for pkg, path in _modules():
         text = path.read_text(encoding="utf-8")
         tree = ast.parse(text)
@@ -94,6 +96,8 @@ def measure():
         for name, line, n, settings in _functions(tree):
             functions.append((module, name, line, n, settings))
         for imp in _imports(tree, module, path.name == "__init__.py"):
+            if imp in known and imp != module:
+                module_edges[module].add(imp)
             top = imp.split(".")[0]
             if top in LAYERS and top != pkg:
                 edges[pkg].add(top)
@@ -106,8 +110,24 @@ def measure():
         below = [b for b in edges.get(pkg, ()) if b not in seen]
         return 1 + max((depth(b, seen + (pkg,)) for b in below), default=0)
 
+    memo = {}
+
+    def module_depth(mod, stack=()):
+        """Longest chain of first-party imports below ``mod`` (a cycle through a package's
+        ``__init__`` re-exports is cut where it closes)."""
+        if mod in memo:
+            return memo[mod]
+        below = [m for m in module_edges.get(mod, ()) if m not in stack]
+        d = 1 + max((module_depth(m, stack + (mod,)) for m in below), default=0)
+        if not stack:
+            memo[mod] = d
+        return d
+
+    depths = {m: module_depth(m) for m in known}
+    deepest = max(depths, key=depths.get)
     return {"sizes": sizes, "functions": functions, "edges": {k: sorted(v) for k, v in edges.items()},
-            "upward": upward, "depth": {p: depth(p) for p in LAYERS}, "fan_in": fan_in}
+            "upward": upward, "depth": {p: depth(p) for p in LAYERS}, "fan_in": fan_in,
+            "module_depth": depths[deepest], "deepest_module": deepest}
 
 
 def main(argv=None) -> int:
@@ -139,6 +159,8 @@ def main(argv=None) -> int:
     for pkg in LAYERS:
         print(f"  {pkg:15s} imports {', '.join(m['edges'].get(pkg, [])) or 'no package of ours'}"
               f"  (depth {m['depth'][pkg]})")
+    print(f"\nModule import depth: {m['module_depth']} levels (the longest chain of first-party imports, below "
+          f"{m['deepest_module']})")
     print(f"\nUpward imports: {len(m['upward'])}" + "".join(f"\n  {a} -> {b}" for a, b in m["upward"]))
     print("\nMost imported modules from other packages:")
     for mod, n in m["fan_in"].most_common(10):
