@@ -51,6 +51,10 @@ def register(sub):
                    help="train a residual on this PD controller (from 'heli design' or a sweep): the env receives "
                    "the PD's command plus --residual-scale times the agent's action; reward and observation scales "
                    "follow the PD's own errors on the training gusts")
+    p.add_argument("--surrogates", type=whole(0), default=0, metavar="N",
+                   help="train on N phase-randomised surrogates of each training segment (same spectra, new gusts) "
+                   "instead of the recorded segments; the evaluation stays on the recorded held-out gusts "
+                   "(default 0)")
     p.add_argument("--residual-scale", type=number("a number in (0, 2]", 0.0, 2.0, high_open=False), default=0.05,
                    metavar="STICK",
                    help="bound of the residual in stick units (default 0.05)")
@@ -65,7 +69,7 @@ def _config(args):
                        eval_freq=args.eval_freq, checkpoint_freq=args.checkpoint_freq,
                        held_out_fraction=args.held_out_fraction, split_seed=args.split_seed,
                        eval_episodes=args.eval_episodes, episode_seconds=args.episode_seconds,
-                       residual=args.residual, residual_scale=args.residual_scale,
+                       residual=args.residual, residual_scale=args.residual_scale, surrogates=args.surrogates,
                        max_seconds=None if args.minutes is None else 60.0 * args.minutes)
 
 

@@ -36,7 +36,7 @@ def phase_randomised(ud: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return np.fft.irfft(spectrum * np.exp(1j * phases)[None, :], n=n, axis=-1)
 
 
-def surrogate_model(env_model: EnvModel, copies: int = 4, seed: int = 0) -> EnvModel:
+def surrogate_model(env_model: EnvModel, copies: int = 4, seed: int = 0, pieces=None) -> EnvModel:
     """``env_model`` with its library replaced by ``copies`` phase-randomised surrogates of every trace.
 
     Parameters
@@ -46,6 +46,9 @@ def surrogate_model(env_model: EnvModel, copies: int = 4, seed: int = 0) -> EnvM
         Surrogates per recorded trace, >= 1.
     seed : int
         Seeds the phases (``numpy.random.Generator``): same seed, same surrogates.
+    pieces : sequence of (trace, first, end), optional
+        Surrogates of these stretches of the traces only (samples ``first`` to ``end``, exclusive), e.g. the
+        training side of a split, so that nothing of a held-out stretch enters; default every whole trace.
 
     Raises
     ------
@@ -55,9 +58,13 @@ def surrogate_model(env_model: EnvModel, copies: int = 4, seed: int = 0) -> EnvM
     if isinstance(copies, bool) or not isinstance(copies, (int, np.integer)) or copies < 1:
         raise ValueError(f"copies must be a whole number >= 1, got {copies!r}")
     rng = np.random.default_rng(seed)
+    if pieces is None:
+        pieces = [(t, 0, int(env_model.lengths[t])) for t in range(env_model.n_traces)]
     ud, gains, col, lengths, ids, sources = [], [], [], [], [], []
-    for t in range(env_model.n_traces):
-        s, n = int(env_model.starts[t]), int(env_model.lengths[t])
+    for t, first, end in pieces:
+        if not (0 <= t < env_model.n_traces and 0 <= first < end <= env_model.lengths[t]):
+            raise ValueError(f"piece ({t}, {first}, {end}) is not a stretch of a library trace")
+        s, n = int(env_model.starts[t]) + int(first), int(end) - int(first)
         for c in range(copies):
             ud.append(phase_randomised(env_model.ud[:, s:s + n], rng))
             gains.append(env_model.gains[:, t])

@@ -373,3 +373,22 @@ def test_heli_train_residual_cli(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["train", "--algo", "ppo", "--timesteps", "10", "--out", "x", "--residual", str(pd),
               "--residual-scale", "3"])
+
+
+def test_training_on_surrogates_of_the_training_segments_only(shipped, tmp_path):
+    """With surrogates the training copies replay surrogates of the training segments (nothing of the held-out
+    stretch), the evaluation the recorded held-out segments; recorded in the agent's metadata."""
+    from controllers.rl.config import TrainConfig
+    from controllers.rl.train import _split, _training_gusts
+
+    config = TrainConfig(surrogates=2, seed=4)
+    split, segments = _split(config, shipped)
+    model, train_segments = _training_gusts(config, shipped, segments[0])
+    assert model.n_traces == 2 * len(segments[0]) and len(train_segments) == model.n_traces
+    for k, seg in enumerate(segments[0]):
+        first, end = seg.samples(int(shipped.lengths[seg.trace]))
+        assert int(model.lengths[2 * k]) == end - first  # the training stretch only
+    run = _tiny("ppo", tmp_path / "sur", shipped, surrogates=2)
+    assert agent_metadata(run.path)["surrogates"] == 2
+    with pytest.raises(AgentError, match="surrogates"):
+        TrainConfig(surrogates=-1)

@@ -92,6 +92,11 @@ class TrainConfig:
         whose value function otherwise chases returns of -1e2 to -1e5 (a spinning
         yaw costs 324 per step), False for SAC. Observations are never normalised
         (the policy scales them itself), so the saved agent needs no statistics.
+    surrogates : int
+        Train on this many phase-randomised surrogates of each training segment
+        (:func:`heli_env.surrogates.surrogate_model`: the segments' spectra and level, new gusts)
+        instead of the recorded segments themselves; 0 (default) replays the recorded ones. The
+        evaluation stays on the recorded held-out segments either way.
     torch_threads : int, optional
         torch threads during training (restored after), >= 1; None leaves torch's
         setting. One is fastest for these small networks: on 2 cores shared with
@@ -138,6 +143,7 @@ class TrainConfig:
     torch_threads: int | None = 1
     residual: object = None
     residual_scale: float = RESIDUAL_SCALE
+    surrogates: int = 0
 
     def __post_init__(self):
         if self.algo not in ALGOS:
@@ -145,6 +151,7 @@ class TrainConfig:
         for name, minimum in (("timesteps", 1), ("n_envs", 1), ("eval_freq", 0), ("checkpoint_freq", 0),
                               ("eval_episodes", 1)):
             object.__setattr__(self, name, _check_count(getattr(self, name), name, minimum))
+        object.__setattr__(self, "surrogates", _check_count(self.surrogates, "surrogates", 0))
         if self.torch_threads is not None:
             object.__setattr__(self, "torch_threads", _check_count(self.torch_threads, "torch_threads"))
         if self.max_seconds is not None and not (self.max_seconds > 0 and math.isfinite(self.max_seconds)):

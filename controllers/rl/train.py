@@ -49,7 +49,7 @@ from typing import NamedTuple
 from heli_core.files import jsonable, write_text
 
 from ..errors import AgentError, TrainingInterrupted
-from ..trace_split import WindowSampler, as_segments, split_traces
+from ..trace_split import TraceSegment, WindowSampler, as_segments, split_traces
 from .agent_file import AGENT_SCHEMA, AGENT_SCHEMA_VERSION, _algo_class, _sb3
 from .config import TrainConfig, make_config
 from .residual import residual_metadata
@@ -240,9 +240,10 @@ def _environments(config: TrainConfig, env_model, task, segments, gamma: float):
     try:  # bad task or episode length; episodes longer than the gust segments
         kw = {"model": env_model, "task": task, "episode_seconds": config.episode_seconds,
               "init_angle_deg": init[0], "init_rate_deg": init[1]}
-        venv = HeliAttitudeVectorEnv(config.n_envs, **kw)
+        train_model, train_segments = _training_gusts(config, env_model, segments[0])
+        venv = HeliAttitudeVectorEnv(config.n_envs, **{**kw, "model": train_model})
         needed = venv.spec_.needed
-        train_sampler = WindowSampler(env_model, segments[0], needed)
+        train_sampler = WindowSampler(train_model, train_segments, needed)
         eval_sampler = WindowSampler(env_model, segments[1], needed)
         eval_venv = HeliAttitudeVectorEnv(config.eval_episodes, **kw)
     except ValueError as e:
@@ -271,6 +272,18 @@ def _scale_observations(hyper: dict, setup) -> None:
         hyper["policy_kwargs"].setdefault("features_extractor_kwargs", {"scale": setup["obs_scale"]})
 
 
+def _training_gusts(config: TrainConfig, env_model, segments):
+    """The model and segments the training copies replay: the recorded training segments, or with
+    ``config.surrogates`` a library of that many surrogates of each (seeded by ``config.seed``)."""
+    if not config.surrogates:
+        return env_model, segments
+    from heli_env.surrogates import surrogate_model
+
+    pieces = [(s.trace, *s.samples(int(env_model.lengths[s.trace]))) for s in segments]
+    model = surrogate_model(env_model, copies=config.surrogates, seed=config.seed, pieces=pieces)
+    return model, [TraceSegment(t) for t in range(model.n_traces)]
+
+
 def _metadata(config: TrainConfig, env_model, split, segments, task, dt: float, setup, hyper: dict) -> dict:
     """What the agent's zip carries in ``heli_agent.json``: algo, seed, model, split, settings, versions."""
     sb3 = _sb3()
@@ -283,6 +296,7 @@ def _metadata(config: TrainConfig, env_model, split, segments, task, dt: float, 
         "task": task if isinstance(task, str) else dataclasses.asdict(task),
         "episode_seconds": config.episode_seconds, "dt": dt, "n_envs": config.n_envs,
         "normalize_reward": config.reward_normalized, "init_angle_deg": init[0], "init_rate_deg": init[1],
+        "surrogates": config.surrogates,
         "residual": None if config.residual is None else residual_metadata(config.residual, config.residual_scale,
                                                                             setup),
         "hyperparameters": _plain(hyper),
