@@ -164,17 +164,24 @@ def kill_series(worker: int, kills: int, base: Path, flights: list[Path], work: 
     return rows
 
 
-def concurrent_refreshes(base: Path, flights: list[Path], work: Path) -> dict:
-    from model_store import ModelDir
-
-    out = work / "concurrent-refresh"
+def _all_at_once(base: Path, out: Path, commands: list) -> tuple[list, list]:
+    """A copy of ``base`` at ``out`` and ``commands`` run on it all at once: their exit codes and the tail
+    of each failed one's error output."""
     shutil.copytree(base, out)
-    procs = [subprocess.Popen(refresh_cmd(out, f), env=run_env(), stdout=subprocess.DEVNULL,
-                              stderr=subprocess.PIPE, text=True) for f in flights]
+    procs = [subprocess.Popen(cmd, env=run_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+             for cmd in commands]
     codes = [p.wait() for p in procs]
     errors = [p.stderr.read().strip()[-300:] for p, c in zip(procs, codes) if c != 0]
     for p in procs:
         p.stderr.close()
+    return codes, errors
+
+
+def concurrent_refreshes(base: Path, flights: list[Path], work: Path) -> dict:
+    from model_store import ModelDir
+
+    out = work / "concurrent-refresh"
+    codes, errors = _all_at_once(base, out, [refresh_cmd(out, f) for f in flights])
     state = ModelDir(out, notify=lambda m: None).load()
     traced = {(e.get("source") or {}).get("name") for e in state.entries}
     # walk the chain of refresh records back through history/
@@ -199,12 +206,7 @@ def concurrent_identifies(base: Path, flights: list[Path], work: Path) -> dict:
     from model_store import ModelDir
 
     out = work / "concurrent-identify"
-    shutil.copytree(base, out)
-    procs = [subprocess.Popen(identify_cmd(f, out), env=run_env(), stdout=subprocess.DEVNULL,
-                              stderr=subprocess.PIPE, text=True) for f in flights]
-    codes = [p.wait() for p in procs]
-    for p in procs:
-        p.stderr.close()
+    codes, _ = _all_at_once(base, out, [identify_cmd(f, out) for f in flights])
     state = ModelDir(out, notify=lambda m: None).load()
     # each identify's model names its flight; every one but the current must be in history/
     models = {}

@@ -33,3 +33,13 @@ def ideal_model_dir():
 def ideal(ideal_model_dir):
     """:func:`ideal_model_dir` as the env loads it."""
     return load_env_model(ideal_model_dir)
+
+
+@pytest.fixture(scope="session")
+def flight_csv(tmp_path_factory):
+    """``heli simulate-flight --duration 40 --seed 3 --out X.csv`` (read only: the CLI tests identify it)."""
+    from heli_cli.main import main
+
+    path = tmp_path_factory.mktemp("sim") / "X.csv"
+    assert main(["simulate-flight", "--duration", "40", "--seed", "3", "--out", str(path)]) == 0
+    return path

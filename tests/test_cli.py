@@ -22,14 +22,6 @@ from identification.terms import BASE_PARAMS
 
 
 @pytest.fixture(scope="session")
-def flight_csv(tmp_path_factory):
-    """``heli simulate-flight --duration 40 --seed 3 --out X.csv``."""
-    path = tmp_path_factory.mktemp("sim") / "X.csv"
-    assert main(["simulate-flight", "--duration", "40", "--seed", "3", "--out", str(path)]) == 0
-    return path
-
-
-@pytest.fixture(scope="session")
 def identified(flight_csv, tmp_path_factory):
     """``heli identify X.csv --out DIR`` with the defaults (decoupled model, figures)."""
     out = tmp_path_factory.mktemp("ident") / "DIR"

@@ -98,14 +98,6 @@ def test_remote_images_and_the_title_are_left_alone():
 
 # -------------------------------------------------------------------------------------- the four commands
 @pytest.fixture(scope="module")
-def flight_csv(tmp_path_factory):
-    """``heli simulate-flight --duration 40 --seed 3`` (the flight tests/test_cli.py identifies)."""
-    path = tmp_path_factory.mktemp("sim") / "X.csv"
-    assert main(["simulate-flight", "--duration", "40", "--seed", "3", "--out", str(path)]) == 0
-    return path
-
-
-@pytest.fixture(scope="module")
 def swept(tmp_path_factory):
     """``heli sweep`` on a 2 x 2 grid of 5 s windows (as tests/test_sweep.py); it draws two figures."""
     out = tmp_path_factory.mktemp("sweep") / "sw"
