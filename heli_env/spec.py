@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -50,7 +51,7 @@ class EnvSpec:
     col: np.ndarray  # (total,) collective applied at each library sample
 
 
-    @property
+    @cached_property
     def measured(self) -> bool:
         """The observation carries sensor noise or lines (the reward and the info never do)."""
         return not self.sensors.silent
@@ -60,12 +61,12 @@ class EnvSpec:
         """(attitude [rad], rate [rad/s]) white-noise standard deviations, each per axis."""
         return self.sensors.attitude_noise, self.sensors.gyro_noise
 
-    @property
+    @cached_property
     def line_axis(self) -> tuple:
-        """Axis index of each gyro line."""
+        """Axis index of each gyro line (computed once: the vector env reads it every step)."""
         return tuple(int(a) for a in self.sensors.line_arrays()[0])
 
-    @property
+    @cached_property
     def line_amp(self) -> tuple:
         """Amplitude of each gyro line [rad/s]."""
         return tuple(float(a) for a in self.sensors.line_arrays()[2])
