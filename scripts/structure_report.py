@@ -110,20 +110,32 @@ def measure():
         below = [b for b in edges.get(pkg, ()) if b not in seen]
         return 1 + max((depth(b, seen + (pkg,)) for b in below), default=0)
 
+    def reaches(start):
+        seen, todo = set(), list(module_edges.get(start, ()))
+        while todo:
+            m = todo.pop()
+            if m not in seen:
+                seen.add(m)
+                todo.extend(module_edges.get(m, ()))
+        return seen
+
+    in_cycle = {m for m in known if m in reaches(m)}
     memo = {}
 
     def module_depth(mod, stack=()):
-        """Longest chain of first-party imports below ``mod`` (a cycle through a package's
-        ``__init__`` re-exports is cut where it closes)."""
+        """Longest chain of first-party imports below ``mod`` that visits no module twice (a cycle is
+        cut where it closes). Only a module on no cycle is remembered: what lies below it cannot
+        include the modules above it, so its depth is the same whatever the path to it (remembering
+        one on a cycle made the figure depend on the order the modules were visited in)."""
         if mod in memo:
             return memo[mod]
-        below = [m for m in module_edges.get(mod, ()) if m not in stack]
+        below = [m for m in sorted(module_edges.get(mod, ())) if m not in stack]
         d = 1 + max((module_depth(m, stack + (mod,)) for m in below), default=0)
-        if not stack:
+        if mod not in in_cycle:
             memo[mod] = d
         return d
 
-    depths = {m: module_depth(m) for m in known}
+    depths = {m: module_depth(m) for m in sorted(known)}
     deepest = max(depths, key=depths.get)
     return {"sizes": sizes, "functions": functions, "edges": {k: sorted(v) for k, v in edges.items()},
             "upward": upward, "depth": {p: depth(p) for p in LAYERS}, "fan_in": fan_in,
