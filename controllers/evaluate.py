@@ -48,7 +48,7 @@ SCHEMA = "heli-env/agent-evaluation"
 def describe_agent(agent) -> tuple[str, str]:
     """(kind, description) of an agent: ("pd", "PD kp=.. kd=.."), ("ppo", "PPO"),
     ("ppo-residual", "PPO ±0.05 stick on PD kp=.. kd=.."), ..."""
-    from .pd import PDController
+    from .pd.controller import PDController
     from .rl.residual import ResidualAgent
 
     if isinstance(agent, PDController):

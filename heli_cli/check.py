@@ -24,7 +24,7 @@ def run(args) -> int:
     from pathlib import Path
 
     from identification.errors import ModelDirError, ModelFileError
-    from model_store import ModelDir
+    from model_store.model_dir import ModelDir
 
     folder = ModelDir(args.model_dir, notify=lambda message: None)
     if not folder.root.is_dir():

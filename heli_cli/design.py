@@ -82,7 +82,10 @@ def design_markdown(model_path, analyses, phase_margin, bandwidth, plots: bool =
 
 def run(args) -> int:
     from controllers.errors import DesignError
-    from controllers.pd import PDController, design_gains, loop_analysis, plot_bode, plot_step_responses
+    from controllers.pd.analysis import loop_analysis
+    from controllers.pd.controller import PDController
+    from controllers.pd.design import design_gains
+    from controllers.pd.figures import plot_bode, plot_step_responses
     from heli_env.model_dir import load_env_model
     from identification.files import write_text
 

@@ -38,7 +38,7 @@ def register(sub):
 
 def run(args) -> int:
     from controllers.evaluate import describe_agent, evaluate_agent
-    from controllers.rl import agent_metadata, load_agent
+    from controllers.rl.agent_file import agent_metadata, load_agent
     from controllers.trace_split import TraceSplit, split_traces
     from heli_env.model_dir import load_env_model
     from identification.files import write_text

@@ -63,7 +63,7 @@ def register(sub):
 
 def _config(args):
     """The TrainConfig of the command line; a --residual PD file is read here, so a bad one fails before any work."""
-    from controllers.rl import TrainConfig
+    from controllers.rl.config import TrainConfig
 
     return TrainConfig(algo=args.algo, timesteps=args.timesteps, seed=args.seed, n_envs=args.n_envs,
                        eval_freq=args.eval_freq, checkpoint_freq=args.checkpoint_freq,
@@ -74,7 +74,7 @@ def _config(args):
 
 
 def _run_seeds(args, config) -> int:
-    from controllers.rl import train_seeds
+    from controllers.rl.seeds import train_seeds
     from identification.backends import make_backend
 
     backend = make_backend(args.backend, workers=args.workers)
@@ -98,7 +98,7 @@ def run(args) -> int:
     progress = progress_of(args)
     progress.stage("loading stable-baselines3, torch and the model; training shows its own bar on a terminal")
     from controllers.errors import TrainingInterrupted
-    from controllers.rl import train_agent
+    from controllers.rl.train import train_agent
 
     if args.seeds is not None:
         progress.done()

@@ -19,10 +19,10 @@ import numpy as np
 
 from heli_core.params import ModelParams
 from heli_core.sensors import SensorModel
-from model_store import MODEL_FILENAME, ModelDir
+from model_store.model_dir import ModelDir
 from model_store.disturbance_library import LIBRARY_DIRNAME
 from model_store.errors import LibraryError, ModelFileError
-from model_store.model_file import sensors_from_document
+from model_store.model_file import MODEL_FILENAME, sensors_from_document
 
 from .errors import EnvModelError
 

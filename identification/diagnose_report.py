@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from model_store import ModelDir
+from model_store.model_dir import ModelDir
 from model_store.model_file import model_document as new_model_document
 
 from .diagnose import Diagnoser, heldout_stats

@@ -54,7 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
-from model_store import ModelDir
+from model_store.model_dir import ModelDir
 from model_store.model_file import MODEL_FILENAME, load_model
 
 from .bootstrap import DEFAULT_REPLICATES, BootstrapResult, interval_bootstrap

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from model_store import ModelDir
+from model_store.model_dir import ModelDir
 from model_store.model_file import model_document
 
 from .disturbance import identify_disturbance

@@ -87,7 +87,7 @@ from .errors import LibraryError
 from heli_core.files import atomic_path, jsonable, sha256_of, write_text
 from heli_core.terms import AXES
 
-from . import faults
+import model_store.faults as faults
 
 LIBRARY_DIRNAME = "disturbances"
 TRACES_DIRNAME = "traces"

@@ -50,7 +50,7 @@ from pathlib import Path
 from .errors import LibraryError, ModelDirBusyError, ModelDirError, ModelFileError
 from heli_core.files import keep_copy, write_bytes, write_text
 
-from . import faults
+import model_store.faults as faults
 from .disturbance_library import LIBRARY_DIRNAME, DisturbanceLibrary, Trace
 from .model_file import MODEL_FILENAME, encode_model, model_document, params_from_document
 

@@ -132,7 +132,7 @@ def load_agent(path):
             raise AgentError(f"{path}: cannot load the {algo.upper()} agent: {e}") from e
         meta = agent_metadata(path) or {}
         return residual_from_metadata(meta, policy, path) if meta.get("residual") else policy
-    from ..pd import PDController
+    from ..pd.controller import PDController
 
     try:
         return PDController.load(path)

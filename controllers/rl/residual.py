@@ -41,7 +41,7 @@ import math
 import numpy as np
 
 from ..errors import AgentError
-from ..pd import PDController, PDGains
+from ..pd.controller import PDController, PDGains
 
 RESIDUAL_SCALE = 0.05
 """Default bound of the residual [stick]: the policy's action in [-1, 1] times this."""
