@@ -4,7 +4,7 @@ The quaternion kinematics of eq. (25) are integrated exactly for rates held
 constant over each sample interval (the rotation increment is the quaternion
 exponential of ``omega*dt/2``, trapezoidal mean of the two samples), starting
 from the level attitude of eq. (26). Euler angles follow from the rotation
-matrix of eq. (27) with :func:`identification.model.euler_from_quaternion`.
+matrix of eq. (27) with :func:`heli_core.quaternion.euler_from_quaternion`.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from .model import euler_from_quaternion, quaternion_from_euler
+from heli_core.quaternion import euler_from_quaternion, quaternion_from_euler
 
 
 def quaternions_from_rates(time, rates, euler0=(0.0, 0.0, 0.0)) -> np.ndarray:

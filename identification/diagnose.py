@@ -48,11 +48,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
+from heli_core.params import ModelParams
+
 from .effects import CATALOGUE, MAX_ALIGNMENT, NONE, UNDECIDED
 from .errors import IdentifiabilityError, NotFittedError
 from .flight import Flight
 from .heldout import HeldOut, Score, Spec
-from .model import ModelParams
 from .preprocess import lowpass_flight
 from .residual_tests import band_shares, cross_correlation, whiteness
 from .terms import AXES, INPUT_FOR_AXIS

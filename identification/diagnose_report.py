@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from heli_core.params import ModelParams
 from model_store.model_dir import ModelDir
 from model_store.model_file import model_document as new_model_document
 
@@ -33,7 +34,6 @@ from .effects import CATALOGUE, alignment_parts, shift_inputs
 from .figures import DPI, pyplot
 from .files import jsonable, save_figure, write_text
 from .flight import Flight
-from .model import ModelParams
 from .report import PendingFigures
 from .terms import AXES, INPUT_FOR_AXIS
 

@@ -53,6 +53,8 @@ from pathlib import Path
 
 import numpy as np
 
+from heli_core.params import ModelParams
+
 from .baselines import TABLE3_STARTS, TABLE4_M0, TABLE4_Q, TABLE5_LENGTHS, parameter_names
 from .baselines.single_axis import make_params
 from .errors import FlightLogError, IdentifiabilityError
@@ -60,7 +62,6 @@ from .files import jsonable, write_text
 from .flight import Flight
 from .method_runs import TABLE5_EKF  # noqa: F401  (re-exported: Table 5's EKF settings lived here)
 from .method_runs import MethodRun, MethodRunner, limit_blas
-from .model import ModelParams
 from .preprocess import DEFAULT_PASS_HZ, DEFAULT_STOP_HZ, lowpass_flight
 
 SCHEMA = "heli-env/method-comparison/2"

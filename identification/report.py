@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from heli_core.params import ModelParams
 from model_store.model_dir import ModelDir
 from model_store.model_file import model_document
 
@@ -38,7 +39,6 @@ from .identify_report import (  # noqa: F401  (the tables are re-exported: they 
     wind_table,
 )
 from .integral_method import IntegralIdentifier
-from .model import ModelParams
 from .sensors import identify_sensors
 from .synthetic import load_truth, truth_paths
 from .validation import ValidationResult, validate_models

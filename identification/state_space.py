@@ -19,7 +19,7 @@ import numpy as np
 from scipy import signal
 from scipy.linalg import expm, solve_discrete_are
 
-from .model import servo_coefficients
+from heli_core.servo import servo_coefficients
 
 WIND_MODELS = ("gm2", "gm_so")
 """Gust models: ``"gm2"`` a slow plus a fast first-order Gauss-Markov process (a
