@@ -49,7 +49,7 @@ def describe_agent(agent) -> tuple[str, str]:
     """(kind, description) of an agent: ("pd", "PD kp=.. kd=.."), ("ppo", "PPO"),
     ("ppo-residual", "PPO ±0.05 stick on PD kp=.. kd=.."), ..."""
     from .pd.controller import PDController
-    from .rl.residual import ResidualAgent
+    from .rl.residual_agent import ResidualAgent
 
     if isinstance(agent, PDController):
         kp = ", ".join(f"{v:.3g}" for v in agent.gains.kp)

@@ -9,7 +9,8 @@ One concept per module:
   hyperparameter set) as tasks of a compute backend;
 * :mod:`~controllers.rl.agent_file`: the agent zip and :func:`load_agent`, which
   loads a PD controller JSON or a PPO/SAC zip alike;
-* :mod:`~controllers.rl.residual`: residual RL, a bounded learnt correction on a PD;
+* :mod:`~controllers.rl.residual_agent`: residual RL, a bounded learnt correction on a PD
+  (:mod:`~controllers.rl.residual` re-exports it with :func:`~controllers.rl.train.residual_setup`);
 * :mod:`~controllers.rl.vec_env`: the native vector env seen through SB3's ``VecEnv``.
 
 The stable-baselines3 callbacks and the observation scaler stay in
@@ -20,7 +21,7 @@ and torch are the ``rl`` extra, imported when an agent is trained or loaded.
 from ..trace_split import TraceSegment, TraceSplit, WindowSampler, as_segments, split_traces
 from .agent_file import AGENT_SCHEMA, AGENT_SCHEMA_VERSION, ALGOS, METADATA_FILE, agent_metadata, load_agent
 from .config import DEFAULT_KWARGS, TrainConfig, make_config
-from .residual import RESIDUAL_INIT_DEG, RESIDUAL_SCALE, residual_from_metadata, residual_metadata
+from .residual_agent import RESIDUAL_INIT_DEG, RESIDUAL_SCALE, residual_from_metadata, residual_metadata
 from .seeds import train_seeds
 from .train import TrainingResult, train_agent
 

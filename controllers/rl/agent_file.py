@@ -17,7 +17,7 @@ from heli_core.errors import require
 
 from ..errors import AgentError
 from ..trace_split import TraceSplit
-from .residual import residual_from_metadata
+from .residual_agent import residual_from_metadata
 
 ALGOS = ("ppo", "sac")
 AGENT_SCHEMA = "heli-env/rl-agent"

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 from ..errors import AgentError
 from .agent_file import ALGOS
-from .residual import RESIDUAL_INIT_DEG, RESIDUAL_SCALE, as_base, check_scale
+from .residual_agent import RESIDUAL_INIT_DEG, RESIDUAL_SCALE, as_base, check_scale
 
 DEFAULT_KWARGS = {
     # A rollout of 512 steps x 8 copies (41 s of flight), a 1 s horizon (gamma 0.99 at 100 Hz),
@@ -104,7 +104,7 @@ class TrainConfig:
         contention), and a fixed count keeps results reproducible.
     residual : PDController or path of a PD controller JSON, optional
         Train a residual on this PD instead of a whole policy
-        (:mod:`controllers.rl.residual`): the env receives
+        (:mod:`controllers.rl.residual_agent`): the env receives
         ``clip(PD(obs) + residual_scale * action, -1, 1)``. Unless given, the task's
         reward scales, the observation scales (``policy_kwargs``'
         ``features_extractor_kwargs``) and the initial ranges follow the PD's own

@@ -1,186 +1,25 @@
-"""Residual RL on a PD controller: ``action = clip(PD(obs) + scale · π(obs), -1, 1)``.
+"""Residual RL on a PD controller under the module name users import: a re-export.
 
-Residual policy learning (Silver et al. 2018, "Residual Policy Learning";
-Johannink et al. 2019, "Residual Reinforcement Learning for Robot Control"): the
-agent learns a bounded correction on top of a working controller instead of the
-whole control law. Here the base is a :class:`controllers.pd.PDController`,
-typically a pair from a gain sweep, and the policy is a PPO or SAC network
-whose action in [-1, 1] is scaled to ±``scale`` stick.
-
-Why it is needed here: swept PDs of the shipped model hold attitude to a few
-thousandths of a degree (p90) with gains of hundreds to thousands of stick/rad.
-A policy learnt from scratch has to reproduce such a law closely before it can
-improve on it, which PPO does not reach in 15 minutes on 2 cores (0.2–1.1° p90).
-A residual starts at the PD (the policy's output layer starts near zero) and only
-has to learn what the PD lacks; the observation carries the previous action, so a
-correction that behaves like integral action is within its reach.
-
-The scales of training follow the base's own error level, measured by flying it
-on windows of the training gusts (:func:`residual_setup`), so the same settings
-carry over to a model whose PD errors are degrees rather than hundredths:
-
-* reward: attitude errors scaled by ``2·E`` and rate errors by ``2·E·ω_c``, where
-  ``E`` is the largest per-axis p90 |attitude error| of the base and ``ω_c`` the
-  largest ``kp/kd`` of its axes (the PD's corner frequency, where a rate error
-  weighs as much as an attitude error in its own command);
-* observations (:class:`controllers.sb3_training.ObservationScaler`): attitude
-  errors by ``4·E``, rates and rate errors by ``4·E·ω_c``, the previous action by
-  ``1.5 ×`` the base's largest p99 |stick| (at least 0.05);
-* starts: roll and pitch within ±0.5°, rates within ±0.5°/s (the regime the base
-  holds; a 5° start would dominate rewards scaled to hundredths of a degree).
-
-The saved agent is the SB3 zip with the base PD and the scale inside its
-``heli_agent.json`` (:func:`residual_metadata`); :func:`controllers.rl.load_agent`
-returns a :class:`ResidualAgent`, which ``heli evaluate`` flies like any agent.
+The residual agent, its bounds, its ``VecEnv`` wrapper and its metadata are
+:mod:`controllers.rl.residual_agent` (the method is described there);
+:func:`residual_setup`, which flies the base PD to scale the training, is
+:mod:`controllers.rl.train`'s, beside the training that uses it. The names are
+bound to the same objects, so ``isinstance`` checks hold. Code of this project
+imports them from where they are defined, so that loading an agent does not
+import the training.
 """
 
-from __future__ import annotations
-
-import math
-
-import numpy as np
-
-from ..errors import AgentError
-from ..pd.controller import PDController, PDGains
-
-RESIDUAL_SCALE = 0.05
-"""Default bound of the residual [stick]: the policy's action in [-1, 1] times this."""
-RESIDUAL_INIT_DEG = 0.5
-"""Default initial roll/pitch range [deg] and rate range [deg/s] of residual training episodes."""
-
-
-def as_base(base) -> PDController:
-    """A PD controller from a :class:`PDController` or the path of a PD JSON (``heli design``, a sweep).
-
-    Raises
-    ------
-    AgentError
-        Anything else, or a file that is not a PD controller.
-    """
-    if isinstance(base, PDController):
-        return base
-    if isinstance(base, (str, bytes)) or hasattr(base, "__fspath__"):
-        try:
-            return PDController.load(base)
-        except (ValueError, UnicodeDecodeError) as e:
-            raise AgentError(f"the residual's base must be a PD controller JSON: {e}") from e
-    raise AgentError(f"residual must be a PDController or the path of a PD controller JSON, got {base!r}")
-
-
-def check_scale(scale) -> float:
-    """The residual bound as a float in (0, 2]; AgentError otherwise."""
-    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not (0.0 < scale <= 2.0):
-        raise AgentError(f"residual_scale must be a number in (0, 2] stick, got {scale!r}")
-    return float(scale)
-
-
-class ResidualAgent:
-    """A PD controller plus a learnt, bounded correction, with SB3's ``predict`` interface.
-
-    Parameters
-    ----------
-    base : PDController
-    policy : object with SB3's ``predict``
-        The residual policy (a PPO or SAC model); its action in [-1, 1] is scaled by ``scale``.
-    scale : float
-        Bound of the residual [stick].
-    """
-
-    def __init__(self, base: PDController, policy, scale: float = RESIDUAL_SCALE):
-        self.base, self.policy, self.scale = base, policy, check_scale(scale)
-
-    def __repr__(self):
-        return f"ResidualAgent({type(self.policy).__name__} ±{self.scale:g} stick on {self.base!r})"
-
-    def predict(self, observation, state=None, episode_start=None, deterministic: bool = False):
-        """Actions for one observation ``(12,)`` or a batch ``(n, 12)``: the PD's command plus the
-        scaled residual, clipped to [-1, 1]. ``state`` and ``episode_start`` go to the policy."""
-        obs = np.asarray(observation, dtype=np.float64)
-        residual, state = self.policy.predict(np.asarray(observation, dtype=np.float32), state, episode_start,
-                                              deterministic)
-        act = self.base.command(obs) + self.scale * np.clip(residual, -1.0, 1.0)
-        return np.clip(act, -1.0, 1.0).astype(np.float32), state
-
-
-def residual_env(venv, base: PDController, scale: float):
-    """SB3 ``VecEnv`` whose action is the residual: the base PD's command on the last observation plus
-    ``scale`` times the action, clipped to [-1, 1], is what the wrapped env receives."""
-    from stable_baselines3.common.vec_env import VecEnvWrapper
-
-    class ResidualVecEnv(VecEnvWrapper):
-        def __init__(self):
-            super().__init__(venv)
-            self._obs = None
-
-        def reset(self):
-            self._obs = self.venv.reset()
-            return self._obs
-
-        def step_async(self, actions):
-            act = base.command(np.asarray(self._obs, dtype=np.float64)) + scale * np.clip(actions, -1.0, 1.0)
-            self.venv.step_async(np.clip(act, -1.0, 1.0).astype(np.float32))
-
-        def step_wait(self):
-            obs, rewards, dones, infos = self.venv.step_wait()
-            self._obs = obs  # after a done: the next episode's first observation, what the next action sees
-            return obs, rewards, dones, infos
-
-    return ResidualVecEnv()
-
-
-def residual_setup(base: PDController, env_model, segments, seed: int = 0, seconds: float = 10.0) -> dict:
-    """Reward and observation scales for residual training, from the base's errors on training gusts.
-
-    Flies ``base`` for ``seconds`` on each training segment (starting at rest) and
-    derives the scales listed in the module docstring.
-
-    Returns
-    -------
-    dict
-        ``error_deg`` (E), ``corner_rad_s`` (ω_c), ``stick_p99``, ``attitude_scale``
-        and ``rate_scale`` [rad, rad/s] of the reward, and ``obs_scale`` (12 floats).
-    """
-    from ..evaluate import evaluate_agent
-
-    res = evaluate_agent(base, env_model, traces=list(segments), episodes_per_trace=1, episode_seconds=seconds,
-                         seed=seed, name="residual base")
-    axes = ("roll", "pitch", "yaw")
-    err = max(float(res.metrics[a]["att_p90_deg"]) for a in axes)
-    stick = max(float(res.metrics[a]["stick_p99"]) for a in axes)
-    if not (math.isfinite(err) and err > 0.0):
-        raise AgentError(f"the residual's base PD gives no usable error level on the training gusts (p90 {err!r} "
-                         "deg); is it stable on this model?")
-    kp, kd = np.abs(base.gains.kp), np.abs(base.gains.kd)
-    corner = float(np.max(np.where(kd > 0, kp / np.where(kd > 0, kd, 1.0), 0.0)))
-    if not corner > 0.0:
-        corner = 10.0  # a P-only or D-only base: weigh 1 rad/s of rate error as 0.1 rad of attitude error
-    e = math.radians(err)
-    obs_scale = [4 * e] * 3 + [4 * e * corner] * 6 + [max(1.5 * stick, 0.05)] * 3
-    return {"error_deg": err, "corner_rad_s": corner, "stick_p99": stick, "attitude_scale": 2 * e,
-            "rate_scale": 2 * e * corner, "obs_scale": obs_scale}
-
-
-def residual_metadata(base: PDController, scale: float, setup: dict) -> dict:
-    """What a residual agent's ``heli_agent.json`` carries under ``"residual"``."""
-    return {"base": base.document(), "scale": scale, "setup": setup}
-
-
-def residual_from_metadata(meta: dict, policy, path) -> ResidualAgent:
-    """The :class:`ResidualAgent` of a loaded policy and its metadata's ``"residual"`` entry.
-
-    Raises
-    ------
-    AgentError
-        The entry lacks the base PD or the scale, or they are malformed.
-    """
-    entry = meta.get("residual")
-    try:
-        doc = entry["base"]
-        base = PDController(PDGains(doc["kp"], doc["kd"]), doc["signs"])
-        return ResidualAgent(base, policy, entry["scale"])
-    except (TypeError, KeyError, ValueError, AgentError) as e:
-        raise AgentError(f"{path}: the residual entry of its metadata is not a base PD and a scale ({e!r})") from e
-
+from .residual_agent import (  # noqa: F401
+    RESIDUAL_INIT_DEG,
+    RESIDUAL_SCALE,
+    ResidualAgent,
+    as_base,
+    check_scale,
+    residual_env,
+    residual_from_metadata,
+    residual_metadata,
+)
+from .train import residual_setup  # noqa: F401
 
 __all__ = ["RESIDUAL_INIT_DEG", "RESIDUAL_SCALE", "ResidualAgent", "as_base", "check_scale", "residual_env",
            "residual_from_metadata", "residual_metadata", "residual_setup"]

@@ -22,7 +22,7 @@ The final agent, not the best one, is what a comparison should use: the best
 was chosen on the held-out traces it would be compared on.
 
 With ``residual=`` a PD controller, the agent learns a bounded correction on top
-of that PD rather than the whole law (:mod:`controllers.rl.residual`); the zip then
+of that PD rather than the whole law (:mod:`controllers.rl.residual_agent`); the zip then
 carries the PD and :func:`load_agent` returns the combined agent.
 
 Reproducibility: one ``seed`` seeds Python, numpy and torch
@@ -46,13 +46,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
 
+import numpy as np
+
 from heli_core.files import jsonable, write_text
 
 from ..errors import AgentError, TrainingInterrupted
+from ..pd.controller import PDController
 from ..trace_split import TraceSegment, WindowSampler, as_segments, split_traces
 from .agent_file import AGENT_SCHEMA, AGENT_SCHEMA_VERSION, _algo_class, _sb3
 from .config import TrainConfig, make_config
-from .residual import residual_metadata
+from .residual_agent import residual_metadata
 
 
 def _out_paths(out) -> tuple[Path, Path, str]:
@@ -136,7 +139,7 @@ def train_agent(algo: str | None = None, model=None, timesteps: int | None = Non
         Fields of :class:`TrainConfig` replacing the config's, e.g. ``seed=3, n_envs=2``
         (so ``train_agent("ppo", model, 10_000, "agents/ppo", seed=3)`` needs no config).
         With ``residual``, the saved agent carries the PD and :func:`load_agent`
-        returns a :class:`controllers.rl.residual.ResidualAgent`.
+        returns a :class:`controllers.rl.residual_agent.ResidualAgent`.
 
     Returns
     -------
@@ -205,14 +208,46 @@ def _train(config: TrainConfig, env_model, out, split, segments, progress, verbo
     return _learn(agent, config, out, metadata, (env, eval_env), progress, callbacks)
 
 
+def residual_setup(base: PDController, env_model, segments, seed: int = 0, seconds: float = 10.0) -> dict:
+    """Reward and observation scales for residual training, from the base's errors on training gusts.
+
+    Flies ``base`` for ``seconds`` on each training segment (starting at rest) and
+    derives the scales listed in :mod:`controllers.rl.residual_agent`'s docstring. (It lives
+    here, beside the training that uses it, so that the residual agent, which every agent
+    loader needs, does not stand on the evaluation and its vector env.)
+
+    Returns
+    -------
+    dict
+        ``error_deg`` (E), ``corner_rad_s`` (ω_c), ``stick_p99``, ``attitude_scale``
+        and ``rate_scale`` [rad, rad/s] of the reward, and ``obs_scale`` (12 floats).
+    """
+    from ..evaluate import evaluate_agent
+
+    res = evaluate_agent(base, env_model, traces=list(segments), episodes_per_trace=1, episode_seconds=seconds,
+                         seed=seed, name="residual base")
+    axes = ("roll", "pitch", "yaw")
+    err = max(float(res.metrics[a]["att_p90_deg"]) for a in axes)
+    stick = max(float(res.metrics[a]["stick_p99"]) for a in axes)
+    if not (math.isfinite(err) and err > 0.0):
+        raise AgentError(f"the residual's base PD gives no usable error level on the training gusts (p90 {err!r} "
+                         "deg); is it stable on this model?")
+    kp, kd = np.abs(base.gains.kp), np.abs(base.gains.kd)
+    corner = float(np.max(np.where(kd > 0, kp / np.where(kd > 0, kd, 1.0), 0.0)))
+    if not corner > 0.0:
+        corner = 10.0  # a P-only or D-only base: weigh 1 rad/s of rate error as 0.1 rad of attitude error
+    e = math.radians(err)
+    obs_scale = [4 * e] * 3 + [4 * e * corner] * 6 + [max(1.5 * stick, 0.05)] * 3
+    return {"error_deg": err, "corner_rad_s": corner, "stick_p99": stick, "attitude_scale": 2 * e,
+            "rate_scale": 2 * e * corner, "obs_scale": obs_scale}
+
+
 def _residual_setup(config: TrainConfig, env_model, train_seg):
     """(scales, task): the residual's scales from its base's errors on the training gusts, and a named task
     with its reward scaled by them; (None, ``config.task``) without a residual."""
     if config.residual is None:
         return None, config.task
     from heli_env.tasks import TaskConfig
-
-    from .residual import residual_setup
 
     setup = residual_setup(config.residual, env_model, train_seg, config.seed)
     task = config.task
@@ -251,7 +286,7 @@ def _environments(config: TrainConfig, env_model, task, segments, gamma: float):
     env = GymnasiumVecEnv(venv, episode_options=train_sampler)
     eval_env = GymnasiumVecEnv(eval_venv, episode_options=eval_sampler, fixed_seed=config.seed + 1000)
     if config.residual is not None:
-        from .residual import residual_env
+        from .residual_agent import residual_env
 
         base, scale = config.residual, config.residual_scale
         env, eval_env = residual_env(env, base, scale), residual_env(eval_env, base, scale)
