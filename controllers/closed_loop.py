@@ -22,7 +22,7 @@ attitude with the mean of the start and end rates instead of exactly; the
 difference is of order ``dt²`` and shows in the tests as < 1 % on the error
 standard deviations.
 
-The PD law is the one of :mod:`controllers.pd` (see :func:`pd_command`); for a
+The PD law is the one of :mod:`controllers.pd` (:func:`controllers.pd.law.pd_command`); for a
 decoupled model the stability verdicts and spectral radii equal those of
 :func:`controllers.pd.loop_analysis` (tested), while the plant here keeps all
 three axes so that coupling terms are included.
@@ -39,6 +39,7 @@ from heli_core.linear import hover_linearisation
 from heli_core.terms import AXES
 
 from .errors import SweepError
+from .pd.law import pd_command  # noqa: F401  (the one PD law: it lived here)
 STABILITY_MARGIN = 1e-9
 """A gain pair is stable when every discrete closed-loop pole has ``|z| < 1 - STABILITY_MARGIN``
 (a pole on the unit circle, e.g. ``kp = 0``, lets the attitude drift and counts as unstable)."""
@@ -53,35 +54,6 @@ def axis_index(axis) -> int:
     if axis in AXES:
         return AXES.index(axis)
     raise SweepError(f"axis must be one of {', '.join(AXES)}, got {axis!r}")
-
-
-def pd_command(kp, kd, sign, e_angle, e_rate):
-    """The per-axis PD law: ``u = s·(kp·e_angle + kd·e_rate)``, a stick offset from trim (unclipped).
-
-    Parameters
-    ----------
-    kp : float or ndarray
-        Proportional gain [stick/rad].
-    kd : float or ndarray
-        Derivative gain [stick/(rad/s)].
-    sign : float
-        Sign of the axis' control gain (k2, k6, k10), so that positive gains stabilise.
-    e_angle : float or ndarray
-        Reference minus angle [rad] (the sweep holds level: ``-angle``).
-    e_rate : float or ndarray
-        Reference rate minus body rate [rad/s] (the sweep: ``-rate``).
-
-    Notes
-    -----
-    The package's one PD law, for floats and numpy batches alike: the batched closed loop
-    (:mod:`controllers.replay`) evaluates it for many gain pairs at once, the linear closed
-    loop takes its slopes (:func:`gain_matrices`), and :class:`controllers.pd.PDController`
-    (``predict``: ``clip(s·(kp·obs[0:3] + kd·obs[6:9]), -1, 1)``) computes the same numbers
-    (``tests/test_sweep.py`` checks it; ``sign`` is ±1, so ``s·(kp·e + kd·ė)`` and
-    ``(s·kp)·e + (s·kd)·ė`` agree bit for bit). The caller clips the result to [-1, 1] and adds
-    the trim.
-    """
-    return sign * (kp * e_angle + kd * e_rate)
 
 
 @dataclass(frozen=True, eq=False)

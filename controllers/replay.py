@@ -34,7 +34,7 @@ from heli_core.physics import kernel
 from heli_core.quaternion import euler_from_quaternion
 from heli_core.terms import AXES
 
-from .closed_loop import pd_command
+from .pd.law import pd_command
 
 PROGRESS_EVERY = 200
 """Control periods between two updates of the progress bar."""

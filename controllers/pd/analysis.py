@@ -28,7 +28,8 @@ from heli_core.params import ModelParams
 from heli_core.terms import AXES
 
 from .controller import PDGains
-from .linearisation import _axis_index, _check_delay, _check_dt, _sampled, _tf, control_sign, plant
+from .law import _axis_index, control_sign
+from .linearisation import _check_delay, _check_dt, _sampled, _tf, plant
 
 _HALF_POWER = 10.0 ** (-3.0 / 20.0)
 

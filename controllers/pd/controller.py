@@ -26,8 +26,7 @@ from heli_core.files import jsonable, write_text
 from heli_core.params import ModelParams
 from heli_core.terms import AXES
 
-from ..closed_loop import pd_command
-from .linearisation import _axis_index, control_sign
+from .law import _axis_index, control_sign, pd_command
 
 SCHEMA = "heli-env/pd-controller"
 SCHEMA_VERSION = 1

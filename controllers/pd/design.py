@@ -20,7 +20,8 @@ from heli_core.terms import AXES
 
 from .analysis import _HALF_POWER, _first_drop, loop_analysis
 from .controller import PDGains
-from .linearisation import _axis_index, _axis_ss, _check_delay, _check_dt, _sampled, control_sign
+from .law import _axis_index, control_sign
+from .linearisation import _axis_ss, _check_delay, _check_dt, _sampled
 
 
 class _Responses:

@@ -33,14 +33,7 @@ from heli_core.linear import hover_linearisation
 from heli_core.params import ModelParams
 from heli_core.terms import AXES
 
-
-def _axis_index(axis) -> int:
-    """0, 1, 2 for "roll", "pitch", "yaw" (or the index itself)."""
-    if isinstance(axis, str) and axis in AXES:
-        return AXES.index(axis)
-    if isinstance(axis, (int, np.integer)) and not isinstance(axis, bool) and 0 <= axis < 3:
-        return int(axis)
-    raise ValueError(f"axis must be one of {AXES} or 0, 1, 2, got {axis!r}")
+from .law import _axis_index, control_sign  # noqa: F401  (control_sign is importable from here)
 
 
 def _check_dt(dt) -> float:
@@ -55,21 +48,6 @@ def _check_delay(delay_steps, dt) -> int:
     if delay_steps and dt == 0:
         raise ValueError("delay_steps needs a control period dt > 0")
     return int(delay_steps)
-
-
-def control_sign(params: ModelParams, axis) -> float:
-    """Sign of the axis' control gain (k2, k6, k10): +1 or -1.
-
-    Raises
-    ------
-    ValueError
-        The control gain is zero: the stick does not move that axis.
-    """
-    i = _axis_index(axis)
-    k = float(params.control_gains[i])
-    if k == 0.0:
-        raise ValueError(f"the model's {AXES[i]} control gain {('k2', 'k6', 'k10')[i]} is 0: the axis cannot be controlled")
-    return 1.0 if k > 0 else -1.0
 
 
 def _axis_ss(params: ModelParams, axis: int):
