@@ -7,27 +7,14 @@ from collections import deque
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
 from heli_core.quaternion import euler_from_quaternion_scalar, quaternion_from_euler
 
 from .errors import ActionError
-from .spec import MAX_RATE, build_spec, real_actions, reset_options
+from .spec import MAX_RATE, action_space, build_spec, observation_space, real_actions, reset_options
+from .spec import OBS_DIM  # noqa: F401  (it lived here)
 from .tasks import NOISE_BLOCK, draw_episode, line_phases, reward_from_sums, wrap
-
-OBS_DIM = 12
-
-
-def observation_space() -> spaces.Box:
-    """The observation space (see :class:`HeliAttitudeEnv`)."""
-    high = np.array([math.pi] * 3 + [MAX_RATE] * 6 + [1.0] * 3, dtype=np.float32)
-    return spaces.Box(-high, high, dtype=np.float32)
-
-
-def action_space() -> spaces.Box:
-    """lat, lon, ped offsets from trim in stick units."""
-    return spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
 
 
 class HeliAttitudeEnv(gym.Env):

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
+from gymnasium import spaces
 
 from heli_core.discrete import discrete_kernel
 from heli_core.physics import trim_sticks
@@ -25,6 +26,19 @@ from .tasks import TaskConfig
 
 MAX_RATE = 35.0
 """Observation bound of body rates and rate errors [rad/s]."""
+OBS_DIM = 12
+"""Length of an observation: attitude errors, rates, rate errors, previous action."""
+
+
+def observation_space() -> spaces.Box:
+    """The observation space (see :class:`heli_env.env.HeliAttitudeEnv`)."""
+    high = np.array([math.pi] * 3 + [MAX_RATE] * 6 + [1.0] * 3, dtype=np.float32)
+    return spaces.Box(-high, high, dtype=np.float32)
+
+
+def action_space() -> spaces.Box:
+    """lat, lon, ped offsets from trim in stick units."""
+    return spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
 
 
 @dataclass(frozen=True, eq=False)

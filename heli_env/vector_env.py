@@ -14,10 +14,9 @@ from gymnasium.vector.utils import batch_space
 from heli_core.physics import N_STATE
 from heli_core.quaternion import quaternion_from_euler
 
-from .env import OBS_DIM, action_space, observation_space
 from .errors import ActionError
 from .kernels import ROW_PAD, advance_kernel, batch_rows, clip_actions, euler_arguments_kernel, observe_kernel
-from .spec import MAX_RATE, build_spec, real_actions, reset_options
+from .spec import MAX_RATE, OBS_DIM, action_space, build_spec, observation_space, real_actions, reset_options
 from .tasks import N_SINES, NOISE_BLOCK, draw_episode, line_phases, reward_coefficients
 
 THREADED_FROM = 256
