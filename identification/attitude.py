@@ -15,6 +15,9 @@ import numpy as np
 
 from heli_core.quaternion import euler_from_quaternion, quaternion_from_euler
 
+DETREND_PERIOD = 10.0
+"""Length of the linear pieces removed from the angles before comparison [s] (Section 3.2)."""
+
 
 def quaternions_from_rates(time, rates, euler0=(0.0, 0.0, 0.0)) -> np.ndarray:
     """Integrate eq. (25) over a rate history.
@@ -89,3 +92,28 @@ def detrend_piecewise(time, values, period: float = 10.0) -> np.ndarray:
     y = values.reshape(-1, time.size).T  # (n, m)
     coef = np.linalg.lstsq(basis, y, rcond=None)[0]
     return (y - basis @ coef).T.reshape(values.shape)
+
+
+def detrended_angles(time, angles, period: float = DETREND_PERIOD) -> np.ndarray:
+    """Unwrapped angles minus their best piecewise-linear fit over ``period`` s pieces [deg].
+
+    Section 3.2: "to remove drift in integration, the best least squares
+    piecewise linear function over 10 s periods is subtracted from the data and
+    the model" (:func:`detrend_piecewise`).
+
+    Parameters
+    ----------
+    time : array_like, shape (n,)
+        Sample times [s].
+    angles : array_like, shape (3, n)
+        Roll, pitch, yaw [rad], wrapped or not.
+    period : float
+        Length of the linear pieces [s].
+
+    Returns
+    -------
+    ndarray, shape (3, n)
+        Detrended angles [deg].
+    """
+    angles = np.unwrap(np.asarray(angles, dtype=float), axis=-1)
+    return np.degrees(detrend_piecewise(time, angles, period))

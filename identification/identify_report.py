@@ -18,7 +18,7 @@ from heli_core.params import ModelParams
 from .disturbance import compare_with_truth
 from .disturbance_report import figure_names, save_figures
 from .terms import AXES, BASE_PARAMS, TERMS
-from .validation import ValidationResult
+from .validation_result import ValidationResult
 from .validation_report import plot_attitude_fit, plot_rate_fit
 
 

@@ -24,22 +24,18 @@ from __future__ import annotations
 import warnings
 
 from collections.abc import Mapping
-from dataclasses import dataclass
 
 import numpy as np
 
-from heli_core.files import jsonable
 from heli_core.params import ModelParams
 from heli_core.physics import QUAT, initial_state, simulate
 from heli_core.quaternion import euler_from_quaternion
 from heli_core.terms import AXES, STICK_ROW
 
-from .attitude import detrend_piecewise
+from .attitude import DETREND_PERIOD, detrended_angles
 from .errors import SimulationDivergedError
 from .flight import Flight
-
-DETREND_PERIOD = 10.0
-"""Length of the linear pieces removed from the angles before comparison [s] (Section 3.2)."""
+from .validation_result import ValidationResult
 
 PERCENTILE_METHOD = "hazen"
 """``numpy.percentile`` method matching Matlab's ``prctile`` (sample k sits at (k - 0.5)/n)."""
@@ -143,31 +139,6 @@ def between_models_mae(a, b) -> dict[str, float]:
     return {axis: float(mae[i]) for i, axis in enumerate(AXES)}
 
 
-def detrended_angles(time, angles, period: float = DETREND_PERIOD) -> np.ndarray:
-    """Unwrapped angles minus their best piecewise-linear fit over ``period`` s pieces [deg].
-
-    Section 3.2: "to remove drift in integration, the best least squares
-    piecewise linear function over 10 s periods is subtracted from the data and
-    the model" (:func:`identification.attitude.detrend_piecewise`).
-
-    Parameters
-    ----------
-    time : array_like, shape (n,)
-        Sample times [s].
-    angles : array_like, shape (3, n)
-        Roll, pitch, yaw [rad], wrapped or not.
-    period : float
-        Length of the linear pieces [s].
-
-    Returns
-    -------
-    ndarray, shape (3, n)
-        Detrended angles [deg].
-    """
-    angles = np.unwrap(np.asarray(angles, dtype=float), axis=-1)
-    return np.degrees(detrend_piecewise(time, angles, period))
-
-
 def attitude_error_stats(time, measured_att, modelled_att, period: float = DETREND_PERIOD) -> dict[str, dict]:
     """Error statistics of modelled attitude after the 10 s detrend, Section 3.2.
 
@@ -209,78 +180,6 @@ def attitude_error_stats(time, measured_att, modelled_att, period: float = DETRE
     mae = np.abs(err).mean(axis=1)
     std = err.std(axis=1)
     return {axis: {"mae_deg": float(mae[i]), "std_deg": float(std[i])} for i, axis in enumerate(AXES)}
-
-
-# ---------------------------------------------------------------- the result
-@dataclass(eq=False)
-class ValidationResult:
-    """Simulated histories and error statistics of one or more models on one flight.
-
-    Built by :func:`validate_models`.
-
-    Attributes
-    ----------
-    time : ndarray, shape (n,)
-        Sample times [s].
-    measured_rates : ndarray, shape (3, n)
-        The measured p, q, r the models are compared with [rad/s].
-    simulated : dict of str to ndarray, shape (3, n)
-        Model label -> simulated p, q, r [rad/s].
-    simulated_attitude : dict of str to ndarray, shape (3, n)
-        Model label -> roll, pitch, yaw from the simulated quaternion,
-        eqs. (25)-(29) [rad] (wrapped, not detrended).
-    rate_stats : dict
-        Model label -> :func:`rate_error_stats` (Tables 1-2).
-    attitude_stats : dict
-        Model label -> :func:`attitude_error_stats` (Section 3.2).
-    between : dict of str to float or None
-        :func:`between_models_mae` of the two models when exactly two were
-        compared (Table 2), else None.
-    measured_attitude : ndarray, shape (3, n), optional
-        Measured roll, pitch, yaw [rad]; needed by
-        :func:`~identification.validation_report.plot_attitude_fit`.
-    period : float
-        Length of the pieces of the attitude detrend [s].
-    """
-
-    time: np.ndarray
-    measured_rates: np.ndarray
-    simulated: dict
-    simulated_attitude: dict
-    rate_stats: dict
-    attitude_stats: dict
-    between: dict | None = None
-    measured_attitude: np.ndarray | None = None
-    period: float = DETREND_PERIOD
-
-    @property
-    def labels(self) -> list[str]:
-        """Model labels in the order they were given."""
-        return list(self.simulated)
-
-    def to_dict(self) -> dict:
-        """Statistics as plain JSON-ready values (non-finite numbers become None).
-
-        The histories are left out; the dictionary holds ``models``,
-        ``n_samples``, ``duration_s``, ``detrend_period_s``, ``rate_stats``,
-        ``attitude_stats`` and ``between``.
-        """
-        return jsonable({
-            "models": self.labels,
-            "n_samples": int(np.size(self.time)),
-            "duration_s": float(self.time[-1] - self.time[0]),
-            "detrend_period_s": float(self.period),
-            "rate_stats": self.rate_stats,
-            "attitude_stats": self.attitude_stats,
-            "between": self.between,
-        })
-
-    def markdown(self) -> str:
-        """The rate table (Tables 1-2 layout, models side by side) and the attitude table
-        (:func:`identification.validation_report.validation_markdown`)."""
-        from .validation_report import validation_markdown
-
-        return validation_markdown(self)
 
 
 # ---------------------------------------------------------------- validation

@@ -16,12 +16,12 @@ import numpy as np
 from heli_core.files import save_figure
 from heli_core.terms import AXES
 
+from .attitude import detrended_angles
 from .figures import DPI, MEASURED_STYLE, model_styles, pyplot
 from .markdown_tables import markdown_table
-from .validation import detrended_angles
 
 if TYPE_CHECKING:
-    from .validation import ValidationResult
+    from .validation_result import ValidationResult
 
 WINDOW_LENGTH = 10.0
 """Length of the automatic close-up windows of :func:`plot_rate_fit` [s] (Fig. 10)."""
