@@ -31,10 +31,9 @@ from model_store.model_file import model_document as new_model_document
 
 from .diagnose import Diagnoser, heldout_stats
 from .effects import CATALOGUE, alignment_parts, shift_inputs
-from .figures import DPI, pyplot
+from .figures import DPI, PendingFigures, pyplot
 from .files import jsonable, save_figure, write_text
 from .flight import Flight
-from .report import PendingFigures
 from .terms import AXES, INPUT_FOR_AXIS
 
 SCHEMA = "heli-env/diagnosis"

@@ -4,7 +4,8 @@ The plotting modules (:mod:`identification.validation_report`,
 :mod:`identification.disturbance_report`, the diagnosis reports) draw with the
 pyplot of :func:`pyplot`, imported only when a figure is drawn (matplotlib is
 heavy and a fit needs none of it), and write PNGs at :data:`DPI` with
-:func:`heli_core.files.save_figure`.
+:func:`heli_core.files.save_figure`. A run whose figures may be drawn after its
+report is written mixes in :class:`PendingFigures`.
 """
 
 from __future__ import annotations
@@ -40,3 +41,16 @@ def model_styles(labels) -> dict[str, dict]:
     """Colour and dash per model label, so that overlapping models stay visible."""
     dashes = ("-", "--", ":", "-.")
     return {lab: {"color": f"C{i}", "ls": dashes[i % len(dashes)]} for i, lab in enumerate(labels)}
+
+
+class PendingFigures:
+    """A run whose report links figures drawn later: :attr:`figures` holds callables each returning
+    ``{key: path}``, :attr:`paths` the files written (both fields of the dataclass that mixes this in)."""
+
+    def draw_figures(self) -> dict:
+        """Draw the figures left for later (:attr:`figures`); add them to :attr:`paths` and return them."""
+        drawn = {}
+        while self.figures:
+            drawn.update(self.figures.pop(0)())
+        self.paths.update(drawn)
+        return drawn

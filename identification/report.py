@@ -24,6 +24,7 @@ from model_store.model_dir import ModelDir
 from model_store.model_file import model_document
 
 from .disturbance import identify_disturbance
+from .figures import PendingFigures
 from .files import sha256_of
 from .fit_warnings import fit_warnings
 from .flight import Flight
@@ -42,19 +43,6 @@ from .integral_method import IntegralIdentifier
 from .sensors import identify_sensors
 from .synthetic import load_truth, truth_paths
 from .validation import ValidationResult, validate_models
-
-
-class PendingFigures:
-    """A run whose report links figures drawn later: :attr:`figures` holds callables each returning
-    ``{key: path}``, :attr:`paths` the files written (both fields of the dataclass that mixes this in)."""
-
-    def draw_figures(self) -> dict:
-        """Draw the figures left for later (:attr:`figures`); add them to :attr:`paths` and return them."""
-        drawn = {}
-        while self.figures:
-            drawn.update(self.figures.pop(0)())
-        self.paths.update(drawn)
-        return drawn
 
 
 @dataclass
