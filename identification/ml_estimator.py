@@ -58,7 +58,7 @@ from .fit_warnings import require_moving_sticks
 from .flight import Flight
 from .integral_method import IntegralIdentifier
 from .state_space import N_NONLINEAR, WIND_MODELS, ZETA_BOUNDS, rts_smooth, wind_block
-from .vibration import remove_vibration_lines
+from .vibration import remove_common_lines
 
 OWN_RATE = ("p", "q", "r")
 """The feature that is each axis' own rate: its term is the damping, a state coefficient."""
@@ -241,9 +241,15 @@ class MaximumLikelihoodIdentifier:
     def _clean(self, flight: Flight) -> tuple[Flight, list]:
         if not self.remove_vibration:
             return flight, []
-        rates, found = remove_vibration_lines(flight.rates, flight.sample_rate, self.vibration_min_hz)
+        rows = list(STICK_ROW)
+        rates, commands, found = remove_common_lines(flight.rates, flight.sticks[rows], flight.sample_rate,
+                                                     self.vibration_min_hz)
+        sticks = flight.sticks
+        if any(ln.get("signal") == "command" for ln in found):
+            sticks = np.array(flight.sticks, dtype=float, copy=True)
+            sticks[rows] = commands
         meta = type(flight.metadata)({**flight.metadata, "vibration_lines": found})
-        return Flight(flight.time, rates, flight.attitude, flight.sticks, meta, flight.extra), found
+        return Flight(flight.time, rates, flight.attitude, sticks, meta, flight.extra), found
 
     # ------------------------------------------------------------------- fit
     def fit(self, flight) -> "MaximumLikelihoodIdentifier":

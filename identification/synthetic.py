@@ -141,12 +141,15 @@ class FlightConfig:
     pilot : {"pid", "pd", "autopilot"}
         ``"pid"`` the human pilot above; ``"pd"`` a pilot who fights gusts with a PD on the attitude and the
         rate seen ``reaction_delay`` ago (no integral; he knows the trim); ``"autopilot"`` a digital flight
-        controller: PD on attitude and rate one sample old, the commands held between samples.
+        controller: PD on attitude and rate one sample old, as its sensors read them (the gyro's noise and
+        vibration, through its D-term low-pass), the commands held between samples.
     vibration_lines : tuple of (float, float)
         Extra sinusoidal lines on every gyro axis: (frequency [Hz], amplitude [rad/s]).
     input_shift : float
         The logged sticks are shifted by this many seconds (whole samples): > 0 the log's input column lags
         the true input (recorded late), < 0 it leads.
+    autopilot_dterm_hz : float
+        Corner of the autopilot's first-order low-pass on the gyro it flies on [Hz].
     """
 
     duration: float = 300.0
@@ -175,6 +178,7 @@ class FlightConfig:
     pilot: str = "pid"
     vibration_lines: tuple = ()
     input_shift: float = 0.0
+    autopilot_dterm_hz: float = 20.0
 
     def __post_init__(self):
         wind = np.asarray(self.wind_level, dtype=float)
@@ -193,6 +197,7 @@ class FlightConfig:
             "vibration_lines": all(len(line) == 2 and 0 < float(line[0]) < math.inf and float(line[1]) >= 0
                                    for line in self.vibration_lines),
             "input_shift": abs(self.input_shift) < self.duration / 2,
+            "autopilot_dterm_hz": 0 < self.autopilot_dterm_hz < math.inf,
         }
         for name in ("stick_noise", "collective_wander", "gyro_noise", "vibration", "attitude_noise"):
             checks[name] = getattr(self, name) >= 0
@@ -406,9 +411,10 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
     col = cfg.collective_trim + coloured_noise(rng, n, fs, 0.05, cfg.collective_wander)
     col = np.clip(col, -1.0, 1.0)
     jitter = np.array([coloured_noise(rng, n, fs, 2.0, cfg.stick_noise) for _ in range(3)])
-    states, sticks = _fly(params, cfg, sweep_schedule(time, cfg), jitter, col, torque)
+    errors = _sensor_errors(rng, cfg, time)
+    states, sticks = _fly(params, cfg, sweep_schedule(time, cfg), jitter, col, torque, errors)
     true_rates = states[:, :3].T
-    rates, att = _sensors(rng, cfg, time, true_rates, euler_from_quaternion(states[:, 6:10].T))
+    rates, att = _sensors(errors, true_rates, euler_from_quaternion(states[:, 6:10].T))
     flight = _logged_flight(cfg, seed, effects, time, rates, att, sticks)
     return SyntheticFlight(flight, params, wind, torque, true_rates, cfg, int(seed), tuple(effects), float(effect_scale))
 
@@ -421,13 +427,14 @@ def _wind(rng: np.random.Generator, n: int, cfg: FlightConfig) -> np.ndarray:
     return np.array([gust_trace(rng, n, cfg.sample_rate, cfg, lv / 1.6449) for lv in level])
 
 
-def _fly(params: ModelParams, cfg: FlightConfig, sweeps, jitter, col, torque) -> tuple[np.ndarray, np.ndarray]:
+def _fly(params: ModelParams, cfg: FlightConfig, sweeps, jitter, col, torque, errors) -> tuple[np.ndarray, np.ndarray]:
     """Fly the truth model with the pilot in the loop: states (n, 10) and the sticks he logged (n, 4).
 
     The pilot (module docstring) holds the attitude with a PID on the angle (``"pid"``) or a PD on angle and
     rate (``"pd"``, ``"autopilot"``) seen ``delay`` samples ago, scaled by the control gain he has learnt,
     and adds the ``sweeps`` and his ``jitter`` (3, n); ``col`` (n,) is the collective and ``torque`` (3, n)
-    the wind [rad/s^2].
+    the wind [rad/s^2]. A human sees the aircraft; the autopilot reads its sensors, the true state plus
+    ``errors`` (:func:`_sensor_errors`), the gyro through its D-term low-pass (``cfg.autopilot_dterm_hz``).
     """
     n = col.size
     fs = cfg.sample_rate
@@ -441,6 +448,7 @@ def _fly(params: ModelParams, cfg: FlightConfig, sweeps, jitter, col, torque) ->
     trim = [-(params.kd1) / gains[0], -(params.kd2) / gains[1],
             -(params.kd3 - params.k12 * cfg.collective_trim) / gains[2]]
     delay = 1 if cfg.pilot == "autopilot" else max(1, int(round(cfg.reaction_delay * fs)))
+    sensed = _AutopilotSensing(cfg, errors, fs) if cfg.pilot == "autopilot" else None
 
     rk4 = kernel(params)[0]["rk4"]
     x = tuple(float(v) for v in initial_state(sticks=trim))
@@ -474,8 +482,12 @@ def _fly(params: ModelParams, cfg: FlightConfig, sweeps, jitter, col, torque) ->
     u_next = None
     hold = cfg.pilot == "autopilot"  # a flight controller holds its commands over the sample
     for k in range(n):
-        hist_ang.append(euler_from_quaternion_scalar(x[6], x[7], x[8], x[9]))
-        hist_rate.append(x[0:3])
+        if sensed is None:
+            hist_ang.append(euler_from_quaternion_scalar(x[6], x[7], x[8], x[9]))
+            hist_rate.append(x[0:3])
+        else:
+            hist_ang.append(sensed.attitude(k, euler_from_quaternion_scalar(x[6], x[7], x[8], x[9])))
+            hist_rate.append(sensed.rate(k, x[0:3]))
         states[k] = x
         u = u_next if u_next is not None else _pilot(k, 0)
         sticks[k] = u
@@ -491,19 +503,57 @@ def _fly(params: ModelParams, cfg: FlightConfig, sweeps, jitter, col, torque) ->
     return states, sticks
 
 
-def _sensors(rng: np.random.Generator, cfg: FlightConfig, time, true_rates, true_att):
-    """What the gyro and the attitude sensor log: noise, rotor vibration and ``cfg.vibration_lines`` added,
-    yaw wrapped to (-pi, pi]. Returns (rates, attitude), each (3, n)."""
+class _AutopilotSensing:
+    """What a flight controller flies on: the attitude its estimator reads (truth plus the attitude noise)
+    and the gyro it logs (truth plus noise and vibration) through a first-order D-term low-pass. Feeding
+    back the true state instead would put in the logged commands information about the gust that no sensor
+    has, which no model of the measured rates can use (an idealised loop; on the bench cell it made a
+    sub-sample input delay and a gain scheduling look likely, statistic 10-77)."""
+
+    def __init__(self, cfg: FlightConfig, errors: tuple, fs: float):
+        gyro, att = errors
+        self._gyro = sum(gyro[1:], gyro[0]).T.tolist()
+        self._att = att.T.tolist()
+        self._a = float(np.exp(-2.0 * np.pi * cfg.autopilot_dterm_hz / fs))
+        self._state = None
+
+    def attitude(self, k: int, true_att) -> list:
+        return [t + e for t, e in zip(true_att, self._att[k])]
+
+    def rate(self, k: int, true_rate) -> list:
+        raw = [t + e for t, e in zip(true_rate, self._gyro[k])]
+        if self._state is None:
+            self._state = raw
+        else:
+            self._state = [self._a * s + (1.0 - self._a) * r for s, r in zip(self._state, raw)]
+        return list(self._state)
+
+
+def _sensor_errors(rng: np.random.Generator, cfg: FlightConfig, time) -> tuple[list, np.ndarray]:
+    """What the gyro and the attitude sensor add to the truth, drawn before the flight (a flight controller
+    flies on what its sensors read): the gyro's terms (noise, rotor vibration, ``cfg.vibration_lines``),
+    each (3, n), in the order they are added, and the attitude noise (3, n)."""
     n = time.size
     phase = rng.uniform(0, 2 * np.pi, size=(3, 2))
     vib = sum(
         cfg.vibration / (j + 1) * np.sin(2 * np.pi * (j + 1) * cfg.rotor_hz * time[None, :] + phase[:, j : j + 1])
         for j in range(2)
     )
-    rates = true_rates + cfg.gyro_noise * rng.standard_normal((3, n)) + vib
-    att = true_att + cfg.attitude_noise * rng.standard_normal((3, n))
+    gyro = [cfg.gyro_noise * rng.standard_normal((3, n)), vib]
+    att = cfg.attitude_noise * rng.standard_normal((3, n))
     for hz, amp in cfg.vibration_lines:  # drawn after today's sensor noise: default flights unchanged
-        rates = rates + amp * np.sin(2 * np.pi * float(hz) * time[None, :] + rng.uniform(0, 2 * np.pi, (3, 1)))
+        gyro.append(amp * np.sin(2 * np.pi * float(hz) * time[None, :] + rng.uniform(0, 2 * np.pi, (3, 1))))
+    return gyro, att
+
+
+def _sensors(errors: tuple, true_rates, true_att):
+    """What the gyro and the attitude sensor log: the truth plus :func:`_sensor_errors`, yaw wrapped to
+    (-pi, pi]. Returns (rates, attitude), each (3, n)."""
+    gyro, att_noise = errors
+    rates = true_rates
+    for term in gyro:
+        rates = rates + term
+    att = true_att + att_noise
     att[2] = np.angle(np.exp(1j * att[2]))
     return rates, att
 

@@ -61,6 +61,18 @@ def test_autopilot_holds_its_commands_and_input_shift_moves_the_logged_sticks():
     assert shifted.flight.metadata["input_shift_s"] == pytest.approx(0.05)
 
 
+def test_the_autopilot_flies_on_what_its_sensors_read():
+    # a flight controller's commands carry its gyro's vibration (through its D-term low-pass); a human's do not
+    auto = simulate_flight(60, seed=1, config=FlightConfig(pilot="autopilot", vibration_lines=((27.0, 0.05),)))
+    human = simulate_flight(60, seed=1, config=FlightConfig(pilot="pd", vibration_lines=((27.0, 0.05),)))
+    for sim, carries in ((auto, True), (human, False)):
+        f, p = signal.welch(sim.flight.sticks[0], 100.0, nperseg=1024)
+        line = p[np.argmin(np.abs(f - 27.0))]
+        assert (line > 100 * np.median(p[(f > 20) & (f < 26)])) == carries
+    with pytest.raises(ValueError, match="autopilot_dterm_hz"):
+        FlightConfig(autopilot_dterm_hz=0.0)
+
+
 def test_vibration_line_shows_at_its_frequency():
     sim = simulate_flight(60, seed=1, config=FlightConfig(vibration_lines=((27.0, 0.05),), vibration=0.0))
     f, p = signal.welch(sim.flight.rates[0] - sim.true_rates[0], 100.0, nperseg=1024)

@@ -10,7 +10,7 @@ import pytest
 from identification.errors import IdentifiabilityError, NotFittedError
 from identification.flight import make_flight
 from identification.ml_estimator import MaximumLikelihoodIdentifier
-from identification.vibration import remove_vibration_lines
+from identification.vibration import remove_common_lines, remove_vibration_lines
 from identification.synthetic import simulate_flight
 
 
@@ -108,6 +108,26 @@ def test_remove_vibration_lines_finds_a_line_and_leaves_the_rest():
     assert all(abs(line["frequency_hz"] - 27.0) < 0.01 for line in lines)
     assert all(abs(line["amplitude"] - 0.05) < 0.002 for line in lines)
     assert np.std(cleaned[0] - slow) < 0.012
+
+
+def test_lines_a_flight_controller_fed_back_are_removed_from_its_commands_and_the_rates_alike():
+    # a flight controller flies on the gyro it logs: its commands carry the gyro's lines, and the aircraft
+    # answers them; cleaning only the rates left a sub-sample delay likelier (statistic 50-85, autopilot cell)
+    fs = 100.0
+    t = np.arange(20000) / fs
+    rng = np.random.default_rng(1)
+    slow = np.vstack([np.sin(2 * np.pi * f * t) for f in (0.7, 0.9, 1.1)])
+    line = 0.05 * np.sin(2 * np.pi * 27.0 * t + 0.3)
+    rates = slow + line + 0.01 * rng.standard_normal((3, t.size))
+    pilot = 0.3 * slow + 0.01 * rng.standard_normal((3, t.size))
+    cleaned, commands, lines = remove_common_lines(rates, pilot, fs)
+    np.testing.assert_array_equal(cleaned, remove_vibration_lines(rates, fs)[0])  # a pilot's sticks: untouched
+    np.testing.assert_array_equal(commands, pilot)
+    assert all("signal" not in ln for ln in lines)
+    controller = pilot - 2.0 * line
+    cleaned, commands, lines = remove_common_lines(rates, controller, fs)
+    assert sum(ln.get("signal") == "command" for ln in lines) == 3
+    assert np.std(commands - pilot) < 0.002 and np.std(cleaned - slow) < 0.012
 
 
 def test_errors_say_what_was_expected(flight180):
