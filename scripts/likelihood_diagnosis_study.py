@@ -19,6 +19,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -108,7 +109,8 @@ def _one(job):
             "partly": bool(truth) and not wrong and 0 < len(ok_axes) < n_true,
             "wrong": bool(wrong), "seconds": seconds,
             "max_lr": max((r["lr"] / r["threshold"] for rows in d.rounds_[:1] for r in rows), default=0.0),
-            "cell": cell, "round1": [(r["axis"], r["effect"], r["lr"]) for rows in d.rounds_[:1] for r in rows]}
+            "cell": cell, "round1": [(r["axis"], r["effect"], r["lr"]) for rows in d.rounds_[:1] for r in rows],
+            "closed": dict(d.closed_loop_), "steps": [(s.axis, s.effect, s.lr) for s in d.steps_]}
 
 
 def _null_table(rows, cells):
@@ -130,9 +132,24 @@ def _null_table(rows, cells):
               + f" | {sum(r['wrong'] for r in rs)}/{len(rs)} |")
 
 
+def _run(jobs, args) -> list:
+    """Every job's row (in parallel), also written to ``args.json`` when asked."""
+    from tqdm import tqdm
+
+    with ProcessPoolExecutor(args.workers) as pool:
+        rows = list(tqdm(pool.map(_one, jobs), total=len(jobs), desc="flights", unit="flight"))
+    if args.json:
+        from heli_core.files import write_text
+
+        write_text(args.json, json.dumps(rows, indent=1))
+    return rows
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--first-seed", type=int, default=1,
+                    help="first seed (default 1; calibrate on other seeds than the ones a table reports)")
     ap.add_argument("--duration", type=float, default=180.0)
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES), metavar="CASE")
@@ -140,26 +157,24 @@ def main(argv=None):
     ap.add_argument("--null-cells", action="store_true",
                     help="instead: effect-free flights of every bench cell, and the largest statistic per candidate "
                     "(the calibration of the floors)")
+    ap.add_argument("--json", default=None, metavar="PATH", help="also write every flight's row (found effects, "
+                    "round-1 statistics, closed-loop shares) to PATH")
     args = ap.parse_args(argv)
-    from tqdm import tqdm
-
+    seeds = range(args.first_seed, args.first_seed + args.seeds)
     if args.null_cells:
         from identification.bench import BENCH_CELLS
 
-        jobs = [("none", s, args.duration, c) for s in range(1, args.seeds + 1) for c in BENCH_CELLS]
-        with ProcessPoolExecutor(args.workers) as pool:
-            rows = list(tqdm(pool.map(_one, jobs), total=len(jobs), desc="flights", unit="flight"))
+        rows = _run([("none", s, args.duration, c) for s in seeds for c in BENCH_CELLS], args)
         print(f"\nCommand: python scripts/likelihood_diagnosis_study.py --null-cells --seeds {args.seeds} "
-              f"--duration {args.duration:g}")
+              f"--duration {args.duration:g}" + (f" --first-seed {args.first_seed}" if args.first_seed != 1 else ""))
         _null_table(rows, list(BENCH_CELLS))
         return
-    jobs = [(c, s, args.duration, args.cell) for c in args.cases for s in range(1, args.seeds + 1)]
-    with ProcessPoolExecutor(args.workers) as pool:
-        rows = list(tqdm(pool.map(_one, jobs), total=len(jobs), desc="flights", unit="flight"))
+    rows = _run([(c, s, args.duration, args.cell) for c in args.cases for s in seeds], args)
     print(f"\nLikelihood diagnosis, {args.seeds} seeds per case, {args.duration:g} s flights"
           + (f", bench cell {args.cell}" if args.cell else ", default heli simulate-flight pilot")
           + f". Command: python scripts/likelihood_diagnosis_study.py --seeds {args.seeds} --duration "
-          f"{args.duration:g}" + (f" --cell {args.cell}" if args.cell else ""))
+          f"{args.duration:g}" + (f" --cell {args.cell}" if args.cell else "")
+          + (f" --first-seed {args.first_seed}" if args.first_seed != 1 else ""))
     print("\n| case | named (all true axes) | partly | wrong effect | median s | what was named, most often |")
     print("|---|---|---|---|---|---|")
     for c in args.cases:
