@@ -55,8 +55,9 @@ import numpy as np
 
 from heli_core.params import ModelParams
 
-from .baselines import TABLE3_STARTS, TABLE4_M0, TABLE4_Q, TABLE5_LENGTHS, parameter_names
-from .baselines.single_axis import make_params
+from .baselines.ekf import TABLE4_M0, TABLE4_Q, TABLE5_LENGTHS
+from .baselines.nlr import TABLE3_STARTS
+from .baselines.single_axis import make_params, parameter_names
 from .errors import FlightLogError, IdentifiabilityError
 from .files import jsonable, write_text
 from .flight import Flight

@@ -13,7 +13,7 @@ import math
 import statistics
 from typing import TYPE_CHECKING
 
-from .baselines import P0_EQ74
+from .baselines.ekf import P0_EQ74
 from .markdown_tables import markdown_table
 from .method_comparison import TARGET_SPEEDUP
 

@@ -20,8 +20,9 @@ import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from .baselines import TABLE4_M0, TABLE4_Q, NonlinearRegression, ParameterEKF, rate_errors, simulate_rate
-from .baselines.single_axis import axis_index, make_params
+from .baselines.ekf import TABLE4_M0, TABLE4_Q, ParameterEKF
+from .baselines.nlr import NonlinearRegression
+from .baselines.single_axis import axis_index, make_params, rate_errors, simulate_rate
 from .files import jsonable
 from .flight import Flight
 from .integral_method import IntegralIdentifier
