@@ -47,14 +47,13 @@ first sample of every window is the level start.
 
 from __future__ import annotations
 
-import dataclasses
-
 import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from heli_core.config import configured
 from heli_core.terms import AXES
 
 from .closed_loop import (
@@ -382,22 +381,15 @@ def sweep_pairs(model, pairs, config: SweepConfig | None = None, **settings) -> 
 
 
 def sweep_config(config: SweepConfig | None, settings: dict) -> SweepConfig:
-    """``config`` (default ``SweepConfig()``) with ``settings`` replacing its fields.
+    """``config`` (default ``SweepConfig()``) with ``settings`` replacing its fields
+    (:func:`heli_core.config.configured`).
 
     Raises
     ------
     TypeError
-        A setting that is not a field of :class:`SweepConfig` (the message lists them).
+        ``config`` is not a SweepConfig, or a setting that is not one of its fields (the message lists them).
     """
-    if config is not None and not isinstance(config, SweepConfig):
-        raise TypeError(f"config must be a SweepConfig (the settings go by keyword: axis=..., windows=...), "
-                        f"got {config!r}")
-    fields = [f.name for f in dataclasses.fields(SweepConfig)]
-    unknown = sorted(set(settings) - set(fields))
-    if unknown:
-        raise TypeError(f"unknown sweep settings {', '.join(unknown)}; expected fields of SweepConfig "
-                        f"({', '.join(fields)})")
-    return dataclasses.replace(config or SweepConfig(), **settings)
+    return configured(SweepConfig, config, settings, "sweep")
 
 
 def _make_backend(backend):

@@ -27,7 +27,8 @@ import heli_core.terms
 from heli_core.errors import HeliError
 
 ROOT = Path(__file__).resolve().parents[1]
-CORE_MODULES = ("params", "physics", "discrete", "servo", "terms", "quaternion", "errors", "files", "backends")
+CORE_MODULES = ("params", "physics", "discrete", "servo", "terms", "quaternion", "errors", "files", "backends",
+                "config")
 UPPER_PACKAGES = ("identification", "heli_env", "controllers", "heli_cli", "model_store")
 
 
@@ -267,3 +268,31 @@ def test_one_linearisation_for_design_and_for_the_sweep():
     np.testing.assert_array_equal(A, A0)
     np.testing.assert_array_equal(B, B0)
     assert states == ["q", "servo_pitch", "pitch"] and A.shape == (3, 3)
+
+
+def test_a_config_object_or_its_fields_by_keyword():
+    """heli_core.config.configured: the default config, a keyword replacing the config's field, the same
+    object when nothing replaces it, and a TypeError naming an unknown setting or a config of another class."""
+    from dataclasses import dataclass
+
+    from heli_core.config import configured, whole_number
+
+    @dataclass(frozen=True)
+    class Settings:
+        count: int = 1
+        label: str = "a"
+
+        def __post_init__(self):
+            object.__setattr__(self, "count", whole_number(self.count, "count", 1))
+
+    base = Settings(count=3)
+    assert configured(Settings, None, {}, "test") == Settings()
+    assert configured(Settings, base, {}, "test") is base
+    assert configured(Settings, base, {"label": "b"}, "test") == Settings(count=3, label="b")
+    assert configured(Settings, None, {"count": 2.0}, "test").count == 2
+    with pytest.raises(ValueError, match=r"count must be a whole number >= 1, got 0"):
+        configured(Settings, base, {"count": 0}, "test")  # a replaced field is checked again
+    with pytest.raises(TypeError, match="unknown test settings counts; expected fields of Settings"):
+        configured(Settings, None, {"counts": 2}, "test")
+    with pytest.raises(TypeError, match="config must be a Settings"):
+        configured(Settings, {"count": 2}, {}, "test")

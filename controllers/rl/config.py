@@ -11,10 +11,10 @@ checked when training starts.
 
 from __future__ import annotations
 
-import dataclasses
 import math
-import numbers
 from dataclasses import dataclass
+
+from heli_core.config import configured, whole_number
 
 from ..errors import AgentError
 from .agent_file import ALGOS
@@ -35,13 +35,6 @@ DEFAULT_KWARGS = {
 
 INIT_DEG = 5.0
 """Default initial roll/pitch range [deg] and rate range [deg/s] of episodes without a residual (the env's)."""
-
-
-def _check_count(value, name, minimum=1):
-    whole = isinstance(value, numbers.Integral) or (isinstance(value, float) and value.is_integer())
-    if isinstance(value, bool) or not whole or value < minimum:
-        raise AgentError(f"{name} must be a whole number >= {minimum}, got {value!r}")
-    return int(value)
 
 
 @dataclass(frozen=True)
@@ -150,10 +143,10 @@ class TrainConfig:
             raise AgentError(f"algo must be one of {ALGOS}, got {self.algo!r}")
         for name, minimum in (("timesteps", 1), ("n_envs", 1), ("eval_freq", 0), ("checkpoint_freq", 0),
                               ("eval_episodes", 1)):
-            object.__setattr__(self, name, _check_count(getattr(self, name), name, minimum))
-        object.__setattr__(self, "surrogates", _check_count(self.surrogates, "surrogates", 0))
+            object.__setattr__(self, name, whole_number(getattr(self, name), name, minimum, AgentError))
+        object.__setattr__(self, "surrogates", whole_number(self.surrogates, "surrogates", 0, AgentError))
         if self.torch_threads is not None:
-            object.__setattr__(self, "torch_threads", _check_count(self.torch_threads, "torch_threads"))
+            object.__setattr__(self, "torch_threads", whole_number(self.torch_threads, "torch_threads", 1, AgentError))
         if self.max_seconds is not None and not (self.max_seconds > 0 and math.isfinite(self.max_seconds)):
             raise AgentError(f"max_seconds must be a positive number of seconds, got {self.max_seconds!r}")
         if self.residual is not None:
@@ -196,14 +189,5 @@ def make_config(config: TrainConfig | None = None, algo: str | None = None, time
     AgentError
         A bad setting (:class:`TrainConfig`).
     """
-    if config is not None and not isinstance(config, TrainConfig):
-        raise TypeError(f"config must be a TrainConfig, got {type(config).__name__}")
-    fields = {f.name for f in dataclasses.fields(TrainConfig)}
-    unknown = sorted(set(settings) - fields)
-    if unknown:
-        raise TypeError(f"unknown training settings {', '.join(unknown)}; expected fields of TrainConfig "
-                        f"({', '.join(sorted(fields))})")
     settings.update({k: v for k, v in (("algo", algo), ("timesteps", timesteps)) if v is not None})
-    if config is None:
-        return TrainConfig(**settings)
-    return dataclasses.replace(config, **settings) if settings else config
+    return configured(TrainConfig, config, settings, "training")
