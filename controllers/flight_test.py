@@ -42,6 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from heli_core.config import check, configured, is_flag, is_real, whole_number
 from heli_core.files import jsonable, write_text
 from heli_core.params import ModelParams
 from heli_core.physics import trim_sticks
@@ -51,11 +52,13 @@ from identification.synthetic import PAPER_PARAMS, FlightConfig, coloured_noise
 from .closed_loop import axis_index, disturbance_spectrum
 from .errors import SweepError
 from .metrics import QUANTILES
-from .replay import LoopInputs, fly, rk4_step
+from .replay import Autopilot, LoopInputs, fly, rk4_step
 from .sweep_inputs import check_pairs, load_model
 
 _DEG = 180.0 / math.pi
 KS_TARGET = 0.1
+TRUTHS = ("model", "paper")
+"""The truths named by a word (:attr:`FlightTestConfig.truth`); a ModelParams is the third kind."""
 
 
 def fit_corner(freq: np.ndarray, psd: np.ndarray, floor: float = 1e-3) -> float:
@@ -102,13 +105,77 @@ def wind_statistics(env_model, dt: float) -> dict:
 
 
 def _truth(truth, env_model) -> tuple[str, ModelParams]:
+    """(name, parameters) of the aircraft flown (:attr:`FlightTestConfig.truth`)."""
     if isinstance(truth, ModelParams):
         return "given", truth
-    if truth == "model":
-        return "model", env_model.params
-    if truth == "paper":
-        return "paper", PAPER_PARAMS
-    raise SweepError(f"truth must be 'model', 'paper' or a ModelParams, got {truth!r}")
+    return truth, env_model.params if truth == "model" else PAPER_PARAMS
+
+
+@dataclass(frozen=True)
+class FlightTestConfig:
+    """Settings of the flight tests of :func:`validate_against_flights` (all but the model, pairs and prediction).
+
+    ``validate_against_flights(model, pairs, config)`` flies them; keyword settings replace its fields
+    (``validate_against_flights(model, pairs, config, seed=3)``).
+
+    Attributes
+    ----------
+    axis : {"roll", "pitch", "yaw"} or int
+        Axis the pairs fly on; the prediction's nominal gains hold the other two.
+    n_flights : int
+        Flights per pair (the same fresh winds for every pair), >= 1.
+    duration : float
+        Length of each flight [s], > 0.
+    seed : int
+        Seeds the fresh wind, the collective and the sensor noise, >= 0.
+    truth : "model", "paper" or ModelParams
+        Parameters of the aircraft flown (see the module docstring).
+    dt : float
+        Autopilot period [s], > 0.
+    sensors : bool
+        The autopilot sees the flight generator's noisy sensors (default) or the true state.
+    substeps : int, optional
+        RK4 sub-steps per period, >= 1 (default the flight generator's, 4).
+    progress : bool
+        tqdm bars on stderr (when it is a terminal).
+    max_batch : int
+        Pair × flight states stepped at once, >= 1 (memory, never a number).
+
+    Raises
+    ------
+    SweepError
+        (a ValueError) A field out of range; the message names it, what was expected and what came.
+    """
+
+    axis: object = "roll"
+    n_flights: int = 10
+    duration: float = 60.0
+    seed: int = 0
+    truth: object = "model"
+    dt: float = 0.01
+    sensors: bool = True
+    substeps: int | None = None
+    progress: bool = True
+    max_batch: int = 4096
+
+    def __post_init__(self):
+        axis_index(self.axis)
+        for name, minimum in (("n_flights", 1), ("seed", 0), ("max_batch", 1)):
+            object.__setattr__(self, name, whole_number(getattr(self, name), name, minimum, SweepError))
+        if self.substeps is not None:
+            object.__setattr__(self, "substeps", whole_number(self.substeps, "substeps", 1, SweepError))
+        check(is_real(self.duration) and self.duration > 0, "duration", "a positive number of seconds",
+              self.duration, SweepError)
+        check(is_real(self.dt) and self.dt > 0, "dt", "a positive control period in seconds", self.dt, SweepError)
+        check(isinstance(self.truth, ModelParams) or (isinstance(self.truth, str) and self.truth in TRUTHS),
+              "truth", "'model', 'paper' or a ModelParams", self.truth, SweepError)
+        for name in ("sensors", "progress"):
+            check(is_flag(getattr(self, name)), name, "True or False", getattr(self, name), SweepError)
+
+    @property
+    def steps(self) -> int:
+        """Autopilot periods per flight."""
+        return int(round(self.duration / self.dt))
 
 
 @dataclass(eq=False)
@@ -198,9 +265,8 @@ def _prediction_rows(prediction, axis: str, dt: float, kp, kd) -> list:
     return rows
 
 
-def validate_against_flights(model, pairs, axis="roll", n_flights: int = 10, duration: float = 60.0, seed: int = 0,
-                             truth="model", dt: float = 0.01, sensors: bool = True, substeps: int | None = None,
-                             prediction=None, progress: bool = True, max_batch: int = 4096) -> FlightTestResult:
+def validate_against_flights(model, pairs, config: FlightTestConfig | None = None, *, prediction=None,
+                             **settings) -> FlightTestResult:
     """Fly the truth model under the PD autopilot in fresh wind; compare with the predicted distributions.
 
     Parameters
@@ -208,27 +274,15 @@ def validate_against_flights(model, pairs, axis="roll", n_flights: int = 10, dur
     model : str, Path, EnvModel or None
         The model directory whose library makes the prediction (None: the shipped model).
     pairs : sequence of (kp, kd)
-        Gain pairs [stick/rad, stick/(rad/s)] on ``axis``.
-    axis : {"roll", "pitch", "yaw"}
-    n_flights : int
-        Flights per pair (the same fresh winds for every pair).
-    duration : float
-        Length of each flight [s].
-    seed : int
-        Seeds the fresh wind, the collective and the sensor noise.
-    truth : "model", "paper" or ModelParams
-        Parameters of the aircraft flown (see the module docstring).
-    dt : float
-        Autopilot period [s].
-    sensors : bool
-        The autopilot sees the flight generator's noisy sensors (default) or the true state.
-    substeps : int, optional
-        RK4 sub-steps per period (default the flight generator's, 4).
+        Gain pairs [stick/rad, stick/(rad/s)] on the config's ``axis``.
+    config : FlightTestConfig, optional
+        The flight tests' settings (default ``FlightTestConfig()``), described there.
     prediction : SweepResult, optional
         A :func:`controllers.sweep.sweep_pairs` result for ``pairs`` on ``axis`` at ``dt`` with
         ``keep_samples=True`` (its nominal gains hold the other axes);
         default: the whole library replayed (each trace from its start, full length).
-    progress : bool
+    **settings
+        :class:`FlightTestConfig` fields replacing the config's (``axis="pitch", n_flights=5, ...``).
 
     Returns
     -------
@@ -237,56 +291,92 @@ def validate_against_flights(model, pairs, axis="roll", n_flights: int = 10, dur
     Raises
     ------
     SweepError
-        Bad pairs, flights or duration, a missing or corrupt model directory, or a ``prediction``
+        Bad pairs or settings, a missing or corrupt model directory, or a ``prediction``
         of another axis, another dt, without samples or without one of ``pairs``.
+    TypeError
+        ``config`` is not a FlightTestConfig, or a keyword is not one of its fields.
     """
+    cfg = configured(FlightTestConfig, config, settings, "flight test")
     env_model = load_model(model)
-    ax = axis_index(axis)
     arr, kp_all, kd_all = check_pairs(pairs)
-    if int(n_flights) != n_flights or n_flights < 1:
-        raise SweepError(f"n_flights must be a whole number >= 1, got {n_flights!r}")
-    if not (duration > 0 and math.isfinite(duration)):
-        raise SweepError(f"duration must be a positive number of seconds, got {duration!r}")
-    cfg = FlightConfig()
-    substeps = cfg.substeps if substeps is None else int(substeps)
-    truth_name, params = _truth(truth, env_model)
-    if prediction is None:
-        from .sweep import sweep_pairs
-
-        prediction = sweep_pairs(env_model, arr, axis=AXES[ax], duration=None, dt=dt, keep_samples=True,
-                                 progress=progress)
-    elif not prediction.samples:
-        raise SweepError("prediction must be run with keep_samples=True")
-    pred_idx = _prediction_rows(prediction, AXES[ax], dt, kp_all, kd_all)
-    nominal = np.asarray(prediction.settings["nominal_gains"])
-    pred_rows = [prediction.row(i) for i in pred_idx]
-    flyable = np.array([r["status"] == "stable" for r in pred_rows])
-
-    wind = wind_statistics(env_model, dt)
-    n = int(round(duration / dt))
-    inputs = _fresh_wind(np.random.default_rng(seed), wind, params, env_model.params, n, int(n_flights), dt,
-                         sensors, cfg)
-    idx = np.flatnonzero(flyable)
-    att, rate, sat = _fly(params, env_model.params, inputs, ax, kp_all[idx], kd_all[idx], nominal, dt, substeps,
-                          max_batch, progress)
-    table, samples = _compare(kp_all, kd_all, flyable, idx, att, rate, sat, n, prediction, pred_idx, pred_rows)
-    pset = prediction.settings
-    settings = {"truth": truth_name, "truth_parameters": params.values(), "n_flights": int(n_flights),
-                "duration": n * dt, "dt": dt, "seed": int(seed), "sensors": bool(sensors), "substeps": substeps,
-                "wind": wind, "nominal_gains": nominal.tolist(), "model": str(env_model.path),
-                "prediction": f"{pset['n_windows']} windows of {pset['duration']:g} s"}
-    return FlightTestResult(AXES[ax], table, settings, samples)
+    truth_name, params = _truth(cfg.truth, env_model)
+    predicted = _Prediction.of(prediction, env_model, arr, cfg)
+    wind = wind_statistics(env_model, cfg.dt)
+    inputs = _fresh_wind(cfg, wind, params, env_model.params)
+    idx = np.flatnonzero(predicted.flyable)
+    autopilot = Autopilot(axis_index(cfg.axis), kp_all[idx], kd_all[idx], predicted.nominal,
+                          np.sign(env_model.params.control_gains))
+    substeps = FlightConfig().substeps if cfg.substeps is None else cfg.substeps
+    flights = _fly(rk4_step(params, cfg.dt, substeps), inputs, autopilot, idx, cfg)
+    table, samples = _compare(kp_all, kd_all, predicted, flights)
+    pset = predicted.result.settings
+    settings = {"truth": truth_name, "truth_parameters": params.values(), "n_flights": cfg.n_flights,
+                "duration": cfg.steps * cfg.dt, "dt": cfg.dt, "seed": cfg.seed, "sensors": bool(cfg.sensors),
+                "substeps": substeps, "wind": wind, "nominal_gains": predicted.nominal.tolist(),
+                "model": str(env_model.path), "prediction": f"{pset['n_windows']} windows of {pset['duration']:g} s"}
+    return FlightTestResult(AXES[autopilot.axis], table, settings, samples)
 
 
-def _fresh_wind(rng, wind: dict, params, model_params, n: int, F: int, dt: float, sensors: bool,
-                cfg: FlightConfig) -> LoopInputs:
-    """What ``F`` flights of ``n`` periods hold over each period: fresh gusts, a wandering collective, sensors.
+@dataclass(frozen=True, eq=False)
+class _Prediction:
+    """The sweep the flights are held against: its result, and per pair its row's index and the row."""
 
-    Per flight, in this order from ``rng``: the gust of each axis (coloured noise at the library's
-    level and bandwidth), the collective (0.05 Hz low-pass around the library's mean), and with
-    ``sensors`` the flight generator's gyro (noise + rotor vibration) and attitude noise. The torque
-    is the truth's ``k·u_d``; the trim the autopilot adds is the identified model's (``model_params``).
+    result: object
+    index: list
+    rows: list
+
+    @classmethod
+    def of(cls, prediction, env_model, pairs, cfg: FlightTestConfig) -> _Prediction:
+        """``prediction``'s rows of ``pairs`` (checked, :func:`_prediction_rows`), or a replay of the whole
+        library computed here when ``prediction`` is None."""
+        axis = AXES[axis_index(cfg.axis)]
+        if prediction is None:
+            from .sweep import sweep_pairs
+
+            prediction = sweep_pairs(env_model, pairs, axis=axis, duration=None, dt=cfg.dt, keep_samples=True,
+                                     progress=cfg.progress)
+        elif not prediction.samples:
+            raise SweepError("prediction must be run with keep_samples=True")
+        index = _prediction_rows(prediction, axis, cfg.dt, pairs[:, 0], pairs[:, 1])
+        return cls(prediction, index, [prediction.row(i) for i in index])
+
+    @property
+    def flyable(self) -> np.ndarray:
+        """Pairs the prediction found stable (the others are not flown)."""
+        return np.array([r["status"] == "stable" for r in self.rows])
+
+    @property
+    def nominal(self) -> np.ndarray:
+        """(kp, kd) per axis of the held axes, shape (3, 2)."""
+        return np.asarray(self.result.settings["nominal_gains"])
+
+
+@dataclass(frozen=True, eq=False)
+class _Flights:
+    """What the flown pairs did on the swept axis: errors of the true state and the clipped periods."""
+
+    pairs: np.ndarray  # (P,) index of each flown pair among all the pairs
+    att: np.ndarray  # (P, n, F) attitude error [rad]
+    rate: np.ndarray  # (P, n, F) rate error [rad/s]
+    sat: np.ndarray  # (P, F) periods where the stick was clipped
+
+    @property
+    def steps(self) -> int:
+        return int(self.att.shape[1])
+
+
+def _fresh_wind(cfg: FlightTestConfig, wind: dict, params, model_params) -> LoopInputs:
+    """What ``cfg.n_flights`` flights of ``cfg.steps`` periods hold over each period: fresh gusts, a wandering
+    collective, sensors.
+
+    Per flight, in this order from ``numpy.random.default_rng(cfg.seed)``: the gust of each axis (coloured
+    noise at the library's level and bandwidth), the collective (0.05 Hz low-pass around the library's mean),
+    and with ``cfg.sensors`` the flight generator's gyro (noise + rotor vibration) and attitude noise
+    (:class:`~identification.synthetic.FlightConfig`). The torque is the truth's ``k·u_d``; the trim the
+    autopilot adds is the identified model's (``model_params``).
     """
+    rng, sensor = np.random.default_rng(cfg.seed), FlightConfig()
+    n, F, dt = cfg.steps, cfg.n_flights, cfg.dt
     fs = 1.0 / dt
     gust = np.empty((3, n, F))
     col = np.empty((n, F))
@@ -298,34 +388,30 @@ def _fresh_wind(rng, wind: dict, params, model_params, n: int, F: int, dt: float
             gust[i, :, f] = coloured_noise(rng, n, fs, wind["corner_hz"][i], wind["std"][i])
         col[:, f] = np.clip(wind["collective_mean"] + coloured_noise(rng, n, fs, 0.05, wind["collective_std"]),
                             -1.0, 1.0)
-        if sensors:  # the flight generator's sensor model
+        if cfg.sensors:  # the flight generator's sensor model
             phase = rng.uniform(0, 2 * np.pi, size=(3, 2))
-            vib = sum(cfg.vibration / (j + 1) * np.sin(2 * np.pi * (j + 1) * cfg.rotor_hz * t[None, :]
-                                                          + phase[:, j:j + 1]) for j in range(2))
-            gyro[:, :, f] = cfg.gyro_noise * rng.standard_normal((3, n)) + vib
-            attn[:, :, f] = cfg.attitude_noise * rng.standard_normal((3, n))
+            vib = sum(sensor.vibration / (j + 1) * np.sin(2 * np.pi * (j + 1) * sensor.rotor_hz * t[None, :]
+                                                             + phase[:, j:j + 1]) for j in range(2))
+            gyro[:, :, f] = sensor.gyro_noise * rng.standard_normal((3, n)) + vib
+            attn[:, :, f] = sensor.attitude_noise * rng.standard_normal((3, n))
     torque = params.control_gains[:, None, None] * gust
     trim = np.array(trim_sticks(model_params, col))  # the autopilot's trim: the identified model's
     return LoopInputs(trim, col, torque, att_noise=attn, rate_noise=gyro)
 
 
-def _fly(params, model_params, inputs: LoopInputs, ax, kp, kd, nominal, dt, substeps, max_batch, progress):
-    """The truth (``params``, RK4 with ``substeps``) under the autopilot (signs of ``model_params``).
-
-    Returns the swept axis' attitude and rate errors (P, n, F) of the true state and the clipped periods (P, F).
-    """
-    P, n, F = kp.size, inputs.steps, inputs.windows
+def _fly(step, inputs: LoopInputs, autopilot: Autopilot, pairs: np.ndarray, cfg: FlightTestConfig) -> _Flights:
+    """The truth (``step``: its RK4 with sub-steps) under ``autopilot`` flying ``pairs`` (their indices among
+    all the pairs); the swept axis' errors of the true state and the clipped periods."""
+    P, n, F = autopilot.pairs, inputs.steps, inputs.windows
     att = np.zeros((P, n, F), dtype=np.float32)
     rate = np.zeros((P, n, F), dtype=np.float32)
     sat = np.zeros((P, F))
-    signs = np.sign(model_params.control_gains)
-    for sl, rec in fly(rk4_step(params, dt, substeps), inputs, ax, kp, kd, nominal, signs, max_batch, progress,
-                       "flight tests"):
+    for sl, rec in fly(step, inputs, autopilot, cfg.max_batch, cfg.progress, "flight tests"):
         att[sl], rate[sl], sat[sl] = rec.att, rec.rate, rec.sat
-    return att, rate, sat
+    return _Flights(pairs, att, rate, sat)
 
 
-def _compare(kp_all, kd_all, flyable, idx, att, rate, sat, n, prediction, pred_idx, pred_rows):
+def _compare(kp_all, kd_all, predicted: _Prediction, flights: _Flights):
     """The table of measured against predicted distributions per pair, and the measured samples."""
     from scipy import stats as sps
 
@@ -335,13 +421,14 @@ def _compare(kp_all, kd_all, flyable, idx, att, rate, sat, n, prediction, pred_i
         cols += [f"att_p{q}_deg", f"pred_td_att_p{q}_deg", f"pred_fd_att_p{q}_deg",
                  f"rate_p{q}_dps", f"pred_td_rate_p{q}_dps", f"pred_fd_rate_p{q}_dps"]
     cols += ["att_p90_err_td", "att_p90_err_fd", "pred_settle_s"]
-    table = {"kp": kp_all, "kd": kd_all, "status": np.where(flyable, "flown", "unstable").astype(object)}
+    table = {"kp": kp_all, "kd": kd_all, "status": np.where(predicted.flyable, "flown", "unstable").astype(object)}
     table.update({c: np.full(G, np.nan) for c in cols})
     samples = {}
-    for j, gi in enumerate(idx):
-        row, pi = pred_rows[gi], pred_idx[gi]
+    att, rate, sat, n = flights.att, flights.rate, flights.sat, flights.steps
+    for j, gi in enumerate(flights.pairs):
+        row, pi = predicted.rows[gi], predicted.index[gi]
         ma, mr = np.abs(att[j].ravel()) * _DEG, np.abs(rate[j].ravel()) * _DEG
-        pa, pr = np.abs(prediction.samples[pi][0]), np.abs(prediction.samples[pi][1])
+        pa, pr = np.abs(predicted.result.samples[pi][0]), np.abs(predicted.result.samples[pi][1])
         if not (np.all(np.isfinite(ma)) and np.max(ma) < 60.0):
             table["status"][gi] = "diverged"
             continue

@@ -122,23 +122,50 @@ def _progress(total, show, desc):
                 disable=not show or not sys.stderr.isatty())
 
 
-def fly(step, inputs: LoopInputs, axis: int, kp, kd, nominal, signs, max_batch: int = 4096,
-        progress: bool = True, desc: str | None = None):
-    """Fly gain pairs ``(kp[g], kd[g])`` on ``axis`` against every window; yield ``(slice, LoopRecord)`` per chunk.
+@dataclass(frozen=True, eq=False)
+class Autopilot:
+    """The PD attitude hold flown: gain pairs on one axis, nominal gains on the other two, the control signs.
+
+    Attributes
+    ----------
+    axis : int
+        Swept axis, 0 roll, 1 pitch, 2 yaw.
+    kp, kd : ndarray, shape (G,)
+        Gains of the swept axis [stick/rad], [stick/(rad/s)]; pair ``g`` is ``(kp[g], kd[g])``.
+    nominal : array (3, 2)
+        (kp, kd) of the held axes.
+    signs : array (3,)
+        Signs of the control gains (k2, k6, k10) the autopilot assumes.
+    """
+
+    axis: int
+    kp: np.ndarray
+    kd: np.ndarray
+    nominal: object
+    signs: object
+
+    @property
+    def pairs(self) -> int:
+        return int(self.kp.size)
+
+    def gains(self, pairs: slice) -> list:
+        """(kp, kd) of each axis flying ``pairs``: the swept axis' as columns (pairs, 1), the held axes' numbers."""
+        gains = [(self.nominal[i][0], self.nominal[i][1]) for i in range(3)]
+        gains[self.axis] = (self.kp[pairs][:, None], self.kd[pairs][:, None])
+        return gains
+
+
+def fly(step, inputs: LoopInputs, autopilot: Autopilot, max_batch: int = 4096, progress: bool = True,
+        desc: str | None = None):
+    """Fly the autopilot's gain pairs against every window; yield ``(slice, LoopRecord)`` per chunk of pairs.
 
     Parameters
     ----------
     step : callable
         ``step(x, u, d)`` advancing the state one period (:func:`zoh_step` or :func:`rk4_step`).
     inputs : LoopInputs
-    axis : int
-        Swept axis, 0 roll, 1 pitch, 2 yaw.
-    kp, kd : ndarray, shape (G,)
-        Gains of the swept axis [stick/rad], [stick/(rad/s)].
-    nominal : array (3, 2)
-        (kp, kd) of the held axes.
-    signs : array (3,)
-        Signs of the control gains (k2, k6, k10) the autopilot assumes.
+    autopilot : Autopilot
+        The pairs flown on the swept axis, the held axes' gains and the signs assumed.
     max_batch : int
         Pair × window states stepped at once; chunks hold ``max(1, max_batch // W)`` pairs.
     progress : bool
@@ -152,16 +179,15 @@ def fly(step, inputs: LoopInputs, axis: int, kp, kd, nominal, signs, max_batch: 
         The chunk's pairs and what they did. Every pair's states are independent of the
         others in its chunk (element-wise numpy), so the split changes no number.
     """
-    G, W, n = kp.size, inputs.windows, inputs.steps
+    G, W, n = autopilot.pairs, inputs.windows, inputs.steps
     cp = max(1, max_batch // W)
     ins = _contiguous(inputs)
-    with _progress(G * W * n, progress, desc or f"replay {AXES[axis]}") as bar, \
+    with _progress(G * W * n, progress, desc or f"replay {AXES[autopilot.axis]}") as bar, \
             np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         for c0 in range(0, G, cp):
             sl = slice(c0, min(G, c0 + cp))
-            gains = [(nominal[i][0], nominal[i][1]) for i in range(3)]
-            gains[axis] = (kp[sl][:, None], kd[sl][:, None])
-            yield sl, _fly_chunk(step, ins, axis, gains, signs, sl.stop - sl.start, bar)
+            yield sl, _fly_chunk(step, ins, autopilot.axis, autopilot.gains(sl), autopilot.signs,
+                                 sl.stop - sl.start, bar)
 
 
 def _contiguous(inputs: LoopInputs) -> dict:

@@ -495,8 +495,7 @@ class _Run:
                                         cfg.max_batch, self.hist_edges)
             self.tasks += 1
         else:
-            st, h, o, div, smp, n_tasks = replay_on(self.be, rp, kp[idx], kd[idx], self.nominal, cfg.keep_samples,
-                                                    cfg.progress, cfg.max_batch, self.hist_edges, cfg.chunk_pairs)
+            st, h, o, div, smp, n_tasks = replay_on(self.be, rp, kp[idx], kd[idx], self.nominal, self.hist_edges, cfg)
             self.tasks += n_tasks
             self.where = self.be.describe()
         for c in TD_COLUMNS:
@@ -515,6 +514,21 @@ class _Run:
             return f"without margin (gain margin {gm[0]:.2f} dB, phase margin {pm[0]:.1f}°)"
         return None
 
+    def settings(self, layout: str, total_seconds: float) -> dict:
+        """The result's ``settings``: what was swept, on which windows and gains, how long each part took."""
+        rp, env_model, cfg = self.rp, self.rp.env_model, self.cfg
+        df = self.freq[1] - self.freq[0]
+        return {
+            "model": str(env_model.path), "library_version": env_model.library_version,
+            "trace_ids": list(env_model.trace_ids), "axis": AXES[rp.axis], "layout": layout, "dt": rp.dt,
+            "duration": rp.steps * rp.dt, "steps": rp.steps, "seed": int(cfg.seed), "n_windows": len(rp.windows),
+            "nominal_gains": self.nominal.tolist(), "agree_tol": float(cfg.agree_tol),
+            "linearised_at_collective": self.plant.collective,
+            "ud_std": np.sqrt(np.sum(self.psd, axis=1) * df).tolist(),
+            "seconds": {"total": total_seconds, **self.seconds}, "backend": self.where, "tasks": self.tasks,
+            "sensors": env_model.sensors.to_dict() if rp.inputs.att_noise is not None else None,
+        }
+
 
 def _predicted(table: dict, sigma: np.ndarray, agree_tol: float) -> None:
     """The frequency-domain columns from the predicted σ, and where the two domains disagree, in place."""
@@ -528,21 +542,6 @@ def _predicted(table: dict, sigma: np.ndarray, agree_tol: float) -> None:
         table["rate_p90_rel_diff"] = table["rate_p90_dps"] / table["pred_rate_p90_dps"] - 1.0
     table["disagree"] = (np.abs(np.nan_to_num(table["att_p90_rel_diff"])) > agree_tol) | (
         np.abs(np.nan_to_num(table["rate_p90_rel_diff"])) > agree_tol)
-
-
-def _settings(rp, cfg: SweepConfig, layout, nominal, plant, freq, psd, seconds, where, n_tasks) -> dict:
-    env_model = rp.env_model
-    df = freq[1] - freq[0]
-    return {
-        "model": str(env_model.path), "library_version": env_model.library_version,
-        "trace_ids": list(env_model.trace_ids), "axis": AXES[rp.axis], "layout": layout, "dt": rp.dt,
-        "duration": rp.steps * rp.dt, "steps": rp.steps, "seed": int(cfg.seed), "n_windows": len(rp.windows),
-        "nominal_gains": nominal.tolist(), "agree_tol": float(cfg.agree_tol),
-        "linearised_at_collective": plant.collective,
-        "ud_std": np.sqrt(np.sum(psd, axis=1) * df).tolist(),
-        "seconds": seconds, "backend": where, "tasks": n_tasks,
-        "sensors": env_model.sensors.to_dict() if rp.inputs.att_noise is not None else None,
-    }
 
 
 def _grown(run: _Run, kp_values, kd_values, layout, cfg: SweepConfig):
@@ -577,8 +576,7 @@ def _sweep(model, kp_values, kd_values, layout, cfg: SweepConfig) -> SweepResult
         run = _Run(rp, plant, nominal, freq, psd, hist_edges, be, cfg,
                    {"time_domain": 0.0, "frequency_domain": time.perf_counter() - t0})
         kp_values, kd_values, block, extension = _grown(run, kp_values, kd_values, layout, cfg)
-        seconds = {"total": time.perf_counter() - t_start, **run.seconds}
-        settings = _settings(rp, cfg, layout, nominal, plant, freq, psd, seconds, run.where, run.tasks)
+        settings = run.settings(layout, time.perf_counter() - t_start)
         settings["extension"] = extension
         return SweepResult(AXES[rp.axis], np.asarray(kp_values), np.asarray(kd_values), block.table, hist_edges,
                            block.hist, block.overflow, rp.windows, freq, psd, settings, block.samples)

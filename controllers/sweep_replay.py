@@ -20,7 +20,7 @@ from heli_core.terms import AXES
 
 from .errors import SweepError
 from .metrics import abs_in_place, error_metrics_inplace
-from .replay import fly, zoh_step
+from .replay import Autopilot, fly, zoh_step
 
 _DEG = 180.0 / math.pi
 MAX_ANGLE_DEG = 60.0
@@ -69,9 +69,8 @@ def replay(rp, kp, kd, nominal, keep_samples=False, progress=True, max_batch=409
     overflow = np.zeros(G, dtype=np.int64)
     diverged = np.zeros(G, dtype=bool)
     samples = {}
-    signs = np.sign(rp.params.control_gains)
-    chunks = fly(zoh_step(rp.params, rp.dt), rp.inputs, rp.axis, kp, kd, nominal, signs, max_batch, progress,
-                 f"sweep {AXES[rp.axis]}")
+    autopilot = Autopilot(rp.axis, kp, kd, nominal, np.sign(rp.params.control_gains))
+    chunks = fly(zoh_step(rp.params, rp.dt), rp.inputs, autopilot, max_batch, progress, f"sweep {AXES[rp.axis]}")
     for sl, rec in chunks:
         if keep_samples:  # before the statistics, which work in place
             for j in range(sl.stop - sl.start):
@@ -127,8 +126,12 @@ def _replay_task(item, shared):
     return replay(rp, kp, kd, nominal, keep_samples, False, max_batch, edges)
 
 
-def replay_on(backend, rp, kp, kd, nominal, keep_samples, progress, max_batch, edges, chunk_pairs):
+def replay_on(backend, rp, kp, kd, nominal, edges, cfg):
     """:func:`replay` split into chunks of pairs run as tasks of ``backend``, joined in pair order.
+
+    ``cfg`` is the sweep's :class:`~controllers.sweep.SweepConfig`: its ``chunk_pairs`` split the pairs into
+    tasks (:func:`chunks`), its ``keep_samples`` and ``max_batch`` go to each task's :func:`replay`, and its
+    ``progress`` shows a bar of finished tasks; ``edges`` are the histogram's.
 
     Every pair's replay is independent of the others in its batch (element-wise
     numpy over the (pairs, windows) states, per-row statistics), so the joined
@@ -140,9 +143,9 @@ def replay_on(backend, rp, kp, kd, nominal, keep_samples, progress, max_batch, e
     -------
     What :func:`replay` returns, and the number of tasks.
     """
-    bounds = chunks(kp.size, len(rp.windows), chunk_pairs)
-    shared = (replace(rp, env_model=None), np.asarray(nominal, dtype=float), keep_samples, max_batch, edges)
-    parts = backend.map(_replay_task, [(kp[a:b], kd[a:b]) for a, b in bounds], shared, progress=progress,
+    bounds = chunks(kp.size, len(rp.windows), cfg.chunk_pairs)
+    shared = (replace(rp, env_model=None), np.asarray(nominal, dtype=float), cfg.keep_samples, cfg.max_batch, edges)
+    parts = backend.map(_replay_task, [(kp[a:b], kd[a:b]) for a, b in bounds], shared, progress=cfg.progress,
                         desc=f"sweep {AXES[rp.axis]}")
     stats = {c: np.concatenate([p[0][c] for p in parts]) for c in TD_COLUMNS}
     hist = np.concatenate([p[1] for p in parts])

@@ -19,7 +19,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from controllers import closed_loop as cl
 from controllers.errors import SweepError
-from controllers.flight_test import fit_corner, validate_against_flights
+from controllers.flight_test import FlightTestConfig, fit_corner, validate_against_flights
 from controllers.sweep import COLUMNS, TD_COLUMNS, parse_range, sweep_gains, sweep_pairs
 from heli_cli.main import main
 from heli_env import HeliAttitudeEnv
@@ -415,6 +415,50 @@ def test_flight_tests_use_the_rows_of_a_matching_prediction(shipped, short_predi
     assert_array_equal(res.table["pred_td_att_p90_deg"], short_prediction.table["att_p90_deg"][::-1])
 
 
+def _same_flight_tests(a, b):
+    for c, v in a.table.items():
+        assert_array_equal(b.table[c], v, err_msg=c)
+    assert a.settings == b.settings
+    assert a.samples.keys() == b.samples.keys()
+    for k, v in a.samples.items():
+        assert_array_equal(b.samples[k][0], v[0])
+
+
+def test_flight_tests_take_their_settings_as_one_config_or_by_keyword(shipped, short_prediction):
+    """The same flights, bit for bit, from a FlightTestConfig and from its fields by keyword; a keyword given
+    beside a config replaces the config's field (as SweepConfig's and TrainConfig's do)."""
+    kw = {"n_flights": 2, "duration": 2.0, "seed": 7, "truth": "paper", "substeps": 2, "progress": False}
+    config = FlightTestConfig(**kw)
+    by_keyword = validate_against_flights(shipped, [(3.0, 1.0), (5.0, 1.0)], prediction=short_prediction, **kw)
+    by_config = validate_against_flights(shipped, [(3.0, 1.0), (5.0, 1.0)], config, prediction=short_prediction)
+    _same_flight_tests(by_keyword, by_config)
+    other_seed = validate_against_flights(shipped, [(3.0, 1.0), (5.0, 1.0)], config, prediction=short_prediction,
+                                          seed=8)
+    assert other_seed.settings["seed"] == 8 and config.seed == 7
+    _same_flight_tests(validate_against_flights(shipped, [(3.0, 1.0), (5.0, 1.0)], prediction=short_prediction,
+                                                **{**kw, "seed": 8}), other_seed)
+    with pytest.raises(TypeError, match="unknown flight test settings flights; expected fields of FlightTestConfig"):
+        validate_against_flights(shipped, [(3.0, 1.0)], flights=3)
+    with pytest.raises(TypeError, match="config must be a FlightTestConfig"):
+        validate_against_flights(shipped, [(3.0, 1.0)], "pitch")
+
+
+@pytest.mark.parametrize("field, value, match", [
+    ("n_flights", 0, "n_flights must be a whole number >= 1, got 0"),
+    ("n_flights", 2.5, "n_flights must be a whole number >= 1, got 2.5"),
+    ("duration", -1.0, "duration must be a positive number of seconds, got -1.0"),
+    ("dt", float("nan"), "dt must be a positive control period in seconds, got nan"),
+    ("seed", -1, "seed must be a whole number >= 0, got -1"),
+    ("truth", "moon", "truth must be 'model', 'paper' or a ModelParams, got 'moon'"),
+    ("substeps", 0, "substeps must be a whole number >= 1, got 0"),
+    ("sensors", "yes", "sensors must be True or False, got 'yes'"),
+    ("axis", "up", "axis"),
+])
+def test_a_bad_flight_test_setting_is_named(field, value, match):
+    with pytest.raises(SweepError, match=match):
+        FlightTestConfig(**{field: value})
+
+
 # ------------------------------------------------------------------------- CLI
 def test_cli_writes_the_outputs(tmp_path, capsys):
     out = tmp_path / "sw"
@@ -466,16 +510,16 @@ def test_cli_rejects_a_bad_duration(capsys):
 # ------------------------------------------------------- one closed loop, one sampler, one config
 def test_the_replay_splits_pairs_into_chunks_without_changing_a_number(shipped):
     """controllers.replay.fly: every pair's states are independent of the others in its chunk."""
-    from controllers.replay import fly, zoh_step
+    from controllers.replay import Autopilot, fly, zoh_step
     from controllers.sweep_inputs import prepare
 
     rp = prepare(shipped, "pitch", 2.0, 0.01, 3, None, 3)
     kp, kd = np.array([1.0, 3.0, 6.0]), np.array([0.5, 1.0, 2.0])
     nominal = np.array([[8.0, 2.0], [8.0, 2.0], [1.0, 0.3]])
-    signs = np.sign(shipped.params.control_gains)
+    autopilot = Autopilot(1, kp, kd, nominal, np.sign(shipped.params.control_gains))
     step = zoh_step(shipped.params, 0.01)
-    whole = [rec for _, rec in fly(step, rp.inputs, 1, kp, kd, nominal, signs, progress=False)]
-    parts = [rec for _, rec in fly(step, rp.inputs, 1, kp, kd, nominal, signs, max_batch=1, progress=False)]
+    whole = [rec for _, rec in fly(step, rp.inputs, autopilot, progress=False)]
+    parts = [rec for _, rec in fly(step, rp.inputs, autopilot, max_batch=1, progress=False)]
     assert len(whole) == 1 and len(parts) == 3
     for name in ("att", "rate", "act", "sat", "omax"):
         assert_array_equal(np.concatenate([getattr(r, name) for r in parts]), getattr(whole[0], name),
@@ -483,16 +527,17 @@ def test_the_replay_splits_pairs_into_chunks_without_changing_a_number(shipped):
 
 
 def test_the_replay_with_zero_sensor_noise_flies_the_true_state(shipped):
-    from controllers.replay import LoopInputs, fly, rk4_step
+    from controllers.replay import Autopilot, LoopInputs, fly, rk4_step
     from controllers.sweep_inputs import prepare
 
     rp = prepare(shipped, "roll", 1.0, 0.01, 0, None, 2, sensors=False)
     quiet = LoopInputs(rp.inputs.trim, rp.inputs.col, rp.inputs.torque, np.zeros_like(rp.inputs.torque),
                        np.zeros_like(rp.inputs.torque))
-    args = (0, np.array([3.0]), np.array([1.0]), np.array([[3.0, 1.0]] * 3), np.sign(shipped.params.control_gains))
+    autopilot = Autopilot(0, np.array([3.0]), np.array([1.0]), np.array([[3.0, 1.0]] * 3),
+                          np.sign(shipped.params.control_gains))
     step = rk4_step(shipped.params, 0.01, 2)
-    (_, a), = fly(step, rp.inputs, *args, progress=False)
-    (_, b), = fly(step, quiet, *args, progress=False)
+    (_, a), = fly(step, rp.inputs, autopilot, progress=False)
+    (_, b), = fly(step, quiet, autopilot, progress=False)
     for name in ("att", "rate", "act", "sat"):
         assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
 
