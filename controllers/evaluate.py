@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from heli_core.config import check, configured, is_real, whole_number
 from heli_core.files import jsonable, write_text
 from heli_core.terms import AXES
 
@@ -40,7 +41,7 @@ from .errors import AgentError
 from .evaluate_report import comparison_markdown, metrics_table  # noqa: F401  (public names of this module)
 from .evaluate_report import evaluation_markdown, plot_episode
 from .metrics import METRIC_NAMES, error_metrics
-from .trace_split import as_segments, draw_windows, split_traces
+from .trace_split import TraceSplit, as_segments, draw_windows, split_traces
 
 SCHEMA = "heli-env/agent-evaluation"
 
@@ -138,9 +139,63 @@ class EvaluationResult:
 
 
 # --------------------------------------------------------------------- evaluation
-def evaluate_agent(agent, model=None, traces=None, episodes_per_trace: int = 2, episode_seconds: float = 30.0,
-                   seed: int = 0, task="hold", split=None, init_angle_deg: float = 0.0, init_rate_deg: float = 0.0,
-                   name: str | None = None) -> EvaluationResult:
+@dataclass(frozen=True)
+class EvaluationConfig:
+    """Settings of :func:`evaluate_agent`: which gust episodes an agent flies (all but the agent and the model).
+
+    ``evaluate_agent(agent, model, config)`` flies them; keyword settings replace its fields
+    (``evaluate_agent(agent, model, config, seed=3)``). One config flies several agents on the very same
+    episodes.
+
+    Attributes
+    ----------
+    traces : None, str, or sequence of int / TraceSegment
+        Gust segments: None or "held-out" the held-out side of ``split``, "train",
+        "all", or explicit trace indices / segments.
+    episodes_per_trace : int
+        Episodes per segment, at distinct offsets where the segment has room, >= 1.
+    episode_seconds : float
+        Episode length [s], > 0.
+    seed : int
+        Seeds the window draw and the environment copies, >= 0.
+    task : str or TaskConfig
+        Environment task; "hold" by default (the sweep's).
+    split : TraceSplit, optional
+        Default ``split_traces(n_traces)`` (fraction 0.25, seed 0).
+    init_angle_deg, init_rate_deg : float
+        Initial roll/pitch and rate ranges [deg], [deg/s], >= 0 (default 0: start at rest).
+
+    Raises
+    ------
+    AgentError
+        (a ValueError) A field out of range; the message names it, what was expected and what came. The
+        traces, the task and episodes longer than a gust segment are checked against the model, by
+        :func:`evaluate_agent`.
+    """
+
+    traces: object = None
+    episodes_per_trace: int = 2
+    episode_seconds: float = 30.0
+    seed: int = 0
+    task: object = "hold"
+    split: TraceSplit | None = None
+    init_angle_deg: float = 0.0
+    init_rate_deg: float = 0.0
+
+    def __post_init__(self):
+        for name, minimum in (("episodes_per_trace", 1), ("seed", 0)):
+            object.__setattr__(self, name, whole_number(getattr(self, name), name, minimum, AgentError))
+        check(is_real(self.episode_seconds) and self.episode_seconds > 0, "episode_seconds",
+              "a positive number of seconds", self.episode_seconds, AgentError)
+        for name in ("init_angle_deg", "init_rate_deg"):
+            value = getattr(self, name)
+            check(is_real(value) and value >= 0, name, "a number >= 0", value, AgentError)
+        check(self.split is None or isinstance(self.split, TraceSplit), "split", "a TraceSplit or None", self.split,
+              AgentError)
+
+
+def evaluate_agent(agent, model=None, config: EvaluationConfig | None = None, *, name: str | None = None,
+                   **settings) -> EvaluationResult:
     """Fly an agent on gust windows of the library and measure its error distributions.
 
     Parameters
@@ -150,23 +205,12 @@ def evaluate_agent(agent, model=None, traces=None, episodes_per_trace: int = 2, 
         it receives the batch of observations ``(episodes, 12)``.
     model : str, Path, EnvModel or None
         Model directory (None: the shipped model).
-    traces : None, str, or sequence of int / TraceSegment
-        Gust segments: None or "held-out" the held-out side of ``split``, "train",
-        "all", or explicit trace indices / segments.
-    episodes_per_trace : int
-        Episodes per segment, at distinct offsets where the segment has room.
-    episode_seconds : float
-        Episode length [s].
-    seed : int
-        Seeds the window draw and the environment copies.
-    task : str or TaskConfig
-        Environment task; "hold" by default (the sweep's).
-    split : TraceSplit, optional
-        Default ``split_traces(n_traces)`` (fraction 0.25, seed 0).
-    init_angle_deg, init_rate_deg : float
-        Initial roll/pitch and rate ranges [deg], [deg/s] (default 0: start at rest).
+    config : EvaluationConfig, optional
+        The episodes flown (default ``EvaluationConfig()``), described there.
     name : str, optional
         Label in reports (default from the agent).
+    **settings
+        :class:`EvaluationConfig` fields replacing the config's (``traces="all", episodes_per_trace=4, ...``).
 
     Returns
     -------
@@ -175,39 +219,40 @@ def evaluate_agent(agent, model=None, traces=None, episodes_per_trace: int = 2, 
     Raises
     ------
     AgentError
-        Bad ``episodes_per_trace``, traces, task or episode length, or episodes
-        longer than a gust segment.
+        Bad settings, traces, task or episode length, or episodes longer than a gust segment.
+    TypeError
+        ``config`` is not an EvaluationConfig, or a keyword is not one of its fields.
     heli_env.errors.EnvModelError
         Missing or corrupt model directory.
     """
     from heli_env.model_dir import EnvModel, load_env_model
     from heli_env.vector_env import HeliAttitudeVectorEnv
 
-    if int(episodes_per_trace) != episodes_per_trace or episodes_per_trace < 1:
-        raise AgentError(f"episodes_per_trace must be a whole number >= 1, got {episodes_per_trace!r}")
+    cfg = configured(EvaluationConfig, config, settings, "evaluation")
     t0 = time.perf_counter()
     env_model = model if isinstance(model, EnvModel) else load_env_model(model)
+    traces = cfg.traces
     label = traces if isinstance(traces, str) else ("held-out" if traces is None else "chosen")
     kind, desc = describe_agent(agent)
     try:
-        split = split_traces(env_model.n_traces) if split is None else split
+        split = split_traces(env_model.n_traces) if cfg.split is None else cfg.split
         segments = as_segments(traces, split, "held-out")
-        E = len(segments) * int(episodes_per_trace)  # draw_windows(per_segment=) gives that many, in order
-        env = HeliAttitudeVectorEnv(E, model=env_model, task=task, episode_seconds=episode_seconds,
-                                    init_angle_deg=init_angle_deg, init_rate_deg=init_rate_deg)
-        windows = draw_windows(env_model, segments, env.spec_.needed, np.random.default_rng(seed),
-                               per_segment=int(episodes_per_trace))
+        E = len(segments) * cfg.episodes_per_trace  # draw_windows(per_segment=) gives that many, in order
+        env = HeliAttitudeVectorEnv(E, model=env_model, task=cfg.task, episode_seconds=cfg.episode_seconds,
+                                    init_angle_deg=cfg.init_angle_deg, init_rate_deg=cfg.init_rate_deg)
+        windows = draw_windows(env_model, segments, env.spec_.needed, np.random.default_rng(cfg.seed),
+                               per_segment=cfg.episodes_per_trace)
     except ValueError as e:  # bad traces, task or episode length; episodes longer than the segments
         raise AgentError(str(e)) from e
-    rec = _fly(agent, env, *_reset_on(env, windows, seed))
+    rec = _fly(agent, env, *_reset_on(env, windows, cfg.seed))
     seconds = time.perf_counter() - t0
     metrics, episodes = _tally(rec, windows, env_model.trace_ids)
     used = sorted({s.trace for s in segments})
     settings = {
-        "model": str(env_model.path), "library_version": env_model.library_version, "seed": int(seed),
-        "task": task if isinstance(task, str) else task.task, "dt": env.spec_.dt,
-        "episode_seconds": float(episode_seconds), "episodes_per_trace": int(episodes_per_trace),
-        "init_angle_deg": float(init_angle_deg), "init_rate_deg": float(init_rate_deg),
+        "model": str(env_model.path), "library_version": env_model.library_version, "seed": cfg.seed,
+        "task": cfg.task if isinstance(cfg.task, str) else cfg.task.task, "dt": env.spec_.dt,
+        "episode_seconds": float(cfg.episode_seconds), "episodes_per_trace": cfg.episodes_per_trace,
+        "init_angle_deg": float(cfg.init_angle_deg), "init_rate_deg": float(cfg.init_rate_deg),
         "traces_label": label, "segments": [s.to_dict() for s in segments],
         "trace_ids_used": [env_model.trace_ids[t] for t in used], "split": split.to_dict(),
         "sample_rate": env_model.sample_rate, "seconds": seconds, "agent": desc,

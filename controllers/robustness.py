@@ -39,7 +39,8 @@ def robustness_check(agent, model=None, cases=None, **evaluate_kwargs) -> dict:
     cases : dict of str to dict, optional
         Name → ``perturbed`` arguments (default :data:`CASES`); the first is the reference.
     **evaluate_kwargs
-        Passed to :func:`controllers.evaluate.evaluate_agent` (traces, episodes_per_trace, seed, ...).
+        Passed to :func:`controllers.evaluate.evaluate_agent`: ``config=`` an
+        :class:`~controllers.evaluate.EvaluationConfig`, or its fields (traces, episodes_per_trace, seed, ...).
 
     Returns
     -------

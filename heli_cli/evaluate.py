@@ -37,7 +37,7 @@ def register(sub):
 
 
 def run(args) -> int:
-    from controllers.evaluate import describe_agent, evaluate_agent
+    from controllers.evaluate import EvaluationConfig, describe_agent, evaluate_agent
     from controllers.rl.agent_file import agent_metadata, load_agent
     from controllers.trace_split import TraceSplit, split_traces
     from heli_env.model_dir import load_env_model
@@ -54,8 +54,9 @@ def run(args) -> int:
     if meta and meta.get("split") and meta["split"].get("n_traces") == env_model.n_traces:
         split, origin = TraceSplit.from_dict(meta["split"]), "the agent's training split"
     progress.stage(f"flying {args.traces} traces' episodes")
-    res = evaluate_agent(agent, env_model, traces=args.traces, episodes_per_trace=args.episodes_per_trace,
-                         episode_seconds=args.episode_seconds, seed=args.seed, split=split,
+    episodes = EvaluationConfig(traces=args.traces, episodes_per_trace=args.episodes_per_trace,
+                                episode_seconds=args.episode_seconds, seed=args.seed)
+    res = evaluate_agent(agent, env_model, episodes, split=split,
                          name=f"{Path(args.agent).name} ({describe_agent(agent)[0]})")
     out = Path(args.out)
     progress.stage("writing the report" + ("" if args.no_plots else " and drawing an episode"))
@@ -75,8 +76,7 @@ def run(args) -> int:
     if args.robustness:
         from controllers.robustness import robustness_check
 
-        check = robustness_check(agent, env_model, traces=args.traces, episodes_per_trace=args.episodes_per_trace,
-                                 episode_seconds=args.episode_seconds, seed=args.seed)
+        check = robustness_check(agent, env_model, config=episodes)  # on the default split, not the agent's
         for case, r in check.items():
             print(f"  {case:18s}: p90 " + ", ".join(f"{a} {r['p90_deg'][a]:.3f} deg (x{r['ratio'][a]:.2f})"
                                                     for a in r["p90_deg"])

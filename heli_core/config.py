@@ -45,7 +45,8 @@ def configured(cls, config, settings: dict, what: str):
         A bad field (the class's own check in ``__post_init__``).
     """
     if config is not None and not isinstance(config, cls):
-        raise TypeError(f"config must be a {cls.__name__} (the settings go by keyword), got {config!r}")
+        article = "an" if cls.__name__[0] in "AEIOU" else "a"
+        raise TypeError(f"config must be {article} {cls.__name__} (the settings go by keyword), got {config!r}")
     names = [f.name for f in dataclasses.fields(cls)]
     unknown = sorted(set(settings) - set(names))
     if unknown:

@@ -15,7 +15,7 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from controllers.errors import AgentError
-from controllers.evaluate import comparison_markdown, evaluate_agent, plot_episode
+from controllers.evaluate import EvaluationConfig, comparison_markdown, evaluate_agent, plot_episode
 from controllers.metrics import METRIC_NAMES, error_metrics, histogram_edges
 from controllers.pd import PDController, PDGains, design_gains
 from controllers.sweep import sweep_pairs
@@ -136,6 +136,41 @@ def test_time_split_windows_and_explicit_segments(shipped, pd):
 def test_bad_evaluation_requests(shipped, pd, kw, match):
     with pytest.raises(AgentError, match=match):
         evaluate_agent(pd, shipped, **kw)
+
+
+def _same_evaluation(a, b):
+    assert a.episodes == b.episodes and a.metrics.keys() == b.metrics.keys()
+    for ax in a.metrics:
+        for k in METRIC_NAMES:
+            assert_array_equal(b.metrics[ax][k], a.metrics[ax][k], err_msg=f"{ax} {k}")
+    for k, v in a.samples.items():
+        assert_array_equal(b.samples[k], v, err_msg=k)
+
+
+def test_an_evaluation_takes_its_settings_as_one_config_or_by_keyword(shipped, pd, pd_result):
+    """The same episodes, bit for bit, from an EvaluationConfig and from its fields by keyword; a keyword given
+    beside a config replaces the config's field (as SweepConfig's and TrainConfig's do)."""
+    config = EvaluationConfig(episodes_per_trace=3, episode_seconds=10.0, seed=5)
+    _same_evaluation(pd_result, evaluate_agent(pd, shipped, config))
+    reseeded = evaluate_agent(pd, shipped, config, seed=6)
+    assert reseeded.settings["seed"] == 6 and config.seed == 5
+    _same_evaluation(evaluate_agent(pd, shipped, episodes_per_trace=3, episode_seconds=10.0, seed=6), reseeded)
+    with pytest.raises(TypeError, match="unknown evaluation settings episodes; expected fields of EvaluationConfig"):
+        evaluate_agent(pd, shipped, episodes=3)
+    with pytest.raises(TypeError, match="config must be an EvaluationConfig"):
+        evaluate_agent(pd, shipped, "held-out")
+
+
+@pytest.mark.parametrize("field, value, match", [
+    ("episodes_per_trace", 0, "episodes_per_trace must be a whole number >= 1, got 0"),
+    ("episode_seconds", 0.0, "episode_seconds must be a positive number of seconds, got 0.0"),
+    ("seed", 1.5, "seed must be a whole number >= 0, got 1.5"),
+    ("init_rate_deg", -1.0, "init_rate_deg must be a number >= 0, got -1.0"),
+    ("split", "held-out", "split must be a TraceSplit or None, got 'held-out'"),
+])
+def test_a_bad_evaluation_setting_is_named(field, value, match):
+    with pytest.raises(AgentError, match=match):
+        EvaluationConfig(**{field: value})
 
 
 def test_evaluation_builds_one_environment(shipped, pd, monkeypatch):
