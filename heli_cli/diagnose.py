@@ -60,16 +60,17 @@ def run(args) -> int:
         if args.method == "ml":
             return _run_ml(args, flight, model, document, source_entry(args.flight), progress)
         from identification.diagnose import ALPHA, MIN_GAIN, Diagnoser
-        from identification.diagnose_report import diagnose_and_report
+        from identification.diagnose_report import DiagnosisConfig, diagnose_and_report
 
         diagnoser = Diagnoser(folds=args.folds, window=args.window,
                               alpha=ALPHA if args.alpha is None else args.alpha,
                               min_gain=MIN_GAIN if args.min_gain is None else args.min_gain, progress=progress.bars)
+        config = DiagnosisConfig(diagnoser=diagnoser, plots=not args.no_plots, draw_figures=False,
+                                 wait=not args.no_wait)
         progress.stage(f"diagnosing {args.flight} by held-out forward simulation (every catalogue effect on "
                        "every axis)")
-        run_ = diagnose_and_report(flight, args.out, model=model, model_document=document,
-                                   source=source_entry(args.flight), plots=not args.no_plots, diagnoser=diagnoser,
-                                   draw_figures=False, wait=not args.no_wait)
+        run_ = diagnose_and_report(flight, args.out, config, model=model, model_document=document,
+                                   source=source_entry(args.flight))
         progress.done()
         _print_run(run_, lambda s: (
             f"held-out MAE {s.gap_before['mae_deg_s']:.3f} -> {s.gap_after['mae_deg_s']:.3f} deg/s, gain "

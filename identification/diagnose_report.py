@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from heli_core.config import check, configured, is_flag
 from heli_core.params import ModelParams
 from model_store.model_dir import ModelDir
 from model_store.model_file import model_document as new_model_document
@@ -299,9 +300,50 @@ def window_limits(measured, simulated: dict, pad: float = 0.1, diverged: float =
 
 
 # ------------------------------------------------------------------------ runner
-def diagnose_and_report(flight: Flight, out_dir, *, model: ModelParams | None = None, model_document=None,
-                        source: dict | None = None, plots: bool = True, diagnoser: Diagnoser | None = None,
-                        progress: bool = False, draw_figures: bool = True, wait: bool = True) -> DiagnosisRun:
+@dataclass(frozen=True)
+class DiagnosisConfig:
+    """How :func:`diagnose_and_report` diagnoses and writes (all but the flight, the folder and the model).
+
+    ``diagnose_and_report(flight, out_dir, config)`` runs it; keyword settings replace its fields
+    (``diagnose_and_report(flight, out_dir, config, plots=False)``).
+
+    Attributes
+    ----------
+    diagnoser : Diagnoser, optional
+        The diagnosis' settings (default :class:`Diagnoser` with ``progress``).
+    progress : bool
+        Progress bar over the candidate search (of the default diagnoser).
+    plots : bool
+        Draw the figures.
+    draw_figures : bool
+        With ``plots``: draw the figures before returning (default), or leave them to
+        :meth:`DiagnosisRun.draw_figures` (``diagnosis.md`` links them either way).
+    wait : bool
+        When an effect was found: wait for another command writing ``out_dir`` (default), or raise
+        :class:`~identification.errors.ModelDirBusyError`.
+
+    Raises
+    ------
+    ValueError
+        A diagnoser that is not a :class:`Diagnoser`, or a switch that is not True or False (the message names it).
+    """
+
+    diagnoser: Diagnoser | None = None
+    progress: bool = False
+    plots: bool = True
+    draw_figures: bool = True
+    wait: bool = True
+
+    def __post_init__(self):
+        check(self.diagnoser is None or isinstance(self.diagnoser, Diagnoser), "diagnoser", "a Diagnoser or None",
+              self.diagnoser)
+        for name in ("progress", "plots", "draw_figures", "wait"):
+            check(is_flag(getattr(self, name)), name, "True or False", getattr(self, name))
+
+
+def diagnose_and_report(flight: Flight, out_dir, config: DiagnosisConfig | None = None, *,
+                        model: ModelParams | None = None, model_document=None, source: dict | None = None,
+                        **settings) -> DiagnosisRun:
     """Diagnose ``flight`` and write the outputs into ``out_dir``.
 
     Parameters
@@ -309,39 +351,39 @@ def diagnose_and_report(flight: Flight, out_dir, *, model: ModelParams | None = 
     flight : Flight
         The raw flight (the diagnoser prefilters it).
     out_dir : str or Path
+    config : DiagnosisConfig, optional
+        How it is diagnosed and written (default ``DiagnosisConfig()``), described there.
     model : ModelParams, optional
         The model whose structure is diagnosed (default: the paper's decoupled model).
     model_document : dict, optional
         Its ``model.json`` document (provenance carried into the new version).
     source : dict, optional
         Provenance of the flight file (``{"file": ..., "sha256": ...}``).
-    plots : bool
-        Draw the figures.
-    diagnoser : Diagnoser, optional
-        Settings (default :class:`Diagnoser` with ``progress``).
-    progress : bool
-        Progress bar over the candidate search.
-    draw_figures : bool
-        With ``plots``: draw the figures before returning (default), or leave them to
-        :meth:`DiagnosisRun.draw_figures` (``diagnosis.md`` links them either way).
-    wait : bool
-        When an effect was found: wait for another command writing ``out_dir`` (default), or raise
-        :class:`~identification.errors.ModelDirBusyError`. The new model, its wind and the diagnosis files
-        are written as one transaction (:class:`model_store.ModelDir`).
+    **settings
+        :class:`DiagnosisConfig` fields replacing the config's (``plots=False, wait=False, ...``).
+
+    When an effect was found, the new model, its wind and the diagnosis files are written as one
+    transaction (:class:`model_store.ModelDir`).
+
+    Raises
+    ------
+    TypeError
+        ``config`` is not a DiagnosisConfig, or a keyword is not one of its fields.
     """
+    cfg = configured(DiagnosisConfig, config, settings, "diagnosis")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    d = (diagnoser or Diagnoser(progress=progress)).fit(flight, model=model)
+    d = (cfg.diagnoser or Diagnoser(progress=cfg.progress)).fit(flight, model=model)
     figures, pending = {}, []
-    if plots and d.baseline_score_ is not None:
+    if cfg.plots and d.baseline_score_ is not None:
         figures = {"residual tests": out / "diagnosis_residuals.png",
                    "worst held-out windows, before and after": out / "diagnosis_windows.png"}
         pending.append(partial(_figures, d, out))
     new_model = _new_model(d, flight, model_document, source) if d.steps_ else None
     doc, paths = write_diagnosis(out, new_model, lambda model_path: diagnosis_document(d, source, model_path),
-                                 lambda doc: diagnosis_markdown(d, doc, figures), wait)
+                                 lambda doc: diagnosis_markdown(d, doc, figures), cfg.wait)
     run = DiagnosisRun(d, doc, paths, pending)
-    if draw_figures:
+    if cfg.draw_figures:
         run.draw_figures()
     return run
 

@@ -118,6 +118,30 @@ def test_same_flight_same_diagnosis():
     assert json.dumps(a, sort_keys=True, default=str) == json.dumps(b, sort_keys=True, default=str)
 
 
+def test_diagnose_and_report_takes_its_settings_as_one_config_or_by_keyword(tmp_path):
+    """The same diagnosis files from a DiagnosisConfig and from its fields by keyword; a keyword given beside a
+    config replaces the config's field (as SweepConfig's and TrainConfig's do); a bad field is named."""
+    from identification.diagnose_report import DiagnosisConfig, diagnose_and_report
+
+    flight = _flight(seed=3, effects=("cross_coupling",), duration=70.0)
+    source = {"file": "flight.csv", "sha256": "0" * 64}
+    config = DiagnosisConfig(diagnoser=Diagnoser(effects=("cross_coupling", "servo_delay")), plots=False)
+    by_keyword = diagnose_and_report(flight, tmp_path / "a", source=source, plots=False,
+                                     diagnoser=Diagnoser(effects=("cross_coupling", "servo_delay")))
+    by_config = diagnose_and_report(flight, tmp_path / "b", config, source=source)
+    assert by_config.document["steps"] and by_config.document["model_file"] == str(tmp_path / "b" / "model.json")
+    assert {**by_config.document, "model_file": None} == {**by_keyword.document, "model_file": None}
+    assert (tmp_path / "b" / "model.json").exists() and not (tmp_path / "b" / "diagnosis_residuals.png").exists()
+    with_plots = diagnose_and_report(flight, tmp_path / "c", config, source=source, plots=True, draw_figures=False)
+    assert with_plots.figures and not config.plots  # the keyword won, the config is unchanged
+    with pytest.raises(TypeError, match="unknown diagnosis settings plot; expected fields of DiagnosisConfig"):
+        diagnose_and_report(flight, tmp_path / "d", plot=False)
+    with pytest.raises(ValueError, match="diagnoser must be a Diagnoser or None, got 'ml'"):
+        DiagnosisConfig(diagnoser="ml")
+    with pytest.raises(ValueError, match="wait must be True or False, got None"):
+        DiagnosisConfig(wait=None)
+
+
 def test_cli_writes_diagnosis_and_a_model_the_env_and_pd_accept(tmp_path):
     import gymnasium as gym
 
