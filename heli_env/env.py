@@ -163,8 +163,7 @@ class HeliAttitudeEnv(gym.Env):
         super().reset(seed=seed)
         s = self.spec_
         options, gust = reset_options(options, s.gust_scale)
-        ep = draw_episode(self.np_random, s.task, s.model.n_traces, s.model.lengths, s.needed, s.episode_steps,
-                          s.dt, s.init_angle, s.init_rate, options)
+        ep = draw_episode(self.np_random, s, options)
         self._episode = ep
         self._lines = None
         if s.line_axis:  # the gyros' vibration lines over the whole episode, each at its episode's phase

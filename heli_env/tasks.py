@@ -98,37 +98,38 @@ class Episode:
     phase: np.ndarray  # (3, N_SINES)
 
 
-def draw_episode(rng: np.random.Generator, cfg: TaskConfig, n_traces: int, lengths, needed: int,
-                 episode_steps: int, dt: float, init_angle: float, init_rate: float, options=None) -> Episode:
+def draw_episode(rng: np.random.Generator, spec, options=None) -> Episode:
     """Draw everything random about an episode, in a fixed order.
 
     Parameters
     ----------
     rng : numpy Generator
         The environment's ``np_random``.
-    n_traces, lengths :
-        Library size and trace lengths [samples].
-    needed : int
-        Trace samples an episode of full length uses.
+    spec : heli_env.spec.EnvSpec
+        The environment's settings: its task, the library's traces (``spec.model.n_traces``,
+        ``spec.model.lengths`` [samples]), the trace samples an episode of full length uses
+        (``needed``), its steps and period, and the initial ranges ``init_angle`` [rad] and
+        ``init_rate`` [rad/s].
     options : dict, optional
         ``trace`` (index) and ``offset`` (sample) pin the replayed gust.
     """
+    cfg, lengths, n_traces = spec.task, spec.model.lengths, spec.model.n_traces
     options = options or {}
     trace = int(rng.integers(n_traces))
     if options.get("trace") is not None:
         trace = int(options["trace"])
         if not 0 <= trace < n_traces:
             raise ValueError(f"options['trace'] must be a trace index in [0, {n_traces}), got {trace}")
-    offset = draw_offset(rng, max(window_count(lengths[trace], needed), 1))  # a short trace ends the episode early
+    offset = draw_offset(rng, max(window_count(lengths[trace], spec.needed), 1))  # a short trace ends the episode early
     if options.get("offset") is not None:
         offset = int(options["offset"])
         if not 0 <= offset < int(lengths[trace]) - 1:
             raise ValueError(
                 f"options['offset'] must be a sample in [0, {int(lengths[trace]) - 1}) of trace {trace}, got {offset}")
-    angles = rng.uniform(-init_angle, init_angle, 2)
-    rates = rng.uniform(-init_rate, init_rate, 3)
+    angles = rng.uniform(-spec.init_angle, spec.init_angle, 2)
+    rates = rng.uniform(-spec.init_rate, spec.init_rate, 3)
     smooth = bool(rng.random() < 0.5) if cfg.reference == "mixed" else cfg.reference == "smooth"
-    n_seg = int(episode_steps * dt // cfg.step_period) + 1
+    n_seg = int(spec.episode_steps * spec.dt // cfg.step_period) + 1
     unit_steps = rng.uniform(-1.0, 1.0, (3, n_seg))
     unit_amp = rng.uniform(0.2, 1.0, (3, N_SINES))
     freq = TWO_PI * rng.uniform(0.05, 0.4, (3, N_SINES))

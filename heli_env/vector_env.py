@@ -159,8 +159,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
         options, gust_default = reset_options(options, s.gust_scale)
         # Every copy draws its episode from its own generator (as a single env seeded seed + i would);
         # the state is then written for all of them at once, and only once every draw has succeeded.
-        eps = [draw_episode(self._rngs[i], s.task, s.model.n_traces, s.model.lengths, s.needed, s.episode_steps,
-                            s.dt, s.init_angle, s.init_rate, options) for i in which.tolist()]
+        eps = [draw_episode(self._rngs[i], s, options) for i in which.tolist()]
         if not eps:
             return
         self._noise_used[which] = NOISE_BLOCK  # a fresh block at the episode's first observation

@@ -572,10 +572,13 @@ def test_sweep_config_runs_the_same_sweep_as_the_keywords(shipped):
 def test_one_window_sampler_for_sweep_episodes_and_splits(shipped):
     """heli_env.tasks' draws are the ones draw_episode, the sweep and trace_split make."""
     from controllers.sweep_inputs import draw_library_windows
-    from heli_env.tasks import TaskConfig, draw_episode, draw_offset, draw_offsets, window_count
+    from heli_env.spec import build_spec
+    from heli_env.tasks import draw_episode, draw_offset, draw_offsets, window_count
 
     assert window_count(100, 100) == 1 and window_count(99, 100) == 0
-    ep = draw_episode(np.random.default_rng(2), TaskConfig(), 3, shipped.lengths, 1001, 1000, 0.01, 0.0, 0.0)
+    spec = build_spec(shipped, episode_seconds=10.0, init_angle_deg=0.0, init_rate_deg=0.0)
+    assert (spec.model.n_traces, spec.needed, spec.episode_steps) == (3, 1001, 1000)
+    ep = draw_episode(np.random.default_rng(2), spec)
     rng = np.random.default_rng(2)
     trace = int(rng.integers(3))
     assert (ep.trace, ep.offset) == (trace, draw_offset(rng, window_count(shipped.lengths[trace], 1001)))
