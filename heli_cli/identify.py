@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 
 from .argtypes import number, output_path, whole
 
@@ -17,6 +18,18 @@ def _delay(text):
         v = math.nan
     if not 0.0 <= v <= 2.0:  # the range ModelParams accepts for a servo delay; NaN fails too
         raise argparse.ArgumentTypeError(f"expected 'auto' or a delay in seconds in [0, 2], got {text!r}")
+    return v
+
+
+def _lag(text):
+    if text is None or text == "auto":
+        return text
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not 0.0 <= v <= 1.0:  # the range ModelParams accepts for a servo lag; NaN fails too
+        raise argparse.ArgumentTypeError(f"expected 'auto' or a servo lag in seconds in [0, 1], got {text!r}")
     return v
 
 
@@ -58,6 +71,9 @@ def register(sub):
     p.add_argument("--delay", type=_delay, default=None,
                    help="servo delay: 'auto' (the likelihood, or the integral fit, profiled over 0-0.5 s; eq. 31) "
                    "or seconds (default: none)")
+    p.add_argument("--servo-lag", type=_lag, default=None,
+                   help="ml: the servos' first-order lag: 'auto' (the likelihood profiled over 10-200 ms, kept only "
+                   "where the data support it; eq. 31's d1) or seconds (default: none)")
     p.add_argument("--input-hold", choices=("linear", "zoh"), default="linear",
                    help="sticks between samples: 'linear' (a pilot's hand, default) or 'zoh' (commands a flight "
                    "controller holds over each sample)")
@@ -92,8 +108,14 @@ def run(args) -> int:
                 progress.done()
                 print(f"warning: {path}: {warning}")
         if args.method == "ml":
-            kwargs = {"delay": args.delay, "input_hold": args.input_hold, "wind_model": args.wind_model}
+            kwargs = {"delay": args.delay, "input_hold": args.input_hold, "wind_model": args.wind_model,
+                      "servo_lag": args.servo_lag}
         else:
+            if args.servo_lag is not None:
+                progress.done()
+                print("heli identify: error: --servo-lag needs the maximum-likelihood estimator (--method ml), "
+                      "got --method integral", file=sys.stderr)
+                return 2
             kwargs = {"interval": args.interval, "delay": args.delay, "prefilter": not args.no_filter,
                       "input_hold": args.input_hold}
         backend = flight_backend(args)
@@ -125,6 +147,9 @@ def _print_run(run, n_flights: int, method: str) -> None:
     for axis, fit in run.identifiers[run.chosen].axes_.items():
         vals = ", ".join(f"{k}={params[k]:.4f}" for k in fit.params)
         delay = f", delay {fit.delay:.3f} s" if fit.delay else ""
+        if getattr(fit, "lag_lr", None) is not None:
+            delay += (f", servo lag {fit.lag:.3f} s (LR {fit.lag_lr:.1f})" if fit.lag
+                      else f", no servo lag supported (LR {fit.lag_lr:.1f})")
         print(f"  {axis:5s}: {vals}  (R² {fit.r2:.3f}{delay})")
     stats = run.validation.rate_stats[run.chosen]
     print("forward-simulation MAE (deg/s): " + ", ".join(f"{a} {stats[a]['mae_deg_s']:.3f}" for a in stats))

@@ -10,7 +10,7 @@ CELL_NAMES = ("default", "independent", "broadband-pd-half", "broadband-pd-2x", 
 (a test keeps the two equal)."""
 
 EFFECT_NAMES = ("servo_delay", "cross_coupling", "gyroscopic", "nonlinear_damping", "gain_scheduling",
-                "collective_torque")
+                "collective_torque", "servo_lag")
 """The names of :data:`identification.synthetic.EFFECTS` (a test keeps the two equal)."""
 
 EFFECT_ALIAS_NAMES = ("flybar", "quadratic_damping", "collective_effectiveness")

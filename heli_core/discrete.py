@@ -57,8 +57,8 @@ def linear_structure(params: ModelParams):
     A = np.zeros((6, 6))
     B = np.zeros((6, 8))
     servo = []
-    for i, tau in enumerate(params.taus):
-        d1, n1, n2 = servo_coefficients(tau)
+    for i, (tau, lag) in enumerate(zip(params.taus, params.lags)):
+        d1, n1, n2 = servo_coefficients(tau, lag)
         if d1 == 0.0:
             servo.append((1.0, 0.0))
         else:  # (n1 - n2 s)/(1 + d1 s) = -n2/d1 + (n1 + n2/d1)/(1 + d1 s)

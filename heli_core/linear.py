@@ -73,7 +73,7 @@ def hover_linearisation(params: ModelParams, collective: float = 0.0) -> HoverLi
     """Linearise the physics core about hover at the trim for ``collective`` (module docstring)."""
     rhs = kernel(params)[0]["rhs"]
     trim = [float(v) for v in trim_sticks(params, float(collective))]
-    delayed = [i for i, tau in enumerate(params.taus) if servo_coefficients(tau)[0] != 0.0]
+    delayed = [i for i, (tau, lag) in enumerate(zip(params.taus, params.lags)) if servo_coefficients(tau, lag)[0] != 0.0]
     x0 = [0.0, 0.0, 0.0, trim[0], trim[1], trim[2], 1.0, 0.0, 0.0, 0.0]
     u0 = [trim[0], trim[1], float(collective), trim[2]]
     d0 = [0.0, 0.0, 0.0]

@@ -17,6 +17,9 @@ import numpy as np
 
 from .terms import BASE_PARAMS, EXTRA_PARAMS, TERMS
 
+SERVO_FIELDS = ("tau_roll", "tau_pitch", "tau_yaw", "lag_roll", "lag_pitch", "lag_yaw")
+"""The servo's parameters per axis: transport delay and first-order lag [s] (eq. 31)."""
+
 
 @dataclass(frozen=True)
 class ModelParams:
@@ -44,6 +47,10 @@ class ModelParams:
     tau_roll, tau_pitch, tau_yaw : float
         Servo transport delay per axis [s], modelled by the first-order Padé
         approximation of eq. (31); 0 means no delay.
+    lag_roll, lag_pitch, lag_yaw : float
+        Servo first-order lag per axis [s] (the servo's time constant), added to
+        the denominator of eq. (31): ``(1 - s tau/2) / (1 + s (tau/2 + lag))``
+        (:func:`heli_core.servo.servo_coefficients`); 0 means none.
     extra : tuple of (str, float)
         Added catalogue terms (:data:`heli_core.terms.EXTRA_PARAMS`) and
         their values, e.g. ``(("nld1", 0.2),)``.
@@ -51,8 +58,8 @@ class ModelParams:
     Raises
     ------
     ValueError
-        A parameter that is not a finite number, a delay outside [0, 2] s, or an
-        unknown or repeated extra term.
+        A parameter that is not a finite number, a delay outside [0, 2] s, a lag
+        outside [0, 1] s, or an unknown or repeated extra term.
     """
 
     k1: float = 0.0
@@ -74,9 +81,12 @@ class ModelParams:
     tau_pitch: float = 0.0
     tau_yaw: float = 0.0
     extra: tuple = field(default=())
+    lag_roll: float = 0.0
+    lag_pitch: float = 0.0
+    lag_yaw: float = 0.0
 
     def __post_init__(self):
-        for name in BASE_PARAMS + ("tau_roll", "tau_pitch", "tau_yaw"):
+        for name in BASE_PARAMS + SERVO_FIELDS:
             v = getattr(self, name)
             if (isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.floating, np.integer))
                     or not math.isfinite(float(v))):
@@ -85,6 +95,9 @@ class ModelParams:
         for name in ("tau_roll", "tau_pitch", "tau_yaw"):
             if not 0.0 <= getattr(self, name) <= 2.0:
                 raise ValueError(f"{name} must be a delay in [0, 2] s, got {getattr(self, name)}")
+        for name in ("lag_roll", "lag_pitch", "lag_yaw"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"{name} must be a servo time constant in [0, 1] s, got {getattr(self, name)}")
         extra = tuple((str(k), float(v)) for k, v in dict(self.extra).items())
         if len(extra) != len(self.extra):
             raise ValueError(f"extra terms must have unique names, got {[k for k, _ in self.extra]}")
@@ -102,6 +115,11 @@ class ModelParams:
         return (self.tau_roll, self.tau_pitch, self.tau_yaw)
 
     @property
+    def lags(self) -> tuple[float, float, float]:
+        """Servo first-order lags (roll, pitch, yaw) [s]."""
+        return (self.lag_roll, self.lag_pitch, self.lag_yaw)
+
+    @property
     def control_gains(self) -> np.ndarray:
         """(k2, k6, k10): torque per unit stick on each axis [rad/s^2]."""
         return np.array([self.k2, self.k6, self.k10])
@@ -114,7 +132,7 @@ class ModelParams:
 
     def get(self, name: str) -> float:
         """Value of a base or extra parameter; 0 for an extra term not in the model."""
-        if name in BASE_PARAMS or name.startswith("tau_"):
+        if name in BASE_PARAMS or name in SERVO_FIELDS:
             return getattr(self, name)
         if name not in TERMS:
             raise KeyError(f"unknown parameter {name!r}")
@@ -122,7 +140,7 @@ class ModelParams:
 
     def with_values(self, **values) -> "ModelParams":
         """A copy with some parameters replaced; extra-term names add or replace terms."""
-        base = {k: v for k, v in values.items() if k in BASE_PARAMS or k.startswith("tau_")}
+        base = {k: v for k, v in values.items() if k in BASE_PARAMS or k in SERVO_FIELDS}
         extra = dict(self.extra)
         for k, v in values.items():
             if k not in base:

@@ -93,8 +93,8 @@ def kernel(params: ModelParams):
         "    lat, lon, col, ped = u",
     ]
     dz = []
-    for i, (stick, tau) in enumerate(zip(("lat", "lon", "ped"), params.taus)):
-        d1, n1, n2 = servo_coefficients(tau)
+    for i, (stick, tau, lag) in enumerate(zip(("lat", "lon", "ped"), params.taus, params.lags)):
+        d1, n1, n2 = servo_coefficients(tau, lag)
         if d1 == 0.0:
             lines.append(f"    c{i} = {stick}")
             dz.append(f"0.0*z{i}")

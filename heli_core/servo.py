@@ -1,10 +1,17 @@
-"""The servo: a transport delay per axis, as the first-order Padé approximation of eq. (31).
+"""The servo: a transport delay per axis, as the first-order Padé approximation of eq. (31), and a lag.
 
 The paper models the lag between the commanded and the achieved blade pitch by
 a delay ``exp(-s*tau)`` and replaces it by its first-order Padé approximation
 (eq. 31, computed "using the *Pade* function")::
 
     theta + d1*theta' = n1*delta - n2*delta'                              (31)
+
+A servo that also lags (a first-order time constant ``lag``, identified where the
+data support one) keeps the form of eq. (31) with the lag added to ``d1``: the
+servo is ``(1 - s tau/2) / (1 + s (tau/2 + lag))``, the Padé delay when
+``lag = 0`` and the first-order lag ``1 / (1 + s lag)`` when ``tau = 0``. Both
+shape the phase alike at low frequency (``tau + lag`` of lag); they differ in
+the gain above ``1/lag``, which a lag attenuates and a delay does not.
 
 Two forms of it are used: the coefficients, which the physics core turns into a
 servo state of the continuous model (:func:`servo_coefficients`), and a
@@ -20,16 +27,19 @@ import numpy as np
 
 
 @lru_cache(maxsize=256)
-def servo_coefficients(tau: float) -> tuple[float, float, float]:
-    """Coefficients ``(d1, n1, n2)`` of the servo-delay model, eq. (31).
+def servo_coefficients(tau: float, lag: float = 0.0) -> tuple[float, float, float]:
+    """Coefficients ``(d1, n1, n2)`` of the servo model, eq. (31).
 
     ``theta + d1*theta' = n1*delta - n2*delta'`` is the first-order Padé
-    approximation of ``exp(-s*tau)``, computed with ``control.pade``.
+    approximation of ``exp(-s*tau)``, computed with ``control.pade``, with the
+    servo's first-order ``lag`` added to ``d1`` (module docstring).
 
     Parameters
     ----------
     tau : float
         Delay [s]; 0 or less means no delay.
+    lag : float
+        First-order time constant [s]; 0 or less means none.
 
     Returns
     -------
@@ -38,18 +48,19 @@ def servo_coefficients(tau: float) -> tuple[float, float, float]:
     n1 : float
         [-]
     n2 : float
-        [s]; ``(0, 1, 0)`` without a delay.
+        [s]; ``(0, 1, 0)`` without a delay or a lag.
     """
+    lag = max(float(lag), 0.0)
     if tau <= 0.0:
-        return (0.0, 1.0, 0.0)
+        return (lag, 1.0, 0.0)
     import control
 
     num, den = control.pade(tau, 1)  # (-s + 2/tau) / (s + 2/tau)
-    return (den[0] / den[1], num[1] / den[1], -num[0] / den[1])
+    return (den[0] / den[1] + lag, num[1] / den[1], -num[0] / den[1])
 
 
-def pade_filter(command: np.ndarray, tau: float, fs: float) -> np.ndarray:
-    """Pass a command through the first-order Padé delay of eq. (31).
+def pade_filter(command: np.ndarray, tau: float, fs: float, lag: float = 0.0) -> np.ndarray:
+    """Pass a command through the servo of eq. (31): the first-order Padé delay (and the servo's lag).
 
     The continuous filter ``(n1 - n2 s)/(1 + d1 s)`` (coefficients from
     ``control.pade``, :func:`servo_coefficients`) is discretised with the
@@ -63,30 +74,33 @@ def pade_filter(command: np.ndarray, tau: float, fs: float) -> np.ndarray:
         Delay [s]; 0 or less returns the command unchanged (as a float array).
     fs : float
         Sample rate [Hz].
+    lag : float
+        The servo's first-order time constant [s]; 0 means none.
 
     Returns
     -------
     ndarray, shape (..., n)
         The servo-side command [stick units].
     """
-    if tau <= 0:
+    if tau <= 0 and lag <= 0:
         return np.asarray(command, dtype=float)
     from scipy import signal
 
-    b, a, zi_unit = _pade_discrete(float(tau), float(fs))
+    b, a, zi_unit = _pade_discrete(float(tau), float(fs), float(lag))
     zi = zi_unit * command[..., :1]
     return signal.lfilter(b, a, command, axis=-1, zi=zi)[0]
 
 
 @lru_cache(maxsize=256)
-def _pade_discrete(tau: float, fs: float):
-    """Bilinear-transform coefficients (b, a) of the Padé delay and the filter state for a unit step.
+def _pade_discrete(tau: float, fs: float, lag: float = 0.0):
+    """Bilinear-transform coefficients (b, a) of the servo (Padé delay and lag) and the filter state for a
+    unit step.
 
     Cached: scipy's bilinear takes about a millisecond, longer than filtering a whole flight.
     """
     from scipy import signal
 
-    d1, n1, n2 = servo_coefficients(tau)
+    d1, n1, n2 = servo_coefficients(tau, lag)
     b, a = signal.bilinear([-n2, n1], [d1, 1.0], fs=fs)
     zi = signal.lfilter_zi(b, a)
     for arr in (b, a, zi):

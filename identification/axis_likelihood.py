@@ -43,6 +43,7 @@ class AxisData:
     tau: float = 0.0
     causal_rows: tuple = ()  # regressors made of measured rates: held over the sample, never interpolated
     rebuild: object = None  # shift (s, < 0: the log's input lags) -> regressors with the axis' stick advanced
+    lag: float = 0.0  # the servo's first-order lag (eq. 31's d1 grows by it) [s]
 
 
 class AxisLikelihood:
@@ -82,7 +83,7 @@ class AxisLikelihood:
             b_c, _ = strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), g0 + g1)
         tau = self.tau_of(x)
         regressors = d.rebuild(tau) if tau < -MIN_SERVO_DELAY else d.regressors
-        servo = d.servo_row is not None and tau > MIN_SERVO_DELAY
+        servo = d.servo_row is not None and (tau > MIN_SERVO_DELAY or (d.lag > 0.0 and tau >= -MIN_SERVO_DELAY))
         if servo:
             b_v, _ = strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), np.eye(Ad.shape[0])[0])
         ys, zs = [], []
@@ -92,7 +93,7 @@ class AxisLikelihood:
             for r in d.causal_rows:
                 Z[r] = signal.lfilter(b_c, a, X[r])
             if servo:
-                v = servo_increments(d.servo_sticks[i], x[0], tau, d.dt, d.hold)
+                v = servo_increments(d.servo_sticks[i], x[0], max(tau, 0.0), d.dt, d.hold, d.lag)
                 Z[d.servo_row] = signal.lfilter(b_v, a, v)
             zs.append(Z[:, d.burn:])
         return np.concatenate(ys), np.concatenate(zs, axis=1), S

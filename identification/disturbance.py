@@ -481,7 +481,7 @@ def interval_torque(data: Flight, params: ModelParams, N: int) -> np.ndarray:
     starts = np.arange((n - 1) // N) * N
     ends = starts + N
     sticks3 = data.sticks[list(STICK_ROW)]
-    cmd = np.array([pade_filter(sticks3[i], params.taus[i], fs) for i in range(3)])
+    cmd = np.array([pade_filter(sticks3[i], params.taus[i], fs, params.lags[i]) for i in range(3)])
     terms = [(TERMS[name], value) for name, value in params.values().items()
              if value != 0.0 and TERMS[name].feature != "1"]
     drive = np.zeros((3, n))

@@ -58,6 +58,7 @@ from .fit_warnings import require_moving_sticks
 from .flight import Flight
 from .integral_method import IntegralIdentifier
 from .state_space import N_NONLINEAR, WIND_MODELS, ZETA_BOUNDS, rts_smooth, wind_block
+from .servo_lag import profile_lag
 from .vibration import remove_common_lines
 
 OWN_RATE = ("p", "q", "r")
@@ -131,6 +132,12 @@ class MLAxisFit:
     delay_profile : tuple of (float, float)
         ``(delay, nll)`` over the grid when the delay was profiled (damping and wind held at the
         undelayed fit, linear parameters solved), else empty.
+    lag : float
+        Servo first-order lag used [s] (eq. 31's ``d1`` grows by it; 0: none).
+    lag_profile : tuple of (float, float)
+        ``(lag, nll)`` when the lag was profiled (``servo_lag="auto"``, :mod:`identification.servo_lag`).
+    lag_lr : float or None
+        Likelihood-ratio statistic of the best lag against none, when profiled.
     """
 
     axis: str
@@ -152,6 +159,9 @@ class MLAxisFit:
     interval_starts: np.ndarray = field(default_factory=lambda: np.empty(0))
     residual: np.ndarray | None = None
     state: np.ndarray = field(default_factory=lambda: np.empty(0), repr=False)
+    lag: float = 0.0
+    lag_profile: tuple = ()
+    lag_lr: float | None = None
 
 
 class MaximumLikelihoodIdentifier:
@@ -190,6 +200,10 @@ class MaximumLikelihoodIdentifier:
     select_terms : bool
         Keep a term beyond the decoupled model (k1, k4, k5, k8, k9, catalogue terms) only where the data
         support it: terms with ``|value| < SUPPORT_Z * se`` are dropped, weakest first, refitting each time.
+    servo_lag : None, float, sequence of 3 float, or "auto"
+        The servo's first-order lag per axis [s] (None: none); "auto" profiles the likelihood over
+        :data:`identification.servo_lag.LAG_GRID` (the delay searched with it when ``delay="auto"``) and keeps
+        the best lag only where the data support it (:func:`identification.servo_lag.profile_lag`).
 
     Attributes
     ----------
@@ -207,7 +221,8 @@ class MaximumLikelihoodIdentifier:
 
     def __init__(self, structure="decoupled", extra_terms=(), input_hold: str = "linear", delay=None,
                  delay_grid=None, wind_model: str = "auto", remove_vibration: bool = True,
-                 vibration_min_hz: float = 8.0, axes=AXES, max_nfev: int = 100, select_terms: bool = False):
+                 vibration_min_hz: float = 8.0, axes=AXES, max_nfev: int = 100, select_terms: bool = False,
+                 servo_lag=None):
         self.structure = structure
         self.extra_terms = extra_terms
         self.input_hold = input_hold
@@ -219,6 +234,7 @@ class MaximumLikelihoodIdentifier:
         self.axes = axes
         self.max_nfev = max_nfev
         self.select_terms = select_terms
+        self.servo_lag = servo_lag
         self.allow_shift = False  # the diagnosis searches negative alignments (log input shifts) too
 
     # ----------------------------------------------------------------- set-up
@@ -228,7 +244,22 @@ class MaximumLikelihoodIdentifier:
     def _delays(self) -> list:
         return IntegralIdentifier(delay=self.delay)._delays()
 
+    def _lags(self) -> list:
+        """Per axis the servo lag [s], or "auto"."""
+        lag = self.servo_lag
+        if lag is None:
+            return [0.0, 0.0, 0.0]
+        if isinstance(lag, str):
+            if lag != "auto":
+                raise ValueError(f"servo_lag must be None, 'auto', seconds or 3 values in seconds, got {lag!r}")
+            return ["auto"] * 3
+        values = np.broadcast_to(np.asarray(lag, dtype=float), (3,)) if np.ndim(lag) <= 1 else None
+        if values is None or not np.all((values >= 0) & (values <= 1.0)):
+            raise ValueError(f"servo_lag must be None, 'auto', seconds or 3 values in seconds in [0, 1], got {lag!r}")
+        return [float(v) for v in values]
+
     def _check_settings(self):
+        self._lags()  # a bad servo_lag is named before any work
         if self.input_hold not in ("linear", "zoh"):
             raise ValueError(f"input_hold must be 'linear' or 'zoh', got {self.input_hold!r}")
         if self.wind_model not in ("auto",) + WIND_MODELS:
@@ -290,18 +321,19 @@ class MaximumLikelihoodIdentifier:
         names = self._param_names()
         # The integral method (Fig. 5) on the same structure is the starting point.
         start = IntegralIdentifier(structure=names, delay=0.0, axes=self.axes).fit(flights)
-        delays = self._delays()
+        delays, lags = self._delays(), self._lags()
         fits, values = {}, {}
         for axis_name in self.axes:
             a = AXES.index(axis_name)
             if not names.get(a):
                 continue
-            fit = self._fit_axis(a, names[a], flights, burn, start.params_, delays[a])
+            fit = self._fit_axis(a, names[a], flights, burn, start.params_, delays[a], lags[a])
             if self.select_terms:
                 fit = self._supported(a, names[a], fit, flights, burn, start.params_)
             fits[axis_name] = fit
             values.update(fit.params)
             values[f"tau_{axis_name}"] = fit.delay
+            values[f"lag_{axis_name}"] = fit.lag
         self.axes_ = fits
         self.params_ = ModelParams().with_values(**values)
         self.flights_ = flights
@@ -319,10 +351,12 @@ class MaximumLikelihoodIdentifier:
                 return replace(fit, dropped=tuple(dropped))
             names = tuple(p for p in names if p != weakest)
             dropped.append(weakest)
-            fit = self._fit_axis(a, names, flights, burn, start_params, fit.delay)  # the delay found stays
+            fit = self._fit_axis(a, names, flights, burn, start_params, fit.delay, fit.lag)  # delay, lag stay
 
-    def _axis_data(self, a: int, axis_params, flights, burn: int, tau: float, wind_model: str = "gm2"):
-        """The likelihood's data for axis ``a`` at servo delay ``tau``, and the name of its damping term."""
+    def _axis_data(self, a: int, axis_params, flights, burn: int, tau: float, wind_model: str = "gm2",
+                   lag: float = 0.0):
+        """The likelihood's data for axis ``a`` at servo delay ``tau`` and lag ``lag``, and the name of its
+        damping term."""
         damping_name = next((p for p in axis_params if TERMS[p].feature == OWN_RATE[a]), None)
         linear = [p for p in axis_params if p != damping_name and TERMS[p].feature != "1"]
         offset = next((p for p in axis_params if TERMS[p].feature == "1"), None)
@@ -332,8 +366,8 @@ class MaximumLikelihoodIdentifier:
             out = []
             for i, f in enumerate(flights):
                 cmd = np.array([f.sticks[r] for r in STICK_ROW])
-                if tau_or_shift > 0:
-                    cmd[a] = pade_filter(f.sticks[STICK_ROW[a]], tau_or_shift, f.sample_rate)
+                if tau_or_shift > 0 or (lag > 0 and tau_or_shift == 0):
+                    cmd[a] = pade_filter(f.sticks[STICK_ROW[a]], tau_or_shift, f.sample_rate, lag)
                 elif tau_or_shift < 0:
                     cmd[a] = np.interp(f.time - tau_or_shift, f.time, f.sticks[STICK_ROW[a]])
                 rows = [TERMS[p].sign * np.broadcast_to(FEATURES[TERMS[p].feature](f.rates, cmd, f.sticks[2]),
@@ -353,7 +387,7 @@ class MaximumLikelihoodIdentifier:
             servo_sticks = [sign * np.asarray(f.sticks[STICK_ROW[a]], dtype=float) for f in flights]
         causal = tuple(j for j, p in enumerate(linear) if TERMS[p].feature in RATE_DEPENDENCE)
         return AxisData(ys, Xs, reg_names, flights[0].dt, self.input_hold, burn, wind_model, command,
-                         servo_sticks, float(tau), causal, regressors), damping_name
+                        servo_sticks, float(tau), causal, regressors, float(lag)), damping_name
 
     def _search(self, like: AxisLikelihood, x0, free_damping: bool, max_nfev=None, tau0: float = 0.0):
         """Search the damping and the wind model (and the delay when ``like.free_tau``) from ``x0``, the
@@ -383,7 +417,8 @@ class MaximumLikelihoodIdentifier:
         res.x = np.concatenate([[0.0], res.x])
         return res
 
-    def _per_kind(self, a, axis_params, flights, burn, tau, x0, models, free, max_nfev=None, free_tau=False):
+    def _per_kind(self, a, axis_params, flights, burn, tau, x0, models, free, max_nfev=None, free_tau=False,
+                  lag=0.0):
         """Search each wind model from delay ``tau`` (held, or searched too with ``free_tau``) and from ``x0``
         (one start for all, or a dict of starts by wind model).
 
@@ -391,7 +426,7 @@ class MaximumLikelihoodIdentifier:
         """
         out = {}
         for kind in models:
-            like = AxisLikelihood(self._axis_data(a, axis_params, flights, burn, tau, kind)[0], free_tau)
+            like = AxisLikelihood(self._axis_data(a, axis_params, flights, burn, tau, kind, lag)[0], free_tau)
             res = self._search(like, x0[kind] if isinstance(x0, dict) else x0, free, max_nfev, tau)
             n = sum(len(y) - like.data.burn for y in like.data.y)
             # Akaike: the concentrated NLL is n/2 log(2 cost / n) + const; one parameter more costs 1
@@ -399,29 +434,31 @@ class MaximumLikelihoodIdentifier:
             out[kind] = (float(res.cost), res.x[:like.nw], like.tau_of(res.x), aic)
         return out
 
-    def _best(self, a, axis_params, flights, burn, tau, x0, models, free, max_nfev=None, free_tau=False):
+    def _best(self, a, axis_params, flights, burn, tau, x0, models, free, max_nfev=None, free_tau=False, lag=0.0):
         """The wind model of :meth:`_per_kind` with the lowest Akaike criterion: ``(cost, x, model, tau)``."""
-        fits = self._per_kind(a, axis_params, flights, burn, tau, x0, models, free, max_nfev, free_tau)
+        fits = self._per_kind(a, axis_params, flights, burn, tau, x0, models, free, max_nfev, free_tau, lag)
         kind = min(fits, key=lambda k: fits[k][3])
         cost, x, tau, _ = fits[kind]
         return cost, x, kind, tau
 
-    def _fit_axis(self, a, axis_params, flights, burn, start_params, delay) -> MLAxisFit:
+    def _fit_axis(self, a, axis_params, flights, burn, start_params, delay, lag=0.0) -> MLAxisFit:
+        """One axis fitted at servo delay ``delay`` and lag ``lag`` (seconds, or "auto": profiled)."""
         _, damping_name = self._axis_data(a, axis_params, flights[:1], burn, 0.0)
         free = damping_name is not None
         damping0 = float(-TERMS[damping_name].sign * start_params.get(damping_name)) if free else 0.0
         x0 = np.array([max(damping0, 0.1) if free else 0.0, np.log(4.0), np.log(0.3), np.log(100.0), np.log(100.0)])
         models = WIND_MODELS if self.wind_model == "auto" else (self.wind_model,)
+        fixed_lag = 0.0 if lag == "auto" else float(lag)
         profile = []
         if delay == "auto":
             # the likelihood over a grid of delays with the damping and wind of the undelayed fit held (the
             # linear parameters solved at each), then every parameter and the delay searched from the best
             grid = np.asarray(self.delay_grid if self.delay_grid is not None else DEFAULT_DELAY_GRID, dtype=float)
-            undelayed = self._per_kind(a, axis_params, flights, burn, 0.0, x0, models, free)
+            undelayed = self._per_kind(a, axis_params, flights, burn, 0.0, x0, models, free, lag=fixed_lag)
             kind = min(undelayed, key=lambda k: undelayed[k][3])
             xb = undelayed[kind][1]
             for tau in grid:
-                like = AxisLikelihood(self._axis_data(a, axis_params, flights, burn, float(tau), kind)[0])
+                like = AxisLikelihood(self._axis_data(a, axis_params, flights, burn, float(tau), kind, fixed_lag)[0])
                 e = like.residual(xb)
                 profile.append((float(tau), 0.5 * float(e @ e)))
             tau0 = min(profile, key=lambda p: p[1])[0]
@@ -430,22 +467,28 @@ class MaximumLikelihoodIdentifier:
             fits = {}
             for start in ({k: v[1] for k, v in undelayed.items()}, x0):  # two starts: the likelihood is multimodal
                 for k, v in self._per_kind(a, axis_params, flights, burn, tau0, start, models, free,
-                                           free_tau=True).items():
+                                           free_tau=True, lag=fixed_lag).items():
                     if k not in fits or v[3] < fits[k][3]:
                         fits[k] = v
             kind = min(fits, key=lambda k: fits[k][3])
             cost, x, tau, _ = fits[kind]
         else:
-            cost, x, kind, tau = self._best(a, axis_params, flights, burn, float(delay), x0, models, free)
-        data, _ = self._axis_data(a, axis_params, flights, burn, tau, kind)
+            cost, x, kind, tau = self._best(a, axis_params, flights, burn, float(delay), x0, models, free,
+                                            lag=fixed_lag)
         free_tau = delay == "auto"
+        lag_profile, lag_lr = (), None
+        if lag == "auto" and self._axis_data(a, axis_params, flights[:1], burn, 0.0)[0].servo_row is not None:
+            found = profile_lag(self, a, axis_params, flights, burn, (cost, x, kind, tau), free, free_tau)
+            fixed_lag, (cost, x, kind, tau), lag_profile, lag_lr = found
+        data, _ = self._axis_data(a, axis_params, flights, burn, tau, kind, fixed_lag)
         like = AxisLikelihood(data, free_tau)
         x = np.append(x, tau) if free_tau else x
         e, theta, S = like.solve_linear(x)
         n_burnt = int(sum(len(y) - burn for y in data.y))
-        return self._result(a, axis_params, like, x, theta, e, S, damping_name, float(tau), kind,
-                            tuple((t, float(n_burnt / 2 * np.log(2 * np.pi * np.e * 2 * c / n_burnt)))
-                                  for t, c in profile))
+        fit = self._result(a, axis_params, like, x, theta, e, S, damping_name, float(tau), kind,
+                           tuple((t, float(n_burnt / 2 * np.log(2 * np.pi * np.e * 2 * c / n_burnt)))
+                                 for t, c in profile))
+        return replace(fit, lag=float(fixed_lag), lag_profile=lag_profile, lag_lr=lag_lr)
 
     def _result(self, a, axis_params, like, x, theta, e, S, damping_name, tau, kind, profile) -> MLAxisFit:
         """Standard errors, wind levels and fit statistics of the optimum."""
@@ -530,7 +573,7 @@ class MaximumLikelihoodIdentifier:
         for axis_name, fit in self.axes_.items():
             a = AXES.index(axis_name)
             kept = tuple(p for p in names[a] if p not in fit.dropped)
-            data, _ = self._axis_data(a, kept, [flight], 0, fit.delay, fit.wind["model"])
+            data, _ = self._axis_data(a, kept, [flight], 0, fit.delay, fit.wind["model"], fit.lag)
             own = [n for n in data.names if "@" not in n]
             off_name = next((n.split("@")[0] for n in data.names if "@" in n), None)
             theta = np.array([fit.params[n] for n in own])
@@ -557,6 +600,8 @@ class MaximumLikelihoodIdentifier:
                 "flight_offsets": list(f.flight_offsets),
                 "dropped_terms": list(f.dropped),
                 "delay_profile": [list(p) for p in f.delay_profile],
+                "servo_lag_s": f.lag, "servo_lag_profile": [list(p) for p in f.lag_profile],
+                "servo_lag_lr": f.lag_lr,
                 "mean_square_innovation": list(f.history),
             }
             for name, f in self.axes_.items()

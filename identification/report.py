@@ -135,7 +135,8 @@ def identification_settings(ident) -> dict:
     if isinstance(ident, MaximumLikelihoodIdentifier):
         settings = {"method": ident.method, "estimator": "ml"}
         settings.update({k: getattr(ident, k) for k in ("input_hold", "wind_model", "remove_vibration",
-                                                         "vibration_min_hz", "max_nfev", "select_terms")})
+                                                         "vibration_min_hz", "max_nfev", "select_terms",
+                                                         "servo_lag")})
     else:
         settings = {"method": "integral (Fig. 5)", "estimator": "integral"}
         settings.update({k: getattr(ident, k) for k in ("interval", "offsets", "disturbance_order", "input_hold",

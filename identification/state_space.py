@@ -142,8 +142,9 @@ def innovation_filters(Ad, g0, g1, L):
     return b_y, b_u, a
 
 
-def servo_increments(sticks, damping: float, tau: float, dt: float, hold: str) -> np.ndarray:
-    """The command's exact contribution to the rate over each sample, through the servo of eq. (31).
+def servo_increments(sticks, damping: float, tau: float, dt: float, hold: str, lag: float = 0.0) -> np.ndarray:
+    """The command's exact contribution to the rate over each sample, through the servo of eq. (31) (its
+    Padé delay ``tau`` and its first-order ``lag``, :func:`heli_core.servo.servo_coefficients`).
 
     The continuous system ``rate' = -damping*rate + f*u + g*z``, ``z' = (u - z)/d1``
     (the Padé servo split into feed-through ``f`` and state ``g``, :func:`identification.model.servo_coefficients`)
@@ -152,7 +153,7 @@ def servo_increments(sticks, damping: float, tau: float, dt: float, hold: str) -
     control gain), so that the rate sees ``k2*v[k]`` as a one-sample input. The
     servo state starts settled on the first stick.
     """
-    d1, n1, n2 = servo_coefficients(tau)
+    d1, n1, n2 = servo_coefficients(tau, lag)
     f, g = -n2 / d1, n1 + n2 / d1
     M = np.zeros((4, 4))
     M[:2, :2] = np.array([[-damping, g], [0.0, -1.0 / d1]]) * dt

@@ -37,6 +37,7 @@ from heli_core.files import atomic_path, write_text
 from heli_core.params import ModelParams
 from heli_core.physics import initial_state, kernel
 from heli_core.quaternion import euler_from_quaternion, euler_from_quaternion_scalar
+from heli_core.terms import AXES
 
 from .flight import Flight, make_flight
 from .io.csv_log import write_csv_flight
@@ -55,6 +56,7 @@ EFFECTS: dict[str, dict[str, float]] = {
     "nonlinear_damping": {"nld1": 2.0, "nld2": 2.0, "nld3": 0.6},
     "gain_scheduling": {"gs1": -0.6 * 1.3475, "gs2": -0.6 * -0.8903, "gs3": -0.6 * 13.4702},
     "collective_torque": {"ct1": 0.25, "ct2": -0.2},
+    "servo_lag": {"lag_roll": 0.04, "lag_pitch": 0.04, "lag_yaw": 0.03},
 }
 """Physical effects that can be hidden in a synthetic flight, with their truth values.
 
@@ -62,7 +64,8 @@ EFFECTS: dict[str, dict[str, float]] = {
 flybar terms k4, k8 (eq. 19, 22); ``gyroscopic`` the inertia ratios k1, k5, k9
 (inertias of a slender fuselage); ``nonlinear_damping`` a quadratic damping;
 ``gain_scheduling`` control effectiveness falling by 60 % per unit collective;
-``collective_torque`` collective driving roll and pitch.
+``collective_torque`` collective driving roll and pitch; ``servo_lag`` servos that lag their command by a
+first-order time constant (eq. 31's ``d1``).
 """
 EFFECT_ALIASES = {"flybar": "cross_coupling", "quadratic_damping": "nonlinear_damping",
                   "collective_effectiveness": "gain_scheduling"}
@@ -298,7 +301,8 @@ class SyntheticFlight:
             "seed": self.seed,
             "effects": list(self.effects),
             "effect_scale": self.effect_scale,
-            "parameters": self.truth.values() | {k: getattr(self.truth, k) for k in ("tau_roll", "tau_pitch", "tau_yaw")},
+            "parameters": self.truth.values() | {k: getattr(self.truth, k) for k in ("tau_roll", "tau_pitch", "tau_yaw")}
+            | {f"lag_{a}": v for a, v in zip(AXES, self.truth.lags) if v},  # a servo lag only where there is one
             "config": asdict(self.config),
             "wind_file": paths["wind"].name,
         }

@@ -225,6 +225,7 @@ class Trace:
                 "parameters": {k: v for k, v in values.items() if k not in dict(params.extra)},
                 "added_terms": dict(params.extra),
                 "servo_delay_s": {a: params.taus[i] for i, a in enumerate(AXES)},
+                **({"servo_lag_s": {a: params.lags[i] for i, a in enumerate(AXES)}} if any(params.lags) else {}),
             },
             "axes": list(p.axes),
             "trace_source": p.trace_source,

@@ -9,6 +9,7 @@ Schema (``schema_version`` 1)::
       "parameters": {"k1": 0.0, "k2": 1.3475, ..., "kd3": 0.0964},   # all 15 of eqs. (18), (21)
       "added_terms": {"nld1": 0.2},          # catalogue terms beyond the paper's model
       "servo_delay_s": {"roll": 0.0, "pitch": 0.0, "yaw": 0.0},       # eq. (31)
+      "servo_lag_s": {"roll": 0.04, ...},    # optional: a servo lag the data supported (eq. 31's d1)
       "sensors": {"gyro_noise_rad_s": {...}, "attitude_noise_rad": {...},   # optional: what the
                   "gyro_lines": [{"axis", "frequency_hz", "amplitude_rad_s"}]},  # env measures through
       "units": {"k2": "rad/s^2", ...},
@@ -73,6 +74,9 @@ def model_document(params: ModelParams, *, structure: str = "custom", sample_rat
             "heli_env": _version(),
         },
     }
+    if any(params.lags):  # written only when identified: files of servos without a lag stay as they were
+        doc["servo_lag_s"] = {axis: params.lags[i] for i, axis in enumerate(AXES)}
+        doc["units"]["servo_lag_s"] = "s"
     if sensors is not None:
         doc["sensors"] = sensors.to_dict()
     if extra:
@@ -149,10 +153,14 @@ def params_from_document(doc: dict, where: str = "model") -> ModelParams:
     delays = doc.get("servo_delay_s") or {}
     if not isinstance(delays, dict) or set(delays) - set(AXES):
         raise ModelFileError(f"{where}: 'servo_delay_s' must be an object with keys among {', '.join(AXES)}, got {delays!r}")
+    lags = doc.get("servo_lag_s") or {}
+    if not isinstance(lags, dict) or set(lags) - set(AXES):
+        raise ModelFileError(f"{where}: 'servo_lag_s' must be an object with keys among {', '.join(AXES)}, got {lags!r}")
     try:
         return ModelParams(
             **{k: params[k] for k in BASE_PARAMS},
             **{f"tau_{axis}": float(delays.get(axis, 0.0)) for axis in AXES},
+            **{f"lag_{axis}": float(lags.get(axis, 0.0)) for axis in AXES},
             extra=tuple(added.items()),
         )
     except (TypeError, ValueError) as e:

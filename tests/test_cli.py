@@ -369,3 +369,15 @@ def test_simulate_flight_lists_the_bench_cells_and_effects_the_library_has():
 
     assert cli.CELL_NAMES == tuple(BENCH_CELLS)
     assert cli.EFFECT_NAMES == tuple(EFFECTS) and cli.EFFECT_ALIAS_NAMES == tuple(EFFECT_ALIASES)
+
+
+def test_identify_servo_lag_option(flight_csv, tmp_path, capsys):
+    # --servo-lag is a setting of the likelihood: refused, naming both, with the integral method; a bad value
+    # is refused by the parser; nothing is written either way
+    assert main(["identify", str(flight_csv), "--out", str(tmp_path / "A"), "--method", "integral",
+                 "--servo-lag", "auto"]) == 2
+    assert "--servo-lag needs the maximum-likelihood estimator" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["identify", str(flight_csv), "--out", str(tmp_path / "B"), "--servo-lag", "2"])
+    assert "servo lag in seconds in [0, 1]" in capsys.readouterr().err
+    assert not (tmp_path / "A" / "model.json").exists() and not (tmp_path / "B").exists()

@@ -231,7 +231,7 @@ def test_discrete_step_follows_rk4():
 
     params = ModelParams(k1=0.8, k2=1.35, k3=2.4, k4=0.8, kd1=0.04, k5=0.9, k6=-0.89, k7=2.5, k8=0.7, kd2=0.01,
                          k9=-0.95, k10=13.5, k11=3.4, k12=-0.56, kd3=0.1, tau_roll=0.08, tau_pitch=0.08, tau_yaw=0.05,
-                         extra=(("nld1", 2.0), ("gs1", -0.8)))
+                         extra=(("nld1", 2.0), ("gs1", -0.8)), lag_pitch=0.03, lag_yaw=0.04)
     rng = np.random.default_rng(1)
     x = initial_state(rates=rng.normal(0, 0.5, 3), euler=rng.normal(0, 0.2, 3), sticks=rng.uniform(-0.3, 0.3, 3),
                       batch=())

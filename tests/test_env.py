@@ -792,6 +792,42 @@ def test_the_env_measures_through_the_models_identified_sensors(tmp_path):
     assert HeliAttitudeEnv(model=root, obs_noise=0.0).spec_.sensors.silent
 
 
+def _model_with_servo_lag(tmp_path, lags):
+    """A copy of the shipped model directory whose model.json records servo lags ``lags`` (roll, pitch, yaw)."""
+    import json
+
+    from heli_env.model_dir import default_model_dir
+    from model_store import ModelDir
+
+    root = tmp_path / "lagged"
+    shutil.copytree(default_model_dir(), root)
+    doc = json.loads((root / "model.json").read_text())
+    doc["servo_lag_s"] = dict(zip(("roll", "pitch", "yaw"), lags))
+    with ModelDir(root).transaction() as tx:
+        tx.write_model_document(doc)
+    return root
+
+
+def test_the_single_and_vector_envs_fly_the_models_servo_lag(tmp_path):
+    # a servo lag identified into model.json (heli identify --servo-lag auto) is flown by both envs
+    root = _model_with_servo_lag(tmp_path, (0.08, 0.0, 0.0))
+    actions = np.zeros((60, 3))
+    actions[5:, 0] = 0.5  # a roll step
+    kw = dict(obs_noise=0.0, episode_seconds=5.0)
+    lagged = _rollout(HeliAttitudeEnv(model=root, **kw), actions, seed=1)
+    plain = _rollout(HeliAttitudeEnv(**kw), actions, seed=1)
+    assert HeliAttitudeEnv(model=root, **kw).model.params.lag_roll == 0.08
+    p_lag, p_plain = np.array(lagged["x"])[:, 0], np.array(plain["x"])[:, 0]
+    rise_lag = p_lag[6:20] - p_lag[5]
+    rise_plain = p_plain[6:20] - p_plain[5]
+    assert np.all(np.abs(rise_lag[:2]) < 0.8 * np.abs(rise_plain[:2]))  # the servo lags the step
+    vec = HeliAttitudeVectorEnv(1, model=root, **kw)
+    vec.reset(seed=1)
+    for a in actions:
+        vec.step(a[None, :])
+    assert np.array_equal(np.array(vec._x)[:, 0], np.array(lagged["x"][-1]))  # the vector env flies it alike
+
+
 def test_a_malformed_sensors_entry_is_refused_naming_the_file(tmp_path):
     from heli_env.errors import EnvModelError
 

@@ -89,6 +89,24 @@ def test_servo_delay_is_found_by_the_likelihood_profile():
     assert 0 < fit.std_errors["tau_roll"] < 0.01  # the delay's own standard error (searched with the rest)
 
 
+def test_a_servo_lag_is_kept_where_the_flight_has_one_and_only_there():
+    lagged = simulate_flight(90, seed=2, effects=("servo_lag",))
+    plain = simulate_flight(90, seed=2, effects=("servo_delay",))
+    fits = {"lagged": MaximumLikelihoodIdentifier(servo_lag="auto", axes=("roll",)).fit(lagged.flight),
+            "plain": MaximumLikelihoodIdentifier(delay=plain.truth.tau_roll, servo_lag="auto",
+                                                 axes=("roll",)).fit(plain.flight)}
+    lag = fits["lagged"].axes_["roll"]
+    assert lag.lag > 0 and lag.lag_lr > 10.0  # the likelihood supports a lag
+    assert abs(lag.lag - lagged.truth.lag_roll) < 0.015
+    assert fits["lagged"].params_.lag_roll == lag.lag and fits["lagged"].summary()["roll"]["servo_lag_s"] == lag.lag
+    plain_fit = fits["plain"].axes_["roll"]
+    assert plain_fit.lag == 0.0 and plain_fit.lag_lr < 10.0  # a delay alone: no lag kept
+    lags = [g for g, _ in plain_fit.lag_profile]
+    assert lags == sorted(lags) and lags[0] == 0.0
+    with pytest.raises(ValueError, match="servo_lag"):
+        MaximumLikelihoodIdentifier(servo_lag="slow").fit(plain.flight)
+
+
 def test_coupled_structure_recovers_cross_coupling():
     sf = simulate_flight(150, seed=3, effects=("cross_coupling",))
     ident = MaximumLikelihoodIdentifier(structure="coupled", axes=("roll", "pitch")).fit(sf.flight)

@@ -135,6 +135,23 @@ def test_no_delay_is_a_feedthrough():
     assert servo_coefficients(0.0) == (0.0, 1.0, 0.0)
 
 
+def test_a_servo_lag_is_a_first_order_response_and_adds_to_the_delays_denominator():
+    """eq. (31) with the lag added to d1: a pure lag is 1/(1 + s T); with a delay, (1 - s tau/2)/(1 + s (tau/2 + T))."""
+    assert servo_coefficients(0.0, 0.05) == (0.05, 1.0, 0.0)
+    d1, n1, n2 = servo_coefficients(0.08, 0.05)
+    assert_allclose((d1, n1, n2), (0.04 + 0.05, 1.0, 0.04), rtol=1e-12)
+    lag, dt = 0.05, 0.001
+    t = dt * np.arange(501)
+    sticks = np.zeros((4, t.size))
+    sticks[0] = 1.0
+    x = simulate(ModelParams(k2=1.0, lag_roll=lag), t, sticks, x0=initial_state())
+    servo_out = derivatives(x, sticks, None, ModelParams(k2=1.0, lag_roll=lag))[0]
+    assert_allclose(servo_out, 1 - np.exp(-t / lag), rtol=0, atol=1e-9)  # the lag's step response, no inverse part
+    assert_allclose(x[0], t - lag + lag * np.exp(-t / lag), rtol=0, atol=1e-9)
+    with pytest.raises(ValueError, match="lag_pitch must be a servo time constant in \\[0, 1\\] s"):
+        ModelParams(lag_pitch=1.5)
+
+
 def test_step_response_through_the_pade_servo_is_delayed():
     """p' = k2 theta_cyc with k2 = 1, tau = 0.1 s: a unit lateral step, analytic solution of eq. (31).
 

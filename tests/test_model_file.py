@@ -149,6 +149,21 @@ def test_unknown_added_term(tmp_path, doc):
         load_model(_write(tmp_path, doc))
 
 
+def test_a_servo_lag_is_stored_only_where_there_is_one(tmp_path):
+    from heli_core.params import ModelParams
+    from model_store.model_file import model_document
+
+    plain = ModelParams(k2=1.3, k3=2.4, tau_roll=0.04)
+    assert "servo_lag_s" not in model_document(plain)  # files of servos without a lag stay as they were
+    lagged = plain.with_values(lag_roll=0.03, lag_yaw=0.02)
+    doc = model_document(lagged)
+    assert doc["servo_lag_s"] == {"roll": 0.03, "pitch": 0.0, "yaw": 0.02} and doc["units"]["servo_lag_s"] == "s"
+    assert load_model(_write(tmp_path, doc))[0] == lagged
+    doc["servo_lag_s"] = {"rol": 0.1}
+    with pytest.raises(ModelFileError, match="'servo_lag_s' must be an object with keys among roll, pitch, yaw"):
+        load_model(_write(tmp_path, doc))
+
+
 @pytest.mark.parametrize("section", ["added_terms", "servo_delay_s"])
 def test_sections_that_are_not_objects(tmp_path, doc, section):
     doc[section] = [0.1, 0.1, 0.1]
