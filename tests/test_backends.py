@@ -326,6 +326,18 @@ def test_seeds_train_as_tasks_and_equal_a_single_run(seeds_local, tmp_path):
     assert not _same_policy(_policy(seeds_local[5].path), _policy(seeds_local[6].path))
 
 
+def test_seeds_take_a_train_config_or_its_fields(seeds_local, tmp_path):
+    """train_seeds(config=TrainConfig(...)) trains the agent its fields by keyword train; a keyword given beside
+    the config replaces its field (here the timesteps), as train_agent's and the sweep's do."""
+    from controllers.rl import TrainConfig, train_seeds
+
+    config = TrainConfig(algo="ppo", timesteps=64, **TINY_PPO)
+    res = train_seeds(out=tmp_path / "ppo", seeds=[5], backend=LocalBackend(1), progress=False, config=config,
+                      timesteps=128)
+    assert res[5].timesteps == seeds_local[5].timesteps and config.timesteps == 64
+    assert _same_policy(_policy(res[5].path), _policy(seeds_local[5].path))
+
+
 def test_seed_and_config_errors(tmp_path):
     from controllers.errors import AgentError
     from controllers.rl import train_seeds
