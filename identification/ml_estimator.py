@@ -58,7 +58,7 @@ from .fit_warnings import require_moving_sticks
 from .flight import Flight
 from .integral_method import IntegralIdentifier
 from .state_space import N_NONLINEAR, WIND_MODELS, ZETA_BOUNDS, rts_smooth, wind_block
-from .servo_lag import profile_lag
+from .servo_lag import lags_of, profile_lag
 from .vibration import remove_common_lines
 
 OWN_RATE = ("p", "q", "r")
@@ -245,18 +245,7 @@ class MaximumLikelihoodIdentifier:
         return IntegralIdentifier(delay=self.delay)._delays()
 
     def _lags(self) -> list:
-        """Per axis the servo lag [s], or "auto"."""
-        lag = self.servo_lag
-        if lag is None:
-            return [0.0, 0.0, 0.0]
-        if isinstance(lag, str):
-            if lag != "auto":
-                raise ValueError(f"servo_lag must be None, 'auto', seconds or 3 values in seconds, got {lag!r}")
-            return ["auto"] * 3
-        values = np.broadcast_to(np.asarray(lag, dtype=float), (3,)) if np.ndim(lag) <= 1 else None
-        if values is None or not np.all((values >= 0) & (values <= 1.0)):
-            raise ValueError(f"servo_lag must be None, 'auto', seconds or 3 values in seconds in [0, 1], got {lag!r}")
-        return [float(v) for v in values]
+        return lags_of(self.servo_lag)
 
     def _check_settings(self):
         self._lags()  # a bad servo_lag is named before any work

@@ -39,7 +39,6 @@ def remove_vibration_lines(rates, fs: float, min_hz: float = 8.0, max_lines: int
     """
     rates = np.array(rates, dtype=float, copy=True)
     n = rates.shape[1]
-    found = []
     if min_hz >= fs / 2 or n < 64:
         return rates, []
     t = np.arange(n) / fs
@@ -48,6 +47,7 @@ def remove_vibration_lines(rates, fs: float, min_hz: float = 8.0, max_lines: int
     win = np.hanning(n)
     df = freqs[1]
     half = max(3, int(round(2.0 / df)))
+    found = []
     for a in range(rates.shape[0]):
         for _ in range(max_lines):
             x = rates[a] - np.mean(rates[a])
@@ -108,7 +108,11 @@ def remove_common_lines(rates, commands, fs: float, min_hz: float = 8.0) -> tupl
         own = [ln["frequency_hz"] for ln in in_commands if ln["axis"] == AXES[a]]
         if not own:
             continue
-        freqs = own + [ln["frequency_hz"] for ln in found if ln["axis"] == AXES[a]]
+        resolution = 0.5 * fs / commands.shape[1]  # the same line found in both: regressed once
+        freqs = []
+        for hz in own + [ln["frequency_hz"] for ln in found if ln["axis"] == AXES[a]]:
+            if all(abs(hz - f) > resolution for f in freqs):
+                freqs.append(hz)
         cleaned[a] = remove_lines(np.asarray(rates[a], dtype=float), fs, freqs)
         commands[a] = remove_lines(commands[a], fs, freqs)
         lines += [{**ln, "signal": "command"} for ln in in_commands if ln["axis"] == AXES[a]]
