@@ -9,28 +9,25 @@ import sys
 from .argtypes import number, output_path, whole
 
 
-def _delay(text):
-    if text is None or text == "auto":
-        return text
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not 0.0 <= v <= 2.0:  # the range ModelParams accepts for a servo delay; NaN fails too
-        raise argparse.ArgumentTypeError(f"expected 'auto' or a delay in seconds in [0, 2], got {text!r}")
-    return v
+def _seconds_or_auto(what: str, upper: float):
+    """An argparse type: 'auto' or ``what`` in seconds within [0, ``upper``] (the range ModelParams accepts)."""
+
+    def parse(text):
+        if text is None or text == "auto":
+            return text
+        try:
+            v = float(text)
+        except ValueError:
+            v = math.nan
+        if not 0.0 <= v <= upper:  # NaN fails too
+            raise argparse.ArgumentTypeError(f"expected 'auto' or a {what} in seconds in [0, {upper:g}], got {text!r}")
+        return v
+
+    return parse
 
 
-def _lag(text):
-    if text is None or text == "auto":
-        return text
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not 0.0 <= v <= 1.0:  # the range ModelParams accepts for a servo lag; NaN fails too
-        raise argparse.ArgumentTypeError(f"expected 'auto' or a servo lag in seconds in [0, 1], got {text!r}")
-    return v
+_delay = _seconds_or_auto("delay", 2.0)
+_lag = _seconds_or_auto("servo lag", 1.0)
 
 
 def add_flight_backend_options(p):
