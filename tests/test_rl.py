@@ -392,3 +392,38 @@ def test_training_on_surrogates_of_the_training_segments_only(shipped, tmp_path)
     assert agent_metadata(run.path)["surrogates"] == 2
     with pytest.raises(AgentError, match="surrogates"):
         TrainConfig(surrogates=-1)
+
+
+def _rl_targets():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("rl_targets", Path(__file__).parents[1] / "scripts" / "rl_targets.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _comparison(folder: Path, p90: dict) -> Path:
+    """A train_compare.py report with the given p90 |attitude error| per agent (roll, pitch, yaw)."""
+    results = [{"summary": {"name": name, "axes": {a: {"att_p90_deg": v} for a, v in zip(("roll", "pitch", "yaw"),
+                                                                                       values)}}}
+               for name, values in p90.items()]
+    folder.mkdir()
+    (folder / "comparison.json").write_text(json.dumps({"results": results, "training": {}}))
+    return folder
+
+
+def test_rl_targets_reads_the_runs_and_says_which_meet_the_targets(tmp_path, capsys):
+    # a user checks the RL targets from train_compare.py's folders: every axis below the robust PD's p90;
+    # within 10 % of the best PD on two axes
+    targets = _rl_targets()
+    pds = {"PD robust swept": (0.20, 0.10, 0.30), "PD best swept": (0.10, 0.09, 0.12)}
+    good = _comparison(tmp_path / "s0", {**pds, "PPO-RESIDUAL": (0.105, 0.099, 0.20)})
+    short = _comparison(tmp_path / "s1", {**pds, "PPO-RESIDUAL": (0.15, 0.10, 0.20)})  # pitch ties the robust PD
+    assert targets.main([str(good), str(short)]) == 0
+    out = capsys.readouterr().out
+    assert "Beats the robust PD on every axis: 1 of 2 runs" in out and "two axes or more: 1 of 2" in out
+    with pytest.raises(ValueError, match="no PD best swept row"):
+        targets.rows(_comparison(tmp_path / "s2", {"PD robust swept": (1, 1, 1), "PPO": (1, 1, 1)}), None)
+    with pytest.raises(FileNotFoundError, match="no comparison.json"):
+        targets.rows(tmp_path, None)

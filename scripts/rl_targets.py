@@ -1,0 +1,87 @@
+"""The RL targets of the realistic environment, from the reports of ``scripts/train_compare.py`` runs.
+
+Each run folder holds the ``comparison.json`` of one seed (``train_compare.py --algos ppo-residual
+--seed S --out DIR``): the agents flown on the same held-out gusts. For every run and RL agent this
+prints the p90 |attitude error| per axis, its ratio to the robust swept PD (gain margin >= 6 dB, phase
+margin >= 45 deg) and to the best swept PD of any margin, and the two targets:
+
+* **beats the robust PD**: p90 below the robust PD's on every axis (target: 3 of 3 seeds);
+* **near the best PD**: within 10 % of the best swept PD on at least two axes.
+
+Usage::
+
+    python scripts/rl_targets.py RUN_DIR [RUN_DIR ...] [--agent PPO-RESIDUAL]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+AXES = ("roll", "pitch", "yaw")
+ROBUST, BEST = "PD robust swept", "PD best swept"
+NEAR = 1.10
+"""Within 10 % of the best swept PD."""
+
+
+def p90s(report: dict) -> dict:
+    """Per agent name, the p90 |attitude error| per axis [deg] of a ``comparison.json``."""
+    out = {}
+    for result in report["results"]:
+        summary = result["summary"]
+        out[summary["name"]] = [float(summary["axes"][a]["att_p90_deg"]) for a in AXES]
+    return out
+
+
+def rows(run: Path, agent: str | None) -> list[dict]:
+    """One row per RL agent of a run: its p90s, ratios and whether it meets each target."""
+    path = run / "comparison.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"{run}: no comparison.json (expected the --out folder of scripts/train_compare.py)")
+    report = json.loads(path.read_text())
+    table = p90s(report)
+    missing = [name for name in (ROBUST, BEST) if name not in table]
+    if missing:
+        raise ValueError(f"{path}: the run has no {' and no '.join(missing)} row; expected a train_compare.py report")
+    out = []
+    for name, values in table.items():
+        if name.startswith("PD") or (agent and name != agent):
+            continue
+        robust = [v / r for v, r in zip(values, table[ROBUST])]
+        best = [v / b for v, b in zip(values, table[BEST])]
+        training = report.get("training", {}).get(name.lower(), {})
+        out.append({"run": run.name, "agent": name, "p90": values, "vs_robust": robust, "vs_best": best,
+                    "beats_robust": all(r < 1.0 for r in robust), "near_best": sum(b <= NEAR for b in best) >= 2,
+                    "timesteps": training.get("timesteps"), "seconds": training.get("seconds")})
+    return out
+
+
+def _fmt(values, digits=3) -> str:
+    return " / ".join(f"{v:.{digits}f}" for v in values)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR")
+    ap.add_argument("--agent", default=None, help="only this agent's rows (e.g. PPO-RESIDUAL)")
+    args = ap.parse_args(argv)
+    table = [row for run in args.runs for row in rows(run, args.agent)]
+    print(f"Command: python scripts/rl_targets.py {' '.join(str(r) for r in args.runs)}"
+          + (f" --agent {args.agent}" if args.agent else "") + "\n")
+    print("| run | agent | steps | p90 roll / pitch / yaw [°] | ÷ robust PD | ÷ best PD | beats robust | near best |")
+    print("|---|---|---|---|---|---|---|---|")
+    for r in table:
+        steps = f"{r['timesteps'] / 1e6:.1f} M" if r["timesteps"] else "—"
+        print(f"| {r['run']} | {r['agent']} | {steps} | {_fmt(r['p90'])} | {_fmt(r['vs_robust'], 2)} "
+              f"| {_fmt(r['vs_best'], 2)} | {'yes' if r['beats_robust'] else 'no'} | {'yes' if r['near_best'] else 'no'} |")
+    n = len(table)
+    beats = sum(r["beats_robust"] for r in table)
+    near = sum(r["near_best"] for r in table)
+    print(f"\nBeats the robust PD on every axis: {beats} of {n} runs (target: every seed). "
+          f"Within 10 % of the best PD on two axes or more: {near} of {n}.")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
