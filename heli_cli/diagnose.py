@@ -100,6 +100,10 @@ def _print_run(run_, evidence) -> int:
     if hasattr(d, "closed_loop_"):
         print("stick share closed by the pilot/controller: "
               + ", ".join(f"{a} {100 * v:.0f} %" for a, v in d.closed_loop_.items()))
+        from identification.ml_diagnosis_report import flight_controller_note
+
+        if flight_controller_note(d):
+            print(flight_controller_note(d))
     for key, path in run_.paths.items():
         print(f"wrote {path}")
     return 0

@@ -73,6 +73,16 @@ def _r2(r: dict) -> str:
            f"{r.get('simulation', float('nan')):.3f}"
 
 
+def flight_controller_note(d: LikelihoodDiagnoser) -> str | None:
+    """What the closed-loop share cannot show when the sticks are a flight controller's commands, else None."""
+    if getattr(d, "input_hold_", None) != "zoh":
+        return None
+    return ("The sticks are a flight controller's commands (held over each sample): it closes the loop within a "
+            "sample, faster than the 0.1-0.5 s the share looks at, so every axis is closed by it whatever the share "
+            "says; the effects are judged on what its corrections leave, with its gyro's vibration removed from the "
+            "commands and the rates alike.")
+
+
 def diagnosis_markdown(d: LikelihoodDiagnoser, figure: Path | None) -> str:
     """``diagnosis.md``: verdict, closed-loop shares, the steps, and every candidate per round."""
     found = ", ".join(f"`{e}` on {a}" for e, a in d.effects_found_)
@@ -87,6 +97,8 @@ def diagnosis_markdown(d: LikelihoodDiagnoser, figure: Path | None) -> str:
            "pilot's corrections leave.", "",
            _table(["Axis", "closed-loop share of the stick"],
                   [[a, f"{100 * v:.0f} %"] for a, v in d.closed_loop_.items()]), ""]
+    if flight_controller_note(d):
+        md += [flight_controller_note(d), ""]
     if d.steps_:
         md += ["## Effects added", "",
                f"R² columns: one-step prediction / {AHEAD_S:g} s ahead / simulation from the sticks alone.", "",

@@ -125,6 +125,9 @@ def test_log_whose_input_lags_is_named_as_a_negative_alignment():
     assert d.effects_found_ == [("servo_delay", "roll")]
     assert d.alignment_[0] == pytest.approx(-0.3, abs=0.01)
     assert d.params_.tau_roll == 0.0  # a log correction, not a servo delay of the aircraft
+    from identification.ml_diagnosis_report import flight_controller_note
+
+    assert flight_controller_note(d) is None  # a pilot's sticks: the share says who closes the loop
 
 
 def test_a_flight_controllers_log_is_read_with_held_sticks_and_no_sub_sample_delay():
@@ -142,6 +145,10 @@ def test_a_flight_controllers_log_is_read_with_held_sticks_and_no_sub_sample_del
     assert d.verdict_ == "none"
     delay = [r for r in d.rounds_[0] if r["effect"] == "servo_delay"][0]
     assert delay["lr"] < delay["threshold"]
+    # the report says the flight controller closes every axis, which the 0.1-0.5 s share cannot see
+    from identification.ml_diagnosis_report import diagnosis_markdown, flight_controller_note
+
+    assert "flight controller's commands" in diagnosis_markdown(d, None) and flight_controller_note(d)
     with pytest.raises(ValueError, match="input_hold"):
         LikelihoodDiagnoser(input_hold="cubic").fit(flight)
 
