@@ -50,8 +50,8 @@ from scipy import stats
 
 from heli_core.params import ModelParams
 
-from .effects import CATALOGUE, MAX_ALIGNMENT, NONE, UNDECIDED
-from .errors import IdentifiabilityError, NotFittedError
+from .effects import CATALOGUE, MAX_ALIGNMENT, NONE, UNDECIDED, DiagnosisResult
+from .errors import IdentifiabilityError
 from .flight import Flight
 from .heldout import HeldOut, Score, Spec
 from .preprocess import lowpass_flight
@@ -166,7 +166,7 @@ def heldout_stats(score: Score) -> dict:
     return rate_error_stats(score.measured.reshape(3, -1), score.simulated.reshape(3, -1))
 
 
-class Diagnoser:
+class Diagnoser(DiagnosisResult):
     """Find the physical effect a model misses in a flight, add it, and show the gap shrink.
 
     Parameters
@@ -534,16 +534,6 @@ class Diagnoser:
                 "_acf": w, "_ccf": cc}
 
     # ------------------------------------------------------------------- use
-    def _check_fitted(self):
-        if not hasattr(self, "verdict_"):
-            raise NotFittedError("this Diagnoser is not fitted yet; call fit(flight) first")
-
     def summary(self) -> dict:
         """JSON-ready result (without the plots' raw series)."""
-        self._check_fitted()
-        return {
-            "verdict": self.verdict_,
-            "effects_found": [{"effect": e, "axis": a} for e, a in self.effects_found_],
-            "steps": [s.to_dict() for s in self.steps_],
-            "evidence": self.evidence_,
-        }
+        return self._summary_head() | {"evidence": self.evidence_}

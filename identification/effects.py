@@ -25,6 +25,7 @@ from types import MappingProxyType
 
 import numpy as np
 
+from .errors import NotFittedError
 from .flight import Flight
 from .terms import AXES, INPUT_FOR_AXIS, TERMS
 
@@ -82,6 +83,22 @@ def implausible(values: dict) -> str | None:
 
 MAX_ALIGNMENT = 0.6
 """Largest |time alignment| the ``servo_delay`` search covers [s]."""
+
+
+class DiagnosisResult:
+    """What both diagnosers (:class:`~identification.diagnose.Diagnoser`,
+    :class:`~identification.ml_diagnosis.LikelihoodDiagnoser`) answer alike once fitted: the verdict, the
+    effects found and the steps that added them."""
+
+    def _check_fitted(self):
+        if not hasattr(self, "verdict_"):
+            raise NotFittedError(f"this {type(self).__name__} is not fitted yet; call fit(flight) first")
+
+    def _summary_head(self) -> dict:
+        """The JSON-ready verdict, effects found and steps every diagnosis summary starts with."""
+        self._check_fitted()
+        return {"verdict": self.verdict_, "effects_found": [{"effect": e, "axis": a} for e, a in self.effects_found_],
+                "steps": [s.to_dict() for s in self.steps_]}
 
 
 @dataclass(frozen=True)

@@ -44,8 +44,7 @@ from threadpoolctl import threadpool_limits
 from heli_core.params import ModelParams
 from heli_core.terms import AXES, DECOUPLED, STICK_ROW, TERMS
 
-from .effects import CATALOGUE, MAX_ALIGNMENT, NONE, SERVO_DELAY, UNDECIDED, implausible, shift_inputs
-from .errors import NotFittedError
+from .effects import CATALOGUE, MAX_ALIGNMENT, NONE, SERVO_DELAY, UNDECIDED, DiagnosisResult, implausible, shift_inputs
 from .flight import Flight
 from .ml_estimator import BURN_IN, MAX_DELAY, MAX_SHIFT, MaximumLikelihoodIdentifier, _AxisLikelihood
 from .state_space import WIND_MODELS, kalman, lti_apply
@@ -193,7 +192,7 @@ def _fresh(x) -> np.ndarray:
     return np.array([max(float(x[0]), 0.5), np.log(4.0), np.log(0.3), np.log(100.0), np.log(100.0)])
 
 
-class LikelihoodDiagnoser:
+class LikelihoodDiagnoser(DiagnosisResult):
     """Name the physical effect a model misses by the likelihood of the wind-state model (module docstring).
 
     Parameters
@@ -478,17 +477,9 @@ class LikelihoodDiagnoser:
         floor = self.min_lr_alignment if alignment else self.min_lr_per_parameter
         return max(float(stats.chi2.ppf(1.0 - self.alpha / m, k)), floor * k)
 
-    def _check_fitted(self):
-        if not hasattr(self, "verdict_"):
-            raise NotFittedError("this LikelihoodDiagnoser is not fitted yet; call fit(flight) first")
-
     def summary(self) -> dict:
         """JSON-ready verdict, steps, candidates per round, closed-loop shares and R² per axis."""
-        self._check_fitted()
-        return {
-            "verdict": self.verdict_,
-            "effects_found": [{"effect": e, "axis": a} for e, a in self.effects_found_],
-            "steps": [s.to_dict() for s in self.steps_],
+        return self._summary_head() | {
             "rounds": self.rounds_,
             "closed_loop_share": self.closed_loop_,
             "input_hold": self.input_hold_,
