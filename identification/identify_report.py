@@ -51,14 +51,14 @@ def parameter_table(identifiers: dict, truth: ModelParams | None) -> str:
             for v in vals:
                 row.append("—" if v is None or tv == 0 else f"{100 * (v - tv) / tv:+.1f}")
         rows.append(row)
-    for axis in AXES:
-        taus = [identifiers[lab].params_.taus[AXES.index(axis)] for lab in labels]
-        if any(taus):
-            row = [f"tau_{axis}", "s"] + [f"{t:.3f}" for t in taus]
-            if truth is not None:
-                tv = truth.taus[AXES.index(axis)]
-                row += [f"{tv:.3f}"] + ["—" for _ in labels]
-            rows.append(row)
+    for kind, servo in (("tau", lambda p: p.taus), ("lag", lambda p: p.lags)):  # the servo's delay and lag
+        for axis in AXES:
+            values = [servo(identifiers[lab].params_)[AXES.index(axis)] for lab in labels]
+            if any(values):
+                row = [f"{kind}_{axis}", "s"] + [f"{t:.3f}" for t in values]
+                if truth is not None:
+                    row += [f"{servo(truth)[AXES.index(axis)]:.3f}"] + ["—" for _ in labels]
+                rows.append(row)
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * len(header)) + "|"]
     lines += ["| " + " | ".join(r) + " |" for r in rows]
     return "\n".join(lines)
