@@ -26,6 +26,34 @@ from functools import lru_cache
 import numpy as np
 
 
+def per_axis(name: str, setting, upper: float) -> list:
+    """An identifier's servo setting (``delay``, ``servo_lag``) per axis (roll, pitch, yaw): seconds in
+    [0, ``upper``], or ``"auto"`` (profiled). None means 0 on every axis, one value every axis the same.
+
+    Raises
+    ------
+    ValueError
+        Anything else, naming the setting, what it takes and what came.
+    """
+    if setting is None:
+        return [0.0, 0.0, 0.0]
+    if isinstance(setting, str):
+        if setting != "auto":
+            raise ValueError(f"{name} must be None, 'auto', seconds or 3 values in seconds, got {setting!r}")
+        return ["auto"] * 3
+    try:
+        values = np.asarray(setting, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be None, 'auto', seconds or 3 values in seconds, got {setting!r}") from None
+    values = np.full(3, float(values)) if values.ndim == 0 else values
+    if values.shape != (3,):
+        raise ValueError(f"{name} needs one value per axis (roll, pitch, yaw) or one for all, got {setting!r}")
+    if not np.all((values >= 0) & (values <= upper)):
+        raise ValueError(f"{name} must be None, 'auto', seconds or 3 values in seconds in [0, {upper:g}], "
+                         f"got {setting!r}")
+    return [float(v) for v in values]
+
+
 @lru_cache(maxsize=256)
 def servo_coefficients(tau: float, lag: float = 0.0) -> tuple[float, float, float]:
     """Coefficients ``(d1, n1, n2)`` of the servo model, eq. (31).

@@ -44,7 +44,7 @@ import time as _time
 import numpy as np
 
 from heli_core.params import ModelParams
-from heli_core.servo import pade_filter  # (it lived here before heli_core: still importable from here)
+from heli_core.servo import pade_filter, per_axis  # (pade_filter lived here before heli_core: still importable)
 from heli_core.terms import AXES, COUPLED, DECOUPLED, EXTRA_PARAMS, STICK_ROW, TERMS
 
 from .errors import IdentifiabilityError, NotFittedError
@@ -152,19 +152,7 @@ class IntegralIdentifier:
         return base
 
     def _delays(self) -> list:
-        d = self.delay
-        if d is None:
-            return [0.0, 0.0, 0.0]
-        if isinstance(d, str):
-            if d != "auto":
-                raise ValueError(f"delay must be None, seconds, 3 values or 'auto', got {d!r}")
-            return ["auto"] * 3
-        if np.ndim(d) == 0:
-            return [float(d)] * 3
-        d = [float(v) for v in d]
-        if len(d) != 3:
-            raise ValueError(f"delay needs one value per axis (roll, pitch, yaw), got {len(d)}")
-        return d
+        return per_axis("delay", self.delay, 2.0)  # the delays ModelParams accepts
 
     # ------------------------------------------------------------------- fit
     def fit(self, flight) -> "IntegralIdentifier":

@@ -49,7 +49,7 @@ from scipy import optimize
 from threadpoolctl import threadpool_limits
 
 from heli_core.params import ModelParams
-from heli_core.servo import pade_filter
+from heli_core.servo import pade_filter, per_axis
 from heli_core.terms import AXES, DECOUPLED, FEATURES, RATE_DEPENDENCE, STICK_ROW, TERMS
 
 from .axis_likelihood import AxisData, AxisLikelihood, simulation_r2
@@ -58,7 +58,7 @@ from .fit_warnings import require_moving_sticks
 from .flight import Flight
 from .integral_method import IntegralIdentifier
 from .state_space import N_NONLINEAR, WIND_MODELS, ZETA_BOUNDS, rts_smooth, wind_block
-from .servo_lag import lags_of, profile_lag
+from .servo_lag import profile_lag
 from .vibration import remove_common_lines
 
 OWN_RATE = ("p", "q", "r")
@@ -242,10 +242,10 @@ class MaximumLikelihoodIdentifier:
         return IntegralIdentifier(structure=self.structure, extra_terms=self.extra_terms)._param_names()
 
     def _delays(self) -> list:
-        return IntegralIdentifier(delay=self.delay)._delays()
+        return per_axis("delay", self.delay, 2.0)  # the delays ModelParams accepts
 
     def _lags(self) -> list:
-        return lags_of(self.servo_lag)
+        return per_axis("servo_lag", self.servo_lag, 1.0)  # the lags ModelParams accepts
 
     def _check_settings(self):
         self._lags()  # a bad servo_lag is named before any work

@@ -30,24 +30,6 @@ NFEV = 30
 """Likelihood evaluations per grid point (each warm-started from the fit without a lag)."""
 
 
-def lags_of(setting) -> list:
-    """Per axis the servo lag [s], or "auto", from the identifier's ``servo_lag`` setting (None: none)."""
-    if setting is None:
-        return [0.0, 0.0, 0.0]
-    if isinstance(setting, str):
-        if setting != "auto":
-            raise ValueError(f"servo_lag must be None, 'auto', seconds or 3 values in seconds, got {setting!r}")
-        return ["auto"] * 3
-    try:
-        values = np.asarray(setting, dtype=float)
-    except (TypeError, ValueError):
-        values = np.full(2, np.nan)  # refused below with the setting named
-    values = np.full(3, float(values)) if values.ndim == 0 else values
-    if values.shape != (3,) or not np.all((values >= 0) & (values <= 1.0)):
-        raise ValueError(f"servo_lag must be None, 'auto', seconds or 3 values in seconds in [0, 1], got {setting!r}")
-    return [float(v) for v in values]
-
-
 def _nll(cost: float, n: int) -> float:
     """Negative log-likelihood of a concentrated least-squares ``cost`` over ``n`` innovations."""
     return 0.5 * n * (np.log(2.0 * np.pi * 2.0 * cost / n) + 1.0)

@@ -402,3 +402,18 @@ def test_the_old_disturbance_keyword_is_a_deprecated_name_of_the_wind_torque():
     with pytest.warns(DeprecationWarning, match="torque"):
         old = core_simulate(PAPER, t, sticks, disturbance=torque)
     np.testing.assert_array_equal(new, old)
+
+
+def test_servo_settings_per_axis_are_parsed_once_for_both_identifiers():
+    from heli_core.servo import per_axis
+    from identification.integral_method import IntegralIdentifier
+    from identification.ml_estimator import MaximumLikelihoodIdentifier
+
+    assert per_axis("delay", None, 2.0) == [0.0, 0.0, 0.0] and per_axis("delay", "auto", 2.0) == ["auto"] * 3
+    assert per_axis("servo_lag", 0.03, 1.0) == [0.03] * 3 and per_axis("delay", (0.1, 0, 0.2), 2.0) == [0.1, 0, 0.2]
+    for bad, says in (("slow", "delay must be None, 'auto'"), ([0.1, 0.2], "delay needs one value per axis"),
+                      (-0.1, r"delay must be .* in \[0, 2\], got -0.1")):
+        with pytest.raises(ValueError, match=says):
+            IntegralIdentifier(delay=bad)._delays()
+        with pytest.raises(ValueError, match="delay"):
+            MaximumLikelihoodIdentifier(delay=bad)._delays()
