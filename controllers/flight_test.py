@@ -47,7 +47,7 @@ from heli_core.files import jsonable, write_text
 from heli_core.params import ModelParams
 from heli_core.physics import trim_sticks
 from heli_core.terms import AXES
-from identification.synthetic import PAPER_PARAMS, FlightConfig, coloured_noise
+from identification.synthetic import PAPER_PARAMS, FlightConfig, coloured_noise, sensor_errors
 
 from .closed_loop import axis_index, disturbance_spectrum
 from .errors import SweepError
@@ -389,11 +389,8 @@ def _fresh_wind(cfg: FlightTestConfig, wind: dict, params, model_params) -> Loop
         col[:, f] = np.clip(wind["collective_mean"] + coloured_noise(rng, n, fs, 0.05, wind["collective_std"]),
                             -1.0, 1.0)
         if cfg.sensors:  # the flight generator's sensor model
-            phase = rng.uniform(0, 2 * np.pi, size=(3, 2))
-            vib = sum(sensor.vibration / (j + 1) * np.sin(2 * np.pi * (j + 1) * sensor.rotor_hz * t[None, :]
-                                                             + phase[:, j:j + 1]) for j in range(2))
-            gyro[:, :, f] = sensor.gyro_noise * rng.standard_normal((3, n)) + vib
-            attn[:, :, f] = sensor.attitude_noise * rng.standard_normal((3, n))
+            terms, attn[:, :, f] = sensor_errors(rng, sensor, t)
+            gyro[:, :, f] = sum(terms[1:], terms[0])
     torque = params.control_gains[:, None, None] * gust
     trim = np.array(trim_sticks(model_params, col))  # the autopilot's trim: the identified model's
     return LoopInputs(trim, col, torque, att_noise=attn, rate_noise=gyro)

@@ -415,7 +415,7 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
     col = cfg.collective_trim + coloured_noise(rng, n, fs, 0.05, cfg.collective_wander)
     col = np.clip(col, -1.0, 1.0)
     jitter = np.array([coloured_noise(rng, n, fs, 2.0, cfg.stick_noise) for _ in range(3)])
-    errors = _sensor_errors(rng, cfg, time)
+    errors = sensor_errors(rng, cfg, time)
     states, sticks = _fly(params, cfg, sweep_schedule(time, cfg), jitter, col, torque, errors)
     true_rates = states[:, :3].T
     rates, att = _sensors(errors, true_rates, euler_from_quaternion(states[:, 6:10].T))
@@ -438,7 +438,7 @@ def _fly(params: ModelParams, cfg: FlightConfig, sweeps, jitter, col, torque, er
     rate (``"pd"``, ``"autopilot"``) seen ``delay`` samples ago, scaled by the control gain he has learnt,
     and adds the ``sweeps`` and his ``jitter`` (3, n); ``col`` (n,) is the collective and ``torque`` (3, n)
     the wind [rad/s^2]. A human sees the aircraft; the autopilot reads its sensors, the true state plus
-    ``errors`` (:func:`_sensor_errors`), the gyro through its D-term low-pass (``cfg.autopilot_dterm_hz``).
+    ``errors`` (:func:`sensor_errors`), the gyro through its D-term low-pass (``cfg.autopilot_dterm_hz``).
     """
     n = col.size
     fs = cfg.sample_rate
@@ -533,10 +533,11 @@ class _AutopilotSensing:
         return list(self._state)
 
 
-def _sensor_errors(rng: np.random.Generator, cfg: FlightConfig, time) -> tuple[list, np.ndarray]:
+def sensor_errors(rng: np.random.Generator, cfg: FlightConfig, time) -> tuple[list, np.ndarray]:
     """What the gyro and the attitude sensor add to the truth, drawn before the flight (a flight controller
     flies on what its sensors read): the gyro's terms (noise, rotor vibration, ``cfg.vibration_lines``),
-    each (3, n), in the order they are added, and the attitude noise (3, n)."""
+    each (3, n), in the order they are added, and the attitude noise (3, n). The flight tests of
+    :mod:`controllers.flight_test` draw their sensors with it too."""
     n = time.size
     phase = rng.uniform(0, 2 * np.pi, size=(3, 2))
     vib = sum(
@@ -551,7 +552,7 @@ def _sensor_errors(rng: np.random.Generator, cfg: FlightConfig, time) -> tuple[l
 
 
 def _sensors(errors: tuple, true_rates, true_att):
-    """What the gyro and the attitude sensor log: the truth plus :func:`_sensor_errors`, yaw wrapped to
+    """What the gyro and the attitude sensor log: the truth plus :func:`sensor_errors`, yaw wrapped to
     (-pi, pi]. Returns (rates, attitude), each (3, n)."""
     gyro, att_noise = errors
     rates = true_rates
