@@ -432,7 +432,7 @@ class MaximumLikelihoodIdentifier:
 
     def _fit_axis(self, a, axis_params, flights, burn, start_params, delay, lag=0.0) -> MLAxisFit:
         """One axis fitted at servo delay ``delay`` and lag ``lag`` (seconds, or "auto": profiled)."""
-        _, damping_name = self._axis_data(a, axis_params, flights[:1], burn, 0.0)
+        first, damping_name = self._axis_data(a, axis_params, flights[:1], burn, 0.0)
         free = damping_name is not None
         damping0 = float(-TERMS[damping_name].sign * start_params.get(damping_name)) if free else 0.0
         x0 = np.array([max(damping0, 0.1) if free else 0.0, np.log(4.0), np.log(0.3), np.log(100.0), np.log(100.0)])
@@ -466,7 +466,7 @@ class MaximumLikelihoodIdentifier:
                                             lag=fixed_lag)
         free_tau = delay == "auto"
         lag_profile, lag_lr = (), None
-        if lag == "auto" and self._axis_data(a, axis_params, flights[:1], burn, 0.0)[0].servo_row is not None:
+        if lag == "auto" and first.servo_row is not None:  # an axis without its stick has no servo
             found = profile_lag(self, a, axis_params, flights, burn, (cost, x, kind, tau), free, free_tau)
             fixed_lag, (cost, x, kind, tau), lag_profile, lag_lr = found
         data, _ = self._axis_data(a, axis_params, flights, burn, tau, kind, fixed_lag)

@@ -70,7 +70,7 @@ def profile_lag(ident, a: int, names, flights, burn: int, base: tuple, free: boo
     models = WIND_MODELS if ident.wind_model == "auto" else (ident.wind_model,)
     fit = ident._best(a, names, flights, burn, tau0, x0, models, free, None, free_tau, best)
     nll = _nll(fit[0], n)
-    profile = sorted(set(profile) | {(best, nll)})
+    profile = sorted([p for p in profile if p[0] != best] + [(best, nll)])  # the refined lag's full fit
     lr = 2.0 * (_nll(cost0, n) - nll)
     if lr > threshold() and best < LAG_GRID[-1] - 1e-9:
         return best, fit, tuple(profile), float(lr)
