@@ -58,6 +58,9 @@ def register(sub):
     p.add_argument("--residual-scale", type=number("a number in (0, 2]", 0.0, 2.0, high_open=False), default=0.05,
                    metavar="STICK",
                    help="bound of the residual in stick units (default 0.05)")
+    p.add_argument("--no-axis-balance", action="store_true",
+                   help="scale a residual's reward and observations by its PD's worst axis on every axis (default: "
+                   "each axis by its own error level, so that every axis counts alike in the reward)")
     p.set_defaults(func=run, out_kind="file")
 
 
@@ -70,7 +73,7 @@ def _config(args):
                        held_out_fraction=args.held_out_fraction, split_seed=args.split_seed,
                        eval_episodes=args.eval_episodes, episode_seconds=args.episode_seconds,
                        residual=args.residual, residual_scale=args.residual_scale, surrogates=args.surrogates,
-                       max_seconds=None if args.minutes is None else 60.0 * args.minutes)
+                       axis_balance=not args.no_axis_balance, max_seconds=None if args.minutes is None else 60.0 * args.minutes)
 
 
 def _run_seeds(args, config) -> int:

@@ -14,7 +14,7 @@ from heli_core.quaternion import euler_from_quaternion_scalar, quaternion_from_e
 from .errors import ActionError
 from .spec import MAX_RATE, action_space, build_spec, observation_space, real_actions, reset_options
 from .spec import OBS_DIM  # noqa: F401  (it lived here)
-from .tasks import NOISE_BLOCK, draw_episode, line_phases, reward_from_sums, wrap
+from .tasks import NOISE_BLOCK, draw_episode, line_phases, reward_of, wrap
 
 
 class HeliAttitudeEnv(gym.Env):
@@ -231,9 +231,7 @@ class HeliAttitudeEnv(gym.Env):
         obs, info = self._observe()
         e_att, e_rate = self._errors
         a = self._prev
-        r = reward_from_sums(s.task, e_att[0] * e_att[0] + e_att[1] * e_att[1] + e_att[2] * e_att[2],
-                             e_rate[0] * e_rate[0] + e_rate[1] * e_rate[1] + e_rate[2] * e_rate[2],
-                             a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+        r = reward_of(s.task, e_att, e_rate, a)
         x = self._x
         terminated = not (abs(self._att[0]) <= s.task.max_angle and abs(self._att[1]) <= s.task.max_angle
                           and math.isfinite(x[0]) and math.isfinite(x[1]) and math.isfinite(x[2]))

@@ -215,7 +215,7 @@ def clip_actions(actions, out):
 
 
 @lru_cache(maxsize=8)
-def observe_kernel(task: str, noisy: bool, parallel: bool = True):
+def observe_kernel(task: str, noisy: bool, parallel: bool = True, axis_weighted: bool = False):
     """The compiled loop ``observe(att, x, ref_att, ref_rate, meas_att, meas_rate, prev, max_rate, max_angle,
     coef, k, steps, obs, deg_att, deg_rate, reward, terminated, truncated)``, specialised on the task.
 
@@ -228,8 +228,8 @@ def observe_kernel(task: str, noisy: bool, parallel: bool = True):
     float32, ``deg_att``/``deg_rate`` (3, n), ``reward`` (n), ``terminated``
     (attitude beyond ``max_angle`` or a rate not finite) and ``truncated``
     (otherwise, at the step limit). The same expressions as the single
-    environment's ``_observe`` and :func:`heli_env.tasks.reward_from_sums`,
-    written out per axis.
+    environment's ``_observe`` and :func:`heli_env.tasks.reward_of`,
+    written out per axis (``axis_weighted``: with ``coef[3:6]`` weighing each axis' errors).
     """
     two_pi = repr(TWO_PI)
 
@@ -245,6 +245,9 @@ def observe_kernel(task: str, noisy: bool, parallel: bool = True):
         "    ca = coef[0]",
         "    cr = coef[1]",
         "    cu = coef[2]",
+        "    w0 = coef[3]",
+        "    w1 = coef[4]",
+        "    w2 = coef[5]",
         "    for i in prange(att.shape[1]):",
     ]
     for c, w in enumerate(("p", "q", "r")):
@@ -265,12 +268,18 @@ def observe_kernel(task: str, noisy: bool, parallel: bool = True):
             rate, rate_err = w, f"r{c}"
         lines += [f"        obs[i, {3 + c}] = {bound(rate)}", f"        obs[i, {6 + c}] = {bound(rate_err)}",
                   f"        obs[i, {9 + c}] = u{c}"]
-    att2 = "0.0" if task == "rate" else "(e0 * e0 + e1 * e1 + e2 * e2)"
+    def squares(v):  # heli_env.tasks.reward_of
+        if axis_weighted:
+            return f"(w0 * {v}0 * {v}0 + w1 * {v}1 * {v}1 + w2 * {v}2 * {v}2)"
+        return f"({v}0 * {v}0 + {v}1 * {v}1 + {v}2 * {v}2)"
+
+    att2 = "0.0" if task == "rate" else squares("e")
     lines += [
-        f"        reward[i] = -(ca * {att2} + cr * (r0 * r0 + r1 * r1 + r2 * r2) + cu * (u0 * u0 + u1 * u1 + u2 * u2))",
+        f"        reward[i] = -(ca * {att2} + cr * {squares('r')} + cu * (u0 * u0 + u1 * u1 + u2 * u2))",
         "        ok = (abs(att[0, i]) <= max_angle and abs(att[1, i]) <= max_angle and isfinite(p) and isfinite(q)",
         "              and isfinite(r))",
         "        terminated[i] = not ok",
         "        truncated[i] = ok and k[i] >= steps[i]",
     ]
-    return _compile(lines, "observe", f"observe {task}{' noisy' if noisy else ''}", parallel)
+    return _compile(lines, "observe", f"observe {task}{' noisy' if noisy else ''}{' axis-weighted' if axis_weighted else ''}",
+                    parallel)

@@ -54,6 +54,10 @@ class TaskConfig:
     weights : tuple of 3 float
         Weights of the attitude, rate and control-effort terms. Default
         (1, 0.1, 0.01) for "hold"/"track", (0, 1, 0.01) for "rate".
+    axis_weights : tuple of 3 float
+        Weights of roll, pitch and yaw in the attitude and rate terms (default 1, 1, 1):
+        ``(w_roll, w_pitch, w_yaw)`` multiply each axis' squared errors, so an axis
+        whose errors are naturally smaller (pitch beside yaw) can count as much.
     max_angle : float
         |roll| or |pitch| beyond this terminates the episode [rad] (default 60°).
     """
@@ -68,6 +72,7 @@ class TaskConfig:
     rate_scale: float = math.radians(30.0)
     weights: tuple | None = None
     max_angle: float = math.radians(60.0)
+    axis_weights: tuple = (1.0, 1.0, 1.0)
 
     def __post_init__(self):
         if self.task not in TASKS:
@@ -81,6 +86,18 @@ class TaskConfig:
             object.__setattr__(self, "weights", (0.0, 1.0, 0.01) if self.task == "rate" else (1.0, 0.1, 0.01))
         if len(self.weights) != 3 or any(not w >= 0 for w in self.weights):
             raise ValueError(f"weights must be 3 non-negative numbers (attitude, rate, effort), got {self.weights!r}")
+        try:
+            axis_weights = tuple(float(w) for w in self.axis_weights)
+        except (TypeError, ValueError):
+            axis_weights = ()
+        if len(axis_weights) != 3 or not all(math.isfinite(w) and w >= 0 for w in axis_weights):
+            raise ValueError(f"axis_weights must be 3 non-negative numbers (roll, pitch, yaw), got {self.axis_weights!r}")
+        object.__setattr__(self, "axis_weights", axis_weights)
+
+    @property
+    def axis_weighted(self) -> bool:
+        """The axes weigh differently in the reward (``axis_weights`` is not all ones)."""
+        return self.axis_weights != (1.0, 1.0, 1.0)
 
 
 @dataclass
@@ -179,23 +196,33 @@ def wrap(angle):
     return angle - TWO_PI * np.round(angle / TWO_PI)
 
 
-def reward_coefficients(cfg: TaskConfig) -> tuple[float, float, float]:
-    """Weights of the squared attitude error [1/rad^2], rate error [s^2/rad^2] and action in the reward."""
+def reward_coefficients(cfg: TaskConfig) -> tuple[float, ...]:
+    """Weights of the squared attitude error [1/rad^2], rate error [s^2/rad^2] and action in the reward,
+    then the three axis weights (roll, pitch, yaw)."""
     wa, wr, wu = cfg.weights
-    return wa / (cfg.attitude_scale * cfg.attitude_scale), wr / (cfg.rate_scale * cfg.rate_scale), wu
+    return (wa / (cfg.attitude_scale * cfg.attitude_scale), wr / (cfg.rate_scale * cfg.rate_scale), wu,
+            *cfg.axis_weights)
 
 
-def reward_from_sums(cfg: TaskConfig, att2, rate2, effort2):
-    """Reward of one step from the sums of squares of the errors and the action.
+def reward_of(cfg: TaskConfig, e_att, e_rate, action):
+    """Reward of one step from the attitude errors [rad], rate errors [rad/s] and action [stick], 3 each.
 
     ``-(w_att * att2/attitude_scale^2 + w_rate * rate2/rate_scale^2 + w_u * effort2)``
-    with ``att2 = sum(e_att^2)`` [rad^2], ``rate2 = sum(e_rate^2)`` [(rad/s)^2] and
-    ``effort2 = sum(a^2)`` [stick^2]; floats or arrays over copies. The vector
-    environment's loop (:func:`heli_env.kernels.observe`) evaluates the same
-    expression with :func:`reward_coefficients`.
+    with ``att2 = sum(w_axis * e_att^2)``, ``rate2 = sum(w_axis * e_rate^2)`` and
+    ``effort2 = sum(a^2)``; floats or arrays over copies. Without axis weights the sums are
+    unweighted (``e0*e0 + e1*e1 + e2*e2``). The vector environment's loop
+    (:func:`heli_env.kernels.observe_kernel`) evaluates the same expression with
+    :func:`reward_coefficients`.
     """
-    ca, cr, cu = reward_coefficients(cfg)
-    return -(ca * att2 + cr * rate2 + cu * effort2)
+    ca, cr, cu, w0, w1, w2 = reward_coefficients(cfg)
+    e, r, a = e_att, e_rate, action
+    if cfg.axis_weighted:
+        att2 = w0 * e[0] * e[0] + w1 * e[1] * e[1] + w2 * e[2] * e[2]
+        rate2 = w0 * r[0] * r[0] + w1 * r[1] * r[1] + w2 * r[2] * r[2]
+    else:
+        att2 = e[0] * e[0] + e[1] * e[1] + e[2] * e[2]
+        rate2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+    return -(ca * att2 + cr * rate2 + cu * (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]))
 
 
 def line_phases(rng: np.random.Generator, n_lines: int) -> list:

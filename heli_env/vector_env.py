@@ -79,7 +79,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._x = None  # (N_STATE, n) once reset
         self._advance = advance_kernel(s.model.params, s.dt, self._threads > 1)
         self._euler_arguments = euler_arguments_kernel()
-        self._observe_loop = observe_kernel(s.task.task, s.measured, self._threads > 1)
+        self._observe_loop = observe_kernel(s.task.task, s.measured, self._threads > 1, s.task.axis_weighted)
         self._trig = batch_rows(5, n)  # arguments of atan2 / asin / atan2 (eqs. 27-29)
         self._att = batch_rows(3, n)  # roll, pitch, yaw [rad]
         self._coef = np.array(reward_coefficients(s.task))

@@ -22,6 +22,7 @@ from numpy.testing import assert_allclose
 import heli_env
 from heli_cli.main import main
 from heli_env import ActionError, EnvModelError, HeliAttitudeEnv, default_model_dir, load_env_model
+from heli_env.tasks import TaskConfig
 from heli_env.vector_env import HeliAttitudeVectorEnv
 from identification.disturbance_library import DisturbanceLibrary
 from identification.model import euler_from_quaternion, step, trim_sticks
@@ -581,6 +582,32 @@ def test_rate_reward_ignores_the_attitude():
         expected = -(np.sum((np.radians(info["rate_error_deg_s"]) / cfg.rate_scale) ** 2)
                      + 0.01 * np.sum(a.astype(float) ** 2))
         assert r == pytest.approx(expected, rel=1e-9)
+
+
+def test_axis_weights_weigh_each_axis_errors_in_the_reward():
+    """``axis_weights`` multiply each axis' squared attitude and rate errors; all ones is the unweighted reward."""
+    actions = _random_actions(200, seed=3)
+    weights = (1.0, 9.0, 0.25)
+    env = HeliAttitudeEnv(task=TaskConfig(axis_weights=weights), episode_seconds=2.0)
+    run = _rollout(env, actions, seed=2)
+    cfg = env.spec_.task
+    plain = _rollout(HeliAttitudeEnv(episode_seconds=2.0), actions, seed=2)
+    assert np.array_equal(np.array(run["x"]), np.array(plain["x"]))  # the weights change the score, not the flight
+    for r, r0, info, a in zip(run["rew"], plain["rew"], run["info"][1:], actions):
+        e_att, e_rate = np.radians(info["attitude_error_deg"]), np.radians(info["rate_error_deg_s"])
+        effort = 0.01 * np.sum(a.astype(float) ** 2)
+        expected = -(np.sum(weights * e_att ** 2) / cfg.attitude_scale ** 2
+                     + 0.1 * np.sum(weights * e_rate ** 2) / cfg.rate_scale ** 2 + effort)
+        assert r == pytest.approx(expected, rel=1e-9)
+        assert r0 == pytest.approx(-(np.sum(e_att ** 2) / cfg.attitude_scale ** 2
+                                     + 0.1 * np.sum(e_rate ** 2) / cfg.rate_scale ** 2 + effort), rel=1e-9)
+    assert run["rew"] != plain["rew"]
+
+
+@pytest.mark.parametrize("bad", [(1.0, 2.0), (1.0, -1.0, 1.0), (1.0, float("nan"), 1.0), "abc", None])
+def test_axis_weights_must_be_three_non_negative_numbers(bad):
+    with pytest.raises(ValueError, match="axis_weights must be 3 non-negative numbers"):
+        TaskConfig(axis_weights=bad)
 
 
 # ------------------------------------------------------------------------------------------ integration

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from numpy.testing import assert_array_equal
+from numpy.testing import assert_allclose, assert_array_equal
 
 pytest.importorskip("stable_baselines3")
 
@@ -318,6 +318,19 @@ def test_residual_training_scales_follow_the_pd_errors(residual_run):
     assert meta["task"]["rate_scale"] == pytest.approx(meta["task"]["attitude_scale"] * setup["corner_rad_s"])
     assert setup["corner_rad_s"] == pytest.approx(max(360.0 / 26.2, 539.0 / 39.4, 66.0 / 3.65))  # the largest kp/kd
     assert (meta["init_angle_deg"], meta["init_rate_deg"]) == (0.5, 0.5)
+    # each axis counts by its own error level: the reward weighs an axis (E / E_i)^2, the observations by 4 E_i
+    errors = np.array(setup["axis_error_deg"])
+    assert max(errors) == setup["error_deg"]
+    assert_allclose(meta["task"]["axis_weights"], np.minimum((setup["error_deg"] / errors) ** 2, 100.0))
+    assert_allclose(setup["obs_scale"][0:3], 4 * np.radians(np.maximum(errors, setup["error_deg"] / 10)))
+    assert setup["axis_weights"] == meta["task"]["axis_weights"]
+
+
+def test_residual_without_axis_balance_weighs_every_axis_alike(ideal, tmp_path):
+    res = _tiny("ppo", tmp_path / "res", ideal, residual=BEST_PD, residual_scale=0.05, axis_balance=False)
+    meta = agent_metadata(res.path)
+    assert meta["task"]["axis_weights"] == [1.0, 1.0, 1.0]
+    assert meta["residual"]["setup"]["obs_scale"][0:3] == [4 * np.radians(meta["residual"]["setup"]["error_deg"])] * 3
 
 
 def test_a_zero_residual_flies_the_pd(shipped):

@@ -19,6 +19,7 @@ from numpy.testing import assert_allclose
 import heli_env  # noqa: F401  (registers HeliAttitude-v0)
 from heli_core.sensors import GyroLine, SensorModel
 from heli_env import ActionError, HeliAttitudeEnv
+from heli_env.tasks import TaskConfig
 from heli_env.vector_env import HeliAttitudeVectorEnv
 
 ENV_ID = "HeliAttitude-v0"
@@ -87,10 +88,11 @@ def test_vector_env_reproduces_single_envs_across_autoresets(task):
         {"task": "track", "reference": "smooth", "obs_noise": (0.01, 0.03), "action_delay": 2},
         {"task": "rate", "dt": 0.02, "gust_scale": 2.0, "collective": 0.1},
         {"task": "hold", "init_angle_deg": 0.0, "init_rate_deg": 0.0},
+        {"task": TaskConfig(task="track", axis_weights=(1.0, 9.0, 0.25)), "obs_noise": (0.01, 0.03)},
         {"task": "hold", "obs_noise": SensorModel((0.01, 0.02, 0.03), (0.003, 0.002, 0.0), (
             GyroLine("roll", 30.0, 0.04), GyroLine("yaw", 40.0, 0.02), GyroLine("roll", 27.0, 0.03)))},
     ],
-    ids=["noise-delay", "dt-gust-collective", "level", "identified-sensors"],
+    ids=["noise-delay", "dt-gust-collective", "level", "axis-weights", "identified-sensors"],
 )
 def test_vector_env_reproduces_single_envs_with_other_settings(kwargs):
     counts = _run_side_by_side({**kwargs, "episode_seconds": 2.0}, n=3, n_steps=300, seed=7)

@@ -105,6 +105,11 @@ class TrainConfig:
         the :class:`~controllers.pd.PDController`.
     residual_scale : float
         Bound of the residual [stick], in (0, 2]; checked only with ``residual``.
+    axis_balance : bool
+        With ``residual`` (default True): each axis' reward and observation scales follow that
+        axis' own error level under the base PD, so that every axis counts alike in the reward
+        (``TaskConfig.axis_weights``); False scales every axis by the largest axis' level, which
+        leaves an axis the PD already holds well (pitch beside yaw) with a tenth of the weight.
 
     Raises
     ------
@@ -137,6 +142,7 @@ class TrainConfig:
     residual: object = None
     residual_scale: float = RESIDUAL_SCALE
     surrogates: int = 0
+    axis_balance: bool = True
 
     def __post_init__(self):
         if self.algo not in ALGOS:

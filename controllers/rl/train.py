@@ -219,41 +219,62 @@ def residual_setup(base: PDController, env_model, segments, seed: int = 0, secon
     Returns
     -------
     dict
-        ``error_deg`` (E), ``corner_rad_s`` (ω_c), ``stick_p99``, ``attitude_scale``
-        and ``rate_scale`` [rad, rad/s] of the reward, and ``obs_scale`` (12 floats).
+        ``error_deg`` (E, the largest axis'), ``axis_error_deg`` (E_i per axis), ``corner_rad_s`` (ω_c),
+        ``stick_p99``, ``attitude_scale`` and ``rate_scale`` [rad, rad/s] of the reward (from E),
+        ``axis_weights`` ((E / E_i)², at most :data:`MAX_AXIS_WEIGHT`: the reward of each axis scaled by
+        its own level), ``obs_scale`` (12 floats, every axis by E) and ``axis_obs_scale`` (each axis by E_i).
     """
     from ..evaluate import evaluate_agent
 
     res = evaluate_agent(base, env_model, traces=list(segments), episodes_per_trace=1, episode_seconds=seconds,
                          seed=seed, name="residual base")
     axes = ("roll", "pitch", "yaw")
-    err = max(float(res.metrics[a]["att_p90_deg"]) for a in axes)
+    errors = [float(res.metrics[a]["att_p90_deg"]) for a in axes]
+    err = max(errors)
     stick = max(float(res.metrics[a]["stick_p99"]) for a in axes)
-    if not (math.isfinite(err) and err > 0.0):
+    if not (all(math.isfinite(v) for v in errors) and err > 0.0):
         raise AgentError(f"the residual's base PD gives no usable error level on the training gusts (p90 {err!r} "
                          "deg); is it stable on this model?")
     kp, kd = np.abs(base.gains.kp), np.abs(base.gains.kd)
     corner = float(np.max(np.where(kd > 0, kp / np.where(kd > 0, kd, 1.0), 0.0)))
     if not corner > 0.0:
         corner = 10.0  # a P-only or D-only base: weigh 1 rad/s of rate error as 0.1 rad of attitude error
+    axis_errors = [max(e_i, err / math.sqrt(MAX_AXIS_WEIGHT)) for e_i in errors]
+
+    def observation_scales(levels):
+        levels = [math.radians(v) for v in levels]
+        return [4 * e for e in levels] + [4 * e * corner for e in levels] * 2 + [max(1.5 * stick, 0.05)] * 3
+
     e = math.radians(err)
-    obs_scale = [4 * e] * 3 + [4 * e * corner] * 6 + [max(1.5 * stick, 0.05)] * 3
-    return {"error_deg": err, "corner_rad_s": corner, "stick_p99": stick, "attitude_scale": 2 * e,
-            "rate_scale": 2 * e * corner, "obs_scale": obs_scale}
+    return {"error_deg": err, "axis_error_deg": errors, "corner_rad_s": corner, "stick_p99": stick,
+            "attitude_scale": 2 * e, "rate_scale": 2 * e * corner,
+            "axis_weights": [(err / e_i) ** 2 for e_i in axis_errors], "obs_scale": observation_scales([err] * 3),
+            "axis_obs_scale": observation_scales(axis_errors)}
+
+
+MAX_AXIS_WEIGHT = 100.0
+"""Largest reward weight of an axis relative to the worst-held one (an axis the base holds ten times better
+than the worst counts ten times, not more: a near-perfect axis would otherwise drown the others)."""
 
 
 def _residual_setup(config: TrainConfig, env_model, train_seg):
     """(scales, task): the residual's scales from its base's errors on the training gusts, and a named task
-    with its reward scaled by them; (None, ``config.task``) without a residual."""
+    with its reward scaled by them (per axis with ``config.axis_balance``); (None, ``config.task``) without
+    a residual."""
     if config.residual is None:
         return None, config.task
     from heli_env.tasks import TaskConfig
 
     setup = residual_setup(config.residual, env_model, train_seg, config.seed)
+    if config.axis_balance:
+        setup = {**setup, "obs_scale": setup["axis_obs_scale"]}
+    else:
+        setup = {**setup, "axis_weights": [1.0, 1.0, 1.0]}
     task = config.task
     if isinstance(task, str):
         try:
-            task = TaskConfig(task=task, attitude_scale=setup["attitude_scale"], rate_scale=setup["rate_scale"])
+            task = TaskConfig(task=task, attitude_scale=setup["attitude_scale"], rate_scale=setup["rate_scale"],
+                              axis_weights=tuple(setup["axis_weights"]))
         except ValueError as e:
             raise AgentError(str(e)) from e
     return setup, task
