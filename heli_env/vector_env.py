@@ -106,6 +106,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._line_sin = np.zeros((len(s.line_axis), n))
         self._noise = np.zeros((NOISE_BLOCK, 6, n)) if s.measured else None  # each copy's block of sensor noise
         self._noise_used = np.full(n, NOISE_BLOCK, dtype=np.int64)  # steps of it used
+        self._last_obs = None  # the observation each copy was last given (a masked reset leaves the others')
         self._att_noise = np.array(s.obs_noise[0])[:, None]
         self._rate_noise = np.array(s.obs_noise[1])[:, None]
         self._ones = np.ones(n, dtype=bool)
@@ -149,7 +150,13 @@ class HeliAttitudeVectorEnv(VectorEnv):
         np.multiply(np.take(self._table, j, axis=0).T[7:10], self._gust, out=self._ud)  # the gust about to act
         if self._threads > 1:  # (setting the count launches numba's pool, even to 1: single-threaded never does)
             numba.set_num_threads(self._threads)
+        used = self._noise_used.copy()
         obs, info, _, _, _ = self._observe()
+        if self._last_obs is not None and not mask.all():  # a copy not reset keeps its observation and its noise
+            keep = ~mask
+            obs[keep] = self._last_obs[keep]
+            self._noise_used[keep] = used[keep]
+        self._last_obs = obs.copy()
         return obs, info
 
     def _reset_envs(self, which, options):
@@ -225,6 +232,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
             j = self._base[which]
             ud[:, which] = self._table[j, 7:10].T * self._gust[which]
         obs, info, rew, terminated, truncated = self._observe()
+        self._last_obs = obs.copy()
         if restart.any():
             rew[restart] = 0.0
             terminated &= ~restart

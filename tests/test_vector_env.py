@@ -368,3 +368,21 @@ def test_default_thread_count_follows_the_batch_size():
     assert HeliAttitudeVectorEnv(8)._threads == 1
     assert HeliAttitudeVectorEnv(THREADED_FROM)._threads == numba.config.NUMBA_NUM_THREADS
     assert HeliAttitudeVectorEnv(8, threads=numba.config.NUMBA_NUM_THREADS)._threads == numba.config.NUMBA_NUM_THREADS
+
+
+def test_a_masked_reset_leaves_the_other_copies_alone():
+    """Resetting copy 0 alone neither changes copy 1's observation nor spends its sensor noise: copy 1 goes on
+    exactly as the single env of its seed."""
+    venv = HeliAttitudeVectorEnv(2, obs_noise=(0.01, 0.03), episode_seconds=5.0)
+    single = HeliAttitudeEnv(obs_noise=(0.01, 0.03), episode_seconds=5.0)
+    obs, _ = venv.reset(seed=[4, 9])
+    s_obs, _ = single.reset(seed=9)
+    actions = np.random.default_rng(2).uniform(-0.2, 0.2, (40, 3)).astype(np.float32)
+    for k, a in enumerate(actions):
+        if k == 20:
+            before = obs[1].copy()
+            obs, _ = venv.reset(options={"reset_mask": np.array([True, False])})
+            assert_allclose(obs[1], before, rtol=0, atol=0)
+        obs, *_ = venv.step(np.stack([a, a]))
+        s_obs, *_ = single.step(a)
+        assert_allclose(obs[1], s_obs, rtol=1e-12, atol=1e-12)
