@@ -61,6 +61,9 @@ def register(sub):
     p.add_argument("--no-axis-balance", action="store_true",
                    help="scale a residual's reward and observations by its PD's worst axis on every axis (default: "
                    "each axis by its own error level, so that every axis counts alike in the reward)")
+    p.add_argument("--paired-baseline", action="store_true",
+                   help="with --residual: each training copy has a twin flying the PD alone on the same gusts, start "
+                   "and sensor noise, and the residual is rewarded for the difference (twice the env copies)")
     p.set_defaults(func=run, out_kind="file")
 
 
@@ -73,7 +76,8 @@ def _config(args):
                        held_out_fraction=args.held_out_fraction, split_seed=args.split_seed,
                        eval_episodes=args.eval_episodes, episode_seconds=args.episode_seconds,
                        residual=args.residual, residual_scale=args.residual_scale, surrogates=args.surrogates,
-                       axis_balance=not args.no_axis_balance, max_seconds=None if args.minutes is None else 60.0 * args.minutes)
+                       axis_balance=not args.no_axis_balance, paired_baseline=args.paired_baseline,
+                       max_seconds=None if args.minutes is None else 60.0 * args.minutes)
 
 
 def _run_seeds(args, config) -> int:

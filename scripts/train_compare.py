@@ -146,6 +146,8 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--no-axis-balance", action="store_true",
                     help="scale a residual's reward and observations by the base PD's worst axis on every axis "
                     "(default: each axis by its own error level)")
+    ap.add_argument("--paired-baseline", action="store_true",
+                    help="reward a residual for what it gains over a twin copy flying the PD alone on the same gusts")
     ap.add_argument("--algo-kwargs", type=json.loads, default=None, metavar="JSON",
                     help="SB3 hyperparameters over the defaults of every algorithm trained, e.g. "
                     "'{\"gamma\": 0.95, \"gae_lambda\": 0.9}'")
@@ -226,7 +228,8 @@ def _train(ap, args, env_model, agents: list, out: Path) -> dict:
                           residual=agents[2 if args.residual_on == "robust" else 1][1] if residual else None,
                           residual_scale=args.residual_scale, surrogates=args.surrogates,
                           normalize_reward=False if args.no_reward_normalisation else None,
-                          axis_balance=not args.no_axis_balance, algo_kwargs=args.algo_kwargs)
+                          axis_balance=not args.no_axis_balance, algo_kwargs=args.algo_kwargs,
+                          paired_baseline=args.paired_baseline)
         training[algo] = {"timesteps": res.timesteps, "seconds": res.seconds,
                           "steps_per_second": res.steps_per_second, "stopped_by_time": res.stopped_by_time,
                           "evaluations": res.evaluations, "agent": str(res.path)}
@@ -243,6 +246,7 @@ def _training_notes(args, training: dict, agents: list) -> list[str]:
              + (f"; {args.surrogates} surrogates per training segment" if args.surrogates else "")
              + ("; raw rewards" if args.no_reward_normalisation else "")
              + ("; every axis scaled by the worst one" if args.no_axis_balance else "")
+             + ("; paired PD baseline" if args.paired_baseline else "")
              + (f"; hyperparameters {json.dumps(args.algo_kwargs)}" if args.algo_kwargs else "") + ":", ""]
     for algo, t in training.items():
         notes.append(f"- {algo.upper()}: {t['timesteps']} timesteps in {t['seconds']:.0f} s "

@@ -269,6 +269,18 @@ def test_heli_train_cli(tmp_path, capsys):
     assert type(load_agent(tmp_path / "cli_ppo.zip")).__name__ == "PPO"
 
 
+def test_heli_train_cli_residual_settings(tmp_path, ideal_model_dir):
+    pd_file = tmp_path / "pd.json"
+    PDController(PDGains([360.0, 539.0, 66.0], [26.2, 39.4, 3.65]), [1, -1, 1]).save(pd_file)
+    out = tmp_path / "res"
+    assert main(["train", "--algo", "ppo", "--model", str(ideal_model_dir), "--timesteps", "64", "--out", str(out),
+                 "--n-envs", "1", "--episode-seconds", "1", "--eval-freq", "0", "--checkpoint-freq", "0",
+                 "--no-progress", "--residual", str(pd_file), "--paired-baseline", "--no-axis-balance"]) == 0
+    meta = agent_metadata(tmp_path / "res.zip")
+    assert meta["paired_baseline"] is True and meta["axis_balance"] is False
+    assert meta["task"]["axis_weights"] == [1.0, 1.0, 1.0]
+
+
 def test_heli_train_missing_model_dir(tmp_path, capsys):
     code = main(["train", "--algo", "sac", "--model", str(tmp_path / "nope"), "--timesteps", "10", "--out",
                  str(tmp_path / "a")])
@@ -347,6 +359,42 @@ def test_a_zero_residual_flies_the_pd(shipped):
         obs_w, *_ = wrapped.step(np.zeros((3, 3), np.float32))
         obs_p, *_ = plain.step(BEST_PD.predict(obs_p)[0])
         assert_array_equal(obs_w, obs_p)
+
+
+def test_a_paired_residual_is_rewarded_for_what_it_gains_over_its_twin(shipped):
+    """The twin flies the PD alone on the same gust: a zero residual gains exactly nothing; the paired reward
+    is the copy's reward minus its twin's."""
+    from controllers.residual import residual_env
+    from controllers.sb3_vec_env import GymnasiumVecEnv
+    from heli_env.vector_env import HeliAttitudeVectorEnv
+
+    def env(twins):
+        return GymnasiumVecEnv(HeliAttitudeVectorEnv(6, model=shipped, episode_seconds=1.0), twins=twins)
+
+    paired, plain = residual_env(env(True), BEST_PD, 0.05, paired=True), residual_env(env(True), BEST_PD, 0.05)
+    assert paired.num_envs == 3
+    for e in (paired, plain):
+        e.seed(4)
+    obs, obs_plain = paired.reset(), plain.reset()
+    assert obs.shape == (3, 12)
+    rng = np.random.default_rng(0)
+    for k in range(250):  # two episode ends
+        a = np.zeros((3, 3), np.float32) if k < 120 else rng.uniform(-1, 1, (3, 3)).astype(np.float32)
+        obs, rew, done, _ = paired.step(a)
+        _, rew_plain, _, _ = plain.step(np.concatenate([a, np.zeros((3, 3), np.float32)]))
+        assert_allclose(rew, rew_plain[:3] - rew_plain[3:], rtol=1e-6, atol=1e-9)
+        if k < 120:
+            assert_array_equal(rew, 0.0)
+    assert not np.all(rew == 0.0)
+    with pytest.raises(AgentError, match="twins=True"):
+        residual_env(env(False), BEST_PD, 0.05, paired=True)
+
+
+def test_paired_baseline_training_is_recorded(ideal, tmp_path):
+    res = _tiny("ppo", tmp_path / "paired", ideal, residual=BEST_PD, residual_scale=0.05, paired_baseline=True)
+    meta = agent_metadata(res.path)
+    assert meta["paired_baseline"] is True and meta["n_envs"] == 2
+    assert len(res.evaluations) >= 1  # the held-out evaluation scores the raw return of the unpaired env
 
 
 @pytest.mark.parametrize("kw, exc, match", [

@@ -111,3 +111,49 @@ def test_rejects_same_step_autoreset():
 
     with pytest.raises(ValueError, match="NEXT_STEP"):
         GymnasiumVecEnv(Fake())
+
+
+# --------------------------------------------------------------------------------------------- twins
+def _twins(shipped, n=4, seconds=0.3):
+    sampler = WindowSampler(shipped, (TraceSegment(0), TraceSegment(1)), needed=int(seconds * 100) + 1)
+    return GymnasiumVecEnv(HeliAttitudeVectorEnv(n, model=shipped, episode_seconds=seconds), episode_options=sampler,
+                           twins=True)
+
+
+def test_twins_meet_the_same_gusts_starts_and_sensor_noise(shipped):
+    """Twin copies given the same actions stay equal bit for bit, through episode ends and restarts."""
+    adapter = _twins(shipped)
+    adapter.seed(5)
+    obs = adapter.reset()
+    assert_array_equal(obs[:2], obs[2:])
+    assert not np.array_equal(obs[0], obs[1])  # the two pairs differ from each other
+    rng = np.random.default_rng(1)
+    ends = 0
+    for _ in range(100):
+        a = rng.uniform(-0.5, 0.5, (2, 3)).astype(np.float32)
+        obs, rew, done, infos = adapter.step(np.concatenate([a, a]))
+        assert_array_equal(obs[:2], obs[2:])
+        assert_array_equal(rew[:2], rew[2:])
+        assert_array_equal(done[:2], done[2:])
+        ends += int(done[:2].sum())
+    assert ends >= 4
+    assert [d["trace"] for d in adapter.reset_infos[:2]] == [d["trace"] for d in adapter.reset_infos[2:]]
+
+
+def test_a_copy_ends_with_its_twin(shipped):
+    """A twin that fails (full roll stick) ends its pair: the other copy is truncated, not terminated."""
+    adapter = _twins(shipped, n=2, seconds=20.0)
+    adapter.seed(0)
+    adapter.reset()
+    for _ in range(1500):
+        obs, rew, done, infos = adapter.step(np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]], np.float32))
+        if done.any():
+            break
+    assert done.all()
+    assert infos[0]["TimeLimit.truncated"] is False and infos[1]["TimeLimit.truncated"] is True
+    assert_array_equal(obs[0], obs[1])  # both restarted together
+
+
+def test_twins_need_an_even_number_of_copies(shipped):
+    with pytest.raises(ValueError, match="even number of copies"):
+        GymnasiumVecEnv(HeliAttitudeVectorEnv(3, model=shipped), twins=True)

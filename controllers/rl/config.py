@@ -110,6 +110,11 @@ class TrainConfig:
         axis' own error level under the base PD, so that every axis counts alike in the reward
         (``TaskConfig.axis_weights``); False scales every axis by the largest axis' level, which
         leaves an axis the PD already holds well (pitch beside yaw) with a tenth of the weight.
+    paired_baseline : bool
+        With ``residual``: every training copy has a twin that meets the same gusts, start and
+        sensor noise under the base PD alone, and the residual is rewarded for the difference
+        (:func:`controllers.rl.residual_agent.residual_env`, ``paired=True``); twice the
+        environment copies are stepped. The held-out evaluations score the raw return.
 
     Raises
     ------
@@ -143,6 +148,7 @@ class TrainConfig:
     residual_scale: float = RESIDUAL_SCALE
     surrogates: int = 0
     axis_balance: bool = True
+    paired_baseline: bool = False
 
     def __post_init__(self):
         if self.algo not in ALGOS:

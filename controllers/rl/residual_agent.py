@@ -101,28 +101,50 @@ class ResidualAgent:
         return np.clip(act, -1.0, 1.0).astype(np.float32), state
 
 
-def residual_env(venv, base: PDController, scale: float):
+def residual_env(venv, base: PDController, scale: float, paired: bool = False):
     """SB3 ``VecEnv`` whose action is the residual: the base PD's command on the last observation plus
-    ``scale`` times the action, clipped to [-1, 1], is what the wrapped env receives."""
+    ``scale`` times the action, clipped to [-1, 1], is what the wrapped env receives.
+
+    With ``paired=True``, ``venv`` is a :class:`controllers.rl.vec_env.GymnasiumVecEnv` with
+    ``twins=True`` (2h copies) and the wrapper shows its first h copies: copy ``h + i``, the twin of
+    copy ``i`` (same gusts, start and sensor noise), flies the base PD alone, and copy ``i``'s reward
+    is its own minus its twin's — what the residual gained over the PD on the same gust. The gust's
+    share of the return, which no observation predicts and which left PPO's value function
+    explaining nothing of the returns, cancels; the twin's reward does not depend on the residual's
+    actions, so the policy gradient keeps its expectation (a control variate). Observations, episode
+    ends and infos are copy ``i``'s.
+    """
     from stable_baselines3.common.vec_env import VecEnvWrapper
+    from stable_baselines3.common.vec_env.base_vec_env import VecEnv
+
+    if paired and not getattr(venv, "twins", False):
+        raise AgentError("a paired residual needs a GymnasiumVecEnv with twins=True")
+    half = venv.num_envs // 2 if paired else venv.num_envs
 
     class ResidualVecEnv(VecEnvWrapper):
         def __init__(self):
             super().__init__(venv)
+            if paired:  # SB3 sees the first half; the wrapper's own bookkeeping is per shown copy
+                VecEnv.__init__(self, half, venv.observation_space, venv.action_space)
             self._obs = None
 
         def reset(self):
             self._obs = self.venv.reset()
-            return self._obs
+            return self._obs[:half]
 
         def step_async(self, actions):
-            act = base.command(np.asarray(self._obs, dtype=np.float64)) + scale * np.clip(actions, -1.0, 1.0)
+            command = base.command(np.asarray(self._obs, dtype=np.float64))
+            act = command[:half] + scale * np.clip(actions, -1.0, 1.0)
+            if paired:
+                act = np.concatenate([act, command[half:]])
             self.venv.step_async(np.clip(act, -1.0, 1.0).astype(np.float32))
 
         def step_wait(self):
             obs, rewards, dones, infos = self.venv.step_wait()
             self._obs = obs  # after a done: the next episode's first observation, what the next action sees
-            return obs, rewards, dones, infos
+            if paired:
+                rewards = (rewards[:half] - rewards[half:]).astype(np.float32)
+            return obs[:half], rewards, dones[:half], infos[:half]
 
     return ResidualVecEnv()
 

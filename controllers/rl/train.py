@@ -297,20 +297,21 @@ def _environments(config: TrainConfig, env_model, task, segments, gamma: float):
         kw = {"model": env_model, "task": task, "episode_seconds": config.episode_seconds,
               "init_angle_deg": init[0], "init_rate_deg": init[1]}
         train_model, train_segments = _training_gusts(config, env_model, segments[0])
-        venv = HeliAttitudeVectorEnv(config.n_envs, **{**kw, "model": train_model})
+        paired = config.residual is not None and config.paired_baseline
+        venv = HeliAttitudeVectorEnv(config.n_envs * (2 if paired else 1), **{**kw, "model": train_model})
         needed = venv.spec_.needed
         train_sampler = WindowSampler(train_model, train_segments, needed)
         eval_sampler = WindowSampler(env_model, segments[1], needed)
         eval_venv = HeliAttitudeVectorEnv(config.eval_episodes, **kw)
     except ValueError as e:
         raise AgentError(str(e)) from e
-    env = GymnasiumVecEnv(venv, episode_options=train_sampler)
+    env = GymnasiumVecEnv(venv, episode_options=train_sampler, twins=paired)
     eval_env = GymnasiumVecEnv(eval_venv, episode_options=eval_sampler, fixed_seed=config.seed + 1000)
     if config.residual is not None:
         from .residual_agent import residual_env
 
         base, scale = config.residual, config.residual_scale
-        env, eval_env = residual_env(env, base, scale), residual_env(eval_env, base, scale)
+        env, eval_env = residual_env(env, base, scale, paired), residual_env(eval_env, base, scale)
     env, eval_env = VecMonitor(env), VecMonitor(eval_env)  # monitors the raw returns
     if config.reward_normalized:  # the eval env is wrapped alike (EvalCallback syncs wrappers) but left raw
         env = VecNormalize(env, norm_obs=False, norm_reward=True, gamma=gamma)
@@ -352,7 +353,8 @@ def _metadata(config: TrainConfig, env_model, split, segments, task, dt: float, 
         "task": task if isinstance(task, str) else dataclasses.asdict(task),
         "episode_seconds": config.episode_seconds, "dt": dt, "n_envs": config.n_envs,
         "normalize_reward": config.reward_normalized, "init_angle_deg": init[0], "init_rate_deg": init[1],
-        "surrogates": config.surrogates,
+        "surrogates": config.surrogates, "axis_balance": config.axis_balance,
+        "paired_baseline": config.residual is not None and config.paired_baseline,
         "residual": None if config.residual is None else residual_metadata(config.residual, config.residual_scale,
                                                                             setup),
         "hyperparameters": _plain(hyper),

@@ -21,6 +21,13 @@ SB3 (2.x) trains on its own ``VecEnv`` and does not take a
 Per-episode reset options (a pinned gust window, :mod:`controllers.trace_split`)
 come from ``episode_options(i, rng)``, called for copy ``i`` at every reset with
 the adapter's own random generator, seeded with the environments.
+
+With ``twins=True`` the second half of the copies mirrors the first: copy ``h + i``
+(``h`` = half the copies) gets copy ``i``'s seed and episode options and ends and
+restarts with it, so the two meet the same gusts, start from the same state and read
+the same sensor noise. What differs between them is only what they are told to do:
+:func:`controllers.rl.residual_agent.residual_env` flies the base PD alone on the twin
+and rewards the residual for the difference (a paired baseline).
 """
 
 from __future__ import annotations
@@ -47,13 +54,21 @@ class GymnasiumVecEnv(VecEnv):
     fixed_seed : int, optional
         Every :meth:`reset` reseeds the environments and ``rng`` with this seed, so
         every call replays the same episodes (evaluation environments).
+    twins : bool
+        Copies ``h .. 2h - 1`` mirror copies ``0 .. h - 1`` (seeds, episode options, episode
+        ends); needs an even number of copies. A copy whose twin's episode ended is ended
+        with it (``TimeLimit.truncated`` unless it terminated itself).
     """
 
     def __init__(self, env, episode_options: Callable[[int, np.random.Generator], dict] | None = None,
-                 fixed_seed: int | None = None):
+                 fixed_seed: int | None = None, twins: bool = False):
         mode = env.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
         if mode != AutoresetMode.NEXT_STEP:
             raise ValueError(f"GymnasiumVecEnv needs a NEXT_STEP autoreset vector env, got {mode}")
+        if twins and env.num_envs % 2:
+            raise ValueError(f"twins need an even number of copies, got {env.num_envs}")
+        self.twins = bool(twins)
+        self._twin_options = {}
         self.env = env
         self.episode_options = episode_options
         self.fixed_seed = fixed_seed
@@ -69,6 +84,8 @@ class GymnasiumVecEnv(VecEnv):
         if self.fixed_seed is not None:
             seeds = [self.fixed_seed + i for i in range(n)]
         seed = None if seeds[0] is None else [int(s) for s in seeds]
+        if seed is not None and self.twins:
+            seed = seed[:n // 2] * 2
         if seed is not None:
             self._rng = np.random.default_rng(seed[0])
         options = self._options
@@ -93,12 +110,17 @@ class GymnasiumVecEnv(VecEnv):
             for i, d in zip(which, self._split_infos(info, which)):
                 self.reset_infos[i] = d
             return obs
-        for i in which:
+        for i in which:  # ascending: a copy resets before its twin
             mask = np.zeros(n, dtype=bool)
             mask[i] = True
-            opts = dict(per_copy[i]) if per_copy else {}
-            if self.episode_options is not None:
+            j = int(i) - n // 2 if self.twins and i >= n // 2 else int(i)  # the copy whose options it takes
+            opts = dict(per_copy[j]) if per_copy else {}
+            if j != i:
+                opts = self._twin_options.pop(j, opts)
+            elif self.episode_options is not None:
                 opts.update(self.episode_options(int(i), self._rng))
+                if self.twins:
+                    self._twin_options[int(i)] = opts
             new_obs, info = self.env.reset(options={"reset_mask": mask, **opts})
             obs = obs.copy()
             obs[i] = new_obs[i]
@@ -112,6 +134,10 @@ class GymnasiumVecEnv(VecEnv):
     def step_wait(self):
         obs, rew, terminated, truncated, info = self.env.step(self._actions)
         dones = np.logical_or(terminated, truncated)
+        if self.twins:  # a copy ends with its twin
+            half = dones[:self.num_envs // 2] | dones[self.num_envs // 2:]
+            truncated = np.logical_or(truncated, np.concatenate([half, half]) & ~dones)
+            dones = np.concatenate([half, half])
         infos = self._split_infos(info, range(self.num_envs))
         for i in range(self.num_envs):
             infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
