@@ -295,6 +295,7 @@ def _fly(agent, env, obs, info) -> dict:
     steps = np.full(E, n, dtype=np.int64)
     terminated = np.zeros(E, dtype=bool)
     alive = np.ones(E, dtype=bool)
+    state = None  # an agent with memory (a stacked history, a recurrent policy) carries it here
     torch = sys.modules.get("torch")
     threads = torch.get_num_threads() if torch is not None else None
     if torch is not None:
@@ -303,7 +304,7 @@ def _fly(agent, env, obs, info) -> dict:
         for k in range(n):
             att[k] = info["attitude_error_deg"]
             rate[k] = info["rate_error_deg_s"]
-            a, _ = agent.predict(obs, deterministic=True)
+            a, state = agent.predict(obs, state=state, episode_start=np.full(E, k == 0), deterministic=True)
             a = np.clip(np.asarray(a, dtype=np.float64).reshape(E, 3), -1.0, 1.0)  # the env clips the same way
             act[k] = a
             obs, r, term, trunc, info = env.step(a)

@@ -64,6 +64,9 @@ def register(sub):
     p.add_argument("--paired-baseline", action="store_true",
                    help="with --residual: each training copy has a twin flying the PD alone on the same gusts, start "
                    "and sensor noise, and the residual is rewarded for the difference (twice the env copies)")
+    p.add_argument("--history", type=whole(1), default=1, metavar="N",
+                   help="with --residual: the policy sees the last N observations side by side (default 1), so it "
+                   "can tell what the servo delay still holds and what the gust is doing")
     p.set_defaults(func=run, out_kind="file")
 
 
@@ -77,6 +80,7 @@ def _config(args):
                        eval_episodes=args.eval_episodes, episode_seconds=args.episode_seconds,
                        residual=args.residual, residual_scale=args.residual_scale, surrogates=args.surrogates,
                        axis_balance=not args.no_axis_balance, paired_baseline=args.paired_baseline,
+                       history=args.history,
                        max_seconds=None if args.minutes is None else 60.0 * args.minutes)
 
 

@@ -148,6 +148,8 @@ def _parser() -> argparse.ArgumentParser:
                     "(default: each axis by its own error level)")
     ap.add_argument("--paired-baseline", action="store_true",
                     help="reward a residual for what it gains over a twin copy flying the PD alone on the same gusts")
+    ap.add_argument("--history", type=int, default=1,
+                    help="observations a residual's policy sees side by side, newest last (default 1)")
     ap.add_argument("--algo-kwargs", type=json.loads, default=None, metavar="JSON",
                     help="SB3 hyperparameters over the defaults of every algorithm trained, e.g. "
                     "'{\"gamma\": 0.95, \"gae_lambda\": 0.9}'")
@@ -229,7 +231,7 @@ def _train(ap, args, env_model, agents: list, out: Path) -> dict:
                           residual_scale=args.residual_scale, surrogates=args.surrogates,
                           normalize_reward=False if args.no_reward_normalisation else None,
                           axis_balance=not args.no_axis_balance, algo_kwargs=args.algo_kwargs,
-                          paired_baseline=args.paired_baseline)
+                          paired_baseline=args.paired_baseline, history=args.history)
         training[algo] = {"timesteps": res.timesteps, "seconds": res.seconds,
                           "steps_per_second": res.steps_per_second, "stopped_by_time": res.stopped_by_time,
                           "evaluations": res.evaluations, "agent": str(res.path)}
@@ -247,6 +249,7 @@ def _training_notes(args, training: dict, agents: list) -> list[str]:
              + ("; raw rewards" if args.no_reward_normalisation else "")
              + ("; every axis scaled by the worst one" if args.no_axis_balance else "")
              + ("; paired PD baseline" if args.paired_baseline else "")
+             + (f"; {args.history} observations stacked" if args.history > 1 else "")
              + (f"; hyperparameters {json.dumps(args.algo_kwargs)}" if args.algo_kwargs else "") + ":", ""]
     for algo, t in training.items():
         notes.append(f"- {algo.upper()}: {t['timesteps']} timesteps in {t['seconds']:.0f} s "

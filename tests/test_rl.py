@@ -21,7 +21,7 @@ from stable_baselines3.common.callbacks import BaseCallback  # noqa: E402
 
 from controllers.errors import AgentError, TrainingInterrupted  # noqa: E402
 from controllers.pd import PDController, PDGains  # noqa: E402
-from controllers.rl import agent_metadata, load_agent, split_traces, train_agent  # noqa: E402
+from controllers.rl import agent_metadata, load_agent, make_config, split_traces, train_agent  # noqa: E402
 from controllers.trace_split import TraceSegment, WindowSampler, draw_windows  # noqa: E402
 from heli_cli.main import main  # noqa: E402
 
@@ -395,6 +395,43 @@ def test_paired_baseline_training_is_recorded(ideal, tmp_path):
     meta = agent_metadata(res.path)
     assert meta["paired_baseline"] is True and meta["n_envs"] == 2
     assert len(res.evaluations) >= 1  # the held-out evaluation scores the raw return of the unpaired env
+
+
+def test_stacked_observations_are_the_ones_training_saw(shipped):
+    """ResidualAgent's history equals SB3's VecFrameStack, through episode ends."""
+    from stable_baselines3.common.vec_env import VecFrameStack
+
+    from controllers.residual import stack_observations
+    from controllers.sb3_vec_env import GymnasiumVecEnv
+    from heli_env.vector_env import HeliAttitudeVectorEnv
+
+    env = VecFrameStack(GymnasiumVecEnv(HeliAttitudeVectorEnv(2, model=shipped, episode_seconds=0.1)), 4)
+    env.seed(1)
+    raw = env.venv
+    stacked = env.reset()
+    state = stack_observations(raw._obs, None, None, 4)
+    assert_array_equal(stacked, state)
+    rng = np.random.default_rng(0)
+    for k in range(25):  # two episode ends
+        stacked, _, done, _ = env.step(rng.uniform(-0.3, 0.3, (2, 3)).astype(np.float32))
+        state = stack_observations(raw._obs, state, done, 4)
+        assert_array_equal(stacked, state)
+
+
+def test_a_residual_with_history_trains_and_flies(ideal, tmp_path):
+    from controllers.evaluate import evaluate_agent
+    from controllers.residual import ResidualAgent
+
+    res = _tiny("ppo", tmp_path / "hist", ideal, residual=BEST_PD, residual_scale=0.05, history=3)
+    agent = load_agent(res.path)
+    assert isinstance(agent, ResidualAgent) and agent.history == 3
+    assert agent_metadata(res.path)["residual"]["history"] == 3
+    one, state = agent.predict(np.zeros(12, np.float32), deterministic=True)
+    assert one.shape == (3,) and state.shape == (1, 36)
+    result = evaluate_agent(agent, ideal, traces=[0], episodes_per_trace=2, episode_seconds=1.0, seed=0)
+    assert np.isfinite(result.metrics["roll"]["att_p90_deg"])
+    with pytest.raises(AgentError, match="history"):
+        make_config(history=2)  # without a residual
 
 
 @pytest.mark.parametrize("kw, exc, match", [

@@ -18,7 +18,7 @@ from heli_core.config import configured, whole_number
 
 from ..errors import AgentError
 from .agent_file import ALGOS
-from .residual_agent import RESIDUAL_INIT_DEG, RESIDUAL_SCALE, as_base, check_scale
+from .residual_agent import RESIDUAL_INIT_DEG, RESIDUAL_SCALE, as_base, check_history, check_scale
 
 DEFAULT_KWARGS = {
     # A rollout of 512 steps x 8 copies (41 s of flight), a 1 s horizon (gamma 0.99 at 100 Hz),
@@ -115,6 +115,11 @@ class TrainConfig:
         sensor noise under the base PD alone, and the residual is rewarded for the difference
         (:func:`controllers.rl.residual_agent.residual_env`, ``paired=True``); twice the
         environment copies are stepped. The held-out evaluations score the raw return.
+    history : int
+        With ``residual``: the policy sees the last ``history`` observations side by side (SB3's
+        ``VecFrameStack``; 1, the default, the current one). Past actions and rates let it infer
+        what the servo delay still holds and what the gust is doing, which no single observation
+        shows. In [1, 16].
 
     Raises
     ------
@@ -149,6 +154,7 @@ class TrainConfig:
     surrogates: int = 0
     axis_balance: bool = True
     paired_baseline: bool = False
+    history: int = 1
 
     def __post_init__(self):
         if self.algo not in ALGOS:
@@ -164,6 +170,10 @@ class TrainConfig:
         if self.residual is not None:
             object.__setattr__(self, "residual", as_base(self.residual))
             object.__setattr__(self, "residual_scale", check_scale(self.residual_scale))
+        object.__setattr__(self, "history", check_history(self.history))
+        if self.history > 1 and self.residual is None:
+            raise AgentError(f"history (observations stacked) is for residual agents; got history={self.history} "
+                             "without residual")
         init = self.init_ranges
         if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v < 90 for v in init):
             raise AgentError(f"init_angle_deg and init_rate_deg must be numbers in [0, 90), got {init!r}")

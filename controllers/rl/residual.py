@@ -14,12 +14,14 @@ from .residual_agent import (  # noqa: F401
     RESIDUAL_SCALE,
     ResidualAgent,
     as_base,
+    check_history,
     check_scale,
     residual_env,
     residual_from_metadata,
     residual_metadata,
+    stack_observations,
 )
 from .train import residual_setup  # noqa: F401
 
-__all__ = ["RESIDUAL_INIT_DEG", "RESIDUAL_SCALE", "ResidualAgent", "as_base", "check_scale", "residual_env",
-           "residual_from_metadata", "residual_metadata", "residual_setup"]
+__all__ = ["RESIDUAL_INIT_DEG", "RESIDUAL_SCALE", "ResidualAgent", "as_base", "check_history", "check_scale",
+           "residual_env", "residual_from_metadata", "residual_metadata", "residual_setup", "stack_observations"]

@@ -83,22 +83,60 @@ class ResidualAgent:
         The residual policy (a PPO or SAC model); its action in [-1, 1] is scaled by ``scale``.
     scale : float
         Bound of the residual [stick].
+    history : int
+        Observations the policy sees, the newest last (1: the current one). With more than one the
+        agent keeps them in ``predict``'s ``state`` as SB3's ``VecFrameStack`` stacks them in training
+        (zeros before an episode's first observation); pass ``episode_start`` at each episode's first
+        step, as SB3's ``evaluate_policy`` and :func:`controllers.evaluate.evaluate_agent` do.
     """
 
-    def __init__(self, base: PDController, policy, scale: float = RESIDUAL_SCALE):
+    def __init__(self, base: PDController, policy, scale: float = RESIDUAL_SCALE, history: int = 1):
         self.base, self.policy, self.scale = base, policy, check_scale(scale)
+        self.history = check_history(history)
 
     def __repr__(self):
-        return f"ResidualAgent({type(self.policy).__name__} ±{self.scale:g} stick on {self.base!r})"
+        seen = f", {self.history} observations" if self.history > 1 else ""
+        return f"ResidualAgent({type(self.policy).__name__} ±{self.scale:g} stick on {self.base!r}{seen})"
 
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = False):
         """Actions for one observation ``(12,)`` or a batch ``(n, 12)``: the PD's command plus the
-        scaled residual, clipped to [-1, 1]. ``state`` and ``episode_start`` go to the policy."""
+        scaled residual, clipped to [-1, 1]. ``state`` and ``episode_start`` go to the policy, or with
+        ``history`` > 1 carry the stacked observations (returned as the new ``state``)."""
         obs = np.asarray(observation, dtype=np.float64)
-        residual, state = self.policy.predict(np.asarray(observation, dtype=np.float32), state, episode_start,
-                                              deterministic)
+        seen = np.asarray(observation, dtype=np.float32)
+        if self.history > 1:
+            state = stack_observations(seen, state, episode_start, self.history)
+            seen, policy_state = (state[0] if obs.ndim == 1 else state), None
+        else:
+            policy_state = state
+        residual, policy_state = self.policy.predict(seen, policy_state, episode_start, deterministic)
         act = self.base.command(obs) + self.scale * np.clip(residual, -1.0, 1.0)
-        return np.clip(act, -1.0, 1.0).astype(np.float32), state
+        return np.clip(act, -1.0, 1.0).astype(np.float32), (state if self.history > 1 else policy_state)
+
+
+def check_history(history) -> int:
+    """The number of stacked observations as an int in [1, 16]; AgentError otherwise."""
+    if isinstance(history, bool) or not isinstance(history, (int, np.integer)) or not 1 <= history <= 16:
+        raise AgentError(f"history must be a whole number of observations in [1, 16], got {history!r}")
+    return int(history)
+
+
+def stack_observations(obs, stacked, episode_start, history: int) -> np.ndarray:
+    """The last ``history`` observations side by side, newest last, as SB3's ``VecFrameStack`` keeps them.
+
+    ``obs`` (12,) or (n, 12); ``stacked`` the previous result (n, 12·history) or None; rows where
+    ``episode_start`` is true (and all rows when ``stacked`` is None) start again from zeros.
+    """
+    obs = np.atleast_2d(obs)
+    n, d = obs.shape
+    if stacked is None or np.shape(stacked) != (n, d * history):
+        out = np.zeros((n, d * history), dtype=np.float32)
+    else:
+        out = np.roll(np.asarray(stacked, dtype=np.float32), -d, axis=1)
+        if episode_start is not None:
+            out[np.asarray(episode_start, dtype=bool).reshape(n)] = 0.0
+    out[:, -d:] = obs
+    return out
 
 
 def residual_env(venv, base: PDController, scale: float, paired: bool = False):
@@ -149,9 +187,9 @@ def residual_env(venv, base: PDController, scale: float, paired: bool = False):
     return ResidualVecEnv()
 
 
-def residual_metadata(base: PDController, scale: float, setup: dict) -> dict:
+def residual_metadata(base: PDController, scale: float, setup: dict, history: int = 1) -> dict:
     """What a residual agent's ``heli_agent.json`` carries under ``"residual"``."""
-    return {"base": base.document(), "scale": scale, "setup": setup}
+    return {"base": base.document(), "scale": scale, "setup": setup, "history": history}
 
 
 def residual_from_metadata(meta: dict, policy, path) -> ResidualAgent:
@@ -166,10 +204,10 @@ def residual_from_metadata(meta: dict, policy, path) -> ResidualAgent:
     try:
         doc = entry["base"]
         base = PDController(PDGains(doc["kp"], doc["kd"]), doc["signs"])
-        return ResidualAgent(base, policy, entry["scale"])
+        return ResidualAgent(base, policy, entry["scale"], entry.get("history", 1))
     except (TypeError, KeyError, ValueError, AgentError) as e:
         raise AgentError(f"{path}: the residual entry of its metadata is not a base PD and a scale ({e!r})") from e
 
 
-__all__ = ["RESIDUAL_INIT_DEG", "RESIDUAL_SCALE", "ResidualAgent", "as_base", "check_scale", "residual_env",
-           "residual_from_metadata", "residual_metadata"]
+__all__ = ["RESIDUAL_INIT_DEG", "RESIDUAL_SCALE", "ResidualAgent", "as_base", "check_history", "check_scale",
+           "residual_env", "residual_from_metadata", "residual_metadata", "stack_observations"]

@@ -199,7 +199,7 @@ def _train(config: TrainConfig, env_model, out, split, segments, progress, verbo
     setup, task = _residual_setup(config, env_model, segments[0])
     hyper = config.hyperparameters()
     env, eval_env, dt = _environments(config, env_model, task, segments, hyper["gamma"])
-    _scale_observations(hyper, setup)
+    _scale_observations(hyper, setup, config.history)
     agent = _algo_class(config.algo)("MlpPolicy", env, seed=config.seed, device="cpu", verbose=verbose, **hyper)
     # SB3's own logger would make an empty SB3-<date> folder in the system's temp folder on
     # every run; its training statistics go to the run folder instead (progress.csv).
@@ -312,6 +312,10 @@ def _environments(config: TrainConfig, env_model, task, segments, gamma: float):
 
         base, scale = config.residual, config.residual_scale
         env, eval_env = residual_env(env, base, scale, paired), residual_env(eval_env, base, scale)
+        if config.history > 1:
+            from stable_baselines3.common.vec_env import VecFrameStack
+
+            env, eval_env = VecFrameStack(env, config.history), VecFrameStack(eval_env, config.history)
     env, eval_env = VecMonitor(env), VecMonitor(eval_env)  # monitors the raw returns
     if config.reward_normalized:  # the eval env is wrapped alike (EvalCallback syncs wrappers) but left raw
         env = VecNormalize(env, norm_obs=False, norm_reward=True, gamma=gamma)
@@ -319,14 +323,15 @@ def _environments(config: TrainConfig, env_model, task, segments, gamma: float):
     return env, eval_env, venv.spec_.dt
 
 
-def _scale_observations(hyper: dict, setup) -> None:
+def _scale_observations(hyper: dict, setup, history: int = 1) -> None:
     """Put :class:`controllers.sb3_training.ObservationScaler` in front of the policy unless another feature
-    extractor is asked for; a residual's scaler takes the observation scales of its ``setup``."""
+    extractor is asked for; a residual's scaler takes the observation scales of its ``setup``, once per
+    stacked observation."""
     from ..sb3_training import ObservationScaler
 
     hyper["policy_kwargs"].setdefault("features_extractor_class", ObservationScaler)
     if setup is not None and hyper["policy_kwargs"]["features_extractor_class"] is ObservationScaler:
-        hyper["policy_kwargs"].setdefault("features_extractor_kwargs", {"scale": setup["obs_scale"]})
+        hyper["policy_kwargs"].setdefault("features_extractor_kwargs", {"scale": list(setup["obs_scale"]) * history})
 
 
 def _training_gusts(config: TrainConfig, env_model, segments):
@@ -356,7 +361,7 @@ def _metadata(config: TrainConfig, env_model, split, segments, task, dt: float, 
         "surrogates": config.surrogates, "axis_balance": config.axis_balance,
         "paired_baseline": config.residual is not None and config.paired_baseline,
         "residual": None if config.residual is None else residual_metadata(config.residual, config.residual_scale,
-                                                                            setup),
+                                                                            setup, config.history),
         "hyperparameters": _plain(hyper),
         "versions": {"stable_baselines3": sb3.__version__, "torch": _torch_version()},
     })
