@@ -5,11 +5,18 @@ compared with flight tests". Here the flight test is the project's synthetic
 aircraft (:mod:`identification.synthetic`): the truth model integrated by the
 physics core's RK4 with sub-steps (as the flight generator flies it), a
 digital PD autopilot at the control period holding its stick over each period
-(zero-order hold), and **fresh wind**: coloured noise
+(zero-order hold), and **fresh wind** — not the library traces that made the
+prediction, but new gusts of their statistics. By default (``gusts="spectrum"``)
+each flight's gust is a phase-randomised surrogate of a library trace
+(:func:`heli_env.surrogates.phase_randomised`: every Fourier amplitude of its
+u_d kept, new phases), so it has the library's whole spectrum — slow and
+broadband parts alike. ``gusts="corner"`` draws coloured noise instead
 (:func:`identification.synthetic.coloured_noise`, the generator's wind model:
-white noise through a 2nd-order Butterworth low-pass) at the level and
-bandwidth *measured on the library* — not the library traces that made the
-prediction. The autopilot sees the generator's sensor model (gyro noise, rotor
+white noise through a 2nd-order Butterworth low-pass) at the level and the one
+fitted corner of the library's spectrum; a library of slow plus broadband gusts
+has more slow power than that low-pass, and a loose loop, whose error is the
+slow gust itself, then flies half the predicted error (KS 0.2–0.4 at
+Kp ≤ 4 on the shipped model). The autopilot sees the generator's sensor model (gyro noise, rotor
 vibration, attitude noise; :class:`identification.synthetic.FlightConfig`)
 and adds the trim of the *identified* model for the flown collective (what a
 real autopilot would know); the errors compared are those of the true state
@@ -57,6 +64,8 @@ from .sweep_inputs import check_pairs, load_model
 
 _DEG = 180.0 / math.pi
 KS_TARGET = 0.1
+GUSTS = ("spectrum", "corner")
+"""Fresh gusts of the flight tests (:attr:`FlightTestConfig.gusts`)."""
 TRUTHS = ("model", "paper")
 """The truths named by a word (:attr:`FlightTestConfig.truth`); a ModelParams is the third kind."""
 
@@ -134,6 +143,9 @@ class FlightTestConfig:
         Autopilot period [s], > 0.
     sensors : bool
         The autopilot sees the flight generator's noisy sensors (default) or the true state.
+    gusts : {"spectrum", "corner"}
+        Fresh gusts as phase-randomised surrogates of the library's traces (default: its whole
+        spectrum) or as coloured noise at its level and one fitted corner (the module docstring).
     substeps : int, optional
         RK4 sub-steps per period, >= 1 (default the flight generator's, 4).
     progress : bool
@@ -154,6 +166,7 @@ class FlightTestConfig:
     truth: object = "model"
     dt: float = 0.01
     sensors: bool = True
+    gusts: str = "spectrum"
     substeps: int | None = None
     progress: bool = True
     max_batch: int = 4096
@@ -171,6 +184,7 @@ class FlightTestConfig:
               "truth", "'model', 'paper' or a ModelParams", self.truth, SweepError)
         for name in ("sensors", "progress"):
             check(is_flag(getattr(self, name)), name, "True or False", getattr(self, name), SweepError)
+        check(self.gusts in GUSTS, "gusts", f"one of {GUSTS}", self.gusts, SweepError)
 
     @property
     def steps(self) -> int:
@@ -302,7 +316,7 @@ def validate_against_flights(model, pairs, config: FlightTestConfig | None = Non
     truth_name, params = _truth(cfg.truth, env_model)
     predicted = _Prediction.of(prediction, env_model, arr, cfg)
     wind = wind_statistics(env_model, cfg.dt)
-    inputs = _fresh_wind(cfg, wind, params, env_model.params)
+    inputs = _fresh_wind(cfg, wind, params, env_model)
     idx = np.flatnonzero(predicted.flyable)
     autopilot = Autopilot(axis_index(cfg.axis), kp_all[idx], kd_all[idx], predicted.nominal,
                           np.sign(env_model.params.control_gains))
@@ -311,7 +325,7 @@ def validate_against_flights(model, pairs, config: FlightTestConfig | None = Non
     table, samples = _compare(kp_all, kd_all, predicted, flights)
     pset = predicted.result.settings
     settings = {"truth": truth_name, "truth_parameters": params.values(), "n_flights": cfg.n_flights,
-                "duration": cfg.steps * cfg.dt, "dt": cfg.dt, "seed": cfg.seed, "sensors": bool(cfg.sensors),
+                "duration": cfg.steps * cfg.dt, "dt": cfg.dt, "seed": cfg.seed, "sensors": bool(cfg.sensors), "gusts": cfg.gusts,
                 "substeps": substeps, "wind": wind, "nominal_gains": predicted.nominal.tolist(),
                 "model": str(env_model.path), "prediction": f"{pset['n_windows']} windows of {pset['duration']:g} s"}
     return FlightTestResult(AXES[autopilot.axis], table, settings, samples)
@@ -365,15 +379,16 @@ class _Flights:
         return int(self.att.shape[1])
 
 
-def _fresh_wind(cfg: FlightTestConfig, wind: dict, params, model_params) -> LoopInputs:
+def _fresh_wind(cfg: FlightTestConfig, wind: dict, params, env_model) -> LoopInputs:
     """What ``cfg.n_flights`` flights of ``cfg.steps`` periods hold over each period: fresh gusts, a wandering
     collective, sensors.
 
-    Per flight, in this order from ``numpy.random.default_rng(cfg.seed)``: the gust of each axis (coloured
-    noise at the library's level and bandwidth), the collective (0.05 Hz low-pass around the library's mean),
-    and with ``cfg.sensors`` the flight generator's gyro (noise + rotor vibration) and attitude noise
+    Per flight, in this order from ``numpy.random.default_rng(cfg.seed)``: the gust of the three axes
+    (``cfg.gusts``: a surrogate of library traces, :func:`_surrogate_gust`, or coloured noise at the library's
+    level and corner per axis), the collective (0.05 Hz low-pass around the library's mean), and with
+    ``cfg.sensors`` the flight generator's gyro (noise + rotor vibration) and attitude noise
     (:class:`~identification.synthetic.FlightConfig`). The torque is the truth's ``k·u_d``; the trim the
-    autopilot adds is the identified model's (``model_params``).
+    autopilot adds is the identified model's (``env_model.params``).
     """
     rng, sensor = np.random.default_rng(cfg.seed), FlightConfig()
     n, F, dt = cfg.steps, cfg.n_flights, cfg.dt
@@ -383,17 +398,48 @@ def _fresh_wind(cfg: FlightTestConfig, wind: dict, params, model_params) -> Loop
     gyro = np.zeros((3, n, F))
     attn = np.zeros((3, n, F))
     t = np.arange(n) * dt
+    traces = _library_gusts(env_model, dt) if cfg.gusts == "spectrum" else None
     for f in range(F):
-        for i in range(3):
-            gust[i, :, f] = coloured_noise(rng, n, fs, wind["corner_hz"][i], wind["std"][i])
+        if traces is not None:
+            gust[:, :, f] = _surrogate_gust(rng, traces, n)
+        else:
+            for i in range(3):
+                gust[i, :, f] = coloured_noise(rng, n, fs, wind["corner_hz"][i], wind["std"][i])
         col[:, f] = np.clip(wind["collective_mean"] + coloured_noise(rng, n, fs, 0.05, wind["collective_std"]),
                             -1.0, 1.0)
         if cfg.sensors:  # the flight generator's sensor model
             terms, attn[:, :, f] = sensor_errors(rng, sensor, t)
             gyro[:, :, f] = sum(terms[1:], terms[0])
     torque = params.control_gains[:, None, None] * gust
-    trim = np.array(trim_sticks(model_params, col))  # the autopilot's trim: the identified model's
+    trim = np.array(trim_sticks(env_model.params, col))  # the autopilot's trim: the identified model's
     return LoopInputs(trim, col, torque, att_noise=attn, rate_noise=gyro)
+
+
+def _library_gusts(env_model, dt: float) -> list:
+    """Each library trace's u_d (:attr:`~heli_env.model_dir.EnvModel.replay_ud`) at the control period, its
+    mean removed (eq. 42: the trim absorbs it), as (3, m) arrays."""
+    ratio = max(int(round(dt * env_model.sample_rate)), 1)
+    out = []
+    for s, m in zip(env_model.starts, env_model.lengths):
+        seg = np.asarray(env_model.replay_ud[:, s:s + m:ratio], dtype=float)
+        out.append(seg - seg.mean(axis=1, keepdims=True))
+    return out
+
+
+def _surrogate_gust(rng: np.random.Generator, traces: list, n: int) -> np.ndarray:
+    """``n`` periods of a new gust with the library's spectra: phase-randomised surrogates of traces drawn in
+    proportion to their length, joined until long enough, from a random start."""
+    from heli_env.surrogates import phase_randomised
+
+    lengths = np.array([tr.shape[1] for tr in traces], dtype=float)
+    pieces, have = [], 0
+    while have < n + 1:
+        piece = phase_randomised(traces[int(rng.choice(len(traces), p=lengths / lengths.sum()))], rng)
+        pieces.append(piece)
+        have += piece.shape[1]
+    joined = np.concatenate(pieces, axis=1)
+    start = int(rng.integers(0, joined.shape[1] - n + 1))
+    return joined[:, start:start + n]
 
 
 def _fly(step, inputs: LoopInputs, autopilot: Autopilot, pairs: np.ndarray, cfg: FlightTestConfig) -> _Flights:
