@@ -302,6 +302,16 @@ def default_pairs(result, n: int = 4) -> list:
     return [(float(result.table["kp"][i]), float(result.table["kd"][i])) for i in order[picks]]
 
 
+def _fresh_gusts(kind: str, wind: dict) -> str:
+    """The flight tests' fresh gusts in words (:attr:`controllers.flight_test.FlightTestConfig.gusts`)."""
+    level = f"u_d std {', '.join(f'{v:.4f}' for v in wind['std'])}"
+    if kind == "spectrum":
+        return (f"fresh gusts with the library's spectrum (phase-randomised surrogates of its traces; {level}, "
+                "roll/pitch/yaw)")
+    return (f"fresh coloured wind at the library's level ({level}) and bandwidth "
+            f"(corner {', '.join(f'{v:.3f}' for v in wind['corner_hz'])} Hz, roll/pitch/yaw)")
+
+
 def plot_histograms(result, path, pairs=None):
     """Overlaid |attitude error| histograms (density per decade, log axis) with the half-normal predictions."""
     import matplotlib
@@ -356,9 +366,8 @@ def flight_test_markdown(result) -> str:
         "",
         f"{s['n_flights']} flights of {s['duration']:g} s per gain pair of the truth model "
         f"(**{s['truth']}** parameters), RK4 with {s['substeps']} sub-steps, PD autopilot at dt = {s['dt']:g} s"
-        f"{' on noisy sensors' if s['sensors'] else ''}, in fresh coloured wind at the library's level "
-        f"(u_d std {', '.join(f'{v:.4f}' for v in w['std'])}) and bandwidth "
-        f"(corner {', '.join(f'{v:.3f}' for v in w['corner_hz'])} Hz, roll/pitch/yaw), seed {s['seed']}. "
+        f"{' on noisy sensors' if s['sensors'] else ''}, in {_fresh_gusts(s.get('gusts', 'corner'), w)}, "
+        f"seed {s['seed']}. "
         f"Predictions: the library replayed through the identified model ({s['prediction']}).",
         "",
         "KS = largest gap between the measured and predicted CDFs of |error| (two-sample against the "

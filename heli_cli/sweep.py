@@ -64,6 +64,9 @@ def register(sub):
                    "ranking (0: every stable pair; default 4)")
     p.add_argument("--truth", default="model", choices=("model", "paper"),
                    help="aircraft flown by --flights: the model's own parameters (default) or the paper's values")
+    p.add_argument("--flight-gusts", default="spectrum", choices=("spectrum", "corner"),
+                   help="fresh gusts of --flights: surrogates with the library's whole spectrum (default) or coloured "
+                   "noise at its level and one fitted corner")
     p.add_argument("--backend", default="local", choices=("local", "ray"),
                    help="where the replay runs: 'local' (default) this machine's cores, 'ray' the Ray cluster at "
                    "RAY_ADDRESS or a Ray instance started here (needs the 'cluster' extra); same result either way")
@@ -113,7 +116,7 @@ def run(args) -> int:
             progress.stage(f"flying {args.flights} flight test(s) per pair at {len(pairs)} gain pair(s)")
             flights = validate_against_flights(args.model, pairs, axis=args.axis, n_flights=args.flights,
                                                duration=args.duration, seed=args.seed, truth=args.truth, dt=args.dt,
-                                               progress=not args.quiet)
+                                               gusts=args.flight_gusts, progress=not args.quiet)
             paths["flights"] = flights.to_json(out / "flight_tests.json")
             report += "\n" + flights.to_markdown()
     from identification.files import write_text
