@@ -58,6 +58,13 @@ def register(sub):
     p.add_argument("--residual-scale", type=number("a number in (0, 2]", 0.0, 2.0, high_open=False), default=0.05,
                    metavar="STICK",
                    help="bound of the residual in stick units (default 0.05)")
+    add_residual_options(p)
+    p.set_defaults(func=run, out_kind="file")
+
+
+def add_residual_options(p) -> None:
+    """The options of how a residual learns (TrainConfig's ``axis_balance``, ``paired_baseline``, ``history``),
+    shared with ``scripts/train_compare.py``."""
     p.add_argument("--no-axis-balance", action="store_true",
                    help="scale a residual's reward and observations by its PD's worst axis on every axis (default: "
                    "each axis by its own error level, so that every axis counts alike in the reward)")
@@ -67,7 +74,6 @@ def register(sub):
     p.add_argument("--history", type=whole(1), default=1, metavar="N",
                    help="with --residual: the policy sees the last N observations side by side (default 1), so it "
                    "can tell what the servo delay still holds and what the gust is doing")
-    p.set_defaults(func=run, out_kind="file")
 
 
 def _config(args):

@@ -49,6 +49,7 @@ from controllers.pd import PDController, PDGains, design_gains, loop_analysis
 from controllers.rl import load_agent, split_traces, train_agent
 from controllers.sweep import sweep_pairs
 from controllers.trace_split import draw_windows
+from heli_cli.train import add_residual_options
 from heli_env import load_env_model
 from identification.files import jsonable, write_text
 
@@ -143,13 +144,7 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--no-reward-normalisation", action="store_true",
                     help="train on the raw rewards (default: PPO's are divided by a running estimate of the return's "
                     "spread, SB3 VecNormalize(norm_obs=False))")
-    ap.add_argument("--no-axis-balance", action="store_true",
-                    help="scale a residual's reward and observations by the base PD's worst axis on every axis "
-                    "(default: each axis by its own error level)")
-    ap.add_argument("--paired-baseline", action="store_true",
-                    help="reward a residual for what it gains over a twin copy flying the PD alone on the same gusts")
-    ap.add_argument("--history", type=int, default=1,
-                    help="observations a residual's policy sees side by side, newest last (default 1)")
+    add_residual_options(ap)
     ap.add_argument("--algo-kwargs", type=json.loads, default=None, metavar="JSON",
                     help="SB3 hyperparameters over the defaults of every algorithm trained, e.g. "
                     "'{\"gamma\": 0.95, \"gae_lambda\": 0.9}'")
