@@ -376,11 +376,11 @@ def test_flight_tests_of_a_loose_loop_meet_the_library_spectrum(shipped):
     """Kp 0.5, Kd 0 hardly closes the loop: its error is the slow gust itself. Fresh gusts with the library's
     whole spectrum (surrogates, the default) fly the predicted distribution up to the sampling noise of a few
     minutes of slow gusts (KS 0.05-0.14 over seeds 0-4 with 6 x 60 s); the one-corner coloured noise has too
-    little slow power and flies about half the predicted error (KS 0.33-0.44)."""
+    little slow power and flies about half the predicted error (KS 0.35-0.47 over seeds 0-4 with 3 x 60 s)."""
     pairs = [(0.5, 0.0)]
     prediction = sweep_pairs(shipped, pairs, duration=None, keep_samples=True, progress=False)
-    runs = {g: validate_against_flights(shipped, pairs, n_flights=6, duration=60.0, seed=2, progress=False,
-                                        prediction=prediction, gusts=g) for g in ("spectrum", "corner")}
+    runs = {g: validate_against_flights(shipped, pairs, n_flights=n, duration=60.0, seed=2, progress=False,
+                                        prediction=prediction, gusts=g) for g, n in (("spectrum", 6), ("corner", 3))}
     assert runs["spectrum"].settings["gusts"] == "spectrum"
     ks = {g: float(r.table["ks_att"][0]) for g, r in runs.items()}
     assert ks["spectrum"] < 0.2 and ks["corner"] > 0.3
