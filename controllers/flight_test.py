@@ -325,7 +325,8 @@ def validate_against_flights(model, pairs, config: FlightTestConfig | None = Non
     table, samples = _compare(kp_all, kd_all, predicted, flights)
     pset = predicted.result.settings
     settings = {"truth": truth_name, "truth_parameters": params.values(), "n_flights": cfg.n_flights,
-                "duration": cfg.steps * cfg.dt, "dt": cfg.dt, "seed": cfg.seed, "sensors": bool(cfg.sensors), "gusts": cfg.gusts,
+                "duration": cfg.steps * cfg.dt, "dt": cfg.dt, "seed": cfg.seed, "sensors": bool(cfg.sensors),
+                "gusts": cfg.gusts,
                 "substeps": substeps, "wind": wind, "nominal_gains": predicted.nominal.tolist(),
                 "model": str(env_model.path), "prediction": f"{pset['n_windows']} windows of {pset['duration']:g} s"}
     return FlightTestResult(AXES[autopilot.axis], table, settings, samples)

@@ -281,5 +281,5 @@ def observe_kernel(task: str, noisy: bool, parallel: bool = True, axis_weighted:
         "        terminated[i] = not ok",
         "        truncated[i] = ok and k[i] >= steps[i]",
     ]
-    return _compile(lines, "observe", f"observe {task}{' noisy' if noisy else ''}{' axis-weighted' if axis_weighted else ''}",
-                    parallel)
+    tag = f"observe {task}{' noisy' if noisy else ''}{' axis-weighted' if axis_weighted else ''}"
+    return _compile(lines, "observe", tag, parallel)

@@ -91,7 +91,8 @@ class TaskConfig:
         except (TypeError, ValueError):
             axis_weights = ()
         if len(axis_weights) != 3 or not all(math.isfinite(w) and w >= 0 for w in axis_weights):
-            raise ValueError(f"axis_weights must be 3 non-negative numbers (roll, pitch, yaw), got {self.axis_weights!r}")
+            raise ValueError(
+                f"axis_weights must be 3 non-negative numbers (roll, pitch, yaw), got {self.axis_weights!r}")
         object.__setattr__(self, "axis_weights", axis_weights)
 
     @property

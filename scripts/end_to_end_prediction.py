@@ -6,9 +6,10 @@ Gauss-Markov gusts, gyro noise, vibration lines) of the paper's aircraft with a 
 scratch folder; then per axis three PD pairs — the design of ``heli design`` (45°) scaled by 0.5, 1 and 2 —
 predicted by the sweep on the identified model (its library, its sensors; 8 windows of 30 s) and flown on
 the *truth* (RK4) in fresh wind of a different model (``gusts="corner"``: coloured low-pass noise at the
-library's level and bandwidth, not surrogates of its spectrum) on the flight generator's sensors, 10 flights of 60 s per pair (:func:`controllers.flight_test.
-validate_against_flights`). Prints per pair the predicted and flown p90 |attitude error| and their ratio,
-and the mean and worst |ratio - 1| over everything (target: within 15 %).
+library's level and bandwidth, not surrogates of its spectrum) on the flight generator's sensors, 10 flights
+of 60 s per pair (:func:`controllers.flight_test.validate_against_flights`). Prints per pair the predicted
+and flown p90 |attitude error| and their ratio, and the mean and worst |ratio - 1| over everything (target:
+within 15 %).
 
 Usage::
 

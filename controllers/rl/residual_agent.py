@@ -20,12 +20,14 @@ on windows of the training gusts (:func:`controllers.rl.train.residual_setup`), 
 the same settings carry over to a model whose PD errors are degrees rather than
 hundredths:
 
-* reward: attitude errors scaled by ``2·E`` and rate errors by ``2·E·ω_c``, where
-  ``E`` is the largest per-axis p90 |attitude error| of the base and ``ω_c`` the
+* reward: attitude errors scaled by ``2·E_i`` and rate errors by ``2·E_i·ω_c``, where
+  ``E_i`` is the base's p90 |attitude error| on axis ``i`` (at least a tenth of the
+  largest, ``E``; with ``axis_balance=False`` every axis takes ``E``) and ``ω_c`` the
   largest ``kp/kd`` of its axes (the PD's corner frequency, where a rate error
-  weighs as much as an attitude error in its own command);
+  weighs as much as an attitude error in its own command); written as
+  ``attitude_scale = 2·E`` with ``axis_weights = (E/E_i)²``;
 * observations (:class:`controllers.sb3_training.ObservationScaler`): attitude
-  errors by ``4·E``, rates and rate errors by ``4·E·ω_c``, the previous action by
+  errors by ``4·E_i``, rates and rate errors by ``4·E_i·ω_c``, the previous action by
   ``1.5 ×`` the base's largest p99 |stick| (at least 0.05);
 * starts: roll and pitch within ±0.5°, rates within ±0.5°/s (the regime the base
   holds; a 5° start would dominate rewards scaled to hundredths of a degree).
