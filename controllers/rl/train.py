@@ -208,7 +208,8 @@ def _train(config: TrainConfig, env_model, out, split, segments, progress, verbo
     return _learn(agent, config, out, metadata, (env, eval_env), progress, callbacks)
 
 
-def residual_setup(base: PDController, env_model, segments, seed: int = 0, seconds: float = 10.0) -> dict:
+def residual_setup(base: PDController, env_model, segments, seed: int = 0, seconds: float = 10.0,
+                   axis_balance: bool = True) -> dict:
     """Reward and observation scales for residual training, from the base's errors on training gusts.
 
     Flies ``base`` for ``seconds`` on each training segment (starting at rest) and
@@ -221,8 +222,9 @@ def residual_setup(base: PDController, env_model, segments, seed: int = 0, secon
     dict
         ``error_deg`` (E, the largest axis'), ``axis_error_deg`` (E_i per axis), ``corner_rad_s`` (ω_c),
         ``stick_p99``, ``attitude_scale`` and ``rate_scale`` [rad, rad/s] of the reward (from E),
-        ``axis_weights`` ((E / E_i)², at most :data:`MAX_AXIS_WEIGHT`: the reward of each axis scaled by
-        its own level), ``obs_scale`` (12 floats, every axis by E) and ``axis_obs_scale`` (each axis by E_i).
+        ``axis_weights`` (with ``axis_balance``: (E / E_i)², at most :data:`MAX_AXIS_WEIGHT`, the reward of
+        each axis scaled by its own level; otherwise ones) and ``obs_scale`` (12 floats: each axis by its
+        E_i with ``axis_balance``, otherwise every axis by E).
     """
     from ..evaluate import evaluate_agent
 
@@ -239,17 +241,13 @@ def residual_setup(base: PDController, env_model, segments, seed: int = 0, secon
     corner = float(np.max(np.where(kd > 0, kp / np.where(kd > 0, kd, 1.0), 0.0)))
     if not corner > 0.0:
         corner = 10.0  # a P-only or D-only base: weigh 1 rad/s of rate error as 0.1 rad of attitude error
-    axis_errors = [max(e_i, err / math.sqrt(MAX_AXIS_WEIGHT)) for e_i in errors]
-
-    def observation_scales(levels):
-        levels = [math.radians(v) for v in levels]
-        return [4 * e for e in levels] + [4 * e * corner for e in levels] * 2 + [max(1.5 * stick, 0.05)] * 3
-
+    levels = [max(e_i, err / math.sqrt(MAX_AXIS_WEIGHT)) for e_i in errors] if axis_balance else [err] * 3
+    rad = [math.radians(v) for v in levels]
     e = math.radians(err)
     return {"error_deg": err, "axis_error_deg": errors, "corner_rad_s": corner, "stick_p99": stick,
             "attitude_scale": 2 * e, "rate_scale": 2 * e * corner,
-            "axis_weights": [(err / e_i) ** 2 for e_i in axis_errors], "obs_scale": observation_scales([err] * 3),
-            "axis_obs_scale": observation_scales(axis_errors)}
+            "axis_weights": [(err / v) ** 2 for v in levels],
+            "obs_scale": [4 * r for r in rad] + [4 * r * corner for r in rad] * 2 + [max(1.5 * stick, 0.05)] * 3}
 
 
 MAX_AXIS_WEIGHT = 100.0
@@ -265,11 +263,7 @@ def _residual_setup(config: TrainConfig, env_model, train_seg):
         return None, config.task
     from heli_env.tasks import TaskConfig
 
-    setup = residual_setup(config.residual, env_model, train_seg, config.seed)
-    if config.axis_balance:
-        setup = {**setup, "obs_scale": setup["axis_obs_scale"]}
-    else:
-        setup = {**setup, "axis_weights": [1.0, 1.0, 1.0]}
+    setup = residual_setup(config.residual, env_model, train_seg, config.seed, axis_balance=config.axis_balance)
     task = config.task
     if isinstance(task, str):
         try:
