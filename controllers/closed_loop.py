@@ -197,6 +197,13 @@ def closed_loop_poles(plant: HoverPlant, axis, kp, kd, nominal) -> tuple[np.ndar
     return max_abs, max_abs < 1.0 - STABILITY_MARGIN
 
 
+def replay_segments(env_model, dt: float) -> list:
+    """Each library trace's replayed u_d (:attr:`heli_env.model_dir.EnvModel.replay_ud`) taken every ``dt``
+    (the samples the replay uses), as (3, m) views, in the library's order."""
+    ratio = int(round(dt * env_model.sample_rate))
+    return [env_model.replay_ud[:, s:s + n:ratio] for s, n in zip(env_model.starts, env_model.lengths)]
+
+
 def disturbance_spectrum(env_model, dt: float, nperseg: int = 2048) -> tuple[np.ndarray, np.ndarray]:
     """One-sided power spectral density of the library's ``u_d`` per axis (Welch), at the control period.
 
@@ -217,8 +224,7 @@ def disturbance_spectrum(env_model, dt: float, nperseg: int = 2048) -> tuple[np.
     """
     from scipy.signal import welch
 
-    ratio = int(round(dt * env_model.sample_rate))
-    segs = [env_model.replay_ud[:, s:s + n:ratio] for s, n in zip(env_model.starts, env_model.lengths)]
+    segs = replay_segments(env_model, dt)
     nps = int(min(nperseg, min(s.shape[1] for s in segs)))
     if nps < 16:
         raise SweepError(f"the disturbance traces are too short for a spectrum ({nps} samples at dt={dt} s)")

@@ -15,8 +15,8 @@ broadband parts alike. ``gusts="corner"`` draws coloured noise instead
 white noise through a 2nd-order Butterworth low-pass) at the level and the one
 fitted corner of the library's spectrum; a library of slow plus broadband gusts
 has more slow power than that low-pass, and a loose loop, whose error is the
-slow gust itself, then flies half the predicted error (KS 0.2–0.4 at
-Kp ≤ 4 on the shipped model). The autopilot sees the generator's sensor model (gyro noise, rotor
+slow gust itself, then flies half the predicted error (KS 0.16–0.40 at
+Kp ≤ 4 on the shipped model, `scripts/bench.py --only sweep`'s grid). The autopilot sees the generator's sensor model (gyro noise, rotor
 vibration, attitude noise; :class:`identification.synthetic.FlightConfig`)
 and adds the trim of the *identified* model for the flown collective (what a
 real autopilot would know); the errors compared are those of the true state
@@ -56,7 +56,7 @@ from heli_core.physics import trim_sticks
 from heli_core.terms import AXES
 from identification.synthetic import PAPER_PARAMS, FlightConfig, coloured_noise, sensor_errors
 
-from .closed_loop import axis_index, disturbance_spectrum
+from .closed_loop import axis_index, disturbance_spectrum, replay_segments
 from .errors import SweepError
 from .metrics import QUANTILES
 from .replay import Autopilot, LoopInputs, fly, rk4_step
@@ -100,11 +100,9 @@ def wind_statistics(env_model, dt: float) -> dict:
     eq. 42) at the control period; ``corner_hz`` the fitted Butterworth corner of its
     Welch spectrum (:func:`fit_corner`).
     """
-    ratio = int(round(dt * env_model.sample_rate))
     var = np.zeros(3)
     n = 0
-    for s, m in zip(env_model.starts, env_model.lengths):
-        seg = env_model.replay_ud[:, s:s + m:ratio]
+    for seg in replay_segments(env_model, dt):
         var += seg.var(axis=1) * seg.shape[1]
         n += seg.shape[1]
     freq, psd = disturbance_spectrum(env_model, dt)
@@ -326,8 +324,7 @@ def validate_against_flights(model, pairs, config: FlightTestConfig | None = Non
     pset = predicted.result.settings
     settings = {"truth": truth_name, "truth_parameters": params.values(), "n_flights": cfg.n_flights,
                 "duration": cfg.steps * cfg.dt, "dt": cfg.dt, "seed": cfg.seed, "sensors": bool(cfg.sensors),
-                "gusts": cfg.gusts,
-                "substeps": substeps, "wind": wind, "nominal_gains": predicted.nominal.tolist(),
+                "gusts": cfg.gusts, "substeps": substeps, "wind": wind, "nominal_gains": predicted.nominal.tolist(),
                 "model": str(env_model.path), "prediction": f"{pset['n_windows']} windows of {pset['duration']:g} s"}
     return FlightTestResult(AXES[autopilot.axis], table, settings, samples)
 
@@ -385,7 +382,7 @@ def _fresh_wind(cfg: FlightTestConfig, wind: dict, params, env_model) -> LoopInp
     collective, sensors.
 
     Per flight, in this order from ``numpy.random.default_rng(cfg.seed)``: the gust of the three axes
-    (``cfg.gusts``: a surrogate of library traces, :func:`_surrogate_gust`, or coloured noise at the library's
+    (``cfg.gusts``: surrogates of the library's traces, :func:`_surrogate_gust`, or coloured noise at its
     level and corner per axis), the collective (0.05 Hz low-pass around the library's mean), and with
     ``cfg.sensors`` the flight generator's gyro (noise + rotor vibration) and attitude noise
     (:class:`~identification.synthetic.FlightConfig`). The torque is the truth's ``k·u_d``; the trim the
@@ -399,7 +396,9 @@ def _fresh_wind(cfg: FlightTestConfig, wind: dict, params, env_model) -> LoopInp
     gyro = np.zeros((3, n, F))
     attn = np.zeros((3, n, F))
     t = np.arange(n) * dt
-    traces = _library_gusts(env_model, dt) if cfg.gusts == "spectrum" else None
+    traces = None
+    if cfg.gusts == "spectrum":  # each trace's mean removed (eq. 42: the trim absorbs it)
+        traces = [seg - seg.mean(axis=1, keepdims=True) for seg in replay_segments(env_model, dt)]
     for f in range(F):
         if traces is not None:
             gust[:, :, f] = _surrogate_gust(rng, traces, n)
@@ -414,17 +413,6 @@ def _fresh_wind(cfg: FlightTestConfig, wind: dict, params, env_model) -> LoopInp
     torque = params.control_gains[:, None, None] * gust
     trim = np.array(trim_sticks(env_model.params, col))  # the autopilot's trim: the identified model's
     return LoopInputs(trim, col, torque, att_noise=attn, rate_noise=gyro)
-
-
-def _library_gusts(env_model, dt: float) -> list:
-    """Each library trace's u_d (:attr:`~heli_env.model_dir.EnvModel.replay_ud`) at the control period, its
-    mean removed (eq. 42: the trim absorbs it), as (3, m) arrays."""
-    ratio = max(int(round(dt * env_model.sample_rate)), 1)
-    out = []
-    for s, m in zip(env_model.starts, env_model.lengths):
-        seg = np.asarray(env_model.replay_ud[:, s:s + m:ratio], dtype=float)
-        out.append(seg - seg.mean(axis=1, keepdims=True))
-    return out
 
 
 def _surrogate_gust(rng: np.random.Generator, traces: list, n: int) -> np.ndarray:
