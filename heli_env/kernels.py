@@ -245,9 +245,7 @@ def observe_kernel(task: str, noisy: bool, parallel: bool = True, axis_weighted:
         "    ca = coef[0]",
         "    cr = coef[1]",
         "    cu = coef[2]",
-        "    w0 = coef[3]",
-        "    w1 = coef[4]",
-        "    w2 = coef[5]",
+        *(["    w0 = coef[3]", "    w1 = coef[4]", "    w2 = coef[5]"] if axis_weighted else []),
         "    for i in prange(att.shape[1]):",
     ]
     for c, w in enumerate(("p", "q", "r")):
