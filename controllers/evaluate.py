@@ -2,7 +2,8 @@
 
 :func:`evaluate_agent` flies any policy with stable-baselines3's
 ``predict(observation, deterministic=True)`` (a :class:`controllers.pd.PDController`,
-an SB3 PPO or SAC model) through the native vector environment, one copy per
+an SB3 PPO or SAC model; an agent whose ``predict`` also takes SB3's ``state`` and
+``episode_start`` gets them, so one with memory flies as it trained) through the native vector environment, one copy per
 episode, on gust windows of chosen library traces (by default the held-out side
 of :func:`controllers.trace_split.split_traces`). Windows ``(trace, offset)`` are
 drawn by ``numpy.random.default_rng(seed)`` and pinned through the
@@ -25,6 +26,7 @@ The Markdown reports and the episode figure are in :mod:`controllers.evaluate_re
 
 from __future__ import annotations
 
+import inspect
 import json
 import sys
 import time
@@ -284,6 +286,16 @@ def _tally(rec: dict, windows, trace_ids) -> tuple[dict, list]:
     return metrics, episodes
 
 
+def _takes_memory(agent) -> bool:
+    """Whether ``agent.predict`` takes SB3's ``state`` and ``episode_start`` (SB3 models, the PD, a residual with
+    a history); a plain ``predict(observation, deterministic=True)`` is called without them."""
+    try:
+        params = inspect.signature(agent.predict).parameters
+    except (TypeError, ValueError):  # a builtin or C-level predict: no signature to read
+        return False
+    return {"state", "episode_start"} <= set(params) or any(p.kind is p.VAR_KEYWORD for p in params.values())
+
+
 def _fly(agent, env, obs, info) -> dict:
     """Step all copies with the agent until every episode has ended once; record the first episodes."""
     E, n = env.num_envs, env.spec_.episode_steps
@@ -296,6 +308,7 @@ def _fly(agent, env, obs, info) -> dict:
     terminated = np.zeros(E, dtype=bool)
     alive = np.ones(E, dtype=bool)
     state = None  # an agent with memory (a stacked history, a recurrent policy) carries it here
+    memory = _takes_memory(agent)
     torch = sys.modules.get("torch")
     threads = torch.get_num_threads() if torch is not None else None
     if torch is not None:
@@ -304,7 +317,10 @@ def _fly(agent, env, obs, info) -> dict:
         for k in range(n):
             att[k] = info["attitude_error_deg"]
             rate[k] = info["rate_error_deg_s"]
-            a, state = agent.predict(obs, state=state, episode_start=np.full(E, k == 0), deterministic=True)
+            if memory:
+                a, state = agent.predict(obs, state=state, episode_start=np.full(E, k == 0), deterministic=True)
+            else:
+                a, _ = agent.predict(obs, deterministic=True)
             a = np.clip(np.asarray(a, dtype=np.float64).reshape(E, 3), -1.0, 1.0)  # the env clips the same way
             act[k] = a
             obs, r, term, trunc, info = env.step(a)

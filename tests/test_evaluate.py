@@ -90,6 +90,33 @@ def test_same_seed_same_evaluation(shipped, pd, pd_result):
     assert [e["offset"] for e in other.episodes] != [e["offset"] for e in pd_result.episodes]
 
 
+def test_a_plain_predict_and_one_with_memory_fly_alike(shipped, pd, pd_result):
+    """An agent whose predict takes only (observation, deterministic) is flown as before; one that takes SB3's
+    state and episode_start gets them: its state comes back at the next step, episode_start on the first."""
+
+    class Plain:
+        def predict(self, observation, deterministic=True):
+            return pd.predict(observation)
+
+    class Remembering:
+        def __init__(self):
+            self.starts, self.states = [], []
+
+        def predict(self, observation, state=None, episode_start=None, deterministic=False):
+            self.starts.append(bool(np.all(episode_start)))
+            self.states.append(state)
+            return pd.predict(observation)[0], len(self.states)
+
+    episodes = EvaluationConfig(episodes_per_trace=3, episode_seconds=10.0, seed=5)  # pd_result's
+    assert_array_equal(evaluate_agent(Plain(), shipped, episodes).samples["att_err_deg"],
+                       pd_result.samples["att_err_deg"])
+    memory = Remembering()
+    assert_array_equal(evaluate_agent(memory, shipped, episodes).samples["att_err_deg"],
+                       pd_result.samples["att_err_deg"])
+    assert memory.starts[0] and not any(memory.starts[1:])
+    assert memory.states[:3] == [None, 1, 2]
+
+
 def test_evaluation_flies_held_out_traces_only(shipped, pd_result):
     held = {s.trace for s in split_traces(shipped.n_traces).held_out}
     assert {e["trace"] for e in pd_result.episodes} == held
