@@ -47,7 +47,7 @@ from heli_core.terms import AXES, DECOUPLED, STICK_ROW, TERMS
 from .effects import CATALOGUE, MAX_ALIGNMENT, NONE, SERVO_DELAY, UNDECIDED, DiagnosisResult, implausible, shift_inputs
 from .flight import Flight
 from .ml_estimator import BURN_IN, MAX_DELAY, MAX_SHIFT, MaximumLikelihoodIdentifier, _AxisLikelihood
-from .state_space import WIND_MODELS, kalman, lti_apply
+from .state_space import WIND_MODELS, concentrated_nll, kalman, lti_apply
 
 ALPHA = 0.01
 """Family-wise level of the likelihood-ratio test per axis and round (Bonferroni over the candidates)."""
@@ -293,7 +293,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
                                                    nfev, free_tau)
             if free_tau:
                 alignment = tau
-        nll = 0.5 * n * (np.log(2.0 * np.pi * 2.0 * cost / n) + 1.0)
+        nll = concentrated_nll(cost, n)
         return AxisScore(tuple(names), float(alignment), float(nll), np.asarray(x), kind)
 
     def _describe(self, a, score: AxisScore) -> AxisScore:

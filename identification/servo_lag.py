@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-from .state_space import WIND_MODELS
+from .state_space import WIND_MODELS, concentrated_nll
 
 LAG_GRID = (0.01, 0.02, 0.03, 0.05, 0.08, 0.12, 0.2)
 """Servo lags profiled [s]; the best is refined between its neighbours."""
@@ -28,11 +28,6 @@ MIN_LR_LAG = 10.0
 """Smallest likelihood-ratio statistic of a lag kept (calibrated on flights whose servo has none)."""
 NFEV = 30
 """Likelihood evaluations per grid point (each warm-started from the fit without a lag)."""
-
-
-def _nll(cost: float, n: int) -> float:
-    """Negative log-likelihood of a concentrated least-squares ``cost`` over ``n`` innovations."""
-    return 0.5 * n * (np.log(2.0 * np.pi * 2.0 * cost / n) + 1.0)
 
 
 def threshold() -> float:
@@ -60,18 +55,18 @@ def profile_lag(ident, a: int, names, flights, burn: int, base: tuple, free: boo
     """
     cost0, x0, kind0, tau0 = base
     n = int(sum(f.n - burn for f in flights))
-    profile = [(0.0, _nll(cost0, n))]
+    profile = [(0.0, concentrated_nll(cost0, n))]
     for lag in LAG_GRID:
         cost, _, _, _ = ident._best(a, names, flights, burn, tau0, x0, (kind0,), free, NFEV, free_tau, lag)
-        profile.append((float(lag), _nll(cost, n)))
+        profile.append((float(lag), concentrated_nll(cost, n)))
     best = _refined(profile)
     if best <= 0.0:
         return 0.0, base, tuple(profile), 0.0
     models = WIND_MODELS if ident.wind_model == "auto" else (ident.wind_model,)
     fit = ident._best(a, names, flights, burn, tau0, x0, models, free, None, free_tau, best)
-    nll = _nll(fit[0], n)
+    nll = concentrated_nll(fit[0], n)
     profile = sorted([p for p in profile if p[0] != best] + [(best, nll)])  # the refined lag's full fit
-    lr = 2.0 * (_nll(cost0, n) - nll)
+    lr = 2.0 * (concentrated_nll(cost0, n) - nll)
     if lr > threshold() and best < LAG_GRID[-1] - 1e-9:
         return best, fit, tuple(profile), float(lr)
     return 0.0, base, tuple(profile), float(lr)

@@ -125,6 +125,12 @@ def strictly_proper_tf(A, b, den=None):
     return np.real(np.poly(shifted) - den), np.real(den)
 
 
+def concentrated_nll(cost: float, n: int) -> float:
+    """Negative log-likelihood of ``n`` Gaussian innovations whose least-squares ``cost`` is half their sum of
+    squares, with their variance concentrated out (set to its estimate ``2 cost / n``)."""
+    return 0.5 * n * (np.log(2.0 * np.pi * 2.0 * cost / n) + 1.0)
+
+
 def innovation_filters(Ad, g0, g1, L):
     """Linear filters giving the innovations from the measurements and each input.
 
