@@ -56,6 +56,23 @@ def test_training_statistics_go_to_the_run_folder_not_the_temp_folder(ppo_run):
     assert "time/total_timesteps" in header
 
 
+def test_training_statistics_file_is_closed_when_training_returns(shipped, tmp_path):
+    # an open progress.csv handle became a ResourceWarning wherever it happened to be collected
+    import gc
+    import warnings
+
+    res = _tiny("ppo", tmp_path / "ppo", shipped, timesteps=128, eval_freq=0, checkpoint_freq=0)
+    stats = res.run_dir / "progress.csv"
+    written = stats.read_text()
+    res.agent.learn(64)  # further learning neither fails on the closed file nor truncates the record
+    assert stats.read_text().startswith(written) and len(written.splitlines()) >= 2
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        del res
+        gc.collect()
+    assert not [w for w in caught if issubclass(w.category, ResourceWarning)]
+
+
 # -------------------------------------------------------------------------------------------- split
 def test_split_holds_out_whole_traces_and_keeps_both_sides():
     for n in (2, 3, 4, 9):

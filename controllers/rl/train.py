@@ -412,6 +412,7 @@ def _learn(agent, config: TrainConfig, out, metadata: dict, envs, progress: bool
         cb.bar.close()
         for env in envs:
             env.close()
+        _close_logger(agent)
     seconds = time.perf_counter() - t0
     metadata = {**metadata, "timesteps": int(agent.num_timesteps), "train_seconds": seconds}
     save_atomically(agent, path, metadata)
@@ -420,6 +421,16 @@ def _learn(agent, config: TrainConfig, out, metadata: dict, envs, progress: bool
     return TrainingResult(path, config.algo, int(agent.num_timesteps), seconds, bool(cb.clock and cb.clock.reached),
                           run_dir, list(cb.checkpoint.paths), best if best.exists() else None, record["evaluations"],
                           metadata, agent)
+
+
+def _close_logger(agent) -> None:
+    """Close the run's SB3 logger (``progress.csv`` complete and its file released) and leave the agent a
+    logger that writes nothing, so that a further ``agent.learn`` neither fails on the closed file nor
+    truncates the run's statistics by opening it again."""
+    from stable_baselines3.common.logger import Logger
+
+    agent.logger.close()
+    agent.set_logger(Logger(folder=None, output_formats=[]))
 
 
 def _plain(value):
