@@ -1,10 +1,10 @@
-"""stable-baselines3 pieces of RL training: observation scaling, progress, time budget, atomic checkpoints
-and evaluations.
+"""stable-baselines3 pieces of RL training: observation scaling and normalisation, progress, time budget,
+atomic checkpoints and evaluations.
 
 Imported by :mod:`controllers.rl` only when an agent is trained or loaded
 (stable-baselines3 and torch are the ``rl`` extra). Agents saved by
-:func:`controllers.rl.train_agent` refer to :class:`ObservationScaler` by this
-module's path, so it must stay importable under this name.
+:func:`controllers.rl.train_agent` refer to :class:`ObservationScaler` (or
+:class:`ObservationNormalizer`) by this module's path, so they must stay importable under these names.
 """
 
 from __future__ import annotations
@@ -53,6 +53,83 @@ class ObservationScaler(BaseFeaturesExtractor):
 
     def forward(self, observations: torch.Tensor) -> torch.Tensor:
         return observations.flatten(1) * self.inv_scale
+
+
+class ObservationNormalizer(ObservationScaler):
+    """Standardises the observation by running statistics of the training rollouts, inside the policy.
+
+    What SB3's ``VecNormalize(norm_obs=True)`` does outside it: ``clip((obs - mean) / sqrt(var + 1e-8),
+    -clip, clip)``, with ``mean`` and ``var`` merged over every observation the training copies
+    produced (:class:`ObservationStatistics` feeds them in at the end of each rollout, the held-out
+    evaluations never). The statistics are buffers of the policy, so the saved agent's ``predict``
+    takes the environment's raw observation and nothing travels beside it. Before the first update
+    it is the :class:`ObservationScaler` of the same ``scale`` (mean 0, var ``scale``²).
+
+    Parameters
+    ----------
+    observation_space : gymnasium.spaces.Box
+    scale : sequence of float, optional
+        The starting standard deviations (default :data:`OBS_SCALE`).
+    clip : float
+        Bound of the standardised observation, > 0 (SB3's default 10).
+    """
+
+    def __init__(self, observation_space: gym.spaces.Box, scale=None, clip: float = 10.0):
+        super().__init__(observation_space, scale)
+        if not (isinstance(clip, (int, float)) and clip > 0 and math.isfinite(clip)):
+            raise ValueError(f"clip must be a positive number, got {clip!r}")
+        self.clip = float(clip)
+        inv = self.inv_scale.double()
+        self.register_buffer("mean", torch.zeros_like(inv))
+        self.register_buffer("var", 1.0 / inv ** 2)
+        self.register_buffer("count", torch.tensor(1e-4, dtype=torch.float64))  # RunningMeanStd's start
+        self._set_inverse()
+
+    def _set_inverse(self) -> None:
+        self.inv_scale.copy_((1.0 / torch.sqrt(self.var + 1e-8)).float())
+
+    def update(self, observations: np.ndarray) -> None:
+        """Merge a batch of raw observations, shape (n, *observation shape), into the statistics."""
+        from stable_baselines3.common.running_mean_std import RunningMeanStd
+
+        batch = np.asarray(observations, dtype=np.float64).reshape(len(observations), -1)
+        rms = RunningMeanStd(shape=self.mean.shape)
+        rms.mean, rms.var, rms.count = self.mean.numpy().copy(), self.var.numpy().copy(), float(self.count)
+        rms.update(batch)
+        with torch.no_grad():
+            self.mean.copy_(torch.as_tensor(rms.mean))
+            self.var.copy_(torch.as_tensor(rms.var))
+            self.count.fill_(rms.count)
+            self._set_inverse()
+
+    def forward(self, observations: torch.Tensor) -> torch.Tensor:
+        centred = observations.flatten(1) - self.mean.float()
+        return torch.clamp(centred * self.inv_scale, -self.clip, self.clip)
+
+
+class ObservationStatistics(BaseCallback):
+    """Feeds the observations of each training rollout to the policy's :class:`ObservationNormalizer` modules.
+
+    Observations are gathered step by step (``new_obs`` of the training copies) and merged at the
+    rollout's end, so that the statistics stay fixed while a rollout is collected.
+    """
+
+    def __init__(self):
+        super().__init__()
+        self._batch = []
+
+    def _on_step(self) -> bool:
+        self._batch.append(np.array(self.locals["new_obs"], dtype=np.float64, copy=True))
+        return True
+
+    def _on_rollout_end(self) -> None:
+        if not self._batch:
+            return
+        batch = np.concatenate(self._batch)
+        self._batch = []
+        for module in self.model.policy.modules():
+            if isinstance(module, ObservationNormalizer):
+                module.update(batch)
 
 
 class ProgressBar(BaseCallback):

@@ -58,13 +58,13 @@ def register(sub):
     p.add_argument("--residual-scale", type=number("a number in (0, 2]", 0.0, 2.0, high_open=False), default=0.05,
                    metavar="STICK",
                    help="bound of the residual in stick units (default 0.05)")
-    add_residual_options(p)
+    add_learning_options(p)
     p.set_defaults(func=run, out_kind="file")
 
 
-def add_residual_options(p) -> None:
-    """The options of how a residual learns (TrainConfig's ``axis_balance``, ``paired_baseline``, ``history``),
-    shared with ``scripts/train_compare.py``."""
+def add_learning_options(p) -> None:
+    """The options of how an agent learns (TrainConfig's ``axis_balance``, ``paired_baseline``, ``history``,
+    ``normalize_obs``), shared with ``scripts/train_compare.py``; :func:`learning_settings` reads them."""
     p.add_argument("--no-axis-balance", action="store_true",
                    help="scale a residual's reward and observations by its PD's worst axis on every axis (default: "
                    "each axis by its own error level, so that every axis counts alike in the reward)")
@@ -74,6 +74,16 @@ def add_residual_options(p) -> None:
     p.add_argument("--history", type=whole(1), default=1, metavar="N",
                    help="with --residual: the policy sees the last N observations side by side (default 1), so it "
                    "can tell what the servo delay still holds and what the gust is doing")
+    p.add_argument("--normalize-obs", action="store_true",
+                   help="standardise observations by running statistics of the training rollouts (SB3's "
+                   "VecNormalize, kept inside the policy so the saved agent takes raw observations); default: "
+                   "fixed scales")
+
+
+def learning_settings(args) -> dict:
+    """The TrainConfig fields of :func:`add_learning_options`' options."""
+    return {"axis_balance": not args.no_axis_balance, "paired_baseline": args.paired_baseline,
+            "history": args.history, "normalize_obs": args.normalize_obs}
 
 
 def _config(args):
@@ -85,9 +95,7 @@ def _config(args):
                        held_out_fraction=args.held_out_fraction, split_seed=args.split_seed,
                        eval_episodes=args.eval_episodes, episode_seconds=args.episode_seconds,
                        residual=args.residual, residual_scale=args.residual_scale, surrogates=args.surrogates,
-                       axis_balance=not args.no_axis_balance, paired_baseline=args.paired_baseline,
-                       history=args.history,
-                       max_seconds=None if args.minutes is None else 60.0 * args.minutes)
+                       max_seconds=None if args.minutes is None else 60.0 * args.minutes, **learning_settings(args))
 
 
 def _run_seeds(args, config) -> int:

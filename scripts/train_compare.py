@@ -49,7 +49,7 @@ from controllers.pd import PDController, PDGains, design_gains, loop_analysis
 from controllers.rl import load_agent, split_traces, train_agent
 from controllers.sweep import sweep_pairs
 from controllers.trace_split import draw_windows
-from heli_cli.train import add_residual_options
+from heli_cli.train import add_learning_options, learning_settings
 from heli_env import load_env_model
 from identification.files import jsonable, write_text
 
@@ -144,7 +144,7 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--no-reward-normalisation", action="store_true",
                     help="train on the raw rewards (default: PPO's are divided by a running estimate of the return's "
                     "spread, SB3 VecNormalize(norm_obs=False))")
-    add_residual_options(ap)
+    add_learning_options(ap)
     ap.add_argument("--algo-kwargs", type=json.loads, default=None, metavar="JSON",
                     help="SB3 hyperparameters over the defaults of every algorithm trained, e.g. "
                     "'{\"gamma\": 0.95, \"gae_lambda\": 0.9}'")
@@ -225,8 +225,7 @@ def _train(ap, args, env_model, agents: list, out: Path) -> dict:
                           residual=agents[2 if args.residual_on == "robust" else 1][1] if residual else None,
                           residual_scale=args.residual_scale, surrogates=args.surrogates,
                           normalize_reward=False if args.no_reward_normalisation else None,
-                          axis_balance=not args.no_axis_balance, algo_kwargs=args.algo_kwargs,
-                          paired_baseline=args.paired_baseline, history=args.history)
+                          algo_kwargs=args.algo_kwargs, **learning_settings(args))
         training[algo] = {"timesteps": res.timesteps, "seconds": res.seconds,
                           "steps_per_second": res.steps_per_second, "stopped_by_time": res.stopped_by_time,
                           "evaluations": res.evaluations, "agent": str(res.path)}
@@ -245,6 +244,7 @@ def _training_notes(args, training: dict, agents: list) -> list[str]:
              + ("; every axis scaled by the worst one" if args.no_axis_balance else "")
              + ("; paired PD baseline" if args.paired_baseline else "")
              + (f"; {args.history} observations stacked" if args.history > 1 else "")
+             + ("; running observation statistics" if args.normalize_obs else "")
              + (f"; hyperparameters {json.dumps(args.algo_kwargs)}" if args.algo_kwargs else "") + ":", ""]
     for algo, t in training.items():
         notes.append(f"- {algo.upper()}: {t['timesteps']} timesteps in {t['seconds']:.0f} s "

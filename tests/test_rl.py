@@ -292,9 +292,10 @@ def test_heli_train_cli_residual_settings(tmp_path, ideal_model_dir):
     out = tmp_path / "res"
     assert main(["train", "--algo", "ppo", "--model", str(ideal_model_dir), "--timesteps", "64", "--out", str(out),
                  "--n-envs", "1", "--episode-seconds", "1", "--eval-freq", "0", "--checkpoint-freq", "0",
-                 "--no-progress", "--residual", str(pd_file), "--paired-baseline", "--no-axis-balance"]) == 0
+                 "--no-progress", "--residual", str(pd_file), "--paired-baseline", "--no-axis-balance",
+                 "--normalize-obs"]) == 0
     meta = agent_metadata(tmp_path / "res.zip")
-    assert meta["paired_baseline"] is True and meta["axis_balance"] is False
+    assert meta["paired_baseline"] is True and meta["axis_balance"] is False and meta["normalize_obs"] is True
     assert meta["task"]["axis_weights"] == [1.0, 1.0, 1.0]
 
 
@@ -449,6 +450,48 @@ def test_a_residual_with_history_trains_and_flies(ideal, tmp_path):
     assert np.isfinite(result.metrics["roll"]["att_p90_deg"])
     with pytest.raises(AgentError, match="history"):
         make_config(history=2)  # without a residual
+
+
+def test_observation_normalizer_is_vecnormalize_inside_the_policy():
+    """Before any statistics it is the fixed scaler (clipped); after, SB3 VecNormalize's standardisation."""
+    import gymnasium as gym
+    import torch
+    from stable_baselines3.common.running_mean_std import RunningMeanStd
+
+    from controllers.sb3_training import ObservationNormalizer, ObservationScaler
+
+    space = gym.spaces.Box(-np.inf, np.inf, (4,), np.float32)
+    scale = [0.1, 0.2, 1.0, 3.0]
+    norm, fixed = ObservationNormalizer(space, scale, clip=5.0), ObservationScaler(space, scale)
+    obs = torch.as_tensor(np.random.default_rng(0).normal(0.3, 0.5, (50, 4)), dtype=torch.float32)
+    assert_allclose(norm(obs).numpy(), np.clip(fixed(obs).numpy(), -5.0, 5.0), rtol=1e-6)
+    batches = [np.random.default_rng(k).normal([1.0, -2.0, 0.0, 5.0], [0.1, 1.0, 2.0, 0.01], (n, 4))
+               for k, n in ((1, 64), (2, 200))]
+    rms = RunningMeanStd(shape=(4,))
+    for b in batches:
+        norm.update(b)
+        rms.update(b)
+    want = np.clip((obs.numpy() - rms.mean) / np.sqrt(rms.var + 1e-8), -5.0, 5.0)
+    assert_allclose(norm(obs).numpy(), want, rtol=1e-4, atol=1e-4)  # float32 arithmetic
+    assert np.any(np.abs(want) == 5.0)  # the clip is reached
+    with pytest.raises(ValueError, match="clip"):
+        ObservationNormalizer(space, scale, clip=0.0)
+
+
+def test_normalized_observations_learn_from_training_rollouts_only(shipped, tmp_path):
+    from controllers.sb3_training import ObservationNormalizer
+
+    res = _tiny("ppo", tmp_path / "norm", shipped, residual=BEST_PD, residual_scale=0.05, normalize_obs=True)
+    assert agent_metadata(res.path)["normalize_obs"] is True
+    norms = [m for m in res.agent.policy.modules() if isinstance(m, ObservationNormalizer)]
+    assert norms
+    # every training observation once, none of the held-out evaluations' (eval_freq 128 ran two)
+    assert float(norms[0].count) == pytest.approx(res.timesteps + 1e-4) and len(res.evaluations) >= 1
+    agent = load_agent(res.path)
+    loaded = [m for m in agent.policy.policy.modules() if isinstance(m, ObservationNormalizer)]
+    assert_array_equal(loaded[0].mean.numpy(), norms[0].mean.numpy())
+    obs = np.random.default_rng(0).normal(0.0, 0.01, (5, 12)).astype(np.float32)
+    assert_array_equal(agent.policy.predict(obs, deterministic=True)[0], res.agent.predict(obs, deterministic=True)[0])
 
 
 @pytest.mark.parametrize("kw, exc, match", [

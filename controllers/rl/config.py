@@ -115,6 +115,11 @@ class TrainConfig:
         sensor noise under the base PD alone, and the residual is rewarded for the difference
         (:func:`controllers.rl.residual_agent.residual_env`, ``paired=True``); twice the
         environment copies are stepped. The held-out evaluations score the raw return.
+    normalize_obs : bool
+        Standardise observations by running statistics of the training rollouts (what SB3's
+        ``VecNormalize(norm_obs=True)`` does), held inside the policy
+        (:class:`controllers.sb3_training.ObservationNormalizer`, started from the fixed scales), so the
+        saved agent still takes raw observations. Default False: the fixed scales alone.
     history : int
         With ``residual``: the policy sees the last ``history`` observations side by side (SB3's
         ``VecFrameStack``; 1, the default, the current one). Past actions and rates let it infer
@@ -155,6 +160,7 @@ class TrainConfig:
     axis_balance: bool = True
     paired_baseline: bool = False
     history: int = 1
+    normalize_obs: bool = False
 
     def __post_init__(self):
         if self.algo not in ALGOS:

@@ -199,7 +199,7 @@ def _train(config: TrainConfig, env_model, out, split, segments, progress, verbo
     setup, task = _residual_setup(config, env_model, segments[0])
     hyper = config.hyperparameters()
     env, eval_env, dt = _environments(config, env_model, task, segments, hyper["gamma"])
-    _scale_observations(hyper, setup, config.history)
+    _scale_observations(hyper, setup, config.history, config.normalize_obs)
     agent = _algo_class(config.algo)("MlpPolicy", env, seed=config.seed, device="cpu", verbose=verbose, **hyper)
     # SB3's own logger would make an empty SB3-<date> folder in the system's temp folder on
     # every run; its training statistics go to the run folder instead (progress.csv).
@@ -317,14 +317,16 @@ def _environments(config: TrainConfig, env_model, task, segments, gamma: float):
     return env, eval_env, venv.spec_.dt
 
 
-def _scale_observations(hyper: dict, setup, history: int = 1) -> None:
-    """Put :class:`controllers.sb3_training.ObservationScaler` in front of the policy unless another feature
+def _scale_observations(hyper: dict, setup, history: int = 1, normalize: bool = False) -> None:
+    """Put :class:`controllers.sb3_training.ObservationScaler` (``normalize``: its running form,
+    :class:`~controllers.sb3_training.ObservationNormalizer`) in front of the policy unless another feature
     extractor is asked for; a residual's scaler takes the observation scales of its ``setup``, once per
     stacked observation."""
-    from ..sb3_training import ObservationScaler
+    from ..sb3_training import ObservationNormalizer, ObservationScaler
 
-    hyper["policy_kwargs"].setdefault("features_extractor_class", ObservationScaler)
-    if setup is not None and hyper["policy_kwargs"]["features_extractor_class"] is ObservationScaler:
+    own = ObservationNormalizer if normalize else ObservationScaler
+    hyper["policy_kwargs"].setdefault("features_extractor_class", own)
+    if setup is not None and hyper["policy_kwargs"]["features_extractor_class"] is own:
         hyper["policy_kwargs"].setdefault("features_extractor_kwargs", {"scale": list(setup["obs_scale"]) * history})
 
 
@@ -352,7 +354,7 @@ def _metadata(config: TrainConfig, env_model, split, segments, task, dt: float, 
         "task": task if isinstance(task, str) else dataclasses.asdict(task),
         "episode_seconds": config.episode_seconds, "dt": dt, "n_envs": config.n_envs,
         "normalize_reward": config.reward_normalized, "init_angle_deg": init[0], "init_rate_deg": init[1],
-        "surrogates": config.surrogates, "axis_balance": config.axis_balance,
+        "surrogates": config.surrogates, "axis_balance": config.axis_balance, "normalize_obs": config.normalize_obs,
         "paired_baseline": config.residual is not None and config.paired_baseline,
         "residual": None if config.residual is None else residual_metadata(config.residual, config.residual_scale,
                                                                             setup, config.history),
@@ -387,6 +389,10 @@ def _callbacks(config: TrainConfig, eval_env, out, metadata: dict, progress: boo
     ckpt = AtomicCheckpoint(config.checkpoint_freq or 2 ** 62, run_dir / "checkpoints", name, metadata)
     bar = ProgressBar(config.timesteps, progress, eval_cb, desc=f"{config.algo} {name}")
     clock = WallClockLimit(config.max_seconds) if config.max_seconds is not None else None
+    if config.normalize_obs:  # first: the statistics are merged before anything saves the policy
+        from ..sb3_training import ObservationStatistics
+
+        cbs.insert(0, ObservationStatistics())
     cbs += [ckpt, bar] + ([clock] if clock else []) + list(extra)
     return _Callbacks(eval_cb, ckpt, bar, clock, cbs)
 
