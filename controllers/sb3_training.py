@@ -168,6 +168,18 @@ class ProgressBar(BaseCallback):
             self.bar = None
 
 
+class CurriculumProgress(BaseCallback):
+    """Tells a :class:`controllers.trace_split.GustCurriculum` the timesteps taken, at every step."""
+
+    def __init__(self, curriculum):
+        super().__init__()
+        self.curriculum = curriculum
+
+    def _on_step(self) -> bool:
+        self.curriculum.timesteps = self.num_timesteps
+        return True
+
+
 class WallClockLimit(BaseCallback):
     """Stops training once ``seconds`` of wall time have passed since training started."""
 

@@ -228,6 +228,40 @@ class WindowSampler:
         return {"trace": self.segments[j].trace, "offset": self.firsts[j] + draw_offset(rng, self.rooms[j])}
 
 
+class GustCurriculum:
+    """Episode options of ``sampler`` with the gusts scaled by how far training has come (a curriculum).
+
+    ``gust_scale`` rises linearly from ``start`` at timestep 0 to 1 at ``steps`` and stays 1 after;
+    the trainer sets :attr:`timesteps` as it goes (:class:`controllers.sb3_training.CurriculumProgress`).
+    The scale depends on timesteps only, so the same seed gives the same episodes.
+
+    Parameters
+    ----------
+    sampler : callable
+        ``sampler(i, rng) -> dict`` of reset options (a :class:`WindowSampler`).
+    start : float
+        Gust multiplier of the first episodes, in [0, 1).
+    steps : int
+        Timesteps over which the gusts reach their recorded level, >= 1.
+    """
+
+    def __init__(self, sampler, start: float, steps: int):
+        if not (isinstance(start, (int, float)) and not isinstance(start, bool) and 0.0 <= start < 1.0):
+            raise ValueError(f"the curriculum's starting gust scale must be a number in [0, 1), got {start!r}")
+        if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
+            raise ValueError(f"the curriculum's steps must be a whole number >= 1, got {steps!r}")
+        self.sampler, self.start, self.steps = sampler, float(start), int(steps)
+        self.timesteps = 0
+
+    @property
+    def gust_scale(self) -> float:
+        """The gust multiplier of episodes starting now."""
+        return self.start + (1.0 - self.start) * min(self.timesteps / self.steps, 1.0)
+
+    def __call__(self, i: int, rng: np.random.Generator) -> dict:
+        return {**self.sampler(i, rng), "gust_scale": self.gust_scale}
+
+
 def as_segments(traces, split: TraceSplit | None = None, default: str = "held-out") -> tuple:
     """Segments from trace indices, :class:`TraceSegment` objects, or a split side name.
 

@@ -293,9 +293,10 @@ def test_heli_train_cli_residual_settings(tmp_path, ideal_model_dir):
     assert main(["train", "--algo", "ppo", "--model", str(ideal_model_dir), "--timesteps", "64", "--out", str(out),
                  "--n-envs", "1", "--episode-seconds", "1", "--eval-freq", "0", "--checkpoint-freq", "0",
                  "--no-progress", "--residual", str(pd_file), "--paired-baseline", "--no-axis-balance",
-                 "--normalize-obs"]) == 0
+                 "--normalize-obs", "--curriculum", "1000", "--curriculum-start", "0.3"]) == 0
     meta = agent_metadata(tmp_path / "res.zip")
     assert meta["paired_baseline"] is True and meta["axis_balance"] is False and meta["normalize_obs"] is True
+    assert meta["curriculum"] == {"start": 0.3, "steps": 1000}
     assert meta["task"]["axis_weights"] == [1.0, 1.0, 1.0]
 
 
@@ -492,6 +493,39 @@ def test_normalized_observations_learn_from_training_rollouts_only(shipped, tmp_
     assert_array_equal(loaded[0].mean.numpy(), norms[0].mean.numpy())
     obs = np.random.default_rng(0).normal(0.0, 0.01, (5, 12)).astype(np.float32)
     assert_array_equal(agent.policy.predict(obs, deterministic=True)[0], res.agent.predict(obs, deterministic=True)[0])
+
+
+def test_gust_curriculum_rises_to_the_recorded_level():
+    from controllers.trace_split import GustCurriculum
+
+    cur = GustCurriculum(lambda i, rng: {"trace": 1, "offset": int(rng.integers(100))}, 0.25, 400)
+    rng = np.random.default_rng(0)
+    scales = []
+    for t in (0, 100, 200, 400, 10_000):
+        cur.timesteps = t
+        options = cur(0, rng)
+        assert options["trace"] == 1 and 0 <= options["offset"] < 100
+        scales.append(options["gust_scale"])
+    assert_allclose(scales, [0.25, 0.4375, 0.625, 1.0, 1.0])
+    for start, steps in ((1.0, 10), (-0.1, 10), (0.5, 0), (0.5, 2.5), (True, 10)):
+        with pytest.raises(ValueError, match="curriculum"):
+            GustCurriculum(None, start, steps)
+
+
+def test_training_with_a_gust_curriculum(shipped, tmp_path, monkeypatch):
+    from controllers.trace_split import GustCurriculum
+
+    seen = []
+    call = GustCurriculum.__call__
+    monkeypatch.setattr(GustCurriculum, "__call__", lambda self, i, rng: seen.append(call(self, i, rng)) or seen[-1])
+    res = _tiny("ppo", tmp_path / "cur", shipped, curriculum_steps=512, curriculum_start=0.2)
+    assert agent_metadata(res.path)["curriculum"] == {"start": 0.2, "steps": 512}
+    scales = [o["gust_scale"] for o in seen]
+    assert scales[0] == 0.2 and scales == sorted(scales) and 0.2 < scales[-1] <= 0.2 + 0.8 * 256 / 512
+    with pytest.raises(AgentError, match="curriculum_start"):
+        make_config(curriculum_start=1.0)
+    with pytest.raises(AgentError, match="curriculum_steps"):
+        make_config(curriculum_steps=-1)
 
 
 @pytest.mark.parametrize("kw, exc, match", [

@@ -120,6 +120,13 @@ class TrainConfig:
         ``VecNormalize(norm_obs=True)`` does), held inside the policy
         (:class:`controllers.sb3_training.ObservationNormalizer`, started from the fixed scales), so the
         saved agent still takes raw observations. Default False: the fixed scales alone.
+    curriculum_steps : int
+        Gust curriculum: training episodes' gusts rise linearly from ``curriculum_start`` times their
+        recorded level to the full level over the first ``curriculum_steps`` timesteps
+        (:class:`controllers.trace_split.GustCurriculum`); 0 (default) trains at the full level
+        throughout. The held-out evaluations always fly the full gusts.
+    curriculum_start : float
+        Gust multiplier of the first training episodes with a curriculum, in [0, 1) (default 0.5).
     history : int
         With ``residual``: the policy sees the last ``history`` observations side by side (SB3's
         ``VecFrameStack``; 1, the default, the current one). Past actions and rates let it infer
@@ -161,6 +168,8 @@ class TrainConfig:
     paired_baseline: bool = False
     history: int = 1
     normalize_obs: bool = False
+    curriculum_steps: int = 0
+    curriculum_start: float = 0.5
 
     def __post_init__(self):
         if self.algo not in ALGOS:
@@ -169,6 +178,11 @@ class TrainConfig:
                               ("eval_episodes", 1)):
             object.__setattr__(self, name, whole_number(getattr(self, name), name, minimum, AgentError))
         object.__setattr__(self, "surrogates", whole_number(self.surrogates, "surrogates", 0, AgentError))
+        object.__setattr__(self, "curriculum_steps",
+                           whole_number(self.curriculum_steps, "curriculum_steps", 0, AgentError))
+        start = self.curriculum_start
+        if not (isinstance(start, (int, float)) and not isinstance(start, bool) and 0.0 <= start < 1.0):
+            raise AgentError(f"curriculum_start must be a gust multiplier in [0, 1), got {start!r}")
         if self.torch_threads is not None:
             object.__setattr__(self, "torch_threads", whole_number(self.torch_threads, "torch_threads", 1, AgentError))
         if self.max_seconds is not None and not (self.max_seconds > 0 and math.isfinite(self.max_seconds)):

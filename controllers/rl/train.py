@@ -52,7 +52,7 @@ from heli_core.files import jsonable, write_text
 
 from ..errors import AgentError, TrainingInterrupted
 from ..pd.controller import PDController
-from ..trace_split import TraceSegment, WindowSampler, as_segments, split_traces
+from ..trace_split import GustCurriculum, TraceSegment, WindowSampler, as_segments, split_traces
 from .agent_file import AGENT_SCHEMA, AGENT_SCHEMA_VERSION, _algo_class, _sb3
 from .config import TrainConfig, make_config
 from .residual_agent import residual_metadata
@@ -198,7 +198,11 @@ def _train(config: TrainConfig, env_model, out, split, segments, progress, verbo
     set_random_seed(config.seed)
     setup, task = _residual_setup(config, env_model, segments[0])
     hyper = config.hyperparameters()
-    env, eval_env, dt = _environments(config, env_model, task, segments, hyper["gamma"])
+    env, eval_env, dt, curriculum = _environments(config, env_model, task, segments, hyper["gamma"])
+    if curriculum is not None:
+        from ..sb3_training import CurriculumProgress
+
+        callbacks = (CurriculumProgress(curriculum), *callbacks)
     _scale_observations(hyper, setup, config.history, config.normalize_obs)
     agent = _algo_class(config.algo)("MlpPolicy", env, seed=config.seed, device="cpu", verbose=verbose, **hyper)
     # SB3's own logger would make an empty SB3-<date> folder in the system's temp folder on
@@ -275,7 +279,8 @@ def _residual_setup(config: TrainConfig, env_model, train_seg):
 
 
 def _environments(config: TrainConfig, env_model, task, segments, gamma: float):
-    """The training and evaluation ``VecEnv`` (residual, monitor and reward-normalising wrappers) and dt [s].
+    """The training and evaluation ``VecEnv`` (residual, monitor and reward-normalising wrappers), dt [s] and
+    the training gusts' :class:`~controllers.trace_split.GustCurriculum` (None without one).
 
     Training copies replay windows of the training segments; the evaluation copies replay
     fixed windows of the held-out ones (``fixed_seed``), the same at every evaluation.
@@ -295,11 +300,13 @@ def _environments(config: TrainConfig, env_model, task, segments, gamma: float):
         venv = HeliAttitudeVectorEnv(config.n_envs * (2 if paired else 1), **{**kw, "model": train_model})
         needed = venv.spec_.needed
         train_sampler = WindowSampler(train_model, train_segments, needed)
+        curriculum = (GustCurriculum(train_sampler, config.curriculum_start, config.curriculum_steps)
+                      if config.curriculum_steps else None)
         eval_sampler = WindowSampler(env_model, segments[1], needed)
         eval_venv = HeliAttitudeVectorEnv(config.eval_episodes, **kw)
     except ValueError as e:
         raise AgentError(str(e)) from e
-    env = GymnasiumVecEnv(venv, episode_options=train_sampler, twins=paired)
+    env = GymnasiumVecEnv(venv, episode_options=curriculum or train_sampler, twins=paired)
     eval_env = GymnasiumVecEnv(eval_venv, episode_options=eval_sampler, fixed_seed=config.seed + 1000)
     if config.residual is not None:
         from .residual_agent import residual_env
@@ -314,7 +321,7 @@ def _environments(config: TrainConfig, env_model, task, segments, gamma: float):
     if config.reward_normalized:  # the eval env is wrapped alike (EvalCallback syncs wrappers) but left raw
         env = VecNormalize(env, norm_obs=False, norm_reward=True, gamma=gamma)
         eval_env = VecNormalize(eval_env, training=False, norm_obs=False, norm_reward=False)
-    return env, eval_env, venv.spec_.dt
+    return env, eval_env, venv.spec_.dt, curriculum
 
 
 def _scale_observations(hyper: dict, setup, history: int = 1, normalize: bool = False) -> None:
@@ -355,6 +362,8 @@ def _metadata(config: TrainConfig, env_model, split, segments, task, dt: float, 
         "episode_seconds": config.episode_seconds, "dt": dt, "n_envs": config.n_envs,
         "normalize_reward": config.reward_normalized, "init_angle_deg": init[0], "init_rate_deg": init[1],
         "surrogates": config.surrogates, "axis_balance": config.axis_balance, "normalize_obs": config.normalize_obs,
+        "curriculum": ({"start": config.curriculum_start, "steps": config.curriculum_steps}
+                       if config.curriculum_steps else None),
         "paired_baseline": config.residual is not None and config.paired_baseline,
         "residual": None if config.residual is None else residual_metadata(config.residual, config.residual_scale,
                                                                             setup, config.history),
