@@ -16,6 +16,7 @@ from functools import cached_property
 import numpy as np
 from gymnasium import spaces
 
+from heli_core.config import is_real
 from heli_core.discrete import discrete_kernel
 from heli_core.physics import trim_sticks
 from heli_core.sensors import SensorModel
@@ -97,19 +98,13 @@ MAX_INIT_RATE_DEG = 1000.0
 """Largest initial body-rate magnitude drawn at reset [deg/s]."""
 
 
-def _real(value) -> bool:
-    """A finite real number (not a bool, not a string, not complex)."""
-    return (isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
-            and math.isfinite(value))
-
-
 def _index(value) -> bool:
     return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
 
 
 def checked_gust_scale(value, name: str) -> float:
     """``value`` as a gust multiplier in [0, :data:`MAX_GUST_SCALE`], else :class:`OptionError`."""
-    if not (_real(value) and 0 <= value <= MAX_GUST_SCALE):
+    if not (is_real(value) and 0 <= value <= MAX_GUST_SCALE):
         raise OptionError(f"{name} must be a number in [0, {MAX_GUST_SCALE:g}], got {value!r}")
     return float(value)
 
@@ -199,7 +194,7 @@ def build_spec(model=None, task="hold", reference="mixed", dt: float = 0.01, epi
     gust_scale = checked_gust_scale(gust_scale, "gust_scale")
     for name, value, high in (("init_angle_deg", init_angle_deg, MAX_INIT_ANGLE_DEG),
                               ("init_rate_deg", init_rate_deg, MAX_INIT_RATE_DEG)):
-        if not (_real(value) and 0 <= value <= high):
+        if not (is_real(value) and 0 <= value <= high):
             raise OptionError(f"{name} must be a number in [0, {high:g}], got {value!r}")
     sensors = measurement_model(obs_noise, env_model)
     omega = sensors.line_arrays()[1]
