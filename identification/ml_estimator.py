@@ -57,7 +57,7 @@ from .errors import IdentifiabilityError, NotFittedError
 from .fit_warnings import require_moving_sticks
 from .flight import Flight
 from .integral_method import IntegralIdentifier
-from .state_space import N_NONLINEAR, WIND_MODELS, ZETA_BOUNDS, rts_smooth, wind_block
+from .state_space import N_NONLINEAR, WIND_MODELS, ZETA_BOUNDS, concentrated_nll, rts_smooth, wind_block
 from .servo_lag import profile_lag
 from .vibration import remove_common_lines
 
@@ -475,8 +475,7 @@ class MaximumLikelihoodIdentifier:
         e, theta, S = like.solve_linear(x)
         n_burnt = int(sum(len(y) - burn for y in data.y))
         fit = self._result(a, axis_params, like, x, theta, e, S, damping_name, float(tau), kind,
-                           tuple((t, float(n_burnt / 2 * np.log(2 * np.pi * np.e * 2 * c / n_burnt)))
-                                 for t, c in profile))
+                           tuple((t, float(concentrated_nll(c, n_burnt))) for t, c in profile))
         return replace(fit, lag=float(fixed_lag), lag_profile=lag_profile, lag_lr=lag_lr)
 
     def _result(self, a, axis_params, like, x, theta, e, S, damping_name, tau, kind, profile) -> MLAxisFit:
