@@ -64,7 +64,7 @@ def register(sub):
 
 def add_learning_options(p) -> None:
     """The options of how an agent learns (TrainConfig's ``axis_balance``, ``paired_baseline``, ``history``,
-    ``normalize_obs``, the gust curriculum), shared with ``scripts/train_compare.py``; :func:`learning_settings` reads them."""
+    ``normalize_obs``, ``lr_schedule``, the gust curriculum), shared with ``scripts/train_compare.py``; :func:`learning_settings` reads them."""
     p.add_argument("--no-axis-balance", action="store_true",
                    help="scale a residual's reward and observations by its PD's worst axis on every axis (default: "
                    "each axis by its own error level, so that every axis counts alike in the reward)")
@@ -78,6 +78,9 @@ def add_learning_options(p) -> None:
                    help="standardise observations by running statistics of the training rollouts (SB3's "
                    "VecNormalize, kept inside the policy so the saved agent takes raw observations); default: "
                    "fixed scales")
+    p.add_argument("--lr-schedule", choices=("constant", "linear"), default="constant",
+                   help="learning rate constant (default) or falling linearly to 0 at --timesteps (with a time "
+                   "budget, give --timesteps about what the budget allows)")
     p.add_argument("--curriculum", type=whole(0), default=0, metavar="STEPS",
                    help="gust curriculum: training gusts rise linearly from --curriculum-start times their level to "
                    "the full level over the first STEPS timesteps (default 0: full gusts throughout; the held-out "
@@ -90,7 +93,7 @@ def learning_settings(args) -> dict:
     """The TrainConfig fields of :func:`add_learning_options`' options."""
     return {"axis_balance": not args.no_axis_balance, "paired_baseline": args.paired_baseline,
             "history": args.history, "normalize_obs": args.normalize_obs, "curriculum_steps": args.curriculum,
-            "curriculum_start": args.curriculum_start}
+            "curriculum_start": args.curriculum_start, "lr_schedule": args.lr_schedule}
 
 
 def _config(args):

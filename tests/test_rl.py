@@ -293,10 +293,10 @@ def test_heli_train_cli_residual_settings(tmp_path, ideal_model_dir):
     assert main(["train", "--algo", "ppo", "--model", str(ideal_model_dir), "--timesteps", "64", "--out", str(out),
                  "--n-envs", "1", "--episode-seconds", "1", "--eval-freq", "0", "--checkpoint-freq", "0",
                  "--no-progress", "--residual", str(pd_file), "--paired-baseline", "--no-axis-balance",
-                 "--normalize-obs", "--curriculum", "1000", "--curriculum-start", "0.3"]) == 0
+                 "--normalize-obs", "--curriculum", "1000", "--curriculum-start", "0.3", "--lr-schedule", "linear"]) == 0
     meta = agent_metadata(tmp_path / "res.zip")
     assert meta["paired_baseline"] is True and meta["axis_balance"] is False and meta["normalize_obs"] is True
-    assert meta["curriculum"] == {"start": 0.3, "steps": 1000}
+    assert meta["curriculum"] == {"start": 0.3, "steps": 1000} and meta["lr_schedule"] == "linear"
     assert meta["task"]["axis_weights"] == [1.0, 1.0, 1.0]
 
 
@@ -526,6 +526,22 @@ def test_training_with_a_gust_curriculum(shipped, tmp_path, monkeypatch):
         make_config(curriculum_start=1.0)
     with pytest.raises(AgentError, match="curriculum_steps"):
         make_config(curriculum_steps=-1)
+
+
+def test_linear_learning_rate_falls_to_zero_at_the_timesteps(shipped, tmp_path):
+    import csv
+
+    res = _tiny("ppo", tmp_path / "lin", shipped, timesteps=512, lr_schedule="linear", eval_freq=0)
+    rows = list(csv.DictReader((res.run_dir / "progress.csv").open()))
+    rates = [float(r["train/learning_rate"]) for r in rows if r.get("train/learning_rate")]
+    steps = [int(r["time/total_timesteps"]) for r in rows if r.get("train/learning_rate")]
+    assert len(rates) >= 3  # updates every 128 steps
+    # SB3 sets the rate of an update from the progress before it: 3e-4 x (1 - steps / 512)
+    assert_allclose(rates, [3e-4 * (1 - (t - 128) / 512) for t in steps], rtol=1e-6)
+    assert agent_metadata(res.path)["lr_schedule"] == "linear" and type(load_agent(res.path)).__name__ == "PPO"
+    assert agent_metadata(res.path)["hyperparameters"]["learning_rate"] == 3e-4
+    with pytest.raises(AgentError, match="lr_schedule"):
+        make_config(lr_schedule="cosine")
 
 
 @pytest.mark.parametrize("kw, exc, match", [

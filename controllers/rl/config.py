@@ -33,6 +33,9 @@ DEFAULT_KWARGS = {
 }
 """Hyperparameters :func:`train_agent` starts from; ``algo_kwargs`` override them (``policy_kwargs`` merged)."""
 
+LR_SCHEDULES = ("constant", "linear")
+"""Learning-rate schedules of :attr:`TrainConfig.lr_schedule`."""
+
 INIT_DEG = 5.0
 """Default initial roll/pitch range [deg] and rate range [deg/s] of episodes without a residual (the env's)."""
 
@@ -120,6 +123,10 @@ class TrainConfig:
         ``VecNormalize(norm_obs=True)`` does), held inside the policy
         (:class:`controllers.sb3_training.ObservationNormalizer`, started from the fixed scales), so the
         saved agent still takes raw observations. Default False: the fixed scales alone.
+    lr_schedule : {"constant", "linear"}
+        The learning rate: constant (default), or falling linearly from ``learning_rate`` to 0 at
+        ``timesteps`` (SB3's ``LinearSchedule``). With a time budget set ``timesteps`` to about what the
+        budget allows, or the rate never gets low.
     curriculum_steps : int
         Gust curriculum: training episodes' gusts rise linearly from ``curriculum_start`` times their
         recorded level to the full level over the first ``curriculum_steps`` timesteps
@@ -168,6 +175,7 @@ class TrainConfig:
     paired_baseline: bool = False
     history: int = 1
     normalize_obs: bool = False
+    lr_schedule: str = "constant"
     curriculum_steps: int = 0
     curriculum_start: float = 0.5
 
@@ -180,6 +188,8 @@ class TrainConfig:
         object.__setattr__(self, "surrogates", whole_number(self.surrogates, "surrogates", 0, AgentError))
         object.__setattr__(self, "curriculum_steps",
                            whole_number(self.curriculum_steps, "curriculum_steps", 0, AgentError))
+        if self.lr_schedule not in LR_SCHEDULES:
+            raise AgentError(f"lr_schedule must be one of {LR_SCHEDULES}, got {self.lr_schedule!r}")
         start = self.curriculum_start
         if not (isinstance(start, (int, float)) and not isinstance(start, bool) and 0.0 <= start < 1.0):
             raise AgentError(f"curriculum_start must be a gust multiplier in [0, 1), got {start!r}")
@@ -208,6 +218,15 @@ class TrainConfig:
     def reward_normalized(self) -> bool:
         """Whether training rewards are normalised (``normalize_reward``, its default filled in)."""
         return self.algo == "ppo" if self.normalize_reward is None else bool(self.normalize_reward)
+
+    def learning_rate(self, hyper: dict):
+        """What the algorithm takes as ``learning_rate``: ``hyper``'s number, or with ``lr_schedule="linear"``
+        a function of SB3's remaining progress falling from it to 0."""
+        if self.lr_schedule == "constant":
+            return hyper["learning_rate"]
+        from stable_baselines3.common.utils import LinearSchedule
+
+        return LinearSchedule(hyper["learning_rate"], 0.0, 1.0)
 
     def hyperparameters(self) -> dict:
         """The algorithm's :data:`DEFAULT_KWARGS` with ``algo_kwargs`` over them (``policy_kwargs`` merged); a copy."""

@@ -204,7 +204,8 @@ def _train(config: TrainConfig, env_model, out, split, segments, progress, verbo
 
         callbacks = (CurriculumProgress(curriculum), *callbacks)
     _scale_observations(hyper, setup, config.history, config.normalize_obs)
-    agent = _algo_class(config.algo)("MlpPolicy", env, seed=config.seed, device="cpu", verbose=verbose, **hyper)
+    agent = _algo_class(config.algo)("MlpPolicy", env, seed=config.seed, device="cpu", verbose=verbose,
+                                     **{**hyper, "learning_rate": config.learning_rate(hyper)})
     # SB3's own logger would make an empty SB3-<date> folder in the system's temp folder on
     # every run; its training statistics go to the run folder instead (progress.csv).
     agent.set_logger(configure(str(out[1]), ["csv"] + (["stdout"] if verbose else [])))
@@ -362,6 +363,7 @@ def _metadata(config: TrainConfig, env_model, split, segments, task, dt: float, 
         "episode_seconds": config.episode_seconds, "dt": dt, "n_envs": config.n_envs,
         "normalize_reward": config.reward_normalized, "init_angle_deg": init[0], "init_rate_deg": init[1],
         "surrogates": config.surrogates, "axis_balance": config.axis_balance, "normalize_obs": config.normalize_obs,
+        "lr_schedule": config.lr_schedule,
         "curriculum": ({"start": config.curriculum_start, "steps": config.curriculum_steps}
                        if config.curriculum_steps else None),
         "paired_baseline": config.residual is not None and config.paired_baseline,
