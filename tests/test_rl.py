@@ -357,6 +357,17 @@ def test_residual_training_scales_follow_the_pd_errors(residual_run):
     assert setup["axis_weights"] == meta["task"]["axis_weights"]
 
 
+def test_a_residual_ppo_explores_with_gsde_unless_told_otherwise():
+    residual = make_config(residual=BEST_PD).hyperparameters()
+    assert residual["use_sde"] is True and residual["sde_sample_freq"] == 8
+    assert residual["policy_kwargs"]["log_std_init"] == -2.0 and residual["policy_kwargs"]["net_arch"] == [64, 64]
+    plain = make_config().hyperparameters()
+    assert "use_sde" not in plain and plain["policy_kwargs"]["log_std_init"] == -1.0
+    off = make_config(residual=BEST_PD, algo_kwargs={"use_sde": False}).hyperparameters()
+    assert off["use_sde"] is False and off["policy_kwargs"]["log_std_init"] == -1.0
+    assert "use_sde" not in make_config(algo="sac", residual=BEST_PD).hyperparameters()
+
+
 def test_residual_without_axis_balance_weighs_every_axis_alike(ideal, tmp_path):
     res = _tiny("ppo", tmp_path / "res", ideal, residual=BEST_PD, residual_scale=0.05, axis_balance=False)
     meta = agent_metadata(res.path)
