@@ -81,6 +81,19 @@ def seed_list(text):
     return seeds
 
 
+def weights(count: int):
+    """``count`` numbers >= 0 separated by commas, e.g. ``1,0.1,0.01``, as a tuple of floats."""
+    def parse(text):
+        try:
+            values = tuple(float(v) for v in text.split(","))
+        except ValueError:
+            values = ()
+        if len(values) != count or not all(math.isfinite(v) and v >= 0 for v in values):
+            raise argparse.ArgumentTypeError(f"expected {count} numbers >= 0 separated by commas, got {text!r}")
+        return values
+    return parse
+
+
 def output_path(text):
     """A path to write to: not empty (``''`` would name the current folder, or nothing at all)."""
     if not str(text).strip():

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from .argtypes import number, output_path, seed, seed_list, whole
+from .argtypes import number, output_path, seed, seed_list, weights, whole
 
 
 def register(sub):
@@ -64,7 +64,8 @@ def register(sub):
 
 def add_learning_options(p) -> None:
     """The options of how an agent learns (TrainConfig's ``axis_balance``, ``paired_baseline``, ``history``,
-    ``normalize_obs``, ``lr_schedule``, the gust curriculum), shared with ``scripts/train_compare.py``; :func:`learning_settings` reads them."""
+    ``normalize_obs``, ``lr_schedule``, ``reward_weights``, the gust curriculum), shared with
+    ``scripts/train_compare.py``; :func:`learning_settings` reads them."""
     p.add_argument("--no-axis-balance", action="store_true",
                    help="scale a residual's reward and observations by its PD's worst axis on every axis (default: "
                    "each axis by its own error level, so that every axis counts alike in the reward)")
@@ -78,6 +79,9 @@ def add_learning_options(p) -> None:
                    help="standardise observations by running statistics of the training rollouts (SB3's "
                    "VecNormalize, kept inside the policy so the saved agent takes raw observations); default: "
                    "fixed scales")
+    p.add_argument("--reward-weights", type=weights(3), default=None, metavar="ATT,RATE,EFFORT",
+                   help="weights of the reward's attitude, rate and control-effort terms (default 1,0.1,0.01); "
+                   "the error figures compared are attitude only")
     p.add_argument("--lr-schedule", choices=("constant", "linear"), default="constant",
                    help="learning rate constant (default) or falling linearly to 0 at --timesteps (with a time "
                    "budget, give --timesteps about what the budget allows)")
@@ -93,7 +97,9 @@ def learning_settings(args) -> dict:
     """The TrainConfig fields of :func:`add_learning_options`' options."""
     return {"axis_balance": not args.no_axis_balance, "paired_baseline": args.paired_baseline,
             "history": args.history, "normalize_obs": args.normalize_obs, "curriculum_steps": args.curriculum,
-            "curriculum_start": args.curriculum_start, "lr_schedule": args.lr_schedule}
+            "curriculum_start": args.curriculum_start, "lr_schedule": args.lr_schedule,
+            "reward_weights": args.reward_weights}
+
 
 
 def _config(args):

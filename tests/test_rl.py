@@ -293,10 +293,13 @@ def test_heli_train_cli_residual_settings(tmp_path, ideal_model_dir):
     assert main(["train", "--algo", "ppo", "--model", str(ideal_model_dir), "--timesteps", "64", "--out", str(out),
                  "--n-envs", "1", "--episode-seconds", "1", "--eval-freq", "0", "--checkpoint-freq", "0",
                  "--no-progress", "--residual", str(pd_file), "--paired-baseline", "--no-axis-balance",
-                 "--normalize-obs", "--curriculum", "1000", "--curriculum-start", "0.3", "--lr-schedule", "linear"]) == 0
+                 "--normalize-obs", "--curriculum", "1000", "--curriculum-start", "0.3", "--lr-schedule", "linear",
+                 "--reward-weights", "1,0.01,0.01"]) == 0
     meta = agent_metadata(tmp_path / "res.zip")
     assert meta["paired_baseline"] is True and meta["axis_balance"] is False and meta["normalize_obs"] is True
     assert meta["curriculum"] == {"start": 0.3, "steps": 1000} and meta["lr_schedule"] == "linear"
+    assert meta["task"]["weights"] == [1.0, 0.01, 0.01]  # on the residual's own scales
+    assert meta["task"]["attitude_scale"] == 2 * np.radians(meta["residual"]["setup"]["error_deg"])
     assert meta["task"]["axis_weights"] == [1.0, 1.0, 1.0]
 
 
@@ -313,6 +316,11 @@ def test_heli_train_bad_arguments(capsys):
     assert e.value.code == 2
     with pytest.raises(SystemExit):
         main(["train", "--algo", "a2c", "--timesteps", "10", "--out", "x"])
+    capsys.readouterr()
+    for bad in ("1,0.1", "1,-1,0", "a,b,c", "1,nan,0"):
+        with pytest.raises(SystemExit):
+            main(["train", "--algo", "ppo", "--timesteps", "10", "--out", "x", "--reward-weights", bad])
+        assert "3 numbers >= 0 separated by commas" in capsys.readouterr().err
 
 
 # ------------------------------------------------------------------------------------------- residual
@@ -539,10 +547,13 @@ def test_training_with_a_gust_curriculum(shipped, tmp_path, monkeypatch):
         make_config(curriculum_steps=-1)
 
 
-def test_linear_learning_rate_falls_to_zero_at_the_timesteps(shipped, tmp_path):
+def test_linear_learning_rate_and_reward_weights_of_a_named_task(shipped, tmp_path):
     import csv
 
-    res = _tiny("ppo", tmp_path / "lin", shipped, timesteps=512, lr_schedule="linear", eval_freq=0)
+    res = _tiny("ppo", tmp_path / "lin", shipped, timesteps=512, lr_schedule="linear", eval_freq=0,
+                reward_weights=[1, 0, 0.02])
+    task = agent_metadata(res.path)["task"]
+    assert task["task"] == "hold" and task["weights"] == [1.0, 0.0, 0.02] and task["attitude_scale"] == 10 * np.pi / 180
     rows = list(csv.DictReader((res.run_dir / "progress.csv").open()))
     rates = [float(r["train/learning_rate"]) for r in rows if r.get("train/learning_rate")]
     steps = [int(r["time/total_timesteps"]) for r in rows if r.get("train/learning_rate")]
@@ -553,6 +564,13 @@ def test_linear_learning_rate_falls_to_zero_at_the_timesteps(shipped, tmp_path):
     assert agent_metadata(res.path)["hyperparameters"]["learning_rate"] == 3e-4
     with pytest.raises(AgentError, match="lr_schedule"):
         make_config(lr_schedule="cosine")
+    for bad in ((1, 0.1), (1, -0.1, 0), "1,0,0", (1, float("nan"), 0)):
+        with pytest.raises(AgentError, match="reward_weights"):
+            make_config(reward_weights=bad)
+    from heli_env.tasks import TaskConfig
+
+    with pytest.raises(AgentError, match="TaskConfig"):
+        make_config(task=TaskConfig(), reward_weights=(1, 0, 0))
 
 
 @pytest.mark.parametrize("kw, exc, match", [

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from heli_core.config import configured, whole_number
+from heli_core.config import configured, is_real, whole_number
 
 from ..errors import AgentError
 from .agent_file import ALGOS
@@ -133,6 +133,10 @@ class TrainConfig:
         ``VecNormalize(norm_obs=True)`` does), held inside the policy
         (:class:`controllers.sb3_training.ObservationNormalizer`, started from the fixed scales), so the
         saved agent still takes raw observations. Default False: the fixed scales alone.
+    reward_weights : tuple of 3 float, optional
+        Weights of the attitude, rate and control-effort terms of a named task's reward
+        (:class:`heli_env.tasks.TaskConfig` ``weights``; default the task's own, (1, 0.1, 0.01) for
+        "hold"). For a task given as a ``TaskConfig``, set its ``weights`` there instead.
     lr_schedule : {"constant", "linear"}
         The learning rate: constant (default), or falling linearly from ``learning_rate`` to 0 at
         ``timesteps`` (SB3's ``LinearSchedule``). With a time budget set ``timesteps`` to about what the
@@ -186,6 +190,7 @@ class TrainConfig:
     history: int = 1
     normalize_obs: bool = False
     lr_schedule: str = "constant"
+    reward_weights: tuple | None = None
     curriculum_steps: int = 0
     curriculum_start: float = 0.5
 
@@ -198,6 +203,14 @@ class TrainConfig:
         object.__setattr__(self, "surrogates", whole_number(self.surrogates, "surrogates", 0, AgentError))
         object.__setattr__(self, "curriculum_steps",
                            whole_number(self.curriculum_steps, "curriculum_steps", 0, AgentError))
+        if self.reward_weights is not None:
+            w = self.reward_weights
+            if isinstance(w, (str, bytes)) or not hasattr(w, "__len__") or len(w) != 3 or not all(
+                    is_real(v) and v >= 0 for v in w):
+                raise AgentError(f"reward_weights must be 3 numbers >= 0 (attitude, rate, effort), got {w!r}")
+            if not isinstance(self.task, str):
+                raise AgentError("reward_weights are for a named task; set the weights of a TaskConfig task in it")
+            object.__setattr__(self, "reward_weights", tuple(float(v) for v in w))
         if self.lr_schedule not in LR_SCHEDULES:
             raise AgentError(f"lr_schedule must be one of {LR_SCHEDULES}, got {self.lr_schedule!r}")
         start = self.curriculum_start
