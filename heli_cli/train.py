@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import sys
 
 from .argtypes import number, output_path, seed, seed_list, weights, whole
@@ -69,9 +70,10 @@ def add_learning_options(p) -> None:
     p.add_argument("--no-axis-balance", action="store_true",
                    help="scale a residual's reward and observations by its PD's worst axis on every axis (default: "
                    "each axis by its own error level, so that every axis counts alike in the reward)")
-    p.add_argument("--paired-baseline", action="store_true",
+    p.add_argument("--paired-baseline", action=argparse.BooleanOptionalAction, default=True,
                    help="with --residual: each training copy has a twin flying the PD alone on the same gusts, start "
-                   "and sensor noise, and the residual is rewarded for the difference (twice the env copies)")
+                   "and sensor noise, and the residual is rewarded for the difference (twice the env copies; the "
+                   "default; --no-paired-baseline: each copy's own return)")
     p.add_argument("--history", type=whole(1), default=1, metavar="N",
                    help="with --residual: the policy sees the last N observations side by side (default 1), so it "
                    "can tell what the servo delay still holds and what the gust is doing")
@@ -80,8 +82,8 @@ def add_learning_options(p) -> None:
                    "VecNormalize, kept inside the policy so the saved agent takes raw observations); default: "
                    "fixed scales")
     p.add_argument("--reward-weights", type=weights(3), default=None, metavar="ATT,RATE,EFFORT",
-                   help="weights of the reward's attitude, rate and control-effort terms (default 1,0.1,0.01); "
-                   "the error figures compared are attitude only")
+                   help="weights of the reward's attitude, rate and control-effort terms (default 1,0.01,0.01 with "
+                   "--residual, else 1,0.1,0.01); the error figures compared are attitude only")
     p.add_argument("--lr-schedule", choices=("constant", "linear"), default="constant",
                    help="learning rate constant (default) or falling linearly to 0 at --timesteps (with a time "
                    "budget, give --timesteps about what the budget allows)")

@@ -242,7 +242,7 @@ def _training_notes(args, training: dict, agents: list) -> list[str]:
              + (f"; {args.surrogates} surrogates per training segment" if args.surrogates else "")
              + ("; raw rewards" if args.no_reward_normalisation else "")
              + ("; every axis scaled by the worst one" if args.no_axis_balance else "")
-             + ("; paired PD baseline" if args.paired_baseline else "")
+             + ("" if args.paired_baseline else "; no paired PD baseline")
              + (f"; {args.history} observations stacked" if args.history > 1 else "")
              + ("; running observation statistics" if args.normalize_obs else "")
              + (f"; learning rate to 0 at {args.timesteps} steps" if args.lr_schedule == "linear" else "")

@@ -365,8 +365,13 @@ def test_residual_training_scales_follow_the_pd_errors(residual_run):
     assert setup["axis_weights"] == meta["task"]["axis_weights"]
 
 
-def test_a_residual_ppo_explores_with_gsde_unless_told_otherwise():
-    residual = make_config(residual=BEST_PD).hyperparameters()
+def test_a_residual_trains_as_measured_unless_told_otherwise():
+    """gSDE, a paired baseline and a small rate weight: the settings docs/controllers.md measured."""
+    config = make_config(residual=BEST_PD)
+    assert config.paired_baseline is True and config.task_weights == (1.0, 0.01, 0.01)
+    assert make_config().task_weights is None
+    assert make_config(residual=BEST_PD, reward_weights=(1, 0.1, 0)).task_weights == (1.0, 0.1, 0.0)
+    residual = config.hyperparameters()
     assert residual["use_sde"] is True and residual["sde_sample_freq"] == 8
     assert residual["policy_kwargs"]["log_std_init"] == -2.0 and residual["policy_kwargs"]["net_arch"] == [64, 64]
     plain = make_config().hyperparameters()
