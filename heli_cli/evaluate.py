@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from .argtypes import number, output_path, seed, whole
@@ -32,7 +33,8 @@ def register(sub):
     p.add_argument("--no-plots", action="store_true", help="do not draw episode.png")
     p.add_argument("--robustness", action="store_true",
                    help="also fly the agent with 20 ms more servo delay and the control gains 20 %% lower and "
-                   "higher (same windows), and print the p90 degradation")
+                   "higher (same windows); prints the p90 degradation and writes DIR/robustness.json and "
+                   "robustness.md")
     p.set_defaults(func=run, out_kind="dir")
 
 
@@ -77,14 +79,20 @@ def run(args) -> int:
         from controllers.robustness import robustness_check
 
         check = robustness_check(agent, env_model, config=episodes)  # on the default split, not the agent's
-        for case, r in check.items():
-            print(f"  {case:18s}: p90 " + ", ".join(f"{a} {r['p90_deg'][a]:.3f} deg (x{r['ratio'][a]:.2f})"
-                                                    for a in r["p90_deg"])
-                  + f"; ended early {r['ended_early']}")
+        lines = [f"{case:18s}: p90 " + ", ".join(f"{a} {r['p90_deg'][a]:.3f} deg (x{r['ratio'][a]:.2f})"
+                                                 for a in r["p90_deg"]) + f"; ended early {r['ended_early']}"
+                 for case, r in check.items()]
+        print("\n".join("  " + line for line in lines))
+        paths.append(write_text(out / "robustness.json", json.dumps({"agent": res.name, "cases": check},
+                                                                    indent=1, allow_nan=False) + "\n"))
+        paths.append(write_text(out / "robustness.md", f"# Robustness of {res.name}\n\n"
+                                "p90 |attitude error| with the aircraft off the model, on the same windows "
+                                "(ratio to nominal in brackets):\n\n" + "\n".join(f"- {line}" for line in lines)
+                                + "\n"))
     for path in paths:
         print(f"wrote {path}")
     from .html_report import write_html_report  # evaluation.md links no figure: episode.png is appended
 
-    print(f"wrote {write_html_report(paths[1], figures=paths[2:])}")
+    print(f"wrote {write_html_report(paths[1], figures=[p for p in paths[2:] if p.suffix == '.png'])}")
     return 0
 

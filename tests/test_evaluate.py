@@ -242,6 +242,23 @@ def test_heli_evaluate_pd_json(pd, tmp_path, capsys):
     assert sorted(p.name for p in out.iterdir()) == ["episode.png", "evaluation.html", "evaluation.json", "evaluation.md"]
 
 
+def test_heli_evaluate_robustness_is_written(pd, tmp_path, capsys):
+    import json
+
+    agent = pd.save(tmp_path / "pd.json")
+    out = tmp_path / "ev"
+    assert main(["evaluate", str(agent), "--out", str(out), "--episode-seconds", "2", "--episodes-per-trace", "1",
+                 "--no-plots", "--robustness"]) == 0
+    printed = capsys.readouterr().out
+    saved = json.loads((out / "robustness.json").read_text())
+    assert list(saved["cases"]) == ["nominal", "+20 ms servo delay", "gain -20 %", "gain +20 %"]
+    delayed = saved["cases"]["+20 ms servo delay"]
+    assert saved["cases"]["nominal"]["ratio"] == {"roll": 1.0, "pitch": 1.0, "yaw": 1.0}
+    assert f"roll {delayed['p90_deg']['roll']:.3f} deg (x{delayed['ratio']['roll']:.2f})" in printed
+    assert "+20 ms servo delay" in (out / "robustness.md").read_text()
+    assert f"wrote {out / 'robustness.json'}" in printed
+
+
 def test_heli_evaluate_errors(pd, tmp_path, capsys):
     agent = pd.save(tmp_path / "pd.json")
     assert main(["evaluate", str(agent), "--model", str(tmp_path / "missing")]) == 2

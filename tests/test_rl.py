@@ -665,6 +665,18 @@ def test_rl_targets_reads_the_runs_and_says_which_meet_the_targets(tmp_path, cap
     assert targets.main([str(good), str(short)]) == 0
     out = capsys.readouterr().out
     assert "Beats the robust PD on every axis: 1 of 2 runs" in out and "two axes or more: 1 of 2" in out
+    # the restated target: worst p90 over the robustness check against the best PD's worst
+    def robustness(folder, sub, cases):
+        (folder / sub).mkdir()
+        (folder / sub / "robustness.json").write_text(json.dumps({"agent": sub, "cases": {
+            name: {"p90_deg": dict(zip(("roll", "pitch", "yaw"), p90))} for name, p90 in cases.items()}}))
+
+    robustness(good, "robust", {"nominal": (0.105, 0.099, 0.20), "+20 ms servo delay": (0.2, 0.1, 0.3)})
+    robustness(good, "robust_pd_best", {"nominal": (0.10, 0.09, 0.12), "+20 ms servo delay": (0.11, 0.095, 1.2)})
+    assert targets.main([str(good), str(short)]) == 0
+    out = capsys.readouterr().out
+    assert "| s0 | 0.200 / 0.100 / 0.300 | 0.110 / 0.095 / 1.200 | 1.82 / 1.05 / 0.25 | yes |" in out
+    assert "best PD's worst case on two axes or more: 1 of 1 runs with robustness checks" in out
     with pytest.raises(ValueError, match="no PD best swept row"):
         targets.rows(_comparison(tmp_path / "s2", {"PD robust swept": (1, 1, 1), "PPO": (1, 1, 1)}), None)
     with pytest.raises(FileNotFoundError, match="no comparison.json"):
