@@ -56,9 +56,10 @@ def register(sub):
                    help="train on N phase-randomised surrogates of each training segment (same spectra, new gusts) "
                    "instead of the recorded segments; the evaluation stays on the recorded held-out gusts "
                    "(default 0)")
-    p.add_argument("--residual-scale", type=number("a number in (0, 2]", 0.0, 2.0, high_open=False), default=0.05,
+    p.add_argument("--residual-scale", type=number("a number in (0, 2]", 0.0, 2.0, high_open=False),
+                   default=None,
                    metavar="STICK",
-                   help="bound of the residual in stick units (default 0.05)")
+                   help="bound of the residual in stick units (default 0.15, controllers.rl.RESIDUAL_SCALE)")
     add_learning_options(p)
     p.set_defaults(func=run, out_kind="file")
 
@@ -112,7 +113,8 @@ def _config(args):
                        eval_freq=args.eval_freq, checkpoint_freq=args.checkpoint_freq,
                        held_out_fraction=args.held_out_fraction, split_seed=args.split_seed,
                        eval_episodes=args.eval_episodes, episode_seconds=args.episode_seconds,
-                       residual=args.residual, residual_scale=args.residual_scale, surrogates=args.surrogates,
+                       residual=args.residual, surrogates=args.surrogates,
+                       **({} if args.residual_scale is None else {"residual_scale": args.residual_scale}),
                        max_seconds=None if args.minutes is None else 60.0 * args.minutes, **learning_settings(args))
 
 

@@ -46,7 +46,7 @@ import numpy as np
 
 from controllers.evaluate import comparison_markdown, evaluate_agent, plot_episode
 from controllers.pd import PDController, PDGains, design_gains, loop_analysis
-from controllers.rl import load_agent, split_traces, train_agent
+from controllers.rl import RESIDUAL_SCALE, load_agent, split_traces, train_agent
 from controllers.sweep import sweep_pairs
 from controllers.trace_split import draw_windows
 from heli_cli.train import add_learning_options, learning_settings
@@ -137,7 +137,8 @@ def _parser() -> argparse.ArgumentParser:
                     "a 9 x 9 refinement follows)")
     ap.add_argument("--residual-on", choices=("robust", "best"), default="robust",
                     help="the swept PD a residual trains on (default robust: the best pair with 6 dB / 45 deg margins)")
-    ap.add_argument("--residual-scale", type=float, default=0.05, help="bound of the residual in stick (default 0.05)")
+    ap.add_argument("--residual-scale", type=float, default=RESIDUAL_SCALE,
+                    help=f"bound of the residual in stick (default {RESIDUAL_SCALE:g})")
     ap.add_argument("--surrogates", type=int, default=0,
                     help="train on N phase-randomised surrogates of each training segment instead of the recorded "
                     "ones (the evaluation stays on the recorded held-out gusts; default 0)")

@@ -303,6 +303,14 @@ def test_heli_train_cli_residual_settings(tmp_path, ideal_model_dir):
     assert meta["task"]["axis_weights"] == [1.0, 1.0, 1.0]
 
 
+def test_heli_train_help_names_the_residual_bound_it_uses(capsys):
+    from controllers.rl import RESIDUAL_SCALE
+
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    assert f"(default {RESIDUAL_SCALE:g}, controllers.rl.RESIDUAL_SCALE)" in " ".join(capsys.readouterr().out.split())
+
+
 def test_heli_train_missing_model_dir(tmp_path, capsys):
     code = main(["train", "--algo", "sac", "--model", str(tmp_path / "nope"), "--timesteps", "10", "--out",
                  str(tmp_path / "a")])
