@@ -57,8 +57,7 @@ def register(sub):
                    "instead of the recorded segments; the evaluation stays on the recorded held-out gusts "
                    "(default 0)")
     p.add_argument("--residual-scale", type=number("a number in (0, 2]", 0.0, 2.0, high_open=False),
-                   default=None,
-                   metavar="STICK",
+                   default=None, metavar="STICK",
                    help="bound of the residual in stick units (default 0.15, controllers.rl.RESIDUAL_SCALE)")
     add_learning_options(p)
     p.set_defaults(func=run, out_kind="file")
