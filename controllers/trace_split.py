@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from heli_core.config import is_real, whole_number
 from heli_env.tasks import draw_offset, draw_offsets, window_count
 
 
@@ -246,11 +247,10 @@ class GustCurriculum:
     """
 
     def __init__(self, sampler, start: float, steps: int):
-        if not (isinstance(start, (int, float)) and not isinstance(start, bool) and 0.0 <= start < 1.0):
+        if not (is_real(start) and 0.0 <= start < 1.0):
             raise ValueError(f"the curriculum's starting gust scale must be a number in [0, 1), got {start!r}")
-        if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
-            raise ValueError(f"the curriculum's steps must be a whole number >= 1, got {steps!r}")
-        self.sampler, self.start, self.steps = sampler, float(start), int(steps)
+        steps = whole_number(steps, "the curriculum's steps", 1)
+        self.sampler, self.start, self.steps = sampler, float(start), steps
         self.timesteps = 0
 
     @property

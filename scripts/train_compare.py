@@ -248,7 +248,8 @@ def _training_notes(args, training: dict, agents: list) -> list[str]:
              + ("; running observation statistics" if args.normalize_obs else "")
              + (f"; learning rate to 0 at {args.timesteps} steps" if args.lr_schedule == "linear" else "")
              + (f"; reward weights {args.reward_weights}" if args.reward_weights else "")
-             + (f"; gusts from {args.curriculum_start:g}x to full over {args.curriculum} steps" if args.curriculum else "")
+             + (f"; gusts from {args.curriculum_start:g}x to full over {args.curriculum} steps"
+                if args.curriculum else "")
              + (f"; hyperparameters {json.dumps(args.algo_kwargs)}" if args.algo_kwargs else "") + ":", ""]
     for algo, t in training.items():
         notes.append(f"- {algo.upper()}: {t['timesteps']} timesteps in {t['seconds']:.0f} s "

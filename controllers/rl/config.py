@@ -222,9 +222,8 @@ class TrainConfig:
             object.__setattr__(self, "reward_weights", tuple(float(v) for v in w))
         if self.lr_schedule not in LR_SCHEDULES:
             raise AgentError(f"lr_schedule must be one of {LR_SCHEDULES}, got {self.lr_schedule!r}")
-        start = self.curriculum_start
-        if not (isinstance(start, (int, float)) and not isinstance(start, bool) and 0.0 <= start < 1.0):
-            raise AgentError(f"curriculum_start must be a gust multiplier in [0, 1), got {start!r}")
+        if not (is_real(self.curriculum_start) and 0.0 <= self.curriculum_start < 1.0):
+            raise AgentError(f"curriculum_start must be a gust multiplier in [0, 1), got {self.curriculum_start!r}")
         if self.torch_threads is not None:
             object.__setattr__(self, "torch_threads", whole_number(self.torch_threads, "torch_threads", 1, AgentError))
         if self.max_seconds is not None and not (self.max_seconds > 0 and math.isfinite(self.max_seconds)):
