@@ -404,7 +404,7 @@ def _callbacks(config: TrainConfig, eval_env, out, metadata: dict, progress: boo
     ckpt = AtomicCheckpoint(config.checkpoint_freq or 2 ** 62, run_dir / "checkpoints", name, metadata)
     bar = ProgressBar(config.timesteps, progress, eval_cb, desc=f"{config.algo} {name}")
     clock = WallClockLimit(config.max_seconds) if config.max_seconds is not None else None
-    if config.normalize_obs:  # first: the statistics are merged before anything saves the policy
+    if config.normalize_obs:  # first, so a callback acting at a rollout's end sees the merged statistics
         from ..sb3_training import ObservationStatistics
 
         cbs.insert(0, ObservationStatistics())
