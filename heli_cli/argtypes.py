@@ -8,6 +8,7 @@ bad value ends the command with argparse's usage line and exit status 2.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 
@@ -92,6 +93,17 @@ def weights(count: int):
             raise argparse.ArgumentTypeError(f"expected {count} numbers >= 0 separated by commas, got {text!r}")
         return values
     return parse
+
+
+def json_object(text):
+    """A JSON object, e.g. ``{"gamma": 0.995}``, as a dict."""
+    try:
+        value = json.loads(text)
+    except ValueError:
+        value = None
+    if not isinstance(value, dict):
+        raise argparse.ArgumentTypeError(f"expected a JSON object such as '{{\"gamma\": 0.995}}', got {text!r}")
+    return value
 
 
 def output_path(text):

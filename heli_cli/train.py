@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .argtypes import number, output_path, seed, seed_list, weights, whole
+from .argtypes import json_object, number, output_path, seed, seed_list, weights, whole
 
 
 def register(sub):
@@ -59,13 +59,16 @@ def register(sub):
     p.add_argument("--residual-scale", type=number("a number in (0, 2]", 0.0, 2.0, high_open=False),
                    default=None, metavar="STICK",
                    help="bound of the residual in stick units (default 0.15, controllers.rl.RESIDUAL_SCALE)")
+    p.add_argument("--reward-reference", metavar="PD.json", default=None,
+                   help="with --residual: weigh each axis of the reward by the error this PD (e.g. the best pair of "
+                   "'heli sweep') leaves on the training gusts, instead of the --residual PD's own")
     add_learning_options(p)
     p.set_defaults(func=run, out_kind="file")
 
 
 def add_learning_options(p) -> None:
     """The options of how an agent learns (TrainConfig's ``axis_balance``, ``paired_baseline``, ``history``,
-    ``normalize_obs``, ``lr_schedule``, ``reward_weights``, the gust curriculum), shared with
+    ``normalize_obs``, ``lr_schedule``, ``reward_weights``, the gust curriculum, ``algo_kwargs``), shared with
     ``scripts/train_compare.py``; :func:`learning_settings` reads them."""
     p.add_argument("--no-axis-balance", action="store_true",
                    help="scale a residual's reward and observations by its PD's worst axis on every axis (default: "
@@ -93,6 +96,9 @@ def add_learning_options(p) -> None:
                    "evaluations always fly full gusts)")
     p.add_argument("--curriculum-start", type=number("a gust multiplier in [0, 1)", 0.0, 1.0, low_open=False),
                    default=0.5, metavar="X", help="gust multiplier of the first training episodes (default 0.5)")
+    p.add_argument("--algo-kwargs", type=json_object, default=None, metavar="JSON",
+                   help="SB3 hyperparameters over the defaults, e.g. '{\"gamma\": 0.995}' or, for a residual, "
+                   "'{\"use_sde\": false}' (white-noise exploration instead of the default gSDE)")
 
 
 def learning_settings(args) -> dict:
@@ -100,7 +106,7 @@ def learning_settings(args) -> dict:
     return {"axis_balance": not args.no_axis_balance, "paired_baseline": args.paired_baseline,
             "history": args.history, "normalize_obs": args.normalize_obs, "curriculum_steps": args.curriculum,
             "curriculum_start": args.curriculum_start, "lr_schedule": args.lr_schedule,
-            "reward_weights": args.reward_weights}
+            "reward_weights": args.reward_weights, "algo_kwargs": args.algo_kwargs}
 
 
 
@@ -112,7 +118,7 @@ def _config(args):
                        eval_freq=args.eval_freq, checkpoint_freq=args.checkpoint_freq,
                        held_out_fraction=args.held_out_fraction, split_seed=args.split_seed,
                        eval_episodes=args.eval_episodes, episode_seconds=args.episode_seconds,
-                       residual=args.residual, surrogates=args.surrogates,
+                       residual=args.residual, surrogates=args.surrogates, reward_reference=args.reward_reference,
                        **({} if args.residual_scale is None else {"residual_scale": args.residual_scale}),
                        max_seconds=None if args.minutes is None else 60.0 * args.minutes, **learning_settings(args))
 

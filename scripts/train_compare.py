@@ -145,10 +145,11 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--no-reward-normalisation", action="store_true",
                     help="train on the raw rewards (default: PPO's are divided by a running estimate of the return's "
                     "spread, SB3 VecNormalize(norm_obs=False))")
+    ap.add_argument("--reward-reference", choices=("base", "best"), default="base",
+                    help="the PD whose error on each axis weighs that axis in a residual's reward: the residual's "
+                    "base (default) or the best swept pair, so that each axis counts by how far it is from what a "
+                    "PD reaches")
     add_learning_options(ap)
-    ap.add_argument("--algo-kwargs", type=json.loads, default=None, metavar="JSON",
-                    help="SB3 hyperparameters over the defaults of every algorithm trained, e.g. "
-                    "'{\"gamma\": 0.95, \"gae_lambda\": 0.9}'")
     ap.add_argument("--no-progress", action="store_true")
     return ap
 
@@ -226,7 +227,8 @@ def _train(ap, args, env_model, agents: list, out: Path) -> dict:
                           residual=agents[2 if args.residual_on == "robust" else 1][1] if residual else None,
                           residual_scale=args.residual_scale, surrogates=args.surrogates,
                           normalize_reward=False if args.no_reward_normalisation else None,
-                          algo_kwargs=args.algo_kwargs, **learning_settings(args))
+                          reward_reference=agents[1][1] if residual and args.reward_reference == "best" else None,
+                          **learning_settings(args))
         training[algo] = {"timesteps": res.timesteps, "seconds": res.seconds,
                           "steps_per_second": res.steps_per_second, "stopped_by_time": res.stopped_by_time,
                           "evaluations": res.evaluations, "agent": str(res.path)}
@@ -248,6 +250,7 @@ def _training_notes(args, training: dict, agents: list) -> list[str]:
              + ("; running observation statistics" if args.normalize_obs else "")
              + (f"; learning rate to 0 at {args.timesteps} steps" if args.lr_schedule == "linear" else "")
              + (f"; reward weights {args.reward_weights}" if args.reward_weights else "")
+             + ("; axes weighed by the best swept pair's errors" if args.reward_reference == "best" else "")
              + (f"; gusts from {args.curriculum_start:g}x to full over {args.curriculum} steps"
                 if args.curriculum else "")
              + (f"; hyperparameters {json.dumps(args.algo_kwargs)}" if args.algo_kwargs else "") + ":", ""]

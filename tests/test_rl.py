@@ -303,6 +303,44 @@ def test_heli_train_cli_residual_settings(tmp_path, ideal_model_dir):
     assert meta["task"]["axis_weights"] == [1.0, 1.0, 1.0]
 
 
+def test_heli_train_cli_reward_reference_and_algo_kwargs(tmp_path, ideal_model_dir):
+    """--reward-reference weighs the axes by another PD's errors; --algo-kwargs reaches the algorithm."""
+    base, reference = tmp_path / "base.json", tmp_path / "ref.json"
+    BEST_PD.save(base)
+    PDController(PDGains([180.0, 539.0, 66.0], [13.1, 39.4, 3.65]), [1, -1, 1]).save(reference)
+    out = tmp_path / "res"
+    assert main(["train", "--algo", "ppo", "--model", str(ideal_model_dir), "--timesteps", "64", "--out", str(out),
+                 "--n-envs", "1", "--episode-seconds", "1", "--eval-freq", "0", "--checkpoint-freq", "0",
+                 "--no-progress", "--residual", str(base), "--reward-reference", str(reference),
+                 "--algo-kwargs", '{"use_sde": false, "n_steps": 32, "batch_size": 32}']) == 0
+    meta = agent_metadata(tmp_path / "res.zip")
+    assert meta["reward_reference"]["kp"] == [180.0, 539.0, 66.0]
+    assert meta["hyperparameters"]["use_sde"] is False and meta["hyperparameters"]["n_steps"] == 32
+    setup = meta["residual"]["setup"]
+    ref = np.array(setup["reference_axis_error_deg"])
+    assert_allclose(meta["task"]["axis_weights"], np.minimum((ref.max() / ref) ** 2, 100.0))
+    # the scales of reward and observations still follow the base's own errors
+    assert meta["task"]["attitude_scale"] == 2 * np.radians(setup["error_deg"])
+    assert not np.allclose(ref, setup["axis_error_deg"])  # halving roll's gains changed what roll leaves
+
+
+def test_bad_reward_reference_and_algo_kwargs(ideal_model_dir, tmp_path, capsys):
+    with pytest.raises(AgentError, match="needs residual and axis_balance"):
+        make_config(reward_reference=BEST_PD)
+    with pytest.raises(AgentError, match="needs residual and axis_balance"):
+        make_config(residual=BEST_PD, axis_balance=False, reward_reference=BEST_PD)
+    with pytest.raises(AgentError, match="reward_reference must be a PDController"):
+        make_config(residual=BEST_PD, reward_reference=3)
+    with pytest.raises(AgentError, match="algo_kwargs must be a dict"):
+        make_config(algo_kwargs=[("gamma", 0.9)])
+    with pytest.raises(AgentError, match="PPO takes no 'gama'; it takes .*gamma"):
+        train_agent("ppo", ideal_model_dir, 10, tmp_path / "x", progress=False, algo_kwargs={"gama": 0.9})
+    assert not (tmp_path / "x.zip").exists()
+    with pytest.raises(SystemExit):
+        main(["train", "--algo", "ppo", "--timesteps", "10", "--out", "x", "--algo-kwargs", "gamma=0.9"])
+    assert "expected a JSON object" in capsys.readouterr().err
+
+
 def test_heli_train_help_names_the_residual_bound_it_uses(capsys):
     from controllers.rl import RESIDUAL_SCALE
 
@@ -597,7 +635,7 @@ def test_bad_residual_requests(shipped, tmp_path, kw, exc, match):
     with pytest.raises(exc, match=match):
         train_agent("ppo", shipped, 100, tmp_path / "x", progress=False, **kw)
     (tmp_path / "other.json").write_text('{"schema": "other"}')
-    with pytest.raises(AgentError, match="residual's base must be a PD controller JSON"):
+    with pytest.raises(AgentError, match="residual must be a PD controller JSON"):
         train_agent("ppo", shipped, 100, tmp_path / "x", progress=False, residual=tmp_path / "other.json")
 
 

@@ -162,6 +162,12 @@ class TrainConfig:
         ``VecFrameStack``; 1, the default, the current one). Past actions and rates let it infer
         what the servo delay still holds and what the gust is doing, which no single observation
         shows. In [1, 16].
+    reward_reference : PDController or path, optional
+        With ``residual`` and ``axis_balance``: weigh each axis of the reward by the error this PD
+        leaves on the training gusts instead of the base's own (:func:`controllers.rl.train.residual_setup`).
+        With the best swept pair as reference, each axis counts by how far it is from what a PD
+        can reach there, the figure the comparison reports; with the base (the default) an axis the
+        base already holds well (pitch beside yaw) weighs most. A path is read here.
 
     Raises
     ------
@@ -202,6 +208,7 @@ class TrainConfig:
     reward_weights: tuple | None = None
     curriculum_steps: int = 0
     curriculum_start: float = 0.5
+    reward_reference: object = None
 
     def __post_init__(self):
         if self.algo not in ALGOS:
@@ -220,6 +227,9 @@ class TrainConfig:
             if not isinstance(self.task, str):
                 raise AgentError("reward_weights are for a named task; set the weights of a TaskConfig task in it")
             object.__setattr__(self, "reward_weights", tuple(float(v) for v in w))
+        if self.algo_kwargs is not None and not (isinstance(self.algo_kwargs, dict)
+                                                 and all(isinstance(k, str) for k in self.algo_kwargs)):
+            raise AgentError(f"algo_kwargs must be a dict of SB3 keyword arguments, got {self.algo_kwargs!r}")
         if self.lr_schedule not in LR_SCHEDULES:
             raise AgentError(f"lr_schedule must be one of {LR_SCHEDULES}, got {self.lr_schedule!r}")
         if not (is_real(self.curriculum_start) and 0.0 <= self.curriculum_start < 1.0):
@@ -235,6 +245,10 @@ class TrainConfig:
         if self.history > 1 and self.residual is None:
             raise AgentError(f"history (observations stacked) is for residual agents; got history={self.history} "
                              "without residual")
+        if self.reward_reference is not None:
+            if self.residual is None or not self.axis_balance:
+                raise AgentError("reward_reference weighs a residual's axes; it needs residual and axis_balance")
+            object.__setattr__(self, "reward_reference", as_base(self.reward_reference, "reward_reference"))
         init = self.init_ranges
         if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v < 90 for v in init):
             raise AgentError(f"init_angle_deg and init_rate_deg must be numbers in [0, 90), got {init!r}")

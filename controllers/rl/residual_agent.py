@@ -51,8 +51,9 @@ RESIDUAL_INIT_DEG = 0.5
 """Default initial roll/pitch range [deg] and rate range [deg/s] of residual training episodes."""
 
 
-def as_base(base) -> PDController:
-    """A PD controller from a :class:`PDController` or the path of a PD JSON (``heli design``, a sweep).
+def as_base(base, name: str = "residual") -> PDController:
+    """A PD controller from a :class:`PDController` or the path of a PD JSON (``heli design``, a sweep);
+    ``name`` is the setting's, for the messages.
 
     Raises
     ------
@@ -65,8 +66,8 @@ def as_base(base) -> PDController:
         try:
             return PDController.load(base)
         except (ValueError, UnicodeDecodeError) as e:
-            raise AgentError(f"the residual's base must be a PD controller JSON: {e}") from e
-    raise AgentError(f"residual must be a PDController or the path of a PD controller JSON, got {base!r}")
+            raise AgentError(f"{name} must be a PD controller JSON: {e}") from e
+    raise AgentError(f"{name} must be a PDController or the path of a PD controller JSON, got {base!r}")
 
 
 def check_scale(scale) -> float:

@@ -149,7 +149,8 @@ def train_agent(algo: str | None = None, model=None, timesteps: int | None = Non
     ------
     AgentError
         Unknown algorithm, bad counts, split, traces, task or episode length,
-        episodes longer than the gust segments, or a bad residual base or scale.
+        episodes longer than the gust segments, a bad residual base or scale, or an
+        ``algo_kwargs`` key the algorithm does not take.
     TypeError
         A keyword that is not a field of :class:`TrainConfig`.
     heli_env.errors.EnvModelError
@@ -163,7 +164,7 @@ def train_agent(algo: str | None = None, model=None, timesteps: int | None = Non
 
     env_model = model if isinstance(model, EnvModel) else load_env_model(model)
     split, segments = _split(config, env_model)
-    _sb3()
+    _check_algo_kwargs(config)
     import torch
 
     from threadpoolctl import threadpool_limits
@@ -172,12 +173,24 @@ def train_agent(algo: str | None = None, model=None, timesteps: int | None = Non
     if config.torch_threads is not None:
         torch.set_num_threads(config.torch_threads)
     # every other pool (BLAS, OpenMP) held to the same count: their idle threads spin, and two trainings
-    # side by side on two cores ran at 1/10 of one alone (850 against 9,900 steps/s) until they were
+    # side by side on two cores ran at 1/10 of one alone (850 against 9,900 steps/s) until they were held
     try:
         with threadpool_limits(limits=config.torch_threads):
             return _train(config, env_model, _out_paths(out), split, segments, progress, verbose, callbacks)
     finally:
         torch.set_num_threads(threads_before)
+
+
+def _check_algo_kwargs(config: TrainConfig) -> None:
+    """AgentError, before any work, for an ``algo_kwargs`` key the algorithm's constructor does not take."""
+    import inspect
+
+    taken = {k for k in inspect.signature(_algo_class(config.algo).__init__).parameters
+             if not k.startswith("_") and k not in ("self", "policy", "env", "seed", "device", "verbose")}
+    unknown = sorted(set(config.algo_kwargs or {}) - taken)
+    if unknown:
+        raise AgentError(f"algo_kwargs: {config.algo.upper()} takes no {', '.join(map(repr, unknown))}; it takes "
+                         f"{', '.join(sorted(taken))}")
 
 
 def _split(config: TrainConfig, env_model):
@@ -214,7 +227,7 @@ def _train(config: TrainConfig, env_model, out, split, segments, progress, verbo
 
 
 def residual_setup(base: PDController, env_model, segments, seed: int = 0, seconds: float = 10.0,
-                   axis_balance: bool = True) -> dict:
+                   axis_balance: bool = True, reference: PDController | None = None) -> dict:
     """Reward and observation scales for residual training, from the base's errors on training gusts.
 
     Flies ``base`` for ``seconds`` on each training segment (starting at rest) and
@@ -229,30 +242,49 @@ def residual_setup(base: PDController, env_model, segments, seed: int = 0, secon
         ``stick_p99``, ``attitude_scale`` and ``rate_scale`` [rad, rad/s] of the reward (from E),
         ``axis_weights`` (with ``axis_balance``: (E / E_i)², at most :data:`MAX_AXIS_WEIGHT`, the reward of
         each axis scaled by its own level; otherwise ones) and ``obs_scale`` (12 floats: each axis by its
-        E_i with ``axis_balance``, otherwise every axis by E).
+        E_i with ``axis_balance``, otherwise every axis by E). With a ``reference`` PD (``axis_balance``
+        only), ``axis_weights`` are (R / R_i)² of its p90s R_i on the same gusts (R the largest, the same cap)
+        and ``reference_axis_error_deg`` lists the R_i; the scales still follow the base.
     """
-    from ..evaluate import evaluate_agent
-
-    res = evaluate_agent(base, env_model, traces=list(segments), episodes_per_trace=1, episode_seconds=seconds,
-                         seed=seed, name="residual base")
-    axes = ("roll", "pitch", "yaw")
-    errors = [float(res.metrics[a]["att_p90_deg"]) for a in axes]
+    errors, stick = _p90_errors(base, env_model, segments, seed, seconds, "residual base")
     err = max(errors)
-    stick = max(float(res.metrics[a]["stick_p99"]) for a in axes)
-    if not (all(math.isfinite(v) for v in errors) and err > 0.0):
-        raise AgentError(f"the residual's base PD gives no usable error level on the training gusts (p90 {err!r} "
-                         "deg); is it stable on this model?")
     kp, kd = np.abs(base.gains.kp), np.abs(base.gains.kd)
     corner = float(np.max(np.where(kd > 0, kp / np.where(kd > 0, kd, 1.0), 0.0)))
     if not corner > 0.0:
         corner = 10.0  # a P-only or D-only base: weigh 1 rad/s of rate error as 0.1 rad of attitude error
-    levels = [max(e_i, err / math.sqrt(MAX_AXIS_WEIGHT)) for e_i in errors] if axis_balance else [err] * 3
+    levels = _balanced(errors) if axis_balance else [err] * 3
     rad = [math.radians(v) for v in levels]
     e = math.radians(err)
-    return {"error_deg": err, "axis_error_deg": errors, "corner_rad_s": corner, "stick_p99": stick,
-            "attitude_scale": 2 * e, "rate_scale": 2 * e * corner,
-            "axis_weights": [(err / v) ** 2 for v in levels],
-            "obs_scale": [4 * r for r in rad] + [4 * r * corner for r in rad] * 2 + [max(1.5 * stick, 0.05)] * 3}
+    setup = {"error_deg": err, "axis_error_deg": errors, "corner_rad_s": corner, "stick_p99": stick,
+             "attitude_scale": 2 * e, "rate_scale": 2 * e * corner,
+             "axis_weights": [(err / v) ** 2 for v in levels],
+             "obs_scale": [4 * r for r in rad] + [4 * r * corner for r in rad] * 2 + [max(1.5 * stick, 0.05)] * 3}
+    if reference is not None:
+        if not axis_balance:
+            raise AgentError("a reward reference weighs the axes; it needs axis_balance")
+        ref, _ = _p90_errors(reference, env_model, segments, seed, seconds, "reward reference")
+        setup["reference_axis_error_deg"] = ref
+        setup["axis_weights"] = [(max(ref) / v) ** 2 for v in _balanced(ref)]
+    return setup
+
+
+def _p90_errors(pd: PDController, env_model, segments, seed: int, seconds: float, role: str):
+    """(p90 |attitude error| per axis [deg], largest p99 |stick|) of ``pd`` flying ``seconds`` on each segment."""
+    from ..evaluate import evaluate_agent
+
+    res = evaluate_agent(pd, env_model, traces=list(segments), episodes_per_trace=1, episode_seconds=seconds,
+                         seed=seed, name=role)
+    axes = ("roll", "pitch", "yaw")
+    errors = [float(res.metrics[a]["att_p90_deg"]) for a in axes]
+    if not (all(math.isfinite(v) for v in errors) and max(errors) > 0.0):
+        raise AgentError(f"the {role} PD gives no usable error level on the training gusts (p90 {errors!r} "
+                         "deg); is it stable on this model?")
+    return errors, max(float(res.metrics[a]["stick_p99"]) for a in axes)
+
+
+def _balanced(errors) -> list:
+    """Each axis' error level for balancing: its own, at least the largest / sqrt(:data:`MAX_AXIS_WEIGHT`)."""
+    return [max(e_i, max(errors) / math.sqrt(MAX_AXIS_WEIGHT)) for e_i in errors]
 
 
 MAX_AXIS_WEIGHT = 100.0
@@ -266,7 +298,8 @@ def _residual_setup(config: TrainConfig, env_model, train_seg):
     ``config.axis_balance``) and weighted by ``config.task_weights``, else ``config.task`` itself."""
     setup = None
     if config.residual is not None:
-        setup = residual_setup(config.residual, env_model, train_seg, config.seed, axis_balance=config.axis_balance)
+        setup = residual_setup(config.residual, env_model, train_seg, config.seed, axis_balance=config.axis_balance,
+                               reference=config.reward_reference)
     task = config.task
     if isinstance(task, str) and (setup is not None or config.task_weights is not None):
         from heli_env.tasks import TaskConfig
@@ -371,6 +404,7 @@ def _metadata(config: TrainConfig, env_model, split, segments, task, dt: float, 
         "curriculum": ({"start": config.curriculum_start, "steps": config.curriculum_steps}
                        if config.curriculum_steps else None),
         "paired_baseline": config.residual is not None and config.paired_baseline,
+        "reward_reference": None if config.reward_reference is None else config.reward_reference.document(),
         "residual": None if config.residual is None else residual_metadata(config.residual, config.residual_scale,
                                                                             setup, config.history),
         "hyperparameters": _plain(hyper),
