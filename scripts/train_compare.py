@@ -131,6 +131,8 @@ def _parser() -> argparse.ArgumentParser:
                     help="comma-separated algorithms: ppo, sac, and ppo-residual / sac-residual, a residual on the "
                     "best swept PD (default ppo,sac,ppo-residual)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--split-seed", type=int, default=0,
+                    help="seed of which traces are held out (default 0; another holds out another trace)")
     ap.add_argument("--n-envs", type=int, default=8)
     ap.add_argument("--episodes-per-trace", type=int, default=6, help="held-out episodes per trace (default 6)")
     ap.add_argument("--grid", type=int, default=13, help="coarse PD sweep grid size per axis (default 13 x 13; "
@@ -159,7 +161,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     out = Path(args.out)
     env_model = load_env_model(args.model)
-    split = split_traces(env_model.n_traces)
+    split = split_traces(env_model.n_traces, seed=args.split_seed)
     ids = env_model.trace_ids
     print(f"library: {env_model.n_traces} traces; training {[ids[s.trace] for s in split.train]}, held out "
           f"{[ids[s.trace] for s in split.held_out]}" + (" (one trace split in time)" if split.in_time else ""))
@@ -221,8 +223,8 @@ def _train(ap, args, env_model, agents: list, out: Path) -> dict:
         if base not in ("ppo", "sac") or residual not in ("", "residual"):
             ap.error(f"--algos: unknown algorithm {algo!r}")
         print(f"training {algo.upper()} for at most {args.minutes:g} min ...", flush=True)
-        res = train_agent(base, env_model, args.timesteps, out / algo, seed=args.seed, n_envs=args.n_envs,
-                          eval_freq=200_000 if base == "ppo" else 50_000, checkpoint_freq=500_000,
+        res = train_agent(base, env_model, args.timesteps, out / algo, seed=args.seed, split_seed=args.split_seed,
+                          n_envs=args.n_envs, eval_freq=200_000 if base == "ppo" else 50_000, checkpoint_freq=500_000,
                           progress=not args.no_progress, max_seconds=60.0 * args.minutes,
                           residual=agents[2 if args.residual_on == "robust" else 1][1] if residual else None,
                           residual_scale=args.residual_scale, surrogates=args.surrogates,
@@ -241,7 +243,8 @@ def _train(ap, args, env_model, agents: list, out: Path) -> dict:
 def _training_notes(args, training: dict, agents: list) -> list[str]:
     """comparison.md's lines on the training budget and runs, and the PD gains compared."""
     notes = [f"Training on {os.cpu_count()} cores, one torch thread, {args.n_envs} environment copies, seed "
-             f"{args.seed}; budget {args.minutes:g} min per algorithm; residual bound {args.residual_scale:g} stick"
+             f"{args.seed}" + (f", split seed {args.split_seed}" if args.split_seed else "")
+             + f"; budget {args.minutes:g} min per algorithm; residual bound {args.residual_scale:g} stick"
              + (f"; {args.surrogates} surrogates per training segment" if args.surrogates else "")
              + ("; raw rewards" if args.no_reward_normalisation else "")
              + ("; every axis scaled by the worst one" if args.no_axis_balance else "")

@@ -33,7 +33,7 @@ DEFAULT_KWARGS = {
 }
 """Hyperparameters :func:`train_agent` starts from; ``algo_kwargs`` override them (``policy_kwargs`` merged)."""
 
-RESIDUAL_KWARGS = {
+RESIDUAL_SDE_KWARGS = {
     # gSDE: exploration noise that is a function of the state, resampled every 8 steps (80 ms) instead of
     # white noise at 100 Hz, which the servo lag and the airframe filter away before it shows in the error.
     # log std -2 starts it at the same action noise (std 0.37) as the default's -1 without it. Over seeds
@@ -41,7 +41,18 @@ RESIDUAL_KWARGS = {
     # and pitch 1.05-1.12 -> 1.03-1.08 for every seed, and yaw on average 1.36 -> 1.22 (docs/controllers.md).
     "ppo": {"use_sde": True, "sde_sample_freq": 8, "policy_kwargs": {"log_std_init": -2.0}},
 }
-"""What residual training changes in :data:`DEFAULT_KWARGS`, unless ``algo_kwargs`` sets ``use_sde`` itself."""
+"""What residual training changes in :data:`DEFAULT_KWARGS` for its exploration, unless ``algo_kwargs`` sets
+``use_sde`` itself."""
+
+RESIDUAL_KWARGS = {
+    # A third of the default learning rate. With 3e-4 a residual's updates stayed large to the end (clip
+    # fraction 0.41-0.44, approximate KL 0.045-0.063 per update after 8 M steps) and its held-out return
+    # stopped rising by 2 M steps; with 1e-4 seeds 0-2 (15 min) came out better in 6 of 9 axis x seed
+    # cells, equal in 1 and worse in 2 (yaw of seed 1, 1.04 -> 1.15; of seed 2, 1.11 -> 1.12), roll
+    # 1.39 / 1.21 / 1.12 -> 1.22 / 1.13 / 1.12 of the best PD (docs/controllers.md).
+    "ppo": {"learning_rate": 1e-4},
+}
+"""What residual training changes in :data:`DEFAULT_KWARGS` besides exploration; ``algo_kwargs`` override it."""
 
 RESIDUAL_REWARD_WEIGHTS = (1.0, 0.01, 0.01)
 """Attitude, rate and effort weights of a residual's reward. The task's own rate weight (0.1) charged the
@@ -281,12 +292,15 @@ class TrainConfig:
         return LinearSchedule(hyper["learning_rate"], 0.0, 1.0)
 
     def hyperparameters(self) -> dict:
-        """The algorithm's :data:`DEFAULT_KWARGS`, for a residual with :data:`RESIDUAL_KWARGS` over them (unless
-        ``algo_kwargs`` sets ``use_sde``), then ``algo_kwargs`` over those (``policy_kwargs`` merged); a copy."""
+        """The algorithm's :data:`DEFAULT_KWARGS`, for a residual with :data:`RESIDUAL_SDE_KWARGS` (unless
+        ``algo_kwargs`` sets ``use_sde``) and :data:`RESIDUAL_KWARGS` over them, then ``algo_kwargs`` over
+        those (``policy_kwargs`` merged); a copy."""
         kwargs = {k: (dict(v) if isinstance(v, dict) else v) for k, v in DEFAULT_KWARGS[self.algo].items()}
         layers = [self.algo_kwargs or {}]
-        if self.residual is not None and "use_sde" not in layers[0]:
+        if self.residual is not None:
             layers.insert(0, RESIDUAL_KWARGS.get(self.algo, {}))
+            if "use_sde" not in layers[-1]:
+                layers.insert(0, RESIDUAL_SDE_KWARGS.get(self.algo, {}))
         for layer in layers:
             for k, v in layer.items():
                 kwargs[k] = {**kwargs.get(k, {}), **v} if k == "policy_kwargs" else v
