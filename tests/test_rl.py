@@ -424,8 +424,8 @@ def test_a_residual_trains_as_measured_unless_told_otherwise():
     assert "use_sde" not in plain and plain["policy_kwargs"]["log_std_init"] == -1.0
     off = make_config(residual=BEST_PD, algo_kwargs={"use_sde": False}).hyperparameters()
     assert off["use_sde"] is False and off["policy_kwargs"]["log_std_init"] == -1.0
-    # a third of the default learning rate, with gSDE or without; algo_kwargs still set it
-    assert residual["learning_rate"] == off["learning_rate"] == 1e-4 and plain["learning_rate"] == 3e-4
+    # a sixth of the default learning rate, with gSDE or without; algo_kwargs still set it
+    assert residual["learning_rate"] == off["learning_rate"] == 5e-5 and plain["learning_rate"] == 3e-4
     mine = make_config(residual=BEST_PD, algo_kwargs={"learning_rate": 5e-4}).hyperparameters()
     assert mine["learning_rate"] == 5e-4 and mine["use_sde"] is True
     assert "use_sde" not in make_config(algo="sac", residual=BEST_PD).hyperparameters()
