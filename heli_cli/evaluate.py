@@ -29,6 +29,9 @@ def register(sub):
     p.add_argument("--episode-seconds", type=number("seconds >= 0.01 (one control period)", 0.01, low_open=False),
                    default=30.0, help="episode length in s (default 30)")
     p.add_argument("--seed", type=seed(), default=0, help="seed of the gust windows (default 0)")
+    p.add_argument("--split-seed", type=seed(), default=None, metavar="N",
+                   help="held-out traces of 'heli train --split-seed N', for an agent that carries no split (a PD "
+                   "JSON); an RL agent flies its own training split (default: that, else 0)")
     p.add_argument("--out", default=DEFAULT_OUT, type=output_path, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
     p.add_argument("--no-plots", action="store_true", help="do not draw episode.png")
     p.add_argument("--robustness", action="store_true",
@@ -39,6 +42,7 @@ def register(sub):
 
 
 def run(args) -> int:
+    from controllers.errors import AgentError
     from controllers.evaluate import EvaluationConfig, describe_agent, evaluate_agent
     from controllers.rl.agent_file import agent_metadata, load_agent
     from controllers.trace_split import TraceSplit, split_traces
@@ -52,13 +56,18 @@ def run(args) -> int:
     env_model = load_env_model(args.model)
     agent = load_agent(args.agent)
     meta = agent_metadata(args.agent)
-    split, origin = split_traces(env_model.n_traces), "default split"
     if meta and meta.get("split") and meta["split"].get("n_traces") == env_model.n_traces:
         split, origin = TraceSplit.from_dict(meta["split"]), "the agent's training split"
+        if args.split_seed is not None and args.split_seed != split.seed:
+            raise AgentError(f"{args.agent} was trained with split seed {split.seed}; --split-seed "
+                             f"{args.split_seed} would fly traces it trained on (leave the option out)")
+    else:
+        split = split_traces(env_model.n_traces, seed=args.split_seed or 0)
+        origin = "default split" if not args.split_seed else f"split seed {args.split_seed}"
     progress.stage(f"flying {args.traces} traces' episodes")
     episodes = EvaluationConfig(traces=args.traces, episodes_per_trace=args.episodes_per_trace,
-                                episode_seconds=args.episode_seconds, seed=args.seed)
-    res = evaluate_agent(agent, env_model, episodes, split=split,
+                                episode_seconds=args.episode_seconds, seed=args.seed, split=split)
+    res = evaluate_agent(agent, env_model, episodes,
                          name=f"{Path(args.agent).name} ({describe_agent(agent)[0]})")
     out = Path(args.out)
     progress.stage("writing the report" + ("" if args.no_plots else " and drawing an episode"))
@@ -78,7 +87,7 @@ def run(args) -> int:
     if args.robustness:
         from controllers.robustness import robustness_check
 
-        check = robustness_check(agent, env_model, config=episodes)  # on the default split, not the agent's
+        check = robustness_check(agent, env_model, config=episodes)  # the evaluation's windows and split
         lines = [f"{case:18s}: p90 " + ", ".join(f"{a} {r['p90_deg'][a]:.3f} deg (x{r['ratio'][a]:.2f})"
                                                  for a in r["p90_deg"]) + f"; ended early {r['ended_early']}"
                  for case, r in check.items()]

@@ -259,6 +259,28 @@ def test_heli_evaluate_robustness_is_written(pd, tmp_path, capsys):
     assert f"wrote {out / 'robustness.json'}" in printed
 
 
+def test_heli_evaluate_split_seed_holds_out_another_trace_for_the_evaluation_and_the_check(pd, tmp_path, capsys):
+    """--split-seed flies the held-out traces of 'heli train --split-seed'; the robustness check's nominal case
+    flies the same windows as the evaluation (it flew the default split before)."""
+    import json
+
+    from controllers.trace_split import split_traces
+    from heli_env.model_dir import load_env_model
+
+    agent = pd.save(tmp_path / "pd.json")
+    out = tmp_path / "ev"
+    assert main(["evaluate", str(agent), "--out", str(out), "--episode-seconds", "2", "--episodes-per-trace", "1",
+                 "--no-plots", "--robustness", "--split-seed", "1"]) == 0
+    printed = capsys.readouterr().out
+    env_model = load_env_model(None)
+    held_out = [env_model.trace_ids[s.trace] for s in split_traces(env_model.n_traces, seed=1).held_out]
+    assert held_out != [env_model.trace_ids[s.trace] for s in split_traces(env_model.n_traces).held_out]
+    assert f"held-out traces {', '.join(held_out)} (split seed 1)" in printed
+    evaluation = json.loads((out / "evaluation.json").read_text())["summary"]["axes"]
+    nominal = json.loads((out / "robustness.json").read_text())["cases"]["nominal"]["p90_deg"]
+    assert nominal == {a: evaluation[a]["att_p90_deg"] for a in ("roll", "pitch", "yaw")}
+
+
 def test_heli_evaluate_errors(pd, tmp_path, capsys):
     agent = pd.save(tmp_path / "pd.json")
     assert main(["evaluate", str(agent), "--model", str(tmp_path / "missing")]) == 2

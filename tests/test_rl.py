@@ -643,6 +643,12 @@ def test_bad_residual_requests(shipped, tmp_path, kw, exc, match):
         train_agent("ppo", shipped, 100, tmp_path / "x", progress=False, residual=tmp_path / "other.json")
 
 
+def test_heli_evaluate_split_seed_cannot_fly_an_agent_on_its_training_traces(residual_run, ideal_model_dir, capsys):
+    assert main(["evaluate", str(residual_run.path), "--model", str(ideal_model_dir), "--split-seed", "1",
+                 "--no-plots"]) == 2
+    assert "trained with split seed 0; --split-seed 1 would fly traces it trained on" in capsys.readouterr().err
+
+
 def test_corrupt_residual_metadata(residual_run, tmp_path):
     meta = agent_metadata(residual_run.path)
     bad = _copy_zip(residual_run.path, tmp_path / "bad_res.zip",
