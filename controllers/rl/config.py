@@ -297,11 +297,11 @@ class TrainConfig:
         ``algo_kwargs`` sets ``use_sde``) and :data:`RESIDUAL_KWARGS` over them, then ``algo_kwargs`` over
         those (``policy_kwargs`` merged); a copy."""
         kwargs = {k: (dict(v) if isinstance(v, dict) else v) for k, v in DEFAULT_KWARGS[self.algo].items()}
-        layers = [self.algo_kwargs or {}]
+        mine = self.algo_kwargs or {}
+        layers = [mine]
         if self.residual is not None:
-            layers.insert(0, RESIDUAL_KWARGS.get(self.algo, {}))
-            if "use_sde" not in layers[-1]:
-                layers.insert(0, RESIDUAL_SDE_KWARGS.get(self.algo, {}))
+            layers[:0] = ([] if "use_sde" in mine else [RESIDUAL_SDE_KWARGS.get(self.algo, {})]) + [
+                RESIDUAL_KWARGS.get(self.algo, {})]
         for layer in layers:
             for k, v in layer.items():
                 kwargs[k] = {**kwargs.get(k, {}), **v} if k == "policy_kwargs" else v
