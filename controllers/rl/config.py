@@ -50,7 +50,8 @@ RESIDUAL_KWARGS = {
     # stopped rising by 2 M steps. In 15 min (seeds 0-2, +-0.15 stick) p90 / best PD went from roll
     # 1.39 / 1.21 / 1.12, pitch 1.05 / 0.99 / 0.98, yaw 1.17 / 1.04 / 1.11 with 3e-4 to roll 1.20 / 1.14 /
     # 1.14, pitch 1.03 / 0.98 / 0.96, yaw 1.07 / 1.05 / 1.02 with 5e-5; 1e-4 gave roll and pitch within 0.02
-    # of those and yaw 1.07 / 1.15 / 1.12 (docs/controllers.md).
+    # of those and yaw 1.07 / 1.15 / 1.12. On another held-out trace (split seed 1) 5e-5 gave roll 1.16 / 1.16
+    # / 1.04, pitch 0.98 / 0.98 / 0.99, yaw 1.14 / 1.04 / 1.36 (docs/controllers.md).
     "ppo": {"learning_rate": 5e-5},
 }
 """What residual training changes in :data:`DEFAULT_KWARGS` besides exploration; ``algo_kwargs`` override it."""
