@@ -32,6 +32,11 @@ NEAR = 1.10
 """Within 10 % of the best swept PD."""
 
 
+def near(ratios) -> bool:
+    """Within :data:`NEAR` of the best swept PD on at least two axes (the second target)."""
+    return sum(r <= NEAR for r in ratios) >= 2
+
+
 def p90s(report: dict) -> dict:
     """Per agent name, the p90 |attitude error| per axis [deg] of a ``comparison.json``."""
     out = {}
@@ -59,7 +64,7 @@ def rows(run: Path, agent: str | None) -> list[dict]:
         best = [v / b for v, b in zip(values, table[BEST])]
         training = report.get("training", {}).get(name.lower(), {})
         out.append({"run": run.name, "agent": name, "p90": values, "vs_robust": robust, "vs_best": best,
-                    "beats_robust": all(r < 1.0 for r in robust), "near_best": sum(b <= NEAR for b in best) >= 2,
+                    "beats_robust": all(r < 1.0 for r in robust), "near_best": near(best),
                     "timesteps": training.get("timesteps"), "seconds": training.get("seconds")})
     return out
 
@@ -82,7 +87,7 @@ def robust_row(run: Path) -> dict | None:
         return None
     mine, theirs = worst_case(agent), worst_case(best)
     ratio = [m / t for m, t in zip(mine, theirs)]
-    return {"run": run.name, "agent": mine, "best": theirs, "ratio": ratio, "near": sum(r <= NEAR for r in ratio) >= 2}
+    return {"run": run.name, "agent": mine, "best": theirs, "ratio": ratio, "near": near(ratio)}
 
 
 def _fmt(values, digits=3) -> str:

@@ -49,6 +49,7 @@ from typing import NamedTuple
 import numpy as np
 
 from heli_core.files import jsonable, write_text
+from heli_core.terms import AXES
 
 from ..errors import AgentError, TrainingInterrupted
 from ..pd.controller import PDController
@@ -257,14 +258,14 @@ def residual_setup(base: PDController, env_model, segments, seed: int = 0, secon
     e = math.radians(err)
     setup = {"error_deg": err, "axis_error_deg": errors, "corner_rad_s": corner, "stick_p99": stick,
              "attitude_scale": 2 * e, "rate_scale": 2 * e * corner,
-             "axis_weights": [(err / v) ** 2 for v in levels],
+             "axis_weights": _axis_weights(errors) if axis_balance else [1.0] * 3,
              "obs_scale": [4 * r for r in rad] + [4 * r * corner for r in rad] * 2 + [max(1.5 * stick, 0.05)] * 3}
     if reference is not None:
         if not axis_balance:
             raise AgentError("a reward reference weighs the axes; it needs axis_balance")
         ref, _ = _p90_errors(reference, env_model, segments, seed, seconds, "reward reference")
         setup["reference_axis_error_deg"] = ref
-        setup["axis_weights"] = [(max(ref) / v) ** 2 for v in _balanced(ref)]
+        setup["axis_weights"] = _axis_weights(ref)
     return setup
 
 
@@ -274,17 +275,21 @@ def _p90_errors(pd: PDController, env_model, segments, seed: int, seconds: float
 
     res = evaluate_agent(pd, env_model, traces=list(segments), episodes_per_trace=1, episode_seconds=seconds,
                          seed=seed, name=role)
-    axes = ("roll", "pitch", "yaw")
-    errors = [float(res.metrics[a]["att_p90_deg"]) for a in axes]
+    errors = [float(res.metrics[a]["att_p90_deg"]) for a in AXES]
     if not (all(math.isfinite(v) for v in errors) and max(errors) > 0.0):
         raise AgentError(f"the {role} PD gives no usable error level on the training gusts (p90 {errors!r} "
                          "deg); is it stable on this model?")
-    return errors, max(float(res.metrics[a]["stick_p99"]) for a in axes)
+    return errors, max(float(res.metrics[a]["stick_p99"]) for a in AXES)
 
 
 def _balanced(errors) -> list:
     """Each axis' error level for balancing: its own, at least the largest / sqrt(:data:`MAX_AXIS_WEIGHT`)."""
     return [max(e_i, max(errors) / math.sqrt(MAX_AXIS_WEIGHT)) for e_i in errors]
+
+
+def _axis_weights(errors) -> list:
+    """Each axis' reward weight, (E / E_i)² of the balanced levels E_i (:func:`_balanced`), E the largest."""
+    return [(max(errors) / v) ** 2 for v in _balanced(errors)]
 
 
 MAX_AXIS_WEIGHT = 100.0
