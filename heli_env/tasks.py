@@ -26,8 +26,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from heli_core.config import is_real
+
 TASKS = ("hold", "track", "rate")
 REFERENCES = ("steps", "smooth", "mixed")
+
+
+def three_weights(value, name: str, labels: str) -> tuple:
+    """``value`` as 3 finite floats >= 0, else ValueError naming ``name`` and what each weighs (``labels``)."""
+    try:
+        weights = tuple(value) if not isinstance(value, (str, bytes)) else ()
+    except TypeError:
+        weights = ()
+    if len(weights) != 3 or not all(is_real(w) and w >= 0 for w in weights):
+        raise ValueError(f"{name} must be 3 finite numbers >= 0 ({labels}), got {value!r}")
+    return tuple(float(w) for w in weights)
+
+
 N_SINES = 2
 TWO_PI = 2.0 * math.pi
 
@@ -84,16 +99,8 @@ class TaskConfig:
                 raise ValueError(f"{name} must be positive, got {getattr(self, name)!r}")
         if self.weights is None:
             object.__setattr__(self, "weights", (0.0, 1.0, 0.01) if self.task == "rate" else (1.0, 0.1, 0.01))
-        if len(self.weights) != 3 or any(not w >= 0 for w in self.weights):
-            raise ValueError(f"weights must be 3 non-negative numbers (attitude, rate, effort), got {self.weights!r}")
-        try:
-            axis_weights = tuple(float(w) for w in self.axis_weights)
-        except (TypeError, ValueError):
-            axis_weights = ()
-        if len(axis_weights) != 3 or not all(math.isfinite(w) and w >= 0 for w in axis_weights):
-            raise ValueError(
-                f"axis_weights must be 3 non-negative numbers (roll, pitch, yaw), got {self.axis_weights!r}")
-        object.__setattr__(self, "axis_weights", axis_weights)
+        object.__setattr__(self, "weights", three_weights(self.weights, "weights", "attitude, rate, effort"))
+        object.__setattr__(self, "axis_weights", three_weights(self.axis_weights, "axis_weights", "roll, pitch, yaw"))
 
     @property
     def axis_weighted(self) -> bool:

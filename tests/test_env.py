@@ -604,10 +604,14 @@ def test_axis_weights_weigh_each_axis_errors_in_the_reward():
     assert run["rew"] != plain["rew"]
 
 
-@pytest.mark.parametrize("bad", [(1.0, 2.0), (1.0, -1.0, 1.0), (1.0, float("nan"), 1.0), "abc", None])
-def test_axis_weights_must_be_three_non_negative_numbers(bad):
-    with pytest.raises(ValueError, match="axis_weights must be 3 non-negative numbers"):
-        TaskConfig(axis_weights=bad)
+@pytest.mark.parametrize("bad", [(1.0, 2.0), (1.0, -1.0, 1.0), (1.0, float("nan"), 1.0), (1.0, float("inf"), 0.0),
+                                 (1.0, True, 1.0), ("1", 1.0, 1.0), "abc", 3.0])
+@pytest.mark.parametrize("name", ["axis_weights", "weights"])
+def test_reward_weights_must_be_three_finite_non_negative_numbers(name, bad):
+    # an infinite weight would make every reward -inf (or nan at zero error): refused with the field's name
+    with pytest.raises(ValueError, match=f"^{name} must be 3 finite numbers >= 0"):
+        TaskConfig(**{name: bad})
+    assert TaskConfig(**{name: np.array([1, 0.5, 0])}).__getattribute__(name) == (1.0, 0.5, 0.0)
 
 
 # ------------------------------------------------------------------------------------------ integration

@@ -233,13 +233,15 @@ class TrainConfig:
         object.__setattr__(self, "curriculum_steps",
                            whole_number(self.curriculum_steps, "curriculum_steps", 0, AgentError))
         if self.reward_weights is not None:
-            w = self.reward_weights
-            if isinstance(w, (str, bytes)) or not hasattr(w, "__len__") or len(w) != 3 or not all(
-                    is_real(v) and v >= 0 for v in w):
-                raise AgentError(f"reward_weights must be 3 numbers >= 0 (attitude, rate, effort), got {w!r}")
+            from heli_env.tasks import three_weights
+
+            try:  # the task's own check, before the model loads
+                weights = three_weights(self.reward_weights, "reward_weights", "attitude, rate, effort")
+            except ValueError as e:
+                raise AgentError(str(e)) from None
             if not isinstance(self.task, str):
                 raise AgentError("reward_weights are for a named task; set the weights of a TaskConfig task in it")
-            object.__setattr__(self, "reward_weights", tuple(float(v) for v in w))
+            object.__setattr__(self, "reward_weights", weights)
         if self.algo_kwargs is not None and not (isinstance(self.algo_kwargs, dict)
                                                  and all(isinstance(k, str) for k in self.algo_kwargs)):
             raise AgentError(f"algo_kwargs must be a dict of SB3 keyword arguments, got {self.algo_kwargs!r}")
