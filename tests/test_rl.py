@@ -701,13 +701,15 @@ def _rl_targets():
     return module
 
 
-def _comparison(folder: Path, p90: dict) -> Path:
-    """A train_compare.py report with the given p90 |attitude error| per agent (roll, pitch, yaw)."""
+def _comparison(folder: Path, p90: dict, held_out: int | None = None) -> Path:
+    """A train_compare.py report with the given p90 |attitude error| per agent (roll, pitch, yaw), evaluated on
+    library trace ``held_out`` (None: a report without its split)."""
     results = [{"summary": {"name": name, "axes": {a: {"att_p90_deg": v} for a, v in zip(("roll", "pitch", "yaw"),
                                                                                        values)}}}
                for name, values in p90.items()]
     folder.mkdir()
-    (folder / "comparison.json").write_text(json.dumps({"results": results, "training": {}}))
+    split = {} if held_out is None else {"split": {"held_out": [{"trace": held_out, "start": 0.0, "stop": 1.0}]}}
+    (folder / "comparison.json").write_text(json.dumps({"results": results, "training": {}, **split}))
     return folder
 
 
@@ -721,6 +723,13 @@ def test_rl_targets_reads_the_runs_and_says_which_meet_the_targets(tmp_path, cap
     assert targets.main([str(good), str(short)]) == 0
     out = capsys.readouterr().out
     assert "Beats the robust PD on every axis: 1 of 2 runs" in out and "two axes or more: 1 of 2" in out
+    assert "| ? | 2 | 1 | 1 | 1.27 / 1.11 / 1.67 | 1.50 / 1.11 / 1.67 |" in out  # no split recorded: one group
+    # runs held out on different traces are summed up per trace, worst cell beside the mean
+    other = _comparison(tmp_path / "x0", {**pds, "PPO-RESIDUAL": (0.11, 0.09, 0.15)}, held_out=0)
+    twin = _comparison(tmp_path / "x1", {**pds, "PPO-RESIDUAL": (0.10, 0.108, 0.14)}, held_out=0)
+    assert targets.main([str(other), str(twin)]) == 0
+    out = capsys.readouterr().out
+    assert "| 0 | 2 | 1 | 1 | 1.05 / 1.10 / 1.21 | 1.10 / 1.20 / 1.25 |" in out
     # the restated target: worst p90 over the robustness check against the best PD's worst
     def robustness(folder, sub, cases):
         (folder / sub).mkdir()
