@@ -19,12 +19,13 @@ CASES = {"nominal": {}, "+20 ms servo delay": {"delay": 0.02}, "gain -20 %": {"g
 
 
 def perturbed(env_model, delay: float = 0.0, gain: float = 1.0):
-    """``env_model`` with ``delay`` seconds more servo delay on every axis and its control gains times ``gain``.
+    """``env_model`` with ``delay`` seconds more servo delay on every axis (a negative ``delay`` shortens it,
+    never below 0) and its control gains times ``gain``.
 
     The library's gust torque stays the aircraft's (each trace keeps the gains it was identified with).
     """
     p = env_model.params
-    values = {f"tau_{axis}": tau + delay for axis, tau in zip(AXES, p.taus)}
+    values = {f"tau_{axis}": max(tau + delay, 0.0) for axis, tau in zip(AXES, p.taus)}
     values.update({name: gain * getattr(p, name) for name in ("k2", "k6", "k10")})
     return dataclasses.replace(env_model, params=p.with_values(**values))
 

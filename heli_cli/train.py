@@ -68,7 +68,8 @@ def register(sub):
 
 def add_learning_options(p) -> None:
     """The options of how an agent learns (TrainConfig's ``axis_balance``, ``paired_baseline``, ``history``,
-    ``normalize_obs``, ``lr_schedule``, ``reward_weights``, the gust curriculum, ``algo_kwargs``), shared with
+    ``normalize_obs``, ``lr_schedule``, ``reward_weights``, the gust curriculum, ``algo_kwargs``,
+    ``delay_spread``), shared with
     ``scripts/train_compare.py``; :func:`learning_settings` reads them."""
     p.add_argument("--no-axis-balance", action="store_true",
                    help="scale a residual's reward and observations by its PD's worst axis on every axis (default: "
@@ -96,6 +97,11 @@ def add_learning_options(p) -> None:
                    "evaluations always fly full gusts)")
     p.add_argument("--curriculum-start", type=number("a gust multiplier in [0, 1)", 0.0, 1.0, low_open=False),
                    default=0.5, metavar="X", help="gust multiplier of the first training episodes (default 0.5)")
+    p.add_argument("--delay-spread", type=number("a delay spread in seconds >= 0", 0.0, low_open=False), default=0.0,
+                   metavar="SECONDS",
+                   help="domain randomisation of the servo delay: training copies fly the identified delay shifted by "
+                   "4 evenly spaced values from -SECONDS to +SECONDS (at most 0.1; default 0: as identified); the "
+                   "held-out evaluations fly it as identified")
     p.add_argument("--algo-kwargs", type=json_object, default=None, metavar="JSON",
                    help="SB3 hyperparameters over the defaults, e.g. '{\"gamma\": 0.995}' or, for a residual, "
                    "'{\"use_sde\": false}' (white-noise exploration instead of the default gSDE)")
@@ -106,7 +112,8 @@ def learning_settings(args) -> dict:
     return {"axis_balance": not args.no_axis_balance, "paired_baseline": args.paired_baseline,
             "history": args.history, "normalize_obs": args.normalize_obs, "curriculum_steps": args.curriculum,
             "curriculum_start": args.curriculum_start, "lr_schedule": args.lr_schedule,
-            "reward_weights": args.reward_weights, "algo_kwargs": args.algo_kwargs}
+            "reward_weights": args.reward_weights, "algo_kwargs": args.algo_kwargs,
+            "delay_spread": args.delay_spread}
 
 
 

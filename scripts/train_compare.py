@@ -250,6 +250,7 @@ def _training_notes(args, training: dict, agents: list) -> list[str]:
              + ("; every axis scaled by the worst one" if args.no_axis_balance else "")
              + ("" if args.paired_baseline else "; no paired PD baseline")
              + (f"; {args.history} observations stacked" if args.history > 1 else "")
+             + (f"; servo delay spread ±{1e3 * args.delay_spread:g} ms in training" if args.delay_spread else "")
              + ("; running observation statistics" if args.normalize_obs else "")
              + (f"; learning rate to 0 at {args.timesteps} steps" if args.lr_schedule == "linear" else "")
              + (f"; reward weights {args.reward_weights}" if args.reward_weights else "")

@@ -490,6 +490,35 @@ def test_paired_baseline_training_is_recorded(ideal, tmp_path):
     assert len(res.evaluations) >= 1  # the held-out evaluation scores the raw return of the unpaired env
 
 
+def test_delay_spread_trains_on_shifted_servo_delays(shipped, ideal, tmp_path):
+    # domain randomisation of the servo delay: groups of training copies fly the identified delay shifted
+    # evenly over -spread..+spread; the held-out evaluation flies it as identified
+    from controllers.rl.config import TrainConfig
+    from controllers.rl.train import _environments
+
+    config = make_config(residual=BEST_PD, residual_scale=0.05, n_envs=5, delay_spread=0.02, episode_seconds=1.0,
+                         train_traces=[0], eval_traces=[1], algo_kwargs=TINY["ppo"])
+    assert [round(s, 6) for s, _ in config.delay_groups] == [-0.02, -0.006667, 0.006667, 0.02]
+    assert [c for _, c in config.delay_groups] == [2, 1, 1, 1]
+    assert make_config(n_envs=8).delay_groups == [(0.0, 8)]
+    env, eval_env, _, _ = _environments(config, shipped, config.task, ([TraceSegment(0)], [TraceSegment(1)]), 0.99)
+    groups = env.venv.venv.envs  # VecNormalize -> VecMonitor -> ConcatVecEnv
+    assert env.num_envs == 5
+    for (shift, copies), group in zip(config.delay_groups, groups):
+        flown = group.venv.env  # residual wrapper -> its paired GymnasiumVecEnv -> the vector env
+        assert group.num_envs == copies and flown.num_envs == 2 * copies  # each copy with its twin
+        assert flown.model.params.taus == pytest.approx([t + shift for t in shipped.params.taus], abs=1e-12)
+    assert eval_env.venv.venv.venv.env.model.params.taus == shipped.params.taus
+    res = _tiny("ppo", tmp_path / "spread", ideal, residual=BEST_PD, residual_scale=0.05, delay_spread=0.03)
+    meta = agent_metadata(res.path)
+    assert meta["delay_spread"] == 0.03 and [g["copies"] for g in meta["delay_groups"]] == [1, 1]
+    for bad in (-0.01, 0.2, float("nan"), "0.01"):
+        with pytest.raises(AgentError, match="delay_spread"):
+            TrainConfig(delay_spread=bad)
+    with pytest.raises(AgentError, match="at least 2 training copies"):
+        TrainConfig(delay_spread=0.01, n_envs=1)
+
+
 def test_stacked_observations_are_the_ones_training_saw(shipped):
     """ResidualAgent's history equals SB3's VecFrameStack, through episode ends."""
     from stable_baselines3.common.vec_env import VecFrameStack

@@ -13,6 +13,8 @@ def test_perturbed_model_and_the_degradation_of_a_pd(shipped):
     assert slow.params.tau_roll == pytest.approx(shipped.params.tau_roll + 0.02)
     assert slow.params.k6 == pytest.approx(0.8 * shipped.params.k6)
     assert slow.torque is not shipped.torque and (slow.torque == shipped.torque).all()  # the same gusts
+    fast = perturbed(shipped, delay=-0.04)  # a shorter delay stops at none (roll's 45 ms -> 5 ms, yaw's 35 ms -> 0)
+    assert fast.params.tau_roll == pytest.approx(shipped.params.tau_roll - 0.04) and fast.params.tau_yaw == 0.0
     pd = PDController.from_model(shipped.params, design_gains(shipped.params))
     check = robustness_check(pd, shipped, traces="all", episodes_per_trace=2, episode_seconds=10.0, seed=1)
     assert list(check) == list(CASES)

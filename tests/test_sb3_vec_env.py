@@ -157,3 +157,37 @@ def test_a_copy_ends_with_its_twin(shipped):
 def test_twins_need_an_even_number_of_copies(shipped):
     with pytest.raises(ValueError, match="even number of copies"):
         GymnasiumVecEnv(HeliAttitudeVectorEnv(3, model=shipped), twins=True)
+
+
+def test_concatenated_groups_fly_as_one_vecenv(shipped):
+    # training on several delays side by side: two groups of copies seen as one VecEnv fly exactly as one
+    # VecEnv of all the copies would (each copy seeded seed + its index over the whole), through episode ends
+    from controllers.rl.vec_env import ConcatVecEnv
+
+    whole = GymnasiumVecEnv(HeliAttitudeVectorEnv(5, model=shipped, episode_seconds=0.05))
+    parts = ConcatVecEnv([GymnasiumVecEnv(HeliAttitudeVectorEnv(n, model=shipped, episode_seconds=0.05))
+                          for n in (2, 3)])
+    assert parts.num_envs == 5
+    whole.seed(11)
+    parts.seed(11)
+    assert_array_equal(parts.reset(), whole.reset())
+    rng = np.random.default_rng(0)
+    for _ in range(8):  # one episode end at step 5
+        a = rng.uniform(-0.3, 0.3, (5, 3)).astype(np.float32)
+        got, want = parts.step(a), whole.step(a)
+        for g, w in zip(got[:3], want[:3]):
+            assert_array_equal(g, w)
+        assert [d["time"] for d in got[3]] == [d["time"] for d in want[3]]
+    assert parts.get_attr("num_envs", [1, 3]) == [2, 3]  # each copy answered by its own group
+    with pytest.raises(ValueError, match="spaces"):
+        ConcatVecEnv([parts, _Boxed(parts)])
+
+
+class _Boxed:
+    """A VecEnv stand-in with another observation space."""
+
+    def __init__(self, env):
+        import gymnasium
+
+        self.num_envs, self.action_space = env.num_envs, env.action_space
+        self.observation_space = gymnasium.spaces.Box(-1.0, 1.0, (2,))

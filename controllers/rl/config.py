@@ -62,6 +62,12 @@ best swept PD's yaw rate activity twice its attitude error, so the reward prefer
 yaw than the figure compared (p90 |attitude error|); with 0.01, seeds 0-2 came out better on every axis
 (yaw 1.19-1.26 -> 1.04-1.17 of the best PD; docs/controllers.md)."""
 
+DELAY_LEVELS = 4
+"""Servo delays flown side by side with :attr:`TrainConfig.delay_spread` (evenly spaced over the spread)."""
+
+MAX_DELAY_SPREAD = 0.1
+"""Largest delay spread accepted [s]: beyond 100 ms the training aircraft is no longer the identified one."""
+
 LR_SCHEDULES = ("constant", "linear")
 """Learning-rate schedules of :attr:`TrainConfig.lr_schedule`."""
 
@@ -181,6 +187,12 @@ class TrainConfig:
         With the best swept pair as reference, each axis counts by how far it is from what a PD
         can reach there, the figure the comparison reports; with the base (the default) an axis the
         base already holds well (pitch beside yaw) weighs most. A path is read here.
+    delay_spread : float
+        Domain randomisation of the servo delay [s], in [0, :data:`MAX_DELAY_SPREAD`]: the training copies
+        are split into :data:`DELAY_LEVELS` groups (fewer with fewer copies, >= 2 needed), each flying the
+        model with every axis' delay (eq. 31) shifted by one of that many evenly spaced values from
+        ``-delay_spread`` to ``+delay_spread`` (a delay never below 0), so the policy cannot rely on the
+        identified delay being exact. The held-out evaluations fly the model as identified. Default 0.
 
     Raises
     ------
@@ -222,6 +234,7 @@ class TrainConfig:
     curriculum_steps: int = 0
     curriculum_start: float = 0.5
     reward_reference: object = None
+    delay_spread: float = 0.0
 
     def __post_init__(self):
         if self.algo not in ALGOS:
@@ -249,6 +262,13 @@ class TrainConfig:
             raise AgentError(f"lr_schedule must be one of {LR_SCHEDULES}, got {self.lr_schedule!r}")
         if not (is_real(self.curriculum_start) and 0.0 <= self.curriculum_start < 1.0):
             raise AgentError(f"curriculum_start must be a gust multiplier in [0, 1), got {self.curriculum_start!r}")
+        if not (is_real(self.delay_spread) and 0.0 <= self.delay_spread <= MAX_DELAY_SPREAD):
+            raise AgentError(f"delay_spread must be a number of seconds in [0, {MAX_DELAY_SPREAD:g}], got "
+                             f"{self.delay_spread!r}")
+        object.__setattr__(self, "delay_spread", float(self.delay_spread))
+        if self.delay_spread and self.n_envs < 2:
+            raise AgentError(f"delay_spread needs at least 2 training copies (n_envs) to fly different delays, got "
+                             f"n_envs={self.n_envs}")
         if self.torch_threads is not None:
             object.__setattr__(self, "torch_threads", whole_number(self.torch_threads, "torch_threads", 1, AgentError))
         if self.max_seconds is not None and not (self.max_seconds > 0 and math.isfinite(self.max_seconds)):
@@ -273,6 +293,16 @@ class TrainConfig:
         """(roll/pitch range [deg], rate range [deg/s]) of the episodes' starts, defaults filled in."""
         default = RESIDUAL_INIT_DEG if self.residual is not None else INIT_DEG
         return tuple(default if v is None else v for v in (self.init_angle_deg, self.init_rate_deg))
+
+    @property
+    def delay_groups(self) -> list[tuple[float, int]]:
+        """(servo delay added [s], training copies) of each group flown side by side (``delay_spread``):
+        ``[(0.0, n_envs)]`` without a spread."""
+        if not self.delay_spread:
+            return [(0.0, self.n_envs)]
+        levels = min(DELAY_LEVELS, self.n_envs)
+        shifts = [self.delay_spread * (2 * k / (levels - 1) - 1) for k in range(levels)]
+        return [(shift, self.n_envs // levels + (k < self.n_envs % levels)) for k, shift in enumerate(shifts)]
 
     @property
     def task_weights(self) -> tuple | None:

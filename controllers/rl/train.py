@@ -332,7 +332,8 @@ def _environments(config: TrainConfig, env_model, task, segments, gamma: float):
 
     from heli_env.vector_env import HeliAttitudeVectorEnv
 
-    from .vec_env import GymnasiumVecEnv
+    from ..robustness import perturbed
+    from .vec_env import ConcatVecEnv, GymnasiumVecEnv
 
     init = config.init_ranges
     try:  # bad task or episode length; episodes longer than the gust segments
@@ -340,7 +341,10 @@ def _environments(config: TrainConfig, env_model, task, segments, gamma: float):
               "init_angle_deg": init[0], "init_rate_deg": init[1]}
         train_model, train_segments = _training_gusts(config, env_model, segments[0])
         paired = config.residual is not None and config.paired_baseline
-        venv = HeliAttitudeVectorEnv(config.n_envs * (2 if paired else 1), **{**kw, "model": train_model})
+        venvs = [HeliAttitudeVectorEnv(copies * (2 if paired else 1),
+                                       **{**kw, "model": perturbed(train_model, shift) if shift else train_model})
+                 for shift, copies in config.delay_groups]  # one group per servo delay flown (delay_spread)
+        venv = venvs[0]
         needed = venv.spec_.needed
         train_sampler = WindowSampler(train_model, train_segments, needed)
         curriculum = (GustCurriculum(train_sampler, config.curriculum_start, config.curriculum_steps)
@@ -349,17 +353,18 @@ def _environments(config: TrainConfig, env_model, task, segments, gamma: float):
         eval_venv = HeliAttitudeVectorEnv(config.eval_episodes, **kw)
     except ValueError as e:
         raise AgentError(str(e)) from e
-    env = GymnasiumVecEnv(venv, episode_options=curriculum or train_sampler, twins=paired)
+    envs = [GymnasiumVecEnv(v, episode_options=curriculum or train_sampler, twins=paired) for v in venvs]
     eval_env = GymnasiumVecEnv(eval_venv, episode_options=eval_sampler, fixed_seed=config.seed + 1000)
     if config.residual is not None:
         from .residual_agent import residual_env
 
         base, scale = config.residual, config.residual_scale
-        env, eval_env = residual_env(env, base, scale, paired), residual_env(eval_env, base, scale)
-        if config.history > 1:
-            from stable_baselines3.common.vec_env import VecFrameStack
+        envs, eval_env = [residual_env(e, base, scale, paired) for e in envs], residual_env(eval_env, base, scale)
+    env = envs[0] if len(envs) == 1 else ConcatVecEnv(envs)  # a paired residual's twins stay within their group
+    if config.residual is not None and config.history > 1:
+        from stable_baselines3.common.vec_env import VecFrameStack
 
-            env, eval_env = VecFrameStack(env, config.history), VecFrameStack(eval_env, config.history)
+        env, eval_env = VecFrameStack(env, config.history), VecFrameStack(eval_env, config.history)
     env, eval_env = VecMonitor(env), VecMonitor(eval_env)  # monitors the raw returns
     if config.reward_normalized:  # the eval env is wrapped alike (EvalCallback syncs wrappers) but left raw
         env = VecNormalize(env, norm_obs=False, norm_reward=True, gamma=gamma)
@@ -405,7 +410,8 @@ def _metadata(config: TrainConfig, env_model, split, segments, task, dt: float, 
         "episode_seconds": config.episode_seconds, "dt": dt, "n_envs": config.n_envs,
         "normalize_reward": config.reward_normalized, "init_angle_deg": init[0], "init_rate_deg": init[1],
         "surrogates": config.surrogates, "axis_balance": config.axis_balance, "normalize_obs": config.normalize_obs,
-        "lr_schedule": config.lr_schedule,
+        "lr_schedule": config.lr_schedule, "delay_spread": config.delay_spread,
+        "delay_groups": [{"added_delay_s": shift, "copies": copies} for shift, copies in config.delay_groups],
         "curriculum": ({"start": config.curriculum_start, "steps": config.curriculum_steps}
                        if config.curriculum_steps else None),
         "paired_baseline": config.residual is not None and config.paired_baseline,

@@ -187,3 +187,75 @@ class GymnasiumVecEnv(VecEnv):
 
     def get_images(self):
         return [self.env.render()] + [None] * (self.num_envs - 1)
+
+
+class ConcatVecEnv(VecEnv):
+    """Several SB3 ``VecEnv`` with the same spaces seen as one: the first's copies, then the second's, ...
+
+    Used to train on several aircraft at once (:attr:`controllers.rl.config.TrainConfig.delay_spread`:
+    one group of copies per servo delay), each group a whole SB3 ``VecEnv`` with its own wrappers (a
+    paired residual's twins stay within their group). Seeds and reset options go to the group that holds
+    each copy: ``seed(s)`` seeds copy ``i`` of the whole with ``s + i``, as one ``VecEnv`` would.
+    """
+
+    def __init__(self, envs):
+        self.envs = list(envs)
+        if not self.envs:
+            raise ValueError("ConcatVecEnv needs at least one VecEnv")
+        first = self.envs[0]
+        for e in self.envs[1:]:
+            if e.observation_space != first.observation_space or e.action_space != first.action_space:
+                raise ValueError("ConcatVecEnv: every VecEnv must have the first one's observation and action spaces")
+        ends = np.cumsum([e.num_envs for e in self.envs])
+        self._slices = [slice(int(stop - e.num_envs), int(stop)) for e, stop in zip(self.envs, ends)]
+        super().__init__(int(ends[-1]), first.observation_space, first.action_space)
+
+    def _where(self, indices) -> list[tuple[int, int]]:
+        """(group, index within it) of each of ``indices`` (all copies for None)."""
+        out = []
+        for i in self._get_indices(indices):
+            k = next(k for k, s in enumerate(self._slices) if s.start <= i < s.stop)
+            out.append((k, i - self._slices[k].start))
+        return out
+
+    def seed(self, seed: int | None = None):
+        if seed is None:  # as VecEnv.seed: one random base, each copy its own increment
+            seed = int(np.random.randint(0, np.iinfo(np.uint32).max, dtype=np.uint32))
+        return [s for e, part in zip(self.envs, self._slices) for s in e.seed(seed + part.start)]
+
+    def set_options(self, options=None) -> None:
+        per_copy = options if isinstance(options, list) else [options] * self.num_envs
+        for e, part in zip(self.envs, self._slices):
+            e.set_options(per_copy[part])
+
+    def reset(self):
+        obs = np.concatenate([e.reset() for e in self.envs])
+        self.reset_infos = [d for e in self.envs for d in (getattr(e, "reset_infos", None) or [{}] * e.num_envs)]
+        return obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        for e, part in zip(self.envs, self._slices):
+            e.step_async(actions[part])
+
+    def step_wait(self):
+        results = [e.step_wait() for e in self.envs]
+        return (np.concatenate([r[0] for r in results]), np.concatenate([r[1] for r in results]),
+                np.concatenate([r[2] for r in results]), [info for r in results for info in r[3]])
+
+    def close(self) -> None:
+        for e in self.envs:
+            e.close()
+
+    def get_attr(self, attr_name: str, indices=None) -> list[Any]:
+        return [self.envs[k].get_attr(attr_name, [j])[0] for k, j in self._where(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices=None) -> None:
+        for k, j in self._where(indices):
+            self.envs[k].set_attr(attr_name, value, [j])
+
+    def env_method(self, method_name: str, *method_args, indices=None, **method_kwargs) -> list[Any]:
+        return [self.envs[k].env_method(method_name, *method_args, indices=[j], **method_kwargs)[0]
+                for k, j in self._where(indices)]
+
+    def env_is_wrapped(self, wrapper_class, indices=None) -> list[bool]:
+        return [self.envs[k].env_is_wrapped(wrapper_class, [j])[0] for k, j in self._where(indices)]
