@@ -13,7 +13,8 @@ A run folder that also holds the robustness checks of its agent and of its best 
 RUN/pd_swept.json --robustness --out RUN/robust_pd_best``) gets a second table, the proposed
 restatement of the second target: each one's *worst* p90 over the check's cases (nominal, 20 ms more
 servo delay, control gains -20 % and +20 %), the agent's as a multiple of the best PD's, and whether it
-is within 10 % on two axes or more.
+is within 10 % on two axes or more; and a third, each agent's degradation: its p90 in every perturbed
+case as a multiple of its nominal p90.
 
 Runs held out on different traces (``train_compare.py --split-seed``) are summed up per held-out trace:
 how many runs meet each target, and the mean and the worst ratio to the best PD per axis, so that a
@@ -80,11 +81,12 @@ def held_out(report: dict) -> str:
 
 
 def by_trace(table: list[dict]) -> list[dict]:
-    """Per held-out trace (in order of first appearance): runs, how many meet each target, and the mean and
-    the largest ratio to the best PD per axis."""
+    """Per held-out trace (in order of first appearance; then "all" when there are several): runs, how many
+    meet each target, and the mean and the largest ratio to the best PD per axis."""
     out = []
-    for trace in dict.fromkeys(r["held_out"] for r in table):
-        mine = [r for r in table if r["held_out"] == trace]
+    traces = list(dict.fromkeys(r["held_out"] for r in table))
+    for trace in traces + (["all"] if len(traces) > 1 else []):
+        mine = [r for r in table if trace in ("all", r["held_out"])]
         ratios = [r["vs_best"] for r in mine]
         out.append({"held_out": trace, "runs": len(mine), "beats_robust": sum(r["beats_robust"] for r in mine),
                     "near_best": sum(r["near_best"] for r in mine),
@@ -100,6 +102,17 @@ def worst_case(path: Path) -> list[float]:
     """Per axis, the largest p90 |attitude error| [deg] over the cases of a ``robustness.json``."""
     cases = json.loads(path.read_text())["cases"]
     return [max(float(case["p90_deg"][a]) for case in cases.values()) for a in AXES]
+
+
+def degradation(run: Path) -> dict | None:
+    """Per case of the agent's robustness check (nominal left out), its p90 per axis as a multiple of its
+    nominal p90; None when the run holds no check of its agent."""
+    path = run / ROBUST_AGENT / "robustness.json"
+    if not path.is_file():
+        return None
+    cases = list(json.loads(path.read_text())["cases"].items())
+    nominal = cases[0][1]["p90_deg"]
+    return {name: [float(case["p90_deg"][a]) / float(nominal[a]) for a in AXES] for name, case in cases[1:]}
 
 
 def robust_row(run: Path) -> dict | None:
@@ -152,6 +165,14 @@ def main(argv=None) -> int:
                   f"| {'yes' if r['near'] else 'no'} |")
         print(f"\nWithin 10 % of the best PD's worst case on two axes or more: {sum(r['near'] for r in restated)} "
               f"of {len(restated)} runs with robustness checks.")
+    checked = [(run.name, d) for run, d in ((run, degradation(run)) for run in args.runs) if d]
+    if checked:
+        cases = list(checked[0][1])
+        print("\nEach agent's p90 over the robustness check as a multiple of its nominal p90 (roll / pitch / yaw):\n")
+        print("| run | " + " | ".join(cases) + " |")
+        print("|---|" + "---|" * len(cases))
+        for name, d in checked:
+            print(f"| {name} | " + " | ".join(f"×{_fmt(d.get(c, [float('nan')] * 3), 2)}" for c in cases) + " |")
     return 0
 
 
