@@ -78,9 +78,9 @@ def add_learning_options(p) -> None:
                    help="with --residual: each training copy has a twin flying the PD alone on the same gusts, start "
                    "and sensor noise, and the residual is rewarded for the difference (twice the env copies; the "
                    "default; --no-paired-baseline: each copy's own return)")
-    p.add_argument("--history", type=whole(1), default=1, metavar="N",
-                   help="with --residual: the policy sees the last N observations side by side (default 1), so it "
-                   "can tell what the servo delay still holds and what the gust is doing")
+    p.add_argument("--history", type=whole(1), default=None, metavar="N",
+                   help="with --residual: the policy sees the last N observations side by side (default 4; 1: the "
+                   "current one only), so it can tell what the servo delay still holds and what the gust is doing")
     p.add_argument("--normalize-obs", action="store_true",
                    help="standardise observations by running statistics of the training rollouts (SB3's "
                    "VecNormalize, kept inside the policy so the saved agent takes raw observations); default: "

@@ -382,14 +382,18 @@ def residual_run(ideal, tmp_path_factory):
 def test_residual_agent_is_the_pd_plus_a_bounded_correction(residual_run):
     from controllers.residual import ResidualAgent
 
+    from controllers.residual import stack_observations
+
     agent = load_agent(residual_run.path)
     assert isinstance(agent, ResidualAgent) and agent.scale == 0.05
     assert agent.base.gains == BEST_PD.gains and agent.base.signs == BEST_PD.signs
+    assert agent.history == 4  # a residual's default: its policy sees the last 4 observations
     obs = np.random.default_rng(2).normal(0, 2e-4, (64, 12)).astype(np.float32)
     act, _ = agent.predict(obs, deterministic=True)
     pd_act, _ = BEST_PD.predict(obs)
     assert np.all(np.abs(act - pd_act) <= 0.05 + 1e-6)
-    residual, _ = residual_run.agent.predict(obs, deterministic=True)
+    # the policy saw this observation after three empty ones (a fresh episode's stack)
+    residual, _ = residual_run.agent.predict(stack_observations(obs, None, None, 4), deterministic=True)
     assert_array_equal(act, np.clip(BEST_PD.command(obs) + 0.05 * residual, -1, 1).astype(np.float32))
     assert isinstance(load_agent(residual_run.best_model), ResidualAgent)  # the best model carries its base too
 
@@ -554,6 +558,9 @@ def test_a_residual_with_history_trains_and_flies(ideal, tmp_path):
     assert np.isfinite(result.metrics["roll"]["att_p90_deg"])
     with pytest.raises(AgentError, match="history"):
         make_config(history=2)  # without a residual
+    # a residual sees its last 4 observations unless told otherwise; a whole policy the current one
+    assert make_config(residual=BEST_PD).stacked == 4 and make_config().stacked == 1
+    assert make_config(residual=BEST_PD, history=1).stacked == 1
 
 
 def test_observation_normalizer_is_vecnormalize_inside_the_policy():
@@ -594,7 +601,8 @@ def test_normalized_observations_learn_from_training_rollouts_only(shipped, tmp_
     agent = load_agent(res.path)
     loaded = [m for m in agent.policy.policy.modules() if isinstance(m, ObservationNormalizer)]
     assert_array_equal(loaded[0].mean.numpy(), norms[0].mean.numpy())
-    obs = np.random.default_rng(0).normal(0.0, 0.01, (5, 12)).astype(np.float32)
+    seen = res.agent.observation_space.shape[0]  # 4 stacked observations: a residual's default history
+    obs = np.random.default_rng(0).normal(0.0, 0.01, (5, seen)).astype(np.float32)
     assert_array_equal(agent.policy.predict(obs, deterministic=True)[0], res.agent.predict(obs, deterministic=True)[0])
 
 
@@ -758,7 +766,10 @@ def test_rl_targets_reads_the_runs_and_says_which_meet_the_targets(tmp_path, cap
     twin = _comparison(tmp_path / "x1", {**pds, "PPO-RESIDUAL": (0.10, 0.108, 0.14)}, held_out=0)
     assert targets.main([str(other), str(twin)]) == 0
     out = capsys.readouterr().out
-    assert "| 0 | 2 | 1 | 1 | 1.05 / 1.10 / 1.21 | 1.10 / 1.20 / 1.25 |" in out
+    assert "| 0 | 2 | 1 | 1 | 1.05 / 1.10 / 1.21 | 1.10 / 1.20 / 1.25 |" in out and "| all |" not in out
+    assert targets.main([str(good), str(other)]) == 0  # runs on two traces: each, then all of them
+    out = capsys.readouterr().out
+    assert "| 0 | 1 | 1 | 1 |" in out and "| all | 2 | 2 | 2 | 1.07 / 1.05 / 1.46 | 1.10 / 1.10 / 1.67 |" in out
     # the restated target: worst p90 over the robustness check against the best PD's worst
     def robustness(folder, sub, cases):
         (folder / sub).mkdir()
@@ -771,6 +782,7 @@ def test_rl_targets_reads_the_runs_and_says_which_meet_the_targets(tmp_path, cap
     out = capsys.readouterr().out
     assert "| s0 | 0.200 / 0.100 / 0.300 | 0.110 / 0.095 / 1.200 | 1.82 / 1.05 / 0.25 | yes |" in out
     assert "best PD's worst case on two axes or more: 1 of 1 runs with robustness checks" in out
+    assert "| s0 | ×1.90 / 1.01 / 1.50 |" in out  # the agent's degradation: +20 ms over its nominal p90
     with pytest.raises(ValueError, match="no PD best swept row"):
         targets.rows(_comparison(tmp_path / "s2", {"PD robust swept": (1, 1, 1), "PPO": (1, 1, 1)}), None)
     with pytest.raises(FileNotFoundError, match="no comparison.json"):

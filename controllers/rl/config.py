@@ -62,6 +62,13 @@ best swept PD's yaw rate activity twice its attitude error, so the reward prefer
 yaw than the figure compared (p90 |attitude error|); with 0.01, seeds 0-2 came out better on every axis
 (yaw 1.19-1.26 -> 1.04-1.17 of the best PD; docs/controllers.md)."""
 
+RESIDUAL_HISTORY = 4
+"""Observations a residual's policy sees side by side by default (:attr:`TrainConfig.history`). With the
+last one only, the residuals learned a yaw law that leans on the identified delay: 20 ms more servo delay
+multiplied their yaw p90 by 2.06-3.12 (9 runs: seeds 0-2 on each of the three held-out traces); with 4,
+by 1.26-1.69, at about the same nominal error (p90 / best PD, mean of the 9 runs: roll 1.15 -> 1.16,
+pitch 0.98 -> 0.96, yaw 1.10 -> 1.11; docs/controllers.md)."""
+
 DELAY_LEVELS = 4
 """Servo delays flown side by side with :attr:`TrainConfig.delay_spread` (evenly spaced over the spread)."""
 
@@ -176,11 +183,11 @@ class TrainConfig:
         throughout. The held-out evaluations always fly the full gusts.
     curriculum_start : float
         Gust multiplier of the first training episodes with a curriculum, in [0, 1) (default 0.5).
-    history : int
+    history : int, optional
         With ``residual``: the policy sees the last ``history`` observations side by side (SB3's
-        ``VecFrameStack``; 1, the default, the current one). Past actions and rates let it infer
-        what the servo delay still holds and what the gust is doing, which no single observation
-        shows. In [1, 16].
+        ``VecFrameStack``; 1 the current one only). Past actions and rates let it infer what the
+        servo delay still holds and what the gust is doing, which no single observation shows. In
+        [1, 16]; default :data:`RESIDUAL_HISTORY` with ``residual``, else 1 (:attr:`stacked`).
     reward_reference : PDController or path, optional
         With ``residual`` and ``axis_balance``: weigh each axis of the reward by the error this PD
         leaves on the training gusts instead of the base's own (:func:`controllers.rl.train.residual_setup`).
@@ -227,7 +234,7 @@ class TrainConfig:
     surrogates: int = 0
     axis_balance: bool = True
     paired_baseline: bool = True
-    history: int = 1
+    history: int | None = None
     normalize_obs: bool = False
     lr_schedule: str = "constant"
     reward_weights: tuple | None = None
@@ -276,8 +283,9 @@ class TrainConfig:
         if self.residual is not None:
             object.__setattr__(self, "residual", as_base(self.residual))
             object.__setattr__(self, "residual_scale", check_scale(self.residual_scale))
-        object.__setattr__(self, "history", check_history(self.history))
-        if self.history > 1 and self.residual is None:
+        if self.history is not None:
+            object.__setattr__(self, "history", check_history(self.history))
+        if self.residual is None and self.stacked > 1:
             raise AgentError(f"history (observations stacked) is for residual agents; got history={self.history} "
                              "without residual")
         if self.reward_reference is not None:
@@ -293,6 +301,13 @@ class TrainConfig:
         """(roll/pitch range [deg], rate range [deg/s]) of the episodes' starts, defaults filled in."""
         default = RESIDUAL_INIT_DEG if self.residual is not None else INIT_DEG
         return tuple(default if v is None else v for v in (self.init_angle_deg, self.init_rate_deg))
+
+    @property
+    def stacked(self) -> int:
+        """Observations the policy sees side by side (``history``, its default filled in)."""
+        if self.history is not None:
+            return self.history
+        return RESIDUAL_HISTORY if self.residual is not None else 1
 
     @property
     def delay_groups(self) -> list[tuple[float, int]]:

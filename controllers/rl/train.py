@@ -217,7 +217,7 @@ def _train(config: TrainConfig, env_model, out, split, segments, progress, verbo
         from ..sb3_training import CurriculumProgress
 
         callbacks = (CurriculumProgress(curriculum), *callbacks)
-    _scale_observations(hyper, setup, config.history, config.normalize_obs)
+    _scale_observations(hyper, setup, config.stacked, config.normalize_obs)
     agent = _algo_class(config.algo)("MlpPolicy", env, seed=config.seed, device="cpu", verbose=verbose,
                                      **{**hyper, "learning_rate": config.learning_rate(hyper)})
     # SB3's own logger would make an empty SB3-<date> folder in the system's temp folder on
@@ -361,10 +361,10 @@ def _environments(config: TrainConfig, env_model, task, segments, gamma: float):
         base, scale = config.residual, config.residual_scale
         envs, eval_env = [residual_env(e, base, scale, paired) for e in envs], residual_env(eval_env, base, scale)
     env = envs[0] if len(envs) == 1 else ConcatVecEnv(envs)  # a paired residual's twins stay within their group
-    if config.residual is not None and config.history > 1:
+    if config.stacked > 1:  # a residual's (TrainConfig refuses a history without one)
         from stable_baselines3.common.vec_env import VecFrameStack
 
-        env, eval_env = VecFrameStack(env, config.history), VecFrameStack(eval_env, config.history)
+        env, eval_env = VecFrameStack(env, config.stacked), VecFrameStack(eval_env, config.stacked)
     env, eval_env = VecMonitor(env), VecMonitor(eval_env)  # monitors the raw returns
     if config.reward_normalized:  # the eval env is wrapped alike (EvalCallback syncs wrappers) but left raw
         env = VecNormalize(env, norm_obs=False, norm_reward=True, gamma=gamma)
@@ -417,7 +417,7 @@ def _metadata(config: TrainConfig, env_model, split, segments, task, dt: float, 
         "paired_baseline": config.residual is not None and config.paired_baseline,
         "reward_reference": None if config.reward_reference is None else config.reward_reference.document(),
         "residual": None if config.residual is None else residual_metadata(config.residual, config.residual_scale,
-                                                                            setup, config.history),
+                                                                            setup, config.stacked),
         "hyperparameters": _plain(hyper),
         "versions": {"stable_baselines3": sb3.__version__, "torch": _torch_version()},
     })
