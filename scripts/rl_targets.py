@@ -68,7 +68,8 @@ def rows(run: Path, agent: str | None) -> list[dict]:
         robust = [v / r for v, r in zip(values, table[ROBUST])]
         best = [v / b for v, b in zip(values, table[BEST])]
         training = report.get("training", {}).get(name.lower(), {})
-        out.append({"run": run.name, "held_out": held_out(report), "agent": name, "p90": values, "vs_robust": robust, "vs_best": best,
+        out.append({"run": run.name, "held_out": held_out(report), "agent": name, "p90": values,
+                    "vs_robust": robust, "vs_best": best,
                     "beats_robust": all(r < 1.0 for r in robust), "near_best": near(best),
                     "timesteps": training.get("timesteps"), "seconds": training.get("seconds")})
     return out
@@ -90,7 +91,8 @@ def by_trace(table: list[dict]) -> list[dict]:
         ratios = [r["vs_best"] for r in mine]
         out.append({"held_out": trace, "runs": len(mine), "beats_robust": sum(r["beats_robust"] for r in mine),
                     "near_best": sum(r["near_best"] for r in mine),
-                    "mean": [sum(axis) / len(axis) for axis in zip(*ratios)], "worst": [max(axis) for axis in zip(*ratios)]})
+                    "mean": [sum(axis) / len(axis) for axis in zip(*ratios)],
+                    "worst": [max(axis) for axis in zip(*ratios)]})
     return out
 
 

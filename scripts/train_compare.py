@@ -46,8 +46,7 @@ import numpy as np
 
 from controllers.evaluate import comparison_markdown, evaluate_agent, plot_episode
 from controllers.pd import PDController, PDGains, design_gains, loop_analysis
-from controllers.rl import RESIDUAL_SCALE, load_agent, split_traces, train_agent
-from controllers.rl.config import RESIDUAL_HISTORY
+from controllers.rl import RESIDUAL_HISTORY, RESIDUAL_SCALE, load_agent, split_traces, train_agent
 from controllers.sweep import sweep_pairs
 from controllers.trace_split import draw_windows
 from heli_cli.train import add_learning_options, learning_settings
@@ -250,8 +249,8 @@ def _training_notes(args, training: dict, agents: list) -> list[str]:
              + ("; raw rewards" if args.no_reward_normalisation else "")
              + ("; every axis scaled by the worst one" if args.no_axis_balance else "")
              + ("" if args.paired_baseline else "; no paired PD baseline")
-             + (f"; a residual sees its last {args.history or RESIDUAL_HISTORY} observations" if "residual" in args.algos
-                else "")
+             + (f"; a residual sees its last {args.history or RESIDUAL_HISTORY} observations"
+                if "residual" in args.algos else "")
              + (f"; servo delay spread ±{1e3 * args.delay_spread:g} ms in training" if args.delay_spread else "")
              + ("; running observation statistics" if args.normalize_obs else "")
              + (f"; learning rate to 0 at {args.timesteps} steps" if args.lr_schedule == "linear" else "")

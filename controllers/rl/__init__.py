@@ -20,14 +20,14 @@ and torch are the ``rl`` extra, imported when an agent is trained or loaded.
 
 from ..trace_split import TraceSegment, TraceSplit, WindowSampler, as_segments, split_traces
 from .agent_file import AGENT_SCHEMA, AGENT_SCHEMA_VERSION, ALGOS, METADATA_FILE, agent_metadata, load_agent
-from .config import (DEFAULT_KWARGS, RESIDUAL_KWARGS, RESIDUAL_REWARD_WEIGHTS, RESIDUAL_SDE_KWARGS, TrainConfig,
-                     make_config)
+from .config import (DEFAULT_KWARGS, RESIDUAL_HISTORY, RESIDUAL_KWARGS, RESIDUAL_REWARD_WEIGHTS, RESIDUAL_SDE_KWARGS,
+                     TrainConfig, make_config)
 from .residual_agent import RESIDUAL_INIT_DEG, RESIDUAL_SCALE, residual_from_metadata, residual_metadata
 from .seeds import train_seeds
 from .train import TrainingResult, train_agent
 
 __all__ = ["AGENT_SCHEMA", "AGENT_SCHEMA_VERSION", "ALGOS", "DEFAULT_KWARGS", "METADATA_FILE",
-           "RESIDUAL_INIT_DEG", "RESIDUAL_KWARGS", "RESIDUAL_REWARD_WEIGHTS", "RESIDUAL_SCALE", "RESIDUAL_SDE_KWARGS",
-           "TraceSegment", "TraceSplit", "TrainConfig", "TrainingResult", "WindowSampler",
+           "RESIDUAL_HISTORY", "RESIDUAL_INIT_DEG", "RESIDUAL_KWARGS", "RESIDUAL_REWARD_WEIGHTS", "RESIDUAL_SCALE",
+           "RESIDUAL_SDE_KWARGS", "TraceSegment", "TraceSplit", "TrainConfig", "TrainingResult", "WindowSampler",
            "agent_metadata", "as_segments", "load_agent", "make_config", "residual_from_metadata",
            "residual_metadata", "split_traces", "train_agent", "train_seeds"]

@@ -219,9 +219,8 @@ class ConcatVecEnv(VecEnv):
         return out
 
     def seed(self, seed: int | None = None):
-        if seed is None:  # as VecEnv.seed: one random base, each copy its own increment
-            seed = int(np.random.randint(0, np.iinfo(np.uint32).max, dtype=np.uint32))
-        return [s for e, part in zip(self.envs, self._slices) for s in e.seed(seed + part.start)]
+        base = super().seed(seed)[0]  # SB3's own: the given base, or a random one for None
+        return [s for e, part in zip(self.envs, self._slices) for s in e.seed(base + part.start)]
 
     def set_options(self, options=None) -> None:
         per_copy = options if isinstance(options, list) else [options] * self.num_envs
@@ -230,7 +229,7 @@ class ConcatVecEnv(VecEnv):
 
     def reset(self):
         obs = np.concatenate([e.reset() for e in self.envs])
-        self.reset_infos = [d for e in self.envs for d in (getattr(e, "reset_infos", None) or [{}] * e.num_envs)]
+        self.reset_infos = [d for e in self.envs for d in e.reset_infos]
         return obs
 
     def step_async(self, actions: np.ndarray) -> None:
