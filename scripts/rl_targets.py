@@ -20,9 +20,17 @@ Runs held out on different traces (``train_compare.py --split-seed``) are summed
 how many runs meet each target, and the mean and the worst ratio to the best PD per axis, so that a
 figure holding on one trace only shows as such.
 
+``--refly K`` measures how much the near-best verdict owes to the evaluation's draw: it flies each run's
+RL agent and its best swept PD again on the run's held-out trace, paired (the same gust windows and
+sensor noise for both), with K evaluation seeds of the run's own number of episodes each (seeds
+:data:`REFLY_SEED` onward, none of them the comparison's own). It prints each axis' ratio to the best PD
+over the K draws (lowest and highest), in how many of them the agent is near the best PD, and the ratio of
+the p90s over all K draws' episodes together: the held-out trace's figure with the window draw and the
+sensor noise averaged out.
+
 Usage::
 
-    python scripts/rl_targets.py RUN_DIR [RUN_DIR ...] [--agent PPO-RESIDUAL]
+    python scripts/rl_targets.py RUN_DIR [RUN_DIR ...] [--agent PPO-RESIDUAL] [--refly K [--model DIR]]
 """
 
 from __future__ import annotations
@@ -96,6 +104,62 @@ def by_trace(table: list[dict]) -> list[dict]:
     return out
 
 
+REFLY_SEED = 1000
+"""First evaluation seed of ``--refly`` (the comparisons fly seed = training seed + 1)."""
+AGENT_FILE, BEST_FILE = "ppo-residual.zip", "pd_swept.json"
+"""The files of a run ``--refly`` flies: its RL agent and its best swept PD."""
+
+
+def refly(run: Path, draws: int, model=None) -> dict:
+    """A run's agent and best swept PD flown on ``draws`` evaluation draws of its held-out trace (see the module's
+    docstring): per draw the agent's p90 per axis as a multiple of the PD's, and the same over all draws pooled.
+
+    Raises
+    ------
+    FileNotFoundError
+        The run folder lacks ``comparison.json``, its agent or its best PD.
+    ValueError
+        The model's library does not hold the run's held-out trace.
+    """
+    import numpy as np
+
+    from controllers.evaluate import EvaluationConfig, evaluate_agent
+    from controllers.rl.agent_file import load_agent
+    from controllers.trace_split import TraceSplit
+    from heli_env.model_dir import EnvModel, load_env_model
+
+    paths = [run / name for name in ("comparison.json", AGENT_FILE, BEST_FILE)]
+    missing = [p.name for p in paths if not p.is_file()]
+    if missing:
+        raise FileNotFoundError(f"{run}: no {', '.join(missing)} (expected the --out folder of "
+                                f"scripts/train_compare.py --algos ppo-residual)")
+    report = json.loads(paths[0].read_text())
+    settings = next(r["settings"] for r in report["results"] if r["summary"]["name"] == BEST)
+    env_model = model if isinstance(model, EnvModel) else load_env_model(model)
+    if settings["trace_ids_used"] != [env_model.trace_ids[s["trace"]] for s in settings["split"]["held_out"]]:
+        raise ValueError(f"{run} was evaluated on traces {settings['trace_ids_used']}; the model's library "
+                         f"({env_model.path}) holds {list(env_model.trace_ids)} at those places: pass the run's "
+                         f"model with --model")
+    agents = [load_agent(p) for p in paths[1:]]
+    split = TraceSplit.from_dict(settings["split"])
+    errors = [[], []]  # per agent, per draw: (samples, 3) |attitude error| [deg]
+    for k in range(draws):
+        config = EvaluationConfig(episodes_per_trace=settings["episodes_per_trace"],
+                                  episode_seconds=settings["episode_seconds"], seed=REFLY_SEED + k, split=split)
+        for mine, agent in zip(errors, agents):
+            rec = evaluate_agent(agent, env_model, config).samples
+            valid = np.arange(rec["att_err_deg"].shape[0])[:, None] < rec["steps"][None, :]
+            mine.append(np.abs(rec["att_err_deg"][valid]))
+    p90 = [[np.percentile(e, 90, axis=0) for e in mine] for mine in errors]
+    per_draw = [(a / b).tolist() for a, b in zip(*p90)]
+    pooled = (np.percentile(np.concatenate(errors[0]), 90, axis=0)
+              / np.percentile(np.concatenate(errors[1]), 90, axis=0)).tolist()
+    return {"run": run.name, "held_out": held_out(report), "draws": draws,
+            "episodes": draws * settings["episodes_per_trace"], "low": np.min(per_draw, axis=0).tolist(),
+            "high": np.max(per_draw, axis=0).tolist(), "near_draws": sum(near(r) for r in per_draw),
+            "pooled": pooled, "near": near(pooled)}
+
+
 ROBUST_AGENT, ROBUST_BEST = "robust", "robust_pd_best"
 """Sub-folders of a run holding ``heli evaluate --robustness`` of its RL agent and of its best swept PD."""
 
@@ -136,10 +200,17 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR")
     ap.add_argument("--agent", default=None, help="only this agent's rows (e.g. PPO-RESIDUAL)")
+    ap.add_argument("--refly", type=int, default=0, metavar="K",
+                    help="fly each run's agent and best PD again on K evaluation draws of its held-out trace and "
+                         "print the near-best figure's spread over them (default 0: off)")
+    ap.add_argument("--model", default=None, help="with --refly: the runs' model directory (default: the shipped one)")
     args = ap.parse_args(argv)
+    if args.refly < 0:
+        ap.error(f"--refly must be a number of draws >= 0, got {args.refly}")
     table = [row for run in args.runs for row in rows(run, args.agent)]
     print(f"Command: python scripts/rl_targets.py {' '.join(str(r) for r in args.runs)}"
-          + (f" --agent {args.agent}" if args.agent else "") + "\n")
+          + (f" --agent {args.agent}" if args.agent else "") + (f" --refly {args.refly}" if args.refly else "")
+          + (f" --model {args.model}" if args.model else "") + "\n")
     print("| run | agent | steps | p90 roll / pitch / yaw [°] | ÷ robust PD | ÷ best PD | beats robust | near best |")
     print("|---|---|---|---|---|---|---|---|")
     for r in table:
@@ -175,7 +246,30 @@ def main(argv=None) -> int:
         print("|---|" + "---|" * len(cases))
         for name, d in checked:
             print(f"| {name} | " + " | ".join(f"×{_fmt(d.get(c, [float('nan')] * 3), 2)}" for c in cases) + " |")
+    if args.refly:
+        print_refly([refly(run, args.refly, args.model) for run in args.runs])
     return 0
+
+
+def print_refly(table: list[dict]) -> None:
+    """The ``--refly`` tables: each run's ratio to the best PD over the draws, and per held-out trace."""
+    draws, episodes = table[0]["draws"], table[0]["episodes"]
+    print(f"\nFlown again on {draws} evaluation draws of the held-out trace (seeds {REFLY_SEED}-"
+          f"{REFLY_SEED + draws - 1}; the agent and its best PD on the same windows and sensor noise):\n")
+    print("| run | held out | ÷ best PD, lowest draw | highest draw | draws near best | "
+          f"pooled ({episodes} episodes) ÷ best PD | pooled near best |")
+    print("|---|---|---|---|---|---|---|")
+    for r in table:
+        print(f"| {r['run']} | {r['held_out']} | {_fmt(r['low'], 2)} | {_fmt(r['high'], 2)} "
+              f"| {r['near_draws']} of {r['draws']} | {_fmt(r['pooled'], 2)} | {'yes' if r['near'] else 'no'} |")
+    print("\n| held out | runs | pooled near best | mean pooled ÷ best PD | worst pooled ÷ best PD |")
+    print("|---|---|---|---|---|")
+    traces = list(dict.fromkeys(r["held_out"] for r in table))
+    for trace in traces + (["all"] if len(traces) > 1 else []):
+        mine = [r["pooled"] for r in table if trace in ("all", r["held_out"])]
+        hits = sum(r["near"] for r in table if trace in ("all", r["held_out"]))
+        print(f"| {trace} | {len(mine)} | {hits} | {_fmt([sum(a) / len(a) for a in zip(*mine)], 2)} "
+              f"| {_fmt([max(a) for a in zip(*mine)], 2)} |")
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 import zipfile
 from pathlib import Path
 
@@ -787,3 +788,47 @@ def test_rl_targets_reads_the_runs_and_says_which_meet_the_targets(tmp_path, cap
         targets.rows(_comparison(tmp_path / "s2", {"PD robust swept": (1, 1, 1), "PPO": (1, 1, 1)}), None)
     with pytest.raises(FileNotFoundError, match="no comparison.json"):
         targets.rows(tmp_path, None)
+
+
+def _flown_run(folder: Path, agent_file: Path, model, split_seed: int = 0) -> Path:
+    """A train_compare.py folder for ``--refly``: the agent, BEST_PD as its best swept PD, and a comparison.json
+    whose PD rows (best and a robust one) were flown on the held-out trace of ``split_seed`` (1 episode of 2 s)."""
+    from controllers.evaluate import evaluate_agent
+    from controllers.trace_split import split_traces
+
+    folder.mkdir()
+    shutil.copy(agent_file, folder / "ppo-residual.zip")
+    BEST_PD.save(folder / "pd_swept.json")
+    robust = PDController(PDGains([36.0, 54.0, 6.6], [2.6, 3.9, 0.37]), BEST_PD.signs)
+    results = [evaluate_agent(pd, model, episodes_per_trace=1, episode_seconds=2.0, name=name,
+                              split=split_traces(model.n_traces, seed=split_seed))
+               for pd, name in ((BEST_PD, "PD best swept"), (robust, "PD robust swept"))]
+    (folder / "comparison.json").write_text(json.dumps({"results": [r.to_dict() for r in results],
+                                                        "split": results[0].settings["split"]}))
+    return folder
+
+
+def test_rl_targets_refly_measures_the_near_best_verdict_over_evaluation_draws(residual_run, ideal, shipped,
+                                                                               tmp_path, capsys):
+    # the near-best figure rests on one draw of held-out windows and sensor noise: --refly flies the agent and
+    # its best PD again, paired, on several draws and pools them
+    targets = _rl_targets()
+    pd_file = BEST_PD.save(tmp_path / "pd.json")
+    same = targets.refly(_flown_run(tmp_path / "same", pd_file, shipped), 3, shipped)
+    # the PD against itself on the shipped model's noisy sensors: every draw pairs windows and noise exactly
+    assert same["low"] == same["high"] == same["pooled"] == [1.0, 1.0, 1.0]
+    assert same["near_draws"] == 3 and same["near"] and same["episodes"] == 3
+    run = _flown_run(tmp_path / "res", residual_run.path, ideal, split_seed=1)
+    first = targets.refly(run, 2, ideal)
+    assert first == targets.refly(run, 2, ideal)  # the same draws every time
+    assert first["held_out"] == "0" and 0 <= first["near_draws"] <= 2
+    assert all(lo <= hi for lo, hi in zip(first["low"], first["high"])) and min(first["pooled"]) > 0
+    assert first["pooled"] != [1.0, 1.0, 1.0]  # the residual flies otherwise than its PD
+    assert targets.main([str(run), "--refly", "2", "--model", str(ideal.path)]) == 0
+    out = capsys.readouterr().out
+    assert "Flown again on 2 evaluation draws" in out and "| res | 0 | " in out and "of 2 |" in out
+    with pytest.raises(ValueError, match="pass the run's model with --model"):
+        targets.refly(run, 1, shipped)  # another library at the run's held-out place
+    (run / "pd_swept.json").unlink()
+    with pytest.raises(FileNotFoundError, match="no pd_swept.json"):
+        targets.refly(run, 1, ideal)
