@@ -342,12 +342,16 @@ def test_bad_reward_reference_and_algo_kwargs(ideal_model_dir, tmp_path, capsys)
     assert "expected a JSON object" in capsys.readouterr().err
 
 
-def test_heli_train_help_names_the_residual_bound_it_uses(capsys):
+def test_heli_train_help_names_the_residual_bound_and_delay_levels_it_uses(capsys):
+    # the help states these as literals (importing the config at parse time costs a second): it must not drift
     from controllers.rl import RESIDUAL_SCALE
+    from controllers.rl.config import DELAY_LEVELS, MAX_DELAY_SPREAD
 
     with pytest.raises(SystemExit):
         main(["train", "--help"])
-    assert f"(default {RESIDUAL_SCALE:g}, controllers.rl.RESIDUAL_SCALE)" in " ".join(capsys.readouterr().out.split())
+    text = " ".join(capsys.readouterr().out.split())
+    assert f"(default {RESIDUAL_SCALE:g}, controllers.rl.RESIDUAL_SCALE)" in text
+    assert f"by {DELAY_LEVELS} evenly spaced values" in text and f"(at most {MAX_DELAY_SPREAD:g}," in text
 
 
 def test_heli_train_missing_model_dir(tmp_path, capsys):
