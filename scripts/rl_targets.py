@@ -89,13 +89,19 @@ def held_out(report: dict) -> str:
     return "+".join(str(s["trace"]) for s in segments) if segments else "?"
 
 
+def per_trace(table: list[dict]) -> list[tuple[str, list[dict]]]:
+    """The rows of each held-out trace (in order of first appearance), then all of them as "all" when there are
+    several traces."""
+    traces = list(dict.fromkeys(r["held_out"] for r in table))
+    return [(trace, [r for r in table if trace in ("all", r["held_out"])])
+            for trace in traces + (["all"] if len(traces) > 1 else [])]
+
+
 def by_trace(table: list[dict]) -> list[dict]:
     """Per held-out trace (in order of first appearance; then "all" when there are several): runs, how many
     meet each target, and the mean and the largest ratio to the best PD per axis."""
     out = []
-    traces = list(dict.fromkeys(r["held_out"] for r in table))
-    for trace in traces + (["all"] if len(traces) > 1 else []):
-        mine = [r for r in table if trace in ("all", r["held_out"])]
+    for trace, mine in per_trace(table):
         ratios = [r["vs_best"] for r in mine]
         out.append({"held_out": trace, "runs": len(mine), "beats_robust": sum(r["beats_robust"] for r in mine),
                     "near_best": sum(r["near_best"] for r in mine),
@@ -264,12 +270,10 @@ def print_refly(table: list[dict]) -> None:
               f"| {r['near_draws']} of {r['draws']} | {_fmt(r['pooled'], 2)} | {'yes' if r['near'] else 'no'} |")
     print("\n| held out | runs | pooled near best | mean pooled ÷ best PD | worst pooled ÷ best PD |")
     print("|---|---|---|---|---|")
-    traces = list(dict.fromkeys(r["held_out"] for r in table))
-    for trace in traces + (["all"] if len(traces) > 1 else []):
-        mine = [r["pooled"] for r in table if trace in ("all", r["held_out"])]
-        hits = sum(r["near"] for r in table if trace in ("all", r["held_out"]))
-        print(f"| {trace} | {len(mine)} | {hits} | {_fmt([sum(a) / len(a) for a in zip(*mine)], 2)} "
-              f"| {_fmt([max(a) for a in zip(*mine)], 2)} |")
+    for trace, mine in per_trace(table):
+        pooled = [r["pooled"] for r in mine]
+        print(f"| {trace} | {len(mine)} | {sum(r['near'] for r in mine)} "
+              f"| {_fmt([sum(a) / len(a) for a in zip(*pooled)], 2)} | {_fmt([max(a) for a in zip(*pooled)], 2)} |")
 
 
 if __name__ == "__main__":
