@@ -58,7 +58,7 @@ def register(sub):
                    "(default 0)")
     p.add_argument("--residual-scale", type=number("a number in (0, 2]", 0.0, 2.0, high_open=False),
                    default=None, metavar="STICK",
-                   help="bound of the residual in stick units (default 0.15, controllers.rl.RESIDUAL_SCALE)")
+                   help="bound of the residual in stick units (default 0.3, controllers.rl.RESIDUAL_SCALE)")
     p.add_argument("--reward-reference", metavar="PD.json", default=None,
                    help="with --residual: weigh each axis of the reward by the error this PD (e.g. the best pair of "
                    "'heli sweep') leaves on the training gusts, instead of the --residual PD's own")
