@@ -276,5 +276,16 @@ def print_refly(table: list[dict]) -> None:
               f"| {_fmt([sum(a) / len(a) for a in zip(*pooled)], 2)} | {_fmt([max(a) for a in zip(*pooled)], 2)} |")
 
 
+def _cli(argv=None) -> int:
+    """:func:`main` with a missing run file, a wrong report or model as one line on stderr and exit status 2."""
+    import sys
+
+    try:
+        return main(argv)
+    except (FileNotFoundError, ValueError) as e:  # EnvModelError is a ValueError
+        print(f"rl_targets.py: {type(e).__name__}: {e}", file=sys.stderr)
+        return 2
+
+
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(_cli())

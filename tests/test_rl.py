@@ -836,3 +836,6 @@ def test_rl_targets_refly_measures_the_near_best_verdict_over_evaluation_draws(r
     (run / "pd_swept.json").unlink()
     with pytest.raises(FileNotFoundError, match="no pd_swept.json"):
         targets.refly(run, 1, ideal)
+    assert targets._cli([str(run), "--refly", "1", "--model", str(ideal.path)]) == 2  # one line, no traceback
+    assert capsys.readouterr().err == (f"rl_targets.py: FileNotFoundError: {run}: no pd_swept.json (expected the "
+                                       "--out folder of scripts/train_compare.py --algos ppo-residual)\n")
