@@ -100,9 +100,9 @@ def add_learning_options(p) -> None:
     p.add_argument("--delay-spread", type=number("a delay spread in seconds >= 0", 0.0, low_open=False), default=0.0,
                    metavar="SECONDS",
                    help="domain randomisation of the servo delay: training copies fly the identified delay shifted by "
-                   "4 evenly spaced values from -SECONDS to +SECONDS (at most 0.1, controllers.rl.config.MAX_DELAY_SPREAD; "
-                   "default 0: as identified); the "
-                   "held-out evaluations fly it as identified")
+                   "4 evenly spaced values from -SECONDS to +SECONDS (at most 0.1, "
+                   "controllers.rl.config.MAX_DELAY_SPREAD; default 0: as identified); the held-out evaluations fly "
+                   "it as identified")
     p.add_argument("--algo-kwargs", type=json_object, default=None, metavar="JSON",
                    help="SB3 hyperparameters over the defaults, e.g. '{\"gamma\": 0.995}' or, for a residual, "
                    "'{\"use_sde\": false}' (white-noise exploration instead of the default gSDE)")

@@ -125,7 +125,7 @@ def refly(run: Path, draws: int, model=None) -> dict:
     FileNotFoundError
         The run folder lacks ``comparison.json``, its agent or its best PD.
     ValueError
-        The model's library does not hold the run's held-out trace.
+        The report has no best swept PD, or the model's library does not hold the run's held-out trace.
     """
     import numpy as np
 
@@ -140,7 +140,9 @@ def refly(run: Path, draws: int, model=None) -> dict:
         raise FileNotFoundError(f"{run}: no {', '.join(missing)} (expected the --out folder of "
                                 f"scripts/train_compare.py --algos ppo-residual)")
     report = json.loads(paths[0].read_text())
-    settings = next(r["settings"] for r in report["results"] if r["summary"]["name"] == BEST)
+    settings = next((r["settings"] for r in report["results"] if r["summary"]["name"] == BEST), None)
+    if settings is None:
+        raise ValueError(f"{paths[0]}: the run has no {BEST} row; expected a train_compare.py report")
     env_model = model if isinstance(model, EnvModel) else load_env_model(model)
     if settings["trace_ids_used"] != [env_model.trace_ids[s["trace"]] for s in settings["split"]["held_out"]]:
         raise ValueError(f"{run} was evaluated on traces {settings['trace_ids_used']}; the model's library "
