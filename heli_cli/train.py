@@ -69,8 +69,7 @@ def register(sub):
 def add_learning_options(p) -> None:
     """The options of how an agent learns (TrainConfig's ``axis_balance``, ``paired_baseline``, ``history``,
     ``normalize_obs``, ``lr_schedule``, ``reward_weights``, the gust curriculum, ``algo_kwargs``,
-    ``delay_spread``), shared with
-    ``scripts/train_compare.py``; :func:`learning_settings` reads them."""
+    ``delay_spread``), shared with ``scripts/train_compare.py``; :func:`learning_settings` reads them."""
     p.add_argument("--no-axis-balance", action="store_true",
                    help="scale a residual's reward and observations by its PD's worst axis on every axis (default: "
                    "each axis by its own error level, so that every axis counts alike in the reward)")

@@ -30,6 +30,8 @@ from heli_core.config import is_real
 
 TASKS = ("hold", "track", "rate")
 REFERENCES = ("steps", "smooth", "mixed")
+N_SINES = 2
+TWO_PI = 2.0 * math.pi
 
 
 def three_weights(value, name: str, labels: str) -> tuple:
@@ -41,10 +43,6 @@ def three_weights(value, name: str, labels: str) -> tuple:
     if len(weights) != 3 or not all(is_real(w) and w >= 0 for w in weights):
         raise ValueError(f"{name} must be 3 finite numbers >= 0 ({labels}), got {value!r}")
     return tuple(float(w) for w in weights)
-
-
-N_SINES = 2
-TWO_PI = 2.0 * math.pi
 
 
 @dataclass(frozen=True)

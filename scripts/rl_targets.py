@@ -102,12 +102,15 @@ def by_trace(table: list[dict]) -> list[dict]:
     meet each target, and the mean and the largest ratio to the best PD per axis."""
     out = []
     for trace, mine in per_trace(table):
-        ratios = [r["vs_best"] for r in mine]
+        mean, worst = mean_and_worst([r["vs_best"] for r in mine])
         out.append({"held_out": trace, "runs": len(mine), "beats_robust": sum(r["beats_robust"] for r in mine),
-                    "near_best": sum(r["near_best"] for r in mine),
-                    "mean": [sum(axis) / len(axis) for axis in zip(*ratios)],
-                    "worst": [max(axis) for axis in zip(*ratios)]})
+                    "near_best": sum(r["near_best"] for r in mine), "mean": mean, "worst": worst})
     return out
+
+
+def mean_and_worst(ratios: list[list[float]]) -> tuple[list[float], list[float]]:
+    """Per axis, the mean and the largest of several runs' ratios (one list of three per run)."""
+    return [sum(axis) / len(axis) for axis in zip(*ratios)], [max(axis) for axis in zip(*ratios)]
 
 
 REFLY_SEED = 1000
@@ -255,7 +258,10 @@ def main(argv=None) -> int:
         for name, d in checked:
             print(f"| {name} | " + " | ".join(f"×{_fmt(d.get(c, [float('nan')] * 3), 2)}" for c in cases) + " |")
     if args.refly:
-        print_refly([refly(run, args.refly, args.model) for run in args.runs])
+        from heli_env.model_dir import load_env_model
+
+        model = load_env_model(args.model)  # once for every run
+        print_refly([refly(run, args.refly, model) for run in args.runs])
     return 0
 
 
@@ -273,9 +279,8 @@ def print_refly(table: list[dict]) -> None:
     print("\n| held out | runs | pooled near best | mean pooled ÷ best PD | worst pooled ÷ best PD |")
     print("|---|---|---|---|---|")
     for trace, mine in per_trace(table):
-        pooled = [r["pooled"] for r in mine]
-        print(f"| {trace} | {len(mine)} | {sum(r['near'] for r in mine)} "
-              f"| {_fmt([sum(a) / len(a) for a in zip(*pooled)], 2)} | {_fmt([max(a) for a in zip(*pooled)], 2)} |")
+        mean, worst = mean_and_worst([r["pooled"] for r in mine])
+        print(f"| {trace} | {len(mine)} | {sum(r['near'] for r in mine)} | {_fmt(mean, 2)} | {_fmt(worst, 2)} |")
 
 
 def _cli(argv=None) -> int:
