@@ -284,7 +284,8 @@ def print_refly(table: list[dict]) -> None:
 
 
 def _cli(argv=None) -> int:
-    """:func:`main` with a missing run file, a wrong report or model as one line on stderr and exit status 2."""
+    """:func:`main` with a missing run file, a wrong report or model as one line on stderr and exit status 2, and
+    Ctrl-C as one line and 130."""
     import sys
 
     try:
@@ -292,6 +293,9 @@ def _cli(argv=None) -> int:
     except (FileNotFoundError, ValueError) as e:  # EnvModelError is a ValueError
         print(f"rl_targets.py: {type(e).__name__}: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # it writes nothing: the tables printed so far are all there is
+        print("rl_targets.py: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":
