@@ -39,9 +39,11 @@ def register(sub):
         "resampling, segment detection). Logs import as real loggers write them: a cut last message is dropped, "
         "0xFF/0x00 padding skipped, a restarted clock continued, a missing attitude reconstructed from the rates, "
         "each printed as a one-line warning and kept in the metadata; damage in the middle of a log needs "
-        "--allow-damaged. Nothing is written for a refused log.",
+        "--allow-damaged. An old ArduPilot text DataFlash log (.log, ArduCopter <= 3.0) is recognised and refused "
+        "in one line saying what it holds and what identification would need. Nothing is written for a refused log.",
     )
-    p.add_argument("log", metavar="LOG", help="PX4 .ulg, ArduPilot .bin, Betaflight/Rotorflight blackbox, or CSV")
+    p.add_argument("log", metavar="LOG", help="PX4 .ulg, ArduPilot .bin, Betaflight/Rotorflight blackbox, or CSV "
+                   "(an ArduPilot text .log is described and refused)")
     p.add_argument("--out", metavar="FLIGHT.csv", type=output_path, help="canonical CSV to write (required unless --list)")
     p.add_argument("--list", action="store_true",
                    help="list the logs in the file (a blackbox flash dump holds several) with their length and "

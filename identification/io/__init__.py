@@ -2,7 +2,9 @@
 
 :func:`read_log` reads any supported file, recognised by its content (not its
 name): the canonical CSV, PX4 ULog, ArduPilot DataFlash ``.bin`` and
-Betaflight/Rotorflight blackbox logs. The flight-controller formats need the
+Betaflight/Rotorflight blackbox logs. An old ArduPilot *text* DataFlash log is
+recognised and refused with :class:`InsufficientLogError`, whose one line says what
+it holds and what is missing (:mod:`.dataflash_text`). The flight-controller formats need the
 ``logs`` extra (pyulog, pymavlink, orangebox), imported only when used. What each
 format must contain, and how padding and several logs in one file are handled, is
 listed in :mod:`identification.io.container`.
@@ -24,18 +26,18 @@ from pathlib import Path
 
 from .csv_log import SERVO_COLUMNS, read_csv_flight, read_servo_csv, sticks_from_servos, write_csv_flight
 from .errors import (
-    DamagedLogError, InputSourceError, LogFormatError, LogSelectionError, MissingStreamError, NotAirborneError,
-    SegmentError,
+    DamagedLogError, InputSourceError, InsufficientLogError, LogFormatError, LogSelectionError, MissingStreamError,
+    NotAirborneError, SegmentError,
 )
 
 __all__ = [
     "read_csv_flight", "read_servo_csv", "sticks_from_servos", "write_csv_flight", "read_flight", "read_log",
     "detect_format", "list_logs", "LogFormatError", "DamagedLogError", "MissingStreamError", "InputSourceError",
-    "LogSelectionError", "NotAirborneError", "SegmentError", "FORMATS",
+    "LogSelectionError", "NotAirborneError", "SegmentError", "InsufficientLogError", "FORMATS",
 ]
 
-FORMATS = ("csv", "px4-ulog", "ardupilot-dataflash", "blackbox")
-"""Formats :func:`read_log` recognises."""
+FORMATS = ("csv", "px4-ulog", "ardupilot-dataflash", "ardupilot-dataflash-text", "blackbox")
+"""Formats :func:`read_log` recognises (a text DataFlash log only to describe and refuse it)."""
 
 
 def detect_format(path) -> str:
@@ -125,6 +127,8 @@ def read_log(path, inputs: str | None = None, segment=None, rate: float | None =
     ------
     LogFormatError, DamagedLogError, MissingStreamError
         The file cannot be read as a log, is damaged in the middle, or lacks a needed stream.
+    InsufficientLogError
+        An ArduPilot text DataFlash log: the message says what it holds and what identification needs.
     LogSelectionError
         ``log`` names no log of the file.
     InputSourceError
@@ -151,6 +155,10 @@ def read_log(path, inputs: str | None = None, segment=None, rate: float | None =
                                 "(only blackbox flash dumps hold several)")
     if fmt == "csv":
         return _read_csv(path, inputs, segment, calibration)
+    if fmt == "ardupilot-dataflash-text":
+        from .dataflash_text import load_dataflash_text
+
+        load_dataflash_text(path)  # raises InsufficientLogError
     from .raw_log import to_flight
 
     if fmt == "px4-ulog":
@@ -190,6 +198,10 @@ def list_logs(path, allow_damaged: bool = False) -> list[dict]:
         from .blackbox import blackbox_log_summaries
 
         return [{"format": "blackbox", **row} for row in blackbox_log_summaries(path, allow_damaged)]
+    if fmt == "ardupilot-dataflash-text":
+        from .dataflash_text import text_log_summary
+
+        return [{"log": 1, "format": fmt, **text_log_summary(path)}]
     row = {"log": 1, "format": fmt, "firmware": None, "start_s": None, "duration_s": None, "attitude": None,
            "airborne_s": None, "status": "ok"}
     try:

@@ -193,7 +193,7 @@ def load_ardupilot(path, allow_damaged: bool = False) -> RawLog:
         attitude = make_stream(att["t"], np.radians([att["Roll"], att["Pitch"], att["Yaw"]]), "ATT", angles=True)
     accel = make_stream(imu["t"], [imu["AccX"], imu["AccY"], imu["AccZ"]], "IMU.Acc")
 
-    firmware, vehicle, heli = _vehicle(texts, params)
+    firmware, vehicle, heli = vehicle_of(texts, params)
     if vehicle in ("fixed-wing", "ground vehicle"):
         tolerated.append(f"{firmware}: a {vehicle}, not a rotorcraft; the attitude models of this package describe "
                          "hovering helicopters, so read identification results of this log with care")
@@ -244,7 +244,7 @@ def _parse(path: Path, allow_damaged: bool):
     return cols, params, texts, tolerated, damage, meta_end
 
 
-def _vehicle(texts: list, params: dict) -> tuple[str, str, bool]:
+def vehicle_of(texts: list, params: dict) -> tuple[str, str, bool]:
     """(firmware string, vehicle, whether a helicopter) from the log's texts and parameters."""
     firmware = next((t for t in texts if "Copter" in t or "Plane" in t or "Rover" in t), "ArduPilot")
     heli = ("heli" in firmware.lower() or any(k.startswith(("H_SW", "H_SV", "H_COL")) for k in params)

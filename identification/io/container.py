@@ -25,6 +25,9 @@ ArduPilot DataFlash        The bytes 0xA3 0x95 0x80 (an FMT message) at the star
 (``.bin``)                 (GyrX/Y/Z); for inputs ``RATE`` (controller), ``RCIN`` + the ``RCMAP_*``/``RC<n>_*``
                            parameters (sticks) or ``RCOU`` on a helicopter (servos). ``ATT`` is used when
                            present.
+ArduPilot text DataFlash   A line ``FMT, 128, <length>, FMT, ...`` (the format record describing itself)
+(``.log``, ArduCopter      within the first :data:`DF_TEXT_HEAD` bytes, after a few header lines (firmware,
+<= 3.0)                    board). Recognised and described, never imported (:mod:`.dataflash_text`).
 Betaflight / Rotorflight   ``H Product:Blackbox flight data recorder`` at the start of each log (after any
 blackbox (``.bbl``,        padding); the header's field definitions; main-frame fields ``time`` and
 ``.bfl``, ``LOGnnn.TXT``)  ``gyroADC[0..2]``; for inputs ``axisP/I/D[0..2]`` (controller, Betaflight),
@@ -48,6 +51,7 @@ never treated as damage.
 from __future__ import annotations
 
 import contextlib
+import re
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -60,6 +64,10 @@ DF_HEAD = b"\xa3\x95\x80"
 """A DataFlash log starts with the header bytes 0xA3 0x95 and the FMT message type 0x80."""
 BLACKBOX_MAGIC = b"H Product:Blackbox flight data recorder"
 """Every blackbox log (also each one of several in a flash dump) starts with this header line."""
+DF_TEXT_FMT = re.compile(rb"^FMT,[ \t]*128,[ \t]*\d+,[ \t]*FMT,", re.MULTILINE)
+"""A text DataFlash log: the line of the FMT record that describes FMT itself (type 128)."""
+DF_TEXT_HEAD = 4096
+"""bytes: a text DataFlash log's FMT line for FMT lies within this many bytes of its start (header lines first)."""
 SIGNATURES = {"px4-ulog": ULOG_MAGIC, "ardupilot-dataflash": DF_HEAD, "blackbox": BLACKBOX_MAGIC}
 PAD = b"\xff\x00"
 """Bytes that erased flash (0xFF) or a pre-allocated file (0x00) is filled with."""
@@ -106,7 +114,7 @@ class Located:
     Attributes
     ----------
     format : str
-        ``"csv"``, ``"px4-ulog"``, ``"ardupilot-dataflash"`` or ``"blackbox"``.
+        ``"csv"``, ``"px4-ulog"``, ``"ardupilot-dataflash"``, ``"ardupilot-dataflash-text"`` or ``"blackbox"``.
     size : int
         File size [bytes].
     logs : tuple of Span
@@ -150,6 +158,8 @@ def locate_bytes(data: bytes, name: str = "file") -> Located:
         raise LogFormatError(f"{name}: the file holds only 0xFF/0x00 bytes ({size} bytes: erased flash or an "
                              "empty pre-allocated file); there is no log in it")
     fmt = next((f for f, magic in SIGNATURES.items() if data.startswith(magic, lead)), None)
+    if fmt is None and DF_TEXT_FMT.search(data, lead, lead + DF_TEXT_HEAD):
+        fmt = "ardupilot-dataflash-text"
     if fmt is None:
         first = data[lead:].split(b"\n", 1)[0].lstrip(b"\xef\xbb\xbf").decode("ascii", "replace")
         if not lead and "," in first and "time" in [c.strip() for c in first.split(",")]:
@@ -157,7 +167,8 @@ def locate_bytes(data: bytes, name: str = "file") -> Located:
         after = f" after {lead} bytes of 0xFF/0x00 padding" if lead else ""
         raise LogFormatError(
             f"{name}: unknown log format (first bytes{after} {data[lead:lead + 16]!r}); expected a canonical CSV "
-            "(header with 'time'), a PX4 ULog, an ArduPilot DataFlash .bin or a Betaflight/Rotorflight blackbox log"
+            "(header with 'time'), a PX4 ULog, an ArduPilot DataFlash .bin or text .log, or a Betaflight/Rotorflight "
+            "blackbox log"
         )
     trail = _trail_pad(data, lead, size)
     stop = size - trail

@@ -29,6 +29,15 @@ class MissingStreamError(LogFormatError):
     """The log lacks a stream the import needs (body rates, attitude, or the chosen input source)."""
 
 
+class InsufficientLogError(MissingStreamError):
+    """The log is recognised and read, but what it holds cannot identify attitude dynamics.
+
+    Raised for an ArduPilot text DataFlash log (:mod:`.dataflash_text`): the message says
+    what the log is (firmware, vehicle, length), what it holds (message types and rates) and
+    what is missing (gyro rates, an input stream, time stamps, a sample rate high enough).
+    """
+
+
 class LogSelectionError(FlightLogError):
     """``log=N`` names no log of the file (a blackbox flash dump holds several; ``heli import --list``)."""
 
