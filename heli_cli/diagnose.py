@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from .argtypes import number, output_path, whole
+from .argtypes import INPUT_HOLD_HELP, input_hold, number, output_path, whole
 
 
 def register(sub):
@@ -28,9 +28,7 @@ def register(sub):
                    help="ml: smallest likelihood-ratio statistic per added term accepted (default 10)")
     p.add_argument("--min-lr-alignment", type=number("a number >= 0", 0.0, low_open=False), default=None,
                    help="ml: smallest likelihood-ratio statistic of a servo delay / input shift (default 20)")
-    p.add_argument("--input-hold", choices=("auto", "linear", "zoh"), default="auto",
-                   help="ml: sticks between samples, 'linear' (a pilot) or 'zoh' (a flight controller's commands); "
-                   "'auto' (default) what the log says, else linear")
+    p.add_argument("--input-hold", type=input_hold, default="auto", help=INPUT_HOLD_HELP)
     p.add_argument("--folds", type=whole(2, 12), default=5,  # at most Diagnoser.min_windows (12)
                    help="integral: cross-validation blocks, 2 to 12 (default 5)")
     p.add_argument("--window", type=number("a positive number of seconds", 0.0),

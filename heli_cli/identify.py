@@ -6,7 +6,7 @@ import argparse
 import math
 import sys
 
-from .argtypes import number, output_path, whole
+from .argtypes import INPUT_HOLD_HELP, input_hold, number, output_path, whole
 
 
 def _seconds_or_auto(what: str, upper: float):
@@ -71,9 +71,8 @@ def register(sub):
     p.add_argument("--servo-lag", type=_lag, default=None,
                    help="ml: the servos' first-order lag: 'auto' (the likelihood profiled over 10-200 ms, kept only "
                    "where the data support it; eq. 31's d1) or seconds (default: none)")
-    p.add_argument("--input-hold", choices=("linear", "zoh"), default="linear",
-                   help="sticks between samples: 'linear' (a pilot's hand, default) or 'zoh' (commands a flight "
-                   "controller holds over each sample)")
+    p.add_argument("--input-hold", type=input_hold, default="auto",
+                   help=INPUT_HOLD_HELP + "; integral: 'auto' is 'linear'")
     p.add_argument("--wind-model", choices=("auto", "gm2", "gm_so"), default="auto",
                    help="ml: gust model per axis, 'gm2' two first-order Gauss-Markov processes, 'gm_so' a slow "
                    "first-order and a fast second-order one, 'auto' the more likely (default)")
@@ -114,7 +113,7 @@ def run(args) -> int:
                       "got --method integral", file=sys.stderr)
                 return 2
             kwargs = {"interval": args.interval, "delay": args.delay, "prefilter": not args.no_filter,
-                      "input_hold": args.input_hold}
+                      "input_hold": "linear" if args.input_hold == "auto" else args.input_hold}
         backend = flight_backend(args)
         try:
             run = identify_and_report(

@@ -20,8 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal
 
-from .state_space import (N_NONLINEAR, discrete_model, innovation_filters, kalman, servo_increments,
-                          strictly_proper_tf)
+from .state_space import (HOLD_INDEX, N_NONLINEAR, discrete_model, hold_fraction, innovation_filters, kalman,
+                          servo_increments, strictly_proper_tf)
 
 MIN_SERVO_DELAY = 1e-4
 """Delays below this are no delay (the Padé servo of eq. 31 degenerates at zero) [s]."""
@@ -35,7 +35,7 @@ class AxisData:
     regressors: list  # per flight (m, n_f): sign * feature, one offset column per flight
     names: tuple      # parameter names of the regressors (offsets as "kd1@0", "kd1@1", ...)
     dt: float
-    hold: str
+    hold: object  # the input's hold (name or fraction, state_space.hold_fraction): the search's start or fixed value
     burn: int
     wind_model: str = "gm2"
     servo_row: int | None = None  # regressor driven through the servo (eq. 31), or None
@@ -53,12 +53,13 @@ class AxisLikelihood:
         self.data = data
         self.free_tau = free_tau
         self.nw = N_NONLINEAR[data.wind_model]
-        """Length of the damping-and-wind part of the search vector; the servo delay follows when ``free_tau``."""
+        """Length of the model part of the search vector (damping, wind, hold fraction); the servo delay follows
+        when ``free_tau``."""
 
     def unpack(self, x):
         """(damping, T_slow, T_fast, var_slow/R, var_fast/R, zeta) from the search vector."""
         damping, lts, ltf, lqs, lqf = x[:5]
-        zeta = float(np.exp(x[5])) if self.nw > 5 else 1.0
+        zeta = float(np.exp(x[HOLD_INDEX + 1])) if self.nw > HOLD_INDEX + 1 else 1.0
         return (float(damping), float(np.exp(lts)), float(np.exp(ltf)), float(np.exp(lqs)), float(np.exp(lqf)),
                 zeta)
 
@@ -70,8 +71,13 @@ class AxisLikelihood:
         """
         return float(x[self.nw]) if self.free_tau else self.data.tau
 
+    @staticmethod
+    def hold_at(x) -> float:
+        """The input's hold fraction at ``x`` (0 held over the sample, 1 linearly interpolated)."""
+        return float(x[HOLD_INDEX])
+
     def discrete(self, x):
-        return discrete_model(*self.unpack(x), self.data.dt, self.data.hold, self.data.wind_model)
+        return discrete_model(*self.unpack(x), self.data.dt, self.hold_at(x), self.data.wind_model)
 
     def filtered(self, x):
         """Innovation-domain measurements ``y~`` (n,) and regressors ``Z`` (m, n), burn-in removed, and ``S``."""
@@ -93,7 +99,7 @@ class AxisLikelihood:
             for r in d.causal_rows:
                 Z[r] = signal.lfilter(b_c, a, X[r])
             if servo:
-                v = servo_increments(d.servo_sticks[i], x[0], max(tau, 0.0), d.dt, d.hold, d.lag)
+                v = servo_increments(d.servo_sticks[i], x[0], max(tau, 0.0), d.dt, self.hold_at(x), d.lag)
                 Z[d.servo_row] = signal.lfilter(b_v, a, v)
             zs.append(Z[:, d.burn:])
         return np.concatenate(ys), np.concatenate(zs, axis=1), S
@@ -115,40 +121,46 @@ class AxisLikelihood:
         yt, Z, _ = self.filtered(x)
         return yt - theta @ Z
 
-    def fisher(self, x, theta, mse: float, free_damping: bool = True) -> tuple[np.ndarray, float]:
+    def fisher(self, x, theta, mse: float, free_damping: bool = True, fixed=()) -> tuple[np.ndarray, float]:
         """Standard errors of ``(x, theta)`` at the optimum and the condition number of the column-normalised
         Fisher information (Gauss-Newton: de/dx by central differences, de/dtheta = -Z); ``mse`` is the mean
-        squared innovation. Without a damping term its column is zero."""
+        squared innovation. Entries of ``x`` not searched (``fixed`` indices; the damping of a structure
+        without one) are left out of the information and get a standard error of 0."""
         _, Z, _ = self.filtered(x)
         nx = len(x)
-        J = np.empty((Z.shape[1], nx + Z.shape[0]))
+        held = set(int(i) for i in fixed) | (set() if free_damping else {0})
+        J = np.zeros((Z.shape[1], nx + Z.shape[0]))
         for j in range(nx):
+            if j in held:
+                continue
             h = 1e-5 * max(1.0, abs(x[j]))
             xp, xm = x.copy(), x.copy()
             xp[j] += h
             xm[j] -= h
             J[:, j] = (self.residual_at(xp, theta) - self.residual_at(xm, theta)) / (2 * h)
         J[:, nx:] = -Z.T
-        if not free_damping:
-            J[:, 0] = 0.0
-        F = J.T @ J
+        keep = np.array([j not in held for j in range(J.shape[1])])
+        F = J[:, keep].T @ J[:, keep]
         dscale = np.sqrt(np.maximum(np.diag(F), 1e-300))
         Fn = F / np.outer(dscale, dscale)
         w = np.linalg.eigvalsh(Fn)
         cond = float(w[-1] / max(w[0], 1e-300))
-        se = np.sqrt(np.maximum(np.diag(np.linalg.pinv(Fn)) * mse, 0.0)) / dscale
+        se = np.zeros(J.shape[1])
+        se[keep] = np.sqrt(np.maximum(np.diag(np.linalg.pinv(Fn)) * mse, 0.0)) / dscale
         return se, cond
 
 
-def simulation_r2(data: AxisData, damping: float, theta) -> float:
-    """R^2 of the wind- and noise-free response to the inputs, each flight started at its first sample."""
+def simulation_r2(data: AxisData, damping: float, theta, hold=None) -> float:
+    """R^2 of the wind- and noise-free response to the inputs, each flight started at its first sample, the
+    inputs under ``hold`` (a name or fraction; default the data's)."""
     dt = data.dt
+    frac = hold_fraction(data.hold if hold is None else hold)
     ad = float(np.exp(-damping * dt))
     if abs(damping) > 1e-9:
         g = (1.0 - ad) / damping
-        g1 = (dt - g) / (damping * dt) if data.hold == "linear" else 0.0
+        g1 = frac * (dt - g) / (damping * dt)
     else:
-        g, g1 = dt, (dt / 2 if data.hold == "linear" else 0.0)
+        g, g1 = dt, frac * dt / 2
     g0 = g - g1
     num = den = 0.0
     for y, X in zip(data.y, data.regressors):

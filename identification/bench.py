@@ -7,7 +7,11 @@ flight. :data:`PAPER_LEVEL_CLOSED_LOOP_BROADBAND` names the cells of the headlin
 who fights broadband gusts at the paper's level (u_d 90 % half-width 0.09 in roll and pitch).
 The cell ``"independent"`` mimics the independent simulator of the turbulence issue: a PD pilot
 with a 0.18 s reaction, one-stick 0.3-3 Hz sweeps, gusts with a slow part (4 s) and a broadband
-part (0.35 s) at the paper's level, gyro noise and a 27 Hz vibration line.
+part (0.35 s) at the paper's level, gyro noise and a 27 Hz vibration line. The cell ``"held-sticks-pd"``
+is the same pilot (reacting to what he saw 0.18 s earlier) whose sticks reach the aircraft held over each
+10 ms sample, as a digital radio link or a flight controller delivers them, with a little white noise on the
+commands: the log does not say how its sticks move between samples, and an estimator that assumes either
+hold is biased on the other kind.
 
 ``heli simulate-flight --cell NAME`` writes a flight of a cell; ``scripts/identification_bias.py``
 identifies every cell over many seeds.
@@ -41,6 +45,7 @@ BENCH_CELLS: dict[str, FlightConfig] = {
     "dryden-0.2Hz-pid": FlightConfig(wind_model="dryden", wind_corner_hz=0.2),
     "dryden-2Hz-pd": FlightConfig(**_PD, wind_model="dryden", wind_corner_hz=2.0),
     "broadband-autopilot": FlightConfig(pilot="autopilot", pilot_bandwidth=4.0, **_BROADBAND),
+    "held-sticks-pd": FlightConfig(**_PD, **_BROADBAND, held_sticks=True, command_noise=0.01),
     "broadband-pd-noisy-gyro": FlightConfig(**_PD, **{**_BROADBAND, "vibration_lines": ((27.0, 0.06), (41.5, 0.04))},
                                             gyro_noise=0.03),
 }

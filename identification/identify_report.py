@@ -81,9 +81,12 @@ def method_sentence(ident) -> str:
 
     if isinstance(ident, MaximumLikelihoodIdentifier):
         winds = ", ".join(f"{a} {f.wind['model']}" for a, f in ident.axes_.items())
+        holds = ", ".join(f"{a} {f.input_hold:.2f}" for a, f in ident.axes_.items())
+        how = (f"a fraction of linear interpolation estimated per axis ({holds}; 0 held over the sample, 1 "
+               "interpolated)" if ident.input_hold == "auto" else f"a fixed hold ({ident.input_hold})")
         return ("Method: maximum likelihood (filter-error / prediction-error method): per axis the rate, a slow and "
                 "a fast Gauss-Markov gust entering as torque, white gyro noise; exact discretisation with the "
-                f"sticks {'linearly interpolated' if ident.input_hold == 'linear' else 'held'} between samples, "
+                f"sticks between samples as {how}, "
                 "steady-state Kalman filter, innovations minimised over the damping and the wind model with the "
                 f"linear parameters projected out; gust models chosen by likelihood ({winds}); standard errors "
                 "from the Fisher information; no prefilter (vibration lines removed by regression on their "

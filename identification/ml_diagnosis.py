@@ -46,8 +46,9 @@ from heli_core.terms import AXES, DECOUPLED, STICK_ROW, TERMS
 
 from .effects import CATALOGUE, MAX_ALIGNMENT, NONE, SERVO_DELAY, UNDECIDED, DiagnosisResult, implausible, shift_inputs
 from .flight import Flight
-from .ml_estimator import BURN_IN, MAX_DELAY, MAX_SHIFT, MaximumLikelihoodIdentifier, _AxisLikelihood
-from .state_space import WIND_MODELS, concentrated_nll, kalman, lti_apply
+from .axis_likelihood import AxisLikelihood as _AxisLikelihood
+from .ml_estimator import BURN_IN, MAX_DELAY, MAX_SHIFT, MaximumLikelihoodIdentifier, check_hold
+from .state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll, kalman, lti_apply
 
 ALPHA = 0.01
 """Family-wise level of the likelihood-ratio test per axis and round (Bonferroni over the candidates)."""
@@ -162,19 +163,6 @@ def ahead_r2(like: _AxisLikelihood, x, theta, horizon: int) -> float:
     return 1.0 - num / (den or 1.0)
 
 
-def hold_of(flight: Flight) -> str:
-    """How a log's inputs move between samples, as the log says: ``flight.metadata["input_hold"]`` when it
-    is ``"zoh"`` (a flight controller's commands, held over each sample) or ``"linear"``; ``"linear"`` (a
-    pilot's hand) when the log does not say.
-
-    The hold is how the log was made, not physics, and the likelihood cannot be trusted to choose it: read
-    as interpolated, a held command is half a sample of lag, while a missing effect (quadratic damping) made
-    held sticks the likelier on pilot flights (13 of the 14 whose diagnosis then missed an axis).
-    """
-    hold = flight.metadata.get("input_hold", "linear")
-    return hold if hold in ("linear", "zoh") else "linear"
-
-
 def _starting_structure(model: ModelParams | None) -> tuple[dict, list]:
     """Per axis the terms the diagnosis starts from (the paper's decoupled model, or ``model``'s nonzero
     terms), and the alignments (``model``'s servo delays)."""
@@ -188,8 +176,10 @@ def _starting_structure(model: ModelParams | None) -> tuple[dict, list]:
 
 
 def _fresh(x) -> np.ndarray:
-    """A second start for a search: the damping of ``x`` with the wind model's default starting values."""
-    return np.array([max(float(x[0]), 0.5), np.log(4.0), np.log(0.3), np.log(100.0), np.log(100.0)])
+    """A second start for a search: the damping and hold fraction of ``x`` with the wind model's default
+    starting values."""
+    return np.array([max(float(x[0]), 0.5), np.log(4.0), np.log(0.3), np.log(100.0), np.log(100.0),
+                     float(x[HOLD_INDEX])])
 
 
 class LikelihoodDiagnoser(DiagnosisResult):
@@ -207,9 +197,10 @@ class LikelihoodDiagnoser(DiagnosisResult):
         Largest number of add-and-refit rounds.
     min_duration : float
         Shortest flight decided on [s].
-    input_hold : {"auto", "linear", "zoh"}
+    input_hold : "auto", "linear", "zoh" or float in [0, 1]
         Sticks between samples (see :class:`~identification.ml_estimator.MaximumLikelihoodIdentifier`);
-        ``"auto"`` takes what the log says (:func:`hold_of`).
+        ``"auto"`` estimates the hold fraction with every other parameter, in the base model and in every
+        candidate alike, so that a hold is never read as an effect nor an effect as a hold.
     axes : sequence of str
         Axes diagnosed.
 
@@ -230,8 +221,10 @@ class LikelihoodDiagnoser(DiagnosisResult):
         The final model (terms added, delays as servo delays), fitted on the flight.
     alignment_ : tuple of 3 float
         Final alignment per axis [s] (> 0 servo delay, < 0 input shift of the log).
-    input_hold_ : str
-        The hold used.
+    input_hold_ : str or float
+        The hold setting used.
+    hold_fractions_ : dict of str to float
+        Per diagnosed axis, the final model's hold fraction (0 held over the sample, 1 interpolated).
     evidence_ : dict
     fit_time_ : float
     """
@@ -255,8 +248,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
         if not (isinstance(self.max_rounds, (int, np.integer)) and self.max_rounds >= 1):
             raise ValueError(f"max_rounds must be a whole number >= 1, got {self.max_rounds!r}")
-        if self.input_hold not in ("auto", "linear", "zoh"):
-            raise ValueError(f"input_hold must be 'auto', 'linear' or 'zoh', got {self.input_hold!r}")
+        check_hold(self.input_hold)
         bad = [a for a in self.axes if a not in AXES]
         if bad or not self.axes:
             raise ValueError(f"axes must be a non-empty subset of {AXES}, got {self.axes!r}")
@@ -358,7 +350,8 @@ class LikelihoodDiagnoser(DiagnosisResult):
     def _fit(self, flight: Flight, model: ModelParams | None):
         self.steps_, self.rounds_, self.effects_found_ = [], [], []
         self.evidence_ = {}
-        self.input_hold_ = hold_of(flight) if self.input_hold == "auto" else self.input_hold
+        self.input_hold_ = self.input_hold
+        self.hold_fractions_ = {}
         self._ident = MaximumLikelihoodIdentifier(input_hold=self.input_hold_)
         self._ident.allow_shift = True  # alignments below zero: a log whose input column lags
         cleaned, _ = self._ident._clean(flight)
@@ -470,6 +463,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
         final._fit([shift_inputs(cleaned, shifts) if min(shifts) < 0 else cleaned])
         self.identifier_ = final
         self.params_ = final.params_
+        self.hold_fractions_ = {axis: fit.input_hold for axis, fit in final.axes_.items()}
 
     def threshold(self, m: int, k: int, alignment: bool = False) -> float:
         """Acceptance threshold of a candidate adding ``k`` parameters among ``m`` tried on the axis (the
@@ -483,6 +477,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
             "rounds": self.rounds_,
             "closed_loop_share": self.closed_loop_,
             "input_hold": self.input_hold_,
+            "hold_fractions": self.hold_fractions_,
             "alignment_s": dict(zip(AXES, self.alignment_)),
             "r2_before": {a: s.r2 for a, s in self.baseline_.items()},
             "r2_after": {a: s.r2 for a, s in self.final_.items()},

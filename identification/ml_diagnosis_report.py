@@ -73,14 +73,23 @@ def _r2(r: dict) -> str:
            f"{r.get('simulation', float('nan')):.3f}"
 
 
+HELD = 0.5
+"""A hold fraction below this reads as sticks held over each sample (0 held, 1 interpolated)."""
+
+
 def flight_controller_note(d: LikelihoodDiagnoser) -> str | None:
-    """What the closed-loop share cannot show when the sticks are a flight controller's commands, else None."""
-    if getattr(d, "input_hold_", None) != "zoh":
+    """What the closed-loop share cannot show when the sticks are held over each sample (a flight controller's
+    commands, or a digital link's), else None."""
+    fractions = getattr(d, "hold_fractions_", {}) or {}
+    held = d.input_hold_ == "zoh" or (fractions and max(fractions.values()) < HELD)
+    if not held:
         return None
-    return ("The sticks are a flight controller's commands (held over each sample): it closes the loop within a "
-            "sample, faster than the 0.1-0.5 s the share looks at, so every axis is closed by it whatever the share "
-            "says; the effects are judged on what its corrections leave, with its gyro's vibration removed from the "
-            "commands and the rates alike.")
+    said = "set" if d.input_hold_ == "zoh" else \
+        "estimated hold fraction " + ", ".join(f"{a} {v:.2f}" for a, v in fractions.items())
+    return (f"The sticks reach the aircraft held over each sample ({said}; 0 held, 1 interpolated). If they are a "
+            "flight controller's commands, it closes the loop within a sample, faster than the 0.1-0.5 s the share "
+            "looks at, so every axis is closed by it whatever the share says; the effects are judged on what its "
+            "corrections leave, with its gyro's vibration removed from the commands and the rates alike.")
 
 
 def diagnosis_markdown(d: LikelihoodDiagnoser, figure: Path | None) -> str:

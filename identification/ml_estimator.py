@@ -57,7 +57,8 @@ from .errors import IdentifiabilityError, NotFittedError
 from .fit_warnings import require_moving_sticks
 from .flight import Flight
 from .integral_method import IntegralIdentifier
-from .state_space import N_NONLINEAR, WIND_MODELS, ZETA_BOUNDS, concentrated_nll, rts_smooth, wind_block
+from .state_space import (HOLD_INDEX, HOLDS, N_NONLINEAR, WIND_MODELS, ZETA_BOUNDS, concentrated_nll, hold_fraction,
+                          rts_smooth, wind_block)
 from .servo_lag import profile_lag
 from .vibration import remove_common_lines
 
@@ -90,7 +91,6 @@ SUPPORT_Z = 3.0
 TIME_CONSTANT_BOUNDS = ((0.8, 120.0), (0.02, 0.8))
 """Bounds of the slow and the fast gust time constants [s]."""
 
-_AxisLikelihood = AxisLikelihood  # the likelihood diagnosis imports it by its name from before it moved
 
 
 @dataclass(frozen=True)
@@ -162,6 +162,17 @@ class MLAxisFit:
     lag: float = 0.0
     lag_profile: tuple = ()
     lag_lr: float | None = None
+    input_hold: float = 1.0
+    input_hold_se: float | None = None
+
+
+def check_hold(hold) -> None:
+    """Raise ``ValueError`` unless ``hold`` is "auto", "linear", "zoh" or a fraction in [0, 1]."""
+    if hold == "auto" or hold in HOLDS:
+        return
+    if isinstance(hold, (int, float, np.integer, np.floating)) and not isinstance(hold, bool) and 0 <= hold <= 1:
+        return
+    raise ValueError(f"input_hold must be 'auto', 'linear', 'zoh' or a fraction in [0, 1], got {hold!r}")
 
 
 class MaximumLikelihoodIdentifier:
@@ -176,9 +187,12 @@ class MaximumLikelihoodIdentifier:
         Parameters to fit, as for :class:`~identification.integral_method.IntegralIdentifier`.
     extra_terms : sequence of str
         Catalogue terms fitted in addition (:data:`identification.terms.EXTRA_PARAMS`).
-    input_hold : {"linear", "zoh"}
-        Sticks between samples: linearly interpolated (a pilot's hand) or held
-        (a digital controller's commands).
+    input_hold : "auto", "linear", "zoh" or float in [0, 1]
+        How the sticks move between samples: ``u(t) = u_k + a (u_{k+1} - u_k) (t - t_k)/dt`` with ``a`` the
+        hold fraction, 1 (``"linear"``) a pilot's hand sampled, 0 (``"zoh"``) a command held over its sample
+        (a digital radio link, a flight controller). ``"auto"`` (default) estimates ``a`` per axis with every
+        other parameter, as MATLAB's ``greyest`` would with a free ``InterSample``: a log rarely says which,
+        and assuming the wrong one biases the damping by 15-19 % (docs/method.md).
     delay : None, float, sequence of 3 float, or "auto"
         Servo delay per axis [s] (Padé, eq. 31); "auto" profiles the likelihood
         over ``delay_grid`` (damping and wind held at the undelayed fit), then searches the delay jointly
@@ -219,7 +233,7 @@ class MaximumLikelihoodIdentifier:
 
     method = "maximum likelihood (filter error, Gauss-Markov wind)"
 
-    def __init__(self, structure="decoupled", extra_terms=(), input_hold: str = "linear", delay=None,
+    def __init__(self, structure="decoupled", extra_terms=(), input_hold="auto", delay=None,
                  delay_grid=None, wind_model: str = "auto", remove_vibration: bool = True,
                  vibration_min_hz: float = 8.0, axes=AXES, max_nfev: int = 100, select_terms: bool = False,
                  servo_lag=None):
@@ -249,8 +263,7 @@ class MaximumLikelihoodIdentifier:
 
     def _check_settings(self):
         self._lags()  # a bad servo_lag is named before any work
-        if self.input_hold not in ("linear", "zoh"):
-            raise ValueError(f"input_hold must be 'linear' or 'zoh', got {self.input_hold!r}")
+        check_hold(self.input_hold)
         if self.wind_model not in ("auto",) + WIND_MODELS:
             raise ValueError(f"wind_model must be 'auto' or one of {WIND_MODELS}, got {self.wind_model!r}")
         if not (isinstance(self.max_nfev, (int, np.integer)) and self.max_nfev >= 5):
@@ -375,36 +388,55 @@ class MaximumLikelihoodIdentifier:
             sign = TERMS[linear[command]].sign
             servo_sticks = [sign * np.asarray(f.sticks[STICK_ROW[a]], dtype=float) for f in flights]
         causal = tuple(j for j, p in enumerate(linear) if TERMS[p].feature in RATE_DEPENDENCE)
-        return AxisData(ys, Xs, reg_names, flights[0].dt, self.input_hold, burn, wind_model, command,
+        return AxisData(ys, Xs, reg_names, flights[0].dt, self._hold_start(), burn, wind_model, command,
                         servo_sticks, float(tau), causal, regressors, float(lag)), damping_name
 
     def _search(self, like: AxisLikelihood, x0, free_damping: bool, max_nfev=None, tau0: float = 0.0):
-        """Search the damping and the wind model (and the delay when ``like.free_tau``) from ``x0``, the
-        damping-and-wind part of a search vector (of either wind model) and ``tau0``."""
+        """Search the damping, the wind model and the input's hold fraction (and the delay when
+        ``like.free_tau``) from ``x0``, the model part of a search vector (of either wind model) and ``tau0``.
+        The damping stays at 0 without a damping term; the hold at the user's when one was set."""
         lo = np.array([-2.0, np.log(TIME_CONSTANT_BOUNDS[0][0]), np.log(TIME_CONSTANT_BOUNDS[1][0]),
-                       np.log(1e-4), np.log(1e-4), np.log(ZETA_BOUNDS[0])])
+                       np.log(1e-4), np.log(1e-4), 0.0, np.log(ZETA_BOUNDS[0])])
         hi = np.array([200.0, np.log(TIME_CONSTANT_BOUNDS[0][1]), np.log(TIME_CONSTANT_BOUNDS[1][1]),
-                       np.log(1e9), np.log(1e9), np.log(ZETA_BOUNDS[1])])
+                       np.log(1e9), np.log(1e9), 1.0, np.log(ZETA_BOUNDS[1])])
         x0 = np.asarray(x0, dtype=float)
-        start = list(x0[:5])
-        if like.nw > 5:
-            start.append(x0[5] if x0.size > 5 else np.log(0.8))
+        start = list(x0[:HOLD_INDEX]) + [x0[HOLD_INDEX] if x0.size > HOLD_INDEX else self._hold_start()]
+        if like.nw > HOLD_INDEX + 1:
+            start.append(x0[HOLD_INDEX + 1] if x0.size > HOLD_INDEX + 1 else np.log(0.8))
         lo, hi = list(lo[:like.nw]), list(hi[:like.nw])
         if like.free_tau:
             start.append(tau0)
             lo.append(-MAX_SHIFT if tau0 < 0 or self.allow_shift else 0.0)
             hi.append(MAX_DELAY)
         lo, hi = np.array(lo), np.array(hi)
-        x0 = np.clip(np.array(start), lo + 1e-9, hi - 1e-9)
-        if free_damping:
-            return optimize.least_squares(like.residual, x0, bounds=(lo, hi), x_scale="jac",
-                                          max_nfev=max_nfev or self.max_nfev, xtol=XTOL, ftol=FTOL)
-        # no damping term in the structure: the damping stays at zero
-        res = optimize.least_squares(lambda z: like.residual(np.concatenate([[0.0], z])), x0[1:],
-                                     bounds=(lo[1:], hi[1:]), x_scale="jac", max_nfev=max_nfev or self.max_nfev,
-                                     xtol=XTOL, ftol=FTOL)
-        res.x = np.concatenate([[0.0], res.x])
+        fixed = self._fixed(free_damping)
+        full = np.array(start)
+        for i, v in fixed.items():
+            full[i] = v
+        free = np.array([i not in fixed for i in range(full.size)])
+        z0 = np.clip(full[free], lo[free] + 1e-9, hi[free] - 1e-9)
+
+        def residual(z):
+            x = full.copy()
+            x[free] = z
+            return like.residual(x)
+
+        res = optimize.least_squares(residual, z0, bounds=(lo[free], hi[free]), x_scale="jac",
+                                     max_nfev=max_nfev or self.max_nfev, xtol=XTOL, ftol=FTOL)
+        full[free] = res.x
+        res.x = full
         return res
+
+    def _hold_start(self) -> float:
+        """The hold fraction a search starts from (estimated) or keeps (set by the user)."""
+        return 1.0 if self.input_hold == "auto" else hold_fraction(self.input_hold)
+
+    def _fixed(self, free_damping: bool = True) -> dict:
+        """Entries of the search vector that are not searched, with their values."""
+        fixed = {} if free_damping else {0: 0.0}
+        if self.input_hold != "auto":
+            fixed[HOLD_INDEX] = hold_fraction(self.input_hold)
+        return fixed
 
     def _per_kind(self, a, axis_params, flights, burn, tau, x0, models, free, max_nfev=None, free_tau=False,
                   lag=0.0):
@@ -435,7 +467,8 @@ class MaximumLikelihoodIdentifier:
         first, damping_name = self._axis_data(a, axis_params, flights[:1], burn, 0.0)
         free = damping_name is not None
         damping0 = float(-TERMS[damping_name].sign * start_params.get(damping_name)) if free else 0.0
-        x0 = np.array([max(damping0, 0.1) if free else 0.0, np.log(4.0), np.log(0.3), np.log(100.0), np.log(100.0)])
+        x0 = np.array([max(damping0, 0.1) if free else 0.0, np.log(4.0), np.log(0.3), np.log(100.0), np.log(100.0),
+                       self._hold_start()])
         models = WIND_MODELS if self.wind_model == "auto" else (self.wind_model,)
         fixed_lag = 0.0 if lag == "auto" else float(lag)
         profile = []
@@ -484,7 +517,7 @@ class MaximumLikelihoodIdentifier:
         n = e.size
         mse = float(np.mean(e ** 2))
         nx = len(x)
-        se, cond = like.fisher(x, theta, mse, free_damping=damping_name is not None)
+        se, cond = like.fisher(x, theta, mse, free_damping=damping_name is not None, fixed=self._fixed())
         damping, ts, tf, qs, qf, zeta = like.unpack(x)
         R = mse / S
         params, std = {}, {}
@@ -523,11 +556,13 @@ class MaximumLikelihoodIdentifier:
         }
         yall = np.concatenate([y[data.burn:] for y in data.y])
         ss = float(np.sum((yall - yall.mean()) ** 2)) or 1.0
+        hold = like.hold_at(x)
         return MLAxisFit(
-            AXES[a], params, std, tau, cond, simulation_r2(data, damping, theta),
+            AXES[a], params, std, tau, cond, simulation_r2(data, damping, theta, hold),
             (float(np.mean(like.residual(np.asarray(x)) ** 2)), mse), wind, float(np.sqrt(R)),
             float(0.5 * n * (np.log(2 * np.pi * mse) + 1.0)), int(n), offs, 1.0 - float(e @ e) / ss,
-            profile, state=np.asarray(x[:like.nw], dtype=float))
+            profile, state=np.asarray(x[:like.nw], dtype=float), input_hold=hold,
+            input_hold_se=float(se[HOLD_INDEX]) if HOLD_INDEX not in self._fixed() else None)
 
     # ----------------------------------------------------------------- use
     def _check_fitted(self):
@@ -571,7 +606,7 @@ class MaximumLikelihoodIdentifier:
                 if index is not None:
                     shift = fit.flight_offsets[index] - fit.params[off_name]
                 drive = drive + fit.params[off_name] + shift
-            states = rts_smooth(data.y[0], drive, *AxisLikelihood(data).unpack(fit.state), data.dt, data.hold,
+            states = rts_smooth(data.y[0], drive, *AxisLikelihood(data).unpack(fit.state), data.dt, fit.input_hold,
                                 fit.wind["model"])
             _, cw, _ = wind_block(fit.wind["model"], 1.0, 1.0)  # the same sum for every T, zeta
             out[a] = cw @ states[1:] + shift
@@ -590,6 +625,7 @@ class MaximumLikelihoodIdentifier:
                 "delay_profile": [list(p) for p in f.delay_profile],
                 "servo_lag_s": f.lag, "servo_lag_profile": [list(p) for p in f.lag_profile],
                 "servo_lag_lr": f.lag_lr,
+                "input_hold": f.input_hold, "input_hold_se": f.input_hold_se,
                 "mean_square_innovation": list(f.history),
             }
             for name, f in self.axes_.items()

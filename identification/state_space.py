@@ -31,9 +31,39 @@ zeta = 0.71, two cascaded first-order stages at zeta = 1)."""
 ZETA_BOUNDS = (0.2, 3.0)
 """Bounds of the fast second-order gust's damping ratio."""
 
-N_NONLINEAR = {"gm2": 5, "gm_so": 6}
-"""Parameters searched by the optimiser: damping, log T_slow, log T_fast, log(var_slow/R), log(var_fast/R),
-and for ``"gm_so"`` log zeta."""
+N_NONLINEAR = {"gm2": 6, "gm_so": 7}
+"""Length of the model part of the search vector: damping, log T_slow, log T_fast, log(var_slow/R),
+log(var_fast/R), the input's hold fraction (:data:`HOLD_INDEX`), and for ``"gm_so"`` log zeta. A part the
+caller fixes (the damping of a structure without one, a hold the user sets) stays in the vector, unsearched."""
+
+HOLD_INDEX = 5
+"""Index of the hold fraction in the search vector (the same for every wind model)."""
+
+HOLDS = {"linear": 1.0, "zoh": 0.0}
+"""The named holds as fractions of linear interpolation: a pilot's hand sampled (``"linear"``, first-order
+hold, MATLAB's ``InterSample`` 'foh') and a command held over its sample (``"zoh"``, a digital link or a
+flight controller)."""
+
+
+def hold_fraction(hold) -> float:
+    """The input's hold as a fraction ``a`` in [0, 1]: between samples ``u(t) = u_k + a (u_{k+1} - u_k) s``,
+    ``s = (t - t_k)/dt``; 0 is a zero-order hold, 1 linear interpolation (:data:`HOLDS` names both).
+
+    A number is taken as it is (the likelihood's derivatives step just past either end); the settings a
+    user gives are checked to lie in [0, 1] where they come in.
+
+    Raises
+    ------
+    ValueError
+        Neither a name of :data:`HOLDS` nor a finite number.
+    """
+    if isinstance(hold, str):
+        if hold in HOLDS:
+            return HOLDS[hold]
+    elif isinstance(hold, (int, float, np.integer, np.floating)) and not isinstance(hold, bool):
+        if np.isfinite(hold):
+            return float(hold)
+    raise ValueError(f"input hold must be 'linear', 'zoh' or a fraction in [0, 1], got {hold!r}")
 
 
 def wind_block(kind: str, t_slow: float, t_fast: float, zeta: float = 1.0):
@@ -64,8 +94,8 @@ def discrete_model(damping: float, t_slow: float, t_fast: float, q_slow: float, 
 
     State ``(rate, gust states...)``. Returns ``Ad``, the input vectors ``g0``,
     ``g1`` such that ``x[k+1] = Ad x[k] + g0 u[k] + g1 u[k+1]`` (``g1 = 0`` for a
-    held input) and the process-noise covariance ``Qd`` by Van Loan's method,
-    for stationary gust-torque variances ``q_slow``, ``q_fast``.
+    held input; ``hold`` a name or fraction, :func:`hold_fraction`) and the process-noise
+    covariance ``Qd`` by Van Loan's method, for stationary gust-torque variances ``q_slow``, ``q_fast``.
     """
     Aw, cw, cols = wind_block(kind, t_slow, t_fast, zeta)
     m = Aw.shape[0] + 1
@@ -80,10 +110,8 @@ def discrete_model(damping: float, t_slow: float, t_fast: float, q_slow: float, 
     E = expm(M)
     Ad = E[:m, :m]
     ga, gb = E[:m, m], E[:m, m + 1]
-    if hold == "linear":  # u(t) = u_k + (u_{k+1} - u_k) (t - t_k)/dt
-        g0, g1 = ga - gb, gb
-    else:
-        g0, g1 = ga, np.zeros(m)
+    frac = hold_fraction(hold)  # u(t) = u_k + frac (u_{k+1} - u_k) (t - t_k)/dt
+    g0, g1 = ga - frac * gb, frac * gb
     Qd = np.zeros((m, m))
     for q, col in zip((q_slow, q_fast), cols):  # unit intensities keep expm well scaled
         b = np.concatenate([[0.0], col])
@@ -154,7 +182,8 @@ def servo_increments(sticks, damping: float, tau: float, dt: float, hold: str, l
 
     The continuous system ``rate' = -damping*rate + f*u + g*z``, ``z' = (u - z)/d1``
     (the Padé servo split into feed-through ``f`` and state ``g``, :func:`identification.model.servo_coefficients`)
-    is discretised exactly with the stick held or linearly interpolated; returns
+    is discretised exactly with the stick held, linearly interpolated or a fraction between (``hold``,
+    :func:`hold_fraction`); returns
     ``v[k]``, the rate's increment from ``k`` to ``k+1`` due to the command (per unit
     control gain), so that the rate sees ``k2*v[k]`` as a one-sample input. The
     servo state starts settled on the first stick.
@@ -167,7 +196,8 @@ def servo_increments(sticks, damping: float, tau: float, dt: float, hold: str, l
     M[2, 3] = 1.0
     E = expm(M)
     ga, gb = E[:2, 2], E[:2, 3]
-    h0, h1 = (ga - gb, gb) if hold == "linear" else (ga, np.zeros(2))
+    frac = hold_fraction(hold)
+    h0, h1 = ga - frac * gb, frac * gb
     u = np.asarray(sticks, dtype=float)
     u_next = np.append(u[1:], u[-1])
     w = h0[1] * u + h1[1] * u_next

@@ -153,6 +153,14 @@ class FlightConfig:
         the true input (recorded late), < 0 it leads.
     autopilot_dterm_hz : float
         Corner of the autopilot's first-order low-pass on the gyro it flies on [Hz].
+    held_sticks : bool
+        The aircraft sees each logged stick held over its sample (a digital radio link or a flight
+        controller delivering the pilot's sticks at the log rate), not interpolated; the autopilot always
+        holds its commands.
+    command_noise : float
+        Standard deviation of white noise added to every logged command, sample by sample [stick units]
+        (a digital link's quantisation and the hand's tremor: what makes a held stick differ most from an
+        interpolated one).
     """
 
     duration: float = 300.0
@@ -182,6 +190,8 @@ class FlightConfig:
     vibration_lines: tuple = ()
     input_shift: float = 0.0
     autopilot_dterm_hz: float = 20.0
+    held_sticks: bool = False
+    command_noise: float = 0.0
 
     def __post_init__(self):
         wind = np.asarray(self.wind_level, dtype=float)
@@ -202,7 +212,7 @@ class FlightConfig:
             "input_shift": abs(self.input_shift) < self.duration / 2,
             "autopilot_dterm_hz": 0 < self.autopilot_dterm_hz < math.inf,
         }
-        for name in ("stick_noise", "collective_wander", "gyro_noise", "vibration", "attitude_noise"):
+        for name in ("stick_noise", "collective_wander", "gyro_noise", "vibration", "attitude_noise", "command_noise"):
             checks[name] = getattr(self, name) >= 0
         expected = {"wind_model": f"one of {WIND_MODELS}", "pilot": f"one of {PILOTS}",
                     "wind_slow_fraction": "a fraction in [0, 1]", "input_shift": "|shift| < half the duration",
@@ -416,6 +426,8 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
     col = np.clip(col, -1.0, 1.0)
     jitter = np.array([coloured_noise(rng, n, fs, 2.0, cfg.stick_noise) for _ in range(3)])
     errors = sensor_errors(rng, cfg, time)
+    if cfg.command_noise > 0:  # drawn last, so that flights without it keep their draws
+        jitter = jitter + rng.normal(0.0, cfg.command_noise, jitter.shape)
     states, sticks = _fly(params, cfg, sweep_schedule(time, cfg), jitter, col, torque, errors)
     true_rates = states[:, :3].T
     rates, att = _sensors(errors, true_rates, euler_from_quaternion(states[:, 6:10].T))
@@ -484,7 +496,7 @@ def _fly(params: ModelParams, cfg: FlightConfig, sweeps, jitter, col, torque, er
     # sub-step). A zero-order hold at the log rate would be a digital autopilot,
     # not a pilot, and would look like a half-sample lead to any identifier.
     u_next = None
-    hold = cfg.pilot == "autopilot"  # a flight controller holds its commands over the sample
+    hold = cfg.pilot == "autopilot" or cfg.held_sticks  # a flight controller or a digital link holds the sample
     for k in range(n):
         if sensed is None:
             hist_ang.append(euler_from_quaternion_scalar(x[6], x[7], x[8], x[9]))
@@ -571,7 +583,7 @@ def _logged_flight(cfg: FlightConfig, seed, effects, time, rates, att, sticks) -
         "seed": int(seed),
         "effects": list(effects),
         "input_source": "flight controller commands" if cfg.pilot == "autopilot" else "pilot sticks",
-        "input_hold": "zoh" if cfg.pilot == "autopilot" else "linear",
+        "input_hold": "zoh" if cfg.pilot == "autopilot" or cfg.held_sticks else "linear",
     }
     logged = np.ascontiguousarray(sticks.T)
     n = time.size

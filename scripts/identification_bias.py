@@ -43,18 +43,21 @@ def _one(job):
     from identification.integral_method import IntegralIdentifier
     from identification.ml_estimator import MaximumLikelihoodIdentifier
 
-    cell, seed, duration = job
+    cell, seed, duration, ml_hold = job
     with threadpool_limits(limits=1, user_api="blas"):
         sim = bench_flight(cell, seed, duration)
         truth = sim.truth.values()
-        hold = "zoh" if sim.config.pilot == "autopilot" else "linear"
+        # the ML estimator as `heli identify` runs it (the hold estimated), unless --hold names one; the
+        # integral method, which cannot estimate it, is told the truth
+        hold = "zoh" if sim.config.pilot == "autopilot" or sim.config.held_sticks else "linear"
         out = {"cell": cell, "seed": seed}
         t0 = time.perf_counter()
-        ml = MaximumLikelihoodIdentifier(input_hold=hold).fit(sim.flight)
+        ml = MaximumLikelihoodIdentifier(input_hold=hold if ml_hold == "truth" else ml_hold).fit(sim.flight)
         out["ml_time_s"] = time.perf_counter() - t0
         wind = ml.wind_torque(0)
         out["wind_corr"] = [float(np.corrcoef(wind[i], sim.wind_torque[i])[0, 1]) for i in range(3)]
         out["wind_models"] = [f.wind["model"] for f in ml.axes_.values()]
+        out["hold_fractions"] = [f.input_hold for f in ml.axes_.values()]
         integral = IntegralIdentifier(input_hold=hold).fit(sim.flight)
         for name, ident in (("ml", ml), ("integral", integral)):
             v = ident.params_.values()
@@ -74,7 +77,8 @@ def grid(args):
     unknown = [c for c in cells if c not in BENCH_CELLS]
     if unknown:
         raise SystemExit(f"unknown cells {unknown}; known: {', '.join(BENCH_CELLS)}")
-    jobs = [(c, s, args.duration) for c in cells for s in range(1, args.seeds + 1)]
+    hold = args.hold if args.hold in ("auto", "linear", "zoh", "truth") else float(args.hold)
+    jobs = [(c, s, args.duration, hold) for c in cells for s in range(1, args.seeds + 1)]
     from tqdm import tqdm
 
     if args.workers > 1:
@@ -85,16 +89,18 @@ def grid(args):
     by_cell = {c: [r for r in rows if r["cell"] == c] for c in cells}
     print(f"\nRelative error (%) against the truth: RMS over {args.seeds} seeds [worst |error|], "
           f"{args.duration:g} s flights at 100 Hz. Command: python scripts/identification_bias.py "
-          f"--seeds {args.seeds} --duration {args.duration:g}")
-    print("\n| cell | estimator | " + " | ".join(PARAMS) + " | smoother wind corr. (worst) |")
-    print("|---|---|" + "---|" * (len(PARAMS) + 1))
+          f"--seeds {args.seeds} --duration {args.duration:g} --hold {args.hold}")
+    print("\n| cell | estimator | " + " | ".join(PARAMS) + " | smoother wind corr. (worst) | hold fraction (range) |")
+    print("|---|---|" + "---|" * (len(PARAMS) + 2))
     for c in cells:
         for m in METHODS:
             rms, worst, _ = _stats(by_cell[c], m, PARAMS)
             cells_txt = [f"{a:.1f} [{b:.1f}]" for a, b in zip(rms, worst)]
             corr = np.array([r["wind_corr"] for r in by_cell[c]])
             extra = f"{corr.mean():.3f} ({corr.min():.3f})" if m == "ml" else ""
-            print(f"| {c} | {m} | " + " | ".join(cells_txt) + f" | {extra} |")
+            holds = np.array([r["hold_fractions"] for r in by_cell[c]])
+            hold_txt = f"{holds.mean():.2f} ({holds.min():.2f}-{holds.max():.2f})" if m == "ml" else ""
+            print(f"| {c} | {m} | " + " | ".join(cells_txt) + f" | {extra} | {hold_txt} |")
     head = [r for c in PAPER_LEVEL_CLOSED_LOOP_BROADBAND if c in by_cell for r in by_cell[c]]
     if head:
         print(f"\nHeadline: closed-loop, broadband-wind cells at the paper's level "
@@ -151,6 +157,9 @@ def main(argv=None):
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--cells", nargs="+", default=None, help="bench cells (default: all)")
     ap.add_argument("--json", default=None, help="also write every flight's errors to this JSON file")
+    ap.add_argument("--hold", default="auto",
+                    help="the ML estimator's input hold: 'auto' (default, as heli identify), 'linear', 'zoh', a "
+                         "fraction, or 'truth' (the cell's own, as this script did before the hold was estimated)")
     ap.add_argument("--integral-variants", action="store_true",
                     help="the earlier study of the integral method's offset variants over wind levels")
     ap.add_argument("--winds", type=float, nargs="+", default=[0.0, 0.045, 0.09, 0.18],
