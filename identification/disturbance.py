@@ -37,6 +37,14 @@ model's (the two differ by the estimator's noise; using eq. 47's keeps
 by :func:`identification.validation.validate_models`. The paper reports
 0.095 deg/s mean absolute roll-rate error.
 
+The trace a maximum-likelihood identification stores. With the wind-state
+estimator the library does not store eq. (46)'s profile but the wind its
+Rauch-Tung-Striebel smoother sees: since issue #30 one draw from the smoother's
+posterior (:mod:`identification.wind_posterior`, ``trace_source`` "posterior
+draw"), which has the identified wind's full power, with the smoother's
+conditional mean kept beside it (``trace_mean``, ``estimate``) for the plots,
+the comparison with a known wind and the diagnosis.
+
 Defaults from evidence. ``scripts/disturbance_study.py`` identifies the model
 with ``IntegralIdentifier()`` on seeded 300 s synthetic flights (seeds 1-4,
 100 Hz) and compares the identified u_d with the true wind for Δt in {0.02,
@@ -95,6 +103,7 @@ from .errors import DisturbanceError, SimulationDivergedError
 from .flight import Flight
 from .preprocess import lowpass_flight
 from .validation import ValidationResult, validate_models
+from .wind_posterior import WindPosterior
 
 DEFAULT_INTERVAL = 0.02
 """Default Δt of eqs. (43)-(46) [s], chosen in ``scripts/disturbance_study.py`` (module
@@ -190,12 +199,21 @@ class DisturbanceProfile:
     simulation_diverged : str or None
         Why the simulation was dropped, when the model diverged (the message of
         :class:`~identification.errors.SimulationDivergedError`).
-    trace_source : {"eq46", "smoother"}
-        What ``trace`` and ``kd`` hold: the smoothed eq. (46) profile, or the wind
+    trace_source : {"eq46", "smoother", "posterior draw"}
+        What ``trace`` and ``kd`` hold: the smoothed eq. (46) profile; the wind
         torque the maximum-likelihood model's Rauch-Tung-Striebel smoother
-        estimated at every sample (:meth:`identification.ml_estimator.MaximumLikelihoodIdentifier.wind_torque`),
+        estimated at every sample (its conditional mean,
+        :meth:`identification.ml_estimator.MaximumLikelihoodIdentifier.wind_torque`);
+        or a draw from that smoother's posterior (:mod:`identification.wind_posterior`),
         over the control gain. The eq. (46) quantities (``torque``, ``ud_raw``,
         ``ud``) are kept either way, for the paper's comparison.
+    trace_mean : ndarray, shape (3, n), or None
+        With a posterior draw in ``trace``: the smoother's conditional mean over the
+        control gain, zero-mean [stick units]: the best estimate of the wind that blew,
+        for plots, the comparison with a known wind and the diagnosis. None otherwise.
+    trace_draw : dict or None
+        With a posterior draw in ``trace``: how it was drawn (``method``, ``seed``,
+        ``draw``, ``n_draws``; :meth:`identification.wind_posterior.WindPosterior.describe`).
     """
 
     axes: tuple
@@ -222,6 +240,14 @@ class DisturbanceProfile:
     simulation: ValidationResult | None = field(default=None)
     trace_source: str = "eq46"
     simulation_diverged: str | None = None
+    trace_mean: np.ndarray | None = None
+    trace_draw: dict | None = None
+
+    @property
+    def estimate(self) -> np.ndarray:
+        """The best estimate of the wind u_d that blew, shape (3, n) [stick units]: the smoother's mean when
+        ``trace`` is a posterior draw, else ``trace`` itself."""
+        return self.trace if self.trace_mean is None else self.trace_mean
 
     @property
     def n_intervals(self) -> int:
@@ -284,7 +310,7 @@ class DisturbanceProfile:
 
 
 # ------------------------------------------------------------------- helpers
-def _source_of(flight: Flight) -> dict:
+def source_of(flight: Flight) -> dict:
     """Name and SHA-256 of a flight: the logged file's, or of its arrays when it has none."""
     meta = flight.metadata
     name = str(meta.get("source", "unnamed flight"))
@@ -355,13 +381,16 @@ def identify_disturbance(flight: Flight, params: ModelParams, interval: float | 
     simulate : bool
         Simulate the model without and with the disturbance (Section 3.4) and
         keep the comparison in ``simulation``.
-    wind_torque : array_like, shape (3, n), optional
+    wind_torque : array_like, shape (3, n), or WindPosterior, optional
         The wind torque at every sample about the model's offsets [rad/s^2], as
         the maximum-likelihood model's smoother estimates it. When given, it is
         the profile's ``trace`` (over the control gain, zero-mean) and ``kd``
         (the model's offset plus its mean): the disturbance the library stores
         and the environment replays; the eq. (46) profile is still computed and
-        reported beside it.
+        reported beside it. A :class:`~identification.wind_posterior.WindPosterior`
+        makes its first draw the ``trace`` (``trace_source`` "posterior draw": gusts
+        with the identified wind's full power) and keeps its mean in ``trace_mean``
+        and ``kd``.
 
     Returns
     -------
@@ -390,10 +419,20 @@ def identify_disturbance(flight: Flight, params: ModelParams, interval: float | 
     which = np.minimum(np.arange(data.n) // N, torque.shape[1] - 1)
     trace = ud[:, which]
     statistics = {a: _axis_statistics(ud[i], ud_raw[i], stick[i], passes[i], auto[i]) for a, i in zip(axes, rows)}
-    if wind_torque is not None:
+    trace_source, trace_mean, trace_draw = "eq46", None, None
+    if isinstance(wind_torque, WindPosterior):
+        trace_mean, kd = _smoother_trace(wind_torque.mean, params, kd, rows, data.n)
+        trace, _ = _smoother_trace(wind_torque.draw, params, kd, rows, data.n)
+        trace_source, trace_draw = "posterior draw", wind_torque.describe()
+    elif wind_torque is not None:
         trace, kd = _smoother_trace(wind_torque, params, kd, rows, data.n)
+        trace_source = "smoother"
+    if wind_torque is not None:
+        mean = trace if trace_mean is None else trace_mean
         for a, i in zip(axes, rows):
-            statistics[a].update(_smoother_statistics(trace[i], ud[i, which]))
+            statistics[a].update(_smoother_statistics(mean[i], ud[i, which], trace_source))
+            if trace_mean is not None:
+                statistics[a].update(draw_ud_std=float(trace[i].std()), draw_ud_interval90=interval90(trace[i]))
     profile = DisturbanceProfile(
         axes=axes, interval=round(N * (1.0 / data.sample_rate), 12), samples_per_interval=N,
         sample_rate=round(float(data.sample_rate), 9), time=np.asarray(flight.time),
@@ -401,8 +440,8 @@ def identify_disturbance(flight: Flight, params: ModelParams, interval: float | 
         torque=torque, kd=kd, control_gains=params.control_gains, ud_raw=ud_raw, ud=ud, trace=trace,
         collective=np.asarray(data.sticks[2], dtype=float), sticks=stick, passes=tuple(int(p) for p in passes),
         smoothing=smoothing, smoothing_cost=cost, statistics=statistics, params=params,
-        prefilter=dict(data.metadata.get("prefilter", {})) if prefilter else None, source=_source_of(flight),
-        trace_source="eq46" if wind_torque is None else "smoother",
+        prefilter=dict(data.metadata.get("prefilter", {})) if prefilter else None, source=source_of(flight),
+        trace_source=trace_source, trace_mean=trace_mean, trace_draw=trace_draw,
     )
     if simulate:
         _attach_simulation(profile, data)
@@ -494,7 +533,8 @@ def interval_torque(data: Flight, params: ModelParams, N: int) -> np.ndarray:
 
 
 def _smoother_trace(wind_torque, params: ModelParams, kd: np.ndarray, rows, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The profile's trace and offsets from the smoother's wind torque (3, n) about the model's offsets.
+    """The profile's trace and offsets from the smoother's wind torque (3, n) about the model's offsets
+    (its mean or a posterior draw).
 
     Returns the wind over the control gain, zero-mean, on ``rows`` (zero elsewhere), and ``kd`` with the
     model's offset plus the wind's mean on ``rows``.
@@ -532,11 +572,11 @@ def _axis_statistics(ud, ud_raw, stick, passes: int, auto: int) -> dict:
     }
 
 
-def _smoother_statistics(smoother_ud, eq46_ud) -> dict:
-    """What one axis' statistics add when the trace is the smoother's: its spread and its agreement with
-    the eq. (46) profile held at the samples."""
+def _smoother_statistics(smoother_ud, eq46_ud, trace_source: str = "smoother") -> dict:
+    """What one axis' statistics add when the trace is the smoother's (or a draw from its posterior): the
+    smoother mean's spread and its agreement with the eq. (46) profile held at the samples."""
     return {
-        "trace_source": "smoother",
+        "trace_source": trace_source,
         "smoother_ud_std": float(smoother_ud.std()),
         "smoother_ud_interval90": interval90(smoother_ud),
         "smoother_vs_eq46_correlation": float(np.corrcoef(smoother_ud, eq46_ud)[0, 1]),
@@ -569,6 +609,10 @@ def simulate_with_disturbance(profile: DisturbanceProfile, flight: Flight) -> Va
 def compare_with_truth(profile: DisturbanceProfile, true_ud) -> dict[str, dict[str, float]]:
     """How well the identified u_d matches a known wind (synthetic flights).
 
+    The identified u_d is the profile's best estimate (:attr:`DisturbanceProfile.estimate`): the
+    smoother's mean when the stored trace is a posterior draw, whose own departures from the mean are
+    the posterior's spread, not estimation error.
+
     Parameters
     ----------
     profile : DisturbanceProfile
@@ -584,13 +628,14 @@ def compare_with_truth(profile: DisturbanceProfile, true_ud) -> dict[str, dict[s
         input) [stick units].
     """
     true_ud = np.asarray(true_ud, dtype=float)
-    if true_ud.shape != profile.trace.shape:
-        raise ValueError(f"true_ud must have shape {profile.trace.shape} (roll, pitch, yaw by sample), got {true_ud.shape}")
+    estimate = profile.estimate
+    if true_ud.shape != estimate.shape:
+        raise ValueError(f"true_ud must have shape {estimate.shape} (roll, pitch, yaw by sample), got {true_ud.shape}")
     out = {}
     for a in profile.axes:
         i = AXES.index(a)
         t = true_ud[i] - true_ud[i].mean()
-        e = profile.trace[i]
+        e = estimate[i]
         out[a] = {
             "correlation": float(np.corrcoef(e, t)[0, 1]),
             "rms_error": float(np.sqrt(np.mean((e - t) ** 2))),

@@ -57,7 +57,7 @@ def profile_markdown(profile: DisturbanceProfile, title: str = "Wind disturbance
         "The paper's rule matches the fitted normal of u_d to that of the stick (minus its mean); the KS test "
         "compares the two samples (a small p-value says they differ).\n",
     ]
-    if profile.trace_source == "smoother":
+    if profile.trace_source in ("smoother", "posterior draw"):
         text += _smoother_section(profile)
     if profile.simulation_diverged:
         text += [f"**Simulating the model with the identified disturbance: diverged.** "
@@ -73,13 +73,30 @@ def _smoother_section(profile: DisturbanceProfile) -> list[str]:
              "[{:.4f}, {:.4f}]".format(*profile.statistics[a]["smoother_ud_interval90"]),
              f"{profile.statistics[a]['ud_std']:.4f}",
              f"{profile.statistics[a]['smoother_vs_eq46_correlation']:.3f}"] for a in profile.axes]
+    header = ["Axis", "kd (rad/s²)", "std u_d (smoother)", "90 % interval u_d (smoother)",
+              "std u_d (eq. 46, smoothed)", "correlation smoother vs eq. 46"]
+    if profile.trace_source == "posterior draw":
+        for row, a in zip(rows, profile.axes):
+            row += [f"{profile.statistics[a]['draw_ud_std']:.4f}",
+                    "[{:.4f}, {:.4f}]".format(*profile.statistics[a]["draw_ud_interval90"])]
+        return [
+            "**Stored trace: a draw from the smoother's posterior.** The library stores (and the environment "
+            "and the sweeps replay) one draw of the wind torque given the flight, by the simulation smoother "
+            "of Durbin & Koopman (2002) on the maximum-likelihood model's Rauch-Tung-Striebel smoother "
+            f"(seed {profile.trace_draw['seed']}, from the flight's SHA-256), over the control gain: it "
+            "follows the flight's gusts where the gyro saw them and has the identified wind's full power "
+            "where it could not. The smoother's conditional mean, the best estimate of the wind that blew, "
+            "is smoother than any wind (its std below); it is kept for the figures and the comparison with "
+            "a known wind. kd is the model's offset plus the flight's mean wind. The eq. (46) profile above "
+            "is kept for the paper's comparison.\n",
+            markdown_table(header + ["std u_d (stored draw)", "90 % interval u_d (stored draw)"], rows) + "\n",
+        ]
     return [
         "**Stored trace: the smoother's wind.** The library stores (and the environment replays) the wind "
         "torque that the Rauch-Tung-Striebel smoother of the maximum-likelihood model estimated at every "
         "sample, over the control gain; kd is the model's offset plus the flight's mean wind. The eq. (46) "
         "profile above is kept for the paper's comparison.\n",
-        markdown_table(["Axis", "kd (rad/s²)", "std u_d (smoother)", "90 % interval u_d (smoother)",
-                        "std u_d (eq. 46, smoothed)", "correlation smoother vs eq. 46"], rows) + "\n",
+        markdown_table(header, rows) + "\n",
     ]
 
 
@@ -118,8 +135,13 @@ def plot_profile(profile: DisturbanceProfile, path, true_ud=None):
     for ax, a in zip(axs[:, 0], profile.axes):
         i = AXES.index(a)
         ax.step(t_int, profile.ud_raw[i], where="post", color="0.7", lw=0.6, label="eq. (46), unsmoothed")
-        ax.step(profile.time, profile.trace[i], where="post", color="C0", lw=1.0,
-                label=f"smoothed, {profile.passes[i]} passes")
+        if profile.trace_mean is None:
+            ax.step(profile.time, profile.trace[i], where="post", color="C0", lw=1.0,
+                    label=f"smoothed, {profile.passes[i]} passes")
+        else:  # the stored draw, and the smoother's mean it was drawn about
+            ax.plot(profile.time, profile.trace[i], color="C2", lw=0.6, alpha=0.7,
+                    label="posterior draw (stored trace)")
+            ax.plot(profile.time, profile.trace_mean[i], color="C0", lw=1.0, label="smoother mean")
         if true_ud is not None:
             tr = np.asarray(true_ud)[i]
             c = truth[a]

@@ -23,7 +23,7 @@ from heli_core.params import ModelParams
 from model_store.model_dir import ModelDir
 from model_store.model_file import model_document
 
-from .disturbance import identify_disturbance
+from .disturbance import identify_disturbance, source_of
 from .figures import PendingFigures
 from .files import sha256_of
 from .fit_warnings import fit_warnings
@@ -178,7 +178,8 @@ class IdentifyOptions:
         None: one after the other in this process. The pooled fit is one task, here.
     method : {"ml", "integral"}
         The estimator (:data:`METHODS`): maximum likelihood with a wind state (default; the library then
-        stores the smoother's wind) or the integral method of Fig. 5 (the library stores eq. 46's profile).
+        stores a draw from the smoother's posterior, :mod:`identification.wind_posterior`) or the integral
+        method of Fig. 5 (the library stores eq. 46's profile).
     draw_figures : bool
         With ``plots``: draw the figures before returning (default), or leave them to
         :meth:`IdentificationRun.draw_figures` (``report.md`` links them either way), so that a caller
@@ -317,7 +318,7 @@ def _winds(ident, flights: list, out: Path, opts: IdentifyOptions, figures: list
     show = (len(chosen_flights) > 1) if opts.progress is None else opts.progress
     done = None
     opts.say(f"identifying the wind of {len(chosen_flights)} flight{'s' if len(chosen_flights) != 1 else ''}")
-    winds = {i: ident.wind_torque(i) for i in chosen_flights} if hasattr(ident, "wind_torque") else {}
+    winds = {i: _posterior(ident, i, flights[i]) for i in chosen_flights} if hasattr(ident, "wind_torque") else {}
     if opts.backend is not None:
         from .fleet import disturbances_of
 
@@ -336,6 +337,21 @@ def _winds(ident, flights: list, out: Path, opts: IdentifyOptions, figures: list
         sections += wind_section(profile, f"{names[i]}: wind disturbance (Sections 2.5.3, 3.3)", true_ud,
                                  prefix if opts.plots else None)
     return profiles, sections
+
+
+def _posterior(ident, index: int, flight: Flight):
+    """The wind of fitted flight ``index``: the smoother's mean and one draw from its posterior, seeded by
+    the flight's SHA-256 (same flight, same draw), whose draw the library stores.
+
+    One draw per flight, not several: the library's unit is the flight (the environment samples traces,
+    training and held-out sets split them, provenance names them), so several draws of one flight would
+    count it several times and put its gusts on both sides of a held-out split; and draws of one flight
+    share the smoother's mean, most of the wind's variance, so more of them add little new wind. A
+    sweep's sampling error is set by how much flight time the library holds (``heli sweep`` states it).
+    """
+    from .wind_posterior import flight_seed, wind_posterior
+
+    return wind_posterior(ident, index, seed=flight_seed(source_of(flight)["sha256"]))
 
 
 def source_entry(path, sha256: str | None = None) -> dict:

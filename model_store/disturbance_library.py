@@ -47,6 +47,9 @@ Manifest (``schema_version`` 1)::
           "model": {"sha256": "..." | null, "parameters": {...}, "added_terms": {...},
                     "servo_delay_s": {...}},
           "axes": ["roll", "pitch", "yaw"],
+          "trace_source": "posterior draw",           # or "smoother" (its mean), "eq46"; absent before
+          "trace_draw": {"method": "...", "seed": 123, "draw": 0, "n_draws": 1},  # posterior draws only
+          "mean_std": {"roll": 0.046, ...},           # std of the smoother's mean (posterior draws only)
           "identification": {"roll": {"ks_statistic": ..., "ks_pvalue": ..., "auto_passes": ...,
                                       "stick_interval90": [...]}, ...},
           "metadata": {...}                           # anything the caller added
@@ -231,6 +234,11 @@ class Trace:
             "trace_source": p.trace_source,
             "identification": ident,
         }
+        draw = getattr(p, "trace_draw", None)
+        if draw is not None:  # a posterior draw: how it was drawn, and the spread of the mean it was drawn about
+            mean = np.asarray(p.trace_mean)
+            meta["trace_draw"] = dict(draw)
+            meta["mean_std"] = {a: float(mean[AXES.index(a)].std()) for a in p.axes}
         if metadata:
             meta["metadata"] = dict(metadata)
         return cls(p.time, p.trace, p.collective, meta)

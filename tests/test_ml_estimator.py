@@ -174,7 +174,7 @@ def test_heli_identify_uses_maximum_likelihood_by_default(tmp_path, flight180):
     assert doc["identification"]["estimator"] == "ml"
     assert doc["fit_statistics"]["axes"]["roll"]["wind"]["model"] in ("gm2", "gm_so")
     manifest = json.loads((tmp_path / "ml" / "disturbances" / "manifest-v0001.json").read_text())
-    assert manifest["traces"][0]["trace_source"] == "smoother"
+    assert manifest["traces"][0]["trace_source"] == "posterior draw"  # issue #30: a draw from the smoother's posterior
     assert main(["identify", str(path), "--out", str(tmp_path / "int"), "--no-plots", "--method", "integral",
                  "--no-disturbances"]) == 0
     doc = json.loads((tmp_path / "int" / "model.json").read_text())

