@@ -232,7 +232,8 @@ def _params(parm: dict | None) -> dict:
     """``PARM`` records as {name: value} (the last value of a name written twice)."""
     if not parm or "Name" not in parm or "Value" not in parm:
         return {}
-    return {str(n): float(v) for n, v in zip(parm["Name"], parm["Value"])}
+    values, ok = _floats(np.asarray(parm["Value"], dtype=object))  # numbers already, unless its FMT says text
+    return {str(n): float(v) for n, v, good in zip(parm["Name"], values, ok) if good}
 
 
 def log_clock(log: TextLog) -> LogClock | None:
@@ -243,12 +244,14 @@ def log_clock(log: TextLog) -> LogClock | None:
     LogClock or None
         None when the log has no clock at all (no time stamps, no GPS time).
     """
-    stamped = [(log.count(m), m, c, s) for m in log.messages for c, s in TIME_COLUMNS if c in log.messages[m]]
+    def numeric(m, c):
+        return c in log.messages.get(m, {}) and log.messages[m][c].dtype.kind == "f"
+
+    stamped = [(log.count(m), m, c, s) for m in log.messages for c, s in TIME_COLUMNS if numeric(m, c)]
     if stamped:
         _, message, column, scale = max(stamped)
     else:
-        gps = log.messages.get("GPS", {})
-        found = next(((c, s) for c, s in GPS_TIME_COLUMNS if c in gps), None)
+        found = next(((c, s) for c, s in GPS_TIME_COLUMNS if numeric("GPS", c)), None)
         if found is None:
             return None
         message, (column, scale) = "GPS", found
@@ -266,11 +269,21 @@ def log_clock(log: TextLog) -> LogClock | None:
     return LogClock(f"{message}.{column}", float(dt[running].sum()), int(starts))
 
 
+def _hz(rate: float) -> str:
+    """A rate as a reader says it: "9.8 Hz", "10 Hz", "100 Hz"."""
+    return f"{rate:.0f} Hz" if rate >= 9.95 else f"{rate:.1f}".rstrip("0").rstrip(".") + " Hz"
+
+
+def _n(count: int, noun: str) -> str:
+    """A count with its noun: "1 record", "2 records"."""
+    return f"{count} {noun}{'' if count == 1 else 's'}"
+
+
 def _rate(log: TextLog, name: str, clock: LogClock | None) -> str:
-    """A message's rate ("9.8 Hz"), or its record count when the log has no clock."""
+    """A message's rate ("at 9.8 Hz"), or its record count ("in 34 records") when the log has no clock."""
     if clock is None or clock.duration_s <= 0:
-        return f"{log.count(name)} records"
-    return f"{log.count(name) / clock.duration_s:.2g} Hz"
+        return f"in {_n(log.count(name), 'record')}"
+    return f"at {_hz(log.count(name) / clock.duration_s)}"
 
 
 def _has(log: TextLog, name: str, *fields: str) -> bool:
@@ -297,13 +310,13 @@ def _holdings(log: TextLog, clock: LogClock | None) -> list[str]:
     held = []
     if _has(log, "ATT", "Roll", "Pitch", "Yaw"):
         desired = " and desired attitude" if any(f in log.messages["ATT"] for f in ("RollIn", "DesRoll")) else ""
-        held.append(f"attitude{desired} (ATT) at {_rate(log, 'ATT', clock)}")
+        held.append(f"attitude{desired} (ATT) {_rate(log, 'ATT', clock)}")
     others = sorted((m for m in log.messages if m not in ("ATT", "MSG")), key=log.count, reverse=True)
     if clock is not None and clock.duration_s > 0:
         others = [m for m in others if log.count(m) >= 0.5 * clock.duration_s]
-    held += [f"{m} at {_rate(log, m, clock)}" for m in others]
+    held += [f"{m} {_rate(log, m, clock)}" for m in others]
     if log.params:
-        held.append(f"{len(log.params)} parameters")
+        held.append(_n(len(log.params), "parameter"))
     return held or ["no records"]
 
 
@@ -325,7 +338,7 @@ def _verdict(log: TextLog, clock: LogClock | None, missing: list) -> str:
             "this aircraft")
     count, stream = max((log.count(m), what) for m, what in (("ATT", "attitude"), ("IMU", "gyro")))
     if count and clock is not None and clock.duration_s > 0 and count / clock.duration_s < MIN_IDENTIFY_RATE_HZ:
-        return f"its {count / clock.duration_s:.2g} Hz {stream} is too coarse to identify rate dynamics: {want}"
+        return f"its {_hz(count / clock.duration_s)} {stream} is too coarse to identify rate dynamics: {want}"
     if missing:
         return f"nothing to identify rate dynamics from: {want}"
     return "heli import reads the binary .bin this firmware writes, not a text export: import the .bin"
@@ -337,9 +350,9 @@ def describe(log: TextLog) -> str:
     missing = _missing(log)
     skipped = []
     if log.malformed:
-        skipped.append(f"{len(log.malformed)} malformed lines skipped (first at line {log.malformed[0][0]})")
+        skipped.append(f"{_n(len(log.malformed), 'malformed line')} skipped (first at line {log.malformed[0][0]})")
     if log.unknown:
-        skipped.append(f"{sum(log.unknown.values())} records of types without an FMT line skipped "
+        skipped.append(f"{_n(sum(log.unknown.values()), 'record')} of types without an FMT line skipped "
                        f"({', '.join(sorted(log.unknown))})")
     tail = f" ({'; '.join(skipped)})" if skipped else ""
     return (f"{_identity(log, clock)}: {', '.join(_holdings(log, clock))}"
