@@ -69,6 +69,7 @@ from .errors import SweepError
 from .metrics import histogram_edges
 from .sweep_extend import EXTENSION_VALUES, MAX_EXTENSIONS, PairBlock, best_index, extend_grid
 from .sweep_inputs import check_gains, check_pairs, load_model, parse_range, prepare
+from .sweep_interval import BLOCK_SECONDS, LEVEL, interval_summary
 from .sweep_margins import (MARGIN_COLUMNS, ROBUST_GAIN_MARGIN_DB, ROBUST_PHASE_MARGIN_DEG, loop_margins,
                             robust)
 from .sweep_replay import MAX_ANGLE_DEG, TASK_STATES, TD_COLUMNS, check_chunk_pairs, chunks, replay, replay_on
@@ -86,7 +87,9 @@ COLUMNS = ("kp", "kd", "status", "max_pole", "settle_s") + MARGIN_COLUMNS + TD_C
     "att_p90_rel_diff", "rate_p90_rel_diff", "disagree", "extension_round")
 """Columns of the result table, one row per gain pair (Kp-major order).
 
-``att_*`` |attitude error| [deg], ``rate_*`` |rate error| [deg/s], ``stick_*`` the
+``att_*`` |attitude error| [deg], ``rate_*`` |rate error| [deg/s] (``*_p90_lo_*`` and ``*_p90_hi_*`` the
+ends of the time-domain p90's 90 % interval, its sampling error over blocks of the library's time,
+:mod:`controllers.sweep_interval`), ``stick_*`` the
 applied stick offset from trim [stick units], ``saturation`` the fraction of control
 periods where the swept axis' stick was clipped, ``other_axes_max_deg`` the largest
 |angle| of the two nominally held axes; ``pred_*`` the frequency-domain
@@ -127,8 +130,11 @@ class SweepConfig:
         Library traces to draw windows from (default all), or explicit windows.
     windows : int, optional
         Number of (trace, offset) windows, spread round robin over ``traces`` with
-        distinct offsets per trace (default one per trace). Windows of one trace may
-        overlap when the trace is shorter than their total length.
+        distinct offsets per trace, drawn at random; windows of one trace may
+        overlap when the trace is shorter than their total length. Default: windows that
+        tile every trace end to end (:func:`~controllers.sweep_inputs.tile_windows`), the
+        whole library flown once: every p90 then carries the smallest sampling error the
+        library allows, its 90 % interval in the table (:mod:`controllers.sweep_interval`).
     progress : bool
         tqdm bar on stderr (when it is a terminal).
     nominal : array (3, 2), optional
@@ -527,7 +533,24 @@ class _Run:
             "ud_std": np.sqrt(np.sum(self.psd, axis=1) * df).tolist(),
             "seconds": {"total": total_seconds, **self.seconds}, "backend": self.where, "tasks": self.tasks,
             "sensors": env_model.sensors.to_dict() if rp.inputs.att_noise is not None else None,
+            "p90_interval": p90_interval_settings(rp),
         }
+
+
+def p90_interval_settings(rp) -> dict:
+    """How the p90s' intervals were made (``settings["p90_interval"]``; the half-widths are added at the end)."""
+    n_blocks = None if rp.blocks is None else int(np.max(rp.blocks[0])) + 1
+    return {"level": LEVEL, "method": f"Woodruff's, over blocks of {BLOCK_SECONDS:g} s of library time",
+            "block_s": BLOCK_SECONDS, "n_blocks": n_blocks,
+            "library_s_flown": None if n_blocks is None else _library_seconds(rp)}
+
+
+def _library_seconds(rp) -> float:
+    """Seconds of library time the windows cover (each stretch counted once)."""
+    wins = np.asarray(rp.windows, dtype=np.int64).reshape(-1, 2)
+    samples = wins[:, 1:] + rp.ratio * np.arange(rp.steps, dtype=np.int64)[None, :]
+    keys = wins[:, :1] * (int(samples.max()) + 1) + samples
+    return float(np.unique(keys).size * rp.dt)
 
 
 def _predicted(table: dict, sigma: np.ndarray, agree_tol: float) -> None:
@@ -578,6 +601,7 @@ def _sweep(model, kp_values, kd_values, layout, cfg: SweepConfig) -> SweepResult
         kp_values, kd_values, block, extension = _grown(run, kp_values, kd_values, layout, cfg)
         settings = run.settings(layout, time.perf_counter() - t_start)
         settings["extension"] = extension
+        settings["p90_interval"].update(interval_summary(block.table, block.table["status"] == "stable"))
         return SweepResult(AXES[rp.axis], np.asarray(kp_values), np.asarray(kd_values), block.table, hist_edges,
                            block.hist, block.overflow, rp.windows, freq, psd, settings, block.samples)
     finally:

@@ -2,9 +2,10 @@
 
 A sweep (:mod:`controllers.sweep`) flies every gain pair against the same
 windows ``(trace, offset)`` of the model's disturbance library. This module turns
-the user's settings into those windows — explicit, each trace whole, or drawn
-with ``numpy.random.default_rng(seed)`` (:func:`heli_env.tasks.draw_offsets`, the
-package's one window sampler) — and gathers what the replay holds over each
+the user's settings into those windows — explicit, each trace whole, tiling every
+trace end to end (the default: the whole library flown once, :func:`tile_windows`),
+or a number of them drawn with ``numpy.random.default_rng(seed)``
+(:func:`heli_env.tasks.draw_offsets`, the package's one window sampler) — and gathers what the replay holds over each
 control period (:class:`controllers.replay.LoopInputs`): the trim for the
 recorded collective, the collective, and the gust torque ``k·u_d`` each trace was
 identified with. Every bad setting is a :class:`~controllers.errors.SweepError`.
@@ -23,6 +24,7 @@ from heli_env.tasks import draw_offsets, window_count
 from .closed_loop import axis_index
 from .errors import SweepError
 from .replay import LoopInputs
+from .sweep_interval import trace_blocks
 
 
 def check_gains(values, name: str) -> np.ndarray:
@@ -118,6 +120,9 @@ class LibraryReplay:
     windows : tuple of (trace, offset)
     inputs : LoopInputs
         Trim, collective and gust torque per period, shape (..., steps, windows).
+    blocks : tuple (ndarray (steps, windows), ndarray (n, 2)) or None
+        The block of trace time of every period of every window and the pairs of adjacent blocks
+        (:func:`controllers.sweep_interval.trace_blocks`), for the p90s' intervals; None: no intervals.
     """
 
     env_model: object
@@ -128,6 +133,7 @@ class LibraryReplay:
     steps: int
     windows: tuple
     inputs: LoopInputs
+    blocks: tuple | None = None
 
 
 def _explicit(traces) -> bool:
@@ -163,17 +169,44 @@ def _trace_list(env_model, traces) -> list:
     return sel
 
 
-def draw_library_windows(env_model, traces, windows, steps, ratio, seed) -> tuple:
-    """(trace, offset) windows: explicit, or drawn with ``Generator(seed)`` over the selected traces.
+def tile_windows(env_model, sel, steps: int, ratio: int, seed) -> tuple:
+    """Windows that tile each selected trace end to end: every stretch of the library flown once.
 
-    ``windows`` windows (default one per trace) go round robin over the traces; each
-    trace's offsets are distinct, drawn in the order the traces are first used.
+    A trace of ``L`` samples holds ``m = max(1, (L - 1) // (steps * ratio))`` windows; they follow each other
+    (one shares its first sample with the last of the one before) from an offset drawn with
+    ``Generator(seed)`` in the ``L - 1 - m * steps * ratio`` samples left over, so the same seed gives the
+    same windows. A trace shorter than one window is a :class:`SweepError`.
+    """
+    rng = np.random.default_rng(seed)
+    span = steps * ratio
+    out = []
+    for t in sel:
+        length = int(env_model.lengths[t])
+        if length - 1 < span:
+            raise SweepError(
+                f"trace {t} ({env_model.trace_ids[t]}) is {(length - 1) / env_model.sample_rate:g} s long; a "
+                f"{span / env_model.sample_rate:g} s window does not fit (shorten duration)")
+        m = (length - 1) // span
+        start = int(rng.integers(length - 1 - m * span + 1))
+        out += [(t, start + j * span) for j in range(m)]
+    return tuple(out)
+
+
+def draw_library_windows(env_model, traces, windows, steps, ratio, seed) -> tuple:
+    """(trace, offset) windows: explicit, tiling every selected trace, or drawn with ``Generator(seed)``.
+
+    By default (``windows`` None) the windows tile each selected trace (:func:`tile_windows`): the whole
+    library flown once, which is all the information it holds (two windows over one stretch of a trace fly
+    the same gusts). ``windows`` windows go round robin over the traces instead; each trace's offsets are
+    distinct, drawn in the order the traces are first used.
     """
     needed = steps * ratio + 1
     if _explicit(traces):
         return _explicit_windows(env_model, traces, needed)
     sel = _trace_list(env_model, traces)
-    n_win = len(sel) if windows is None else int(windows)
+    if windows is None:
+        return tile_windows(env_model, sel, steps, ratio, seed)
+    n_win = int(windows)
     if n_win < 1:
         raise SweepError(f"windows must be >= 1, got {windows!r}")
     assign = [sel[i % len(sel)] for i in range(n_win)]
@@ -265,5 +298,6 @@ def prepare(model, axis, duration, dt, seed, traces, windows, sensors: bool = Tr
         raise SweepError("the model cannot be trimmed (zero control gain on some axis)")
     torque = env_model.torque[:, idx]  # each trace's u_d with the gains it was identified with
     att_noise, rate_noise = sensor_inputs(env_model.sensors if sensors else None, steps, len(wins), float(dt), seed)
+    blocks = trace_blocks(wins, steps, ratio, env_model.sample_rate)
     return LibraryReplay(env_model, params, ax, float(dt), ratio, steps, wins,
-                         LoopInputs(trim, col, torque, att_noise=att_noise, rate_noise=rate_noise))
+                         LoopInputs(trim, col, torque, att_noise=att_noise, rate_noise=rate_noise), blocks)

@@ -21,14 +21,17 @@ from heli_core.terms import AXES
 from .errors import SweepError
 from .metrics import abs_in_place, error_metrics_inplace
 from .replay import Autopilot, fly, zoh_step
+from .sweep_interval import INTERVAL_COLUMNS, quantiles_at, woodruff_levels
 
 _DEG = 180.0 / math.pi
 MAX_ANGLE_DEG = 60.0
 """A replay whose roll or pitch leaves ±60° (the environments' termination) counts as diverged."""
 
 TD_COLUMNS = ("att_rms_deg", "att_p50_deg", "att_p90_deg", "att_p99_deg", "rate_rms_dps", "rate_p50_dps",
-              "rate_p90_dps", "rate_p99_dps", "stick_rms", "stick_p99", "saturation", "other_axes_max_deg")
-"""Time-domain columns of a sweep's table (see :data:`controllers.sweep.COLUMNS`)."""
+              "rate_p90_dps", "rate_p99_dps", "stick_rms", "stick_p99", "saturation",
+              "other_axes_max_deg") + INTERVAL_COLUMNS
+"""Time-domain columns of a sweep's table (see :data:`controllers.sweep.COLUMNS`); the last four are the
+90 % intervals of the two p90s (:mod:`controllers.sweep_interval`)."""
 
 TASK_STATES = 1024
 """Pair × window states per task when a sweep runs on a backend: a task gets
@@ -76,16 +79,18 @@ def replay(rp, kp, kd, nominal, keep_samples=False, progress=True, max_batch=409
             for j in range(sl.stop - sl.start):
                 samples[sl.start + j] = (rec.att[j].T.ravel() * _DEG, rec.rate[j].T.ravel() * _DEG,
                                          rec.act[j].T.ravel())
-        _chunk_stats(rec, n, sl, stats, hist, overflow, diverged, hist_edges)
+        _chunk_stats(rec, n, sl, stats, hist, overflow, diverged, hist_edges, getattr(rp, "blocks", None))
     for c in TD_COLUMNS:
         stats[c][diverged] = np.nan
     return stats, hist, overflow, diverged, samples
 
 
-def _chunk_stats(rec, n, sl, stats, hist, overflow, diverged, edges):
+def _chunk_stats(rec, n, sl, stats, hist, overflow, diverged, edges, blocks=None):
     """Per-pair statistics of one chunk's records (g, n, W), written into the result arrays at ``sl``.
 
-    Saturation counts the periods where the PD command or the stick (trim + offset) was clipped.
+    Saturation counts the periods where the PD command or the stick (trim + offset) was clipped. ``blocks``
+    is ``(block of each (period, window), adjacent block pairs)`` (:func:`controllers.sweep_interval.trace_blocks`)
+    for the p90s' intervals; without it they are NaN.
     """
     A = abs_in_place(rec.att, _DEG)
     R = abs_in_place(rec.rate, _DEG)
@@ -98,11 +103,19 @@ def _chunk_stats(rec, n, sl, stats, hist, overflow, diverged, edges):
     if np.any(bad):  # keep the statistics finite; they are discarded for diverged pairs
         for arr in (A, R, U):
             arr[bad] = 0.0
+    levels = None
+    if blocks is not None:  # before the statistics partition the samples in place
+        ids, adjacent = np.asarray(blocks[0]).ravel(), blocks[1]
+        levels = [woodruff_levels(A, ids, adjacent), woodruff_levels(R, ids, adjacent)]
     m = error_metrics_inplace(A, R, U, rec.sat.mean(axis=1) / n, edges)
     hist[sl], overflow[sl] = m.pop("hist_counts"), m.pop("hist_overflow")
     for c, v in m.items():
         stats[c][sl] = v
     stats["other_axes_max_deg"][sl] = omax * _DEG
+    if levels is not None:
+        for (lo, hi), data, lv in zip((INTERVAL_COLUMNS[:2], INTERVAL_COLUMNS[2:]), (A, R), levels):
+            ends = quantiles_at(data, lv)
+            stats[lo][sl], stats[hi][sl] = ends[:, 0], ends[:, 1]
 
 
 def check_chunk_pairs(chunk_pairs) -> None:

@@ -39,7 +39,9 @@ def write_json(result, path):
 
     doc = {
         "schema": "heli-env/gain-sweep",
-        "schema_version": 2,  # 2: margins, extension_round and settings["extension"]; the grid may have grown
+        # 2: margins, extension_round and settings["extension"]; the grid may have grown
+        # 3: the p90s' 90 % intervals (*_p90_lo_*, *_p90_hi_*) and settings["p90_interval"]
+        "schema_version": 3,
         "settings": result.settings,
         "kp_values": result.kp_values.tolist(),
         "kd_values": result.kd_values.tolist(),
@@ -113,7 +115,7 @@ def markdown(result, max_rows: int = 400) -> str:
         f"- stable pairs: {int(np.sum(st == 'stable'))}; unstable (closed-loop poles, not simulated): {n_unst}; "
         f"diverged in replay: {n_div}",
         f"- time and frequency domain disagree (p90 > {100 * tol:.0f} %): {n_dis}",
-    ]
+    ] + _interval_lines(s)
     lines += _grid_lines(result) + _best_lines(result)
     sec = s.get("seconds", {})
     if sec:
@@ -124,7 +126,8 @@ def markdown(result, max_rows: int = 400) -> str:
         "",
         "## Per gain pair",
         "",
-        "|attitude error| [deg] and |rate error| [deg/s]: time domain / frequency domain; margins of the "
+        "|attitude error| [deg] and |rate error| [deg/s]: time domain / frequency domain, the time domain's "
+        "p90 with its 90 % interval in brackets (its sampling error); margins of the "
         "sampled loop broken at the swept stick: gain [dB] / phase [deg].",
         "",
         "| Kp | Kd | p50 att | p90 att | p99 att | Δp90 att | p90 rate | Δp90 rate | RMS stick | sat. % | margins "
@@ -143,16 +146,42 @@ def markdown(result, max_rows: int = 400) -> str:
         lines.append(
             f"| {row['kp']:.4g} | {row['kd']:.4g} "
             f"| {_fmt(row['att_p50_deg'])} / {_fmt(row['pred_att_p50_deg'])} "
-            f"| {_fmt(row['att_p90_deg'])} / {_fmt(row['pred_att_p90_deg'])} "
+            f"| {_fmt(row['att_p90_deg'])} {_interval(row, 'att_p90', 'deg')} / {_fmt(row['pred_att_p90_deg'])} "
             f"| {_fmt(row['att_p99_deg'])} / {_fmt(row['pred_att_p99_deg'])} "
             f"| {_fmt(100 * row['att_p90_rel_diff'], '+.1f')} % "
-            f"| {_fmt(row['rate_p90_dps'])} / {_fmt(row['pred_rate_p90_dps'])} "
+            f"| {_fmt(row['rate_p90_dps'])} {_interval(row, 'rate_p90', 'dps')} / {_fmt(row['pred_rate_p90_dps'])} "
             f"| {_fmt(100 * row['rate_p90_rel_diff'], '+.1f')} % "
             f"| {_fmt(row['stick_rms'])} / {_fmt(row['pred_stick_rms'])} "
             f"| {_fmt(100 * row['saturation'], '.1f')} | {_margins(row)} | {note} |")
     if len(rows) > max_rows:
         lines.append(f"\n({len(rows) - max_rows} more rows in sweep.csv)")
     return "\n".join(lines) + "\n"
+
+
+def _interval(row, name: str, unit: str, spec: str = ".3f") -> str:
+    """``[lo, hi]``: the 90 % interval of a p90 (empty where there is none)."""
+    lo, hi = row.get(f"{name}_lo_{unit}"), row.get(f"{name}_hi_{unit}")
+    if lo is None or hi is None or not (math.isfinite(lo) and math.isfinite(hi)):
+        return ""
+    return f"[{format(lo, spec)}, {format(hi, spec)}]"
+
+
+def interval_sentence(settings: dict) -> str:
+    """The p90s' sampling error in one sentence (``settings["p90_interval"]``), or an empty string."""
+    iv = settings.get("p90_interval") or {}
+    if iv.get("median_half_width") is None:
+        return ""
+    return (f"sampling error of the p90s (90 % interval, {iv['method']}; {iv['n_blocks']} blocks, "
+            f"{iv['library_s_flown']:g} s of library flown in {settings['n_windows']} windows): half-width "
+            f"±{100 * iv['median_half_width']:.1f} % of the p90 (median over the stable pairs), "
+            f"±{100 * iv['max_half_width']:.1f} % at most")
+
+
+def _interval_lines(settings: dict) -> list:
+    """The summary's line on the p90s' sampling error."""
+    sentence = interval_sentence(settings)
+    return [f"- {sentence}. It covers which stretches of wind the library holds, not the model's error."] \
+        if sentence else []
 
 
 def _span(values) -> str:
@@ -181,8 +210,9 @@ def _grid_lines(result) -> list:
 
 def pair_summary(row, deg: str = "°", emphasis: str = "") -> str:
     """One pair in a line: gains (between ``emphasis``), p90s in both domains, stick, margins (units ``deg``)."""
+    ci = _interval(row, "att_p90", "deg", ".3g")
     return (f"{emphasis}Kp = {row['kp']:.4g}, Kd = {row['kd']:.4g}{emphasis}: p90 {row['att_p90_deg']:.3g}{deg} "
-            f"(frequency domain {row['pred_att_p90_deg']:.3g}{deg}), p90 |rate error| {row['rate_p90_dps']:.3g}"
+            f"{'(90 % interval ' + ci + ', ' if ci else '('}frequency domain {row['pred_att_p90_deg']:.3g}{deg}), p90 |rate error| {row['rate_p90_dps']:.3g}"
             f"{deg}/s, RMS stick {row['stick_rms']:.3f}, gain margin {_fmt(row['gain_margin_db'], '.1f')} dB, "
             f"phase margin {_fmt(row['phase_margin_deg'], '.1f')}{deg}")
 

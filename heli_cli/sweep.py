@@ -29,7 +29,9 @@ def register(sub):
         "simulated; every pair's gain and phase margins stand beside its errors, and the report names the best "
         "pair and the best one keeping 6 dB and 45 deg. When the best pair lies on an edge of the grid, the grid "
         "grows past that edge (3 gains at a time, its last ratio continued) until the best pair is interior, the "
-        "pair beyond is unstable, or --max-extensions rounds ran (--no-extend: the grid as given). "
+        "pair beyond is unstable, or --max-extensions rounds ran (--no-extend: the grid as given). By default the "
+        "windows tile every library trace, and each time-domain p90 comes with its 90 % interval (its sampling "
+        "error over blocks of the library's time). "
         "Writes DIR/sweep.csv, sweep.json, heatmap.png, histograms.png and sweep.md. With --flights N "
         "the prediction is checked against N fresh-wind flights of the truth model per chosen pair "
         "(KS statistics; DIR/flight_tests.json).",
@@ -46,7 +48,8 @@ def register(sub):
     p.add_argument("--dt", type=number("a finite number > 0", 0.0),
                    default=0.01, help="control period in seconds (default 0.01)")
     p.add_argument("--windows", type=whole(1), default=None,
-                   help="number of (trace, offset) gust windows (default one per library trace)")
+                   help="number of (trace, offset) gust windows drawn at random (default: windows that tile every "
+                   "library trace end to end, the whole library flown once; each p90 comes with its 90 %% interval)")
     p.add_argument("--no-sensors", action="store_true",
                    help="the autopilot reads the true state (default: through the model's identified sensors, "
                    "model.json['sensors']: gyro and attitude noise, vibration lines)")
@@ -133,6 +136,11 @@ def run(args) -> int:
     print(f"unstable (closed-loop poles, not simulated): {n_unstable}; diverged: {int((st == 'diverged').sum())}; "
           f"time/frequency domain disagree: {int(result.table['disagree'].sum())}")
     _print_extension(result)
+    from controllers.sweep_report import interval_sentence
+
+    sentence = interval_sentence(result.settings)
+    if sentence:
+        print(sentence[0].upper() + sentence[1:])
     if best:
         print(f"best by p90 |attitude error|: {pair_summary(best, ' deg')}")
         robust = result.best_robust()
