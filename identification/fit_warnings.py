@@ -67,6 +67,29 @@ def require_moving_sticks(flights, axes) -> None:
                 "source (heli import --inputs)")
 
 
+STATIC_INPUT_STD = MIN_STICK_STD
+"""A modulating input (the collective) whose standard deviation within every flight is below this [stick
+units] does not vary: a term it multiplies is the offset (``k12·col``) or the control gain (``gs·u·col``)
+under another name, and is not fitted."""
+
+
+def static_collective(flights) -> float | None:
+    """The collective's largest within-flight standard deviation when it is below :data:`STATIC_INPUT_STD`
+    in every flight (it does not vary), else None. Within each flight, since a collective constant in each
+    but different between flights is the flights' own offsets again."""
+    flights = [flights] if hasattr(flights, "time") else list(flights)
+    stds = [float(np.std(np.asarray(f.sticks[2], dtype=float))) for f in flights]
+    worst = max(stds, default=0.0)
+    return worst if worst < STATIC_INPUT_STD else None
+
+
+def on_static_input(term: str, collective_static: bool) -> bool:
+    """Whether ``term`` multiplies an input that does not vary (its feature uses the collective)."""
+    from heli_core.terms import TERMS
+
+    return collective_static and "col" in TERMS[term].feature.split("*")
+
+
 def _name(flight, k: int, n: int) -> str:
     meta = getattr(flight, "metadata", {}) or {}
     source = meta.get("source")

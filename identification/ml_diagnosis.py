@@ -353,7 +353,6 @@ class LikelihoodDiagnoser(DiagnosisResult):
         self.input_hold_ = self.input_hold
         self.hold_fractions_ = {}
         self._ident = MaximumLikelihoodIdentifier(input_hold=self.input_hold_)
-        self._ident.allow_shift = True  # alignments below zero: a log whose input column lags
         cleaned, _ = self._ident._clean(flight)
         self._flight = cleaned
         self._fs = flight.sample_rate

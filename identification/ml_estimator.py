@@ -54,7 +54,8 @@ from heli_core.terms import AXES, DECOUPLED, FEATURES, RATE_DEPENDENCE, STICK_RO
 
 from .axis_likelihood import AxisData, AxisLikelihood, simulation_r2
 from .errors import IdentifiabilityError, NotFittedError
-from .fit_warnings import require_moving_sticks
+from .fit_warnings import on_static_input, require_moving_sticks, static_collective
+from .effects import shift_inputs
 from .flight import Flight
 from .integral_method import IntegralIdentifier
 from .state_space import (HOLD_INDEX, HOLDS, N_NONLINEAR, WIND_MODELS, ZETA_BOUNDS, concentrated_nll, hold_fraction,
@@ -71,8 +72,13 @@ COMMAND_FEATURE = ("u_lat", "u_lon", "u_ped")
 BURN_IN = 1.0
 """Seconds at the start of each flight left out of the likelihood while the filter settles."""
 
-DEFAULT_DELAY_GRID = np.round(np.arange(0.0, 0.5001, 0.01), 4)
-"""Delays profiled by ``delay="auto"`` [s]; from the best, the delay is searched jointly with the rest."""
+MAX_SHIFT = 0.6
+"""Largest input shift (a log whose input column lags the response) searched [s]."""
+
+DEFAULT_DELAY_GRID = np.round(np.arange(-MAX_SHIFT, 0.5001, 0.01), 4)
+"""Alignments profiled by ``delay="auto"`` [s]; from the best, the alignment is searched jointly with the rest.
+A positive one is the servo delay (Padé, eq. 31), a negative one a log whose input column lags the response
+(:attr:`MaximumLikelihoodIdentifier.input_shifts_`)."""
 
 XTOL, FTOL = 1e-6, 1e-8
 """Stopping tolerances of the likelihood search: a relative cost change of 1e-8 is a change of the
@@ -81,8 +87,12 @@ log-likelihood of about 1e-4 on a 300 s flight, far below any difference a test 
 MAX_DELAY = 0.6
 """Largest servo delay searched [s]."""
 
-MAX_SHIFT = 0.6
-"""Largest input shift (a log whose input column lags the response) searched [s]."""
+MIN_PROFILE_DAMPING = 0.05
+"""A damping [1/s] below which the undelayed fit is not held for the alignment profile of ``delay="auto"``."""
+
+NOMINAL_DAMPING = 1.0
+"""The damping [1/s] the alignment profile holds instead (a 1 s time constant, the order of a small
+helicopter's rate response) when the undelayed fit's is not positive and the integral method's start is not."""
 
 SUPPORT_Z = 3.0
 """With ``select_terms``: a term beyond the decoupled model is kept when ``|value| >= SUPPORT_Z * se``
@@ -138,6 +148,12 @@ class MLAxisFit:
         ``(lag, nll)`` when the lag was profiled (``servo_lag="auto"``, :mod:`identification.servo_lag`).
     lag_lr : float or None
         Likelihood-ratio statistic of the best lag against none, when profiled.
+    input_hold : float
+        The input's hold fraction (0 held over the sample, 1 linearly interpolated), estimated or set.
+    input_hold_se : float or None
+        Its standard error when estimated.
+    input_shift : float
+        The shift of the axis' stick found by ``delay="auto"`` [s]: negative for a log whose input lags.
     """
 
     axis: str
@@ -164,6 +180,7 @@ class MLAxisFit:
     lag_lr: float | None = None
     input_hold: float = 1.0
     input_hold_se: float | None = None
+    input_shift: float = 0.0
 
 
 def check_hold(hold) -> None:
@@ -196,9 +213,11 @@ class MaximumLikelihoodIdentifier:
     delay : None, float, sequence of 3 float, or "auto"
         Servo delay per axis [s] (Padé, eq. 31); "auto" profiles the likelihood
         over ``delay_grid`` (damping and wind held at the undelayed fit), then searches the delay jointly
-        with every other parameter from the best; its standard error is reported as ``tau_<axis>``.
+        with every other parameter from the best; its standard error is reported as ``tau_<axis>``. A
+        negative alignment found by "auto" is no servo delay but a log whose input column lags the
+        response: the axis' stick is advanced by it (:attr:`input_shifts_`) and the model's delay is 0.
     delay_grid : sequence of float, optional
-        Candidate delays for ``delay="auto"`` [s] (default 0 to 0.5 s in 10 ms).
+        Candidate alignments for ``delay="auto"`` [s] (default -0.6 to 0.5 s in 10 ms).
     wind_model : {"auto", "gm2", "gm_so"}
         Gust model (:data:`WIND_MODELS`); "auto" fits both and keeps the one of
         higher likelihood per axis (they have the same number of parameters).
@@ -224,7 +243,12 @@ class MaximumLikelihoodIdentifier:
     params_ : ModelParams
     axes_ : dict of str to MLAxisFit
     flights_ : list of Flight
-        The flights as fitted (vibration lines removed).
+        The flights as fitted (vibration lines removed, sticks advanced by :attr:`input_shifts_`).
+    input_shifts_ : dict of str to float
+        Per axis, the shift applied to its stick [s]: negative where ``delay="auto"`` found the log's input
+        column late (``metadata["input_shift_s"]`` of :attr:`flights_`), else 0.
+    static_collective_ : float or None
+        The collective's standard deviation when it does not vary (its terms not fitted), else None.
     fit_time_ : float
         Wall time of ``fit`` [s].
     vibration_lines_ : list of list of dict
@@ -249,7 +273,6 @@ class MaximumLikelihoodIdentifier:
         self.max_nfev = max_nfev
         self.select_terms = select_terms
         self.servo_lag = servo_lag
-        self.allow_shift = False  # the diagnosis searches negative alignments (log input shifts) too
 
     # ----------------------------------------------------------------- set-up
     def _param_names(self) -> dict[int, tuple[str, ...]]:
@@ -321,6 +344,10 @@ class MaximumLikelihoodIdentifier:
         cleaned = [self._clean(f) for f in flights]
         flights = [c[0] for c in cleaned]
         names = self._param_names()
+        self.static_collective_ = static_collective(flights)
+        static = {a: tuple(p for p in names[a] if on_static_input(p, self.static_collective_ is not None))
+                  for a in names}
+        names = {a: tuple(p for p in names[a] if p not in static[a]) for a in names}
         # The integral method (Fig. 5) on the same structure is the starting point.
         start = IntegralIdentifier(structure=names, delay=0.0, axes=self.axes).fit(flights)
         delays, lags = self._delays(), self._lags()
@@ -332,10 +359,20 @@ class MaximumLikelihoodIdentifier:
             fit = self._fit_axis(a, names[a], flights, burn, start.params_, delays[a], lags[a])
             if self.select_terms:
                 fit = self._supported(a, names[a], fit, flights, burn, start.params_)
+            if static[a]:  # terms of an input that does not vary: not fitted, listed as dropped
+                fit = replace(fit, dropped=tuple(fit.dropped) + static[a])
             fits[axis_name] = fit
             values.update(fit.params)
             values[f"tau_{axis_name}"] = fit.delay
             values[f"lag_{axis_name}"] = fit.lag
+        shifts = [min(fits[a].delay, 0.0) if a in fits else 0.0 for a in AXES]
+        if min(shifts) < 0.0:  # a log whose input lags: the sticks advanced, the model without a servo delay
+            flights = [shift_inputs(f, shifts) for f in flights]
+            for a, shift in zip(AXES, shifts):
+                if shift < 0.0:
+                    fits[a] = replace(fits[a], delay=0.0, input_shift=shift)
+                    values[f"tau_{a}"] = 0.0
+        self.input_shifts_ = dict(zip(AXES, shifts))
         self.axes_ = fits
         self.params_ = ModelParams().with_values(**values)
         self.flights_ = flights
@@ -406,7 +443,7 @@ class MaximumLikelihoodIdentifier:
         lo, hi = list(lo[:like.nw]), list(hi[:like.nw])
         if like.free_tau:
             start.append(tau0)
-            lo.append(-MAX_SHIFT if tau0 < 0 or self.allow_shift else 0.0)
+            lo.append(-MAX_SHIFT)
             hi.append(MAX_DELAY)
         lo, hi = np.array(lo), np.array(hi)
         fixed = self._fixed(free_damping)
@@ -478,7 +515,12 @@ class MaximumLikelihoodIdentifier:
             grid = np.asarray(self.delay_grid if self.delay_grid is not None else DEFAULT_DELAY_GRID, dtype=float)
             undelayed = self._per_kind(a, axis_params, flights, burn, 0.0, x0, models, free, lag=fixed_lag)
             kind = min(undelayed, key=lambda k: undelayed[k][3])
-            xb = undelayed[kind][1]
+            xb = np.array(undelayed[kind][1], dtype=float)
+            if free and xb[0] < MIN_PROFILE_DAMPING:
+                # an undelayed fit with a damping of the wrong sign (a log whose input lags by a large
+                # fraction of the response time): held at it, the profile ranks alignments by how well
+                # an unstable model fits, so it is held at the integral method's start or a nominal one
+                xb[0] = max(x0[0], NOMINAL_DAMPING)
             for tau in grid:
                 like = AxisLikelihood(self._axis_data(a, axis_params, flights, burn, float(tau), kind, fixed_lag)[0])
                 e = like.residual(xb)
@@ -569,12 +611,19 @@ class MaximumLikelihoodIdentifier:
         if not hasattr(self, "params_"):
             raise NotFittedError("this MaximumLikelihoodIdentifier is not fitted yet; call fit(flight) first")
 
+    def aligned(self, flight: Flight) -> Flight:
+        """``flight`` with its sticks advanced by :attr:`input_shifts_` (itself when there are none)."""
+        self._check_fitted()
+        shifts = [self.input_shifts_.get(a, 0.0) for a in AXES]
+        return shift_inputs(flight, shifts) if min(shifts) < 0.0 else flight
+
     def predict(self, flight: Flight) -> np.ndarray:
-        """Forward-simulate the identified model with the flight's sticks; rates (3, n) [rad/s]."""
+        """Forward-simulate the identified model with the flight's sticks (aligned, :meth:`aligned`); rates
+        (3, n) [rad/s]."""
         self._check_fitted()
         from heli_core.physics import forward_rates
 
-        return forward_rates(self.params_, flight)
+        return forward_rates(self.params_, self.aligned(flight))
 
     def wind_torque(self, flight: Flight | int = 0) -> np.ndarray:
         """The smoother's estimate of the wind torque at every sample, shape (3, n) [rad/s^2].
@@ -588,7 +637,7 @@ class MaximumLikelihoodIdentifier:
         self._check_fitted()
         names = self._param_names()
         if isinstance(flight, Flight):
-            flight, index = self._clean(flight)[0], None
+            flight, index = self._clean(self.aligned(flight))[0], None
         else:
             index = int(flight)
             flight = self.flights_[index]

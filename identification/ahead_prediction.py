@@ -1,0 +1,140 @@
+"""Multi-step prediction of the wind-state model, in the fit and on segments the fit never saw.
+
+The one-step prediction error is what the likelihood of
+:mod:`identification.ml_estimator` minimises, and on a log that was low-pass filtered
+before it was written (nothing above a few Hz, :mod:`identification.log_band`) it is
+near zero for any model: the next sample of a smooth signal is its last one. What a
+user relies on is the model's prediction further ahead: from the Kalman-filtered state
+at sample ``k`` (rate and gust states), the rate ``h`` samples later with the sticks
+known and the gust decaying as its Gauss-Markov model says (:func:`ahead_r2`, 0.5 s by
+default in the reports). :func:`heldout_ahead_r2` scores it on segments not used for
+the fit: the flight is cut into ``folds`` contiguous blocks, the model is fitted on the
+others (as separate flights sharing the parameters, each with its own offset) and
+predicts the held-out block from its own filter, the model's mean offset in place of
+the block's.
+
+A prediction whose error grows without bound (a model with negative damping, an
+unstable filter) has no R²: it is reported as *diverged* (:data:`DIVERGED`), never as a
+number like -10^42.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+
+import numpy as np
+
+from heli_core.terms import AXES
+
+from .axis_likelihood import AxisLikelihood
+from .flight import Flight
+from .state_space import kalman, lti_apply
+
+AHEAD_S = 0.5
+"""Horizon of the multi-step prediction the reports give [s]."""
+
+DIVERGED = "diverged"
+"""What a prediction whose error grows without bound reports instead of an R²."""
+
+DIVERGED_R2 = -1e3
+"""An R² below this (an error a thousand times the signal's variance) is a diverged prediction."""
+
+
+def ahead_r2(like: AxisLikelihood, x, theta, horizon: int) -> float:
+    """R² of the model's prediction ``horizon`` samples ahead from the Kalman-filtered state (every flight of
+    ``like``), or NaN when the prediction diverged (:func:`is_diverged`).
+
+    ``x_{k+h|k} = Ad^h (x_{k|k} - F_k) + F_{k+h}`` with ``F`` the response from rest
+    to the known inputs: the gust estimate decays as the wind model says.
+    """
+    d = like.data
+    Ad, g0, g1, Qd = like.discrete(x)
+    _, L, _ = kalman(Ad, Qd)
+    m = Ad.shape[0]
+    eye = np.eye(m)
+    Phi = Ad - np.outer(Ad @ L, eye[0])
+    row = np.linalg.matrix_power(Ad, horizon)[0]
+    num = den = 0.0
+    with np.errstate(over="ignore", invalid="ignore"):
+        for y, X in zip(d.y, d.regressors):
+            u = theta @ X
+            un = np.append(u[1:], u[-1])
+            n = y.size
+            pred = lti_apply(Phi, np.column_stack([Ad @ L, g0, g1]), eye, np.zeros((m, 3)), np.vstack([y, u, un]))
+            filt = pred + np.outer(L, y - pred[0])
+            F = lti_apply(Ad, np.column_stack([g0, g1]), eye, np.zeros((m, 2)), np.vstack([u, un]))
+            p = row @ (filt[:, :n - horizon] - F[:, :n - horizon]) + F[0, horizon:]
+            target = y[horizon:]
+            keep = slice(d.burn, None)
+            num += float(np.sum((target - p)[keep] ** 2))
+            den += float(np.sum((target[keep] - target[keep].mean()) ** 2))
+    r2 = 1.0 - num / (den or 1.0)
+    return math.nan if is_diverged(r2) else r2
+
+
+def is_diverged(r2) -> bool:
+    """True for an R² that is not a finite number above :data:`DIVERGED_R2`."""
+    return r2 is None or not np.isfinite(r2) or r2 < DIVERGED_R2
+
+
+def format_r2(r2, digits: int = 3) -> str:
+    """An R² as text, :data:`DIVERGED` when the prediction diverged."""
+    return DIVERGED if is_diverged(r2) else f"{r2:.{digits}f}"
+
+
+def heldout_ahead_r2(identifier, flight: Flight, folds: int = 4, horizon_s: float = AHEAD_S) -> dict:
+    """Per axis, the ``horizon_s``-ahead prediction R² on each of ``folds`` contiguous blocks of ``flight``,
+    each predicted by the model fitted on the other blocks.
+
+    Parameters
+    ----------
+    identifier : MaximumLikelihoodIdentifier
+        An estimator with the settings to use (it is cloned per fold, never refitted in place).
+    flight : Flight
+        The flight as the identifier would take it (aligned, resampled).
+    folds : int
+        Number of blocks (each at least 20 s).
+    horizon_s : float
+        Prediction horizon [s].
+
+    Returns
+    -------
+    dict
+        ``{axis: [r2 of block 1, ...]}`` with NaN for a diverged prediction (:func:`format_r2`).
+
+    Raises
+    ------
+    ValueError
+        Fewer than 2 folds, or blocks shorter than 20 s.
+    """
+    from .ml_estimator import BURN_IN
+
+    if folds < 2 or flight.duration / folds < 20.0:
+        raise ValueError(f"need at least 2 folds of 20 s each; got {folds} folds of a {flight.duration:.1f} s flight")
+    edges = np.linspace(flight.time[0], flight.time[-1], folds + 1)
+    blocks = [flight.segment(edges[i], edges[i + 1]) for i in range(folds)]
+    horizon = max(1, int(round(horizon_s * flight.sample_rate)))
+    out = {axis: [] for axis in identifier.axes}
+    for i, block in enumerate(blocks):
+        fitted = _clone(identifier).fit([b for j, b in enumerate(blocks) if j != i])
+        burn = int(round(BURN_IN * flight.sample_rate))
+        for axis, fit in fitted.axes_.items():
+            out[axis].append(_block_r2(fitted, AXES.index(axis), fit, block, burn, horizon))
+    return out
+
+
+def _clone(identifier):
+    """A new, unfitted estimator with ``identifier``'s settings (scikit-learn's ``clone``)."""
+    names = inspect.signature(type(identifier)).parameters
+    return type(identifier)(**{k: getattr(identifier, k) for k in names})
+
+
+def _block_r2(fitted, a: int, fit, block: Flight, burn: int, horizon: int) -> float:
+    """The ``horizon``-ahead R² of axis ``a`` of a fitted identifier on a block it did not see; the block's
+    offset is the model's (the mean of the fitted flights')."""
+    names = tuple(p for p in fitted._param_names()[a] if p not in fit.dropped)
+    cleaned = fitted._clean(fitted.aligned(block))[0]
+    data, _ = fitted._axis_data(a, names, [cleaned], burn, fit.delay, fit.wind["model"], fit.lag)
+    theta = np.array([fit.params[n.split("@")[0]] for n in data.names])
+    return ahead_r2(AxisLikelihood(data), fit.state, theta, horizon)
