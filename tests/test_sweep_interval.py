@@ -1,4 +1,4 @@
-"""The sweep's default windows (the library tiled) and the 90 % interval beside each p90 (controllers.sweep_interval)."""
+"""The sweep's default windows (the library tiled) and the 90 % interval beside each p90 (sweep_interval)."""
 
 from __future__ import annotations
 
