@@ -120,8 +120,10 @@ def _run_ml(args, flight, model, document, source, progress) -> int:
     run_ = diagnose_by_likelihood(flight, args.out, model=model, model_document=document, source=source,
                                   plots=not args.no_plots, diagnoser=diagnoser, wait=not args.no_wait)
     progress.done()
+    from identification.ahead_prediction import format_r2
+
     _print_run(run_, lambda s: (
-        f"LR {s.lr:.1f} > {s.threshold:.1f}; 0.5 s-ahead R² {s.r2_before['ahead_0.5s']:.3f} -> "
-        f"{s.r2_after['ahead_0.5s']:.3f}; "
+        f"LR {s.lr:.1f} > {s.threshold:.1f}; 0.5 s-ahead R² {format_r2(s.r2_before['ahead_0.5s'])} -> "
+        f"{format_r2(s.r2_after['ahead_0.5s'])}; "
         + (f"runner-up {s.runner_up} (LR {s.runner_up_lr:.1f})" if s.runner_up else "no runner-up")))
     return _write_html(run_)

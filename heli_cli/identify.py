@@ -116,13 +116,13 @@ def run(args) -> int:
                       "input_hold": "linear" if args.input_hold == "auto" else args.input_hold}
         backend = flight_backend(args)
         try:
-            run = identify_and_report(
+            run = _identify_or_explain(args, flights, kwargs, progress, lambda: identify_and_report(
                 flights, args.out, coupled=args.coupled, sources=[source_entry(p) for p in args.flights],
                 identifier_kwargs=kwargs, flight_paths=args.flights, plots=not args.no_plots,
                 disturbances=not args.no_disturbances, backend=backend, method=args.method,
                 progress=progress.bars and len(flights) > 1, draw_figures=False, stage=progress.stage,
                 wait=not args.no_wait,
-            )
+            ))
         finally:
             if backend is not None:
                 backend.close()
@@ -133,6 +133,45 @@ def run(args) -> int:
 
     print(f"wrote {write_html_report(run.paths['report'])}")  # after the figures: it embeds them
     return 0
+
+
+def _identify_or_explain(args, flights, kwargs: dict, progress, identify):
+    """``identify()``; when its model diverges, test whether searching the alignment (``--delay auto``) gives
+    a physical, stable model, and say so in the error with the command to run next only if it does."""
+    from identification.alignment_check import check_alignment
+    from identification.errors import SimulationDivergedError
+
+    try:
+        return identify()
+    except SimulationDivergedError as e:
+        if args.method != "ml" or args.delay == "auto":
+            raise
+        progress.stage("the model diverged: fitting again with the alignment searched (--delay auto)")
+        finding = check_alignment(flights, kwargs)
+        if finding.helps:
+            advice = (f"Fitted with the alignment searched ({finding.seconds:.0f} s): {finding.describe()}. "
+                      f"Identify with it: {next_command(sys.argv[1:], '--delay', 'auto')}")
+        else:
+            advice = (f"Searching the alignment (--delay auto) does not mend it: {finding.describe()}; the "
+                      "sticks of this log may not be the aircraft's inputs (heli import --inputs)")
+        raise SimulationDivergedError(f"{e} {advice}") from None
+
+
+def next_command(argv, option: str, value: str) -> str:
+    """The ``heli`` command line ``argv`` with ``option`` set to ``value`` (replaced or added), quoted."""
+    import shlex
+
+    argv = list(argv)
+    for i, word in enumerate(argv):
+        if word == option and i + 1 < len(argv):
+            argv[i + 1] = value
+            break
+        if word.startswith(option + "="):
+            argv[i] = f"{option}={value}"
+            break
+    else:
+        argv += [option, value]
+    return shlex.join(["heli"] + argv)
 
 
 def _print_run(run, n_flights: int, method: str) -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 CELL_NAMES = ("default", "independent", "broadband-pd-half", "broadband-pd-2x", "broadband-pd-delay0.1",
               "broadband-pd-delay0.25", "dryden-0.2Hz-pid", "dryden-2Hz-pd", "broadband-autopilot",
-              "broadband-pd-noisy-gyro")
+              "held-sticks-pd", "broadband-pd-noisy-gyro")
 """The names of :data:`identification.bench.BENCH_CELLS`, written here so that ``--help`` imports no numpy
 (a test keeps the two equal)."""
 
@@ -103,9 +103,9 @@ def run(args) -> int:
     if args.effect:
         scale = f" (x{args.effect_scale:g})" if args.effect_scale != 1.0 else ""
         print(f"hidden effects: {', '.join(args.effect)}{scale}")
-    if f.metadata.get("input_hold") == "zoh":  # a CSV does not carry it: say how to read the sticks
-        print("the sticks are a flight controller's commands, held over each sample: identify and diagnose "
-              "this log with --input-hold zoh")
+    if f.metadata.get("input_hold") == "zoh":  # a CSV does not carry it: the estimators find it
+        print("the sticks reach the aircraft held over each sample (a CSV does not say so: heli identify and "
+              "diagnose estimate the hold from the data)")
     return 0
 
 

@@ -46,9 +46,12 @@ from heli_core.terms import AXES, DECOUPLED, STICK_ROW, TERMS
 
 from .effects import CATALOGUE, MAX_ALIGNMENT, NONE, SERVO_DELAY, UNDECIDED, DiagnosisResult, implausible, shift_inputs
 from .flight import Flight
+from .ahead_prediction import AHEAD_S, ahead_r2
 from .axis_likelihood import AxisLikelihood as _AxisLikelihood
-from .ml_estimator import BURN_IN, MAX_DELAY, MAX_SHIFT, MaximumLikelihoodIdentifier, check_hold
-from .state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll, kalman, lti_apply
+from .fit_warnings import on_static_input, static_collective
+from .ml_estimator import (BURN_IN, MAX_DELAY, MAX_SHIFT, MIN_PROFILE_DAMPING, NOMINAL_DAMPING,
+                           MaximumLikelihoodIdentifier, check_hold)
+from .state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll
 
 ALPHA = 0.01
 """Family-wise level of the likelihood-ratio test per axis and round (Bonferroni over the candidates)."""
@@ -64,10 +67,14 @@ the model is misspecified in small ways the chi-square law does not know (a hold
 controller's sample of lag): on effect-free flights its statistic reaches 12.2, hence the higher floor."""
 MIN_DURATION = 60.0
 """Shortest flight a diagnosis decides on [s]."""
-AHEAD_S = 0.5
-"""Horizon of the multi-step prediction R² reported per step [s]."""
 ALIGNMENT_GRID = np.round(np.arange(-MAX_ALIGNMENT, 0.5001, 0.025), 4)
 """Alignments the ``servo_delay`` candidate profiles [s]; the best is refined to 1 ms."""
+MAX_GAIN_RATIO = 3.0
+"""Largest factor a fitted gain scheduling may change the control gain by over the flight's collective range
+(a rotor's control power grows with its load, not several-fold within one flight)."""
+AHEAD_R2_TOLERANCE = 0.002
+"""A candidate that lowers the 0.5 s-ahead prediction R² by more than this is not accepted: a term that
+raises the one-step likelihood while the model predicts worse fits the noise or the wind, not the aircraft."""
 EDGE_S = 0.01
 """An alignment within this of the searched range's edge [s] is a boundary hit, not a found value."""
 RESOLUTION_SAMPLES = 2
@@ -134,35 +141,6 @@ def closed_loop_share(flight: Flight, axis: int, lags=(0.1, 0.2, 0.3, 0.5)) -> f
     return float(1.0 - np.var(resid) / var) if var > 0 else 0.0
 
 
-def ahead_r2(like: _AxisLikelihood, x, theta, horizon: int) -> float:
-    """R² of the model's prediction ``horizon`` samples ahead from the Kalman-filtered state (one flight).
-
-    ``x_{k+h|k} = Ad^h (x_{k|k} - F_k) + F_{k+h}`` with ``F`` the response from rest
-    to the known inputs: the gust estimate decays as the wind model says.
-    """
-    d = like.data
-    Ad, g0, g1, Qd = like.discrete(x)
-    _, L, _ = kalman(Ad, Qd)
-    m = Ad.shape[0]
-    eye = np.eye(m)
-    Phi = Ad - np.outer(Ad @ L, eye[0])
-    num = den = 0.0
-    for y, X in zip(d.y, d.regressors):
-        u = theta @ X
-        un = np.append(u[1:], u[-1])
-        n = y.size
-        pred = lti_apply(Phi, np.column_stack([Ad @ L, g0, g1]), eye, np.zeros((m, 3)), np.vstack([y, u, un]))
-        filt = pred + np.outer(L, y - pred[0])
-        F = lti_apply(Ad, np.column_stack([g0, g1]), eye, np.zeros((m, 2)), np.vstack([u, un]))
-        row = np.linalg.matrix_power(Ad, horizon)[0]
-        p = row @ (filt[:, :n - horizon] - F[:, :n - horizon]) + F[0, horizon:]
-        target = y[horizon:]
-        keep = slice(d.burn, None)
-        num += float(np.sum((target - p)[keep] ** 2))
-        den += float(np.sum((target[keep] - target[keep].mean()) ** 2))
-    return 1.0 - num / (den or 1.0)
-
-
 def _starting_structure(model: ModelParams | None) -> tuple[dict, list]:
     """Per axis the terms the diagnosis starts from (the paper's decoupled model, or ``model``'s nonzero
     terms), and the alignments (``model``'s servo delays)."""
@@ -180,6 +158,16 @@ def _fresh(x) -> np.ndarray:
     starting values."""
     return np.array([max(float(x[0]), 0.5), np.log(4.0), np.log(0.3), np.log(100.0), np.log(100.0),
                      float(x[HOLD_INDEX])])
+
+
+def _predicts_worse(before: dict, after: dict) -> str | None:
+    """Why a candidate's model predicts worse than the base ``AHEAD_S`` ahead, or None."""
+    b, c = before.get("ahead_0.5s"), after.get("ahead_0.5s")
+    if c is None or not np.isfinite(c):
+        return f"its {AHEAD_S:g} s-ahead prediction diverges"
+    if b is not None and np.isfinite(b) and c < b - AHEAD_R2_TOLERANCE:
+        return f"it lowers the {AHEAD_S:g} s-ahead prediction R² from {b:.3f} to {c:.3f}"
+    return None
 
 
 class LikelihoodDiagnoser(DiagnosisResult):
@@ -306,7 +294,10 @@ class LikelihoodDiagnoser(DiagnosisResult):
         """The best alignment: a scan with the wind and damping held (linear parameters solved), then a
         bounded search around the best with every parameter free."""
         kinds = (base.kind,)
-        scan = [self._score(a, base.names, float(s), base.x, kinds, 0) for s in ALIGNMENT_GRID
+        held = np.array(base.x, dtype=float)
+        if held[0] < MIN_PROFILE_DAMPING:  # as the identifier's profile: an unstable base ranks nothing
+            held[0] = NOMINAL_DAMPING
+        scan = [self._score(a, base.names, float(s), held, kinds, 0) for s in ALIGNMENT_GRID
                 if abs(s - base.alignment) > 1e-9]
         best = min(scan, key=lambda sc: sc.nll)
         # the scan held the undelayed fit's damping and wind, which a large alignment makes wrong: the
@@ -335,7 +326,29 @@ class LikelihoodDiagnoser(DiagnosisResult):
             return None
         data = self._data(a, sc.names, sc.alignment, sc.kind)
         _, theta, _ = _AxisLikelihood(data).solve_linear(np.asarray(sc.x))
-        return implausible({nm: float(v) for nm, v in zip(data.names, theta) if nm in added})
+        values = {nm: float(v) for nm, v in zip(data.names, theta)}
+        return implausible({nm: v for nm, v in values.items() if nm in added}) or \
+            self._scheduled_gain_implausible(values, added)
+
+    def _scheduled_gain_implausible(self, values: dict, added) -> str | None:
+        """Why a fitted gain scheduling cannot be physical: the control gain it gives changes sign, or by more
+        than :data:`MAX_GAIN_RATIO`, over the flight's collective range."""
+        for gs in (p for p in added if TERMS[p].effect == "gain_scheduling"):
+            gain = next((p for p in values if TERMS.get(p) is not None and TERMS[p].effect == "control"
+                         and TERMS[p].axis == TERMS[gs].axis), None)
+            if gain is None:
+                continue
+            col = self._flight.sticks[2]
+            lo, hi = float(np.min(col)), float(np.max(col))
+            ends = [TERMS[gain].sign * values[gain] + TERMS[gs].sign * values[gs] * c for c in (lo, hi)]
+            if ends[0] * ends[1] <= 0.0:
+                return (f"{gs} = {values[gs]:.3g} makes the control gain change sign over the flight's collective "
+                        f"[{lo:.3g}, {hi:.3g}] ({ends[0]:.3g} to {ends[1]:.3g}): not a rotor's load")
+            ratio = max(abs(ends[0]), abs(ends[1])) / min(abs(ends[0]), abs(ends[1]))
+            if ratio > MAX_GAIN_RATIO:
+                return (f"{gs} = {values[gs]:.3g} changes the control gain {ratio:.1f}-fold over the flight's "
+                        f"collective [{lo:.3g}, {hi:.3g}], more than x{MAX_GAIN_RATIO:g}: not a rotor's load")
+        return None
 
     # ------------------------------------------------------------------ fit
     def fit(self, flight: Flight, model: ModelParams | None = None) -> "LikelihoodDiagnoser":
@@ -359,6 +372,15 @@ class LikelihoodDiagnoser(DiagnosisResult):
         self._burn = int(round(BURN_IN * self._fs))
         self._shift_cache = {}
         structure, alignment = _starting_structure(model)
+        collective = static_collective(cleaned)
+        self._static = collective is not None
+        self.untestable_ = {}
+        if self._static:  # a collective that never moves: its terms are the offset or the gain again
+            structure = {a: tuple(p for p in names if not on_static_input(p, True)) for a, names in structure.items()}
+            for name, effect in CATALOGUE.items():
+                if any(on_static_input(p, True) for a in range(3) for p in effect.terms_on(a)):
+                    self.untestable_[name] = (f"the collective does not vary in this flight (std {collective:.2g}): "
+                                              "its terms are the offset or the control gain under another name")
         self.closed_loop_ = {AXES[a]: closed_loop_share(flight, a) for a in range(3)}
         if flight.duration < self.min_duration:
             self.verdict_ = UNDECIDED
@@ -420,11 +442,20 @@ class LikelihoodDiagnoser(DiagnosisResult):
                          "n_parameters": k, "alignment_s": sc.alignment,
                          "accepted": bool(lr > thr and why is None), "implausible": why})
         scored.sort(key=lambda r: -r[0])
-        if not scored or scored[0][0] <= 1.0:
+        after = None
+        while scored and scored[0][0] > 1.0:
+            after = self._describe(a, scored[0][3])
+            worse = _predicts_worse(base.r2, after.r2)
+            if worse is None:
+                break
+            row = next(r for r in rows if r["effect"] == scored[0][1])
+            row["accepted"], row["implausible"] = False, worse
+            scored.pop(0)
+            after = None
+        if after is None:
             return False
         _, name, k, sc, lr, thr = scored[0]
         runner = scored[1] if len(scored) > 1 else None
-        after = self._describe(a, sc)
         added = {p: v for p, v in after.params.items() if p not in base.names}
         if name == SERVO_DELAY:
             added = {"alignment_s": after.alignment}
@@ -445,7 +476,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
                 k = 1
             else:
                 add = tuple(p for p in effect.terms_on(a) if p not in base.names)
-                if not add:
+                if not add or name in self.untestable_:
                     continue
                 sc = self._score(a, base.names + add, base.alignment, base.x, (base.kind,), NFEV, free_tau)
                 k = len(add)
@@ -477,6 +508,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
             "closed_loop_share": self.closed_loop_,
             "input_hold": self.input_hold_,
             "hold_fractions": self.hold_fractions_,
+            "untestable": getattr(self, "untestable_", {}),
             "alignment_s": dict(zip(AXES, self.alignment_)),
             "r2_before": {a: s.r2 for a, s in self.baseline_.items()},
             "r2_after": {a: s.r2 for a, s in self.final_.items()},

@@ -28,7 +28,8 @@ from .effects import CATALOGUE, alignment_parts, describe, shift_inputs
 from .figures import pyplot
 from .files import jsonable, save_figure
 from .flight import Flight
-from .ml_diagnosis import AHEAD_S, LikelihoodDiagnoser
+from .ahead_prediction import AHEAD_S, format_r2
+from .ml_diagnosis import LikelihoodDiagnoser
 from .model import ModelParams
 from .terms import AXES
 
@@ -69,8 +70,8 @@ def _table(header, rows) -> str:
 
 
 def _r2(r: dict) -> str:
-    return f"{r.get('one_step', float('nan')):.4f} / {r.get('ahead_0.5s', float('nan')):.3f} / " \
-           f"{r.get('simulation', float('nan')):.3f}"
+    return (f"{format_r2(r.get('one_step'), 4)} / {format_r2(r.get('ahead_0.5s'))} / "
+            f"{format_r2(r.get('simulation'))}")
 
 
 HELD = 0.5
@@ -108,6 +109,10 @@ def diagnosis_markdown(d: LikelihoodDiagnoser, figure: Path | None) -> str:
                   [[a, f"{100 * v:.0f} %"] for a, v in d.closed_loop_.items()]), ""]
     if flight_controller_note(d):
         md += [flight_controller_note(d), ""]
+    if getattr(d, "untestable_", None):
+        md += ["## Not tested", "", "Effects whose regressor does not vary in this flight cannot be told from the "
+               "model's own terms, so they are not named either way:", ""]
+        md += [f"- `{name}`: {why}" for name, why in d.untestable_.items()] + [""]
     if d.steps_:
         md += ["## Effects added", "",
                f"R² columns: one-step prediction / {AHEAD_S:g} s ahead / simulation from the sticks alone.", "",

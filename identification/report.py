@@ -42,6 +42,7 @@ from .identify_report import (  # noqa: F401  (the tables are re-exported: they 
 from .integral_method import IntegralIdentifier
 from .sensors import identify_sensors
 from .synthetic import load_truth, truth_paths
+from .errors import SimulationDivergedError
 from .validation import ValidationResult, validate_models
 
 
@@ -242,7 +243,8 @@ def identify_and_report(flights, out_dir, options: IdentifyOptions | None = None
     # the share of each axis' rate the sticks explain: the ML fit's simulation, the integral fit's R²
     warnings = fit_warnings(flights, {a: f.r2 for a, f in ident.axes_.items()})
     opts.say("validating both models by forward simulation")
-    validation = validate_models(first, {lab: fitted.params_ for lab, fitted in identifiers.items()})
+    validation, diverged = _validate(first, identifiers, chosen)
+    warnings += diverged
     truth = _truth_of(flights[0], (opts.flight_paths or [None])[0])
     document = model_document(
         ident.params_, structure=chosen, sample_rate=first.sample_rate,
@@ -267,6 +269,19 @@ def identify_and_report(flights, out_dir, options: IdentifyOptions | None = None
         opts.say("drawing the figures")
         run.draw_figures()
     return run
+
+
+def _validate(flight: Flight, identifiers: dict, chosen: str):
+    """Both models simulated from the flight's sticks: ``(validation, warnings)``. The chosen model diverging
+    raises :class:`~identification.errors.SimulationDivergedError`; the other one diverging is a warning and
+    it is left out of the validation (no model is written from a diverging fit, and none is refused for the
+    model it does not write)."""
+    models = {lab: fitted.params_ for lab, fitted in identifiers.items()}
+    try:
+        return validate_models(flight, models), []
+    except SimulationDivergedError as e:
+        validation = validate_models(flight, {chosen: models[chosen]})  # raises when the chosen one diverges
+        return validation, [f"not used: {e}"]
 
 
 def _options(options: IdentifyOptions | None, settings: dict) -> IdentifyOptions:

@@ -201,9 +201,9 @@ def _check_bounded(label: str, params: ModelParams, time, rates) -> None:
            if unstable else "its added terms feed the rates back faster than the damping removes them")
     raise SimulationDivergedError(
         f"model {label!r} diverges when simulated from the flight's sticks: the {AXES[row]} rate leaves "
-        f"±{DIVERGED_RATE:g} rad/s at t={float(time[col]):.2f} s; {why}. Likely causes: an unmodelled servo "
-        "delay (identify with --delay auto), a log whose input column lags the response, or a log of an aircraft "
-        "flown by a rate controller (its recorded command is not an open-loop input)")
+        f"±{DIVERGED_RATE:g} rad/s at t={float(time[col]):.2f} s; {why}. Likely causes: a servo delay or a "
+        "late input column the model does not have, or a log of an aircraft flown by a rate controller (its "
+        "recorded command is not an open-loop input).")
 
 
 def _disturbance_per_model(disturbance, models, n: int) -> dict[str, np.ndarray]:
