@@ -150,7 +150,7 @@ def _identify_or_explain(args, flights, kwargs: dict, progress, identify):
         finding = check_alignment(flights, kwargs)
         if finding.helps:
             advice = (f"Fitted with the alignment searched ({finding.seconds:.0f} s): {finding.describe()}. "
-                      f"Identify with it: {next_command(sys.argv[1:], '--delay', 'auto')}")
+                      f"Identify with it: {next_command(args.argv, '--delay', 'auto')}")
         else:
             advice = (f"Searching the alignment (--delay auto) does not mend it: {finding.describe()}; the "
                       "sticks of this log may not be the aircraft's inputs (heli import --inputs)")
@@ -182,6 +182,8 @@ def _print_run(run, n_flights: int, method: str) -> None:
     for axis, fit in run.identifiers[run.chosen].axes_.items():
         vals = ", ".join(f"{k}={params[k]:.4f}" for k in fit.params)
         delay = f", delay {fit.delay:.3f} s" if fit.delay else ""
+        if getattr(fit, "input_shift", 0.0) < 0.0:
+            delay += f", stick logged {-fit.input_shift:.3f} s late (advanced)"
         if getattr(fit, "lag_lr", None) is not None:
             delay += (f", servo lag {fit.lag:.3f} s (LR {fit.lag_lr:.1f})" if fit.lag
                       else f", no servo lag supported (LR {fit.lag_lr:.1f})")

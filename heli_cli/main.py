@@ -151,6 +151,7 @@ def check_output(path, kind: str) -> None:
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)  # for advice that names the next command
     if args.command is None:  # 'heli' alone: what it can do, on the error stream as argparse's usage errors
         parser.print_help(sys.stderr)
         return 2

@@ -26,6 +26,8 @@ from collections.abc import Iterable, Mapping
 
 import numpy as np
 
+from .log_band import log_band
+
 AXES = ("roll", "pitch", "yaw")
 """Axes in the order of the rates p, q, r."""
 AXIS_STICK = {"roll": ("lat", 0), "pitch": ("lon", 1), "yaw": ("ped", 3)}
@@ -129,6 +131,14 @@ def fit_warnings(flights, r2: Mapping | None = None, *, min_r2: float = MIN_R2,
             out.append(f"{_name(f, k, len(flights))} lasts {duration:.1f} s, shorter than {min_duration_s:.0f} s: "
                        "too short for the parameters and the wind statistics to settle; identify from a longer "
                        "flight or several flights")
+        band = log_band(f) if hasattr(f, "sample_rate") else None
+        if band is not None and band.filtered:
+            out.append(f"{_name(f, k, len(flights))}: {band.describe()}")
+    collective = static_collective(flights) if flights else None
+    if collective is not None:
+        out.append(f"the collective does not vary (std {collective:.2g} within each flight): the collective torque "
+                   "(k12) and gain scheduling are not fitted (with a constant collective they are the offset and "
+                   "the control gain again)")
     if flights:
         sticks = np.concatenate([np.asarray(f.sticks, dtype=float) for f in flights], axis=1)
         rates = np.concatenate([np.asarray(f.rates, dtype=float) for f in flights], axis=1)

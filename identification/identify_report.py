@@ -75,6 +75,19 @@ def fit_table(identifiers: dict) -> str:
     return "\n".join(lines)
 
 
+def _shift_sentence(ident) -> str:
+    """What an input found late means, when ``delay="auto"`` found one (else empty)."""
+    from .alignment_check import STABILISED_NOTE
+
+    late = {a: v for a, v in (getattr(ident, "input_shifts_", None) or {}).items() if v < 0.0}
+    if not late:
+        return ""
+    return (" The sticks of this log lag the response: they were advanced by "
+            + ", ".join(f"{a} {-v:.3f} s" for a, v in late.items())
+            + " before the fit (the alignment searched by --delay auto; a log's timing, so the model has no servo "
+            "delay for it). " + STABILISED_NOTE)
+
+
 def method_sentence(ident) -> str:
     """One sentence of the report saying how the model was identified."""
     from .ml_estimator import MaximumLikelihoodIdentifier
@@ -82,15 +95,20 @@ def method_sentence(ident) -> str:
     if isinstance(ident, MaximumLikelihoodIdentifier):
         winds = ", ".join(f"{a} {f.wind['model']}" for a, f in ident.axes_.items())
         holds = ", ".join(f"{a} {f.input_hold:.2f}" for a, f in ident.axes_.items())
-        how = (f"a fraction of linear interpolation estimated per axis ({holds}; 0 held over the sample, 1 "
-               "interpolated)" if ident.input_hold == "auto" else f"a fixed hold ({ident.input_hold})")
+        decision = getattr(ident, "hold_decision_", None) or {}
+        said = (f"the log's {decision['named']} hold, kept as the data do not reject it" if decision.get("named")
+                else "the axes' pooled fraction")
+        how = (f"a fraction of linear interpolation (0 held over the sample, 1 interpolated) estimated per axis "
+               f"and decided for the log ({said}; per axis {holds})" if ident.input_hold == "auto"
+               else f"a fixed hold ({ident.input_hold})")
         return ("Method: maximum likelihood (filter-error / prediction-error method): per axis the rate, a slow and "
                 "a fast Gauss-Markov gust entering as torque, white gyro noise; exact discretisation with the "
                 f"sticks between samples as {how}, "
                 "steady-state Kalman filter, innovations minimised over the damping and the wind model with the "
                 f"linear parameters projected out; gust models chosen by likelihood ({winds}); standard errors "
                 "from the Fisher information; no prefilter (vibration lines removed by regression on their "
-                "sinusoids). The integral method of Fig. 5 is its starting point and is shown for comparison.")
+                "sinusoids). The integral method of Fig. 5 is its starting point and is shown for comparison."
+                + _shift_sentence(ident))
     return ("Method: integral-based identification (paper Section 2.5.2, Fig. 5) with "
             f"{ident.interval:g} s intervals, per-interval initial values (eq. 34), "
             + ("a per-interval polynomial disturbance of degree "

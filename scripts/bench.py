@@ -74,19 +74,22 @@ def bench_identification(repeats: int) -> dict:
 
     few = max(3, repeats // 20)
     ml = _median_time(lambda: MaximumLikelihoodIdentifier().fit(flight), few)
+    ml_linear = _median_time(lambda: MaximumLikelihoodIdentifier(input_hold="linear").fit(flight), few)
     delayed = simulate_flight(300, seed=2, effects=("servo_delay",)).flight
     ml_delay = _median_time(lambda: MaximumLikelihoodIdentifier(delay="auto").fit(delayed), few)
     diag = _median_time(lambda: LikelihoodDiagnoser().fit(flight), 1)
     lagged = _median_time(lambda: MaximumLikelihoodIdentifier(delay="auto", servo_lag="auto").fit(delayed), 1)
     out.update({
-        "maximum likelihood, decoupled, 3 axes, one core [s]": ml,
-        "maximum likelihood with the delay profiled over 0-0.5 s, 3 axes [s]": ml_delay,
+        "maximum likelihood, decoupled, 3 axes, one core, hold estimated (default) [s]": ml,
+        "the same with the hold fixed linear (the default before) [s]": ml_linear,
+        "hold estimated / fixed time ratio": ml / ml_linear,
+        "maximum likelihood with the alignment profiled over -0.6-0.5 s, 3 axes [s]": ml_delay,
         "the same with the servo lag profiled too (10-200 ms), 3 axes [s]": lagged,
         "likelihood diagnosis of the 300 s flight, every candidate [s]": diag,
         "ML / integral time ratio": ml / (out["decoupled, 3 axes, with FIR prefilter [ms]"] / 1e3),
-        "target (ML <= 1 s; delay profile <= 5 s; diagnosis <= 10 s)": ", ".join(
+        "target (ML with the hold estimated <= 1.5 s; delay profile <= 5 s; diagnosis <= 10 s)": ", ".join(
             f"{name} {'met' if v <= lim else 'NOT met'}" for name, v, lim in
-            (("ML", ml, 1.0), ("delay", ml_delay, 5.0), ("diagnosis", diag, 10.0))),
+            (("ML", ml, 1.5), ("delay", ml_delay, 5.0), ("diagnosis", diag, 10.0))),
     })
     return out
 
