@@ -116,7 +116,10 @@ def _run_ml(args, flight, model, document, source, progress) -> int:
     diagnoser = LikelihoodDiagnoser(alpha=ALPHA if args.alpha is None else args.alpha,
                                     min_lr_per_parameter=MIN_LR_PER_PARAMETER if args.min_lr is None else args.min_lr,
                                     input_hold=args.input_hold, min_lr_alignment=MIN_LR_ALIGNMENT
-                                    if args.min_lr_alignment is None else args.min_lr_alignment)
+                                    if args.min_lr_alignment is None else args.min_lr_alignment,
+                                    progress=lambda step: progress.stage(  # each step's line replaces the last
+                                        step + (", then the report and its figures" if step.startswith("fitting the "
+                                                "final") and not args.no_plots else "")))
     run_ = diagnose_by_likelihood(flight, args.out, model=model, model_document=document, source=source,
                                   plots=not args.no_plots, diagnoser=diagnoser, wait=not args.no_wait)
     progress.done()

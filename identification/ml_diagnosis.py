@@ -191,6 +191,9 @@ class LikelihoodDiagnoser(DiagnosisResult):
         candidate alike, so that a hold is never read as an effect nor an effect as a hold.
     axes : sequence of str
         Axes diagnosed.
+    progress : callable or None
+        Called with a few words as each step of the fit starts (``"round 1, roll: trying cross_coupling"``),
+        e.g. to show progress; None (default) shows nothing.
 
     Attributes
     ----------
@@ -219,7 +222,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
 
     def __init__(self, alpha: float = ALPHA, min_lr_per_parameter: float = MIN_LR_PER_PARAMETER,
                  max_rounds: int = 3, min_duration: float = MIN_DURATION, input_hold: str = "auto", axes=AXES,
-                 min_lr_alignment: float = MIN_LR_ALIGNMENT):
+                 min_lr_alignment: float = MIN_LR_ALIGNMENT, progress=None):
         self.alpha = alpha
         self.min_lr_per_parameter = min_lr_per_parameter
         self.min_lr_alignment = min_lr_alignment
@@ -227,6 +230,11 @@ class LikelihoodDiagnoser(DiagnosisResult):
         self.min_duration = min_duration
         self.input_hold = input_hold
         self.axes = axes
+        self.progress = progress
+
+    def _say(self, text: str) -> None:
+        if self.progress is not None:
+            self.progress(text)
 
     def _check(self):
         if not 0.0 < self.alpha < 1.0:
@@ -389,6 +397,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
             self.params_ = model or ModelParams()
             self.alignment_ = tuple(alignment)
             return
+        self._say(f"fitting the starting structure on {', '.join(self.axes)}")
         current = self._baseline(cleaned, structure, alignment)
         self.baseline_ = dict(current)
         todo = list(self.axes)
@@ -400,6 +409,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
                 break
         self.final_ = current
         self.alignment_ = tuple(current[a].alignment if a in current else alignment[i] for i, a in enumerate(AXES))
+        self._say("fitting the final structure")
         self._final_fit(cleaned, current)
         self.verdict_ = "found" if self.steps_ else NONE
 
@@ -427,10 +437,11 @@ class LikelihoodDiagnoser(DiagnosisResult):
         # and from the fresh start the alignment candidate also gets (else that start alone could
         # win it a likelihood ratio), with every gust model (switching models alone cannot win LR)
         free_tau = (SERVO_DELAY, axis) in self.effects_found_
+        self._say(f"round {rnd}, {axis}: refitting the base")
         tries = [base] + [self._score(a, base.names, base.alignment, start, WIND_MODELS, 3 * NFEV, free_tau)
                           for start in (base.x, _fresh(base.x))]
         base = current[axis] = self._describe(a, min(tries, key=lambda sc: sc.nll))
-        cands = self._candidates(a, axis, base, free_tau)
+        cands = self._candidates(a, axis, base, free_tau, rnd)
         m = max(len(cands), 1)
         scored = []
         for name, k, sc, lr in cands:
@@ -444,6 +455,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
         scored.sort(key=lambda r: -r[0])
         after = None
         while scored and scored[0][0] > 1.0:
+            self._say(f"round {rnd}, {axis}: checking {scored[0][1]}'s prediction")
             after = self._describe(a, scored[0][3])
             worse = _predicts_worse(base.r2, after.r2)
             if worse is None:
@@ -465,19 +477,21 @@ class LikelihoodDiagnoser(DiagnosisResult):
         current[axis] = after
         return True
 
-    def _candidates(self, a: int, axis: str, base: AxisScore, free_tau: bool) -> list:
+    def _candidates(self, a: int, axis: str, base: AxisScore, free_tau: bool, rnd: int = 0) -> list:
         """``(effect, added parameters, score, LR)`` of every catalogue candidate on an axis."""
         cands = []
         for name, effect in CATALOGUE.items():
             if effect.is_alignment:
                 if (name, axis) in self.effects_found_:
                     continue  # found in an earlier round: refined in the final fit, not added twice
+                self._say(f"round {rnd}, {axis}: trying {name}")
                 sc = self._alignment_candidate(a, base)
                 k = 1
             else:
                 add = tuple(p for p in effect.terms_on(a) if p not in base.names)
                 if not add or name in self.untestable_:
                     continue
+                self._say(f"round {rnd}, {axis}: trying {name}")
                 sc = self._score(a, base.names + add, base.alignment, base.x, (base.kind,), NFEV, free_tau)
                 k = len(add)
             cands.append((name, k, sc, 2.0 * (base.nll - sc.nll)))

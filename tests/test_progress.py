@@ -65,3 +65,18 @@ def test_sweep_and_evaluate_skip_their_figures_with_no_plots(tmp_path):
                  str(tmp_path / "ev"), "--no-plots", "-q"]) == 0
     assert sorted(p.name for p in (tmp_path / "ev").iterdir()) == ["evaluation.html", "evaluation.json",
                                                                    "evaluation.md"]
+
+
+def test_the_likelihood_diagnosis_names_each_step_as_it_starts():
+    """Issue 31: 'heli diagnose' showed one static line for 18-24 s; its diagnoser now says each step."""
+    from identification.ml_diagnosis import LikelihoodDiagnoser
+    from identification.synthetic import simulate_flight
+
+    steps = []
+    LikelihoodDiagnoser(axes=("roll",), max_rounds=1, progress=steps.append).fit(simulate_flight(62, seed=3).flight)
+    assert steps[0] == "fitting the starting structure on roll"
+    assert steps[1] == "round 1, roll: refitting the base"
+    assert "round 1, roll: trying servo_delay" in steps and "round 1, roll: trying cross_coupling" in steps
+    assert steps[-1] == "fitting the final structure"
+    quiet = LikelihoodDiagnoser(axes=("roll",), max_rounds=1)
+    assert quiet.progress is None  # the default shows nothing
