@@ -62,7 +62,9 @@ def write_html_report(markdown_path, figures=(), title: str | None = None) -> Pa
         ``evaluation.md``). Relative image links are read from its folder.
     figures : sequence of str or Path
         Figures to show although the report does not link them, appended under "Figures" in this order
-        (a figure the report already links is not repeated; one that is missing becomes a note).
+        (a figure the report already links is not repeated; one that is missing becomes a note). Paths as a
+        command holds them: absolute or relative to the current directory (``sweep/heatmap.png``), not to the
+        report's folder.
     title : str, optional
         The page's ``<title>`` (default: the report's first level-1 heading, else the file's stem).
 
@@ -82,6 +84,7 @@ def write_html_report(markdown_path, figures=(), title: str | None = None) -> Pa
 
     markdown_path = Path(markdown_path)
     text = markdown_path.read_text(encoding="utf-8")
+    figures = [Path(f).resolve() for f in figures]  # against the current directory: the report's folder is not theirs
     page = markdown_to_html(text, markdown_path.parent, title=title, figures=figures, default_title=markdown_path.stem)
     return write_text(markdown_path.with_suffix(".html"), page)
 
@@ -98,7 +101,8 @@ def markdown_to_html(text: str, base_dir, title: str | None = None, figures=(), 
     title : str, optional
         The page's ``<title>`` (default: the first level-1 heading, else ``default_title``).
     figures : sequence of str or Path
-        Figures appended under "Figures" unless the text links them already (see :func:`write_html_report`).
+        Figures appended under "Figures" unless the text links them already (see :func:`write_html_report`),
+        each absolute or relative to ``base_dir``.
     default_title : str
         Title when ``title`` is None and the text has no level-1 heading.
 

@@ -89,6 +89,16 @@ def test_figures_the_markdown_does_not_link_are_appended_once(report, tmp_path):
     assert all(src.startswith("data:image/png;base64,") for src in _img_sources(page))
 
 
+def test_figures_given_relative_to_the_current_directory_are_found(report, tmp_path, monkeypatch):
+    """A command with a relative ``--out`` holds ``out/heatmap.png``: not to be joined to ``out/`` again."""
+    (tmp_path / "heatmap.png").write_bytes(_png(3, 1))
+    monkeypatch.chdir(tmp_path.parent)
+    folder = Path(tmp_path.name)
+    page = write_html_report(folder / "report.md", figures=[folder / "heatmap.png", folder / "rates.png"]).read_text()
+    sources = _img_sources(page)
+    assert len(sources) == 2 and all(src.startswith("data:image/png;base64,") for src in sources)
+
+
 def test_remote_images_and_the_title_are_left_alone():
     page = markdown_to_html("no heading\n\n![logo](https://example.org/logo.png)\n", ".", default_title="sweep")
     assert "<title>sweep</title>" in page
@@ -133,6 +143,23 @@ def test_sweep_writes_sweep_html_with_both_figures(swept):
     sources = _img_sources(page)
     assert len(sources) == 2 and all(s.startswith("data:image/png;base64,") for s in sources)
     assert "heatmap.png" not in page and "histograms.png" not in page
+
+
+def test_sweep_and_evaluate_embed_their_figures_with_a_relative_out(tmp_path, monkeypatch, capsys):
+    """As the README and the demo run them (``--out sweep/``): the figures were once looked for in sweep/sweep/."""
+    from controllers.pd import PDController, design_gains
+    from heli_env import load_env_model
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["sweep", "--kp", "1:4:2", "--kd", "0:1:2", "--duration", "5", "--out", "sw", "--no-progress"]) == 0
+    sources = _img_sources((tmp_path / "sw" / "sweep.html").read_text(encoding="utf-8"))
+    assert len(sources) == 2 and all(s.startswith("data:image/png;base64,") for s in sources)
+    shipped = load_env_model()
+    PDController.from_model(shipped.params, design_gains(shipped.params)).save(tmp_path / "pd.json")
+    assert main(["evaluate", "pd.json", "--out", "ev", "--episode-seconds", "5", "--episodes-per-trace", "1"]) == 0
+    page = _printed_and_written(capsys, Path("ev") / "evaluation.html")
+    (src,) = _img_sources(page)
+    assert src.startswith("data:image/png;base64,")
 
 
 def test_evaluate_writes_evaluation_html_with_the_episode(tmp_path, capsys):
