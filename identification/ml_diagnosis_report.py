@@ -49,7 +49,7 @@ def criterion_text(d: LikelihoodDiagnoser) -> str:
         "accepted candidate per axis (largest LR over its threshold) is added and the search repeats on the axes "
         f"that changed (at most {d.max_rounds} rounds). A candidate whose fitted terms break a physical bound "
         "(an inertia ratio outside [-1, 1], a negative quadratic damping) is not accepted, whatever its LR: it fits "
-        "something else, such as a controller's loop or a misread input. Undecided: a flight shorter than {d.min_duration:g} s."
+        f"something else, such as a controller's loop or a misread input. Undecided: a flight shorter than {d.min_duration:g} s."
     )
 
 
