@@ -12,6 +12,7 @@ import math
 from pathlib import Path
 
 from .argtypes import number, output_path
+from .model_gate import add_accept_option, check_model
 
 DEFAULT_OUT = "pd"
 AXES = ("roll", "pitch", "yaw")
@@ -43,6 +44,7 @@ def register(sub):
     )
     p.add_argument("--model", metavar="DIR", default=None,
                    help="model directory written by 'heli identify' (default: the model shipped with heli-env)")
+    add_accept_option(p, "Design a controller on it")
     p.add_argument("--phase-margin", type=number("a phase margin in (0, 180) degrees", 0.0, 180.0), default=45.0,
                    help="least phase margin in deg (default 45)")
     p.add_argument("--bandwidth", type=_bandwidths, default=None, metavar="W[,W,W]",
@@ -91,6 +93,7 @@ def run(args) -> int:
 
     from .progress import progress_of
 
+    check_model(args, "design a controller on it")  # an unusable model is refused before any work
     with progress_of(args) as progress:
         progress.stage("designing the PD gains and analysing each axis' loop")
         env_model = load_env_model(args.model)

@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 from .argtypes import number, output_path, seed, whole
+from .model_gate import add_accept_option, check_model
 
 DEFAULT_OUT = "evaluation"
 
@@ -23,6 +24,7 @@ def register(sub):
     p.add_argument("agent", metavar="AGENT", help="PD controller JSON (PDController.save) or PPO/SAC zip")
     p.add_argument("--model", metavar="DIR", default=None,
                    help="model directory written by 'heli identify' (default: the model shipped with heli-env)")
+    add_accept_option(p, "Fly an agent on it")
     p.add_argument("--traces", default="held-out", choices=("held-out", "all", "train"),
                    help="which library traces to fly (default held-out)")
     p.add_argument("--episodes-per-trace", type=whole(1), default=4, help="episodes per trace (default 4)")
@@ -51,6 +53,7 @@ def run(args) -> int:
 
     from .progress import progress_of
 
+    check_model(args, "fly an agent on it")  # an unusable model is refused before any work
     progress = progress_of(args)
     progress.stage(f"loading {args.agent} and the model")
     env_model = load_env_model(args.model)

@@ -174,8 +174,18 @@ def next_command(argv, option: str, value: str) -> str:
     return shlex.join(["heli"] + argv)
 
 
+def print_verdict(verdict) -> None:
+    """The model's verdict (:mod:`model_store.verdict`): its level, then one line per reason."""
+    print(f"model verdict: {verdict.level}" + (":" if verdict.reasons else ""))
+    for line in verdict.lines():
+        print(f"  - {line}")
+
+
 def _print_run(run, n_flights: int, method: str) -> None:
-    """The identified parameters, the validation errors, warnings and the files written so far."""
+    """The model's verdict, the identified parameters, the validation errors, warnings and the files written so
+    far."""
+    if run.verdict is not None:
+        print_verdict(run.verdict)
     params = run.params.values()
     print(f"identified {run.chosen} model from {n_flights} flight(s) by "
           f"{'maximum likelihood' if method == 'ml' else 'the integral method'}:")

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .argtypes import number, output_path, seed, whole
+from .model_gate import add_accept_option, check_model
 
 DEFAULT_OUT = "sweep"
 MAX_EXTENSIONS = 4
@@ -38,6 +39,7 @@ def register(sub):
     )
     p.add_argument("--model", metavar="DIR", default=None,
                    help="model directory written by 'heli identify' (default: the model shipped with heli-env)")
+    add_accept_option(p, "Sweep gains on it")
     p.add_argument("--kp", required=True, metavar="A:B:N",
                    help="N proportional gains from A to B [stick/rad], e.g. 0.5:8:20 (or a single value)")
     p.add_argument("--kd", required=True, metavar="C:D:M",
@@ -83,6 +85,7 @@ def run(args) -> int:
     from controllers.sweep import parse_range, sweep_gains
     from controllers.sweep_report import default_pairs, pair_summary
 
+    check_model(args, "sweep gains on it")  # an unusable model is refused before any work
     kp = parse_range(args.kp, "--kp")
     kd = parse_range(args.kd, "--kd")
     if args.model is not None and not Path(args.model).is_dir():

@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from .argtypes import json_object, number, output_path, seed, seed_list, weights, whole
+from .model_gate import add_accept_option, check_model
 
 
 def register(sub):
@@ -22,6 +23,7 @@ def register(sub):
     p.add_argument("--algo", required=True, choices=("ppo", "sac"), help="algorithm")
     p.add_argument("--model", metavar="DIR", default=None,
                    help="model directory written by 'heli identify' (default: the model shipped with heli-env)")
+    add_accept_option(p, "Train an agent on it")
     p.add_argument("--timesteps", required=True, type=whole(1), metavar="N",
                    help="environment steps to train for (all copies together)")
     p.add_argument("--out", required=True, type=output_path, metavar="AGENT", help="agent path (.zip is added)")
@@ -152,6 +154,7 @@ def _run_seeds(args, config) -> int:
 def run(args) -> int:
     from .progress import progress_of
 
+    check_model(args, "train an agent on it")  # an unusable model is refused before any work
     progress = progress_of(args)
     progress.stage("loading stable-baselines3, torch and the model; training shows its own bar on a terminal")
     from controllers.errors import TrainingInterrupted

@@ -182,6 +182,8 @@ class ReportContent:
         The lines of every flight's wind section (:func:`wind_section`).
     reference : IntegralIdentifier or None
         The integral method's fit shown beside a maximum-likelihood one.
+    verdict : model_store.verdict.ModelVerdict or None
+        Whether the written model can be used; the report opens with it.
     """
 
     flights: list
@@ -198,6 +200,7 @@ class ReportContent:
     library_version: int | None
     wind_sections: list
     reference: object = None
+    verdict: object = None
 
 
 def report_markdown(c: ReportContent) -> str:
@@ -211,6 +214,7 @@ def report_markdown(c: ReportContent) -> str:
     md = [
         "# Identification report",
         "",
+        *(c.verdict.markdown() if c.verdict is not None else []),
         f"Model written: `{c.model_path.name}` ({c.chosen}). Flights: {len(c.flights)}, {dur:.1f} s, {n_total} "
         f"samples at {first.sample_rate:.1f} Hz.",
         "",

@@ -21,7 +21,7 @@ import numpy as np
 
 from heli_core.params import ModelParams
 from model_store.model_dir import ModelDir
-from model_store.model_file import model_document
+from model_store.model_file import model_document, with_verdict
 
 from .disturbance import identify_disturbance, source_of
 from .figures import PendingFigures
@@ -40,6 +40,7 @@ from .identify_report import (  # noqa: F401  (the tables are re-exported: they 
     wind_table,
 )
 from .integral_method import IntegralIdentifier
+from .model_verdict import judge_identifier
 from .sensors import identify_sensors
 from .synthetic import load_truth, truth_paths
 from .errors import SimulationDivergedError
@@ -70,6 +71,9 @@ class IdentificationRun(PendingFigures):
     warnings : list of str
         What the data cannot support well (:func:`identification.fit_warnings.fit_warnings`): weak
         fits, short flights, barely excited axes; also in ``report.md``.
+    verdict : model_store.verdict.ModelVerdict or None
+        Whether the written model can be used (:func:`identification.model_verdict.judge_identifier`), as
+        ``model.json`` stores it and ``report.md`` opens with it.
     figures : list of callable
         Figures ``report.md`` links but :func:`identify_and_report` was asked to leave for later
         (``draw_figures=False``); each returns ``{key: path}``. :meth:`draw_figures` draws them.
@@ -84,6 +88,7 @@ class IdentificationRun(PendingFigures):
     library_version: int | None = None
     warnings: list = field(default_factory=list)
     figures: list = field(default_factory=list)
+    verdict: object = None
 
     @property
     def params(self) -> ModelParams:
@@ -259,12 +264,15 @@ def identify_and_report(flights, out_dir, options: IdentifyOptions | None = None
     if opts.method == "ml":
         opts.say("fitting the integral method for comparison")
         reference = IntegralIdentifier(structure=chosen).fit(flights)
+    verdict = judge_identifier(ident, reference)  # stored in model.json, shown first in every report
+    document = with_verdict(document, verdict)
     content = partial(ReportContent, flights, identifiers, chosen, sources=opts.sources, warnings=warnings,
                       truth=truth, method=opts.method, validation=validation, plots=opts.plots,
-                      disturbances=opts.disturbances, wind_sections=wind_sections, reference=reference)
+                      disturbances=opts.disturbances, wind_sections=wind_sections, reference=reference,
+                      verdict=verdict)
     paths, library_version = _write(out, document, profiles, opts, content)
     run = IdentificationRun(identifiers, chosen, validation, truth, paths, profiles, library_version, warnings,
-                            figures)
+                            figures, verdict)
     if opts.draw_figures and figures:
         opts.say("drawing the figures")
         run.draw_figures()

@@ -9,6 +9,7 @@ and two writers take turns. :mod:`model_store.model_file` is the ``model.json`` 
 from .disturbance_library import DisturbanceLibrary, Trace
 from .model_dir import ModelDir, ModelState, Transaction
 from .model_file import MODEL_FILENAME, load_model, model_document, save_model
+from .verdict import ModelVerdict, verdict_of
 
-__all__ = ["MODEL_FILENAME", "DisturbanceLibrary", "ModelDir", "ModelState", "Trace", "Transaction", "load_model",
-           "model_document", "save_model"]
+__all__ = ["MODEL_FILENAME", "DisturbanceLibrary", "ModelDir", "ModelState", "ModelVerdict", "Trace", "Transaction",
+           "load_model", "model_document", "save_model", "verdict_of"]

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from heli_core.errors import HeliError
 
-__all__ = ["LibraryError", "ModelDirBusyError", "ModelDirError", "ModelFileError"]
+__all__ = ["LibraryError", "ModelDirBusyError", "ModelDirError", "ModelFileError", "UnusableModelError"]
 
 
 class ModelFileError(HeliError, ValueError):
@@ -26,3 +26,8 @@ class ModelDirError(ModelFileError):
 
 class ModelDirBusyError(ModelDirError):
     """Another command is writing the model directory, and this one was asked not to wait (``--no-wait``)."""
+
+
+class UnusableModelError(HeliError, ValueError):
+    """A command was asked to build on a model whose verdict is ``unusable`` (:mod:`model_store.verdict`),
+    without the option that accepts it."""

@@ -6,6 +6,8 @@ Schema (``schema_version`` 1)::
       "schema": "heli-env/model",
       "schema_version": 1,
       "structure": "decoupled" | "coupled" | "custom",
+      "verdict": {"level": "usable" | "doubtful" | "unusable", "reasons": [...]},   # optional: whether the
+                                             # model can be used (model_store.verdict); absent: "not judged"
       "parameters": {"k1": 0.0, "k2": 1.3475, ..., "kd3": 0.0964},   # all 15 of eqs. (18), (21)
       "added_terms": {"nld1": 0.2},          # catalogue terms beyond the paper's model
       "servo_delay_s": {"roll": 0.0, "pitch": 0.0, "yaw": 0.0},       # eq. (31)
@@ -31,6 +33,7 @@ import json
 from pathlib import Path
 
 from .errors import ModelFileError
+from .verdict import ModelVerdict, verdict_of
 from heli_core.files import jsonable, keep_copy, write_text
 from heli_core.params import ModelParams
 from heli_core.sensors import SensorModel
@@ -52,9 +55,10 @@ def _version() -> str:
 
 def model_document(params: ModelParams, *, structure: str = "custom", sample_rate: float | None = None,
                    filter_settings=None, identification=None, fit_statistics=None, sources=(),
-                   extra=None, sensors: SensorModel | None = None) -> dict:
+                   extra=None, sensors: SensorModel | None = None, verdict: ModelVerdict | None = None) -> dict:
     """Build the JSON document of a model (see the module docstring); ``sensors`` (identified from the
-    flights, :mod:`identification.sensors`) is stored when given."""
+    flights, :mod:`identification.sensors`) and ``verdict`` (:mod:`model_store.verdict`) are stored when
+    given."""
     values = params.values()
     doc = {
         "schema": SCHEMA,
@@ -74,6 +78,8 @@ def model_document(params: ModelParams, *, structure: str = "custom", sample_rat
             "heli_env": _version(),
         },
     }
+    if verdict is not None:
+        doc = with_verdict(doc, verdict)
     if any(params.lags):  # written only when identified: files of servos without a lag stay as they were
         doc["servo_lag_s"] = {axis: params.lags[i] for i, axis in enumerate(AXES)}
         doc["units"]["servo_lag_s"] = "s"
@@ -82,6 +88,19 @@ def model_document(params: ModelParams, *, structure: str = "custom", sample_rat
     if extra:
         doc.update(extra)
     return doc
+
+
+def with_verdict(doc: dict, verdict: ModelVerdict) -> dict:
+    """A copy of model document ``doc`` with ``verdict`` stored, right after ``"structure"`` (where a reader
+    of ``model.json`` meets it before the numbers it judges)."""
+    out = {}
+    for key, value in doc.items():
+        if key != "verdict":
+            out[key] = value
+        if key == "structure":
+            out["verdict"] = verdict.to_dict()
+    out.setdefault("verdict", verdict.to_dict())
+    return out
 
 
 def sensors_from_document(doc: dict, where: str = "model") -> SensorModel:
@@ -153,6 +172,7 @@ def params_from_document(doc: dict, where: str = "model") -> ModelParams:
     delays = doc.get("servo_delay_s") or {}
     if not isinstance(delays, dict) or set(delays) - set(AXES):
         raise ModelFileError(f"{where}: 'servo_delay_s' must be an object with keys among {', '.join(AXES)}, got {delays!r}")
+    verdict_of(doc, where)  # a malformed verdict is refused here; a missing one reads as "not judged"
     lags = doc.get("servo_lag_s") or {}
     if not isinstance(lags, dict) or set(lags) - set(AXES):
         raise ModelFileError(f"{where}: 'servo_lag_s' must be an object with keys among {', '.join(AXES)}, got {lags!r}")

@@ -1,0 +1,153 @@
+"""The model's verdict: judged from the fit (:mod:`identification.model_verdict`), stored in ``model.json``
+(:mod:`model_store.verdict`), shown first by ``heli identify``, and enforced by the commands that build on a
+model (:mod:`heli_cli.model_gate`)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+
+from heli_cli.main import main
+from identification.model_verdict import ML_DAMPING_BOUNDS, judge_fit
+from model_store.errors import ModelFileError, UnusableModelError
+from model_store.model_file import load_model, model_document, params_from_document
+from model_store.verdict import NOT_JUDGED, ModelVerdict, require_usable, verdict_of
+
+
+def _axis(params: dict, se: dict | None = None, r2: float = 0.8) -> dict:
+    return {"params": params, "std_errors": se or {k: 0.01 * abs(v) for k, v in params.items()}, "r2": r2}
+
+
+GOOD = {"roll": _axis({"k2": 1.35, "k3": 2.3, "kd1": 0.04}),
+        "pitch": _axis({"k6": -0.9, "k7": 2.5, "kd2": 0.01}),
+        "yaw": _axis({"k10": 13.8, "k11": 3.5, "k12": -0.2, "kd3": 0.17})}
+
+
+def test_a_well_placed_fit_is_usable():
+    assert judge_fit(GOOD, damping_bounds=ML_DAMPING_BOUNDS, reference=GOOD) == ModelVerdict("usable")
+
+
+def test_a_damping_at_the_search_bound_is_unusable():
+    fit = dict(GOOD, roll=_axis({"k2": 1.35, "k3": 199.9996, "kd1": 0.04}))
+    v = judge_fit(fit, damping_bounds=ML_DAMPING_BOUNDS)
+    assert v.level == "unusable"
+    assert len(v.reasons) == 1 and v.reasons[0].startswith("roll: damping k3 = 200 1/s is at the upper bound")
+    assert judge_fit(fit).level == "usable"  # an estimator without bounds (the integral method): no bound to sit at
+
+
+def test_a_non_positive_damping_is_unusable():
+    v = judge_fit(dict(GOOD, pitch=_axis({"k6": -0.9, "k7": -0.4, "kd2": 0.0})))
+    assert v.level == "unusable" and "damping k7 = -0.4 1/s is not positive" in v.reasons[0]
+
+
+def test_a_gain_the_other_estimator_signs_otherwise_is_unusable():
+    reference = dict(GOOD, roll=_axis({"k2": 788.0, "k3": -8.2, "kd1": 7.8}))
+    fit = dict(GOOD, roll=_axis({"k2": -2124.8, "k3": 40.0, "kd1": -22.0}))
+    v = judge_fit(fit, reference=reference)
+    assert v.level == "unusable"
+    assert "control gain k2 = -2125 rad/s² against +788 by the integral method" in v.reasons[0]
+
+
+def test_a_gain_within_two_standard_errors_of_zero_is_doubtful():
+    v = judge_fit(dict(GOOD, yaw=_axis({"k10": 0.3, "k11": 3.5, "k12": 0.0, "kd3": 0.1},
+                                       se={"k10": 0.4, "k11": 0.05, "k12": 0.1, "kd3": 0.01})))
+    assert v.level == "doubtful" and "k10 = 0.3 ± 0.4" in v.reasons[0]
+
+
+def test_a_low_r2_is_doubtful_only_where_the_parameters_are_not_pinned_down():
+    # wind-dominated yaw, parameters placed (the project's synthetic flights): no doubt
+    placed = dict(GOOD, yaw=_axis(GOOD["yaw"]["params"], r2=-0.59))
+    assert judge_fit(placed, reference=GOOD).level == "usable"
+    loose = dict(GOOD, yaw=_axis(GOOD["yaw"]["params"], se={"k10": 5.0, "k11": 0.1, "k12": 0.1, "kd3": 0.1}, r2=0.1))
+    v = judge_fit(loose)
+    assert v.level == "doubtful" and v.reasons[0].startswith("yaw: the sticks explain 10 % of the rate")
+    assert "k10 ±36 %" in v.reasons[0]
+    disagree = dict(GOOD, yaw=_axis({"k10": 13.8, "k11": 25.9, "k12": 0.2, "kd3": 0.1}, r2=0.2))
+    assert "k11 25.9, by the integral method 3.5" in judge_fit(disagree, reference=GOOD).reasons[0]
+
+
+def test_an_unusable_verdict_keeps_its_doubts_apart():
+    fit = dict(GOOD, roll=_axis({"k2": 1.35, "k3": 200.0, "kd1": 0.04}),
+               yaw=_axis(GOOD["yaw"]["params"], se={"k10": 5.0, "k11": 0.1, "k12": 0.1, "kd3": 0.1}, r2=0.1))
+    v = judge_fit(fit, damping_bounds=ML_DAMPING_BOUNDS, diverged="the roll rate leaves ±100 rad/s at t=1 s")
+    assert v.level == "unusable" and len(v.reasons) == 2 and len(v.doubts) == 1
+    assert v.reasons[1].startswith("diverges when simulated")
+    assert v.lines()[-1].startswith("also doubtful: yaw")
+
+
+@pytest.mark.parametrize("bad, match", [
+    ({"level": "fine"}, "verdict level must be one of"),
+    ({"level": "unusable", "reasons": []}, "needs at least one reason"),
+    ({"level": "usable", "reasons": "none"}, "'verdict' must be an object"),
+    ("unusable", "'verdict' must be an object"),
+])
+def test_a_malformed_verdict_is_refused_when_the_model_is_read(bad, match):
+    from heli_core.params import ModelParams
+
+    doc = model_document(ModelParams(k2=1.0, k3=2.0)) | {"verdict": bad}
+    with pytest.raises(ModelFileError, match=match):
+        params_from_document(doc, "m.json")
+
+
+def test_the_verdict_is_stored_after_the_structure_and_a_file_without_one_reads_as_not_judged():
+    from heli_core.params import ModelParams
+
+    doc = model_document(ModelParams(k2=1.0, k3=2.0), structure="decoupled",
+                         verdict=ModelVerdict("unusable", ("roll: it is wrong",), ("yaw: it is weak",)))
+    assert list(doc)[:4] == ["schema", "schema_version", "structure", "verdict"]
+    assert verdict_of(json.loads(json.dumps(doc))) == ModelVerdict("unusable", ("roll: it is wrong",),
+                                                                    ("yaw: it is weak",))
+    assert verdict_of(model_document(ModelParams(k2=1.0, k3=2.0))).level == NOT_JUDGED
+
+
+def test_require_usable_refuses_in_one_line_naming_the_reasons_and_the_flag():
+    doc = {"verdict": {"level": "unusable", "reasons": ["roll: damping k3 = 200 1/s is at the upper bound"]}}
+    with pytest.raises(UnusableModelError, match=r"^m\.json is judged unusable: roll: damping k3 = 200 .*--accept"):
+        require_usable(doc, "m.json", flag="--accept")
+    assert require_usable(doc, "m.json", flag="--accept", accept=True).unusable
+    assert require_usable({}, "m.json", flag="--accept").level == NOT_JUDGED
+
+
+def _judged_copy(src, dst, verdict: dict):
+    shutil.copytree(src, dst)
+    path = dst / "model.json"
+    doc = json.loads(path.read_text())
+    path.write_text(json.dumps(doc | {"verdict": verdict}))
+    load_model(dst)  # still a valid model folder
+    return dst
+
+
+@pytest.mark.parametrize("command", [
+    ["design", "--no-plots"],
+    ["sweep", "--kp", "1", "--kd", "0.1", "--no-plots"],
+    ["evaluate", "AGENT", "--no-plots"],
+    ["train", "--algo", "ppo", "--timesteps", "10"],
+])
+def test_commands_that_build_on_a_model_refuse_an_unusable_one(command, ideal_model_dir, tmp_path, capsys):
+    model = _judged_copy(ideal_model_dir, tmp_path / "model",
+                         {"level": "unusable", "reasons": ["roll: damping k3 = 200 1/s is at the upper bound"]})
+    out = tmp_path / ("agent" if command[0] == "train" else "out")
+    assert main(command + ["--model", str(model), "--out", str(out), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert "UnusableModelError" in err[0] and "k3 = 200" in err[0] and "--accept-unusable-model" in err[0]
+    assert not out.exists()
+
+
+def test_design_prints_the_doubts_of_a_doubtful_model_and_goes_on(ideal_model_dir, tmp_path, capsys):
+    model = _judged_copy(ideal_model_dir, tmp_path / "model",
+                         {"level": "doubtful", "reasons": ["yaw: the sticks explain 3 % of the rate"]})
+    assert main(["design", "--model", str(model), "--out", str(tmp_path / "pd"), "--no-plots", "-q"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].endswith("is judged doubtful:") and lines[1] == "  - yaw: the sticks explain 3 % of the rate"
+
+
+def test_design_builds_on_an_unusable_model_when_told_to(ideal_model_dir, tmp_path, capsys):
+    model = _judged_copy(ideal_model_dir, tmp_path / "model",
+                         {"level": "unusable", "reasons": ["roll: damping k3 = 200 1/s is at the upper bound"]})
+    assert main(["design", "--model", str(model), "--out", str(tmp_path / "pd"), "--no-plots", "-q",
+                 "--accept-unusable-model"]) == 0
+    assert "judged unusable (--accept-unusable-model given)" in capsys.readouterr().out
+    assert (tmp_path / "pd" / "pd.json").exists()
