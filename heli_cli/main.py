@@ -155,6 +155,9 @@ def main(argv=None) -> int:
     if args.command is None:  # 'heli' alone: what it can do, on the error stream as argparse's usage errors
         parser.print_help(sys.stderr)
         return 2
+    from .option_wording import command_options
+
+    args.cli_options = command_options(parser, args.command)  # errors advise these, not Python arguments
     created = None  # an output folder this run creates, removed again if the run fails and leaves it empty
     if getattr(args, "out", None) and getattr(args, "out_kind", None) == "dir" and not Path(args.out).exists():
         created = Path(args.out)
@@ -178,7 +181,10 @@ def _run(args) -> int:
         if args.debug:
             traceback.print_exc()
         if isinstance(e, USER_ERRORS):
-            print(f"{prefix}: error: {type(e).__name__}: {e}", file=sys.stderr)
+            from .option_wording import as_cli_options
+
+            message = as_cli_options(str(e), args.command, getattr(args, "cli_options", ()))
+            print(f"{prefix}: error: {type(e).__name__}: {message}", file=sys.stderr)
             return 2
         if isinstance(e, PATH_ERRORS):
             what = f"{e.strerror}: {e.filename}" if e.strerror and e.filename else str(e)
