@@ -77,20 +77,69 @@ def meta_path(out):
     return out.with_name(out.stem + ".meta.json")
 
 
-def _print_list(path, allow_damaged) -> int:
+def _print_list(path, allow_damaged, progress, options=()) -> int:
+    """The table of the logs in ``path``: one row per log with data, then each reason an empty log was refused
+    once, with the logs it applies to (a flash dump can hold dozens of empty logs)."""
     from identification.io import list_logs
 
-    rows = list_logs(path, allow_damaged=allow_damaged)
+    from .option_wording import as_cli_options
+
+    rows = list_logs(path, allow_damaged=allow_damaged, progress=_LogBar(progress, path))
     print(f"{path}: {len(rows)} log{'s' if len(rows) != 1 else ''}")
-    print(f"{'log':>4}  {'start s':>9}  {'length s':>9}  {'airborne s':>10}  attitude  status")
+    shown = [r for r in rows if r["status"] == "ok" or r.get("start_s") is not None or r.get("duration_s")]
+    refused = {}
     for r in rows:
+        if r not in shown:
+            refused.setdefault(as_cli_options(r["status"], "import", options), []).append(r["log"])
+    if shown:
+        print(f"{'log':>4}  {'start s':>9}  {'length s':>9}  {'airborne s':>10}  attitude  status")
+    for r in shown:
         def num(v):
             return "-" if v is None else f"{float(v):.1f}"
 
         att = "-" if r.get("attitude") is None else ("yes" if r["attitude"] else "no")
         print(f"{r['log']:>4}  {num(r.get('start_s')):>9}  {num(r.get('duration_s')):>9}  "
               f"{num(r.get('airborne_s')):>10}  {att:>8}  {r['status']}")
+    for status, logs in refused.items():
+        which = f"log {logs[0]}" if len(logs) == 1 else f"{len(logs)} logs ({_ranges(logs)})"
+        print(f"{which}: {status}")
     return 0
+
+
+def _ranges(numbers) -> str:
+    """``[2, 3, 5, 6, 7, 9]`` -> ``"2-3, 5-7, 9"``."""
+    out, start = [], None
+    for i, n in enumerate(numbers):
+        if start is None:
+            start = n
+        if i + 1 == len(numbers) or numbers[i + 1] != n + 1:
+            out.append(str(start) if start == n else f"{start}-{n}")
+            start = None
+    return ", ".join(out)
+
+
+class _LogBar:
+    """``list_logs``' progress: a tqdm bar over the logs on a terminal, a line when decoding starts off one."""
+
+    def __init__(self, progress, path):
+        self.progress, self.path, self.bar = progress, path, None
+
+    def __call__(self, done, total):
+        if self.progress.quiet:
+            return
+        if self.bar is None:
+            if not self.progress.terminal:
+                self.progress.stage(f"decoding {total} log{'s' if total != 1 else ''} of {self.path}")
+                self.bar = False
+                return
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, desc=f"import: decoding {self.path}", unit="log", leave=False,
+                            file=self.progress.stream)
+        if self.bar:
+            self.bar.update(done - self.bar.n)
+            if done >= total:
+                self.bar.close()
 
 
 def run(args) -> int:
@@ -103,7 +152,8 @@ def run(args) -> int:
     from .progress import progress_of
 
     if args.list:
-        return _print_list(args.log, args.allow_damaged)
+        with progress_of(args) as progress:
+            return _print_list(args.log, args.allow_damaged, progress, getattr(args, "cli_options", ()))
     if not args.out:
         print("heli import: error: --out FLIGHT.csv is required (or --list to see the logs in the file)",
               file=sys.stderr)

@@ -620,3 +620,51 @@ def test_servos_through_the_default_h3_120_mixing_and_a_calibration(tmp_path):
 def test_named_errors_are_flight_log_errors():
     for cls in (LogFormatError, DamagedLogError, InputSourceError, NotAirborneError, SegmentError):
         assert issubclass(cls, FlightLogError)
+
+
+def test_not_airborne_names_the_condition_that_failed():
+    """Issue 31: the peaks were all above their thresholds yet 'longest such run 0.0 s'; the message now says
+    which condition kept every run short (the Rotorflight log's power holds 2.6 s at most, not 3)."""
+    with pytest.raises(NotAirborneError, match=r"'power >= 0\.15' holds at most 2\.\d s at a time"):
+        read_log(_log_path("rotorflight"))
+
+
+def test_cli_errors_advise_options_and_the_python_api_its_arguments(tmp_path, capsys):
+    """Issue 31: the CLI advised ``segment='all'``; it advises ``--segment all``, the Python API its argument."""
+    from heli_cli.main import main
+
+    with pytest.raises(NotAirborneError, match=r"pass segment='all'"):
+        read_log(_log_path("rotorflight"))
+    assert main(["import", str(_log_path("rotorflight")), "--out", str(tmp_path / "f.csv"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "pass --segment all or" in err and "segment='all'" not in err
+    assert main(["import", str(_corpus_path("blackbox_error_recovery.bbl")), "--out", str(tmp_path / "f.csv"),
+                 "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "pass --allow-damaged to import" in err and "allow_damaged=True" not in err
+
+
+def test_cli_list_says_each_refusal_once_and_shows_progress(capsys):
+    """Issue 31: --list printed nothing for 6 s, then 37 identical error sentences in 44 rows."""
+    from heli_cli.main import main
+
+    assert main(["import", str(_corpus_path("betaflight_multi_btfl_all.bbl")), "--list"]) == 0
+    captured = capsys.readouterr()
+    out = captured.out.splitlines()
+    assert out[0].endswith("44 logs")
+    refused = [line for line in out if "MissingStreamError" in line]
+    assert refused == [line for line in out if line.startswith("37 logs (2-3, 5-11, 13-15, 17-27, 29-32, 34, 36-44): "
+                                                                "MissingStreamError: ")] and len(refused) == 1
+    assert len(out) == 2 + 7 + 1  # title, header, the 7 logs that decode, the one refusal
+    assert "import: decoding 44 logs of " in captured.err  # off a terminal: one line as decoding starts
+
+
+def test_list_logs_reports_progress_per_log():
+    from identification.io import list_logs
+
+    calls = []
+    rows = list_logs(_corpus_path("betaflight_gps_rescue.bbl"), progress=lambda done, total: calls.append((done, total)))
+    assert len(rows) == 1 and calls == [(0, 1), (1, 1)]
+    calls.clear()
+    list_logs(_corpus_path("px4_sample_log_small.ulg"), progress=lambda done, total: calls.append((done, total)))
+    assert calls == [(0, 1), (1, 1)]

@@ -161,23 +161,37 @@ def read_log(path, inputs: str | None = None, segment=None, rate: float | None =
         load_dataflash_text(path)  # raises InsufficientLogError
     from .raw_log import to_flight
 
-    if fmt == "px4-ulog":
-        from .px4 import load_px4
-
-        raw = load_px4(path, allow_damaged=allow_damaged)
-    elif fmt == "ardupilot-dataflash":
-        from .ardupilot import load_ardupilot
-
-        raw = load_ardupilot(path, allow_damaged=allow_damaged)
-    else:
-        from .blackbox import load_blackbox
-
-        raw = load_blackbox(path, allow_damaged=allow_damaged, log=log)
+    raw = _load_raw(path, fmt, allow_damaged, log)
     return to_flight(raw, inputs=inputs, segment=segment, rate=rate, calibration=calibration)
 
 
-def list_logs(path, allow_damaged: bool = False) -> list[dict]:
+def _load_raw(path: Path, fmt: str, allow_damaged: bool, log: int | None = None):
+    """The decoded :class:`~identification.io.raw_log.RawLog` of a flight-controller log of format ``fmt``."""
+    if fmt == "px4-ulog":
+        from .px4 import load_px4
+
+        return load_px4(path, allow_damaged=allow_damaged)
+    if fmt == "ardupilot-dataflash":
+        from .ardupilot import load_ardupilot
+
+        return load_ardupilot(path, allow_damaged=allow_damaged)
+    from .blackbox import load_blackbox
+
+    return load_blackbox(path, allow_damaged=allow_damaged, log=log)
+
+
+def list_logs(path, allow_damaged: bool = False, progress=None) -> list[dict]:
     """The logs a file holds, as ``heli import --list`` shows them.
+
+    Parameters
+    ----------
+    path : str or Path
+        A log file of any supported format.
+    allow_damaged : bool
+        Decode what decodes of a log damaged in the middle (see :func:`read_log`).
+    progress : callable or None
+        Called as ``progress(done, total)`` before the first log is decoded and after each one (a blackbox
+        flash dump holds several; decoding one takes up to a few seconds); None (default) shows nothing.
 
     Returns
     -------
@@ -197,23 +211,35 @@ def list_logs(path, allow_damaged: bool = False) -> list[dict]:
     if fmt == "blackbox":
         from .blackbox import blackbox_log_summaries
 
-        return [{"format": "blackbox", **row} for row in blackbox_log_summaries(path, allow_damaged)]
+        return [{"format": "blackbox", **row} for row in blackbox_log_summaries(path, allow_damaged,
+                                                                                progress=progress)]
     if fmt == "ardupilot-dataflash-text":
         from .dataflash_text import text_log_summary
 
         return [{"log": 1, "format": fmt, **text_log_summary(path)}]
     row = {"log": 1, "format": fmt, "firmware": None, "start_s": None, "duration_s": None, "attitude": None,
            "airborne_s": None, "status": "ok"}
+    if progress is not None:
+        progress(0, 1)
     try:
-        whole = read_log(path, segment="all", allow_damaged=allow_damaged)
+        if fmt == "csv":
+            whole = read_log(path, segment="all")
+        else:  # decoded once, mapped twice: the whole log and its airborne segment
+            from .raw_log import to_flight
+
+            raw = _load_raw(path, fmt, allow_damaged)
+            whole = to_flight(raw, segment="all")
     except FlightLogError as e:
         row["status"] = f"{type(e).__name__}: {str(e).split(': ', 1)[-1]}"
         return [row]
+    finally:
+        if progress is not None:
+            progress(1, 1)
     row.update(firmware=whole.metadata.get("firmware"), start_s=round(float(whole.time[0]), 3),
                duration_s=round(whole.duration, 3), attitude=whole.metadata.get("attitude_source") == "measured")
     if fmt != "csv":
         try:
-            row["airborne_s"] = round(read_log(path, allow_damaged=allow_damaged).duration, 3)
+            row["airborne_s"] = round(to_flight(raw, segment="auto").duration, 3)
         except NotAirborneError:
             row["airborne_s"] = 0.0
         except FlightLogError as e:

@@ -305,7 +305,7 @@ def load_blackbox(path, allow_damaged: bool = False, log: int | None = None) -> 
     return raw
 
 
-def blackbox_log_summaries(path, allow_damaged: bool = False, keep: bool = False) -> list[dict]:
+def blackbox_log_summaries(path, allow_damaged: bool = False, keep: bool = False, progress=None) -> list[dict]:
     """One summary per log of a blackbox file (what ``heli import --list`` shows).
 
     Each log is decoded and its airborne segment detected
@@ -317,6 +317,8 @@ def blackbox_log_summaries(path, allow_damaged: bool = False, keep: bool = False
         ``{"log": N, "bytes", "firmware", "start_s", "duration_s", "frames", "attitude": bool,
         "airborne_s": length of the airborne segment [s] or None, "status": "ok" or why it cannot be
         imported}``; with ``keep``, also ``"raw"``: the decoded RawLog (None when refused).
+
+    ``progress``, when given, is called as ``progress(done, total)`` before the first log and after each.
     """
     from ..errors import FlightLogError
     from .raw_log import to_flight
@@ -324,7 +326,11 @@ def blackbox_log_summaries(path, allow_damaged: bool = False, keep: bool = False
     path = Path(path)
     _, spans = blackbox_spans(path)
     out = []
+    if progress is not None:
+        progress(0, len(spans))
     for k, span in enumerate(spans, start=1):
+        if progress is not None and k > 1:
+            progress(k - 1, len(spans))
         row = {"log": k, "bytes": span.size, "firmware": None, "start_s": None, "duration_s": 0.0, "frames": 0,
                "attitude": None, "airborne_s": None, "status": "ok", "raw": None}
         try:
@@ -344,6 +350,8 @@ def blackbox_log_summaries(path, allow_damaged: bool = False, keep: bool = False
             if not isinstance(e, NotAirborneError):
                 row["status"] = f"{type(e).__name__}: {_short(e)}"
         out.append(row)
+    if progress is not None:
+        progress(len(spans), len(spans))
     if not keep:
         for row in out:
             row.pop("raw")

@@ -255,7 +255,7 @@ def detect_airborne(grid: np.ndarray, signals: SegmentSignals, rates: np.ndarray
         "criteria_share": {k: round(float(v.mean()), 4) for k, v in crit.items()},
     }
     if not len(long):
-        raise NotAirborneError(_not_airborne_message(source, grid, valid, runs, f, figures, signals))
+        raise NotAirborneError(_not_airborne_message(source, grid, valid, runs, f, figures, signals, crit))
     lengths = long[:, 1] - long[:, 0]
     a, b = long[int(np.argmax(lengths))]
     trim = int(round(TRIM_S * fs))
@@ -280,9 +280,38 @@ def _armed_note(signals: SegmentSignals, grid: np.ndarray) -> str:
     return f"; armed for {float(dt[on].sum()):.1f} s ({armed.name})"
 
 
-def _not_airborne_message(source, grid, valid, runs, f, figures, signals) -> str:
+def _longest_s(mask: np.ndarray, valid: np.ndarray, fs: float) -> float:
+    """The longest run of ``mask`` within the valid data [s], holes shorter than ``HOLE_S`` filled (as the
+    detector fills them)."""
+    runs = valid_runs(_close_holes(mask & valid, int(round(HOLE_S * fs))) & valid)
+    return float((runs[:, 1] - runs[:, 0]).max() / fs) if runs.size else 0.0
+
+
+def _failed_condition(crit: dict, valid: np.ndarray, fs: float, f: dict) -> str:
+    """Which condition kept every run short: those that alone never hold ``MIN_AIRBORNE_S`` (each with its
+    longest run), else the two that never hold together that long (a peak above a threshold says nothing
+    about how long, or when, it lasts)."""
+    names = {"power": f"power >= {POWER_MIN:.2f}", "vibration": f"vibration >= {VIBRATION_FACTOR:g}x motors-off",
+             "attitude_or_height": f"activity >= {np.degrees(ACTIVITY_MIN_RAD):.1f} deg"
+             + (f" or height >= {ALTITUDE_MIN_M:.1f} m" if "height" in f else ""), "upright": "upright"}
+    alone = {k: _longest_s(c, valid, fs) for k, c in crit.items()}
+    short = [k for k, v in alone.items() if v < MIN_AIRBORNE_S]
+    if short:
+        return "; ".join(f"'{names[k]}' " + (f"holds at most {alone[k]:.1f} s at a time" if alone[k] > 0 else
+                                              "never holds") for k in short)
+    keys = list(crit)
+    pairs = [(_longest_s(crit[a] & crit[b], valid, fs), a, b) for i, a in enumerate(keys) for b in keys[i + 1:]]
+    together, a, b = min(pairs) if pairs else (0.0, keys[0], keys[0])
+    if together >= MIN_AIRBORNE_S:
+        return f"each condition holds for {MIN_AIRBORNE_S:.0f} s alone, and each two together, but never all at once"
+    return (f"each condition holds for {MIN_AIRBORNE_S:.0f} s alone, but '{names[a]}' and '{names[b]}' hold together "
+            f"at most {together:.1f} s at a time")
+
+
+def _not_airborne_message(source, grid, valid, runs, f, figures, signals, crit=None) -> str:
     """Why no airborne run was found: too little continuous data, or the criteria none of the runs met
-    (``f``: :func:`airborne_features`; ``figures``: the peaks :func:`detect_airborne` records)."""
+    (``f``: :func:`airborne_features`; ``figures``: the peaks :func:`detect_airborne` records; ``crit``: each
+    condition's mask, to name the one that failed)."""
     fs = 1.0 / float(grid[1] - grid[0])
     quiet = f["vibration_quiet"]
     best = float((runs[:, 1] - runs[:, 0]).max() / fs) if runs.size else 0.0
@@ -298,9 +327,10 @@ def _not_airborne_message(source, grid, valid, runs, f, figures, signals) -> str
         f"{'vibration >= %gx the motors-off level, ' % VIBRATION_FACTOR if quiet else ''}upright, "
         f"and roll/pitch activity >= {np.degrees(ACTIVITY_MIN_RAD):.1f} deg"
         f"{' or height >= %.1f m' % ALTITUDE_MIN_M if 'height' in f else ''}; got a longest such run of "
-        f"{best:.1f} s (peak {figures['power_name'] or 'power'} {figures['power_max']}, peak vibration "
-        f"{figures['vibration_max_over_quiet']}x motors-off, peak activity {figures['activity_max_deg']} deg"
-        f"{', peak height %s m' % figures['height_max_m'] if 'height' in f else ''}){_armed_note(signals, grid)}. "
+        f"{best:.1f} s{' (' + _failed_condition(crit, valid, fs, f) + ')' if crit else ''}; peaks: "
+        f"{figures['power_name'] or 'power'} {figures['power_max']}, vibration "
+        f"{figures['vibration_max_over_quiet']}x motors-off, activity {figures['activity_max_deg']} deg"
+        f"{', height %s m' % figures['height_max_m'] if 'height' in f else ''}{_armed_note(signals, grid)}. "
         "The log looks like it never left the ground. To import it anyway, pass segment='all' "
         "(heli import --segment all) or a stretch T0:T1 of the log's clock (--segment T0:T1)"
     )
