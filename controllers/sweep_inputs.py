@@ -169,6 +169,12 @@ def _trace_list(env_model, traces) -> list:
     return sel
 
 
+def _longest_window(env_model, sel) -> str:
+    """The advice of a window too long for a trace: the longest duration that fits every selected trace."""
+    longest = math.floor(100.0 * (min(int(env_model.lengths[t]) for t in sel) - 1) / env_model.sample_rate) / 100.0
+    return f"; the longest that fits every trace is {longest:g} s: pass duration={longest:g} or less"
+
+
 def tile_windows(env_model, sel, steps: int, ratio: int, seed) -> tuple:
     """Windows that tile each selected trace end to end: every stretch of the library flown once.
 
@@ -185,7 +191,7 @@ def tile_windows(env_model, sel, steps: int, ratio: int, seed) -> tuple:
         if length - 1 < span:
             raise SweepError(
                 f"trace {t} ({env_model.trace_ids[t]}) is {(length - 1) / env_model.sample_rate:g} s long; a "
-                f"{span / env_model.sample_rate:g} s window does not fit (shorten duration)")
+                f"{span / env_model.sample_rate:g} s window does not fit{_longest_window(env_model, sel)}")
         m = (length - 1) // span
         start = int(rng.integers(length - 1 - m * span + 1))
         out += [(t, start + j * span) for j in range(m)]
@@ -218,7 +224,8 @@ def draw_library_windows(env_model, traces, windows, steps, ratio, seed) -> tupl
         if count < 1:
             raise SweepError(
                 f"trace {t} ({env_model.trace_ids[t]}) is {(env_model.lengths[t] - 1) / env_model.sample_rate:g} s "
-                f"long; a {steps * ratio / env_model.sample_rate:g} s window does not fit (shorten duration)")
+                f"long; a {steps * ratio / env_model.sample_rate:g} s window does not fit"
+                f"{_longest_window(env_model, dict.fromkeys(assign))}")
         if m > count:
             raise SweepError(f"trace {t} has room for {count} distinct windows, {m} were asked")
         offsets[t] = draw_offsets(rng, count, m)

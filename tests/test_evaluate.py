@@ -294,3 +294,20 @@ def test_heli_evaluate_errors(pd, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "AgentError" in err and "shorter than one episode" in err and "Traceback" not in err
     assert not (tmp_path / "ev").exists()
+
+
+def test_cli_episode_longer_than_the_traces_names_the_option_and_the_longest_that_fits(tmp_path, capsys):
+    """Issue 31: the refusal named neither the option nor the longest episode that fits; the advised one runs."""
+    import re
+
+    from heli_cli.main import main
+
+    assert main(["design", "--out", str(tmp_path / "pd"), "--no-plots", "-q"]) == 0
+    agent = str(tmp_path / "pd" / "pd.json")
+    assert main(["evaluate", agent, "--episode-seconds", "5000", "--out", str(tmp_path / "ev"), "-q"]) == 2
+    err = capsys.readouterr().err
+    advised = re.search(r"the longest episode that fits every trace is ([\d.]+) s: pass --episode-seconds \1 or less",
+                        err)
+    assert advised and "episode_seconds=" not in err, err
+    assert main(["evaluate", agent, "--episode-seconds", advised.group(1), "--episodes-per-trace", "1", "--out",
+                 str(tmp_path / "ev"), "--no-plots", "-q"]) == 0

@@ -772,3 +772,18 @@ def test_a_sweep_takes_its_settings_as_one_config_or_by_keyword(shipped):
         sweep_gains(shipped, [1.0], [0.5], windowz=3)
     with pytest.raises(TypeError, match="config must be a SweepConfig"):
         sweep_pairs(shipped, [(1.0, 0.5)], "roll")
+
+
+def test_cli_window_longer_than_the_traces_names_the_option_and_the_longest_that_fits(tmp_path, capsys):
+    """Issue 31: '(shorten duration)' named neither the option nor the longest duration that fits."""
+    import re
+
+    from heli_cli.main import main
+
+    assert main(["sweep", "--kp", "1:4:2", "--kd", "0:1:2", "--duration", "5000", "--out", str(tmp_path / "sw"),
+                 "-q", "--no-plots"]) == 2
+    err = capsys.readouterr().err
+    advised = re.search(r"the longest that fits every trace is ([\d.]+) s: pass --duration \1 or less", err)
+    assert advised and "duration=" not in err, err
+    assert main(["sweep", "--kp", "1:4:2", "--kd", "0:1:2", "--duration", advised.group(1), "--out",
+                 str(tmp_path / "sw"), "-q", "--no-plots"]) == 0
