@@ -46,6 +46,36 @@ class TaskFailed(HeliError, RuntimeError):
         self.index = index
 
 
+#: The one command that installs a module whose extra cannot: orangebox 0.5.0's wheel declares console
+#: scripts without a callable (``bb2csv = scripts/bb2csv``), so pip installs the module and then exits with
+#: status 1 (and, inside an extra, stops before the packages after it). The command therefore tolerates pip's
+#: status and lets the import decide. The Makefile's ``setup`` runs the same line (``LOG_DECODER``); 0.4.0
+#: installs cleanly but misreads 25 of the 9407 frames of the Rotorflight fixture log.
+BLACKBOX_INSTALL = "python -m pip install 'orangebox>=0.5' || python -c 'import orangebox'"
+
+#: Install commands for modules that are not (or not only) an extra's, keyed by top-level module.
+INSTALL_COMMANDS = {"orangebox": BLACKBOX_INSTALL}
+
+
+def install_advice(module: str, extra: str) -> str:
+    """The shell command that installs ``module``, to print after "install it with:".
+
+    Parameters
+    ----------
+    module : str
+        Importable module name; its top-level package selects a special command.
+    extra : str
+        The ``heli-env`` extra that provides it otherwise.
+
+    Returns
+    -------
+    str
+        A command that exits 0 on a fresh machine with ``heli-env`` installed: ``pip install
+        'heli-env[extra]'`` for the extras that install cleanly, :data:`BLACKBOX_INSTALL` for orangebox.
+    """
+    return INSTALL_COMMANDS.get(module.split(".")[0], f"python -m pip install 'heli-env[{extra}]'")
+
+
 def require(module: str, extra: str):
     """Import an optional module lazily, naming the extra that provides it.
 
@@ -63,7 +93,7 @@ def require(module: str, extra: str):
     Raises
     ------
     MissingDependency
-        The module cannot be imported; the message names the ``pip install`` that fixes it.
+        The module cannot be imported; the message names the command that installs it (:func:`install_advice`).
     """
     import importlib
 
@@ -72,5 +102,5 @@ def require(module: str, extra: str):
     except ImportError as e:  # pragma: no cover - depends on the environment
         raise MissingDependency(
             f"'{module}' is needed for this and is not installed; "
-            f"install it with: pip install 'heli-env[{extra}]'"
+            f"install it with: {install_advice(module, extra)}"
         ) from e
