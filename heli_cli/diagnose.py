@@ -89,6 +89,12 @@ def _write_html(run_) -> int:
 def _print_run(run_, evidence) -> int:
     """The verdict, one line per step (its parameters and ``evidence(step)``), and the files written."""
     d = run_.diagnoser
+    if run_.document.get("model_verdict"):  # the written model's, as heli identify shows it
+        from model_store.verdict import ModelVerdict
+
+        from .identify import print_verdict
+
+        print_verdict(ModelVerdict.from_dict(run_.document["model_verdict"]))
     print(f"verdict: {d.verdict_}")
     if d.verdict_ == "undecided":
         print(f"  {d.evidence_.get('reason', '')}")

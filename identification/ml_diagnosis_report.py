@@ -12,7 +12,11 @@ each file atomically (:mod:`identification.files`):
 * when an effect was found, ``model.json`` (a new version, the replaced one in ``history/``) fitted by
   maximum likelihood with the effect added (``added_terms``, ``"diagnosis"``), and this flight's wind (the
   smoother's) appended to the disturbance library, so that the directory is a model the environment and the
-  controllers load.
+  controllers load. The model carries the verdict ``heli identify`` gives its models
+  (:func:`identification.model_verdict.judge_identifier`, with the integral method beside it and its
+  simulation from the flight's sticks), also in ``diagnosis.json`` (``model_verdict``) and first in
+  ``diagnosis.md``: where ``heli identify`` refuses a flight as diverging, the diagnosis does not write a
+  model of it that reads as sound.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from model_store.model_file import model_document as new_model_document
+from model_store.verdict import ModelVerdict, verdict_of
 
 from .diagnose_report import DiagnosisRun, write_diagnosis
 from .effects import CATALOGUE, alignment_parts, describe, shift_inputs
@@ -53,14 +58,17 @@ def criterion_text(d: LikelihoodDiagnoser) -> str:
     )
 
 
-def diagnosis_document(d: LikelihoodDiagnoser, source: dict | None = None, model_path=None) -> dict:
-    """The content of ``diagnosis.json``."""
+def diagnosis_document(d: LikelihoodDiagnoser, source: dict | None = None, model_path=None,
+                       verdict: ModelVerdict | None = None) -> dict:
+    """The content of ``diagnosis.json``; ``verdict``: the written model's (:mod:`model_store.verdict`)."""
     out = {"schema": SCHEMA, "schema_version": SCHEMA_VERSION, "method": "likelihood",
            "source": source or {"name": str(d._flight.metadata.get("source", "flight"))}}
     out.update(d.summary())
     out["criterion"]["text"] = criterion_text(d)
     out["parameters_after"] = d.params_.values() | {f"tau_{a}": d.params_.taus[i] for i, a in enumerate(AXES)}
     out["model_written"] = str(model_path) if model_path else None
+    if verdict is not None:
+        out["model_verdict"] = verdict.to_dict()
     return jsonable(out)
 
 
@@ -93,10 +101,11 @@ def flight_controller_note(d: LikelihoodDiagnoser) -> str | None:
             "corrections leave, with its gyro's vibration removed from the commands and the rates alike.")
 
 
-def diagnosis_markdown(d: LikelihoodDiagnoser, figure: Path | None) -> str:
-    """``diagnosis.md``: verdict, closed-loop shares, the steps, and every candidate per round."""
+def diagnosis_markdown(d: LikelihoodDiagnoser, figure: Path | None, verdict: ModelVerdict | None = None) -> str:
+    """``diagnosis.md``: the written model's verdict, the diagnosis' verdict, closed-loop shares, the steps, and
+    every candidate per round."""
     found = ", ".join(f"`{e}` on {a}" for e, a in d.effects_found_)
-    md = ["# Diagnosis (likelihood)", "", f"**Verdict: {d.verdict_}**" + (f" — added {found}." if found else "."), ""]
+    md = ["# Diagnosis (likelihood)", "", *(verdict.markdown() if verdict is not None else []), f"**Verdict: {d.verdict_}**" + (f" — added {found}." if found else "."), ""]
     if d.verdict_ == "undecided":
         md += [f"Evidence: {d.evidence_.get('reason', '')}", ""]
     md += [criterion_text(d), ""]
@@ -173,11 +182,29 @@ def diagnose_by_likelihood(flight: Flight, out_dir, *, model: ModelParams | None
     d = (diagnoser or LikelihoodDiagnoser()).fit(flight, model=model)
     figure = out / "diagnosis_likelihood.png" if plots and d.rounds_ else None
     new_model = _new_model(d, flight, model_document, source) if d.steps_ else None
-    doc, paths = write_diagnosis(out, new_model, lambda model_path: diagnosis_document(d, source, model_path),
-                                 lambda doc: diagnosis_markdown(d, figure), wait)
+    verdict = verdict_of(new_model[0]) if new_model is not None else None
+    doc, paths = write_diagnosis(out, new_model, lambda model_path: diagnosis_document(d, source, model_path, verdict),
+                                 lambda doc: diagnosis_markdown(d, figure, verdict), wait)
     if figure is not None and plot_statistics(d, figure) is not None:
         paths["likelihood_png"] = figure
     return DiagnosisRun(d, doc, paths)
+
+
+def _verdict(ident, params: ModelParams, flight: Flight, aligned: Flight) -> ModelVerdict:
+    """The verdict ``heli identify`` would give the diagnosed model: the same judge, the integral method on the
+    same flight beside it, and its simulation from the (aligned) flight's sticks, whose divergence
+    ``heli identify`` refuses."""
+    from .errors import SimulationDivergedError
+    from .integral_method import IntegralIdentifier
+    from .model_verdict import judge_identifier
+    from .validation import validate_models
+
+    try:
+        validate_models(aligned, {"diagnosed": params})
+        diverged = None
+    except SimulationDivergedError as e:
+        diverged = str(e).split(": ", 1)[-1].split(";")[0]  # "the roll rate leaves ±100 rad/s at t=... s"
+    return judge_identifier(ident, IntegralIdentifier(structure="decoupled").fit(flight), diverged)
 
 
 def _new_model(d: LikelihoodDiagnoser, flight: Flight, model_document, source):
@@ -200,8 +227,9 @@ def _new_model(d: LikelihoodDiagnoser, flight: Flight, model_document, source):
     sources = list((model_document or {}).get("provenance", {}).get("sources", [])) + ([source] if source else [])
     settings = identification_settings(ident)
     settings["method"] += " after heli diagnose"
+    aligned = shift_inputs(flight, log_shift) if min(log_shift) < 0 else flight
     document = new_model_document(d.params_, structure="custom", sample_rate=flight.sample_rate,
                                   identification=settings, fit_statistics={"axes": ident.summary()},
-                                  sources=sources, extra={"diagnosis": diagnosis})
-    aligned = shift_inputs(flight, log_shift) if min(log_shift) < 0 else flight
+                                  sources=sources, extra={"diagnosis": diagnosis},
+                                  verdict=_verdict(ident, d.params_, flight, aligned))
     return document, identify_disturbance(aligned, d.params_, wind_torque=ident.wind_torque(0))

@@ -187,23 +187,59 @@ DIVERGED_RATE = 100.0
 """A simulated body rate beyond this [rad/s] (about 16 revolutions per second) has diverged."""
 
 
+RK4_STABLE_STEP = 2.785
+"""The largest ``damping · dt`` of a decaying rate that a fixed-step classical RK4 step keeps bounded (its
+stability region on the negative real axis ends at -2.785)."""
+
+COUPLING = ("k1", "k4", "k5", "k8", "k9")
+"""The paper's terms that feed one axis' rate from another's (eqs. 18, 21)."""
+
+
+def _divergence_cause(params: ModelParams, dt: float) -> tuple[str, bool]:
+    """Why a model's simulation left :data:`DIVERGED_RATE`, and whether a late input or a rate controller's
+    log is a likely cause (not when the simulation step, not the model, is unstable)."""
+    values = params.values()
+    damping = dict(zip(AXES, ("k3", "k7", "k11")))
+    unstable = [a for a, k in damping.items() if not values[k] > 0.0]
+    if unstable:
+        return (f"its damping is not positive on {', '.join(unstable)} ("
+                + ", ".join(f"{damping[a]}={values[damping[a]]:.3g}" for a in unstable) + ")"), True
+    stiff = [a for a, k in damping.items() if values[k] * dt > RK4_STABLE_STEP]
+    if stiff:
+        said = ", ".join(f"{damping[a]}={values[damping[a]]:.4g} 1/s (k·dt {values[damping[a]] * dt:.2f})"
+                         for a in stiff)
+        many = len(stiff) > 1
+        return (f"its damping{'s' * many} {said} decay{'' if many else 's'} faster than the simulation's fixed "
+                f"{dt:g} s step can follow (RK4 holds up to k·dt {RK4_STABLE_STEP:g}): the model's "
+                f"ax{'es are' if many else 'is is'} stable, {'their' if many else 'its'} simulation at this step "
+                "is not, and a damping this fast says the data did not place it (the maximum-likelihood search "
+                "stops at 200 1/s)"), False
+    added = [name for name, value in params.extra if value]
+    if added:
+        return f"its added terms ({', '.join(added)}) feed the rates back faster than the damping removes them", True
+    coupled = [k for k in COUPLING if values[k]]
+    if coupled:
+        return (f"its coupling terms ({', '.join(f'{k}={values[k]:.3g}' for k in coupled)}) feed the axes into "
+                "each other faster than the dampings remove it"), True
+    return "its dampings are positive and it has no added or coupling terms: its inputs drive it there", True
+
+
 def _check_bounded(label: str, params: ModelParams, time, rates) -> None:
-    """Raise :class:`SimulationDivergedError` when a simulated rate history leaves ``DIVERGED_RATE``."""
+    """Raise :class:`SimulationDivergedError` when a simulated rate history leaves ``DIVERGED_RATE``; the
+    message names the cause the model shows (:func:`_divergence_cause`), and only the terms it has."""
     with np.errstate(invalid="ignore"):
         bad = ~(np.abs(rates) <= DIVERGED_RATE)  # NaN counts as diverged
     if not bad.any():
         return
     row, col = np.unravel_index(int(np.argmax(bad)), bad.shape)
-    damping = {a: params.get(k) for a, k in zip(AXES, ("k3", "k7", "k11"))}
-    unstable = [a for a, v in damping.items() if not v > 0.0]
-    why = (f"its damping is not positive on {', '.join(unstable)} "
-           f"({', '.join(f'{k}={params.get(k):.3g}' for a, k in zip(AXES, ('k3', 'k7', 'k11')) if a in unstable)})"
-           if unstable else "its added terms feed the rates back faster than the damping removes them")
+    dt = float(np.median(np.diff(time))) if len(time) > 1 else 0.0
+    why, input_causes = _divergence_cause(params, dt)
+    likely = (" Likely causes: a servo delay or a late input column the model does not have, or a log of an "
+              "aircraft flown by a rate controller (its recorded command is not an open-loop input)."
+              if input_causes else "")
     raise SimulationDivergedError(
         f"model {label!r} diverges when simulated from the flight's sticks: the {AXES[row]} rate leaves "
-        f"±{DIVERGED_RATE:g} rad/s at t={float(time[col]):.2f} s; {why}. Likely causes: a servo delay or a "
-        "late input column the model does not have, or a log of an aircraft flown by a rate controller (its "
-        "recorded command is not an open-loop input).")
+        f"±{DIVERGED_RATE:g} rad/s at t={float(time[col]):.2f} s; {why}.{likely}")
 
 
 def _disturbance_per_model(disturbance, models, n: int) -> dict[str, np.ndarray]:

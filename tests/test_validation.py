@@ -199,8 +199,9 @@ def test_a_diverging_model_is_named_with_its_cause(truth_flight):
 
     flight, _ = truth_flight
     unstable = dataclasses.replace(PAPER, k3=-3.0)  # roll damping negative: the rate grows as exp(3 t)
+    # (advice to search the alignment is heli identify's, given only when the search mends it)
     with pytest.raises(SimulationDivergedError, match=r"'bad' diverges .* roll rate .* damping is not positive "
-                                                       r"on roll \(k3=-3\).*--delay auto"):
+                                                       r"on roll \(k3=-3\)\. Likely causes"):
         validate_models(flight, {"good": PAPER, "bad": unstable})
     assert issubclass(SimulationDivergedError, IdentifiabilityError)  # the CLI's one-line errors
     # the disturbance profile of such a model stands; its simulation is reported as diverged, not raised
@@ -208,6 +209,30 @@ def test_a_diverging_model_is_named_with_its_cause(truth_flight):
     assert profile.simulation is None and "diverges" in profile.simulation_diverged
     assert profile.to_dict()["simulation_diverged"] == profile.simulation_diverged
     assert "diverged" in profile.markdown()
+
+
+def test_a_damping_too_fast_for_the_step_is_named_as_such_not_as_added_terms(truth_flight):
+    """The ArduCopter log (50 Hz) fitted k3 = k7 = 200 1/s: k·dt = 4 is past RK4's 2.785, so the simulation
+    diverged with every damping positive and no term added, and the message blamed added terms."""
+    from identification.errors import SimulationDivergedError
+
+    flight, _ = truth_flight
+    stiff = dataclasses.replace(PAPER, k3=200.0)
+    dt = float(np.median(np.diff(flight.time)))
+    assert 200.0 * dt > 2.785, "the flight's step must make k3 = 200 too fast for RK4"
+    with pytest.raises(SimulationDivergedError, match=r"damping k3=200 1/s \(k·dt [0-9.]+\) decays faster than "
+                                                       r"the simulation's fixed") as e:
+        validate_models(flight, {"stiff": stiff})
+    assert "added terms" not in str(e.value) and "Likely causes" not in str(e.value)
+
+
+def test_divergence_names_the_terms_the_model_has():
+    from identification.validation import _divergence_cause
+
+    plain = dataclasses.replace(PAPER, k1=0.0, k4=0.0, k5=0.0, k8=0.0, k9=0.0)
+    assert "no added or coupling terms" in _divergence_cause(plain, 0.01)[0]
+    assert "coupling terms (k4=72.5)" in _divergence_cause(dataclasses.replace(plain, k4=72.5), 0.01)[0]
+    assert "added terms (nld1)" in _divergence_cause(dataclasses.replace(plain, extra=(("nld1", 0.2),)), 0.01)[0]
 
 
 def test_result_to_dict_is_json(two_model_result):
