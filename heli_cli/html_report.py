@@ -10,7 +10,10 @@ command prints, with nothing else to carry along:
   before its figures were drawn still converts;
 * figures a command writes beside the report without linking them (``sweep``'s heat map, ``evaluate``'s
   episode) can be passed as ``figures`` and are appended under "Figures";
-* a short inline style sheet: readable tables, images at most the page's width.
+* a short inline style sheet: readable tables, images at most the page's width;
+* ``<meta name="heli-source">`` and one ``<meta name="heli-figure">`` per embedded figure record the SHA-256 of
+  what the page was made from, so :func:`stale_reasons` (``heli check``) can tell a page that shows an older
+  report (``heli refresh`` rewrote ``report.md`` and the figures) from a current one.
 
 The file is written atomically (:func:`identification.files.write_text`). ``markdown`` is imported when a
 report is converted, not when the ``heli`` parser is built, so ``heli --help`` stays fast.
@@ -19,13 +22,14 @@ report is converted, not when the ``heli`` parser is built, so ``heli --help`` s
 from __future__ import annotations
 
 import base64
+import hashlib
 import html
 import mimetypes
 import re
 from pathlib import Path
 from urllib.parse import unquote
 
-__all__ = ["markdown_to_html", "write_html_report"]
+__all__ = ["markdown_to_html", "rewrite_stale_html", "stale_reasons", "write_html_report"]
 
 MARKDOWN_EXTENSIONS = ("tables", "fenced_code")
 """Extensions of the ``markdown`` package the reports need: pipe tables and fenced code blocks."""
@@ -85,11 +89,90 @@ def write_html_report(markdown_path, figures=(), title: str | None = None) -> Pa
     markdown_path = Path(markdown_path)
     text = markdown_path.read_text(encoding="utf-8")
     figures = [Path(f).resolve() for f in figures]  # against the current directory: the report's folder is not theirs
-    page = markdown_to_html(text, markdown_path.parent, title=title, figures=figures, default_title=markdown_path.stem)
+    page = markdown_to_html(text, markdown_path.parent, title=title, figures=figures, default_title=markdown_path.stem,
+                            source=markdown_path.name)
     return write_text(markdown_path.with_suffix(".html"), page)
 
 
-def markdown_to_html(text: str, base_dir, title: str | None = None, figures=(), default_title: str = "report") -> str:
+def stale_reasons(html_path) -> list[str]:
+    """Why the HTML report ``html_path`` no longer shows its Markdown report and figures; empty when it does.
+
+    The page's ``heli-source`` and ``heli-figure`` metas are compared with the SHA-256 of the files now
+    beside it. A page written before these metas existed is judged by modification time: older than its
+    Markdown report is stale.
+
+    Parameters
+    ----------
+    html_path : str or Path
+        A page written by :func:`write_html_report`.
+
+    Returns
+    -------
+    list of str
+        One sentence per difference ("report.md changed since report.html was written"); [] when current or when
+        the page has no Markdown report beside it.
+    """
+    html_path = Path(html_path)
+    page = html_path.read_text(encoding="utf-8", errors="replace")
+    metas = {kind: _recorded(page, kind) for kind in ("source", "figure")}
+    if not metas["source"]:
+        md = html_path.with_suffix(".md")
+        if md.is_file() and md.stat().st_mtime > html_path.stat().st_mtime:
+            return [f"{html_path.name} is older than {md.name}"]
+        return []
+    reasons = []
+    for kind, entries in metas.items():
+        for name, digest in entries:
+            path = html_path.parent / name
+            if not path.is_file():
+                if kind == "source":
+                    reasons.append(f"{name}, the report {html_path.name} was made from, is gone")
+                continue  # a figure deleted since: the page still shows it, nothing newer to show
+            if _sha256(path) != digest:
+                reasons.append(f"{name} changed since {html_path.name} was written")
+    return reasons
+
+
+def rewrite_stale_html(folder) -> list[str]:
+    """Rewrite every HTML report in ``folder`` that :func:`stale_reasons` finds stale; one line per page rewritten.
+
+    The page is made again from its Markdown report and the figures it embedded (those the report does not link,
+    such as a sweep's heat map, are appended again).
+
+    Parameters
+    ----------
+    folder : str or Path
+
+    Returns
+    -------
+    list of str
+        "report.html rewritten from report.md (report.md changed since report.html was written)" per page.
+    """
+    done = []
+    for page in sorted(Path(folder).glob("*.html")):
+        md = page.with_suffix(".md")
+        reasons = stale_reasons(page) if md.is_file() else []
+        if not reasons:
+            continue
+        text = page.read_text(encoding="utf-8", errors="replace")
+        figures = [page.parent / name for name, _ in _recorded(text, "figure")]
+        write_html_report(md, figures=[f for f in figures if f.is_file()])
+        done.append(f"{page.name} rewritten from {md.name} ({'; '.join(reasons)})")
+    return done
+
+
+def _recorded(page: str, kind: str) -> list[tuple[str, str]]:
+    """``(file name, SHA-256)`` of each ``heli-<kind>`` meta of an HTML page (see :func:`markdown_to_html`)."""
+    found = re.findall(rf'<meta name="heli-{kind}" content="([^"]*)" data-sha256="([0-9a-f]*)">', page)
+    return [(html.unescape(name), digest) for name, digest in found]
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def markdown_to_html(text: str, base_dir, title: str | None = None, figures=(), default_title: str = "report",
+                     source: str | None = None) -> str:
     """A complete HTML page of the Markdown ``text``, its local images embedded as ``data:`` URIs.
 
     Parameters
@@ -105,6 +188,9 @@ def markdown_to_html(text: str, base_dir, title: str | None = None, figures=(), 
         each absolute or relative to ``base_dir``.
     default_title : str
         Title when ``title`` is None and the text has no level-1 heading.
+    source : str, optional
+        The Markdown file's name in ``base_dir``: recorded with the SHA-256 of ``text``, and each embedded
+        figure with its own, for :func:`stale_reasons`. None: no record.
 
     Returns
     -------
@@ -122,6 +208,7 @@ def markdown_to_html(text: str, base_dir, title: str | None = None, figures=(), 
 
     base_dir = Path(base_dir)
     seen: set[Path] = set()
+    embedded: dict[str, str] = {}  # link name -> SHA-256 of the bytes embedded
 
     class _EmbedImages(Treeprocessor):
         """Replace each local ``<img src>`` by its data URI, or the element by a note when it cannot be read."""
@@ -137,6 +224,7 @@ def markdown_to_html(text: str, base_dir, title: str | None = None, figures=(), 
                 seen.add(path)
                 uri, problem = _data_uri(path)
                 if uri is not None:
+                    embedded[_link(path, base_dir)] = _sha256(path)
                     img.set("src", uri)
                     continue
                 alt = img.get("alt") or path.name
@@ -158,9 +246,16 @@ def markdown_to_html(text: str, base_dir, title: str | None = None, figures=(), 
         h1 = re.search(r"<h1[^>]*>(.*?)</h1>", body, re.S)
         title = html.unescape(re.sub(r"<[^>]+>", "", h1.group(1))).strip() if h1 else ""
         title = title or default_title
+    record = ""
+    if source is not None:
+        record = (f'<meta name="heli-source" content="{html.escape(source)}" data-sha256="'
+                  f'{hashlib.sha256(text.encode("utf-8")).hexdigest()}">\n'
+                  + "".join(f'<meta name="heli-figure" content="{html.escape(name)}" data-sha256="{digest}">\n'
+                            for name, digest in embedded.items()))
     return ("<!DOCTYPE html>\n"
             '<html lang="en">\n<head>\n<meta charset="utf-8">\n'
             '<meta name="viewport" content="width=device-width, initial-scale=1">\n'
+            + record +
             f"<title>{html.escape(title)}</title>\n<style>\n{STYLE}</style>\n</head>\n"
             f"<body>\n{body}\n</body>\n</html>\n")
 

@@ -78,4 +78,7 @@ def run(args) -> int:
     for key in ("model", "report", "refresh_md", "refresh_json"):
         if key in result.paths:
             print(f"wrote {result.paths[key]}")
+    from .html_report import write_html_report  # as identify: after the figures, it embeds them
+
+    print(f"wrote {write_html_report(result.paths['report'])}")
     return 0

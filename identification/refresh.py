@@ -68,7 +68,7 @@ from .terms import AXES
 REFRESH_SCHEMA = "heli-env/refresh"
 REFRESH_SCHEMA_VERSION = 1
 FIT_CHOICES = ("auto", "pooled", "new")
-KEPT_FILES = ("report.md", "refresh.md", "refresh.json")
+KEPT_FILES = ("report.md", "report.html", "refresh.md", "refresh.json")
 """Top-level files of a model directory a refresh replaces; copied to ``history/`` first (with the PNG figures)."""
 REPRODUCE_RTOL = 1e-6
 """Relative agreement expected between ``model.json`` and a refit of its source flights."""

@@ -132,6 +132,32 @@ def test_library_gains_a_version_with_both_flights(refreshed, flights):
     assert lib.orphans() == []
 
 
+def test_refresh_rewrites_report_html_and_check_finds_the_folder_current(refreshed, capsys):
+    """report.html shows the refreshed report.md, not the identified one; the old page is kept in history/."""
+    from heli_cli.html_report import stale_reasons
+
+    out, before = refreshed
+    assert (out / "report.md").read_bytes() != before[Path("report.md")]
+    page = (out / "report.html").read_text(encoding="utf-8")
+    assert f'content="report.md" data-sha256="{hashlib.sha256((out / "report.md").read_bytes()).hexdigest()}"' in page
+    assert stale_reasons(out / "report.html") == []
+    assert any(p.name.startswith("report") and p.suffix == ".html" for p in (out / "history").iterdir())
+    assert main(["check", str(out), "--no-repair"]) == 0
+    assert "consistent" in capsys.readouterr().out
+
+
+def test_check_finds_a_stale_report_html_and_writes_it_again(model_dir, capsys):
+    """As a refresh by an older heli left it: report.md rewritten, report.html not."""
+    report = model_dir / "report.md"
+    report.write_text(report.read_text(encoding="utf-8") + "\nA line the page does not show.\n", encoding="utf-8")
+    assert main(["check", str(model_dir), "--no-repair"]) == 2
+    out = capsys.readouterr().out
+    assert "problem: report.html does not show the current report: report.md changed since report.html" in out
+    assert main(["check", str(model_dir)]) == 0
+    assert "repaired: report.html rewritten from report.md" in capsys.readouterr().out
+    assert "A line the page does not show." in (model_dir / "report.html").read_text(encoding="utf-8")
+
+
 def test_env_replays_both_flights(refreshed):
     out, _ = refreshed
     env = gym.make("HeliAttitude-v0", model=str(out))
