@@ -349,3 +349,24 @@ def test_a_trace_staged_twice_is_written_once(folder):
     state = ModelDir(folder).load()
     assert len(state.traces) == 2
     assert_array_equal(state.traces[-1].ud, _trace(5).ud)
+
+
+def test_heli_check_of_a_file_checks_a_flight_or_says_what_it_expected(tmp_path, capsys):
+    """Issue 31: 'heli check flight.csv' said the (existing) file did not exist."""
+    from heli_cli.main import main
+    from identification.synthetic import simulate_flight
+
+    flight = tmp_path / "flight.csv"
+    simulate_flight(5, seed=1).save(flight)
+    assert main(["check", str(flight)]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"{flight}: a valid flight, not a model folder: ") and "does not exist" not in out
+    (tmp_path / "bad.csv").write_text("time,p\n0,1\n")
+    assert main(["check", str(tmp_path / "bad.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "expected a model folder (written by 'heli identify'), got the file" in err
+    assert "a CSV that is not a valid flight: " in err and "missing required column" in err
+    (tmp_path / "m").mkdir()
+    (tmp_path / "m" / "model.json").write_text("{}")
+    assert main(["check", str(tmp_path / "m" / "model.json")]) == 2
+    assert f"check the folder that holds it: heli check {tmp_path / 'm'}" in capsys.readouterr().err
