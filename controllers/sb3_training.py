@@ -139,9 +139,11 @@ class ProgressBar(BaseCallback):
     Silent when ``show`` is False or stderr is not a terminal.
     """
 
-    def __init__(self, total: int, show: bool = True, eval_callback=None, desc: str = "train"):
+    def __init__(self, total: int | None, show: bool = True, eval_callback=None, desc: str = "train"):
         super().__init__()
-        self.total, self.show, self.eval_callback, self.desc = int(total), bool(show), eval_callback, desc
+        # total None: no step count to reach (a time budget stops the run), the bar counts steps and their rate
+        self.total = None if total is None else int(total)
+        self.show, self.eval_callback, self.desc = bool(show), eval_callback, desc
         self.bar = None
         self._last_eval = None
 

@@ -24,13 +24,15 @@ def register(sub):
     p.add_argument("--model", metavar="DIR", default=None,
                    help="model directory written by 'heli identify' (default: the model shipped with heli-env)")
     add_accept_option(p, "Train an agent on it")
-    p.add_argument("--timesteps", required=True, type=whole(1), metavar="N",
-                   help="environment steps to train for (all copies together)")
+    p.add_argument("--timesteps", type=whole(1), default=None, metavar="N",
+                   help="environment steps to train for (all copies together); with --minutes alone, training "
+                   "runs until the time budget is spent")
     p.add_argument("--out", required=True, type=output_path, metavar="AGENT", help="agent path (.zip is added)")
     p.add_argument("--seed", type=seed(), default=0, help="seed of everything (default 0)")
     p.add_argument("--n-envs", type=whole(1), default=8, help="environment copies (default 8)")
     p.add_argument("--minutes", type=number("a finite number > 0", 0.0), default=None,
-                   help="wall-time budget; training stops at --timesteps or this, whichever comes first")
+                   help="wall-time budget; training stops at --timesteps or this, whichever comes first "
+                   "(give --timesteps, --minutes or both)")
     p.add_argument("--eval-freq", type=whole(0), default=50_000, metavar="N",
                    help="timesteps between held-out evaluations (0: none; default 50000)")
     p.add_argument("--eval-episodes", type=whole(1), default=4, help="held-out episodes per evaluation (default 4)")
@@ -123,7 +125,16 @@ def _config(args):
     """The TrainConfig of the command line; a --residual PD file is read here, so a bad one fails before any work."""
     from controllers.rl.config import TrainConfig
 
-    return TrainConfig(algo=args.algo, timesteps=args.timesteps, seed=args.seed, n_envs=args.n_envs,
+    from controllers.errors import AgentError
+    from controllers.rl.config import UNLIMITED_TIMESTEPS
+
+    if args.timesteps is None and args.minutes is None:
+        raise AgentError("give --timesteps N (environment steps), --minutes M (a time budget) or both")
+    if args.timesteps is None and args.lr_schedule == "linear":
+        raise AgentError("--lr-schedule linear falls to 0 at --timesteps: give --timesteps with it (about what "
+                         "--minutes allows)")
+    timesteps = UNLIMITED_TIMESTEPS if args.timesteps is None else args.timesteps
+    return TrainConfig(algo=args.algo, timesteps=timesteps, seed=args.seed, n_envs=args.n_envs,
                        eval_freq=args.eval_freq, checkpoint_freq=args.checkpoint_freq,
                        held_out_fraction=args.held_out_fraction, split_seed=args.split_seed,
                        eval_episodes=args.eval_episodes, episode_seconds=args.episode_seconds,

@@ -839,3 +839,24 @@ def test_rl_targets_refly_measures_the_near_best_verdict_over_evaluation_draws(r
     assert targets._cli([str(run), "--refly", "1", "--model", str(ideal.path)]) == 2  # one line, no traceback
     assert capsys.readouterr().err == (f"rl_targets.py: FileNotFoundError: {run}: no pd_swept.json (expected the "
                                        "--out folder of scripts/train_compare.py --algos ppo-residual)\n")
+
+
+def test_cli_train_with_a_time_budget_alone_stops_on_time_under_a_plain_label(tmp_path, capsys, monkeypatch):
+    """Issue 31: 'heli train' required --timesteps with --minutes and labelled its bar 'ppo ppo:'."""
+    import io
+
+    from heli_cli.main import main
+
+    class _Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    assert main(["train", "--algo", "ppo", "--out", str(tmp_path / "x"), "-q"]) == 2
+    assert "give --timesteps N (environment steps), --minutes M (a time budget) or both" in capsys.readouterr().err
+    terminal = _Terminal()
+    monkeypatch.setattr("sys.stderr", terminal)
+    assert main(["train", "--algo", "ppo", "--minutes", "0.02", "--n-envs", "2", "--eval-freq", "0",
+                 "--checkpoint-freq", "0", "--out", str(tmp_path / "ppo")]) == 0
+    assert "(time budget reached)" in capsys.readouterr().out
+    bar = terminal.getvalue()
+    assert "train PPO for 0.02 min: " in bar and "step/s" in bar and "ppo ppo" not in bar

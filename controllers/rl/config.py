@@ -78,6 +78,10 @@ MAX_DELAY_SPREAD = 0.1
 LR_SCHEDULES = ("constant", "linear")
 """Learning-rate schedules of :attr:`TrainConfig.lr_schedule`."""
 
+UNLIMITED_TIMESTEPS = 10 ** 12
+"""``timesteps`` of a run bounded by its time budget (``max_seconds``) alone: a step cap never reached (SB3
+needs one); the progress bar then counts steps against the clock, not against the cap."""
+
 INIT_DEG = 5.0
 """Default initial roll/pitch range [deg] and rate range [deg/s] of episodes without a residual (the env's)."""
 

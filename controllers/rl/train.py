@@ -55,7 +55,7 @@ from ..errors import AgentError, TrainingInterrupted
 from ..pd.controller import PDController
 from ..trace_split import GustCurriculum, TraceSegment, WindowSampler, as_segments, split_traces
 from .agent_file import AGENT_SCHEMA, AGENT_SCHEMA_VERSION, _algo_class, _sb3
-from .config import TrainConfig, make_config
+from .config import UNLIMITED_TIMESTEPS, TrainConfig, make_config
 from .residual_agent import residual_metadata
 
 
@@ -447,7 +447,9 @@ def _callbacks(config: TrainConfig, eval_env, out, metadata: dict, progress: boo
                                      verbose=0, warn=False)
         cbs.append(eval_cb)
     ckpt = AtomicCheckpoint(config.checkpoint_freq or 2 ** 62, run_dir / "checkpoints", name, metadata)
-    bar = ProgressBar(config.timesteps, progress, eval_cb, desc=f"{config.algo} {name}")
+    by_time = config.max_seconds is not None and config.timesteps >= UNLIMITED_TIMESTEPS
+    bar = ProgressBar(None if by_time else config.timesteps, progress, eval_cb,
+                      desc=f"train {config.algo.upper()}" + (f" for {config.max_seconds / 60:g} min" if by_time else ""))
     clock = WallClockLimit(config.max_seconds) if config.max_seconds is not None else None
     if config.normalize_obs:  # first, so a callback acting at a rollout's end sees the merged statistics
         from ..sb3_training import ObservationStatistics
