@@ -116,6 +116,10 @@ def rk4_step(params, dt: float, substeps: int):
 
 
 def _progress(total, show, desc):
+    if hasattr(show, "update"):  # a bar the caller owns over several replays (a sweep's rounds)
+        from heli_core.backends import _Grown
+
+        return _Grown(show, total)
     from tqdm import tqdm
 
     return tqdm(total=total, desc=desc, unit="step", unit_scale=True, leave=False, file=sys.stderr,

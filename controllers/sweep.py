@@ -458,6 +458,24 @@ class _Run:
     seconds: dict
     tasks: int = 0
     where: str = "in-process"
+    bar: object = None
+
+    def progress(self):
+        """The one bar over the whole sweep (every round of a growing grid adds its tasks to it), or False."""
+        if not self.cfg.progress:
+            return False
+        if self.bar is None:
+            import sys
+
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=0, desc=f"sweep {AXES[self.rp.axis]}", unit="task" if self.be else "step",
+                            unit_scale=self.be is None, leave=False, file=sys.stderr, disable=not sys.stderr.isatty())
+        return self.bar
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
 
     @property
     def sensors(self):
@@ -497,11 +515,12 @@ class _Run:
             return
         cfg, rp = self.cfg, self.rp
         if self.be is None:
-            st, h, o, div, smp = replay(rp, kp[idx], kd[idx], self.nominal, cfg.keep_samples, cfg.progress,
+            st, h, o, div, smp = replay(rp, kp[idx], kd[idx], self.nominal, cfg.keep_samples, self.progress(),
                                         cfg.max_batch, self.hist_edges)
             self.tasks += 1
         else:
-            st, h, o, div, smp, n_tasks = replay_on(self.be, rp, kp[idx], kd[idx], self.nominal, self.hist_edges, cfg)
+            st, h, o, div, smp, n_tasks = replay_on(self.be, rp, kp[idx], kd[idx], self.nominal, self.hist_edges, cfg,
+                                                    self.progress())
             self.tasks += n_tasks
             self.where = self.be.describe()
         for c in TD_COLUMNS:
@@ -590,6 +609,7 @@ def _grown(run: _Run, kp_values, kd_values, layout, cfg: SweepConfig):
 def _sweep(model, kp_values, kd_values, layout, cfg: SweepConfig) -> SweepResult:
     t_start = time.perf_counter()
     be = None if cfg.backend is None else _make_backend(cfg.backend)  # check before any work
+    run = None
     try:
         hist_edges = _check_settings(cfg, be)
         rp = prepare(model, cfg.axis, cfg.duration, cfg.dt, cfg.seed, cfg.traces, cfg.windows, cfg.sensors)
@@ -605,5 +625,7 @@ def _sweep(model, kp_values, kd_values, layout, cfg: SweepConfig) -> SweepResult
         return SweepResult(AXES[rp.axis], np.asarray(kp_values), np.asarray(kd_values), block.table, hist_edges,
                            block.hist, block.overflow, rp.windows, freq, psd, settings, block.samples)
     finally:
+        if run is not None:
+            run.close()
         if be is not cfg.backend:  # made here from a name: release it
             be.close()

@@ -139,12 +139,13 @@ def _replay_task(item, shared):
     return replay(rp, kp, kd, nominal, keep_samples, False, max_batch, edges)
 
 
-def replay_on(backend, rp, kp, kd, nominal, edges, cfg):
+def replay_on(backend, rp, kp, kd, nominal, edges, cfg, progress=None):
     """:func:`replay` split into chunks of pairs run as tasks of ``backend``, joined in pair order.
 
     ``cfg`` is the sweep's :class:`~controllers.sweep.SweepConfig`: its ``chunk_pairs`` split the pairs into
     tasks (:func:`chunks`), its ``keep_samples`` and ``max_batch`` go to each task's :func:`replay`, and its
-    ``progress`` shows a bar of finished tasks; ``edges`` are the histogram's.
+    ``progress`` shows a bar of finished tasks (``progress``, when given, replaces it: a bar the caller owns,
+    see :meth:`heli_core.backends.Backend.map`); ``edges`` are the histogram's.
 
     Every pair's replay is independent of the others in its batch (element-wise
     numpy over the (pairs, windows) states, per-row statistics), so the joined
@@ -158,7 +159,8 @@ def replay_on(backend, rp, kp, kd, nominal, edges, cfg):
     """
     bounds = chunks(kp.size, len(rp.windows), cfg.chunk_pairs)
     shared = (replace(rp, env_model=None), np.asarray(nominal, dtype=float), cfg.keep_samples, cfg.max_batch, edges)
-    parts = backend.map(_replay_task, [(kp[a:b], kd[a:b]) for a, b in bounds], shared, progress=cfg.progress,
+    parts = backend.map(_replay_task, [(kp[a:b], kd[a:b]) for a, b in bounds], shared,
+                        progress=cfg.progress if progress is None else progress,
                         desc=f"sweep {AXES[rp.axis]}")
     stats = {c: np.concatenate([p[0][c] for p in parts]) for c in TD_COLUMNS}
     hist = np.concatenate([p[1] for p in parts])

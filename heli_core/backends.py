@@ -67,7 +67,24 @@ def _check_count(value, name, minimum):
     return value
 
 
+class _Grown:
+    """A caller's bar that one map adds its tasks to, left open for the next (see :meth:`Backend.map`)."""
+
+    def __init__(self, bar, total):
+        bar.total = (bar.total or 0) + total
+        bar.refresh()
+        self.bar = bar
+
+    def __enter__(self):
+        return self.bar
+
+    def __exit__(self, *exc):
+        return False
+
+
 def _progress(total, show, desc):
+    if hasattr(show, "update"):  # a bar the caller owns over several maps (a sweep's rounds)
+        return _Grown(show, total)
     from tqdm import tqdm
 
     return tqdm(total=total, desc=desc, unit="task", leave=False, file=sys.stderr,
@@ -100,8 +117,9 @@ class Backend:
             One task per item; each is pickled with its task, so keep them small.
         shared : object, optional
             Read-only data every task needs; moved to each worker once.
-        progress : bool
-            tqdm bar of finished tasks on stderr (when it is a terminal).
+        progress : bool or tqdm bar
+            tqdm bar of finished tasks on stderr (when it is a terminal); or a bar the caller owns, which
+            this map's tasks are added to and which is left open (one bar over several maps).
         desc : str
             Label of the bar.
 

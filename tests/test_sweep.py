@@ -787,3 +787,29 @@ def test_cli_window_longer_than_the_traces_names_the_option_and_the_longest_that
     assert advised and "duration=" not in err, err
     assert main(["sweep", "--kp", "1:4:2", "--kd", "0:1:2", "--duration", advised.group(1), "--out",
                  str(tmp_path / "sw"), "-q", "--no-plots"]) == 0
+
+
+def test_a_growing_sweep_draws_one_bar_over_all_its_rounds(shipped, monkeypatch):
+    """Issue 31: 'heli sweep' drew a separate '0/1 task' bar per round of its growing grid; one bar now counts
+    every round's tasks (the backend adds each map's tasks to the bar it is given)."""
+    import io
+
+    import tqdm
+
+    class _Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    bars = []
+    real = tqdm.tqdm
+
+    def counted(*args, **kwargs):
+        bars.append(real(*args, **kwargs))
+        return bars[-1]
+
+    monkeypatch.setattr(tqdm, "tqdm", counted)
+    monkeypatch.setattr("sys.stderr", _Terminal())
+    r = sweep_gains(shipped, [1.0, 4.0], [0.0, 1.0], duration=2.0, windows=2, progress=True, backend="local",
+                    chunk_pairs=1)
+    assert len(r.settings["extension"]["rounds"]) >= 1, "the grid grew: several rounds of tasks"
+    assert len(bars) == 1 and bars[0].n == bars[0].total == r.settings["tasks"]
