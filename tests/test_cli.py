@@ -143,7 +143,8 @@ def test_identify_several_flights_pools_them(flight_csv, tmp_path):
 def test_identify_prints_a_summary(flight_csv, capsys, tmp_path):
     assert main(["identify", str(flight_csv), "--out", str(tmp_path), "--no-plots", "--interval", "2"]) == 0
     out = capsys.readouterr().out
-    assert out.startswith("identified decoupled model from 1 flight(s) by maximum likelihood:")
+    assert out.startswith("model verdict: ")  # first: whether the model can be used (issue #31)
+    assert "\nidentified decoupled model from 1 flight(s) by maximum likelihood:" in out
     assert f"wrote {tmp_path / 'model.json'}" in out
 
 
@@ -165,7 +166,8 @@ def test_identify_quiet_prints_no_progress(flight_csv, tmp_path, capsys):
     assert main(["--quiet", "identify", str(flight_csv), "--out", str(tmp_path), "--no-plots", "--method",
                  "integral"]) == 0
     captured = capsys.readouterr()
-    assert captured.err == "" and captured.out.startswith("identified decoupled model")
+    assert captured.err == "" and captured.out.startswith("model verdict: ")
+    assert "\nidentified decoupled model" in captured.out
 
 
 def test_identify_flight_with_nan_exits_2_naming_the_column(flight_csv, tmp_path, capsys):
