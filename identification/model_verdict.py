@@ -179,9 +179,16 @@ def judge_fit(summary: Mapping, *, damping_bounds=None, reference: Mapping | Non
 
 def judge_identifier(ident, reference=None, diverged: str | None = None) -> ModelVerdict:
     """:func:`judge_fit` on a fitted identifier (its ``summary()``), with the search's bounds of its estimator
-    and ``reference`` another fitted identifier on the same flights (or None)."""
+    and ``reference`` another fitted identifier on the same flights (or None), compared on the axes where both
+    used the same alignment (a stick advanced or delayed by one fit only changes the other's gains, even
+    their sign: the T-REX hover's sticks, 0.29 s late, give the unaligned integral fit k2 = -10.5)."""
     from .ml_estimator import MaximumLikelihoodIdentifier
 
     bounds = ML_DAMPING_BOUNDS if isinstance(ident, MaximumLikelihoodIdentifier) else None
-    return judge_fit(ident.summary(), damping_bounds=bounds,
-                     reference=reference.summary() if reference is not None else None, diverged=diverged)
+    summary = ident.summary()
+    ref = reference.summary() if reference is not None else None
+    if ref is not None:  # compare only axes both fitted on the same alignment of sticks and response
+        shifts = getattr(ident, "input_shifts_", None) or {}
+        ref = {a: s for a, s in ref.items() if a in summary and not shifts.get(a)
+               and summary[a].get("delay_s", 0.0) == s.get("delay_s", 0.0)}
+    return judge_fit(summary, damping_bounds=bounds, reference=ref, diverged=diverged)
