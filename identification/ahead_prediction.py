@@ -138,3 +138,43 @@ def _block_r2(fitted, a: int, fit, block: Flight, burn: int, horizon: int) -> fl
     data, _ = fitted._axis_data(a, names, [cleaned], burn, fit.delay, fit.wind["model"], fit.lag)
     theta = np.array([fit.params[n.split("@")[0]] for n in data.names])
     return ahead_r2(AxisLikelihood(data), fit.state, theta, horizon)
+
+
+def fitted_ahead_r2(identifier, flights, horizon_s: float = AHEAD_S) -> dict:
+    """Per axis, the ``horizon_s``-ahead prediction R² of a fitted maximum-likelihood identifier on the flights
+    it was fitted on, each flight with its own offset (:func:`ahead_r2`).
+
+    Unlike the share of the rate the sticks explain alone (the fit's ``r2``, low on a correct model when the wind
+    dominates the axis) and the one-step prediction's (near 1 for any model at a high sample rate), it says
+    whether the model predicts the rate: a correct model in strong wind scores high, a model of noise low.
+
+    Parameters
+    ----------
+    identifier : MaximumLikelihoodIdentifier
+        Fitted.
+    flights : sequence of Flight
+        The flights it was fitted on, as given to ``fit``.
+    horizon_s : float
+        Prediction horizon [s].
+
+    Returns
+    -------
+    dict
+        ``{axis: r2}``, NaN for a diverged prediction (:func:`format_r2`).
+    """
+    from .ml_estimator import BURN_IN
+
+    flights = [flights] if isinstance(flights, Flight) else list(flights)
+    rate = flights[0].sample_rate
+    horizon = max(1, int(round(horizon_s * rate)))
+    burn = int(round(BURN_IN * rate))
+    cleaned = [identifier._clean(identifier.aligned(f))[0] for f in flights]
+    out = {}
+    for axis, fit in identifier.axes_.items():
+        a = AXES.index(axis)
+        names = tuple(p for p in identifier._param_names()[a] if p not in fit.dropped)
+        data, _ = identifier._axis_data(a, names, cleaned, burn, fit.delay, fit.wind["model"], fit.lag)
+        theta = np.array([fit.flight_offsets[int(n.split("@")[1])] if "@" in n else fit.params[n]
+                          for n in data.names])
+        out[axis] = ahead_r2(AxisLikelihood(data), fit.state, theta, horizon)
+    return out

@@ -26,7 +26,7 @@ from model_store.model_file import model_document, with_verdict
 from .disturbance import identify_disturbance, source_of
 from .figures import PendingFigures
 from .files import sha256_of
-from .fit_warnings import fit_warnings
+from .fit_warnings import fit_warnings, judged_r2
 from .flight import Flight
 from .identify_report import (  # noqa: F401  (the tables are re-exported: they lived here)
     ReportContent,
@@ -245,8 +245,8 @@ def identify_and_report(flights, out_dir, options: IdentifyOptions | None = None
     chosen = "coupled" if opts.coupled else "decoupled"
     ident = identifiers[chosen]
     first = ident.flights_[0]  # filtered as identified
-    # the share of each axis' rate the sticks explain: the ML fit's simulation, the integral fit's R²
-    warnings = fit_warnings(flights, {a: f.r2 for a, f in ident.axes_.items()})
+    # judged by what the model predicts (ML: 0.5 s ahead), not by what the sticks explain alone (low in strong wind)
+    warnings = fit_warnings(flights, *judged_r2(ident, flights))
     opts.say("validating both models by forward simulation")
     validation, diverged = _validate(first, identifiers, chosen)
     warnings += diverged
