@@ -178,7 +178,7 @@ def fit_warnings(flights, r2: Mapping | None = None, r2_label: str = "fit", *, m
             out.append(f"{_name(f, k, len(flights))}: {band.describe()}")
     collective = static_collective(flights) if flights else None
     if collective is not None:
-        out.append(f"the collective does not vary (std {collective:.2g} within each flight): the collective torque "
+        out.append(f"the collective does not vary (std {round(collective, 6):g} within each flight): the collective torque "
                    "(k12) and gain scheduling are not fitted (with a constant collective they are the offset and "
                    "the control gain again)")
     if flights:

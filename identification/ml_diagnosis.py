@@ -387,7 +387,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
             structure = {a: tuple(p for p in names if not on_static_input(p, True)) for a, names in structure.items()}
             for name, effect in CATALOGUE.items():
                 if any(on_static_input(p, True) for a in range(3) for p in effect.terms_on(a)):
-                    self.untestable_[name] = (f"the collective does not vary in this flight (std {collective:.2g}): "
+                    self.untestable_[name] = (f"the collective does not vary in this flight (std {round(collective, 6):g}): "
                                               "its terms are the offset or the control gain under another name")
         self.closed_loop_ = {AXES[a]: closed_loop_share(flight, a) for a in range(3)}
         if flight.duration < self.min_duration:

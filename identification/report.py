@@ -255,7 +255,10 @@ def identify_and_report(flights, out_dir, options: IdentifyOptions | None = None
         ident.params_, structure=chosen, sample_rate=first.sample_rate,
         filter_settings=first.metadata.get("prefilter"), identification=identification_settings(ident),
         fit_statistics={"axes": ident.summary(), "validation": validation.to_dict(),
-                        "fit_time_s": ident.fit_time_},
+                        "fit_time_s": ident.fit_time_,
+                        **({"input_hold": ident.hold_decision_} if getattr(ident, "hold_decision_", None) else {}),
+                        **({"input_shifts_s": ident.input_shifts_}
+                           if min(getattr(ident, "input_shifts_", {}).values(), default=0.0) < 0.0 else {})},
         sources=opts.sources, extra=opts.model_extra, sensors=identify_sensors(flights),
     )
     figures = [partial(fit_figures, validation, out)] if opts.plots else []

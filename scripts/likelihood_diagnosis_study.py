@@ -157,6 +157,8 @@ def main(argv=None):
     ap.add_argument("--null-cells", action="store_true",
                     help="instead: effect-free flights of every bench cell, and the largest statistic per candidate "
                     "(the calibration of the floors)")
+    ap.add_argument("--cells", nargs="+", default=None, metavar="CELL",
+                    help="with --null-cells: these bench cells only (default all)")
     ap.add_argument("--json", default=None, metavar="PATH", help="also write every flight's row (found effects, "
                     "round-1 statistics, closed-loop shares) to PATH")
     args = ap.parse_args(argv)
@@ -164,10 +166,15 @@ def main(argv=None):
     if args.null_cells:
         from identification.bench import BENCH_CELLS
 
-        rows = _run([("none", s, args.duration, c) for s in seeds for c in BENCH_CELLS], args)
+        cells = args.cells or list(BENCH_CELLS)
+        unknown = [c for c in cells if c not in BENCH_CELLS]
+        if unknown:
+            raise SystemExit(f"unknown cells {unknown}; known: {', '.join(BENCH_CELLS)}")
+        rows = _run([("none", s, args.duration, c) for s in seeds for c in cells], args)
         print(f"\nCommand: python scripts/likelihood_diagnosis_study.py --null-cells --seeds {args.seeds} "
-              f"--duration {args.duration:g}" + (f" --first-seed {args.first_seed}" if args.first_seed != 1 else ""))
-        _null_table(rows, list(BENCH_CELLS))
+              f"--duration {args.duration:g}" + (f" --first-seed {args.first_seed}" if args.first_seed != 1 else "")
+              + (f" --cells {' '.join(args.cells)}" if args.cells else ""))
+        _null_table(rows, cells)
         return
     rows = _run([(c, s, args.duration, args.cell) for c in args.cases for s in seeds], args)
     print(f"\nLikelihood diagnosis, {args.seeds} seeds per case, {args.duration:g} s flights"

@@ -63,7 +63,44 @@ def main(argv=None):
         cells = [" / ".join(format_r2(v) for v in table[h][a]) for h in HORIZONS]
         worst = np.nanmin(table[0.5][a]) if not np.all(np.isnan(table[0.5][a])) else float("nan")
         print(f"| {a} | " + " | ".join(cells) + f" | {format_r2(worst)} |")
+    ceiling = linear_ceiling(ident.aligned(flight), 0.5)
+    print("\nreference, in the fit's own data: the best linear model of rates, attitudes and all three sticks "
+          "(least squares on the aligned flight, no wind state) 0.5 s ahead from the measured state: "
+          + ", ".join(f"{a} {v:.3f}" for a, v in ceiling.items()))
     print(f"\nCommand: python scripts/real_heli.py --folds {args.folds}")
+
+
+def linear_ceiling(flight, horizon_s: float) -> dict:
+    """R² of the best linear model ``x' = M x + N u + c`` (x: p, q, r, roll, pitch; u: the three cyclic and
+    pedal sticks), fitted by least squares on the whole flight, predicting the rates ``horizon_s`` ahead from
+    the measured state with the sticks known (Euler steps at the log's rate): what any linear model of these
+    sticks can explain without a wind state, in sample (so an optimistic bound)."""
+    from identification.terms import STICK_ROW
+
+    dt, n = flight.dt, flight.n
+    rates = np.asarray(flight.rates, dtype=float)
+    att = np.asarray(flight.attitude[:2], dtype=float)
+    att = att - att.mean(axis=1, keepdims=True)
+    sticks = np.asarray(flight.sticks[list(STICK_ROW)], dtype=float)
+    x = np.vstack([rates, att])
+    rhs = np.vstack([x, sticks, np.ones(n)])
+    theta = np.linalg.lstsq(rhs.T, np.gradient(rates, dt, axis=1).T, rcond=None)[0].T
+    M = np.zeros((5, 5))
+    M[:3] = theta[:, :5]
+    M[3, 0] = M[4, 1] = 1.0
+    N = np.zeros((5, 3))
+    N[:3] = theta[:, 5:8]
+    c = np.zeros(5)
+    c[:3] = theta[:, 8]
+    h = int(round(horizon_s / dt))
+    starts = np.arange(0, n - h, 10)
+    state = x[:, starts].copy()
+    for j in range(h):
+        state = state + dt * (M @ state + N @ sticks[:, starts + j] + c[:, None])
+    target = rates[:, starts + h]
+    r2 = 1.0 - np.sum((state[:3] - target) ** 2, axis=1) / np.sum((target - target.mean(axis=1, keepdims=True)) ** 2,
+                                                                  axis=1)
+    return dict(zip(("roll", "pitch", "yaw"), (float(v) for v in r2)))
 
 
 if __name__ == "__main__":

@@ -9,11 +9,13 @@ from identification.fit_warnings import MIN_DURATION_S, MIN_R2, fit_warnings
 from identification.flight import make_flight
 
 
-def _flight(duration=120.0, rate=50.0, source="f.csv", ped=0.3, r_scale=1.0):
+def _flight(duration=120.0, rate=50.0, source="f.csv", ped=0.3, r_scale=1.0, col=0.05, noise=0.005):
     t = np.arange(0.0, duration, 1.0 / rate)
     w = 2 * np.pi * 0.4
-    sticks = np.array([0.3 * np.sin(w * t), 0.3 * np.cos(w * t), 0.1 + 0 * t, ped * np.sin(1.3 * w * t)])
+    sticks = np.array([0.3 * np.sin(w * t), 0.3 * np.cos(w * t), 0.1 + col * np.sin(0.1 * w * t),
+                       ped * np.sin(1.3 * w * t)])
     rates = np.array([0.2 * np.sin(w * t), 0.2 * np.cos(w * t), r_scale * 0.3 * np.sin(1.3 * w * t)])
+    rates = rates + noise * np.random.default_rng(0).standard_normal(rates.shape)  # a gyro's noise floor
     return make_flight(t, rates, sticks, metadata={"source": source})
 
 
@@ -23,6 +25,13 @@ GOOD = {"roll": 0.8, "pitch": 0.75, "yaw": 0.9}
 def test_a_long_well_excited_well_fitted_flight_gets_no_warning():
     assert fit_warnings([_flight()], GOOD) == []
     assert fit_warnings(_flight(), GOOD) == []  # one flight needs no list
+
+
+def test_a_constant_collective_and_a_log_filtered_before_it_was_written_are_said():
+    (line,) = fit_warnings([_flight(col=0.0)], GOOD)
+    assert line.startswith("the collective does not vary (std 0 within each flight)")
+    (line,) = fit_warnings([_flight(noise=0.0)], GOOD)  # pure tones: no noise floor at all
+    assert "the rates carry nothing above about" in line and "low-pass filtered before it was written" in line
 
 
 def test_a_short_flight_is_named_with_its_length():
