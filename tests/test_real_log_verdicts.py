@@ -87,9 +87,6 @@ def test_ardupilot_quad_diagnosis_says_what_identify_says(tmp_path, capsys):
 ADVICE = re.compile(r"Identify with it: (heli identify .*)$|\(heli import --inputs\)")
 
 
-@pytest.mark.xfail(strict=True, reason="issue #31 point 3: with --inputs sticks the ArduCopter log ends in the "
-                   "same SimulationDivergedError advising 'heli import --inputs' again (heli identify's advice, "
-                   "heli_cli/identify.py, should not name an input source that fails the same way)")
 def test_following_the_advice_for_the_ardupilot_quad_changes_the_outcome(tmp_path, capsys):
     """Every piece of advice the refusal prints is followed; each must end somewhere else than the refusal
     it came from (a model, or another reason), never in the same message again."""
