@@ -421,7 +421,7 @@ def test_residual_training_scales_follow_the_pd_errors(residual_run):
 
 
 def test_a_residual_trains_as_measured_unless_told_otherwise():
-    """gSDE, a paired baseline, a small rate weight and learning rate: the settings docs/controllers.md measured."""
+    """gSDE, a paired baseline, a small rate weight and learning rate: the settings docs/rl-experiments.md measured."""
     config = make_config(residual=BEST_PD)
     assert config.paired_baseline is True and config.task_weights == (1.0, 0.01, 0.01)
     assert make_config().task_weights is None
