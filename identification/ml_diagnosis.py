@@ -49,8 +49,9 @@ from .flight import Flight
 from .ahead_prediction import AHEAD_S, ahead_r2
 from .axis_likelihood import AxisLikelihood as _AxisLikelihood
 from .fit_warnings import on_static_input, static_collective
+from .input_hold import check_hold
 from .ml_estimator import (BURN_IN, MAX_DELAY, MAX_SHIFT, MIN_PROFILE_DAMPING, NOMINAL_DAMPING,
-                           MaximumLikelihoodIdentifier, check_hold)
+                           MaximumLikelihoodIdentifier)
 from .state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll
 
 ALPHA = 0.01

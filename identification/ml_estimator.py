@@ -37,12 +37,24 @@ stores and the environment replays.
 
 Several flights share the aircraft's parameters; each flight keeps its own
 offset ``kd`` (the trim and the day's mean wind) and its own filter start.
+
+How the sticks move between samples is a coordinate of the search too (a hold
+fraction, :mod:`identification.input_hold`), decided once for the log from every
+axis' estimate; with ``delay="auto"`` a negative alignment is a log whose input
+column lags, applied as a shift of the stick by whole samples
+(:attr:`MaximumLikelihoodIdentifier.input_shifts_`).
+
+The module stands past 600 lines as one concept: the search of one axis and the
+decisions that tie the axes together (the log's hold, its shifts, the terms the
+data cannot carry) share the same search state, and split apart each half would
+reach into the other's privates. Its result type is :mod:`identification.ml_axis_fit`,
+the likelihood :mod:`identification.axis_likelihood`.
 """
 
 from __future__ import annotations
 
 import time as _time
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 from scipy import optimize
@@ -53,13 +65,14 @@ from heli_core.servo import pade_filter, per_axis
 from heli_core.terms import AXES, DECOUPLED, FEATURES, RATE_DEPENDENCE, STICK_ROW, TERMS
 
 from .axis_likelihood import AxisData, AxisLikelihood, simulation_r2
+from .effects import shift_inputs
 from .errors import IdentifiabilityError, NotFittedError
 from .fit_warnings import on_static_input, require_moving_sticks, static_collective
-from .effects import shift_inputs
 from .flight import Flight
+from .input_hold import HOLD_START, check_hold, decide_hold, hold_fraction
 from .integral_method import IntegralIdentifier
-from .state_space import (HOLD_INDEX, HOLDS, N_NONLINEAR, WIND_MODELS, ZETA_BOUNDS, concentrated_nll, hold_fraction,
-                          rts_smooth, wind_block)
+from .ml_axis_fit import MLAxisFit
+from .state_space import HOLD_INDEX, N_NONLINEAR, WIND_MODELS, ZETA_BOUNDS, concentrated_nll, rts_smooth, wind_block
 from .servo_lag import profile_lag
 from .vibration import remove_common_lines
 
@@ -101,138 +114,6 @@ SUPPORT_Z = 3.0
 TIME_CONSTANT_BOUNDS = ((0.8, 120.0), (0.02, 0.8))
 """Bounds of the slow and the fast gust time constants [s]."""
 
-
-
-@dataclass(frozen=True)
-class MLAxisFit:
-    """What the maximum-likelihood fit learned about one axis.
-
-    Attributes
-    ----------
-    axis : str
-    params : dict of str to float
-        Identified parameters; the offset is the mean of the flights' offsets.
-    std_errors : dict of str to float
-        Standard errors from the Fisher information of the innovations.
-    delay : float
-        Servo delay used [s] (eq. 31).
-    condition : float
-        Condition number of the column-normalised Fisher information.
-    r2 : float
-        Share of the rate's variance the model explains from the sticks alone
-        (simulation without wind, over the flights).
-    history : tuple of float
-        Mean squared innovation at the start and at the end of the search [(rad/s)^2].
-    wind : dict
-        ``time_constants_s`` (slow, fast), ``torque_std`` (slow, fast) [rad/s^2],
-        ``ud_std`` (slow, fast) [stick units: torque over the control gain] and
-        their standard errors.
-    noise_std : float
-        Gyro white-noise standard deviation [rad/s].
-    nll : float
-        Negative log-likelihood of the innovations (constants included).
-    n_samples : int
-        Samples in the likelihood.
-    flight_offsets : tuple of float
-        Offset kd of each flight [rad/s^2] (trim plus that day's mean wind).
-    prediction_r2 : float
-        Share of the rate's variance the one-step prediction explains.
-    dropped : tuple of str
-        Terms left out because the data did not support them (``select_terms``).
-    delay_profile : tuple of (float, float)
-        ``(delay, nll)`` over the grid when the delay was profiled (damping and wind held at the
-        undelayed fit, linear parameters solved), else empty.
-    lag : float
-        Servo first-order lag used [s] (eq. 31's ``d1`` grows by it; 0: none).
-    lag_profile : tuple of (float, float)
-        ``(lag, nll)`` when the lag was profiled (``servo_lag="auto"``, :mod:`identification.servo_lag`).
-    lag_lr : float or None
-        Likelihood-ratio statistic of the best lag against none, when profiled.
-    input_hold : float
-        The input's hold fraction (0 held over the sample, 1 linearly interpolated), estimated or set.
-    input_hold_se : float or None
-        Its standard error when estimated.
-    input_shift : float
-        The shift of the axis' stick found by ``delay="auto"`` [s]: negative for a log whose input lags.
-    """
-
-    axis: str
-    params: dict
-    std_errors: dict
-    delay: float
-    condition: float
-    r2: float
-    history: tuple
-    wind: dict
-    noise_std: float
-    nll: float
-    n_samples: int
-    flight_offsets: tuple
-    prediction_r2: float
-    delay_profile: tuple = ()
-    dropped: tuple = ()
-    interval_offsets: np.ndarray = field(default_factory=lambda: np.empty(0))
-    interval_starts: np.ndarray = field(default_factory=lambda: np.empty(0))
-    residual: np.ndarray | None = None
-    state: np.ndarray = field(default_factory=lambda: np.empty(0), repr=False)
-    lag: float = 0.0
-    lag_profile: tuple = ()
-    lag_lr: float | None = None
-    input_hold: float = 1.0
-    input_hold_se: float | None = None
-    input_shift: float = 0.0
-
-
-HOLD_START = 0.5
-"""The hold fraction an estimating search starts from."""
-
-HOLD_BIC = 0.5
-"""Per log-sample, the negative log-likelihood a free hold fraction must gain over the nearer named hold to be
-kept (Schwarz's criterion: one parameter costs ``HOLD_BIC * ln n``)."""
-
-
-def decide_hold(estimates: dict, n: float) -> dict:
-    """One hold for a log from each axis' estimate ``{axis: (fraction, se)}`` over ``n`` samples per axis.
-
-    The axes' likelihoods are independent given the hold, and near its optimum each is quadratic in it, so
-    their sum is ``sum (a - a_i)^2 / (2 se_i^2)``: its minimum is the pooled fraction. A named hold (1 a
-    pilot's hand sampled, 0 a held command) is taken unless the pooled likelihood gains more than Schwarz's
-    ``HOLD_BIC * ln n`` over it; then the pooled fraction stands (a log whose sticks are stamped part-way
-    through their sample). A lone axis' weak estimate (0.03 +- 0.32 on a noisy pitch gyro, whose damping it
-    biased 13 %) is so outvoted by the others and by the evidence it needs.
-
-    Returns
-    -------
-    dict
-        ``fraction`` (the decision), ``pooled`` and ``pooled_se``, ``named`` ("linear", "zoh" or None),
-        ``nll_gain`` per named hold (how much worse than the pooled fraction) and ``threshold``.
-    """
-    used = {a: (f, se) for a, (f, se) in estimates.items() if se is not None and se > 0 and np.isfinite(se)}
-    if not used:
-        frac = float(np.mean([f for f, _ in estimates.values()]))
-        return {"fraction": frac, "pooled": frac, "pooled_se": None, "named": None, "nll_gain": {}, "threshold": None}
-    w = np.array([1.0 / se ** 2 for _, se in used.values()])
-    f = np.array([v for v, _ in used.values()])
-    pooled = float(np.clip(w @ f / w.sum(), 0.0, 1.0))
-
-    def cost(a):
-        return float(0.5 * np.sum(w * (a - f) ** 2))
-
-    threshold = HOLD_BIC * float(np.log(max(n, 2.0)))
-    gain = {name: cost(HOLDS[name]) - cost(pooled) for name in ("linear", "zoh")}
-    named = min(gain, key=gain.get)
-    keep = gain[named] < threshold
-    return {"fraction": HOLDS[named] if keep else pooled, "pooled": pooled, "pooled_se": float(w.sum() ** -0.5),
-            "named": named if keep else None, "nll_gain": gain, "threshold": threshold}
-
-
-def check_hold(hold) -> None:
-    """Raise ``ValueError`` unless ``hold`` is "auto", "linear", "zoh" or a fraction in [0, 1]."""
-    if hold == "auto" or hold in HOLDS:
-        return
-    if isinstance(hold, (int, float, np.integer, np.floating)) and not isinstance(hold, bool) and 0 <= hold <= 1:
-        return
-    raise ValueError(f"input_hold must be 'auto', 'linear', 'zoh' or a fraction in [0, 1], got {hold!r}")
 
 
 class MaximumLikelihoodIdentifier:
@@ -413,36 +294,47 @@ class MaximumLikelihoodIdentifier:
             if static[a]:  # terms of an input that does not vary: not fitted, listed as dropped
                 fit = replace(fit, dropped=tuple(fit.dropped) + static[a])
             fits[axis_name] = fit
-        self._decided_hold = None
-        self.hold_decision_ = None
-        if self.input_hold == "auto" and fits:
-            # one hold for the log, from every axis' estimate: a named hold unless the data reject it
-            self.hold_decision_ = decide_hold({a: (f.input_hold, f.input_hold_se) for a, f in fits.items()},
-                                              sum(f.n_samples for f in fits.values()) / len(fits))
-            self._decided_hold = self.hold_decision_["fraction"]
-            for axis_name, fit in list(fits.items()):
-                if abs(fit.input_hold - self._decided_hold) > (fit.input_hold_se or 0.0):
-                    a = AXES.index(axis_name)  # searched again at the log's hold, from its optimum
-                    kept = tuple(p for p in names[a] if p not in fit.dropped)
-                    fits[axis_name] = self._refit(a, kept, flights, burn, fit,
-                                                  tau=fit.delay if fit.delay < 0.0 else None)  # a shift stays whole
-            self._decided_hold = None
+        self.hold_decision_ = self._decide_log_hold(fits, names, flights, burn)
+        flights = self._apply_shifts(fits, flights)
         for axis_name, fit in fits.items():
             values.update(fit.params)
             values[f"tau_{axis_name}"] = fit.delay
             values[f"lag_{axis_name}"] = fit.lag
-        shifts = [min(fits[a].delay, 0.0) if a in fits else 0.0 for a in AXES]
-        if min(shifts) < 0.0:  # a log whose input lags: the sticks advanced, the model without a servo delay
-            flights = [shift_inputs(f, shifts) for f in flights]
-            for a, shift in zip(AXES, shifts):
-                if shift < 0.0:
-                    fits[a] = replace(fits[a], delay=0.0, input_shift=shift)
-                    values[f"tau_{a}"] = 0.0
-        self.input_shifts_ = dict(zip(AXES, shifts))
         self.axes_ = fits
         self.params_ = ModelParams().with_values(**values)
         self.flights_ = flights
         self.vibration_lines_ = [c[1] for c in cleaned]
+
+    def _decide_log_hold(self, fits: dict, names: dict, flights, burn) -> dict | None:
+        """With ``input_hold="auto"``: one hold for the log from every axis' estimate (:func:`decide_hold`, a
+        named hold unless the data reject it); an axis whose estimate lies further from it than its standard
+        error is searched again at it from its optimum (in ``fits``). Returns the decision, else None."""
+        self._decided_hold = None
+        if self.input_hold != "auto" or not fits:
+            return None
+        decision = decide_hold({a: (f.input_hold, f.input_hold_se) for a, f in fits.items()},
+                               sum(f.n_samples for f in fits.values()) / len(fits))
+        self._decided_hold = decision["fraction"]
+        for axis_name, fit in list(fits.items()):
+            if abs(fit.input_hold - self._decided_hold) > (fit.input_hold_se or 0.0):
+                a = AXES.index(axis_name)
+                kept = tuple(p for p in names[a] if p not in fit.dropped)
+                fits[axis_name] = self._refit(a, kept, flights, burn, fit,
+                                              tau=fit.delay if fit.delay < 0.0 else None)  # a shift stays whole
+        self._decided_hold = None
+        return decision
+
+    def _apply_shifts(self, fits: dict, flights: list) -> list:
+        """A log whose input lags (a negative alignment found by ``delay="auto"``): its sticks advanced, the
+        axis' delay 0 and its shift recorded (in ``fits``, :attr:`input_shifts_`). Returns the flights."""
+        shifts = [min(fits[a].delay, 0.0) if a in fits else 0.0 for a in AXES]
+        self.input_shifts_ = dict(zip(AXES, shifts))
+        if min(shifts) >= 0.0:
+            return flights
+        for a, shift in zip(AXES, shifts):
+            if shift < 0.0:
+                fits[a] = replace(fits[a], delay=0.0, input_shift=shift)
+        return [shift_inputs(f, shifts) for f in flights]
 
     def _supported(self, a, axis_params, fit, flights, burn, start_params):
         """Drop, one at a time, the terms beyond the decoupled model whose ``|value / se|`` is below

@@ -132,7 +132,7 @@ def compared_parameters(identifier, estimator: str) -> list[str]:
     """Parameters the drift table compares: every fitted one, less the offsets kd of a maximum-likelihood fit.
 
     With a wind state in the model the offsets are each flight's trim plus that day's mean wind
-    (:attr:`identification.ml_estimator.MLAxisFit.flight_offsets`): they change from flight to flight
+    (:attr:`identification.ml_axis_fit.MLAxisFit.flight_offsets`): they change from flight to flight
     without the aircraft changing, so they are reported per flight and not flagged.
     """
     names = [k for fit in identifier.axes_.values() for k in fit.params]

@@ -21,6 +21,8 @@ from scipy.linalg import expm, solve_discrete_are
 
 from heli_core.servo import servo_coefficients
 
+from .input_hold import hold_fraction
+
 WIND_MODELS = ("gm2", "gm_so")
 """Gust models: ``"gm2"`` a slow plus a fast first-order Gauss-Markov process (a
 Dryden-like spectrum falling as 1/f^2 above each corner); ``"gm_so"`` a slow
@@ -38,32 +40,6 @@ caller fixes (the damping of a structure without one, a hold the user sets) stay
 
 HOLD_INDEX = 5
 """Index of the hold fraction in the search vector (the same for every wind model)."""
-
-HOLDS = {"linear": 1.0, "zoh": 0.0}
-"""The named holds as fractions of linear interpolation: a pilot's hand sampled (``"linear"``, first-order
-hold, MATLAB's ``InterSample`` 'foh') and a command held over its sample (``"zoh"``, a digital link or a
-flight controller)."""
-
-
-def hold_fraction(hold) -> float:
-    """The input's hold as a fraction ``a`` in [0, 1]: between samples ``u(t) = u_k + a (u_{k+1} - u_k) s``,
-    ``s = (t - t_k)/dt``; 0 is a zero-order hold, 1 linear interpolation (:data:`HOLDS` names both).
-
-    A number is taken as it is (the likelihood's derivatives step just past either end); the settings a
-    user gives are checked to lie in [0, 1] where they come in.
-
-    Raises
-    ------
-    ValueError
-        Neither a name of :data:`HOLDS` nor a finite number.
-    """
-    if isinstance(hold, str):
-        if hold in HOLDS:
-            return HOLDS[hold]
-    elif isinstance(hold, (int, float, np.integer, np.floating)) and not isinstance(hold, bool):
-        if np.isfinite(hold):
-            return float(hold)
-    raise ValueError(f"input hold must be 'linear', 'zoh' or a fraction in [0, 1], got {hold!r}")
 
 
 def wind_block(kind: str, t_slow: float, t_fast: float, zeta: float = 1.0):

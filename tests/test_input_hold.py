@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from identification.bench import bench_flight
-from identification.ml_estimator import HOLD_BIC, MaximumLikelihoodIdentifier, check_hold, decide_hold
-from identification.state_space import discrete_model, hold_fraction
+from identification.input_hold import HOLD_BIC, check_hold, decide_hold, hold_fraction
+from identification.ml_estimator import MaximumLikelihoodIdentifier
+from identification.state_space import discrete_model
 
 
 @pytest.fixture(scope="module")
