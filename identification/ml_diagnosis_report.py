@@ -34,6 +34,7 @@ from .figures import pyplot
 from .files import jsonable, save_figure
 from .flight import Flight
 from .ahead_prediction import AHEAD_S, format_r2
+from .log_band import log_band
 from .ml_diagnosis import LikelihoodDiagnoser
 from .model import ModelParams
 from .terms import AXES
@@ -91,8 +92,9 @@ def flight_controller_note(d: LikelihoodDiagnoser) -> str | None:
     commands, or a digital link's), else None."""
     fractions = getattr(d, "hold_fractions_", {}) or {}
     held = d.input_hold_ == "zoh" or (fractions and max(fractions.values()) < HELD)
-    if not held:
-        return None
+    band = log_band(d._flight) if hasattr(d, "_flight") else None
+    if not held or (band is not None and band.filtered and d.input_hold_ != "zoh"):
+        return None  # a log with nothing near its Nyquist frequency cannot say how its sticks were held
     said = "set" if d.input_hold_ == "zoh" else \
         "estimated hold fraction " + ", ".join(f"{a} {v:.2f}" for a, v in fractions.items())
     return (f"The sticks reach the aircraft held over each sample ({said}; 0 held, 1 interpolated). If they are a "
@@ -190,7 +192,7 @@ def diagnose_by_likelihood(flight: Flight, out_dir, *, model: ModelParams | None
     return DiagnosisRun(d, doc, paths)
 
 
-def _verdict(ident, params: ModelParams, flight: Flight, aligned: Flight) -> ModelVerdict:
+def _verdict(ident, params: ModelParams, aligned: Flight) -> ModelVerdict:
     """The verdict ``heli identify`` would give the diagnosed model: the same judge, the integral method on the
     same flight beside it, and its simulation from the (aligned) flight's sticks, whose divergence
     ``heli identify`` refuses."""
@@ -204,7 +206,9 @@ def _verdict(ident, params: ModelParams, flight: Flight, aligned: Flight) -> Mod
         diverged = None
     except SimulationDivergedError as e:
         diverged = str(e).split(": ", 1)[-1].split(";")[0]  # "the roll rate leaves ±100 rad/s at t=... s"
-    return judge_identifier(ident, IntegralIdentifier(structure="decoupled").fit(flight), diverged)
+    # the integral method beside it on the flight as the diagnosis fitted it (its late sticks advanced): on the
+    # T-REX hover, fitted on the log as written, it gave k2 = -10.5 and called the aligned model unusable
+    return judge_identifier(ident, IntegralIdentifier(structure="decoupled").fit(aligned), diverged)
 
 
 def _new_model(d: LikelihoodDiagnoser, flight: Flight, model_document, source):
@@ -231,5 +235,5 @@ def _new_model(d: LikelihoodDiagnoser, flight: Flight, model_document, source):
     document = new_model_document(d.params_, structure="custom", sample_rate=flight.sample_rate,
                                   identification=settings, fit_statistics={"axes": ident.summary()},
                                   sources=sources, extra={"diagnosis": diagnosis},
-                                  verdict=_verdict(ident, d.params_, flight, aligned))
+                                  verdict=_verdict(ident, d.params_, aligned))
     return document, identify_disturbance(aligned, d.params_, wind_torque=ident.wind_torque(0))
