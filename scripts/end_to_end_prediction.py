@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 FACTORS = (0.5, 1.0, 2.0)
-DEFAULT_CELLS = ("independent", "broadband-pd-2x", "dryden-2Hz-pd")
+DEFAULT_CELLS = ("independent", "broadband-pd-2x", "dryden-2Hz-pd", "held-sticks-pd")
 _DEG = 180.0 / np.pi
 
 
