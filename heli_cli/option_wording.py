@@ -50,7 +50,7 @@ def command_options(parser, command: str) -> set:
     """The option strings of ``command``'s sub-parser of the ``heli`` parser (empty if there is none)."""
     import argparse
 
-    for action in parser._actions:
+    for action in getattr(parser, "_actions", ()):  # a stand-in parser (tests) has none
         if isinstance(action, argparse._SubParsersAction) and command in action.choices:
             return set(action.choices[command]._option_string_actions)
     return set()
