@@ -42,7 +42,7 @@ from scipy import stats
 from threadpoolctl import threadpool_limits
 
 from heli_core.params import ModelParams
-from heli_core.terms import AXES, DECOUPLED, STICK_ROW, TERMS
+from heli_core.terms import AXES, DECOUPLED, RATE_DEPENDENCE, STICK_ROW, TERMS
 
 from .effects import CATALOGUE, MAX_ALIGNMENT, NONE, SERVO_DELAY, UNDECIDED, DiagnosisResult, implausible, shift_inputs
 from .flight import Flight
@@ -73,9 +73,14 @@ ALIGNMENT_GRID = np.round(np.arange(-MAX_ALIGNMENT, 0.5001, 0.025), 4)
 MAX_GAIN_RATIO = 3.0
 """Largest factor a fitted gain scheduling may change the control gain by over the flight's collective range
 (a rotor's control power grows with its load, not several-fold within one flight)."""
-AHEAD_R2_TOLERANCE = 0.002
+AHEAD_R2_TOLERANCE = (0.002, 0.05)
 """A candidate that lowers the 0.5 s-ahead prediction R² by more than this is not accepted: a term that
-raises the one-step likelihood while the model predicts worse fits the noise or the wind, not the aircraft."""
+raises the one-step likelihood while the model predicts worse fits the noise or the wind, not the aircraft.
+The first for candidates driven by the inputs (an alignment, the collective), whose multi-step prediction is
+exact; the second for terms of the measured rates (coupling, gyroscopic, quadratic damping), which the
+predictor takes as known inputs rather than propagating them: its R² then moves for reasons of its own (a
+true quadratic damping lowered it by 0.037 on a 180 s flight), and only a large drop is read (the T-REX
+hover's roll: 0.52 to 0.42)."""
 EDGE_S = 0.01
 """An alignment within this of the searched range's edge [s] is a boundary hit, not a found value."""
 RESOLUTION_SAMPLES = 2
@@ -161,12 +166,13 @@ def _fresh(x) -> np.ndarray:
                      float(x[HOLD_INDEX])])
 
 
-def _predicts_worse(before: dict, after: dict) -> str | None:
-    """Why a candidate's model predicts worse than the base ``AHEAD_S`` ahead, or None."""
+def _predicts_worse(before: dict, after: dict, of_rates: bool = False) -> str | None:
+    """Why a candidate's model predicts worse than the base ``AHEAD_S`` ahead, or None; ``of_rates``: the
+    candidate adds terms of the measured rates (:data:`AHEAD_R2_TOLERANCE`)."""
     b, c = before.get("ahead_0.5s"), after.get("ahead_0.5s")
     if c is None or not np.isfinite(c):
         return f"its {AHEAD_S:g} s-ahead prediction diverges"
-    if b is not None and np.isfinite(b) and c < b - AHEAD_R2_TOLERANCE:
+    if b is not None and np.isfinite(b) and c < b - AHEAD_R2_TOLERANCE[int(of_rates)]:
         return f"it lowers the {AHEAD_S:g} s-ahead prediction R² from {b:.3f} to {c:.3f}"
     return None
 
@@ -188,8 +194,9 @@ class LikelihoodDiagnoser(DiagnosisResult):
         Shortest flight decided on [s].
     input_hold : "auto", "linear", "zoh" or float in [0, 1]
         Sticks between samples (see :class:`~identification.ml_estimator.MaximumLikelihoodIdentifier`);
-        ``"auto"`` estimates the hold fraction with every other parameter, in the base model and in every
-        candidate alike, so that a hold is never read as an effect nor an effect as a hold.
+        ``"auto"`` decides the log's hold once, fitted with every other parameter on the structure with every
+        candidate's terms in (:meth:`_decide_hold`), and holds it for the base and the candidates alike, so
+        that a hold is never read as an effect nor an effect as a hold.
     axes : sequence of str
         Axes diagnosed.
     progress : callable or None
@@ -214,7 +221,9 @@ class LikelihoodDiagnoser(DiagnosisResult):
     alignment_ : tuple of 3 float
         Final alignment per axis [s] (> 0 servo delay, < 0 input shift of the log).
     input_hold_ : str or float
-        The hold setting used.
+        The hold used (with ``"auto"``, the fraction decided).
+    hold_decision_ : dict or None
+        With ``"auto"``: the decision (:func:`identification.input_hold.decide_hold`).
     hold_fractions_ : dict of str to float
         Per diagnosed axis, the final model's hold fraction (0 held over the sample, 1 interpolated).
     evidence_ : dict
@@ -374,6 +383,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
         self.evidence_ = {}
         self.input_hold_ = self.input_hold
         self.hold_fractions_ = {}
+        self.hold_decision_ = None
         self._ident = MaximumLikelihoodIdentifier(input_hold=self.input_hold_)
         cleaned, _ = self._ident._clean(flight)
         self._flight = cleaned
@@ -398,6 +408,9 @@ class LikelihoodDiagnoser(DiagnosisResult):
             self.params_ = model or ModelParams()
             self.alignment_ = tuple(alignment)
             return
+        if self.input_hold == "auto":
+            self._say("deciding how the sticks move between samples, every candidate term in")
+            self._decide_hold(cleaned, structure, alignment)
         self._say(f"fitting the starting structure on {', '.join(self.axes)}")
         current = self._baseline(cleaned, structure, alignment)
         self.baseline_ = dict(current)
@@ -413,6 +426,23 @@ class LikelihoodDiagnoser(DiagnosisResult):
         self._say("fitting the final structure")
         self._final_fit(cleaned, current)
         self.verdict_ = "found" if self.steps_ else NONE
+
+    def _decide_hold(self, cleaned: Flight, structure: dict, alignment: list) -> None:
+        """The log's hold decided once (:func:`identification.input_hold.decide_hold`) on the structure with
+        every testable candidate term added, then held for the base and every candidate alike. Estimated on
+        the base alone, a missing effect moved it (a hidden quadratic damping drew a pilot's interpolated
+        sticks to fractions 0.33-0.45, and its pitch statistic below the floor); with the effect's terms in,
+        nothing is missing for it to stand in for."""
+        full = {a: tuple(dict.fromkeys(structure[a] + tuple(
+                    p for name, effect in CATALOGUE.items() if name not in self.untestable_
+                    for p in effect.terms_on(a)))) for a in range(3)}
+        est = MaximumLikelihoodIdentifier(structure=full, delay=[max(v, 0.0) for v in alignment], axes=self.axes)
+        est.remove_vibration = False  # cleaned already
+        shifts = [min(v, 0.0) for v in alignment]
+        est._fit([cleaned] if min(shifts) >= 0 else [shift_inputs(cleaned, shifts)])
+        self.input_hold_ = float(est.hold_decision_["fraction"])
+        self.hold_decision_ = est.hold_decision_
+        self._ident = MaximumLikelihoodIdentifier(input_hold=self.input_hold_)
 
     def _baseline(self, cleaned: Flight, structure: dict, alignment: list) -> dict:
         """Each diagnosed axis' starting structure fitted in full, scored by the candidates' likelihood."""
@@ -458,10 +488,11 @@ class LikelihoodDiagnoser(DiagnosisResult):
         while scored and scored[0][0] > 1.0:
             self._say(f"round {rnd}, {axis}: checking {scored[0][1]}'s prediction")
             after = self._describe(a, scored[0][3])
-            worse = _predicts_worse(base.r2, after.r2)
+            of_rates = any(TERMS[p].feature in RATE_DEPENDENCE for p in scored[0][3].names if p not in base.names)
+            worse = _predicts_worse(base.r2, after.r2, of_rates)
             if worse is None:
                 break
-            row = next(r for r in rows if r["effect"] == scored[0][1])
+            row = next(r for r in rows if r["effect"] == scored[0][1] and r["axis"] == axis)
             row["accepted"], row["implausible"] = False, worse
             scored.pop(0)
             after = None
@@ -523,6 +554,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
             "closed_loop_share": self.closed_loop_,
             "input_hold": self.input_hold_,
             "hold_fractions": self.hold_fractions_,
+            "hold_decision": self.hold_decision_,
             "untestable": getattr(self, "untestable_", {}),
             "alignment_s": dict(zip(AXES, self.alignment_)),
             "r2_before": {a: s.r2 for a, s in self.baseline_.items()},
