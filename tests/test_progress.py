@@ -74,8 +74,9 @@ def test_the_likelihood_diagnosis_names_each_step_as_it_starts():
 
     steps = []
     LikelihoodDiagnoser(axes=("roll",), max_rounds=1, progress=steps.append).fit(simulate_flight(62, seed=3).flight)
-    assert steps[0] == "fitting the starting structure on roll"
-    assert steps[1] == "round 1, roll: refitting the base"
+    assert steps[0] == "deciding how the sticks move between samples, every candidate term in"
+    assert steps[1] == "fitting the starting structure on roll"
+    assert steps[2] == "round 1, roll: refitting the base"
     assert "round 1, roll: trying servo_delay" in steps and "round 1, roll: trying cross_coupling" in steps
     assert steps[-1] == "fitting the final structure"
     quiet = LikelihoodDiagnoser(axes=("roll",), max_rounds=1)
