@@ -264,6 +264,7 @@ def test_flights_on_two_local_workers_equal_one(two_flights, fleet_reference):
                                                  simulate=False))
 
 
+@pytest.mark.slow
 def test_cli_identify_backend_gives_the_same_model_and_library(tmp_path, capsys):
     paths = []
     for seed in (1, 2):
@@ -365,6 +366,7 @@ def test_cli_train_seeds(tmp_path, capsys):
 
 
 # -------------------------------------------------------------------------------------------- Ray
+@pytest.mark.slow
 def test_ray_sweep_and_flights_equal_the_local_backend(ray_backend, delayed, reference, two_flights,
                                                        fleet_reference):
     res = sweep_gains(delayed, **GRID, **SWEEP, backend=ray_backend, chunk_pairs=2)

@@ -112,6 +112,7 @@ def test_identify_writes_the_disturbance_library(identified, flight_csv):
     assert "## Wind disturbance (eqs. 41-47)" in (identified / "report.md").read_text()
 
 
+@pytest.mark.slow
 def test_identifying_again_keeps_the_previous_model_and_library_version(flight_csv, tmp_path, capsys):
     out = tmp_path / "DIR"
     assert main(["identify", str(flight_csv), "--out", str(out), "--no-plots"]) == 0

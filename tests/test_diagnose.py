@@ -142,6 +142,7 @@ def test_diagnose_and_report_takes_its_settings_as_one_config_or_by_keyword(tmp_
         DiagnosisConfig(wait=None)
 
 
+@pytest.mark.slow
 def test_cli_writes_diagnosis_and_a_model_the_env_and_pd_accept(tmp_path):
     import gymnasium as gym
 

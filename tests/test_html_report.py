@@ -157,6 +157,7 @@ def test_sweep_writes_sweep_html_with_both_figures(swept):
     assert not re.search(r'(src|href)="[^"]*(heatmap|histograms)\.png"', page)  # nothing left to fetch beside it
 
 
+@pytest.mark.slow
 def test_sweep_and_evaluate_embed_their_figures_with_a_relative_out(tmp_path, monkeypatch, capsys):
     """As the README and the demo run them (``--out sweep/``): the figures were once looked for in sweep/sweep/."""
     from controllers.pd import PDController, design_gains
@@ -208,6 +209,7 @@ window.addEventListener("load", () => {
 
 @pytest.mark.skipif(_chromium() is None, reason="no chromium installed to render the HTML report in a headless "
                     "browser (Debian: apt-get install chromium)")
+@pytest.mark.slow
 def test_the_sweep_report_renders_in_headless_chromium(swept, tmp_path):
     # a copy of the report with a script that counts the images the browser decoded
     page = (swept / "sweep.html").read_text(encoding="utf-8").replace("</body>", DECODE_CHECK + "</body>")

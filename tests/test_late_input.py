@@ -82,6 +82,7 @@ def test_the_trex_hover_is_found_filtered_late_and_with_a_fixed_collective():
     assert "carry nothing above about" in said and "the collective does not vary" in said
 
 
+@pytest.mark.slow
 def test_the_alignment_check_finds_the_trex_sticks_late_on_its_excited_axes():
     from identification.alignment_check import check_alignment
     from identification.io import read_log

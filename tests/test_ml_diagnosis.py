@@ -17,6 +17,7 @@ def coupled_flight():
     return simulate_flight(150, seed=3, effects=("cross_coupling",))
 
 
+@pytest.mark.slow
 def test_no_missing_effect_names_none():
     d = LikelihoodDiagnoser().fit(simulate_flight(150, seed=6).flight)
     assert d.verdict_ == "none" and d.steps_ == []
@@ -37,6 +38,7 @@ def test_hidden_cross_coupling_is_named_on_its_axes(coupled_flight):
     assert abs(d.params_.get("k8") - truth.k8) < 4 * se
 
 
+@pytest.mark.slow
 def test_servo_delay_is_named_with_its_value():
     sf = simulate_flight(150, seed=2, effects=("servo_delay",))
     d = LikelihoodDiagnoser(axes=("roll",)).fit(sf.flight)
@@ -117,6 +119,7 @@ def test_heli_diagnose_by_likelihood_writes_the_model(tmp_path, coupled_flight):
     assert len(design_gains(params).kp) == 3
 
 
+@pytest.mark.slow
 def test_log_whose_input_lags_is_named_as_a_negative_alignment():
     from identification.effects import shift_inputs
 

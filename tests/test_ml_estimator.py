@@ -89,6 +89,7 @@ def test_servo_delay_is_found_by_the_likelihood_profile():
     assert 0 < fit.std_errors["tau_roll"] < 0.01  # the delay's own standard error (searched with the rest)
 
 
+@pytest.mark.slow
 def test_a_servo_lag_is_kept_where_the_flight_has_one_and_only_there():
     lagged = simulate_flight(90, seed=2, effects=("servo_lag",))
     plain = simulate_flight(90, seed=2, effects=("servo_delay",))
@@ -164,6 +165,7 @@ def test_errors_say_what_was_expected(flight180):
         MaximumLikelihoodIdentifier().fit([f, slow])
 
 
+@pytest.mark.slow
 def test_heli_identify_uses_maximum_likelihood_by_default(tmp_path, flight180):
     from heli_cli.main import main
 
@@ -181,6 +183,7 @@ def test_heli_identify_uses_maximum_likelihood_by_default(tmp_path, flight180):
     assert doc["identification"]["estimator"] == "integral"
 
 
+@pytest.mark.slow
 def test_coupled_fit_keeps_only_the_terms_the_data_support(flight180):
     ident = MaximumLikelihoodIdentifier(structure="coupled", select_terms=True).fit(flight180.flight)
     dropped = {p for f in ident.axes_.values() for p in f.dropped}

@@ -136,6 +136,7 @@ def _run_until(n: int, run) -> bool:
     return False
 
 
+@pytest.mark.slow
 def test_refresh_killed_at_every_file_event_reads_old_or_new_and_runs_again(base, flights, tmp_path):
     old_sha = ModelDir(base).load().model_sha256
     probe = tmp_path / "probe"

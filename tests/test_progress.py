@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import io
 
+import pytest
+
 from heli_cli.progress import Progress
 
 
@@ -40,6 +42,7 @@ def test_on_a_terminal_a_stage_is_a_status_line_erased_when_done():
     assert progress.terminal
 
 
+@pytest.mark.slow
 def test_sweep_and_evaluate_announce_their_stages_off_a_terminal(tmp_path, capsys):
     """A log shows what a long command is doing (issue 18: 'sweep --flights in a log shows nothing for 10 s')."""
     from heli_cli.main import main

@@ -362,6 +362,7 @@ def test_histograms_count_every_sample(small_sweep):
 
 
 # ---------------------------------------------------------------- flight tests
+@pytest.mark.slow
 def test_flight_tests_match_the_prediction(ideal):
     """Fresh-wind flights of the model itself: KS below 0.15 with 5 x 60 s (bench: ~0.05 with 10 x 60 s)."""
     res = validate_against_flights(ideal, [(3.0, 1.0)], n_flights=5, duration=60.0, seed=3, progress=False)
@@ -372,6 +373,7 @@ def test_flight_tests_match_the_prediction(ideal):
     assert "Prediction checked against flight tests" in res.to_markdown()
 
 
+@pytest.mark.slow
 def test_flight_tests_of_a_loose_loop_meet_the_library_spectrum(shipped):
     """Kp 0.5, Kd 0 hardly closes the loop: its error is the slow gust itself. Fresh gusts with the library's
     whole spectrum (surrogates, the default) fly the predicted distribution up to the sampling noise of a few
@@ -774,6 +776,7 @@ def test_a_sweep_takes_its_settings_as_one_config_or_by_keyword(shipped):
         sweep_pairs(shipped, [(1.0, 0.5)], "roll")
 
 
+@pytest.mark.slow
 def test_cli_window_longer_than_the_traces_names_the_option_and_the_longest_that_fits(tmp_path, capsys):
     """Issue 31: '(shorten duration)' named neither the option nor the longest duration that fits."""
     import re
@@ -789,6 +792,7 @@ def test_cli_window_longer_than_the_traces_names_the_option_and_the_longest_that
                  str(tmp_path / "sw"), "-q", "--no-plots"]) == 0
 
 
+@pytest.mark.slow
 def test_a_growing_sweep_draws_one_bar_over_all_its_rounds(shipped, monkeypatch):
     """Issue 31: 'heli sweep' drew a separate '0/1 task' bar per round of its growing grid; one bar now counts
     every round's tasks (the backend adds each map's tasks to the bar it is given)."""
