@@ -115,12 +115,13 @@ def heldout_ahead_r2(identifier, flight: Flight, folds: int = 4, horizon_s: floa
     edges = np.linspace(flight.time[0], flight.time[-1], folds + 1)
     blocks = [flight.segment(edges[i], edges[i + 1]) for i in range(folds)]
     horizon = max(1, int(round(horizon_s * flight.sample_rate)))
+    burn = int(round(BURN_IN * flight.sample_rate))
     out = {axis: [] for axis in identifier.axes}
     for i, block in enumerate(blocks):
         fitted = _clone(identifier).fit([b for j, b in enumerate(blocks) if j != i])
-        burn = int(round(BURN_IN * flight.sample_rate))
-        for axis, fit in fitted.axes_.items():
-            out[axis].append(_block_r2(fitted, AXES.index(axis), fit, block, burn, horizon))
+        cleaned = [fitted._clean(fitted.aligned(block))[0]]
+        for axis, fit in fitted.axes_.items():  # the block's offset is the model's: it was not fitted on it
+            out[axis].append(_axis_r2(fitted, axis, fit, cleaned, burn, horizon))
     return out
 
 
@@ -130,13 +131,15 @@ def _clone(identifier):
     return type(identifier)(**{k: getattr(identifier, k) for k in names})
 
 
-def _block_r2(fitted, a: int, fit, block: Flight, burn: int, horizon: int) -> float:
-    """The ``horizon``-ahead R² of axis ``a`` of a fitted identifier on a block it did not see; the block's
-    offset is the model's (the mean of the fitted flights')."""
-    names = tuple(p for p in fitted._param_names()[a] if p not in fit.dropped)
-    cleaned = fitted._clean(fitted.aligned(block))[0]
-    data, _ = fitted._axis_data(a, names, [cleaned], burn, fit.delay, fit.wind["model"], fit.lag)
-    theta = np.array([fit.params[n.split("@")[0]] for n in data.names])
+def _axis_r2(identifier, axis: str, fit, cleaned: list, burn: int, horizon: int, own_offsets: bool = False) -> float:
+    """The ``horizon``-ahead R² of one axis of a fitted identifier on ``cleaned`` flights (aligned, vibration
+    removed); each flight's offset its own fitted one (``own_offsets``, the flights it was fitted on) or the
+    model's, the mean of the fitted flights' (flights it did not see)."""
+    a = AXES.index(axis)
+    names = tuple(p for p in identifier._param_names()[a] if p not in fit.dropped)
+    data, _ = identifier._axis_data(a, names, cleaned, burn, fit.delay, fit.wind["model"], fit.lag)
+    theta = np.array([fit.flight_offsets[int(n.split("@")[1])] if own_offsets and "@" in n
+                      else fit.params[n.split("@")[0]] for n in data.names])
     return ahead_r2(AxisLikelihood(data), fit.state, theta, horizon)
 
 
@@ -169,12 +172,5 @@ def fitted_ahead_r2(identifier, flights, horizon_s: float = AHEAD_S) -> dict:
     horizon = max(1, int(round(horizon_s * rate)))
     burn = int(round(BURN_IN * rate))
     cleaned = [identifier._clean(identifier.aligned(f))[0] for f in flights]
-    out = {}
-    for axis, fit in identifier.axes_.items():
-        a = AXES.index(axis)
-        names = tuple(p for p in identifier._param_names()[a] if p not in fit.dropped)
-        data, _ = identifier._axis_data(a, names, cleaned, burn, fit.delay, fit.wind["model"], fit.lag)
-        theta = np.array([fit.flight_offsets[int(n.split("@")[1])] if "@" in n else fit.params[n]
-                          for n in data.names])
-        out[axis] = ahead_r2(AxisLikelihood(data), fit.state, theta, horizon)
-    return out
+    return {axis: _axis_r2(identifier, axis, fit, cleaned, burn, horizon, own_offsets=True)
+            for axis, fit in identifier.axes_.items()}
