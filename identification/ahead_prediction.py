@@ -135,9 +135,7 @@ def _axis_r2(identifier, axis: str, fit, cleaned: list, burn: int, horizon: int,
     """The ``horizon``-ahead R² of one axis of a fitted identifier on ``cleaned`` flights (aligned, vibration
     removed); each flight's offset its own fitted one (``own_offsets``, the flights it was fitted on) or the
     model's, the mean of the fitted flights' (flights it did not see)."""
-    a = AXES.index(axis)
-    names = tuple(p for p in identifier._param_names()[a] if p not in fit.dropped)
-    data, _ = identifier._axis_data(a, names, cleaned, burn, fit.delay, fit.wind["model"], fit.lag)
+    data = identifier._fitted_data(AXES.index(axis), fit, cleaned, burn)
     theta = np.array([fit.flight_offsets[int(n.split("@")[1])] if own_offsets and "@" in n
                       else fit.params[n.split("@")[0]] for n in data.names])
     return ahead_r2(AxisLikelihood(data), fit.state, theta, horizon)

@@ -336,6 +336,12 @@ class MaximumLikelihoodIdentifier:
                 fits[a] = replace(fits[a], delay=0.0, input_shift=shift)
         return [shift_inputs(f, shifts) for f in flights]
 
+    def _fitted_data(self, a: int, fit: MLAxisFit, flights, burn: int) -> AxisData:
+        """The likelihood's data of axis ``a`` as ``fit`` was fitted (its terms, delay, gust model and lag) over
+        ``flights`` (aligned and cleaned as :attr:`flights_` are)."""
+        kept = tuple(p for p in self._param_names()[a] if p not in fit.dropped)
+        return self._axis_data(a, kept, flights, burn, fit.delay, fit.wind["model"], fit.lag)[0]
+
     def _supported(self, a, axis_params, fit, flights, burn, start_params):
         """Drop, one at a time, the terms beyond the decoupled model whose ``|value / se|`` is below
         :data:`SUPPORT_Z`, refitting the axis after each; the dropped terms are listed in ``fit.dropped``."""
@@ -624,7 +630,6 @@ class MaximumLikelihoodIdentifier:
         offset ``kd``. Rows of axes not identified are zero.
         """
         self._check_fitted()
-        names = self._param_names()
         if isinstance(flight, Flight):
             flight, index = self._clean(self.aligned(flight))[0], None
         else:
@@ -633,8 +638,7 @@ class MaximumLikelihoodIdentifier:
         out = np.zeros((3, flight.n))
         for axis_name, fit in self.axes_.items():
             a = AXES.index(axis_name)
-            kept = tuple(p for p in names[a] if p not in fit.dropped)
-            data, _ = self._axis_data(a, kept, [flight], 0, fit.delay, fit.wind["model"], fit.lag)
+            data = self._fitted_data(a, fit, [flight], 0)
             own = [n for n in data.names if "@" not in n]
             off_name = next((n.split("@")[0] for n in data.names if "@" in n), None)
             theta = np.array([fit.params[n] for n in own])

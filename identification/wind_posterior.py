@@ -182,14 +182,12 @@ def wind_posterior(ident, flight=0, seed: int = 0, n_draws: int = 1) -> WindPost
 
     mean = ident.wind_torque(flight)
     n = mean.shape[1]
-    names = ident._param_names()
     one = ident.flights_[0] if not hasattr(flight, "rates") else flight
     draws = np.repeat(mean[None], int(n_draws), axis=0)
     for axis_name, fit in ident.axes_.items():
         a = AXES.index(axis_name)
-        kept = tuple(p for p in names[a] if p not in fit.dropped)
-        data, _ = ident._axis_data(a, kept, [one], 0, fit.delay, fit.wind["model"], fit.lag)
-        hold = getattr(fit, "input_hold", data.hold)  # the fitted hold where the fit has one
+        data = ident._fitted_data(a, fit, [one], 0)
+        hold = fit.input_hold
         model = AxisLikelihood(data).unpack(fit.state)
         for d in range(int(n_draws)):  # a stream per draw and axis: a draw is the same whatever else is drawn
             rng = np.random.default_rng([int(seed), d, a])
