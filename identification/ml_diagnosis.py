@@ -427,6 +427,16 @@ class LikelihoodDiagnoser(DiagnosisResult):
         self._final_fit(cleaned, current)
         self.verdict_ = "found" if self.steps_ else NONE
 
+    @staticmethod
+    def _fit_structure(cleaned: Flight, structure: dict, alignment, axes, hold) -> MaximumLikelihoodIdentifier:
+        """``structure`` fitted in full by maximum likelihood on the cleaned flight at ``alignment`` (positive:
+        servo delays; negative: the sticks advanced), the input's ``hold`` as given."""
+        est = MaximumLikelihoodIdentifier(structure=structure, delay=[max(v, 0.0) for v in alignment], axes=axes,
+                                          input_hold=hold, remove_vibration=False)  # cleaned already
+        shifts = [min(v, 0.0) for v in alignment]
+        est._fit([shift_inputs(cleaned, shifts) if min(shifts) < 0 else cleaned])
+        return est
+
     def _decide_hold(self, cleaned: Flight, structure: dict, alignment: list) -> None:
         """The log's hold decided once (:func:`identification.input_hold.decide_hold`) on the structure with
         every testable candidate term added, then held for the base and every candidate alike. Estimated on
@@ -436,21 +446,14 @@ class LikelihoodDiagnoser(DiagnosisResult):
         full = {a: tuple(dict.fromkeys(structure[a] + tuple(
                     p for name, effect in CATALOGUE.items() if name not in self.untestable_
                     for p in effect.terms_on(a)))) for a in range(3)}
-        est = MaximumLikelihoodIdentifier(structure=full, delay=[max(v, 0.0) for v in alignment], axes=self.axes)
-        est.remove_vibration = False  # cleaned already
-        shifts = [min(v, 0.0) for v in alignment]
-        est._fit([cleaned] if min(shifts) >= 0 else [shift_inputs(cleaned, shifts)])
+        est = self._fit_structure(cleaned, full, alignment, self.axes, "auto")
         self.input_hold_ = float(est.hold_decision_["fraction"])
         self.hold_decision_ = est.hold_decision_
         self._ident = MaximumLikelihoodIdentifier(input_hold=self.input_hold_)
 
     def _baseline(self, cleaned: Flight, structure: dict, alignment: list) -> dict:
         """Each diagnosed axis' starting structure fitted in full, scored by the candidates' likelihood."""
-        start = MaximumLikelihoodIdentifier(input_hold=self.input_hold_, structure=structure,
-                                            delay=[max(v, 0.0) for v in alignment], axes=self.axes,
-                                            wind_model="auto")
-        start.remove_vibration = False  # cleaned already
-        start._fit([cleaned] if min(alignment) >= 0 else [shift_inputs(cleaned, [min(v, 0.0) for v in alignment])])
+        start = self._fit_structure(cleaned, structure, alignment, self.axes, self.input_hold_)
         current = {}
         for axis in self.axes:
             a = AXES.index(axis)
@@ -532,11 +535,8 @@ class LikelihoodDiagnoser(DiagnosisResult):
     def _final_fit(self, cleaned: Flight, current: dict):
         """The final structure fitted in full (every search to convergence) on the aligned flight; a delay
         found stays as found (searching it again would change the structure's meaning)."""
-        final = MaximumLikelihoodIdentifier(structure={AXES.index(a): sc.names for a, sc in current.items()},
-                                            delay=[max(v, 0.0) for v in self.alignment_], axes=tuple(current),
-                                            input_hold=self.input_hold_, remove_vibration=False)
-        shifts = [min(v, 0.0) for v in self.alignment_]
-        final._fit([shift_inputs(cleaned, shifts) if min(shifts) < 0 else cleaned])
+        final = self._fit_structure(cleaned, {AXES.index(a): sc.names for a, sc in current.items()},
+                                    self.alignment_, tuple(current), self.input_hold_)
         self.identifier_ = final
         self.params_ = final.params_
         self.hold_fractions_ = {axis: fit.input_hold for axis, fit in final.axes_.items()}
