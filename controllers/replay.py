@@ -16,7 +16,10 @@ the physics core advances the state: its exact discrete step
 rest, servos settled on the first trim.
 
 All three axes fly: the swept axis with the pair under test, the other two with
-the ``nominal`` gains. The state is a tuple of arrays of shape (pairs in a
+the ``nominal`` gains. An autopilot with a derivative filter (``Autopilot.d_poles``)
+passes each axis' rate error through the D term's low-pass first
+(:func:`controllers.pd.law.filtered_rate`, its state starting at the first period's rate error),
+as :class:`controllers.pd.PDController` does. The state is a tuple of arrays of shape (pairs in a
 chunk, windows); the per-period inputs, of shape (windows,), broadcast over the
 pairs. Records are taken on the swept axis at the start of each period (the
 state the controller acts on), so the first sample of every window is the start.
@@ -34,7 +37,7 @@ from heli_core.physics import kernel
 from heli_core.quaternion import euler_from_quaternion
 from heli_core.terms import AXES
 
-from .pd.law import pd_command
+from .pd.law import filtered_rate, pd_command
 
 PROGRESS_EVERY = 200
 """Control periods between two updates of the progress bar."""
@@ -140,6 +143,9 @@ class Autopilot:
         (kp, kd) of the held axes.
     signs : array (3,)
         Signs of the control gains (k2, k6, k10) the autopilot assumes.
+    d_poles : array (3,), optional
+        Pole ``a`` of each axis' derivative filter at the control period
+        (:func:`controllers.pd.law.derivative_pole`); 0 or None: no filter.
     """
 
     axis: int
@@ -147,6 +153,7 @@ class Autopilot:
     kd: np.ndarray
     nominal: object
     signs: object
+    d_poles: object = None
 
     @property
     def pairs(self) -> int:
@@ -191,7 +198,7 @@ def fly(step, inputs: LoopInputs, autopilot: Autopilot, max_batch: int = 4096, p
         for c0 in range(0, G, cp):
             sl = slice(c0, min(G, c0 + cp))
             yield sl, _fly_chunk(step, ins, autopilot.axis, autopilot.gains(sl), autopilot.signs,
-                                 sl.stop - sl.start, bar)
+                                 sl.stop - sl.start, bar, autopilot.d_poles)
 
 
 def _contiguous(inputs: LoopInputs) -> dict:
@@ -203,7 +210,7 @@ def _contiguous(inputs: LoopInputs) -> dict:
             "att_noise": rows(inputs.att_noise), "rate_noise": rows(inputs.rate_noise)}
 
 
-def _fly_chunk(step, ins: dict, ax: int, gains, signs, g: int, bar) -> LoopRecord:
+def _fly_chunk(step, ins: dict, ax: int, gains, signs, g: int, bar, d_poles=None) -> LoopRecord:
     """One chunk of ``g`` pairs over every period; see :func:`fly`."""
     trim, torque, col = ins["trim"], ins["torque"], ins["col"]
     att_noise, rate_noise = ins["att_noise"], ins["rate_noise"]
@@ -214,12 +221,16 @@ def _fly_chunk(step, ins: dict, ax: int, gains, signs, g: int, bar) -> LoopRecor
     rec = LoopRecord(np.empty((g, n, W), dtype=np.float32), np.empty((g, n, W), dtype=np.float32),
                      np.empty((g, n, W), dtype=np.float32), np.zeros((g, W)), np.zeros((g, W)))
     others = [i for i in range(3) if i != ax]
+    poles = [0.0] * 3 if d_poles is None else [float(a) for a in d_poles]
+    d_state = [None] * 3  # each filtered axis' last output; None: its first period is next
     for k in range(n):
         ang = euler_from_quaternion(x[6:10])
         sticks = []
         for i in range(3):
             e_ang = -ang[i] if att_noise is None else -(ang[i] + att_noise[i][k])
             e_rate = -x[i] if rate_noise is None else -(x[i] + rate_noise[i][k])
+            if poles[i]:
+                e_rate = d_state[i] = filtered_rate(d_state[i], e_rate, poles[i])
             u = pd_command(gains[i][0], gains[i][1], signs[i], e_ang, e_rate)
             a = clip(u, -1.0, 1.0)
             t_i = trim[i][k]

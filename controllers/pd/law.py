@@ -2,14 +2,31 @@
 
 :func:`pd_command` is the package's one PD law (the controller's ``predict``, the
 sweep's batched and linear closed loops); :func:`control_sign` gives the sign
-``s_i`` that makes positive gains stabilise. Both stand on the model's
-parameters only, not on its linearisation, so that the controller does not
-import the design machinery.
+``s_i`` that makes positive gains stabilise; :func:`derivative_pole` and
+:func:`filtered_rate` are the D term's first-order low-pass, sampled at the
+control period. They stand on the model's parameters only, not on its
+linearisation, so that the controller does not import the design machinery.
+
+The derivative filter
+---------------------
+A filter of cutoff ``f_c`` [Hz] (time constant ``tau = 1/(2 pi f_c)``) acts on the
+rate error before the derivative gain; sampled at the control period ``dt`` it is
+the pole-matched first-order low-pass::
+
+    y[k] = a y[k-1] + (1 - a) e_rate[k],      a = exp(-dt / tau),
+    F(z) = (1 - a) z / (z - a)
+
+unit gain at DC and no added delay at the current sample. At an episode's first
+period the state starts at the current rate error (``y[0] = e_rate[0]``: no
+transient). No filter is ``a = 0`` and is skipped, so an unfiltered PD computes the very
+numbers it computed before the filter existed.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+import math
 
 from heli_core.params import ModelParams
 from heli_core.terms import AXES
@@ -66,3 +83,56 @@ def pd_command(kp, kd, sign, e_angle, e_rate):
     result to [-1, 1] and adds the trim.
     """
     return sign * (kp * e_angle + kd * e_rate)
+
+
+def check_cutoff(cutoff_hz, name: str = "d_filter_hz"):
+    """A derivative-filter cutoff as a float > 0 [Hz], or None (no filter); ValueError otherwise."""
+    if cutoff_hz is None:
+        return None
+    ok = isinstance(cutoff_hz, (int, float, np.floating, np.integer)) and not isinstance(cutoff_hz, bool)
+    if not (ok and math.isfinite(cutoff_hz) and cutoff_hz > 0):
+        raise ValueError(f"{name} must be a cutoff frequency > 0 Hz or None (no filter), got {cutoff_hz!r}")
+    return float(cutoff_hz)
+
+
+def derivative_pole(cutoff_hz, dt: float) -> float:
+    """The sampled filter's pole ``a = exp(-2 pi f_c dt)`` (module docstring); 0.0 for no filter (None).
+
+    Parameters
+    ----------
+    cutoff_hz : float or None
+        Cutoff of the D term's first-order low-pass [Hz], > 0; None: no filter.
+    dt : float
+        Control period [s], > 0.
+    """
+    cutoff_hz = check_cutoff(cutoff_hz)
+    if cutoff_hz is None:
+        return 0.0
+    if not (math.isfinite(dt) and dt > 0):
+        raise ValueError(f"a derivative filter needs a control period dt > 0 s, got {dt!r}")
+    return math.exp(-2.0 * math.pi * cutoff_hz * dt)
+
+
+def filtered_rate(previous, e_rate, pole, start=None):
+    """One period of the D term's low-pass: ``a·y[k-1] + (1-a)·e_rate[k]`` (``e_rate`` itself where ``start``).
+
+    Parameters
+    ----------
+    previous : float or ndarray, or None
+        The filter's output of the previous period [rad/s]; None: every element starts now.
+    e_rate : float or ndarray
+        This period's rate error [rad/s].
+    pole : float or ndarray
+        ``a`` of :func:`derivative_pole`, broadcast against ``e_rate``; 0 passes ``e_rate`` through.
+    start : ndarray of bool, optional
+        Elements whose episode starts now (broadcast against ``e_rate``): their state restarts at ``e_rate``.
+
+    Returns
+    -------
+    ndarray or float
+        The filtered rate error [rad/s], the next period's ``previous``.
+    """
+    if previous is None:
+        return e_rate
+    y = pole * previous + (1.0 - pole) * e_rate
+    return y if start is None else np.where(start, e_rate, y)
