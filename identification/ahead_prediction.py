@@ -172,3 +172,31 @@ def fitted_ahead_r2(identifier, flights, horizon_s: float = AHEAD_S) -> dict:
     cleaned = [identifier._clean(identifier.aligned(f))[0] for f in flights]
     return {axis: _axis_r2(identifier, axis, fit, cleaned, burn, horizon, own_offsets=True)
             for axis, fit in identifier.axes_.items()}
+
+
+def flight_ahead_r2(identifier, flight: Flight, horizon_s: float = AHEAD_S) -> dict:
+    """Per axis, the ``horizon_s``-ahead prediction R² of a fitted maximum-likelihood identifier on a flight it
+    was not fitted on (``heli identify --validate``).
+
+    Its offset is the model's, the mean of the fitted flights' (the flight's own was not fitted).
+
+    Parameters
+    ----------
+    identifier : MaximumLikelihoodIdentifier
+        Fitted.
+    flight : Flight
+        Another flight of the aircraft, prepared as the fit prepared its own (sticks aligned by the
+        identifier's shifts, vibration lines removed: :func:`identification.validation_flights.as_fitted`).
+    horizon_s : float
+        Prediction horizon [s].
+
+    Returns
+    -------
+    dict
+        ``{axis: r2}``, NaN for a diverged prediction (:func:`format_r2`).
+    """
+    from .ml_estimator import BURN_IN
+
+    horizon = max(1, int(round(horizon_s * flight.sample_rate)))
+    burn = int(round(BURN_IN * flight.sample_rate))
+    return {axis: _axis_r2(identifier, axis, fit, [flight], burn, horizon) for axis, fit in identifier.axes_.items()}

@@ -120,6 +120,43 @@ def rate_error_stats(measured, modelled) -> dict[str, dict[str, float]]:
     }
 
 
+def rate_fit_stats(measured, modelled) -> dict[str, dict[str, float]]:
+    """How much of the measured rates a simulation explains, as MATLAB's ``compare`` reports it.
+
+    Parameters
+    ----------
+    measured : array_like, shape (3, n)
+        Measured p, q, r [rad/s].
+    modelled : array_like, shape (3, n)
+        Simulated p, q, r at the same samples [rad/s].
+
+    Returns
+    -------
+    dict
+        Per axis name a dict with
+
+        ``fit_pct``
+            The normalised root-mean-square fit ``100 (1 - ||y - y_sim|| / ||y - mean(y)||)`` [%]: 100 a
+            perfect simulation, 0 no better than the measured mean, negative worse.
+        ``r2``
+            ``1 - ||y - y_sim||² / ||y - mean(y)||²``, which is ``1 - (1 - fit/100)²``.
+
+        Both NaN on an axis whose measured rate does not vary.
+
+    Raises
+    ------
+    ValueError
+        Shapes other than (3, n) with equal n, or non-finite values.
+    """
+    measured, modelled = _pair("measured", measured, "modelled", modelled)
+    err = np.linalg.norm(measured - modelled, axis=1)
+    spread = np.linalg.norm(measured - measured.mean(axis=1, keepdims=True), axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(spread > 0.0, err / np.where(spread > 0.0, spread, 1.0), np.nan)
+    return {axis: {"fit_pct": float(100.0 * (1.0 - ratio[i])), "r2": float(1.0 - ratio[i] ** 2)}
+            for i, axis in enumerate(AXES)}
+
+
 def between_models_mae(a, b) -> dict[str, float]:
     """Mean absolute difference between two modelled rate histories, Table 2.
 

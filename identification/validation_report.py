@@ -70,6 +70,39 @@ def validation_markdown(result: ValidationResult) -> str:
     )
 
 
+def flight_validation_markdown(checks, figures: bool = True) -> list[str]:
+    """The lines of ``report.md``'s section on flights the model was not fitted on
+    (:class:`~identification.validation_flights.FlightValidation` each): one table row per flight and axis,
+    a sentence per diverged simulation, and with ``figures`` a link to each flight's ``validation_N.png``."""
+    from .ahead_prediction import format_r2
+
+    rows, notes = [], []
+    for c in checks:
+        for axis in c.axes:
+            ahead = "—" if c.ahead_r2 is None else format_r2(c.ahead_r2.get(axis))
+            fit = "diverged" if c.diverged else f"{c.fit_pct[axis]:.1f}"
+            rows.append([c.name, axis, fit, "diverged" if c.diverged else format_r2(c.r2[axis]), ahead])
+        if c.diverged:
+            notes.append(f"- {c.name}: {c.diverged}")
+    first = checks[0]
+    lines = [
+        f"The {first.model} model simulated from each flight's sticks alone, from its measured first state and "
+        "with the model's offsets, against the measured rates (as MATLAB's `compare`): fit = 100 (1 − ‖y − ŷ‖ / "
+        "‖y − ȳ‖) %, R² = 1 − ‖y − ŷ‖² / ‖y − ȳ‖². Wind the sticks cannot explain lowers both on a correct "
+        "model; the prediction 0.5 s ahead from the model's Kalman-filtered state (wind state included) does not"
+        + (" (— : the integral method has no wind state)." if first.ahead_r2 is None else "."),
+        "",
+        markdown_table(["Flight", "Axis", "Fit (%)", "R²", "R² 0.5 s ahead"], rows),
+        "",
+    ]
+    if notes:
+        lines += notes + [""]
+    if figures:
+        lines += [f"![{c.name}: measured vs simulated body rates](validation_{i + 1}.png)"
+                  for i, c in enumerate(checks) if c.validation is not None] + [""]
+    return lines
+
+
 # ---------------------------------------------------------------------- plots
 def pick_windows(time, values, length: float = WINDOW_LENGTH, count: int = 2) -> list[tuple[float, float]]:
     """Non-overlapping windows of ``length`` s where ``values`` varies most.
