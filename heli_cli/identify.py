@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from pathlib import Path
 
 from .argtypes import INPUT_HOLD_HELP, input_hold, number, output_path, whole
 
@@ -80,6 +81,10 @@ def register(sub):
                    default=1.0, help="integral method: integration interval T_i - T_(i-1) in s (default 1.0)")
     p.add_argument("--no-filter", action="store_true",
                    help="integral method: skip the 4/8 Hz zero-phase FIR prefilter (Section 3.1)")
+    p.add_argument("--validate", nargs="+", default=[], metavar="OTHER.csv",
+                   help="after identifying, simulate the model on these flights (not used for the fit) and report "
+                   "per axis the fit %% and R² of the simulation (as MATLAB's compare) and the R² of the 0.5 s-ahead "
+                   "prediction, in the terminal and in report.md with a figure per flight")
     p.add_argument("--no-plots", action="store_true", help="do not draw PNG figures")
     p.add_argument("--no-disturbances", action="store_true",
                    help="do not identify wind profiles nor write the disturbance library")
@@ -99,7 +104,8 @@ def run(args) -> int:
         if len(args.flights) > 1:  # one flight reads in a fraction of a second
             progress.stage(f"reading {len(args.flights)} flights")
         flights = [read_flight(path) for path in args.flights]
-        for path, flight in zip(args.flights, flights):
+        others = [read_flight(path) for path in args.validate]  # a bad one refused before any fit
+        for path, flight in zip(args.flights + args.validate, flights + others):
             for warning in flight.metadata.get("import_warnings") or ():
                 progress.done()
                 print(f"warning: {path}: {warning}")
@@ -121,13 +127,15 @@ def run(args) -> int:
                 identifier_kwargs=kwargs, flight_paths=args.flights, plots=not args.no_plots,
                 disturbances=not args.no_disturbances, backend=backend, method=args.method,
                 progress=progress.bars and len(flights) > 1, draw_figures=False, stage=progress.stage,
-                wait=not args.no_wait,
+                wait=not args.no_wait, validate_flights=others,
+                validate_names=[Path(p).name for p in args.validate],
             ))
         finally:
             if backend is not None:
                 backend.close()
         progress.done()
         _print_run(run, len(flights), args.method)
+        _print_flight_checks(run.flight_checks)
         progress.draw_figures(run)
     from .html_report import write_html_report
 
@@ -180,6 +188,26 @@ def print_verdict(verdict) -> None:
     print(f"model verdict: {verdict.level}" + (":" if verdict.reasons else ""))
     for line in verdict.lines():
         print(f"  - {line}")
+
+
+def _print_flight_checks(checks) -> None:
+    """The model on the ``--validate`` flights: one line per flight and axis (fit %, R², 0.5 s-ahead R²)."""
+    if not checks:
+        return
+    from identification.ahead_prediction import format_r2
+
+    width = max(6, *(len(c.name) for c in checks))
+    print(f"validation on {len(checks)} flight(s) not used for the fit ({checks[0].model} model simulated from "
+          "their sticks, as MATLAB's compare):")
+    print(f"  {'flight':{width}s}  axis    fit %      R²  R² 0.5 s ahead")
+    for c in checks:
+        for axis in c.axes:
+            fit = "diverged" if c.diverged else f"{c.fit_pct[axis]:.1f}"
+            r2 = "diverged" if c.diverged else format_r2(c.r2[axis])
+            ahead = "—" if c.ahead_r2 is None else format_r2(c.ahead_r2.get(axis))
+            print(f"  {c.name:{width}s}  {axis:5s} {fit:>8s} {r2:>7s} {ahead:>15s}")
+        if c.diverged:
+            print(f"  {c.name}: {c.diverged}")
 
 
 def _print_run(run, n_flights: int, method: str) -> None:

@@ -19,7 +19,7 @@ from .disturbance import compare_with_truth
 from .disturbance_report import figure_names, save_figures
 from .terms import AXES, BASE_PARAMS, TERMS
 from .validation_result import ValidationResult
-from .validation_report import plot_attitude_fit, plot_rate_fit
+from .validation_report import flight_validation_markdown, plot_attitude_fit, plot_rate_fit
 
 
 def parameter_table(identifiers: dict, truth: ModelParams | None) -> str:
@@ -184,6 +184,12 @@ class ReportContent:
         The integral method's fit shown beside a maximum-likelihood one.
     verdict : model_store.verdict.ModelVerdict or None
         Whether the written model can be used; the report opens with it.
+    frequency : FrequencyComparison or str or None
+        The model's and the fitted flights' frequency responses
+        (:func:`identification.frequency_response.compare_frequency_response`), or why there are none.
+    flight_checks : list of FlightValidation
+        The model on flights it was not fitted on (``--validate``,
+        :mod:`identification.validation_flights`).
     """
 
     flights: list
@@ -201,6 +207,8 @@ class ReportContent:
     wind_sections: list
     reference: object = None
     verdict: object = None
+    frequency: object = None
+    flight_checks: list = ()
 
 
 def report_markdown(c: ReportContent) -> str:
@@ -232,11 +240,27 @@ def report_markdown(c: ReportContent) -> str:
            "## Validation by forward simulation (no disturbance)", "", c.validation.markdown()]
     if c.plots:
         md += ["![Measured vs modelled body rates](rates.png)", "", "![Detrended attitude](attitude.png)", ""]
+    if c.flight_checks:
+        md += ["## Validation on flights not used for the fit", ""]
+        md += flight_validation_markdown(c.flight_checks, figures=c.plots)
+    md += _frequency_section(c)
     if c.disturbances:
         md += ["## Wind disturbance (eqs. 41-47)", "",
                f"Identified with the {c.chosen} model and appended to the disturbance library "
                f"`disturbances/` as version {c.library_version}.", ""] + c.wind_sections
     return "\n".join(md) + "\n"
+
+
+def _frequency_section(c: ReportContent) -> list[str]:
+    """The frequency-response comparison's section of ``report.md`` (CIFER-style), or why there is none."""
+    from .frequency_response_report import FIGURE_NAME, frequency_markdown
+
+    if c.frequency is None:
+        return []
+    md = ["## Frequency response: flight and model, with coherence", ""]
+    if isinstance(c.frequency, str):
+        return md + [f"Not estimated: {c.frequency}", ""]
+    return md + frequency_markdown(c.frequency, FIGURE_NAME if c.plots else None)
 
 
 def _likelihood_sections(c: ReportContent, ident) -> list[str]:
@@ -256,6 +280,23 @@ def fit_figures(validation: ValidationResult, out: Path) -> dict:
     """``rates.png`` and ``attitude.png`` of the validation in ``out``: ``{key: path}``."""
     return {"rates_png": plot_rate_fit(validation, out / "rates.png"),
             "attitude_png": plot_attitude_fit(validation, out / "attitude.png")}
+
+
+def comparison_figures(frequency, flight_checks, out: Path) -> dict:
+    """The frequency-response figure (when ``frequency`` is a result) and each validation flight's rates
+    (``validation_N.png``, N its place among ``flight_checks``) in ``out``: ``{key: path}``."""
+    from .frequency_response_report import FIGURE_NAME, plot_frequency_response
+
+    paths = {}
+    if frequency is not None and not isinstance(frequency, str):
+        paths["frequency_response_png"] = plot_frequency_response(frequency, out / FIGURE_NAME)
+    for i, c in enumerate(flight_checks):
+        if c.validation is not None:
+            title = (f"Body rates on {c.name}, a flight not used for the fit: measured vs the {c.model} model "
+                     "simulated from its sticks")
+            paths[f"validation_{i + 1}_png"] = plot_rate_fit(c.validation, out / f"validation_{i + 1}.png",
+                                                             title=title)
+    return paths
 
 
 def wind_figures(profile, out: Path, true_ud, prefix: str) -> dict:

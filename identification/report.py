@@ -30,6 +30,7 @@ from .fit_warnings import fit_warnings, judged_r2
 from .flight import Flight
 from .identify_report import (  # noqa: F401  (the tables are re-exported: they lived here)
     ReportContent,
+    comparison_figures,
     fit_figures,
     fit_table,
     method_sentence,
@@ -43,8 +44,9 @@ from .integral_method import IntegralIdentifier
 from .model_verdict import judge_identifier
 from .sensors import identify_sensors
 from .synthetic import load_truth, truth_paths
-from .errors import SimulationDivergedError
+from .errors import IdentifiabilityError, SimulationDivergedError
 from .validation import ValidationResult, validate_models
+from .validation_flights import check_validation_flights, validate_on_flights
 
 
 @dataclass
@@ -77,6 +79,11 @@ class IdentificationRun(PendingFigures):
     figures : list of callable
         Figures ``report.md`` links but :func:`identify_and_report` was asked to leave for later
         (``draw_figures=False``); each returns ``{key: path}``. :meth:`draw_figures` draws them.
+    frequency : FrequencyComparison or str or None
+        The chosen model's and the fitted flights' frequency responses with coherence
+        (:mod:`identification.frequency_response`), or why they could not be estimated.
+    flight_checks : list of FlightValidation
+        The chosen model on the flights of ``validate_flights`` (:mod:`identification.validation_flights`).
     """
 
     identifiers: dict
@@ -89,6 +96,8 @@ class IdentificationRun(PendingFigures):
     warnings: list = field(default_factory=list)
     figures: list = field(default_factory=list)
     verdict: object = None
+    frequency: object = None
+    flight_checks: list = field(default_factory=list)
 
     @property
     def params(self) -> ModelParams:
@@ -199,6 +208,11 @@ class IdentifyOptions:
     wait : bool
         Without ``transaction``: wait for another command writing ``out_dir`` (default), or raise
         :class:`~identification.errors.ModelDirBusyError`.
+    validate_flights : sequence of Flight
+        Flights the model is not fitted on, to simulate it on and score it (``heli identify --validate``,
+        :mod:`identification.validation_flights`); checked before anything is fitted or written.
+    validate_names : sequence of str, optional
+        Their names in the report (default each flight's ``source``).
     """
 
     coupled: bool = False
@@ -216,6 +230,8 @@ class IdentifyOptions:
     stage: Callable[[str], None] | None = None
     transaction: object = None
     wait: bool = True
+    validate_flights: Sequence = ()
+    validate_names: Sequence | None = None
 
     def say(self, text: str) -> None:
         """Tell :attr:`stage` that a step starts (nothing without one)."""
@@ -239,6 +255,8 @@ def identify_and_report(flights, out_dir, options: IdentifyOptions | None = None
     """
     opts = _options(options, settings)
     flights = [flights] if isinstance(flights, Flight) else list(flights)
+    if opts.validate_flights:  # refused before anything is fitted or written
+        check_validation_flights(flights, opts.validate_flights, opts.validate_names)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     identifiers = _fit_models(flights, opts)
@@ -251,6 +269,7 @@ def identify_and_report(flights, out_dir, options: IdentifyOptions | None = None
     validation, diverged = _validate(first, identifiers, chosen)
     warnings += diverged
     truth = _truth_of(flights[0], (opts.flight_paths or [None])[0])
+    frequency, checks = _comparisons(ident, chosen, opts)
     document = model_document(
         ident.params_, structure=chosen, sample_rate=first.sample_rate,
         filter_settings=first.metadata.get("prefilter"), identification=identification_settings(ident),
@@ -258,10 +277,14 @@ def identify_and_report(flights, out_dir, options: IdentifyOptions | None = None
                         "fit_time_s": ident.fit_time_,
                         **({"input_hold": ident.hold_decision_} if getattr(ident, "hold_decision_", None) else {}),
                         **({"input_shifts_s": ident.input_shifts_}
-                           if min(getattr(ident, "input_shifts_", {}).values(), default=0.0) < 0.0 else {})},
+                           if min(getattr(ident, "input_shifts_", {}).values(), default=0.0) < 0.0 else {}),
+                        **({"frequency_response": frequency.to_dict()} if not isinstance(frequency, str) else {}),
+                        **({"validation_flights": [c.to_dict() for c in checks]} if checks else {})},
         sources=opts.sources, extra=opts.model_extra, sensors=identify_sensors(flights),
     )
-    figures = [partial(fit_figures, validation, out)] if opts.plots else []
+    figures = []
+    if opts.plots:
+        figures += [partial(fit_figures, validation, out), partial(comparison_figures, frequency, checks, out)]
     profiles, wind_sections = _winds(ident, flights, out, opts, figures) if opts.disturbances else ([], [])
     reference = None
     if opts.method == "ml":
@@ -272,14 +295,32 @@ def identify_and_report(flights, out_dir, options: IdentifyOptions | None = None
     content = partial(ReportContent, flights, identifiers, chosen, sources=opts.sources, warnings=warnings,
                       truth=truth, method=opts.method, validation=validation, plots=opts.plots,
                       disturbances=opts.disturbances, wind_sections=wind_sections, reference=reference,
-                      verdict=verdict)
+                      verdict=verdict, frequency=frequency, flight_checks=checks)
     paths, library_version = _write(out, document, profiles, opts, content)
     run = IdentificationRun(identifiers, chosen, validation, truth, paths, profiles, library_version, warnings,
-                            figures, verdict)
+                            figures, verdict, frequency, checks)
     if opts.draw_figures and figures:
         opts.say("drawing the figures")
         run.draw_figures()
     return run
+
+
+def _comparisons(ident, chosen: str, opts: IdentifyOptions) -> tuple:
+    """The chosen model against the fitted flights in the frequency domain (or why not), and on the flights
+    of ``opts.validate_flights``: ``(frequency, flight_checks)``."""
+    from .frequency_response import compare_frequency_response
+
+    opts.say("comparing the frequency responses of model and flight")
+    try:
+        frequency = compare_frequency_response(ident.params_, ident.flights_)
+    except IdentifiabilityError as e:
+        frequency = str(e)
+    checks = []
+    if opts.validate_flights:
+        n = len(opts.validate_flights)
+        opts.say(f"simulating the model on {n} flight{'s' if n != 1 else ''} not used for the fit")
+        checks = validate_on_flights(ident, opts.validate_flights, chosen, opts.validate_names)
+    return frequency, checks
 
 
 def _validate(flight: Flight, identifiers: dict, chosen: str):

@@ -73,8 +73,8 @@ def test_simulate_flight_rejects_bad_options(tmp_path, capsys, option, value):
 def test_identify_writes_model_report_and_figures(identified):
     assert sorted(p.name for p in identified.iterdir() if not p.name.startswith(".heli-")) == [
         "attitude.png", "disturbance_distributions.png", "disturbance_profile.png", "disturbance_simulation.png",
-        "disturbances", "model.json", "rates.png", "report.html", "report.md"]
-    for png in ("rates.png", "attitude.png"):
+        "disturbances", "frequency_response.png", "model.json", "rates.png", "report.html", "report.md"]
+    for png in ("rates.png", "attitude.png", "frequency_response.png"):
         assert (identified / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     report = (identified / "report.md").read_text()
     assert "![Measured vs modelled body rates](rates.png)" in report
