@@ -20,7 +20,7 @@ import control
 import gymnasium
 import numpy as np
 import pytest
-from numpy.testing import assert_allclose
+from numpy.testing import assert_allclose, assert_array_equal
 from scipy.optimize import brentq
 
 import heli_env  # noqa: F401  (registers HeliAttitude-v0)
@@ -351,3 +351,129 @@ def test_figures(tmp_path, default_params, default_gains):
     bode = plot_bode(default_params, "pitch", *default_gains.axis("pitch"), tmp_path / "bode.png")
     for p in (steps, bode):
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+# ------------------------------------------------------------ derivative filter
+def _flown(pol, params, seconds=5.0, seed=0, **env_kwargs):
+    """Fly ``pol`` in one fixed episode (``predict`` carrying its state); actions (n, 3) and |roll error| (n,)."""
+    env = HeliAttitudeEnv(episode_seconds=seconds, **env_kwargs)
+    obs, _ = env.reset(seed=seed)
+    state, start, acts, errs = None, True, [], []
+    done = False
+    while not done:
+        a, state = pol.predict(obs, state=state, episode_start=np.array([start]))
+        start = False
+        obs, _, term, trunc, info = env.step(a)
+        acts.append(a)
+        errs.append(abs(info["attitude_error_deg"][0]))
+        done = term or trunc
+    return np.array(acts), np.array(errs)
+
+
+def test_d_filter_off_reproduces_the_unfiltered_pd_exactly(default_params, default_gains):
+    """No filter (the default, or None on every axis) is the old memoryless law, bit for bit, and so is the
+    sweep's replay with zero poles."""
+    from controllers.closed_loop import hover_plant, nominal_gains
+    from controllers.replay import Autopilot, fly, zoh_step
+    from controllers.sweep_inputs import prepare
+
+    old = PDController.from_model(default_params, default_gains)
+    off = PDController.from_model(default_params, PDGains(default_gains.kp, default_gains.kd, (None, None, None)))
+    assert not off.filtered and off.gains == old.gains
+    obs = np.random.default_rng(4).normal(0.0, 0.3, (6, 12))
+    want = np.clip(np.array(old.signs) * (np.array(old.gains.kp) * obs[:, 0:3] + np.array(old.gains.kd)
+                                          * obs[:, 6:9]), -1, 1).astype(np.float32)
+    act, state = off.predict(obs, state="untouched", episode_start=np.ones(6, bool))
+    assert_array_equal(act, want) and state == "untouched"
+    assert_array_equal(off.step(obs)[0], old.command(obs))
+    rp = prepare(None, "roll", 2.0, 0.01, 0, None, 2)
+    nominal = nominal_gains(hover_plant(rp.params, 0.01))
+    runs = [[rec for _, rec in fly(zoh_step(rp.params, 0.01), rp.inputs,
+                                   Autopilot(0, np.array([20.0]), np.array([3.0]), nominal,
+                                             np.sign(rp.params.control_gains), poles), progress=False)][0]
+            for poles in (None, [0.0, 0.0, 0.0])]
+    assert_array_equal(runs[0].act, runs[1].act) and assert_array_equal(runs[0].att, runs[1].att) is None
+
+
+def test_d_filter_reduces_the_stick_increment_on_a_fixed_episode(default_params, default_gains):
+    """The same gains with a 5 Hz filter on one fixed episode (gusts and the model's gyro noise): the stick's RMS
+    increment per step falls by more than half, the attitude error hardly moves."""
+    plain, p_err = _flown(PDController.from_model(default_params, default_gains), default_params)
+    filtered_gains = PDGains(default_gains.kp, default_gains.kd, 5.0)
+    smooth, s_err = _flown(PDController.from_model(default_params, filtered_gains), default_params)
+    step = [np.sqrt(np.mean(np.diff(a, axis=0) ** 2, axis=0)) for a in (plain, smooth)]
+    assert np.all(step[1][:2] < 0.5 * step[0][:2]), step  # roll and pitch (measured 0.46x)
+    assert np.percentile(s_err, 90) < 1.1 * np.percentile(p_err, 90)
+
+
+def test_d_filter_state_resets_on_episode_start_and_is_vectorised(default_params):
+    """A batch flies as each of its rows alone; a row whose episode starts restarts its filter at the current
+    rate error, the others keep their memory; a single observation takes a (1,) episode_start (SB3's)."""
+    pol = PDController.from_model(default_params, PDGains((2.0, 3.0, 4.0), (0.5, 0.25, 0.1), (4.0, None, 9.0)))
+    obs = np.random.default_rng(5).normal(0.0, 0.2, (20, 3, 12))
+    state, batch = None, []
+    for k in range(20):
+        a, state = pol.predict(obs[k], state, np.full(3, k == 0))
+        batch.append(a)
+    for r in range(3):
+        s1 = None
+        for k in range(20):
+            a1, s1 = pol.predict(obs[k, r], s1, np.array([k == 0]))
+            assert_array_equal(a1, batch[k][r])
+    a, s = pol.predict(obs[0], state, np.array([False, True, False]))
+    fresh, _ = pol.predict(obs[0, 1], None)
+    assert_array_equal(a[1], fresh)
+    assert not np.array_equal(a[0], pol.predict(obs[0, 0], None)[0])  # row 0 remembered its filter
+    assert_allclose(s[:, 1], obs[0][:, 7])  # the unfiltered pitch passes the rate error through
+    with pytest.raises(ValueError, match=r"state must be the filter state .* shape \(3, 3\), got \(2, 3\)"):
+        pol.predict(obs[0], np.zeros((2, 3)))
+    with pytest.raises(ValueError, match="episode_start must hold one flag per observation"):
+        pol.predict(obs[0], state, np.ones(2, bool))
+
+
+def test_d_filter_linearisation_matches_the_sampled_loop(default_params, default_gains):
+    """The filtered loop of loop_analysis is s (kp G_angle + kd F G_rate) with F(z) = (1 - a) z / (z - a) on the
+    hand-derived ZOH plant, and its gain margin is the environment's: 5 % inside it the filtered PD holds,
+    5 % outside it does not."""
+    f_c, a = 8.0, math.exp(-2 * math.pi * 8.0 * DT)
+    kp, kd = 10.0, 2.0
+    an = loop_analysis(SIMPLE.with_values(tau_roll=0.0), "roll", kp, kd, dt=DT, d_filter_hz=f_c)
+    for w in (0.5, 3.0, 20.0, 150.0):
+        z = np.exp(1j * w * DT)
+        g_angle, g_rate = _zoh_angle_rate(K2, K3, DT, z)
+        want = kp * g_angle + kd * (1 - a) * z / (z - a) * g_rate
+        assert_allclose(complex(an.loop(z)), want, rtol=1e-9)
+    kp0, kd0, an0 = propose_gains(default_params, "roll", d_filter_hz="auto")
+    assert an0.d_filter_hz and an0.phase_margin >= 45.0 - 1e-6
+    for factor, holds in ((0.95, True), (1.05, False)):
+        g = factor * an0.gain_margin
+        pol = PDController.from_model(default_params, PDGains((g * kp0, 0, 0), (g * kd0, 0, 0), an0.d_filter_hz))
+        acts, errs = _flown(pol, default_params, seconds=10.0, seed=3, task="hold", gust_scale=0.0,
+                            init_angle_deg=1.0, init_rate_deg=1.0, obs_noise=0.0)
+        assert loop_analysis(default_params, "roll", g * kp0, g * kd0, d_filter_hz=an0.d_filter_hz).stable is holds
+        if holds:
+            assert errs[-100:].max() < 1e-3 * errs[:100].max()
+        else:
+            assert len(errs) < 1000 or np.abs(acts[-100:, 0]).max() >= 0.99
+
+
+def test_d_filter_design_rule_and_round_trip(tmp_path, default_params):
+    """"auto" puts the cutoff at D_FILTER_RATIO x crossover and keeps the margin; the filter travels in the
+    controller file (schema version 2) and an unfiltered file stays version 1."""
+    from controllers.pd import D_FILTER_RATIO
+
+    gains = design_gains(default_params, d_filter_hz="auto")
+    for i, axis in enumerate(("roll", "pitch", "yaw")):
+        an = loop_analysis(default_params, axis, gains.kp[i], gains.kd[i], d_filter_hz=gains.d_filter_hz[i])
+        assert an.phase_margin >= 45.0 - 1e-6
+        assert_allclose(gains.d_filter_hz[i], D_FILTER_RATIO * an.gain_crossover / (2 * math.pi), rtol=1e-6)
+    pol = PDController.from_model(default_params, gains, dt=0.02)
+    loaded = PDController.load(pol.save(tmp_path / "pd.json"))
+    assert loaded.gains == pol.gains and loaded.dt == 0.02
+    assert json.loads((tmp_path / "pd.json").read_text())["schema_version"] == 2
+    obs = np.random.default_rng(6).normal(0, 0.3, (4, 12))
+    assert_array_equal(loaded.predict(obs)[0], pol.predict(obs)[0])
+    with pytest.raises(ValueError, match=r"d_filter_hz must be a cutoff frequency > 0 Hz or None \(no filter\), got -1"):
+        PDGains(1.0, 1.0, -1)
+    with pytest.raises(ValueError, match="d_filter_hz must be None, a cutoff in Hz or 3 of them"):
+        PDGains(1.0, 1.0, (1.0, 2.0))

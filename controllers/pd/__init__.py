@@ -22,11 +22,11 @@ Every name below is importable from ``controllers.pd`` as well::
 
 from .analysis import LoopAnalysis, closed_loop_bandwidth, loop_analysis
 from .controller import OBS_DIM, SCHEMA, SCHEMA_VERSION, PDController, PDGains
-from .design import design_gains, propose_gains
+from .design import D_FILTER_RATIO, DEFAULT_D_FILTER, design_gains, propose_gains
 from .figures import plot_bode, plot_step_responses
 from .law import control_sign
 from .linearisation import plant
 
-__all__ = ["OBS_DIM", "SCHEMA", "SCHEMA_VERSION", "LoopAnalysis", "PDController", "PDGains", "closed_loop_bandwidth",
+__all__ = ["D_FILTER_RATIO", "DEFAULT_D_FILTER", "OBS_DIM", "SCHEMA", "SCHEMA_VERSION", "LoopAnalysis", "PDController", "PDGains", "closed_loop_bandwidth",
            "control_sign", "design_gains", "loop_analysis", "plant", "plot_bode", "plot_step_responses",
            "propose_gains"]

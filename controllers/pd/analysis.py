@@ -4,8 +4,11 @@ The environment samples the observation every ``dt`` and holds the action over
 the period (zero-order hold), then integrates the linear part exactly
 (:func:`heli_core.discrete.discrete_step`, matrix exponential). The analysis
 here therefore discretises the plant with :func:`control.c2d` (``'zoh'``) and
-closes the loop in discrete time: ``L(z) = s (kp G_phi(z) + kd G_p(z))``, where
-``G_phi`` and ``G_p`` are the sampled stick-to-angle and stick-to-rate responses.
+closes the loop in discrete time: ``L(z) = s (kp G_phi(z) + kd F(z) G_p(z))``, where
+``G_phi`` and ``G_p`` are the sampled stick-to-angle and stick-to-rate responses and
+``F(z) = (1 - a) z / (z - a)`` the derivative filter the controller runs (1 without one;
+:func:`controllers.pd.law.law_state_space`), so margins, poles and disturbance responses
+are those of the filtered PD the controller's ``predict`` and the sweep's replay fly.
 For the decoupled linear model this is the environment's own closed loop, so
 the predicted stability is exact (``tests/test_pd.py`` checks gain pairs on both
 sides of the boundary in the environment). The hold costs about ``omega*dt/2``
@@ -28,7 +31,7 @@ from heli_core.params import ModelParams
 from heli_core.terms import AXES
 
 from .controller import PDGains
-from .law import _axis_index, control_sign
+from .law import _axis_index, check_cutoff, control_sign, law_state_space
 from .linearisation import _check_delay, _check_dt, _sampled, _tf, plant
 
 _HALF_POWER = 10.0 ** (-3.0 / 20.0)
@@ -90,6 +93,8 @@ class LoopAnalysis:
     disturbance_system : control.StateSpace
         Closed loop from u_d [stick] to (angle [rad], rate [rad/s], action
         [stick, before clipping]).
+    d_filter_hz : float or None
+        Cutoff of the derivative filter in the loop [Hz]; None: no filter.
     """
 
     axis: str
@@ -114,6 +119,7 @@ class LoopAnalysis:
     torque_to_angle: control.TransferFunction
     ud_to_angle: control.TransferFunction
     disturbance_system: control.StateSpace = field(repr=False)
+    d_filter_hz: float | None = None
 
     @property
     def gain_margin_db(self) -> float:
@@ -129,7 +135,8 @@ class LoopAnalysis:
     def summary(self) -> dict:
         """Scalars of the analysis (JSON-ready; non-finite values become None)."""
         worst = float(np.max(np.abs(self.poles))) if self.dt else float(np.max(self.poles.real))
-        return jsonable({"axis": self.axis, "kp": self.kp, "kd": self.kd, "dt": self.dt,
+        return jsonable({"axis": self.axis, "kp": self.kp, "kd": self.kd, "d_filter_hz": self.d_filter_hz,
+                         "dt": self.dt,
                          "delay_steps": self.delay_steps, "gain_margin_db": self.gain_margin_db,
                          "phase_margin_deg": self.phase_margin, "gain_crossover_rad_s": self.gain_crossover,
                          "phase_crossover_rad_s": self.phase_crossover, "bandwidth_rad_s": self.bandwidth,
@@ -210,16 +217,16 @@ def _margins(loop):
 
 
 def loop_analysis(params: ModelParams, axis, kp: float, kd: float, dt: float = 0.01,
-                  delay_steps: int = 0) -> LoopAnalysis:
+                  delay_steps: int = 0, d_filter_hz: float | None = None) -> LoopAnalysis:
     """Margins, bandwidth, poles and disturbance responses of one axis under the PD law.
 
-    The controller acts as ``C = s (kp + kd s)`` on the attitude error (the
-    derivative is the measured rate error); the loop is broken at the stick.
-    With ``dt > 0`` everything is computed for the sampled loop the environment
-    runs (ZOH plant via :func:`control.c2d`, see the module docstring); margins
-    from :func:`control.stability_margins`, bandwidth from
-    :func:`closed_loop_bandwidth`, poles from :func:`control.poles` of the
-    closed loop.
+    The controller acts as ``C = s (kp + kd F s)`` on the attitude error (the
+    derivative is the measured rate error, ``F`` its low-pass when ``d_filter_hz`` is
+    given); the loop is broken at the stick. With ``dt > 0`` everything is computed
+    for the sampled loop the environment runs (ZOH plant via :func:`control.c2d`, the
+    filter as the controller samples it, see the module docstring); margins from
+    :func:`control.stability_margins`, bandwidth from :func:`closed_loop_bandwidth`,
+    poles from :func:`control.poles` of the closed loop.
 
     Parameters
     ----------
@@ -233,6 +240,8 @@ def loop_analysis(params: ModelParams, axis, kp: float, kd: float, dt: float = 0
         Control period [s]; 0 for the continuous-time analysis.
     delay_steps : int
         Periods of action delay (the environment's ``action_delay``).
+    d_filter_hz : float, optional
+        Cutoff of the derivative's first-order low-pass [Hz]; None: no filter.
 
     Returns
     -------
@@ -245,32 +254,57 @@ def loop_analysis(params: ModelParams, axis, kp: float, kd: float, dt: float = 0
     kp, kd = gains.kp[0], gains.kd[0]
     dt = _check_dt(dt)
     nd = _check_delay(delay_steps, dt)
+    cutoff = check_cutoff(d_filter_hz)
     s = control_sign(params, i)
     k = float(params.control_gains[i])
     A, B, C = _sampled(params, i, dt, nd)
-    bu, bd = B[:, :1], B[:, 1:]
-    K = s * np.array([[kp, kd]])
-    KC = K @ C
-    loop = _tf(control.ss(A, bu, KC, 0.0, dt))
-    Acl = A - bu @ KC
-    n = A.shape[0]
-    angle = C[:1]
-    cl_d = control.ss(Acl, bd, angle, 0.0, dt)
-    outputs = np.vstack([C, -KC])
-    dist = control.ss(Acl, k * bd, outputs, np.zeros((3, 1)), dt)
-    ref = control.ss(Acl, bu * (s * kp), angle, 0.0, dt)
-    poles = np.asarray(control.poles(control.ss(Acl, np.zeros((n, 1)), np.zeros((1, n)), 0.0, dt)), dtype=complex)
+    cl = _closed_loop(A, B, C, law_state_space(kp, kd, s, cutoff, dt))
+    loop = _tf(control.series(control.ss(A, B[:, :1], C, np.zeros((2, 1)), dt), control.ss(*cl.law, dt)))
+    n = cl.A.shape[0]
+    poles = np.asarray(control.poles(control.ss(cl.A, np.zeros((n, 1)), np.zeros((1, n)), 0.0, dt)), dtype=complex)
     stable = bool(np.all(np.abs(poles) < 1.0)) if dt else bool(np.all(poles.real < 0.0))
     P = plant(params, i)
     loop_c = control.tf([s * kd, s * kp], [1.0]) * P
+    if cutoff is not None:
+        w_f = 2.0 * math.pi * cutoff
+        loop_c = control.tf([s * kp / w_f, s * (kp + kd * w_f) / w_f], [1.0 / w_f, 1.0]) * P
     T = control.feedback(loop, 1)
     gm, pm, sm, wpc, wgc = _margins(loop)
     bw = closed_loop_bandwidth(T) if kp > 0 and stable else math.nan
-    torque = _tf(cl_d)
+    torque = _tf(control.ss(cl.A, cl.bd, cl.angle, 0.0, dt))
+    dist = control.ss(cl.A, k * cl.bd, cl.outputs, np.zeros((3, 1)), dt)
+    ref = control.ss(cl.A, cl.bu_ref * (s * kp), cl.angle, 0.0, dt)
     return LoopAnalysis(
         axis=AXES[i], kp=kp, kd=kd, dt=dt, delay_steps=nd, sign=s, plant=P, loop=loop, loop_continuous=loop_c,
         gain_margin=gm, phase_margin=pm, stability_margin=sm, phase_crossover=wpc, gain_crossover=wgc,
         bandwidth=bw, poles=poles, stable=stable, complementary=T, reference_to_angle=_tf(ref),
-        torque_to_angle=torque, ud_to_angle=k * torque, disturbance_system=dist,
+        torque_to_angle=torque, ud_to_angle=k * torque, disturbance_system=dist, d_filter_hz=cutoff,
     )
 
+
+@dataclass(frozen=True, eq=False)
+class _Closed:
+    """The closed loop of plant ``(A, B, C)`` and the law ``(Ak, Bk, Ck, Dk)``: state ``(x, w)``."""
+
+    A: np.ndarray
+    bd: np.ndarray
+    bu_ref: np.ndarray
+    angle: np.ndarray
+    outputs: np.ndarray
+    law: tuple
+
+
+def _closed_loop(A, B, C, law) -> _Closed:
+    """``x' = A x + b_u u + b_d d``, ``w' = Ak w + Bk e``, ``u = Ck w + Dk e``, ``e = -C x`` (reference 0).
+
+    Outputs of :attr:`_Closed.outputs`: angle [rad], rate [rad/s], stick [stick, before clipping];
+    ``bu_ref`` is the stick's column, through which a reference angle enters as ``s kp r``.
+    """
+    Ak, Bk, Ck, Dk = law
+    n, m = A.shape[0], Ak.shape[0]
+    bu, bd = B[:, :1], B[:, 1:]
+    Acl = np.block([[A - bu @ Dk @ C, bu @ Ck], [-Bk @ C, Ak]])
+    pad = np.zeros((m, 1))
+    angle = np.hstack([C[:1], np.zeros((1, m))])
+    outputs = np.vstack([np.hstack([C, np.zeros((2, m))]), np.hstack([-Dk @ C, Ck])])
+    return _Closed(Acl, np.vstack([bd, pad]), np.vstack([bu, pad]), angle, outputs, law)

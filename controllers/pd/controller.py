@@ -11,12 +11,20 @@ stick/rad, ``kd`` in stick/(rad/s) and ``s_i`` = sign of the axis' control gain
 (k2, k6, k10) so that positive gains stabilise (the paper's pitch gain k6 is
 negative, eq. 69). The derivative is the *measured* rate error, not a finite
 difference: on the continuous model the controller is exactly ``C(s) = s_i
-(kp + kd s)`` acting on the attitude error, with no derivative filter.
+(kp + kd s)`` acting on the attitude error.
+
+With a derivative filter (``PDGains.d_filter_hz``) the rate error passes a
+first-order low-pass of that cutoff before ``kd`` (sampled at the controller's
+``dt``, :func:`controllers.pd.law.filtered_rate`), ``C(s) = s_i (kp + kd s / (1 + tau s))``:
+the gyro noise and the gusts' fast part no longer reach the stick at full ``kd``.
+The filter's state travels in ``predict``'s ``state`` (shape of ``obs[..., 6:9]``), as a
+recurrent policy's does in stable-baselines3, and restarts where ``episode_start`` is true.
 """
 
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,11 +34,15 @@ from heli_core.files import jsonable, write_text
 from heli_core.params import ModelParams
 from heli_core.terms import AXES
 
-from .law import _axis_index, control_sign, pd_command
+from .law import _axis_index, check_cutoff, control_sign, derivative_pole, filtered_rate, pd_command
 
 SCHEMA = "heli-env/pd-controller"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+"""Written for a controller with a derivative filter; one without is written as version 1, which every
+reader of this schema takes (a reader that knows no filter refuses version 2 instead of flying it unfiltered)."""
 OBS_DIM = 12
+DT = 0.01
+"""Control period [s] a controller's derivative filter is sampled at unless told (the environment's)."""
 
 
 @dataclass(frozen=True)
@@ -45,12 +57,21 @@ class PDGains:
         Proportional gains on the attitude error [stick/rad], >= 0.
     kd : tuple of 3 float
         Derivative gains on the rate error [stick/(rad/s)], >= 0.
+    d_filter_hz : tuple of 3 (float or None)
+        Cutoff of each axis' derivative low-pass [Hz], > 0; None: no filter (the default, on every axis).
+        One value is broadcast to the three axes.
     """
 
     kp: tuple = (0.0, 0.0, 0.0)
     kd: tuple = (0.0, 0.0, 0.0)
+    d_filter_hz: tuple = (None, None, None)
 
     def __post_init__(self):
+        raw = self.d_filter_hz
+        cut = [raw] * 3 if raw is None or np.ndim(raw) == 0 else list(raw)
+        if len(cut) != 3:
+            raise ValueError(f"d_filter_hz must be None, a cutoff in Hz or 3 of them (roll, pitch, yaw), got {raw!r}")
+        object.__setattr__(self, "d_filter_hz", tuple(check_cutoff(c) for c in cut))
         for name in ("kp", "kd"):
             raw = getattr(self, name)
             try:
@@ -68,14 +89,20 @@ class PDGains:
         i = _axis_index(axis)
         return self.kp[i], self.kd[i]
 
+    @property
+    def filtered(self) -> bool:
+        """Whether any axis has a derivative filter."""
+        return any(c is not None for c in self.d_filter_hz)
+
 
 class PDController:
     """Discrete PD attitude policy with stable-baselines3's ``predict`` interface.
 
-    Per step and axis ``action = clip(s * (kp * obs[0:3] + kd * obs[6:9]), -1, 1)``
-    (see the module docstring): memoryless, so ``state`` is passed through and
-    ``episode_start`` and ``deterministic`` are ignored. PD and RL agents go
-    through one evaluator (``stable_baselines3.common.evaluation.evaluate_policy``).
+    Per step and axis ``action = clip(s * (kp * obs[0:3] + kd * y), -1, 1)`` with ``y``
+    the rate error ``obs[6:9]``, low-passed where the gains carry a derivative filter (see the
+    module docstring). Without a filter the law is memoryless: ``state`` is passed through and
+    ``episode_start`` ignored. PD and RL agents go through one evaluator
+    (``stable_baselines3.common.evaluation.evaluate_policy``, :func:`controllers.evaluate.evaluate_agent`).
 
     Parameters
     ----------
@@ -83,25 +110,37 @@ class PDController:
     signs : sequence of 3 float
         Control-gain signs (+1 or -1) of roll, pitch, yaw; :meth:`from_model`
         takes them from the model's k2, k6, k10.
+    dt : float
+        Control period [s] the derivative filter is sampled at (the environment's step), > 0.
     """
 
-    def __init__(self, gains: PDGains, signs=(1.0, 1.0, 1.0)):
+    def __init__(self, gains: PDGains, signs=(1.0, 1.0, 1.0), dt: float = DT):
         if not isinstance(gains, PDGains):
             raise ValueError(f"gains must be a PDGains, got {type(gains).__name__}")
         sg = np.asarray(signs, dtype=float)
         if sg.shape != (3,) or not np.all(np.abs(sg) == 1.0):
             raise ValueError(f"signs must be three values of +1 or -1 (roll, pitch, yaw), got {signs!r}")
+        if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and 0 < dt < 1):
+            raise ValueError(f"dt must be a control period in (0, 1) s, got {dt!r}")
         self.gains = gains
         self.signs = tuple(float(v) for v in sg)
+        self.dt = float(dt)
         self._kp, self._kd, self._sign = np.array(gains.kp, dtype=float), np.array(gains.kd, dtype=float), sg
+        self._poles = np.array([derivative_pole(c, self.dt) for c in gains.d_filter_hz])
 
     @classmethod
-    def from_model(cls, params: ModelParams, gains: PDGains) -> "PDController":
+    def from_model(cls, params: ModelParams, gains: PDGains, dt: float = DT) -> "PDController":
         """The controller for a model: signs of its control gains (k2, k6, k10)."""
-        return cls(gains, [control_sign(params, a) for a in AXES])
+        return cls(gains, [control_sign(params, a) for a in AXES], dt)
+
+    @property
+    def filtered(self) -> bool:
+        """Whether the D term of any axis is low-passed (the law then has memory)."""
+        return self.gains.filtered
 
     def __repr__(self):
-        return f"PDController(kp={self.gains.kp}, kd={self.gains.kd}, signs={self.signs})"
+        cut = f", d_filter_hz={self.gains.d_filter_hz}, dt={self.dt:g}" if self.filtered else ""
+        return f"PDController(kp={self.gains.kp}, kd={self.gains.kd}, signs={self.signs}{cut})"
 
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = False):
         """Actions for one observation ``(12,)`` or a batch ``(n, 12)``.
@@ -111,35 +150,93 @@ class PDController:
         observation : array_like, shape (12,) or (n, 12)
             Observations of ``HeliAttitude-v0`` (attitude error [rad], rates
             [rad/s], rate error [rad/s], previous action).
-        state, episode_start, deterministic
-            SB3's interface; unused (the law has no memory).
+        state : ndarray, shape (3,) or (n, 3), optional
+            With a derivative filter: the filtered rate errors of the previous period [rad/s], as the
+            last call returned them; None: every episode starts now. Without one: passed through.
+        episode_start : array_like of bool, shape (n,), optional
+            Copies whose episode starts at this observation: their filter restarts (SB3's meaning).
+        deterministic
+            SB3's interface; unused (the law is deterministic).
 
         Returns
         -------
         action : ndarray of float32, shape (3,) or (n, 3)
             lat, lon, ped offsets from trim in [-1, 1].
         state
-            ``state`` unchanged.
+            With a filter: the new filter state (pass it back next period); without one ``state`` unchanged.
         """
-        return np.clip(self.command(observation), -1.0, 1.0).astype(np.float32), state
+        if not self.filtered:
+            return np.clip(self.command(observation), -1.0, 1.0).astype(np.float32), state
+        command, state = self.step(observation, state, episode_start)
+        return np.clip(command, -1.0, 1.0).astype(np.float32), state
 
     def command(self, observation) -> np.ndarray:
-        """The unclipped command ``sign * (kp * attitude_error + kd * rate_error)`` [stick], float64,
-        shape (3,) or (n, 3); :meth:`predict` clips it (a residual agent adds to it first)."""
+        """The unclipped command of the unfiltered law ``sign * (kp * attitude_error + kd * rate_error)``
+        [stick], float64, shape (3,) or (n, 3); :meth:`predict` clips it (:meth:`step` is the law with the
+        filter)."""
+        obs = self._checked(observation)
+        return pd_command(self._kp, self._kd, self._sign, obs[..., 0:3], obs[..., 6:9])  # the one PD law
+
+    def step(self, observation, state=None, episode_start=None):
+        """The unclipped command with the derivative filter, and the filter's new state.
+
+        Parameters and ``state`` as :meth:`predict`. Returns ``(command, state)``: float64 of shape
+        (3,) or (n, 3) [stick], and the filtered rate errors [rad/s] (None without a filter, where
+        the command is :meth:`command`'s). A residual agent adds its correction to this command.
+        """
+        obs = self._checked(observation)
+        if not self.filtered:
+            return pd_command(self._kp, self._kd, self._sign, obs[..., 0:3], obs[..., 6:9]), None
+        e_rate = obs[..., 6:9]
+        previous, start = self._memory(state, episode_start, e_rate.shape)
+        y = np.where(self._poles > 0, filtered_rate(previous, e_rate, self._poles, start), e_rate)
+        return pd_command(self._kp, self._kd, self._sign, obs[..., 0:3], y), y
+
+    @staticmethod
+    def _checked(observation) -> np.ndarray:
         obs = np.asarray(observation, dtype=np.float64)
         if obs.ndim not in (1, 2) or obs.shape[-1] != OBS_DIM:
             raise ValueError(f"observation must have shape ({OBS_DIM},) or (n, {OBS_DIM}), got {obs.shape}")
-        return pd_command(self._kp, self._kd, self._sign, obs[..., 0:3], obs[..., 6:9])  # the one PD law
+        return obs
+
+    @staticmethod
+    def _memory(state, episode_start, shape):
+        """(previous filter output or None, per-row restart mask or None) for rate errors of ``shape``."""
+        if state is None:
+            return None, None
+        previous = np.asarray(state, dtype=np.float64)
+        if previous.shape != shape:
+            raise ValueError(f"state must be the filter state the last predict returned, shape {shape}, got "
+                             f"{previous.shape} (pass state=None at the first observation)")
+        if episode_start is None:
+            return previous, None
+        start = np.asarray(episode_start, dtype=bool).reshape(-1)
+        rows = shape[0] if len(shape) == 2 else 1
+        if start.size != rows:
+            raise ValueError(f"episode_start must hold one flag per observation ({rows}), got {start.size}")
+        return previous, (start[:, None] if len(shape) == 2 else bool(start[0]))
 
     def document(self, metadata=None) -> dict:
-        """The JSON document :meth:`save` writes."""
-        return jsonable({
-            "schema": SCHEMA, "schema_version": SCHEMA_VERSION,
-            "law": "action = clip(sign * (kp * attitude_error + kd * rate_error), -1, 1) per axis",
-            "axes": list(AXES), "kp": self.gains.kp, "kd": self.gains.kd, "signs": self.signs,
-            "units": {"kp": "stick/rad", "kd": "stick/(rad/s)", "signs": "-"},
-            "metadata": dict(metadata or {}),
-        })
+        """The JSON document :meth:`save` writes (schema version 1 without a filter, 2 with one)."""
+        doc = {"schema": SCHEMA, "schema_version": SCHEMA_VERSION if self.filtered else 1,
+               "law": "action = clip(sign * (kp * attitude_error + kd * rate_error), -1, 1) per axis",
+               "axes": list(AXES), "kp": self.gains.kp, "kd": self.gains.kd, "signs": self.signs,
+               "units": {"kp": "stick/rad", "kd": "stick/(rad/s)", "signs": "-"}}
+        if self.filtered:
+            doc["law"] = ("action = clip(sign * (kp * attitude_error + kd * y), -1, 1) per axis, y = a * y_prev "
+                          "+ (1 - a) * rate_error, a = exp(-2 pi d_filter_hz dt) (y = rate_error at an episode's "
+                          "start; no filter where d_filter_hz is null)")
+            doc.update(d_filter_hz=self.gains.d_filter_hz, dt=self.dt)
+            doc["units"].update(d_filter_hz="Hz", dt="s")
+        doc["metadata"] = dict(metadata or {})
+        return jsonable(doc)
+
+    @classmethod
+    def from_document(cls, doc: dict) -> "PDController":
+        """The controller of a :meth:`document` (KeyError for a missing entry, ValueError for a bad one)."""
+        if doc.get("schema_version", 1) == 1:
+            return cls(PDGains(doc["kp"], doc["kd"]), doc["signs"])
+        return cls(PDGains(doc["kp"], doc["kd"], doc["d_filter_hz"]), doc["signs"], doc["dt"])
 
     def save(self, path, metadata=None) -> Path:
         """Write the controller as JSON, atomically. Returns the path.
@@ -171,12 +268,13 @@ class PDController:
         if not isinstance(doc, dict) or doc.get("schema") != SCHEMA:
             got = doc.get("schema") if isinstance(doc, dict) else type(doc).__name__
             raise ValueError(f"{path}: expected schema {SCHEMA!r}, got {got!r}")
-        if doc.get("schema_version") != SCHEMA_VERSION:
-            raise ValueError(f"{path}: expected schema_version {SCHEMA_VERSION}, got {doc.get('schema_version')!r}")
-        missing = [k for k in ("kp", "kd", "signs") if k not in doc]
+        version = doc.get("schema_version")
+        if version not in (1, SCHEMA_VERSION):
+            raise ValueError(f"{path}: expected schema_version 1 or {SCHEMA_VERSION}, got {version!r}")
+        missing = [k for k in ("kp", "kd", "signs") + (("d_filter_hz", "dt") if version == 2 else ()) if k not in doc]
         if missing:
             raise ValueError(f"{path}: missing {', '.join(missing)}")
         try:
-            return cls(PDGains(doc["kp"], doc["kd"]), doc["signs"])
+            return cls.from_document(doc)
         except ValueError as e:
             raise ValueError(f"{path}: {e}") from e

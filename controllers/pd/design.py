@@ -6,10 +6,26 @@ For a crossover frequency ``wc`` the two gains follow in closed form from
 that the closed loop's bandwidth is the one asked for (:func:`propose_gains`).
 The frequency responses of the search are plain numpy (:class:`_Responses`);
 the result is checked with :func:`controllers.pd.analysis.loop_analysis`.
+
+The derivative filter
+---------------------
+A PD whose D term sees the raw gyro rate puts ``kd`` times the gyro noise on the
+stick every period: the shipped model's designed PD moved its stick by 0.27 (roll) and
+0.42 (pitch) RMS *per 10 ms step*, more than the stick's own RMS (0.18, 0.27). The
+design can put a first-order low-pass on the D term
+(:func:`controllers.pd.law.filtered_rate`) and design *with* it in the loop, so the
+gains still reach the bandwidth and the phase margin asked for. Its cutoff follows the
+rule ``f_c = N · ω_c / 2π`` (``N`` = :data:`D_FILTER_RATIO` times the loop's crossover
+``ω_c``: far enough above the crossover that the filter's lag there, ``atan(1/N)``, stays a
+few degrees, which the design makes up with lead at the cost of a little ``kp``), or is
+given in Hz. ``d_filter_hz="auto"`` asks for the rule, the default of
+``heli design`` (:data:`DEFAULT_D_FILTER`); the library's default stays None (no filter), so
+the gains of existing callers do not change.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -20,22 +36,58 @@ from heli_core.terms import AXES
 
 from .analysis import _HALF_POWER, _first_drop, loop_analysis
 from .controller import PDGains
-from .law import _axis_index, control_sign
+from .law import _axis_index, check_cutoff, control_sign, derivative_pole, law_state_space
 from .linearisation import _axis_ss, _check_delay, _check_dt, _sampled
+
+D_FILTER_RATIO = 20.0
+"""The derivative filter's cutoff as a multiple of the loop's crossover frequency (``d_filter_hz="auto"``).
+
+Measured on the shipped model (``scripts/d_filter_study.py``, docs/controllers.md "The derivative filter"):
+with the phase margin held, every filter costs ``kp`` (the design buys back the filter's lag with lead,
+which lowers the gain at crossover) and the p90 grows with it. At 20 x crossover (about 22 Hz on roll and
+pitch) the p90 grows by 3 % and the stick's RMS increment per period falls by 28 %; at 10 x by 10 % and
+50 %. The default keeps the p90 within a few per cent; a lower cutoff is a choice (``--d-filter-hz``)."""
+DEFAULT_D_FILTER = "auto"
+"""``heli design``'s derivative filter: the :data:`D_FILTER_RATIO` rule."""
+
+
+def check_d_filter(d_filter_hz):
+    """None, ``"auto"`` or a cutoff > 0 [Hz]; ValueError otherwise."""
+    if isinstance(d_filter_hz, str) and d_filter_hz == "auto":
+        return d_filter_hz
+    return check_cutoff(d_filter_hz)
 
 
 class _Responses:
-    """Fast frequency responses of the signed stick-to-angle and stick-to-rate channels (numpy)."""
+    """Fast frequency responses of the signed stick-to-angle and stick-to-(filtered) rate channels (numpy).
 
-    def __init__(self, params, axis, dt, delay_steps):
+    ``d_filter`` is the design's filter request (None, "auto" or Hz); :meth:`at_crossover` gives the
+    responses with the filter a design of crossover ``wc`` carries (``cutoff``, Hz or None).
+    """
+
+    def __init__(self, params, axis, dt, delay_steps, d_filter=None, ratio: float = D_FILTER_RATIO):
         self.dt = dt
+        self.ratio = float(ratio)
         self.sign = control_sign(params, axis)
         A, B, C = _sampled(params, axis, dt, delay_steps)
         self.A, self.b, self.C = A, B[:, 0], C
+        self.d_filter = check_d_filter(d_filter)
+        self.cutoff = None if self.d_filter == "auto" else self.d_filter
+
+    def at_crossover(self, wc: float) -> "_Responses":
+        """These responses with the filter of a design crossing over at ``wc`` [rad/s]."""
+        if self.d_filter != "auto":
+            return self
+        other = copy.copy(self)
+        other.cutoff = self.ratio * wc / (2.0 * math.pi)
+        return other
 
     def stable(self, kp, kd) -> bool:
-        """Closed-loop stability of the gains (eigenvalues of A - b s [kp, kd] C)."""
-        ev = np.linalg.eigvals(self.A - self.sign * np.outer(self.b, kp * self.C[0] + kd * self.C[1]))
+        """Closed-loop stability of the gains with this filter (eigenvalues of the plant and the law closed)."""
+        Ak, Bk, Ck, Dk = law_state_space(kp, kd, self.sign, self.cutoff, self.dt)
+        b = self.b[:, None]
+        Acl = np.block([[self.A - b @ Dk @ self.C, b @ Ck], [-Bk @ self.C, Ak]])
+        ev = np.linalg.eigvals(Acl)
         return bool(np.all(np.abs(ev) < 1.0)) if self.dt else bool(np.all(ev.real < 0.0))
 
     def __call__(self, w):
@@ -45,7 +97,16 @@ class _Responses:
         M = z[:, None, None] * np.eye(n) - self.A
         x = np.linalg.solve(M, np.broadcast_to(self.b.astype(complex), (w.size, n))[..., None])[..., 0]
         g = self.sign * (x @ self.C.T)  # (nw, 2): angle, rate
-        return g[:, 0], g[:, 1]
+        return g[:, 0], g[:, 1] * self._filter(z)
+
+    def _filter(self, z):
+        """The derivative filter's response at ``z`` (``s`` in continuous time); 1 without one."""
+        if self.cutoff is None:
+            return 1.0
+        if self.dt:
+            a = derivative_pole(self.cutoff, self.dt)
+            return (1.0 - a) * z / (z - a)
+        return 1.0 / (1.0 + z / (2.0 * math.pi * self.cutoff))
 
 
 def _design_at(resp: _Responses, wc: float, pm: float):
@@ -55,8 +116,10 @@ def _design_at(resp: _Responses, wc: float, pm: float):
     equations). If that needs kd < 0 the plant alone already has more margin:
     pure P is returned (margin above ``pm``). kp < 0 means the phase lead a PD
     can give is not enough: None; so is a design whose closed loop is unstable
-    (the phase has wrapped past -180° at ``wc``).
+    (the phase has wrapped past -180° at ``wc``). ``resp`` carries the filter of a
+    design at ``wc`` (:meth:`_Responses.at_crossover`, called here).
     """
+    resp = resp.at_crossover(wc)
     ga, gr = resp(wc)
     ga, gr = complex(ga[0]), complex(gr[0])
     target = -np.exp(1j * math.radians(pm))
@@ -86,7 +149,7 @@ def _bandwidth_of(resp: _Responses, kp: float, kd: float) -> float:
 def _bw_at(resp: _Responses, wc: float, pm: float) -> float:
     """Bandwidth of the design at crossover ``wc`` and margin ``pm``; -1 where there is none."""
     g = _design_at(resp, wc, pm)
-    return _bandwidth_of(resp, *g) if g else -1.0
+    return _bandwidth_of(resp.at_crossover(wc), *g) if g else -1.0
 
 
 def _max_bandwidth(resp: _Responses, pm: float, w_grid) -> float:
@@ -96,7 +159,8 @@ def _max_bandwidth(resp: _Responses, pm: float, w_grid) -> float:
 
 
 def propose_gains(params: ModelParams, axis, bandwidth: float | None = None, phase_margin: float = 45.0,
-                  dt: float = 0.01, delay_steps: int = 0):
+                  dt: float = 0.01, delay_steps: int = 0, d_filter_hz=None,
+                  d_filter_ratio: float = D_FILTER_RATIO):
     """PD gains reaching a closed-loop bandwidth with at least a phase margin.
 
     For a crossover frequency ``wc`` the two gains follow in closed form from
@@ -122,6 +186,12 @@ def propose_gains(params: ModelParams, axis, bandwidth: float | None = None, pha
         Control period [s] (0: continuous time).
     delay_steps : int
         Periods of action delay.
+    d_filter_hz : None, "auto" or float
+        The derivative filter designed with (module docstring): None none, "auto" the cutoff
+        ``d_filter_ratio`` times the crossover, a number the cutoff [Hz]. A pure P design
+        carries none.
+    d_filter_ratio : float
+        The rule's multiple of the crossover (default :data:`D_FILTER_RATIO`), > 0.
 
     Returns
     -------
@@ -130,6 +200,7 @@ def propose_gains(params: ModelParams, axis, bandwidth: float | None = None, pha
     kd : float
         [stick/(rad/s)]
     analysis : LoopAnalysis
+        With the filter chosen (``analysis.d_filter_hz``, Hz or None).
 
     Raises
     ------
@@ -143,7 +214,10 @@ def propose_gains(params: ModelParams, axis, bandwidth: float | None = None, pha
     nd = _check_delay(delay_steps, dt)
     if not (isinstance(phase_margin, (int, float, np.floating)) and 0 < phase_margin < 180):
         raise ValueError(f"phase_margin must be in (0, 180) degrees, got {phase_margin!r}")
-    resp = _Responses(params, i, dt, nd)
+    if not (isinstance(d_filter_ratio, (int, float, np.floating)) and math.isfinite(d_filter_ratio)
+            and d_filter_ratio > 0):
+        raise ValueError(f"d_filter_ratio must be a positive multiple of the crossover, got {d_filter_ratio!r}")
+    resp = _Responses(params, i, dt, nd, d_filter_hz, d_filter_ratio)
     w_top = 0.98 * math.pi / dt if dt else 1e3
     w_grid = np.geomspace(1e-2, w_top, 160)
     bandwidth = _feasible_bandwidth(params, resp, i, bandwidth, phase_margin, w_grid)
@@ -153,7 +227,8 @@ def propose_gains(params: ModelParams, axis, bandwidth: float | None = None, pha
         raise ValueError(f"{AXES[i]}: no PD design reaches {bandwidth:g} rad/s with a phase margin of "
                          f"{phase_margin:g} deg; ask for a lower bandwidth or margin")
     kp, kd = design
-    an = loop_analysis(params, i, kp, kd, dt, nd)
+    cutoff = resp.at_crossover(wc).cutoff if kd > 0 else None
+    an = loop_analysis(params, i, kp, kd, dt, nd, cutoff)
     if not (an.stable and an.phase_margin >= phase_margin - 1e-6):
         raise ValueError(
             f"{AXES[i]}: the design for {bandwidth:g} rad/s (kp={kp:.4g}, kd={kd:.4g}) has a phase margin of only "
@@ -209,16 +284,23 @@ def _best_margin(resp, bandwidth, w_grid, upper):
 
 
 def design_gains(params: ModelParams, bandwidth=None, phase_margin: float = 45.0, dt: float = 0.01,
-                 delay_steps: int = 0) -> PDGains:
-    """:func:`propose_gains` on roll, pitch and yaw; ``bandwidth`` is one value, three, or None.
+                 delay_steps: int = 0, d_filter_hz=None, d_filter_ratio: float = D_FILTER_RATIO) -> PDGains:
+    """:func:`propose_gains` on roll, pitch and yaw; ``bandwidth`` is one value, three, or None;
+    ``d_filter_hz`` one request (None, "auto", Hz) or three, ``d_filter_ratio`` the rule's multiple.
 
     Returns
     -------
     PDGains
+        With each axis' derivative filter (``d_filter_hz``).
     """
     bws = [bandwidth] * 3 if bandwidth is None or np.ndim(bandwidth) == 0 else list(bandwidth)
     if len(bws) != 3:
         raise ValueError(f"bandwidth must be None, a number or 3 numbers (roll, pitch, yaw), got {bandwidth!r}")
-    out = [propose_gains(params, a, b, phase_margin, dt, delay_steps)[:2] for a, b in zip(AXES, bws)]
-    return PDGains(kp=[g[0] for g in out], kd=[g[1] for g in out])
+    cuts = [d_filter_hz] * 3 if d_filter_hz is None or isinstance(d_filter_hz, str) or np.ndim(d_filter_hz) == 0 \
+        else list(d_filter_hz)
+    if len(cuts) != 3:
+        raise ValueError(f"d_filter_hz must be None, 'auto', a cutoff in Hz or 3 of them, got {d_filter_hz!r}")
+    out = [propose_gains(params, a, b, phase_margin, dt, delay_steps, c, d_filter_ratio)
+           for a, b, c in zip(AXES, bws, cuts)]
+    return PDGains(kp=[g[0] for g in out], kd=[g[1] for g in out], d_filter_hz=[g[2].d_filter_hz for g in out])
 

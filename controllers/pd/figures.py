@@ -50,7 +50,8 @@ def plot_step_responses(params: ModelParams, gains: PDGains, path, dt: float = 0
         Duration [s]; default 40/bandwidth of the slowest axis (0.5 s to 30 s).
     """
     plt = _pyplot()
-    analyses = [loop_analysis(params, a, *gains.axis(a), dt, delay_steps) for a in AXES]
+    analyses = [loop_analysis(params, a, *gains.axis(a), dt, delay_steps, gains.d_filter_hz[i])
+                for i, a in enumerate(AXES)]
     if t_final is None:
         bws = [a.bandwidth for a in analyses if a.bandwidth and math.isfinite(a.bandwidth) and a.bandwidth > 0]
         t_final = min(max(40.0 / min(bws), 0.5), 30.0) if bws else 5.0
@@ -79,15 +80,16 @@ def plot_step_responses(params: ModelParams, gains: PDGains, path, dt: float = 0
     return save_figure(fig, path, dpi=110)
 
 
-def plot_bode(params: ModelParams, axis, kp: float, kd: float, path, dt: float = 0.01, delay_steps: int = 0) -> Path:
+def plot_bode(params: ModelParams, axis, kp: float, kd: float, path, dt: float = 0.01, delay_steps: int = 0,
+              d_filter_hz: float | None = None) -> Path:
     """Bode plot of the loop ``L`` with its gain and phase margins marked; saved atomically.
 
-    The sampled loop (the environment's) is drawn with its margins; the
-    continuous loop ``s (kp + kd s) P(s)`` is overlaid dashed to show what the
-    zero-order hold and any delay cost in phase.
+    The sampled loop (the environment's, with the derivative filter ``d_filter_hz`` when given) is
+    drawn with its margins; the continuous loop ``s (kp + kd s) P(s)`` is overlaid dashed to show what
+    the zero-order hold and any delay cost in phase.
     """
     plt = _pyplot()
-    an = loop_analysis(params, axis, kp, kd, dt, delay_steps)
+    an = loop_analysis(params, axis, kp, kd, dt, delay_steps, d_filter_hz)
     w_hi = math.pi / dt if dt else 1e3
     omega = np.geomspace(1e-2, w_hi * (0.999 if dt else 1.0), 800)
     fig, (ax_m, ax_p) = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True)
@@ -128,7 +130,8 @@ def plot_bode(params: ModelParams, axis, kp: float, kd: float, path, dt: float =
     ax_m.legend(fontsize=8, loc="lower left")
     for ax in (ax_m, ax_p):
         ax.grid(True, which="both", alpha=0.3)
-    ax_m.set_title(f"{an.axis} loop: kp={an.kp:.3g} stick/rad, kd={an.kd:.3g} stick/(rad/s); "
+    cut = "" if an.d_filter_hz is None else f", D filter {an.d_filter_hz:.3g} Hz"
+    ax_m.set_title(f"{an.axis} loop: kp={an.kp:.3g} stick/rad, kd={an.kd:.3g} stick/(rad/s){cut}; "
                    f"crossover {an.gain_crossover:.3g} rad/s, closed-loop bw {an.bandwidth:.3g} rad/s, "
                    f"{'stable' if an.stable else 'UNSTABLE'}", fontsize=9)
     fig.tight_layout()

@@ -136,3 +136,38 @@ def filtered_rate(previous, e_rate, pole, start=None):
         return e_rate
     y = pole * previous + (1.0 - pole) * e_rate
     return y if start is None else np.where(start, e_rate, y)
+
+
+def law_state_space(kp: float, kd: float, sign: float, cutoff_hz=None, dt: float = 0.0):
+    """The per-axis PD law as a linear system from (attitude error, rate error) to the stick offset.
+
+    ``(Ak, Bk, Ck, Dk)`` with ``w' = Ak w + Bk e`` (``w[k+1]`` for ``dt > 0``), ``u = Ck w + Dk e``,
+    ``e = (e_angle, e_rate)``. Without a filter there is no state (``Ak`` is 0 × 0) and ``Dk = s (kp, kd)``.
+    With one, sampled (``dt > 0``): ``w`` is the filter's previous output, ``Ak = a``, ``Bk = (0, 1 - a)``,
+    ``Ck = s kd a``, ``Dk = s (kp, kd (1 - a))`` (:func:`filtered_rate`); continuous (``dt = 0``):
+    ``w`` is the filtered rate error, ``tau w' = e_rate - w``, ``Ck = s kd``, ``Dk = s (kp, 0)``.
+
+    Parameters
+    ----------
+    kp, kd : float
+        Gains [stick/rad], [stick/(rad/s)].
+    sign : float
+        Sign of the axis' control gain.
+    cutoff_hz : float or None
+        The derivative filter's cutoff [Hz]; None: none.
+    dt : float
+        Control period [s]; 0 for continuous time.
+
+    Returns
+    -------
+    Ak (m, m), Bk (m, 2), Ck (1, m), Dk (1, 2) : ndarray, m = 0 or 1
+    """
+    cutoff_hz = check_cutoff(cutoff_hz)
+    if cutoff_hz is None:
+        return np.zeros((0, 0)), np.zeros((0, 2)), np.zeros((1, 0)), sign * np.array([[kp, kd]], dtype=float)
+    if dt:
+        a = derivative_pole(cutoff_hz, dt)
+        return (np.array([[a]]), np.array([[0.0, 1.0 - a]]), np.array([[sign * kd * a]]),
+                sign * np.array([[kp, kd * (1.0 - a)]]))
+    w = 2.0 * math.pi * cutoff_hz
+    return np.array([[-w]]), np.array([[0.0, w]]), np.array([[sign * kd]]), sign * np.array([[kp, 0.0]])

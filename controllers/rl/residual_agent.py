@@ -42,7 +42,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import AgentError
-from ..pd.controller import PDController, PDGains
+from ..pd.controller import PDController
 
 RESIDUAL_SCALE = 0.3
 """Default bound of the residual [stick]: the policy's action in [-1, 1] times this. 0.05 left the residual
@@ -94,6 +94,9 @@ class ResidualAgent:
         agent keeps them in ``predict``'s ``state`` as SB3's ``VecFrameStack`` stacks them in training
         (zeros before an episode's first observation); pass ``episode_start`` at each episode's first
         step, as SB3's ``evaluate_policy`` and :func:`controllers.evaluate.evaluate_agent` do.
+
+    A base with a derivative filter keeps its filter state beside the policy's: ``state`` is then the
+    pair ``(policy or history state, filter state)``.
     """
 
     def __init__(self, base: PDController, policy, scale: float = RESIDUAL_SCALE, history: int = 1):
@@ -110,14 +113,19 @@ class ResidualAgent:
         ``history`` > 1 carry the stacked observations (returned as the new ``state``)."""
         obs = np.asarray(observation, dtype=np.float64)
         seen = np.asarray(observation, dtype=np.float32)
+        d_state = None
+        if self.base.filtered and state is not None:
+            state, d_state = state
         if self.history > 1:
             state = stack_observations(seen, state, episode_start, self.history)
             seen, policy_state = (state[0] if obs.ndim == 1 else state), None
         else:
             policy_state = state
         residual, policy_state = self.policy.predict(seen, policy_state, episode_start, deterministic)
-        act = self.base.command(obs) + self.scale * np.clip(residual, -1.0, 1.0)
-        return np.clip(act, -1.0, 1.0).astype(np.float32), (state if self.history > 1 else policy_state)
+        command, d_state = self.base.step(obs, d_state, episode_start)
+        act = command + self.scale * np.clip(residual, -1.0, 1.0)
+        state = state if self.history > 1 else policy_state
+        return np.clip(act, -1.0, 1.0).astype(np.float32), ((state, d_state) if self.base.filtered else state)
 
 
 def check_history(history) -> int:
@@ -171,13 +179,15 @@ def residual_env(venv, base: PDController, scale: float, paired: bool = False):
             if paired:  # SB3 sees the first half; the wrapper's own bookkeeping is per shown copy
                 VecEnv.__init__(self, half, venv.observation_space, venv.action_space)
             self._obs = None
+            self._filter, self._starts = None, None  # the base's derivative filter state, copies just reset
 
         def reset(self):
             self._obs = self.venv.reset()
+            self._filter = self._starts = None
             return self._obs[:half]
 
         def step_async(self, actions):
-            command = base.command(np.asarray(self._obs, dtype=np.float64))
+            command, self._filter = base.step(np.asarray(self._obs, dtype=np.float64), self._filter, self._starts)
             act = command[:half] + scale * np.clip(actions, -1.0, 1.0)
             if paired:
                 act = np.concatenate([act, command[half:]])
@@ -186,6 +196,7 @@ def residual_env(venv, base: PDController, scale: float, paired: bool = False):
         def step_wait(self):
             obs, rewards, dones, infos = self.venv.step_wait()
             self._obs = obs  # after a done: the next episode's first observation, what the next action sees
+            self._starts = np.asarray(dones, dtype=bool)  # those copies' filters restart at it
             if paired:
                 rewards = (rewards[:half] - rewards[half:]).astype(np.float32)
             return obs[:half], rewards, dones[:half], infos[:half]
@@ -208,8 +219,7 @@ def residual_from_metadata(meta: dict, policy, path) -> ResidualAgent:
     """
     entry = meta.get("residual")
     try:
-        doc = entry["base"]
-        base = PDController(PDGains(doc["kp"], doc["kd"]), doc["signs"])
+        base = PDController.from_document(entry["base"])
         return ResidualAgent(base, policy, entry["scale"], entry.get("history", 1))
     except (TypeError, KeyError, ValueError, AgentError) as e:
         raise AgentError(f"{path}: the residual entry of its metadata is not a base PD and a scale ({e!r})") from e
