@@ -91,6 +91,9 @@ class LoopRecord:
         Periods where the PD command or the stick (trim + offset) was clipped.
     omax : ndarray, shape (g, W)
         Largest |angle| of the two held axes [rad].
+    axes : ndarray of float32, shape (3, g, n, W), optional
+        Attitude error of every axis at the start of each period [rad]: recorded by loops that keep memory
+        and run at their own rate (:func:`_fly_substeps`), whose sets fly all three axes at once; None else.
     """
 
     att: np.ndarray
@@ -98,6 +101,7 @@ class LoopRecord:
     act: np.ndarray
     sat: np.ndarray
     omax: np.ndarray
+    axes: np.ndarray | None = None
 
 
 def zoh_step(params, dt: float):
@@ -176,7 +180,9 @@ def fly(step, inputs: LoopInputs, autopilot: Autopilot, max_batch: int = 4096, p
         ``step(x, u, d)`` advancing the state one period (:func:`zoh_step` or :func:`rk4_step`).
     inputs : LoopInputs
     autopilot : Autopilot
-        The pairs flown on the swept axis, the held axes' gains and the signs assumed.
+        The pairs flown on the swept axis, the held axes' gains and the signs assumed; or a loop that keeps
+        memory and runs ``substeps`` ticks per period (:class:`controllers.firmware.autopilot.FirmwareAutopilot`,
+        flown by :func:`_fly_substeps`; ``step`` then advances one tick, ``dt / substeps``).
     max_batch : int
         Pair × window states stepped at once; chunks hold ``max(1, max_batch // W)`` pairs.
     progress : bool
@@ -197,6 +203,9 @@ def fly(step, inputs: LoopInputs, autopilot: Autopilot, max_batch: int = 4096, p
             np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         for c0 in range(0, G, cp):
             sl = slice(c0, min(G, c0 + cp))
+            if getattr(autopilot, "substeps", None):  # a loop with memory at its own rate (controllers.firmware)
+                yield sl, _fly_substeps(step, ins, autopilot, sl, bar)
+                continue
             yield sl, _fly_chunk(step, ins, autopilot.axis, autopilot.gains(sl), autopilot.signs,
                                  sl.stop - sl.start, bar, autopilot.d_poles)
 
@@ -243,6 +252,53 @@ def _fly_chunk(step, ins: dict, ax: int, gains, signs, g: int, bar, d_poles=None
                 rec.sat += (a != u) | (s != t_i + a)
         rec.omax = np.maximum(rec.omax, np.maximum(np.abs(ang[others[0]]), np.abs(ang[others[1]])))
         x = step(x, (sticks[0], sticks[1], col[k], sticks[2]), (torque[0][k], torque[1][k], torque[2][k]))
+        if k % PROGRESS_EVERY == PROGRESS_EVERY - 1:
+            bar.update(PROGRESS_EVERY * g * W)
+    bar.update((n % PROGRESS_EVERY) * g * W)
+    return rec
+
+
+def _fly_substeps(step, ins: dict, autopilot, sl: slice, bar) -> LoopRecord:
+    """One chunk of a loop with memory at its own rate: ``autopilot.substeps`` ticks per period.
+
+    ``step`` advances the physics one tick; the sticks change every tick (``autopilot.command`` on the state
+    of that instant), the gust, the collective, the trim and the sensor errors are held over the period.
+    ``autopilot.start(sl, W)`` gives the loops' memory at rest, ``autopilot.command(memory, e_ang, rates, sl)``
+    the stick offsets (3, g, W) before the clip to [-1, 1], the new memory and where the loop clamped its
+    output. Records are taken at the first tick of each period, the swept axis' as :func:`_fly_chunk` takes
+    them and every axis' attitude error in ``axes``.
+    """
+    trim, torque, col = ins["trim"], ins["torque"], ins["col"]
+    att_noise, rate_noise = ins["att_noise"], ins["rate_noise"]
+    n, W = col.shape
+    g, ax, m = sl.stop - sl.start, autopilot.axis, int(autopilot.substeps)
+    z = np.zeros((g, W))
+    x = (z, z, z, z + trim[0][0], z + trim[1][0], z + trim[2][0], z + 1.0, z, z, z)
+    rec = LoopRecord(np.empty((g, n, W), dtype=np.float32), np.empty((g, n, W), dtype=np.float32),
+                     np.empty((g, n, W), dtype=np.float32), np.zeros((g, W)), np.zeros((g, W)),
+                     np.empty((3, g, n, W), dtype=np.float32))
+    others = [i for i in range(3) if i != ax]
+    memory = autopilot.start(sl, W)
+    for k in range(n):
+        t_k = np.stack([trim[i][k] for i in range(3)])[:, None, :]
+        d_k = (torque[0][k], torque[1][k], torque[2][k])
+        an = 0.0 if att_noise is None else np.stack([att_noise[i][k] for i in range(3)])[:, None, :]
+        rn = 0.0 if rate_noise is None else np.stack([rate_noise[i][k] for i in range(3)])[:, None, :]
+        clipped = np.zeros((g, W), dtype=bool)
+        for j in range(m):
+            ang = np.stack(euler_from_quaternion(x[6:10]))
+            u, memory, sat = autopilot.command(memory, -(ang + an), np.stack(x[0:3]) + rn, sl)
+            a = np.clip(u, -1.0, 1.0)
+            s = np.clip(t_k + a, -1.0, 1.0)
+            clipped |= sat[ax] | (a[ax] != u[ax]) | (s[ax] != t_k[ax] + a[ax])
+            if j == 0:
+                rec.axes[:, :, k] = -ang
+                rec.att[:, k] = -ang[ax]
+                rec.rate[:, k] = -x[ax]
+                rec.act[:, k] = s[ax] - t_k[ax]
+                rec.omax = np.maximum(rec.omax, np.maximum(np.abs(ang[others[0]]), np.abs(ang[others[1]])))
+            x = step(x, (s[0], s[1], col[k], s[2]), d_k)
+        rec.sat += clipped
         if k % PROGRESS_EVERY == PROGRESS_EVERY - 1:
             bar.update(PROGRESS_EVERY * g * W)
     bar.update((n % PROGRESS_EVERY) * g * W)
