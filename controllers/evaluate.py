@@ -14,7 +14,9 @@ states, and one agent evaluated twice gives identical results.
 Per axis (roll, pitch, yaw) the result reports the sweep's metrics
 (:func:`controllers.metrics.error_metrics`): RMS and 50/90/99th percentiles of
 |attitude error| [deg] and |rate error| [deg/s], stick RMS and p99, saturation
-fraction and a histogram. As in the sweep, each sample is the state at the start
+fraction and a histogram; and how hard the agent works its servos
+(:func:`controllers.servo_activity.stick_activity`: the stick's RMS increment per
+control period and its variance above 10 Hz). As in the sweep, each sample is the state at the start
 of a control period and the stick applied over it; by default episodes start
 level and at rest, as the sweep's replays do (``init_angle_deg=0``,
 ``init_rate_deg=0``), so the figures measure the gust response alone.
@@ -43,6 +45,7 @@ from .errors import AgentError
 from .evaluate_report import comparison_markdown, metrics_table  # noqa: F401  (public names of this module)
 from .evaluate_report import evaluation_markdown, plot_episode
 from .metrics import METRIC_NAMES, error_metrics
+from .servo_activity import stick_activity
 from .trace_split import TraceSplit, as_segments, draw_windows, split_traces
 
 SCHEMA = "heli-env/agent-evaluation"
@@ -57,7 +60,8 @@ def describe_agent(agent) -> tuple[str, str]:
     if isinstance(agent, PDController):
         kp = ", ".join(f"{v:.3g}" for v in agent.gains.kp)
         kd = ", ".join(f"{v:.3g}" for v in agent.gains.kd)
-        return "pd", f"PD kp=({kp}) kd=({kd})"
+        cut = ", ".join("none" if v is None else f"{v:.3g}" for v in agent.gains.d_filter_hz)
+        return "pd", f"PD kp=({kp}) kd=({kd})" + (f" D-filter=({cut}) Hz" if agent.filtered else "")
     if isinstance(agent, ResidualAgent):
         kind, desc = describe_agent(agent.policy)
         return f"{kind}-residual", f"{desc} ±{agent.scale:g} stick on {describe_agent(agent.base)[1]}"
@@ -87,6 +91,8 @@ class EvaluationResult:
         ``att_err_deg``, ``rate_err_deg_s``, ``action``, ``disturbance`` of shape
         (steps, episodes, 3), ``reward`` (steps, episodes), ``steps`` (episodes,):
         the recorded episodes (not written to JSON).
+    activity : dict of str -> dict
+        Per axis, the servo activity (:func:`controllers.servo_activity.stick_activity`).
     """
 
     name: str
@@ -95,6 +101,7 @@ class EvaluationResult:
     episodes: list
     settings: dict
     samples: dict = field(repr=False, default_factory=dict)
+    activity: dict = field(default_factory=dict)
 
     @property
     def mean_return(self) -> float:
@@ -108,7 +115,8 @@ class EvaluationResult:
         """Scalar metrics per axis, mean return and early ends (JSON-ready)."""
         return jsonable({"name": self.name, "kind": self.kind, "mean_return": self.mean_return,
                          "terminated_episodes": self.n_terminated, "episodes": len(self.episodes),
-                         "axes": {a: {k: self.metrics[a][k] for k in METRIC_NAMES} for a in AXES}})
+                         "axes": {a: {k: self.metrics[a][k] for k in METRIC_NAMES} for a in AXES},
+                         "servo_activity": self.activity})
 
     def representative_episode(self) -> int:
         """The episode whose RMS attitude error (three axes) is the median of the episodes' (lower median)."""
@@ -138,6 +146,13 @@ class EvaluationResult:
     def plot_episode(self, path, episode: int | None = None, others=()) -> Path:
         """PNG of one episode: attitude and reference, gust u_d and stick per axis (see :func:`plot_episode`)."""
         return plot_episode([self, *others], path, episode)
+
+    def plot_servo_activity(self, path, episode: int | None = None, others=()) -> Path:
+        """PNG of the stick's stretch and spectrum per axis
+        (:func:`controllers.servo_activity.plot_servo_activity`), ``others`` flown on the same gusts beside it."""
+        from .servo_activity import plot_servo_activity
+
+        return plot_servo_activity([self, *others], path, episode)
 
 
 # --------------------------------------------------------------------- evaluation
@@ -259,7 +274,8 @@ def evaluate_agent(agent, model=None, config: EvaluationConfig | None = None, *,
         "trace_ids_used": [env_model.trace_ids[t] for t in used], "split": split.to_dict(),
         "sample_rate": env_model.sample_rate, "seconds": seconds, "agent": desc,
     }
-    return EvaluationResult(name or desc, kind, metrics, episodes, settings, rec)
+    activity = stick_activity(rec["action"], rec["steps"], env.spec_.dt)
+    return EvaluationResult(name or desc, kind, metrics, episodes, settings, rec, activity)
 
 
 def _reset_on(env, windows, seed: int):

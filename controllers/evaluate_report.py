@@ -15,6 +15,8 @@ import numpy as np
 from heli_core.files import save_figure
 from heli_core.terms import AXES
 
+from .servo_activity import activity_table
+
 
 def evaluation_markdown(result) -> str:
     """A report of one agent's evaluation: settings, per-axis metrics, episodes."""
@@ -25,6 +27,8 @@ def evaluation_markdown(result) -> str:
              f"{st['traces_label']} traces {', '.join(st['trace_ids_used'])}, seed {st['seed']}; "
              + _start_text(st['init_angle_deg'], st['init_rate_deg']), "",
              metrics_table([result]), "",
+             "Servo activity (the stick's increment per control period shows chatter that the errors hide):", "",
+             activity_table([result]), "",
              f"Mean return {result.mean_return:.2f}; episodes ended early (|roll| or |pitch| > 60°): "
              f"{result.n_terminated} of {len(result.episodes)}.", "",
              "| episode | trace | offset [s] | steps | return | ended early |", "|---|---|---|---|---|---|"]

@@ -2,7 +2,9 @@
 
 Writes the controller that ``heli evaluate`` flies (``pd.json``), a Markdown table of
 the loop properties of each axis (``design.md``), the closed-loop step responses
-(``step.png``) and one Bode figure per axis (``bode_<axis>.png``).
+(``step.png``), one Bode figure per axis (``bode_<axis>.png``) and the servo activity of
+the design flown in the model's gusts beside the same design without its derivative
+filter (``servo.png``).
 """
 
 from __future__ import annotations
@@ -31,6 +33,22 @@ def _bandwidths(text):
     return vals[0] if len(vals) == 1 else vals
 
 
+def _d_filter(text):
+    """``auto`` (the design's rule), ``off``, one cutoff in Hz for every axis or three (roll,pitch,yaw)."""
+    word = str(text).strip().lower()
+    if word in ("auto", "off"):
+        return "auto" if word == "auto" else None
+    parts = [s for s in word.split(",") if s.strip()]
+    try:
+        vals = [float(s) for s in parts]
+    except ValueError:
+        vals = []
+    if len(vals) not in (1, 3) or not all(v > 0 and math.isfinite(v) for v in vals):
+        raise argparse.ArgumentTypeError(
+            f"expected 'auto', 'off', one positive cutoff in Hz or three (roll,pitch,yaw), got {text!r}")
+    return vals[0] if len(vals) == 1 else vals
+
+
 def register(sub):
     p = sub.add_parser(
         "design",
@@ -39,8 +57,10 @@ def register(sub):
         "(the Padé servo of eq. 31 included when identified), sampled at the control period by zero-order "
         "hold as the environment runs them: each axis reaches the requested closed-loop bandwidth with at "
         "least the requested phase margin (default bandwidth: five times the bare airframe's rate pole, or "
-        "half the largest the margin allows). Writes DIR/pd.json (the controller), design.md (margins, "
-        "crossover, bandwidth, closed-loop poles), step.png and bode_<axis>.png.",
+        "half the largest the margin allows). The D term is low-passed (--d-filter-hz; default: a cutoff 20 "
+        "times the loop's crossover) and the design includes the filter, so the margins hold for the filtered "
+        "PD. Writes DIR/pd.json (the controller), design.md (margins, crossover, bandwidth, closed-loop poles, "
+        "servo activity), step.png, bode_<axis>.png and servo.png.",
     )
     p.add_argument("--model", metavar="DIR", default=None,
                    help="model directory written by 'heli identify' (default: the model shipped with heli-env)")
@@ -49,37 +69,77 @@ def register(sub):
                    help="least phase margin in deg (default 45)")
     p.add_argument("--bandwidth", type=_bandwidths, default=None, metavar="W[,W,W]",
                    help="closed-loop -3 dB bandwidth in rad/s, one for all axes or roll,pitch,yaw")
+    p.add_argument("--d-filter-hz", type=_d_filter, default="auto", metavar="auto|off|F[,F,F]",
+                   help="first-order low-pass on the D term: 'auto' (default) a cutoff 20 times each loop's "
+                   "crossover (controllers.pd.D_FILTER_RATIO), 'off' none, or a cutoff in Hz for every axis or "
+                   "roll,pitch,yaw; the design keeps the phase margin with the filter in the loop")
     p.add_argument("--dt", type=number("a control period in s, 0 < dt < 1", 0.0, 1.0),
                    default=0.01, help="control period in s (default 0.01, the env's)")
     p.add_argument("--out", default=DEFAULT_OUT, type=output_path, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
-    p.add_argument("--no-plots", action="store_true", help="do not draw step.png and the Bode figures")
+    p.add_argument("--no-plots", action="store_true",
+                   help="do not draw step.png, the Bode figures and servo.png (nor fly the design for the last)")
     p.set_defaults(func=run, out_kind="dir")
 
 
-def design_markdown(model_path, analyses, phase_margin, bandwidth, plots: bool = True) -> str:
-    """The design report: one row per axis of :meth:`controllers.pd.LoopAnalysis.summary`."""
+def design_markdown(model_path, analyses, phase_margin, bandwidth, plots: bool = True, activity=None) -> str:
+    """The design report: one row per axis of :meth:`controllers.pd.LoopAnalysis.summary`, and the servo
+    activity table (``activity``, Markdown) when the design was flown."""
     asked = "default (5 x rate pole)" if bandwidth is None else f"{bandwidth} rad/s"
     lines = [
         "# PD attitude controller", "",
         f"Model: `{model_path}`. Requested phase margin {phase_margin:g} deg, bandwidth {asked}; "
-        "loop analysed in discrete time (zero-order hold at the control period).", "",
-        "| axis | kp [stick/rad] | kd [stick/(rad/s)] | phase margin [deg] | gain margin [dB] | crossover [rad/s] "
-        "| bandwidth [rad/s] | largest pole radius | stable |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "loop analysed in discrete time (zero-order hold at the control period), the derivative filter included.",
+        "",
+        "| axis | kp [stick/rad] | kd [stick/(rad/s)] | D filter [Hz] | phase margin [deg] | gain margin [dB] "
+        "| crossover [rad/s] | bandwidth [rad/s] | largest pole radius | stable |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for an in analyses:
         s = an.summary()
 
         def f(v, spec=".3g"):
             return "—" if v is None else format(v, spec)
-        lines.append(f"| {an.axis} | {an.kp:.4g} | {an.kd:.4g} | {f(s['phase_margin_deg'], '.1f')} | "
+        lines.append(f"| {an.axis} | {an.kp:.4g} | {an.kd:.4g} | {f(an.d_filter_hz, '.3g') if an.d_filter_hz else 'none'} | "
+                     f"{f(s['phase_margin_deg'], '.1f')} | "
                      f"{f(s['gain_margin_db'], '.1f')} | {f(s['gain_crossover_rad_s'])} | "
                      f"{f(s['bandwidth_rad_s'])} | {f(s['max_pole_radius'], '.4f')} | {'yes' if an.stable else 'NO'} |")
-    lines += ["", "Control law per axis: `a = clip(sign(k)·(kp·e_angle + kd·e_rate), −1, 1)` on the "
-              "environment's observation.", ""]
+    lines += ["", "Control law per axis: `a = clip(sign(k)·(kp·e_angle + kd·y), −1, 1)` on the environment's "
+              "observation, `y` the rate error through the D filter (`y = a·y_prev + (1 − a)·e_rate`, "
+              "`a = exp(−2π·f_c·dt)`; `y = e_rate` without one).", ""]
+    if activity:
+        lines += ["## Servo activity", "", activity, ""]
     if plots:
         lines += ["![step responses](step.png)", ""] + [f"![Bode {an.axis}](bode_{an.axis}.png)" for an in analyses]
+        if activity:
+            lines += ["", "![servo activity](servo.png)"]
     return "\n".join(lines) + "\n"
+
+
+ACTIVITY_EPISODES = {"traces": "held-out", "episodes_per_trace": 2, "episode_seconds": 10.0}
+"""The gusts a design is flown on for its servo activity (a few seconds of work)."""
+
+
+def _servo_activity(env_model, params, gains, dt, out, design_kwargs):
+    """Fly the design (and, when it has a derivative filter, the same request without one) on held-out gusts;
+    the activity table's Markdown and the path of servo.png."""
+    from controllers.evaluate import evaluate_agent
+    from controllers.pd.controller import PDController
+    from controllers.pd.design import design_gains
+    from controllers.servo_activity import activity_table
+
+    flown = [("this design", gains)]
+    if gains.filtered:
+        flown.append(("same request, no D filter", design_gains(params, **{**design_kwargs, "d_filter_hz": None})))
+    results = [evaluate_agent(PDController.from_model(params, g, dt), env_model, name=name, **ACTIVITY_EPISODES)
+               for name, g in flown]
+    st = results[0].settings
+    where = (f"Flown in the model's gusts ({len(results[0].episodes)} episodes of {st['episode_seconds']:g} s on "
+             f"held-out traces {', '.join(st['trace_ids_used'])}, attitude hold, the model's sensors): the stick's "
+             "increment per control period is the chatter the servos see.")
+    p90 = "; ".join(f"{r.name}: p90 |attitude error| " + ", ".join(
+        f"{a} {r.metrics[a]['att_p90_deg']:.3g}°" for a in AXES) for r in results)
+    text = where + "\n\n" + activity_table(results) + "\n\n" + p90 + "."
+    return text, results[0].plot_servo_activity(out / "servo.png", others=results[1:])
 
 
 def run(args) -> int:
@@ -98,22 +158,32 @@ def run(args) -> int:
         progress.stage("designing the PD gains and analysing each axis' loop")
         env_model = load_env_model(args.model)
         params = env_model.params
+        request = {"bandwidth": args.bandwidth, "phase_margin": args.phase_margin, "dt": args.dt,
+                   "d_filter_hz": args.d_filter_hz}
         try:
-            gains = design_gains(params, bandwidth=args.bandwidth, phase_margin=args.phase_margin, dt=args.dt)
+            gains = design_gains(params, **request)
         except ValueError as e:  # an infeasible request: the message says what is achievable
             raise DesignError(str(e)) from e
-        analyses = [loop_analysis(params, ax, gains.kp[i], gains.kd[i], args.dt) for i, ax in enumerate(AXES)]
+        analyses = [loop_analysis(params, ax, gains.kp[i], gains.kd[i], args.dt, d_filter_hz=gains.d_filter_hz[i])
+                    for i, ax in enumerate(AXES)]
         out = Path(args.out)
-        pd = PDController.from_model(params, gains)
+        activity = None
+        if not args.no_plots:
+            progress.stage("flying the design in the model's gusts for its servo activity")
+            activity, servo = _servo_activity(env_model, params, gains, args.dt, out, request)
+        pd = PDController.from_model(params, gains, args.dt)
         paths = [pd.save(out / "pd.json", {"model": str(env_model.path), "how": "heli design",
                                            "phase_margin_deg": args.phase_margin, "bandwidth_rad_s": args.bandwidth,
+                                           "d_filter_request": args.d_filter_hz,
                                            "dt": args.dt, "analysis": [an.summary() for an in analyses]}),
                  write_text(out / "design.md", design_markdown(env_model.path, analyses, args.phase_margin,
-                                                               args.bandwidth, plots=not args.no_plots))]
+                                                               args.bandwidth, plots=not args.no_plots,
+                                                               activity=activity))]
         progress.done()
         for an in analyses:
             s = an.summary()
-            print(f"  {an.axis:5s}: kp {an.kp:.4g} stick/rad, kd {an.kd:.4g} stick/(rad/s); phase margin "
+            cut = "no D filter" if an.d_filter_hz is None else f"D filter {an.d_filter_hz:.3g} Hz"
+            print(f"  {an.axis:5s}: kp {an.kp:.4g} stick/rad, kd {an.kd:.4g} stick/(rad/s), {cut}; phase margin "
                   f"{an.phase_margin:.1f} deg, gain margin {an.gain_margin_db:.1f} dB, crossover "
                   f"{an.gain_crossover:.3g} rad/s, bandwidth {an.bandwidth:.3g} rad/s, "
                   f"{'stable' if s['stable'] else 'UNSTABLE'}")
@@ -122,9 +192,9 @@ def run(args) -> int:
         if not args.no_plots:
             progress.stage("drawing the step responses and Bode figures")
             figures = [plot_step_responses(params, gains, out / "step.png", dt=args.dt)]
-            figures += [plot_bode(params, an.axis, an.kp, an.kd, out / f"bode_{an.axis}.png", dt=args.dt)
-                        for an in analyses]
+            figures += [plot_bode(params, an.axis, an.kp, an.kd, out / f"bode_{an.axis}.png", dt=args.dt,
+                                  d_filter_hz=an.d_filter_hz) for an in analyses]
             progress.done()
-            for path in figures:
+            for path in [*figures, servo]:
                 print(f"wrote {path}")
     return 0

@@ -19,7 +19,8 @@ def register(sub):
         "rest) and report per axis the RMS and 50/90/99th percentiles of |attitude error| and |rate error|, "
         "stick RMS and p99, saturation and a histogram, as 'heli sweep' does for PD gain pairs. The held-out "
         "traces are those the agent was trained without (recorded in an RL agent's zip), else the default split "
-        "of 'heli train'. Writes DIR/evaluation.json, evaluation.md and episode.png (a representative episode).",
+        "of 'heli train'. Writes DIR/evaluation.json, evaluation.md, episode.png (a representative episode) and "
+        "servo.png (the stick's stretch and spectrum per axis: how hard the agent works its servos).",
     )
     p.add_argument("agent", metavar="AGENT", help="PD controller JSON (PDController.save) or PPO/SAC zip")
     p.add_argument("--model", metavar="DIR", default=None,
@@ -35,7 +36,7 @@ def register(sub):
                    help="held-out traces of 'heli train --split-seed N', for an agent that carries no split (a PD "
                    "JSON); an RL agent flies its own training split (default: that, else 0)")
     p.add_argument("--out", default=DEFAULT_OUT, type=output_path, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
-    p.add_argument("--no-plots", action="store_true", help="do not draw episode.png")
+    p.add_argument("--no-plots", action="store_true", help="do not draw episode.png and servo.png")
     p.add_argument("--robustness", action="store_true",
                    help="also fly the agent with 20 ms more servo delay and the control gains 20 %% lower and "
                    "higher (same windows); prints the p90 degradation and writes DIR/robustness.json and "
@@ -73,10 +74,11 @@ def run(args) -> int:
     res = evaluate_agent(agent, env_model, episodes,
                          name=f"{Path(args.agent).name} ({describe_agent(agent)[0]})")
     out = Path(args.out)
-    progress.stage("writing the report" + ("" if args.no_plots else " and drawing an episode"))
+    progress.stage("writing the report" + ("" if args.no_plots else " and drawing an episode and the sticks"))
     paths = [res.to_json(out / "evaluation.json"), write_text(out / "evaluation.md", res.markdown())]
     if not args.no_plots:
         paths.append(res.plot_episode(out / "episode.png"))
+        paths.append(res.plot_servo_activity(out / "servo.png"))
     progress.done()
     st = res.settings
     print(f"heli evaluate: {res.name} on {len(res.episodes)} episodes of {st['episode_seconds']:g} s, "
@@ -85,7 +87,8 @@ def run(args) -> int:
         m = res.metrics[ax]
         print(f"  {ax:5s}: |attitude error| RMS {m['att_rms_deg']:.3f}, p50 {m['att_p50_deg']:.3f}, p90 "
               f"{m['att_p90_deg']:.3f}, p99 {m['att_p99_deg']:.3f} deg; |rate error| p90 {m['rate_p90_dps']:.3f} "
-              f"deg/s; stick RMS {m['stick_rms']:.3f}, saturated {100 * m['saturation']:.1f} %")
+              f"deg/s; stick RMS {m['stick_rms']:.3f}, RMS step {res.activity[ax]['stick_step_rms']:.3f} per "
+              f"period, saturated {100 * m['saturation']:.1f} %")
     print(f"  mean return {res.mean_return:.2f}; episodes ended early: {res.n_terminated}")
     if args.robustness:
         from controllers.robustness import robustness_check
@@ -103,7 +106,7 @@ def run(args) -> int:
                                 + "\n"))
     for path in paths:
         print(f"wrote {path}")
-    from .html_report import write_html_report  # evaluation.md links no figure: episode.png is appended
+    from .html_report import write_html_report  # evaluation.md links no figure: the PNGs are appended
 
     print(f"wrote {write_html_report(paths[1], figures=[p for p in paths[2:] if p.suffix == '.png'])}")
     return 0

@@ -20,22 +20,39 @@ def designed(tmp_path_factory):
 
 
 def test_writes_the_controller_report_and_figures(designed):
-    for name in ("pd.json", "design.md", "step.png", "bode_roll.png", "bode_pitch.png", "bode_yaw.png"):
+    for name in ("pd.json", "design.md", "step.png", "bode_roll.png", "bode_pitch.png", "bode_yaw.png", "servo.png"):
         assert (designed / name).stat().st_size > 0, name
     doc = json.loads((designed / "pd.json").read_text())
     assert [a["stable"] for a in doc["metadata"]["analysis"]] == [True, True, True]
-    assert "| roll |" in (designed / "design.md").read_text()
+    report = (designed / "design.md").read_text()
+    assert "| roll |" in report and "## Servo activity" in report and "![servo activity](servo.png)" in report
+    assert "| same request, no D filter | pitch |" in report
 
 
 def test_controller_is_the_python_design_and_meets_the_margin(designed):
+    """The CLI's default derivative filter is the design's rule ("auto"); the margin holds with the filter in."""
     params = load_env_model().params
-    gains = design_gains(params, phase_margin=50.0)
+    gains = design_gains(params, phase_margin=50.0, d_filter_hz="auto")
     pd = PDController.load(designed / "pd.json")
     np.testing.assert_allclose(pd.gains.kp, gains.kp, rtol=1e-12)
     np.testing.assert_allclose(pd.gains.kd, gains.kd, rtol=1e-12)
+    np.testing.assert_allclose(pd.gains.d_filter_hz, gains.d_filter_hz, rtol=1e-12)
+    assert pd.filtered and pd.dt == 0.01
     for i, axis in enumerate(("roll", "pitch", "yaw")):
-        an = loop_analysis(params, axis, pd.gains.kp[i], pd.gains.kd[i])
+        an = loop_analysis(params, axis, pd.gains.kp[i], pd.gains.kd[i], d_filter_hz=pd.gains.d_filter_hz[i])
         assert an.stable and an.phase_margin >= 50.0 - 1e-6
+        assert pd.gains.d_filter_hz[i] == pytest.approx(20.0 * an.gain_crossover / (2 * np.pi), rel=1e-6)
+
+
+def test_d_filter_option(tmp_path):
+    """--d-filter-hz off writes the unfiltered design (schema version 1), a number a fixed cutoff."""
+    params = load_env_model().params
+    assert main(["design", "--d-filter-hz", "off", "--no-plots", "--out", str(tmp_path / "off")]) == 0
+    off = PDController.load(tmp_path / "off" / "pd.json")
+    assert not off.filtered and json.loads((tmp_path / "off" / "pd.json").read_text())["schema_version"] == 1
+    np.testing.assert_allclose(off.gains.kp, design_gains(params).kp, rtol=1e-12)
+    assert main(["design", "--d-filter-hz", "8", "--no-plots", "--out", str(tmp_path / "f8")]) == 0
+    assert PDController.load(tmp_path / "f8" / "pd.json").gains.d_filter_hz == (8.0, 8.0, 8.0)
 
 
 def test_designed_controller_flies_in_heli_evaluate(designed, tmp_path, capsys):
@@ -54,7 +71,8 @@ def test_infeasible_request_says_what_is_achievable(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("args", [["--phase-margin", "0"], ["--phase-margin", "200"], ["--bandwidth", "1,x"],
-                                  ["--bandwidth", "1,2"], ["--bandwidth", "-3"], ["--dt", "0"], ["--dt", "nan"]])
+                                  ["--bandwidth", "1,2"], ["--bandwidth", "-3"], ["--dt", "0"], ["--dt", "nan"],
+                                  ["--d-filter-hz", "0"], ["--d-filter-hz", "1,2"], ["--d-filter-hz", "fast"]])
 def test_bad_arguments_exit_2_naming_what_was_expected(args, capsys):
     with pytest.raises(SystemExit) as e:
         main(["design", *args])

@@ -239,7 +239,8 @@ def test_heli_evaluate_pd_json(pd, tmp_path, capsys):
                  "--episodes-per-trace", "2"]) == 0
     text = capsys.readouterr().out
     assert "held-out traces" in text and "default split" in text
-    assert sorted(p.name for p in out.iterdir()) == ["episode.png", "evaluation.html", "evaluation.json", "evaluation.md"]
+    assert sorted(p.name for p in out.iterdir()) == ["episode.png", "evaluation.html", "evaluation.json", "evaluation.md",
+                                                     "servo.png"]
 
 
 def test_heli_evaluate_robustness_is_written(pd, tmp_path, capsys):

@@ -171,8 +171,8 @@ def test_sweep_and_evaluate_embed_their_figures_with_a_relative_out(tmp_path, mo
     PDController.from_model(shipped.params, design_gains(shipped.params)).save(tmp_path / "pd.json")
     assert main(["evaluate", "pd.json", "--out", "ev", "--episode-seconds", "5", "--episodes-per-trace", "1"]) == 0
     page = _printed_and_written(capsys, Path("ev") / "evaluation.html")
-    (src,) = _img_sources(page)
-    assert src.startswith("data:image/png;base64,")
+    sources = _img_sources(page)  # the episode and the servo activity
+    assert len(sources) == 2 and all(s.startswith("data:image/png;base64,") for s in sources)
 
 
 def test_evaluate_writes_evaluation_html_with_the_episode(tmp_path, capsys):
@@ -185,8 +185,9 @@ def test_evaluate_writes_evaluation_html_with_the_episode(tmp_path, capsys):
     assert main(["evaluate", str(agent), "--out", str(out), "--episode-seconds", "5",
                  "--episodes-per-trace", "1"]) == 0
     page = _printed_and_written(capsys, out / "evaluation.html")
-    (src,) = _img_sources(page)
-    assert src.startswith("data:image/png;base64,") and not re.search(r'(src|href)="[^"]*episode\.png"', page)
+    sources = _img_sources(page)  # the episode and the servo activity
+    assert len(sources) == 2 and all(s.startswith("data:image/png;base64,") for s in sources)
+    assert not re.search(r'(src|href)="[^"]*(episode|servo)\.png"', page)
 
 
 # ------------------------------------------------------------------------------------ a headless browser
