@@ -191,7 +191,8 @@ def print_verdict(verdict) -> None:
 
 
 def _print_flight_checks(checks) -> None:
-    """The model on the ``--validate`` flights: one line per flight and axis (fit %, R², 0.5 s-ahead R²)."""
+    """The model on the ``--validate`` flights: one line per flight and axis (fit %, R², 0.5 s-ahead R², CIFER's
+    frequency-response cost J)."""
     if not checks:
         return
     from identification.ahead_prediction import format_r2
@@ -199,13 +200,15 @@ def _print_flight_checks(checks) -> None:
     width = max(6, *(len(c.name) for c in checks))
     print(f"validation on {len(checks)} flight(s) not used for the fit ({checks[0].model} model simulated from "
           "their sticks, as MATLAB's compare):")
-    print(f"  {'flight':{width}s}  axis    fit %      R²  R² 0.5 s ahead")
+    print(f"  {'flight':{width}s}  axis    fit %      R²  R² 0.5 s ahead  freq. cost J")
     for c in checks:
         for axis in c.axes:
             fit = "diverged" if c.diverged else f"{c.fit_pct[axis]:.1f}"
             r2 = "diverged" if c.diverged else format_r2(c.r2[axis])
             ahead = "—" if c.ahead_r2 is None else format_r2(c.ahead_r2.get(axis))
-            print(f"  {c.name:{width}s}  {axis:5s} {fit:>8s} {r2:>7s} {ahead:>15s}")
+            cost = c.cost.get(axis) if c.cost else None
+            cost = "—" if cost is None or not math.isfinite(cost) else f"{cost:.1f}"
+            print(f"  {c.name:{width}s}  {axis:5s} {fit:>8s} {r2:>7s} {ahead:>15s} {cost:>13s}")
         if c.diverged:
             print(f"  {c.name}: {c.diverged}")
 

@@ -7,7 +7,10 @@ and the simulated rates are scored per axis by the normalised root-mean-square f
 (:func:`identification.validation.rate_fit_stats`). A flight in gusts holds rate the sticks cannot explain,
 so a correct model in strong wind scores low there; the maximum-likelihood model's prediction 0.5 s ahead from
 its Kalman-filtered state (:func:`identification.ahead_prediction.flight_ahead_r2`) says whether it predicts
-the rate when the wind is estimated from the past, as the project's other held-out scores do.
+the rate when the wind is estimated from the past, as the project's other held-out scores do; and CIFER's
+frequency-response cost over the flight's coherent band
+(:func:`identification.frequency_response.compare_frequency_response`) whether its dynamics are the flight's
+where the sticks drive the rate.
 
 Each flight is prepared as the fit prepared its own (:func:`as_fitted`): the maximum-likelihood fit's input
 shifts and vibration-line removal, the integral method's prefilter. Its offset ``kd`` is the model's.
@@ -55,6 +58,9 @@ class FlightValidation:
     ahead_r2 : dict of str to float or None
         Per axis, the R² of the prediction 0.5 s ahead (NaN: diverged); None for a model without a wind state
         (the integral method).
+    cost : dict of str to float or None
+        Per axis, CIFER's frequency-response cost J of the model over the flight's coherent band (NaN: no
+        coherent band); None when the flight is too short for the spectra.
     validation : ValidationResult or None
         The simulation against the flight (its figure); None when it diverged.
     diverged : str or None
@@ -69,6 +75,7 @@ class FlightValidation:
     fit_pct: dict
     r2: dict
     ahead_r2: dict | None
+    cost: dict | None
     validation: ValidationResult | None
     diverged: str | None = None
 
@@ -81,7 +88,7 @@ class FlightValidation:
         """Plain JSON-ready values (non-finite numbers become None; the histories are left out)."""
         return jsonable({"file": self.name, "sha256": self.sha256, "duration_s": self.duration_s,
                          "model": self.model, "fit_pct": self.fit_pct, "r2": self.r2, "ahead_r2": self.ahead_r2,
-                         "diverged": self.diverged})
+                         "frequency_response_cost": self.cost, "diverged": self.diverged})
 
 
 def check_validation_flights(flights, others, names=None) -> None:
@@ -168,14 +175,27 @@ def validate_on_flight(identifier, flight: Flight, label: str, name: str | None 
     name = name or str(flight.metadata.get("source", "flight"))
     sha = flight.metadata.get("sha256")
     ahead = flight_ahead_r2(identifier, prepared) if hasattr(identifier, "wind_torque") else None
+    cost = _frequency_cost(identifier.params_, prepared, axes)
     try:
         result = validate_models(prepared, {label: identifier.params_})
     except SimulationDivergedError as e:
         nan = {a: math.nan for a in axes}
-        return FlightValidation(name, sha, flight.duration, label, nan, dict(nan), ahead, None, str(e))
+        return FlightValidation(name, sha, flight.duration, label, nan, dict(nan), ahead, cost, None, str(e))
     stats = rate_fit_stats(result.measured_rates, result.simulated[label])
     return FlightValidation(name, sha, flight.duration, label, {a: stats[a]["fit_pct"] for a in axes},
-                            {a: stats[a]["r2"] for a in axes}, ahead, result)
+                            {a: stats[a]["r2"] for a in axes}, ahead, cost, result)
+
+
+def _frequency_cost(params, flight: Flight, axes) -> dict | None:
+    """Per axis, CIFER's cost J of ``params`` on ``flight``'s coherent band, or None for a flight too short."""
+    from .errors import IdentifiabilityError
+    from .frequency_response import compare_frequency_response
+
+    try:
+        result = compare_frequency_response(params, flight, axes=axes)
+    except IdentifiabilityError:
+        return None
+    return {a: r.cost for a, r in result.axes.items()}
 
 
 def validate_on_flights(identifier, flights, label: str, names=None) -> list[FlightValidation]:

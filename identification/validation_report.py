@@ -81,18 +81,23 @@ def flight_validation_markdown(checks, figures: bool = True) -> list[str]:
         for axis in c.axes:
             ahead = "—" if c.ahead_r2 is None else format_r2(c.ahead_r2.get(axis))
             fit = "diverged" if c.diverged else f"{c.fit_pct[axis]:.1f}"
-            rows.append([c.name, axis, fit, "diverged" if c.diverged else format_r2(c.r2[axis]), ahead])
+            cost = c.cost.get(axis) if c.cost else None
+            rows.append([c.name, axis, fit, "diverged" if c.diverged else format_r2(c.r2[axis]), ahead,
+                         "—" if cost is None or not np.isfinite(cost) else f"{cost:.1f}"])
         if c.diverged:
             notes.append(f"- {c.name}: {c.diverged}")
     first = checks[0]
     lines = [
         f"The {first.model} model simulated from each flight's sticks alone, from its measured first state and "
-        "with the model's offsets, against the measured rates (as MATLAB's `compare`): fit = 100 (1 − ‖y − ŷ‖ / "
+        "with the model's offsets, against the measured rates as the fit takes a flight (vibration lines removed, "
+        "or the integral method's prefilter), as MATLAB's `compare` does: fit = 100 (1 − ‖y − ŷ‖ / "
         "‖y − ȳ‖) %, R² = 1 − ‖y − ŷ‖² / ‖y − ȳ‖². Wind the sticks cannot explain lowers both on a correct "
         "model; the prediction 0.5 s ahead from the model's Kalman-filtered state (wind state included) does not"
-        + (" (— : the integral method has no wind state)." if first.ahead_r2 is None else "."),
+        + (" (— : the integral method has no wind state)" if first.ahead_r2 is None else "")
+        + ". J is CIFER's frequency-response cost of the model over the flight's band where the coherence of "
+        "stick and rate is 0.6 or more (as in the section below; — : no coherent band).",
         "",
-        markdown_table(["Flight", "Axis", "Fit (%)", "R²", "R² 0.5 s ahead"], rows),
+        markdown_table(["Flight", "Axis", "Fit (%)", "R²", "R² 0.5 s ahead", "J"], rows),
         "",
     ]
     if notes:

@@ -89,6 +89,7 @@ def test_another_aircraft_fits_far_worse(flights, fitted):
     for axis in ("roll", "pitch", "yaw"):
         assert other.fit_pct[axis] <= same.fit_pct[axis] - 40.0, axis
         assert other.ahead_r2[axis] < same.ahead_r2[axis] - 0.5, axis
+        assert other.cost[axis] > 3 * same.cost[axis], axis  # its dynamics are not the flight's
 
 
 def test_a_diverging_simulation_is_a_result_not_an_error(flights, fitted):
