@@ -26,12 +26,18 @@ The PD law is the one of :mod:`controllers.pd` (:func:`controllers.pd.law.pd_com
 decoupled model the stability verdicts and spectral radii equal those of
 :func:`controllers.pd.loop_analysis` (tested), while the plant here keeps all
 three axes so that coupling terms are included.
+
+A PD with a derivative filter (``hover_plant(..., d_filter_hz=)``) keeps the static
+state feedback: each filtered axis adds a state ``w`` to the sampled plant, its filtered
+rate ``w[k+1] = a w[k] + (1 - a) rate[k]`` (:func:`controllers.pd.law.filtered_rate`, pole
+``a``), and the law reads ``a w + (1 - a) rate`` where it read the rate. Poles, margins,
+the error spectra and the sensors' share then hold for the filtered PD the replay flies.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -81,6 +87,11 @@ class HoverPlant:
         Where the rates and the angles sit in the state.
     signs : ndarray, shape (3,)
         Signs of the control gains (k2, k6, k10).
+    d_poles : ndarray, shape (3,)
+        Pole ``a`` of each axis' derivative filter at ``dt`` (0: none).
+    filter_idx : ndarray of int, shape (3,)
+        Where each filtered axis' filter state sits in the sampled state (after the physical states);
+        -1 for an axis without a filter.
     """
 
     params: object
@@ -96,15 +107,21 @@ class HoverPlant:
     rate_idx: np.ndarray
     angle_idx: np.ndarray
     signs: np.ndarray
+    d_poles: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    filter_idx: np.ndarray = field(default_factory=lambda: np.full(3, -1))
 
     @property
     def n(self) -> int:
         return self.A.shape[0]
 
 
-def hover_plant(params, dt: float, collective: float = 0.0) -> HoverPlant:
+def hover_plant(params, dt: float, collective: float = 0.0, d_filter_hz=None) -> HoverPlant:
     """The physics core linearised about hover at the trim (:func:`heli_core.linear.hover_linearisation`, the
-    package's one linearisation, which the PD design reads too) and sampled at ``dt`` (zero-order hold)."""
+    package's one linearisation, which the PD design reads too) and sampled at ``dt`` (zero-order hold).
+
+    ``d_filter_hz`` (None, one cutoff [Hz] or three, None for an axis without) appends each filtered axis'
+    derivative-filter state to the sampled plant (module docstring); the continuous matrices stay physical.
+    """
     import control
 
     gains = params.control_gains
@@ -114,9 +131,43 @@ def hover_plant(params, dt: float, collective: float = 0.0) -> HoverPlant:
     n = lin.A.shape[0]
     Bwc = lin.Bd * gains[None, :]  # torque k*u_d per unit equivalent stick, eq. (42)
     sysd = control.c2d(control.ss(lin.A, np.hstack([lin.Bu, Bwc]), np.eye(n), np.zeros((n, 6))), dt, method="zoh")
-    B = np.asarray(sysd.B)
-    return HoverPlant(params, float(dt), float(collective), np.asarray(sysd.A), B[:, :3], B[:, 3:], lin.A, lin.Bu,
-                      Bwc, lin.states, lin.rate_idx, lin.angle_idx, np.sign(gains))
+    A, B = np.asarray(sysd.A), np.asarray(sysd.B)
+    poles = d_poles_of(d_filter_hz, dt)
+    filter_idx = np.full(3, -1)
+    for i in np.flatnonzero(poles > 0):  # w[k+1] = a w[k] + (1 - a) rate[k]: a state after the physical ones
+        m = A.shape[0]
+        A = np.block([[A, np.zeros((m, 1))], [np.zeros((1, m + 1))]])
+        A[m, lin.rate_idx[i]], A[m, m] = 1.0 - poles[i], poles[i]
+        B = np.vstack([B, np.zeros((1, 6))])
+        filter_idx[i] = m
+    return HoverPlant(params, float(dt), float(collective), A, B[:, :3], B[:, 3:], lin.A, lin.Bu,
+                      Bwc, lin.states, lin.rate_idx, lin.angle_idx, np.sign(gains), poles, filter_idx)
+
+
+def d_cutoffs(d_filter_hz):
+    """A derivative-filter request as results record it: None (no filter) or a list of 3 cutoffs [Hz] or None."""
+    if d_filter_hz is None:
+        return None
+    cuts = [d_filter_hz] * 3 if np.ndim(d_filter_hz) == 0 else list(d_filter_hz)
+    return [None if c is None else float(c) for c in cuts]
+
+
+def d_poles_of(d_filter_hz, dt: float) -> np.ndarray:
+    """Each axis' derivative-filter pole at ``dt`` (:func:`controllers.pd.law.derivative_pole`), shape (3,).
+
+    ``d_filter_hz``: None (no filter), one cutoff [Hz] for every axis, or three (None for an axis without);
+    :class:`SweepError` for anything else.
+    """
+    from .pd.law import derivative_pole
+
+    cuts = [d_filter_hz] * 3 if d_filter_hz is None or np.ndim(d_filter_hz) == 0 else list(d_filter_hz)
+    try:
+        if len(cuts) != 3:
+            raise ValueError(f"d_filter_hz must be None, a cutoff in Hz or 3 of them (roll, pitch, yaw), got "
+                             f"{d_filter_hz!r}")
+        return np.array([derivative_pole(c, dt) for c in cuts])
+    except ValueError as e:
+        raise SweepError(str(e)) from e
 
 
 def nominal_gains(plant: HoverPlant, bandwidth: float = 4.0, damping: float = 0.7) -> np.ndarray:
@@ -139,7 +190,8 @@ def gain_matrices(plant: HoverPlant, axis: int, kp, kd, nominal) -> np.ndarray:
 
     The swept ``axis`` gets ``kp[g], kd[g]``; the other two axes their ``nominal`` (3, 2) gains.
     Each row is the slope of :func:`pd_command` in the angle and in the rate (the law is linear,
-    so these are exactly ``sign·kp`` and ``sign·kd``).
+    so these are exactly ``sign·kp`` and ``sign·kd``); a filtered axis splits the rate's slope
+    into ``(1 - a)`` on the rate and ``a`` on its filter state.
     """
     kp = np.atleast_1d(np.asarray(kp, dtype=float))
     kd = np.atleast_1d(np.asarray(kd, dtype=float))
@@ -148,7 +200,12 @@ def gain_matrices(plant: HoverPlant, axis: int, kp, kd, nominal) -> np.ndarray:
     for i in range(3):
         p_i, d_i = (kp, kd) if i == axis else (np.full(G, nominal[i][0]), np.full(G, nominal[i][1]))
         K[:, i, plant.angle_idx[i]] = pd_command(p_i, d_i, plant.signs[i], 1.0, 0.0)
-        K[:, i, plant.rate_idx[i]] = pd_command(p_i, d_i, plant.signs[i], 0.0, 1.0)
+        rate = pd_command(p_i, d_i, plant.signs[i], 0.0, 1.0)
+        if plant.filter_idx[i] < 0:
+            K[:, i, plant.rate_idx[i]] = rate
+        else:
+            a = plant.d_poles[i]
+            K[:, i, plant.rate_idx[i]], K[:, i, plant.filter_idx[i]] = (1.0 - a) * rate, a * rate
     return K
 
 
@@ -323,7 +380,7 @@ def sensor_noise_std(plant: HoverPlant, axis, kp, kd, nominal, sensors) -> np.nd
     """Standard deviations the sensors add to each gain pair's outputs, shape (G, 3), NaN where unstable.
 
     The autopilot acts on the measured state, ``u = -K (x + n)``, so the noise enters the closed loop
-    through ``-Bu K``. White noise (``sensors.attitude_noise``, ``sensors.gyro_noise`` per axis, sampled
+    through ``-Bu K`` (and a derivative filter's state through ``(1 - a)`` times the measured rate). White noise (``sensors.attitude_noise``, ``sensors.gyro_noise`` per axis, sampled
     each period) gives the state covariance of the discrete Lyapunov equation
     ``P = A_cl P A_clᵀ + Bn Σ Bnᵀ`` (scipy); the stick also carries ``K n`` itself, uncorrelated with the
     state it acts on. Each vibration line (a sinusoid of amplitude ``a``, as the autopilot samples it)
@@ -339,6 +396,9 @@ def sensor_noise_std(plant: HoverPlant, axis, kp, kd, nominal, sensors) -> np.nd
     for i in range(3):
         N[plant.angle_idx[i], i] = 1.0
         N[plant.rate_idx[i], 3 + i] = 1.0
+    F = np.zeros((n, 6))  # a filter's state integrates the measured rate
+    for i in np.flatnonzero(plant.filter_idx >= 0):
+        F[plant.filter_idx[i], 3 + i] = 1.0 - plant.d_poles[i]
     Sigma = np.diag(np.square(np.concatenate([sensors.attitude_noise, sensors.gyro_noise])))
     line_axis, line_omega, line_amp = sensors.line_arrays()
     out = np.full((G, 3), np.nan)
@@ -346,7 +406,7 @@ def sensor_noise_std(plant: HoverPlant, axis, kp, kd, nominal, sensors) -> np.nd
         A_cl = plant.A - plant.Bu @ K[g]
         if np.max(np.abs(np.linalg.eigvals(A_cl))) >= 1.0 - STABILITY_MARGIN:
             continue
-        Bn = -plant.Bu @ K[g] @ N  # (n, 6)
+        Bn = -plant.Bu @ K[g] @ N + F  # (n, 6)
         P = solve_discrete_lyapunov(A_cl, Bn @ Sigma @ Bn.T)
         var = np.einsum("oi,ij,oj->o", C[g], P, C[g])
         Kn = K[g] @ N  # the stick's own noise (row ax of -K n)

@@ -56,7 +56,7 @@ from heli_core.physics import trim_sticks
 from heli_core.terms import AXES
 from identification.synthetic import PAPER_PARAMS, FlightConfig, coloured_noise, sensor_errors
 
-from .closed_loop import axis_index, disturbance_spectrum, replay_segments
+from .closed_loop import axis_index, d_cutoffs, d_poles_of, disturbance_spectrum, replay_segments
 from .errors import SweepError
 from .metrics import QUANTILES
 from .replay import Autopilot, LoopInputs, fly, rk4_step
@@ -150,6 +150,9 @@ class FlightTestConfig:
         tqdm bars on stderr (when it is a terminal).
     max_batch : int
         Pair × flight states stepped at once, >= 1 (memory, never a number).
+    d_filter_hz : None, float or 3 floats
+        The derivative filter the autopilot flies with [Hz] (:class:`controllers.sweep.SweepConfig`'s); a
+        given prediction must have been swept with the same.
 
     Raises
     ------
@@ -168,6 +171,7 @@ class FlightTestConfig:
     substeps: int | None = None
     progress: bool = True
     max_batch: int = 4096
+    d_filter_hz: object = None
 
     def __post_init__(self):
         axis_index(self.axis)
@@ -317,7 +321,7 @@ def validate_against_flights(model, pairs, config: FlightTestConfig | None = Non
     inputs = _fresh_wind(cfg, wind, params, env_model)
     idx = np.flatnonzero(predicted.flyable)
     autopilot = Autopilot(axis_index(cfg.axis), kp_all[idx], kd_all[idx], predicted.nominal,
-                          np.sign(env_model.params.control_gains))
+                          np.sign(env_model.params.control_gains), d_poles_of(cfg.d_filter_hz, cfg.dt))
     substeps = FlightConfig().substeps if cfg.substeps is None else cfg.substeps
     flights = _fly(rk4_step(params, cfg.dt, substeps), inputs, autopilot, idx, cfg)
     table, samples = _compare(kp_all, kd_all, predicted, flights)
@@ -325,6 +329,7 @@ def validate_against_flights(model, pairs, config: FlightTestConfig | None = Non
     settings = {"truth": truth_name, "truth_parameters": params.values(), "n_flights": cfg.n_flights,
                 "duration": cfg.steps * cfg.dt, "dt": cfg.dt, "seed": cfg.seed, "sensors": bool(cfg.sensors),
                 "gusts": cfg.gusts, "substeps": substeps, "wind": wind, "nominal_gains": predicted.nominal.tolist(),
+                "d_filter_hz": d_cutoffs(cfg.d_filter_hz),
                 "model": str(env_model.path), "prediction": f"{pset['n_windows']} windows of {pset['duration']:g} s"}
     return FlightTestResult(AXES[autopilot.axis], table, settings, samples)
 
@@ -346,9 +351,12 @@ class _Prediction:
             from .sweep import sweep_pairs
 
             prediction = sweep_pairs(env_model, pairs, axis=axis, duration=None, dt=cfg.dt, keep_samples=True,
-                                     progress=cfg.progress)
+                                     progress=cfg.progress, d_filter_hz=cfg.d_filter_hz)
         elif not prediction.samples:
             raise SweepError("prediction must be run with keep_samples=True")
+        elif prediction.settings.get("d_filter_hz") != d_cutoffs(cfg.d_filter_hz):
+            raise SweepError(f"prediction must be swept with the flight test's derivative filter "
+                             f"({d_cutoffs(cfg.d_filter_hz)} Hz), got {prediction.settings.get('d_filter_hz')}")
         index = _prediction_rows(prediction, axis, cfg.dt, pairs[:, 0], pairs[:, 1])
         return cls(prediction, index, [prediction.row(i) for i in index])
 

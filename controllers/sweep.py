@@ -59,6 +59,7 @@ from heli_core.terms import AXES
 from .closed_loop import (
     GAUSS_ABS_FACTOR,
     closed_loop_poles,
+    d_cutoffs,
     disturbance_spectrum,
     hover_plant,
     nominal_gains,
@@ -168,6 +169,10 @@ class SweepConfig:
         white noise and vibration lines, :func:`~controllers.sweep_inputs.sensor_inputs`) in the replay, and
         their variance is added in the frequency domain (:func:`~controllers.closed_loop.sensor_noise_std`);
         False: the true state (default True; a model without sensors reads the true state either way).
+    d_filter_hz : None, float or 3 floats
+        Cutoff of the derivative filter every pair (and the held axes) flies with [Hz], as
+        :class:`controllers.pd.PDController` runs it; None: no filter (default). The replay, the poles, the
+        margins and the frequency-domain prediction all include it (:func:`~controllers.closed_loop.hover_plant`).
     """
 
     axis: object = "roll"
@@ -188,6 +193,7 @@ class SweepConfig:
     extend: bool = True
     max_extensions: int = MAX_EXTENSIONS
     sensors: bool = True
+    d_filter_hz: object = None
 
 
 # ------------------------------------------------------------------- result
@@ -432,9 +438,10 @@ def _check_settings(cfg: SweepConfig, be) -> np.ndarray:
         raise SweepError(str(e)) from e
 
 
-def _plant_and_nominal(rp, nominal):
-    """The hover plant at the library's mean collective, and the held axes' gains, checked to stabilise."""
-    plant = hover_plant(rp.env_model.params, rp.dt, float(np.mean(rp.env_model.collective)))
+def _plant_and_nominal(rp, nominal, d_filter_hz=None):
+    """The hover plant at the library's mean collective (with the derivative filters' states), and the held
+    axes' gains, checked to stabilise."""
+    plant = hover_plant(rp.env_model.params, rp.dt, float(np.mean(rp.env_model.collective)), d_filter_hz)
     nominal = nominal_gains(plant) if nominal is None else np.asarray(nominal, dtype=float).reshape(3, 2)
     ax = rp.axis
     _, nominal_ok = closed_loop_poles(plant, ax, [nominal[ax][0]], [nominal[ax][1]], nominal)
@@ -516,11 +523,11 @@ class _Run:
         cfg, rp = self.cfg, self.rp
         if self.be is None:
             st, h, o, div, smp = replay(rp, kp[idx], kd[idx], self.nominal, cfg.keep_samples, self.progress(),
-                                        cfg.max_batch, self.hist_edges)
+                                        cfg.max_batch, self.hist_edges, self.plant.d_poles)
             self.tasks += 1
         else:
             st, h, o, div, smp, n_tasks = replay_on(self.be, rp, kp[idx], kd[idx], self.nominal, self.hist_edges, cfg,
-                                                    self.progress())
+                                                    self.progress(), self.plant.d_poles)
             self.tasks += n_tasks
             self.where = self.be.describe()
         for c in TD_COLUMNS:
@@ -553,6 +560,7 @@ class _Run:
             "seconds": {"total": total_seconds, **self.seconds}, "backend": self.where, "tasks": self.tasks,
             "sensors": env_model.sensors.to_dict() if rp.inputs.att_noise is not None else None,
             "p90_interval": p90_interval_settings(rp),
+            "d_filter_hz": d_cutoffs(self.cfg.d_filter_hz),
         }
 
 
@@ -613,7 +621,7 @@ def _sweep(model, kp_values, kd_values, layout, cfg: SweepConfig) -> SweepResult
     try:
         hist_edges = _check_settings(cfg, be)
         rp = prepare(model, cfg.axis, cfg.duration, cfg.dt, cfg.seed, cfg.traces, cfg.windows, cfg.sensors)
-        plant, nominal = _plant_and_nominal(rp, cfg.nominal)
+        plant, nominal = _plant_and_nominal(rp, cfg.nominal, cfg.d_filter_hz)
         t0 = time.perf_counter()
         freq, psd = disturbance_spectrum(rp.env_model, rp.dt)
         run = _Run(rp, plant, nominal, freq, psd, hist_edges, be, cfg,

@@ -41,7 +41,7 @@ the grid and the windows only, never on the number of workers; chunks of 512 to
 for 4 tasks in a 20 × 20 grid × 10 windows and thousands in a cluster-sized one."""
 
 
-def replay(rp, kp, kd, nominal, keep_samples=False, progress=True, max_batch=4096, hist_edges=None):
+def replay(rp, kp, kd, nominal, keep_samples=False, progress=True, max_batch=4096, hist_edges=None, d_poles=None):
     """Fly gain pairs ``(kp[g], kd[g])`` against every window of ``rp``; statistics per pair.
 
     Parameters
@@ -57,6 +57,8 @@ def replay(rp, kp, kd, nominal, keep_samples=False, progress=True, max_batch=409
         Pair × window states stepped at once.
     hist_edges : ndarray
         Histogram edges of |attitude error| [deg].
+    d_poles : array (3,), optional
+        Each axis' derivative-filter pole (:attr:`controllers.closed_loop.HoverPlant.d_poles`); None: no filter.
 
     Returns
     -------
@@ -72,7 +74,7 @@ def replay(rp, kp, kd, nominal, keep_samples=False, progress=True, max_batch=409
     overflow = np.zeros(G, dtype=np.int64)
     diverged = np.zeros(G, dtype=bool)
     samples = {}
-    autopilot = Autopilot(rp.axis, kp, kd, nominal, np.sign(rp.params.control_gains))
+    autopilot = Autopilot(rp.axis, kp, kd, nominal, np.sign(rp.params.control_gains), d_poles)
     chunks = fly(zoh_step(rp.params, rp.dt), rp.inputs, autopilot, max_batch, progress, f"sweep {AXES[rp.axis]}")
     for sl, rec in chunks:
         if keep_samples:  # before the statistics, which work in place
@@ -135,17 +137,17 @@ def chunks(n_pairs: int, n_windows: int, chunk_pairs) -> list:
 def _replay_task(item, shared):
     """One backend task: :func:`replay` of a chunk of pairs (module level, so workers import it)."""
     kp, kd = item
-    rp, nominal, keep_samples, max_batch, edges = shared
-    return replay(rp, kp, kd, nominal, keep_samples, False, max_batch, edges)
+    rp, nominal, keep_samples, max_batch, edges, d_poles = shared
+    return replay(rp, kp, kd, nominal, keep_samples, False, max_batch, edges, d_poles)
 
 
-def replay_on(backend, rp, kp, kd, nominal, edges, cfg, progress=None):
+def replay_on(backend, rp, kp, kd, nominal, edges, cfg, progress=None, d_poles=None):
     """:func:`replay` split into chunks of pairs run as tasks of ``backend``, joined in pair order.
 
     ``cfg`` is the sweep's :class:`~controllers.sweep.SweepConfig`: its ``chunk_pairs`` split the pairs into
     tasks (:func:`chunks`), its ``keep_samples`` and ``max_batch`` go to each task's :func:`replay`, and its
     ``progress`` shows a bar of finished tasks (``progress``, when given, replaces it: a bar the caller owns,
-    see :meth:`heli_core.backends.Backend.map`); ``edges`` are the histogram's.
+    see :meth:`heli_core.backends.Backend.map`); ``edges`` are the histogram's, ``d_poles`` :func:`replay`'s.
 
     Every pair's replay is independent of the others in its batch (element-wise
     numpy over the (pairs, windows) states, per-row statistics), so the joined
@@ -158,7 +160,8 @@ def replay_on(backend, rp, kp, kd, nominal, edges, cfg, progress=None):
     What :func:`replay` returns, and the number of tasks.
     """
     bounds = chunks(kp.size, len(rp.windows), cfg.chunk_pairs)
-    shared = (replace(rp, env_model=None), np.asarray(nominal, dtype=float), cfg.keep_samples, cfg.max_batch, edges)
+    shared = (replace(rp, env_model=None), np.asarray(nominal, dtype=float), cfg.keep_samples, cfg.max_batch, edges,
+              d_poles)
     parts = backend.map(_replay_task, [(kp[a:b], kd[a:b]) for a, b in bounds], shared,
                         progress=cfg.progress if progress is None else progress,
                         desc=f"sweep {AXES[rp.axis]}")

@@ -102,7 +102,7 @@ def markdown(result, max_rows: int = 400) -> str:
                     if a != result.axis)
         + " (pole placement at 4 rad/s, damping ratio 0.7, `controllers.closed_loop.nominal_gains`: a gentle "
         "hold that keeps the swept axis' errors its own; these are not the gains `heli design` picks for "
-        "those axes).",
+        "those axes)." + _filter_sentence(s.get("d_filter_hz")),
         "",
         "Two independent predictions of the error distribution (paper Section 4): **time domain** — the "
         "library's gusts replayed through the physics core in closed loop (stick clipping included); **frequency "
@@ -446,3 +446,12 @@ def miss_reason(row: dict, settings: dict) -> str:
                 "flights part ways")
     return (f"the prediction's p90 is {100 * p90_err:+.0f} % off the flights': the identified model, its sensors "
             "or the library's gusts differ from the truth's at these gains")
+
+
+def _filter_sentence(cutoffs) -> str:
+    """The report's sentence on a sweep's derivative filter (cutoffs per axis from its settings); "" without one."""
+    if not cutoffs or all(c is None for c in cutoffs):
+        return ""
+    cut = ", ".join(f"{a} {'none' if c is None else f'{c:.3g} Hz'}" for a, c in zip(("roll", "pitch", "yaw"), cutoffs))
+    return (f" The D term is low-passed as `heli design`'s controller does it (cutoff {cut}); both predictions and "
+            "the margins include the filter.")

@@ -19,6 +19,20 @@ def backend_from_args(args):
     return make_backend(args.backend, workers=args.workers)
 
 
+def _cutoffs(text):
+    """One positive cutoff in Hz for every axis or three (roll,pitch,yaw)."""
+    import argparse
+    import math
+
+    try:
+        vals = [float(v) for v in str(text).split(",") if v.strip()]
+    except ValueError:
+        vals = []
+    if len(vals) not in (1, 3) or not all(v > 0 and math.isfinite(v) for v in vals):
+        raise argparse.ArgumentTypeError(f"expected one positive cutoff in Hz or three (roll,pitch,yaw), got {text!r}")
+    return vals[0] if len(vals) == 1 else vals
+
+
 def register(sub):
     p = sub.add_parser(
         "sweep",
@@ -55,6 +69,10 @@ def register(sub):
     p.add_argument("--no-sensors", action="store_true",
                    help="the autopilot reads the true state (default: through the model's identified sensors, "
                    "model.json['sensors']: gyro and attitude noise, vibration lines)")
+    p.add_argument("--d-filter-hz", type=_cutoffs, default=None, metavar="F[,F,F]",
+                   help="fly every pair with the D term low-passed at this cutoff in Hz (one for every axis or "
+                   "roll,pitch,yaw), as a 'heli design' controller does; the predictions and margins include it "
+                   "(default: no filter)")
     p.add_argument("--no-extend", action="store_true",
                    help="sweep the grid as given, even when its best pair lies on an edge")
     p.add_argument("--max-extensions", type=whole(0), default=MAX_EXTENSIONS, metavar="N",
@@ -99,7 +117,7 @@ def run(args) -> int:
         result = sweep_gains(args.model, kp, kd, axis=args.axis, duration=args.duration, dt=args.dt,
                              seed=args.seed, windows=args.windows, progress=not args.quiet, backend=backend,
                              extend=not args.no_extend, max_extensions=args.max_extensions,
-                             sensors=not args.no_sensors)
+                             sensors=not args.no_sensors, d_filter_hz=args.d_filter_hz)
     finally:
         backend.close()
     out = Path(args.out)
@@ -122,7 +140,8 @@ def run(args) -> int:
             progress.stage(f"flying {args.flights} flight test(s) per pair at {len(pairs)} gain pair(s)")
             flights = validate_against_flights(args.model, pairs, axis=args.axis, n_flights=args.flights,
                                                duration=args.duration, seed=args.seed, truth=args.truth, dt=args.dt,
-                                               gusts=args.flight_gusts, progress=not args.quiet)
+                                               gusts=args.flight_gusts, progress=not args.quiet,
+                                               d_filter_hz=args.d_filter_hz)
             paths["flights"] = flights.to_json(out / "flight_tests.json")
             report += "\n" + flights.to_markdown()
     from identification.files import write_text

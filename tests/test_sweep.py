@@ -817,3 +817,43 @@ def test_a_growing_sweep_draws_one_bar_over_all_its_rounds(shipped, monkeypatch)
                     chunk_pairs=1)
     assert len(r.settings["extension"]["rounds"]) >= 1, "the grid grew: several rounds of tasks"
     assert len(bars) == 1 and bars[0].n == bars[0].total == r.settings["tasks"]
+
+
+# ------------------------------------------------------------- derivative filter
+def test_a_filtered_sweep_flies_what_the_filtered_pd_controller_flies(shipped):
+    """With d_filter_hz the replay is the environment under PDController.predict with that filter (its state
+    carried), and its margins are controllers.pd.loop_analysis' with the filter in the loop."""
+    from controllers.pd import PDController, PDGains, loop_analysis
+
+    kp, kd, f_c = 20.0, 3.0, 8.0
+    r = sweep_pairs(shipped, [(kp, kd)], duration=5.0, traces=[(1, 1234)], keep_samples=True, progress=False,
+                    sensors=False, d_filter_hz=f_c)
+    assert r.settings["d_filter_hz"] == [f_c] * 3 and "low-passed" in r.to_markdown()
+    nominal = np.array(r.settings["nominal_gains"])
+    gains = PDGains((kp, nominal[1][0], nominal[2][0]), (kd, nominal[1][1], nominal[2][1]), f_c)
+    pol = PDController.from_model(shipped.params, gains)
+    env = HeliAttitudeEnv(model=shipped, init_angle_deg=0.0, init_rate_deg=0.0, episode_seconds=5.0, obs_noise=0.0)
+    obs, _ = env.reset(seed=0, options={"trace": 1, "offset": 1234})
+    state, errs = None, [0.0]
+    for _ in range(499):
+        a, state = pol.predict(obs, state)
+        obs, _, term, trunc, info = env.step(a)
+        errs.append(info["attitude_error_deg"][0])
+    assert_allclose(r.samples[0][0][:500], errs, atol=1e-5)  # the env's observation is float32
+    la = loop_analysis(shipped.params, "roll", kp, kd, 0.01, d_filter_hz=f_c)
+    assert_allclose(r.table["gain_margin_db"][0], la.gain_margin_db, rtol=1e-6)
+    assert_allclose(r.table["phase_margin_deg"][0], la.phase_margin, rtol=1e-6)
+
+
+def test_a_filtered_sweep_predicts_its_smoother_stick_in_both_domains(shipped):
+    """The model's sensors through a 5 Hz filter: the stick's RMS falls in the replay and in the frequency
+    domain alike, and the two domains still agree on the p90."""
+    pairs = [(30.0, 6.0)]
+    plain = sweep_pairs(shipped, pairs, duration=20.0, windows=2, progress=False)
+    smooth = sweep_pairs(shipped, pairs, duration=20.0, windows=2, progress=False, d_filter_hz=5.0)
+    assert smooth.table["stick_rms"][0] < 0.7 * plain.table["stick_rms"][0]
+    assert smooth.table["pred_stick_rms"][0] < 0.7 * plain.table["pred_stick_rms"][0]
+    assert_allclose(smooth.table["stick_rms"], smooth.table["pred_stick_rms"], rtol=0.2)
+    assert_allclose(smooth.table["att_p90_deg"], smooth.table["pred_att_p90_deg"], rtol=0.2)
+    with pytest.raises(SweepError, match="d_filter_hz must be a cutoff frequency > 0 Hz"):
+        sweep_pairs(shipped, pairs, duration=1.0, windows=1, progress=False, d_filter_hz=-2.0)
