@@ -384,6 +384,13 @@ def make_cases(fx: dict, tmp: Path) -> list[Case]:
         "--no-plots", "--backend", "local", "--workers", "2")
     for o in out_paths:
         add("identify", f"--out {o}", fx["good"], "--out", fx[o], "--method", "integral", "--no-plots")
+    for k in bad_csvs:  # --validate: a bad flight to validate on is refused before the fit
+        add("identify", f"--validate {k}", fx["good"], "--out", out(), "--method", "integral", "--no-plots",
+            "--validate", fx[k])
+    add("identify", "--validate the fitted flight", fx["good"], "--out", out(), "--method", "integral", "--no-plots",
+        "--validate", fx["good"])
+    add("identify", "--validate (ml)", fx["good"], "--out", out(), "--no-plots", "--no-disturbances", "--validate",
+        fx["good2"], fx["constant_stick"])
     for m in ("flipped_trace", "truncated_model", "no_manifest", "model_json_dir"):
         add("identify", f"--out into model {m}", fx["good2"], "--out", fx[f"model_{m}"], "--method", "integral",
             "--no-plots")
