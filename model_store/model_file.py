@@ -18,7 +18,9 @@ Schema (``schema_version`` 1)::
       "sample_rate_hz": 100.0,
       "filter": {...} | null,                # Section 3.1 prefilter settings
       "identification": {...},               # method and its settings
-      "fit_statistics": {...},               # per axis: r2, condition number, std errors ...
+      "fit_statistics": {...},               # per axis: r2, condition number, std errors ...; the fitted flight's
+                                             # validation, the frequency response (frequency_response) and the
+                                             # flights of --validate (validation_flights), when identified
       "provenance": {"sources": [{"file": "flight.csv", "sha256": "..."}], "created": "...", "heli_env": "0.1.0"}
     }
 
