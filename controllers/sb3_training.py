@@ -1,5 +1,5 @@
 """stable-baselines3 pieces of RL training: observation scaling and normalisation, progress, time budget,
-atomic checkpoints and evaluations.
+atomic checkpoints and evaluations, the learning curve.
 
 Imported by :mod:`controllers.rl` only when an agent is trained or loaded
 (stable-baselines3 and torch are the ``rl`` extra). Agents saved by
@@ -293,9 +293,19 @@ class AtomicEvalCallback(EvalCallback):
         self.npz_path = folder / "evaluations.npz"
         self.log_path = str(folder / f".evaluations.npz.{os.getpid()}.tmp")  # np.savez appends ".npz"
         self._tmp = Path(self.log_path + ".npz")
+        self.evaluations_p90: list[list[float]] = []  # per evaluation: p90 |attitude error| roll, pitch, yaw [deg]
+        self._errors: list = []
+
+    def _log_success_callback(self, locals_: dict, globals_: dict) -> None:
+        """SB3's per-step hook of ``evaluate_policy`` (episodes still counted): keeps each step's |attitude error|."""
+        super()._log_success_callback(locals_, globals_)
+        err = locals_["info"].get("attitude_error_deg")
+        if err is not None:
+            self._errors.append(np.abs(np.asarray(err, dtype=np.float64)).reshape(3))
 
     def _on_step(self) -> bool:
         n = len(self.evaluations_timesteps)
+        self._errors = []
         try:
             go_on = super()._on_step()
         except BaseException:
@@ -306,4 +316,43 @@ class AtomicEvalCallback(EvalCallback):
             with open(self._tmp, "rb+") as fh:
                 os.fsync(fh.fileno())
             os.replace(self._tmp, self.npz_path)
+            errors = np.array(self._errors) if self._errors else np.full((1, 3), np.nan)
+            self.evaluations_p90.append([float(v) for v in np.percentile(errors, 90, axis=0)])
         return go_on
+
+
+class LearningCurve(BaseCallback):
+    """Records the learning curve: every training episode's return, and each held-out evaluation's mean
+    return and p90 |attitude error| per axis, against the timesteps taken.
+
+    Episode returns are read from the ``"episode"`` entry SB3's ``VecMonitor`` adds to a finished episode's
+    info (the raw return, before any reward normalisation); evaluations from the run's
+    :class:`AtomicEvalCallback` (``evaluation``; None: none). :meth:`record` is what ``training.json``
+    keeps under ``"learning_curve"``; it holds no wall time, so the same seed gives the same record.
+
+    Parameters
+    ----------
+    evaluation : AtomicEvalCallback, optional
+    """
+
+    def __init__(self, evaluation=None):
+        super().__init__()
+        self.evaluation = evaluation
+        self.episodes: list[tuple[int, float]] = []
+
+    def _on_step(self) -> bool:
+        for info in self.locals.get("infos", ()):
+            episode = info.get("episode")
+            if episode is not None:
+                self.episodes.append((int(self.num_timesteps), float(episode["r"])))
+        return True
+
+    def record(self) -> dict:
+        """``{"episodes": [[timesteps, return], ...], "evaluations": [{"timesteps", "mean_return", "p90_deg"}]}``;
+        ``p90_deg`` lists roll, pitch, yaw [deg]."""
+        evaluations = []
+        ev = self.evaluation
+        if ev is not None:
+            for t, r, p90 in zip(ev.evaluations_timesteps, ev.evaluations_results, ev.evaluations_p90):
+                evaluations.append({"timesteps": int(t), "mean_return": float(np.mean(r)), "p90_deg": list(p90)})
+        return {"episodes": [[t, r] for t, r in self.episodes], "evaluations": evaluations}

@@ -16,9 +16,12 @@ def register(sub):
         description="Train a stable-baselines3 PPO or SAC agent on the native vector environment (attitude hold "
         "in replayed gusts). Episodes replay windows of the training traces only; the held-out traces (a "
         "quarter of the library by default, chosen by --split-seed; a single-trace library is split in time) "
-        "score the agent during training. Writes AGENT.zip (the final agent), and AGENT_training/ with "
-        "training.json, best_model.zip, evaluations.npz and checkpoints/. Ctrl-C saves a checkpoint first. "
-        "Evaluate with 'heli evaluate AGENT.zip'.",
+        "score the agent during training. At the end the final agent and a PD (heli design's, or --compare-pd) "
+        "fly the same held-out gusts and a warning says where the agent holds attitude worse. Writes AGENT.zip "
+        "(the final agent), and AGENT_training/ with training.json, report.md/.html (the comparison and "
+        "learning_curve.png: returns and held-out p90 against timesteps), comparison.json, best_model.zip, "
+        "evaluations.npz and checkpoints/. Ctrl-C saves a checkpoint first. Evaluate further with "
+        "'heli evaluate AGENT.zip'.",
     )
     p.add_argument("--algo", required=True, choices=("ppo", "sac"), help="algorithm")
     p.add_argument("--model", metavar="DIR", default=None,
@@ -66,6 +69,11 @@ def register(sub):
     p.add_argument("--reward-reference", metavar="PD.json", default=None,
                    help="with --residual: weigh each axis of the reward by the error this PD (e.g. the best pair of "
                    "'heli sweep') leaves on the training gusts, instead of the --residual PD's own")
+    p.add_argument("--compare-pd", metavar="PD.json", default=None,
+                   help="the PD the final agent is compared with on the held-out gusts (default: the --residual "
+                   "base, else the PD 'heli design' writes for the model with its defaults)")
+    p.add_argument("--no-compare", action="store_true",
+                   help="skip the end-of-training comparison with the PD (the learning curve is still drawn)")
     add_learning_options(p)
     p.set_defaults(func=run, out_kind="file")
 
@@ -143,7 +151,7 @@ def _config(args):
                        max_seconds=None if args.minutes is None else 60.0 * args.minutes, **learning_settings(args))
 
 
-def _run_seeds(args, config) -> int:
+def _run_seeds(args, config, progress) -> int:
     from controllers.rl.seeds import train_seeds
     from identification.backends import make_backend
 
@@ -154,12 +162,78 @@ def _run_seeds(args, config) -> int:
         where = backend.describe()
     finally:
         backend.close()
+    reference = {}  # the PD compared with, made once for every seed
+    reports = {seed: _report(args, res, progress, reference) for seed, res in results.items()}
     print(f"heli train: {args.algo.upper()}, {len(results)} seeds on {where}")
     for seed, res in results.items():
         last = f"; held-out return {res.evaluations[-1][1]:.2f}" if res.evaluations else ""
         why = " (time budget reached)" if res.stopped_by_time else ""
         print(f"  seed {seed}: {res.timesteps} timesteps in {res.seconds:.1f} s{why}{last}; wrote {res.path}")
+        _print_report(reports[seed], f"  seed {seed} ")
     return 0
+
+
+def _comparison_pd(args, env_model, dt: float):
+    """(PD, label) the agent is compared with: --compare-pd, the --residual base, or heli design's defaults."""
+    from controllers.rl.residual_agent import as_base
+    from controllers.rl.training_report import reference_pd
+
+    if args.compare_pd is not None:
+        return as_base(args.compare_pd, "--compare-pd"), str(args.compare_pd)
+    if args.residual is not None:
+        return as_base(args.residual, "--residual"), f"the residual's base {args.residual}"
+    return reference_pd(env_model, dt), "heli design's defaults"
+
+
+def _report(args, res, progress, reference=None) -> dict:
+    """Compare the run's final agent with the PD (unless --no-compare), draw the learning curve, write
+    report.md/.html and comparison.json in the run folder; what was written and the comparison.
+    ``reference`` (a dict) keeps the model and the PD for the next run of a --seeds command."""
+    import json
+
+    from controllers.rl.agent_file import load_agent
+    from controllers.rl.training_report import compare_with_pd, plot_learning_curve, training_markdown
+    from controllers.trace_split import TraceSegment
+    from heli_core.files import write_text
+    from heli_env.model_dir import load_env_model
+
+    from .html_report import write_html_report
+
+    meta, comparison, paths = res.metadata, None, []
+    if not args.no_compare:
+        progress.stage(f"flying {res.path.name} and the PD on the same held-out gusts")
+        reference = {} if reference is None else reference
+        if not reference:
+            env_model = load_env_model(args.model)
+            reference.update(env_model=env_model, pd=_comparison_pd(args, env_model, meta["dt"]))
+        env_model, (pd, label) = reference["env_model"], reference["pd"]
+        task = meta["task"] if isinstance(meta["task"], str) else meta["task"]["task"]
+        comparison = compare_with_pd(load_agent(res.path), pd, env_model,
+                                     [TraceSegment(**d) for d in meta["eval_segments"]], meta["seed"],
+                                     meta["episode_seconds"], task, label)
+        paths.append(write_text(res.run_dir / "comparison.json",
+                                json.dumps(comparison.to_dict(), indent=1, allow_nan=False) + "\n"))
+    progress.stage("drawing the learning curve")
+    paths.append(plot_learning_curve(res.learning_curve, res.run_dir / "learning_curve.png", comparison,
+                                     res.timesteps, f"{res.algo.upper()} seed {meta['seed']}: learning curve"))
+    report = write_text(res.run_dir / "report.md", training_markdown(res, comparison))
+    paths += [report, write_html_report(report)]
+    progress.done()
+    return {"comparison": comparison, "paths": paths}
+
+
+def _print_report(report: dict, indent: str = "") -> None:
+    """The comparison's table (agent vs PD p90 per axis), the warning on stderr, and what was written."""
+    comparison = report["comparison"]
+    if comparison is not None:
+        print(f"{indent}p90 |attitude error| on the held-out gusts, agent vs PD ({comparison.pd_label}):")
+        for ax, a, p, r in zip(("roll", "pitch", "yaw"), comparison.p90("agent"), comparison.p90("pd"),
+                               comparison.ratios):
+            print(f"{indent}  {ax:5s}: agent {a:.4g} deg, PD {p:.4g} deg (x{r:.3g})")
+        if comparison.warning():
+            print(f"heli train: {comparison.warning()}", file=sys.stderr)
+    for path in report["paths"]:
+        print(f"{indent}wrote {path}")
 
 
 def run(args) -> int:
@@ -173,7 +247,7 @@ def run(args) -> int:
 
     if args.seeds is not None:
         progress.done()
-        return _run_seeds(args, _config(args))
+        return _run_seeds(args, _config(args), progress)
     try:
         progress.done()
         res = train_agent(model=args.model, out=args.out, config=_config(args), progress=not args.quiet)
@@ -181,6 +255,7 @@ def run(args) -> int:
         print(f"heli train: interrupted after {e.timesteps} timesteps; checkpoint saved to {e.checkpoint}",
               file=sys.stderr)
         return 130
+    report = _report(args, res, progress)
     why = " (time budget reached)" if res.stopped_by_time else ""
     print(f"heli train: {res.algo.upper()} trained for {res.timesteps} timesteps in {res.seconds:.1f} s "
           f"({res.steps_per_second:.0f} steps/s){why}")
@@ -199,4 +274,5 @@ def run(args) -> int:
         print(f"wrote {len(res.checkpoints)} checkpoints in {res.run_dir / 'checkpoints'}")
     else:
         print(f"no checkpoint (--checkpoint-freq {args.checkpoint_freq} against {res.timesteps} timesteps)")
+    _print_report(report)
     return 0

@@ -93,6 +93,9 @@ class TrainingResult:
         What the agent's zip carries in ``heli_agent.json``.
     agent : PPO or SAC
         The trained model (the one saved at ``path``).
+    learning_curve : dict
+        Training episode returns and held-out evaluations (mean return, p90 |attitude error| per axis)
+        against timesteps (:meth:`controllers.sb3_training.LearningCurve.record`).
     """
 
     path: Path
@@ -106,6 +109,7 @@ class TrainingResult:
     evaluations: list = field(default_factory=list)
     metadata: dict = field(default_factory=dict)
     agent: object = field(default=None, repr=False)
+    learning_curve: dict = field(default_factory=dict, repr=False)
 
     @property
     def steps_per_second(self) -> float:
@@ -425,18 +429,19 @@ def _metadata(config: TrainConfig, env_model, split, segments, task, dt: float, 
 
 class _Callbacks(NamedTuple):
     """The SB3 callbacks of one run: held-out evaluation (or None), checkpoints, progress bar, time budget
-    (or None), and all of them in the order they run, the caller's last."""
+    (or None), the learning curve, and all of them in the order they run, the caller's last."""
 
     evaluation: object
     checkpoint: object
     bar: object
     clock: object
+    curve: object
     all: list
 
 
 def _callbacks(config: TrainConfig, eval_env, out, metadata: dict, progress: bool, extra) -> _Callbacks:
     """The run's callbacks: evaluations every ``eval_freq`` timesteps, checkpoints, bar, time budget, ``extra``."""
-    from ..sb3_training import AtomicCheckpoint, AtomicEvalCallback, ProgressBar, WallClockLimit
+    from ..sb3_training import AtomicCheckpoint, AtomicEvalCallback, LearningCurve, ProgressBar, WallClockLimit
 
     _, run_dir, name = out
     eval_cb = None
@@ -455,8 +460,9 @@ def _callbacks(config: TrainConfig, eval_env, out, metadata: dict, progress: boo
         from ..sb3_training import ObservationStatistics
 
         cbs.insert(0, ObservationStatistics())
-    cbs += [ckpt, bar] + ([clock] if clock else []) + list(extra)
-    return _Callbacks(eval_cb, ckpt, bar, clock, cbs)
+    curve = LearningCurve(eval_cb)
+    cbs += [ckpt, bar, curve] + ([clock] if clock else []) + list(extra)
+    return _Callbacks(eval_cb, ckpt, bar, clock, curve, cbs)
 
 
 def _learn(agent, config: TrainConfig, out, metadata: dict, envs, progress: bool, extra) -> TrainingResult:
@@ -488,7 +494,7 @@ def _learn(agent, config: TrainConfig, out, metadata: dict, envs, progress: bool
     best = run_dir / "best_model.zip"
     return TrainingResult(path, config.algo, int(agent.num_timesteps), seconds, bool(cb.clock and cb.clock.reached),
                           run_dir, list(cb.checkpoint.paths), best if best.exists() else None, record["evaluations"],
-                          metadata, agent)
+                          metadata, agent, record["learning_curve"])
 
 
 def _close_logger(agent) -> None:
@@ -529,7 +535,7 @@ def _write_record(run_dir, metadata, agent, seconds, cb: _Callbacks, interrupted
         "seconds": seconds, "steps_per_second": agent.num_timesteps / seconds if seconds > 0 else None,
         "cpu_count": os.cpu_count(), "interrupted": interrupted,
         "stopped_by_time": bool(cb.clock and cb.clock.reached), "evaluations": evals,
-        "checkpoints": [str(p) for p in cb.checkpoint.paths],
+        "learning_curve": cb.curve.record(), "checkpoints": [str(p) for p in cb.checkpoint.paths],
     })
     write_text(Path(run_dir) / "training.json", json.dumps(record, indent=1, allow_nan=False) + "\n")
     return record
