@@ -124,8 +124,8 @@ def _identify(csvs, tmp_path, *extra):
                  "--no-disturbances", *extra])
 
 
-def test_identify_validate_prints_the_table_and_writes_it_with_its_figures(csvs, tmp_path, capsys):
-    assert _identify(csvs, tmp_path, "--validate", str(csvs["A2"]), str(csvs["B"])) == 0
+def test_identify_validate_prints_the_table_and_writes_it(csvs, tmp_path, capsys):
+    assert _identify(csvs, tmp_path, "--no-plots", "--validate", str(csvs["A2"]), str(csvs["B"])) == 0
     out = capsys.readouterr().out
     assert "validation on 2 flight(s) not used for the fit (decoupled model" in out
     rows = {tuple(line.split()[:2]): line.split() for line in out.splitlines() if line.startswith("  A2.csv")
@@ -133,18 +133,27 @@ def test_identify_validate_prints_the_table_and_writes_it_with_its_figures(csvs,
     for axis in ("roll", "pitch", "yaw"):
         assert float(rows[("A2.csv", axis)][2]) >= float(rows[("B.csv", axis)][2]) + 40.0, axis
         assert rows[("A2.csv", axis)][4] == "—"  # the integral method has no wind state to predict with
+        assert float(rows[("A2.csv", axis)][5]) < float(rows[("B.csv", axis)][5]), axis  # J
     folder = tmp_path / "M"
     report = (folder / "report.md").read_text()
     assert "## Validation on flights not used for the fit" in report and "| B.csv | yaw |" in report
-    assert "![A2.csv: measured vs simulated body rates](validation_1.png)" in report
     assert "## Frequency response: flight and model, with coherence" in report
+    assert ".png" not in report  # --no-plots: no figure linked
+    stats = json.loads((folder / "model.json").read_text())["fit_statistics"]
+    assert [c["file"] for c in stats["validation_flights"]] == ["A2.csv", "B.csv"]
+    assert stats["frequency_response"]["coherence_min"] == 0.6
+
+
+@pytest.mark.slow  # five figures drawn: 4-10 s on 2 shared cores
+def test_identify_validate_draws_a_figure_per_flight_into_the_html_report(csvs, tmp_path):
+    assert _identify(csvs, tmp_path, "--validate", str(csvs["A2"]), str(csvs["B"])) == 0
+    folder = tmp_path / "M"
+    report = (folder / "report.md").read_text()
+    assert "![A2.csv: measured vs simulated body rates](validation_1.png)" in report
     for figure in ("validation_1.png", "validation_2.png", "frequency_response.png"):
         assert (folder / figure).read_bytes()[:4] == b"\x89PNG", figure
     html = (folder / "report.html").read_text()
     assert html.count("data:image/png;base64") >= 5  # rates, attitude, frequency response, two validations
-    stats = json.loads((folder / "model.json").read_text())["fit_statistics"]
-    assert [c["file"] for c in stats["validation_flights"]] == ["A2.csv", "B.csv"]
-    assert stats["frequency_response"]["coherence_min"] == 0.6
 
 
 @pytest.mark.parametrize("case, message", [
