@@ -35,6 +35,7 @@ COMMAND_MODULES = (
     "heli_cli.sweep",
     "heli_cli.train",
     "heli_cli.evaluate",
+    "heli_cli.tune",
 )
 """Modules that register sub-commands, in the order ``heli --help`` lists them (a workflow's order)."""
 

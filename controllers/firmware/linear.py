@@ -32,6 +32,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from heli_core.terms import AXES
+
 from ..closed_loop import STABILITY_MARGIN, hover_plant
 
 PROBE = 1e-7
@@ -166,8 +168,25 @@ class ClosedLoop:
         return self.plant.n
 
     def stable(self) -> tuple[np.ndarray, np.ndarray]:
-        """(spectral radius (G,), stable (G,)) of the tick's closed loop."""
-        radius = np.max(np.abs(np.linalg.eigvals(self.A)), axis=1)
+        """(spectral radius (G,), stable (G,)) of the tick's closed loop, neutral constants left out.
+
+        A mode at exactly ``z = 1`` that the gusts cannot excite is a conserved constant, not an instability:
+        Rotorflight's tail holds the integral of the yaw rate (its I-term), not a heading, so heading plus the
+        accumulated error stays where it started. Such modes (``|λ − 1| < 1e-8`` and a gust input below 1e-9 of
+        the largest) are left out of the radius.
+        """
+        radius = np.empty(self.A.shape[0])
+        for g, A in enumerate(self.A):
+            lam, V = np.linalg.eig(A)
+            mags = np.abs(lam)
+            near = np.abs(lam - 1.0) < 1e-8
+            if np.any(near):
+                try:
+                    reach = np.abs(np.linalg.solve(V, self.Bw.astype(complex))).max(axis=1)
+                    mags = np.where(near & (reach < 1e-9 * max(reach.max(), 1e-300)), 0.0, mags)
+                except np.linalg.LinAlgError:
+                    pass
+            radius[g] = mags.max()
         return radius, radius < 1.0 - STABILITY_MARGIN
 
     def angle_row(self, axis: int) -> np.ndarray:
@@ -240,7 +259,10 @@ def attitude_std(cl: ClosedLoop, m: int, axis: int, freq: np.ndarray, psd: np.nd
         if np.linalg.cond(V) < 1e8:
             left = c @ V  # (N,)
             right = np.linalg.solve(V, B_T[g])  # (N, 3)
-            H = ((left[:, None] * right)[None, :, :] / (z[:, None, None] - lam[None, :, None])).sum(axis=1)
+            res = left[:, None] * right
+            # modes the gusts do not reach (a neutral constant at z = 1, see ClosedLoop.stable) add nothing
+            live = np.abs(res).max(axis=1) > 1e-12 * max(np.abs(res).max(), 1e-300)
+            H = (res[live][None, :, :] / (z[:, None, None] - lam[live][None, :, None])).sum(axis=1)
         else:
             M = z[:, None, None] * np.eye(N)[None] - A_T[g][None]
             H = (c[None, None, :] @ np.linalg.solve(M, np.broadcast_to(B_T[g], (z.size, N, 3))))[:, 0, :]
@@ -310,6 +332,17 @@ def _same_held_axes(ctrl: LinearController, axis: int) -> bool:
     return True
 
 
+def _decoupled(plant, axis: int) -> bool:
+    """Whether ``axis``' states (rate, servo, angle) and stick are apart from the other axes' in the sampled
+    plant: then the other axes' loops do not enter the broken loop, whatever their gains."""
+    own = [int(plant.rate_idx[axis]), int(plant.angle_idx[axis])]
+    own += [i for i, name in enumerate(plant.states) if name == f"servo_{AXES[axis]}"]
+    others = [i for i in range(plant.n) if i not in own]
+    other_sticks = [i for i in range(3) if i != axis]
+    return (not np.any(plant.A[np.ix_(own, others)]) and not np.any(plant.A[np.ix_(others, own)])
+            and not np.any(plant.Bu[np.ix_(own, other_sticks)]) and not np.any(plant.Bu[np.ix_(others, [axis])]))
+
+
 def _margins_of(L: np.ndarray, grid: np.ndarray) -> tuple[float, float]:
     """(gain margin factor, phase margin [deg]) of a loop gain ``L`` on ``grid`` [rad/s] (its last point the
     Nyquist frequency), crossings by linear interpolation (module :func:`stick_margins`)."""
@@ -342,8 +375,8 @@ def stick_margins(cl: ClosedLoop, axis: int, sets=None) -> tuple[np.ndarray, np.
     linear interpolation. Definitions of :mod:`controllers.sweep_margins`: the gain margin is ``1/|L|`` at a
     phase crossover (L real and negative; the Nyquist end counted when ``L(−1) < 0``) nearest to 1 on a log
     scale, the phase margin ``(∠L mod 360°) − 180°`` at the gain crossover of smallest ``|margin|``; +inf
-    where there is none. NaN for sets not in ``sets`` (default: every set). When every set holds the other
-    axes alike (a sweep of ``axis``), ``P`` is evaluated once.
+    where there is none. NaN for sets not in ``sets`` (default: every set). When the other axes' loops do not
+    enter (a decoupled plant) or every set holds them alike (a sweep of ``axis``), ``P`` is evaluated once.
     """
     G = cl.A.shape[0]
     gm = np.full(G, np.nan)
@@ -353,7 +386,7 @@ def stick_margins(cl: ClosedLoop, axis: int, sets=None) -> tuple[np.ndarray, np.
     grid[-1] = w_nyq
     z = np.exp(1j * grid * cl.h)
     z[-1] = -1.0
-    shared = _same_held_axes(cl.ctrl, axis)
+    shared = _decoupled(cl.plant, axis) or _same_held_axes(cl.ctrl, axis)
     P = _held_response(_held_plant(cl, 0, axis), z) if shared else None
     for g in range(G) if sets is None else sets:
         Pg = P if shared else _held_response(_held_plant(cl, g, axis), z)

@@ -1,0 +1,192 @@
+"""``heli tune``: ArduPilot TradHeli or Rotorflight gains tuned in the identified gusts, written as the firmware's file."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+from .argtypes import number, output_path, seed, whole
+from .model_gate import add_accept_option, check_model
+
+FIRMWARE_CHOICES = ("ardupilot", "rotorflight")
+
+
+def _scale(text):
+    """``--scale``: one number > 0 for every axis, or three (roll,pitch,yaw)."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) not in (1, 3) or not all(math.isfinite(v) and v > 0 for v in values):
+        raise argparse.ArgumentTypeError(f"expected one number > 0 or three separated by ',' (roll,pitch,yaw), "
+                                         f"got {text!r}")
+    return values[0] if len(values) == 1 else tuple(values)
+
+
+def _delay(text):
+    if text in ("auto", "none"):
+        return text
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not 0.0 <= v <= 2.0:
+        raise argparse.ArgumentTypeError(f"expected 'auto', 'none' or seconds in [0, 2], got {text!r}")
+    return v
+
+
+def register(sub):
+    p = sub.add_parser(
+        "tune",
+        help="tune ArduPilot TradHeli or Rotorflight gains in the identified gusts; write the firmware's file",
+        description="Identify the model from LOG (or use --model), read the gains the aircraft flew (the log's "
+        "parameters or --params FILE), and fly the firmware's own attitude loop — ArduPilot's heli loop at "
+        "SCHED_LOOP_RATE, or Rotorflight's pid_mode 3 in angle mode at its PID rate, the physics sub-stepped to "
+        "it — in the identified gusts. Sweeps the firmware's gains (ArduPilot: ATC_ANG_*_P x ATC_RAT_*_P with FF "
+        "from the model; Rotorflight: P x angle_level_strength with F from the model, yaw P x I), keeps the sets "
+        "with 6 dB and 45 deg margins, flies the best few beside the current and the default gains, and writes "
+        "DIR/ardupilot.param or DIR/rotorflight.txt (the proposed gains), the current gains to revert to, "
+        "DIR/tune.json (per axis the current, default and proposed gains with their predicted p50/p90/p99 "
+        "attitude error and 90 %% intervals, margins, loop rate and command scale), DIR/tune.md and tune.html "
+        "with a flight-test card.",
+    )
+    p.add_argument("log", metavar="LOG|FLIGHT.csv",
+                   help="the flight: an ArduPilot .bin log or a Rotorflight blackbox log (its parameters are "
+                   "read), or a canonical CSV flight (then --params is needed)")
+    p.add_argument("--firmware", required=True, choices=FIRMWARE_CHOICES, help="the firmware to tune")
+    p.add_argument("--model", metavar="DIR", default=None,
+                   help="a model directory written by 'heli identify' (default: identify LOG into DIR/model)")
+    add_accept_option(p, "Tune gains on it")
+    p.add_argument("--params", metavar="FILE", default=None,
+                   help="the gains the aircraft flew: an ArduPilot parameter file (NAME,VALUE) or a Rotorflight "
+                   "CLI file ('set name = value'); default: read from LOG")
+    p.add_argument("--out", required=True, type=output_path, metavar="DIR", help="output directory")
+    p.add_argument("--scale", type=_scale, default=None, metavar="S|R,P,Y",
+                   help="model stick per firmware output unit (one number, or roll,pitch,yaw); default: measured "
+                   "from LOG (the model's input against the firmware's logged output), else 1")
+    p.add_argument("--delay", type=_delay, default="auto",
+                   help="servo delay when identifying from LOG: 'auto' (default: the likelihood profiled over "
+                   "0-0.5 s), 'none' or seconds")
+    p.add_argument("--window", type=number("a window length in seconds > 0", 0.0), default=20.0,
+                   help="length of the gust windows flown in the time domain (default 20 s; they tile the library)")
+    p.add_argument("--candidates", type=whole(1, 10), default=3,
+                   help="robust candidate sets per axis flown in the time domain (default 3)")
+    p.add_argument("--seed", type=seed(), default=0, help="seed of the windows and sensor errors (default 0)")
+    p.add_argument("--no-sensors", action="store_true",
+                   help="the loop reads the true state (default: through the model's identified sensors)")
+    p.add_argument("--no-plots", action="store_true", help="do not draw the figures")
+    p.set_defaults(func=run, out_kind="dir")
+
+
+def _flown_gains(args, spec):
+    """``(current parameters, notes, source)``; every bad input is refused here, before any work."""
+    from controllers.firmware.errors import FirmwareParamError
+    from identification.io import detect_format
+
+    if args.params is not None:
+        path = Path(args.params)
+        if not path.is_file():
+            raise FileNotFoundError(2, "no such parameter file", str(path))
+        values, kind = spec.read(path)
+        params, notes = spec.params_from(values, str(path), from_file=(kind == "file"))
+        return params, notes, str(path)
+    fmt = detect_format(args.log)
+    wanted = {"ardupilot": ("ardupilot-dataflash", "ardupilot-dataflash-text"), "rotorflight": ("blackbox",)}
+    if fmt not in wanted[spec.name]:
+        kind = "a CSV flight holds no parameters" if fmt == "csv" else f"{args.log} is a {fmt} log, not {spec.name}'s"
+        raise FirmwareParamError(f"{kind}: give the gains the aircraft flew with --params FILE "
+                                 f"({'NAME,VALUE lines' if spec.name == 'ardupilot' else 'CLI set lines'})")
+    values, _ = spec.read(args.log)
+    params, notes = spec.params_from(values, str(args.log), from_file=False)
+    return params, notes, str(args.log)
+
+
+def _check_mapping(spec, current, sample_rate: float, params=None) -> None:
+    """Refuse, before any work, a loop rate the gusts' period cannot hold and axes the model cannot control."""
+    from controllers.firmware.tune import control_signs
+
+    signs = control_signs(params) if params is not None else (1.0, 1.0, 1.0)
+    spec.loop_class(current, 1.0, signs).substeps(1.0 / sample_rate)
+
+
+def _model(args, spec, current, progress):
+    """``(EnvModel, model folder, the input source the model was identified on or None, segment or None)``."""
+    from heli_env.model_dir import load_env_model
+
+    if args.model is not None:
+        if not Path(args.model).is_dir():
+            raise FileNotFoundError(2, "no such model directory (write one with 'heli identify')", str(args.model))
+        check_model(args, "tune firmware gains on it")
+        env_model = load_env_model(args.model)
+        _check_mapping(spec, current, env_model.sample_rate, env_model.params)
+        return env_model, Path(args.model), None, None
+    from identification.io import read_flight
+    from identification.report import identify_and_report, source_entry
+
+    progress.stage(f"reading {args.log}")
+    flight = read_flight(args.log)
+    _check_mapping(spec, current, flight.sample_rate)
+    folder = Path(args.out) / "model"
+    delay = None if args.delay == "none" else args.delay
+    identify_and_report([flight], folder, sources=[source_entry(args.log)], flight_paths=[args.log], plots=False,
+                        identifier_kwargs={"delay": delay}, stage=progress.stage, progress=False)
+    args.model = str(folder)
+    check_model(args, "tune firmware gains on it")
+    return (load_env_model(folder), folder, flight.metadata.get("input_source"),
+            flight.metadata.get("segment"))
+
+
+def run(args) -> int:
+    from controllers.firmware.firmwares import FIRMWARES
+    from controllers.firmware.flown import flown_errors
+    from controllers.firmware.scale import measure_scale, user_scale
+    from controllers.firmware.tune import TuneConfig, tune_gains
+    from controllers.firmware.tune_output import write_outputs
+
+    from .progress import progress_of
+
+    spec = FIRMWARES[args.firmware]
+    if not Path(args.log).is_file():
+        raise FileNotFoundError(2, "no such flight log", str(args.log))
+    current, read_notes, source = _flown_gains(args, spec)  # refused before any work or file
+    progress = progress_of(args)
+    env_model, folder, input_source, segment = _model(args, spec, current, progress)
+    progress.stage("measuring the command scale" if args.scale is None else "using the given command scale")
+    scale = user_scale(args.scale) if args.scale is not None else measure_scale(args.log, input_source)
+    cfg = TuneConfig(window_s=args.window, candidates=args.candidates, seed=args.seed, sensors=not args.no_sensors,
+                     progress=progress.bars)
+    result = tune_gains(env_model, spec, current, scale, cfg, stage=progress.stage)
+    result.notes[:0] = [f"gains read from {source}: {n}" for n in read_notes]
+    flown = flown_errors(args.log, segment)
+    progress.stage("writing the parameter files, tune.json and the report")
+    context = [f"Model: `{folder}`; flight: `{args.log}`; gains flown: `{source}`."]
+    paths = write_outputs(result, args.out, flown, context, plots=not args.no_plots,
+                          command=" ".join(["heli"] + list(getattr(args, "argv", []))))
+    progress.done()
+    from .html_report import write_html_report
+
+    paths["html"] = write_html_report(paths["report"])
+    _print_summary(result, scale)
+    for key in ("proposed", "current", "json", "report", "html"):
+        print(f"wrote {paths[key]}")
+    for fig in paths.get("figures", []):
+        print(f"wrote {fig}")
+    return 0
+
+
+def _print_summary(result, scale) -> None:
+    print(f"heli tune: {result.firmware} at {result.loop_rate_hz:g} Hz, command scale "
+          f"{', '.join(f'{v:.4g}' for v in scale.scale)} ({scale.source}), "
+          f"{result.settings['seconds']:.1f} s")
+    for axis, row in result.axes.items():
+        def p90(s):
+            return "diverged" if s.get("diverged", True) else f"{s['p90_deg']:.3g}"
+
+        tail = " (defaults already near best)" if row["defaults_near_best"] else ""
+        kept = " (kept: no robust set)" if row["kept_current"] else ""
+        print(f"  {axis:5s}: p90 |attitude error| current {p90(row['current'])}, default {p90(row['default'])}, "
+              f"proposed {p90(row['proposed'])} deg; proposed margins "
+              f"{row['proposed']['gain_margin_db']:.3g} dB / {row['proposed']['phase_margin_deg']:.3g} deg{kept}{tail}")
+    for note in result.notes:
+        print(f"note: {note}")

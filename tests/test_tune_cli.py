@@ -1,0 +1,99 @@
+"""``heli tune``: bad input ends in one line and exit 2 with nothing written; a run writes every promised file."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from heli_cli.main import main
+
+import firmware_plain_loop as plain
+
+LOGS = Path(__file__).resolve().parents[2] / "shared" / "fixtures" / "logs"
+
+
+@pytest.fixture()
+def ap_params(tmp_path):
+    path = tmp_path / "flown.param"
+    path.write_text("ATC_ANG_RLL_P,4.5\nATC_RAT_RLL_P,0.05\nATC_ANG_PIT_P,4.5\n")
+    return path
+
+
+def _refused(argv, capsys, match, out):
+    code = main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1 and match in err[0], err
+    assert not Path(out).exists() or not any(Path(out).iterdir())
+
+
+@pytest.mark.parametrize("content, match", [
+    ("ATC_RAT_RLL_PP,0.1\n", "unknown parameter 'ATC_RAT_RLL_PP'"),
+    ("ATC_RAT_RLL_P,0.9\n", "outside ArduPilot's documented range"),
+    ("ATC_RAT_RLL_P 0.1 7\n", "expected 'NAME,VALUE'"),
+])
+def test_bad_parameter_files_are_refused(tmp_path, capsys, flight_csv, ideal_model_dir, content, match):
+    params = tmp_path / "bad.param"
+    params.write_text(content)
+    out = tmp_path / "out"
+    _refused(["tune", str(flight_csv), "--firmware", "ardupilot", "--model", str(ideal_model_dir), "--params",
+              str(params), "--out", str(out)], capsys, match, out)
+
+
+def test_a_csv_flight_without_params_is_refused(tmp_path, capsys, flight_csv, ideal_model_dir):
+    out = tmp_path / "out"
+    _refused(["tune", str(flight_csv), "--firmware", "rotorflight", "--model", str(ideal_model_dir), "--out",
+              str(out)], capsys, "a CSV flight holds no parameters: give the gains the aircraft flew with --params",
+             out)
+
+
+@pytest.mark.skipif(not LOGS.is_dir(), reason="the shared real-log fixtures are absent")
+def test_a_log_of_the_other_firmware_is_refused(tmp_path, capsys, ideal_model_dir):
+    out = tmp_path / "out"
+    _refused(["tune", str(LOGS / "ardupilot_copter_log171.bin"), "--firmware", "rotorflight", "--model",
+              str(ideal_model_dir), "--out", str(out)], capsys, "ardupilot-dataflash log, not rotorflight's", out)
+
+
+def test_a_missing_model_and_a_bad_scale_are_refused(tmp_path, capsys, flight_csv, ap_params):
+    out = tmp_path / "out"
+    _refused(["tune", str(flight_csv), "--firmware", "ardupilot", "--model", str(tmp_path / "nope"), "--params",
+              str(ap_params), "--out", str(out)], capsys, "no such model directory", out)
+    with pytest.raises(SystemExit) as e:
+        main(["tune", str(flight_csv), "--firmware", "ardupilot", "--params", str(ap_params), "--out", str(out),
+              "--scale", "1,2"])
+    assert e.value.code == 2
+
+
+def test_a_loop_rate_the_gusts_cannot_hold_is_refused(tmp_path, capsys, flight_csv, ideal_model_dir):
+    params = tmp_path / "p.param"
+    params.write_text("SCHED_LOOP_RATE,250\n")
+    out = tmp_path / "out"
+    _refused(["tune", str(flight_csv), "--firmware", "ardupilot", "--model", str(ideal_model_dir), "--params",
+              str(params), "--out", str(out)], capsys, "whole multiple of the control rate", out)
+
+
+@pytest.mark.slow
+def test_tune_writes_the_files_and_the_plain_loop_flies_them(tmp_path, capsys, flight_csv, ideal_model_dir,
+                                                              ap_params):
+    """A whole run on the ideal model (about 7 s): the promised files and keys, margins kept, the proposed gains
+    within the documented ranges and the file as the plain loop reads it equal to what was predicted
+    (scripts/firmware_tune_check.py flies it)."""
+    out = tmp_path / "out"
+    assert main(["-q", "tune", str(flight_csv), "--firmware", "ardupilot", "--model", str(ideal_model_dir),
+                 "--params", str(ap_params), "--out", str(out), "--scale", "12,12,2", "--window", "10",
+                 "--no-plots", "--candidates", "2"]) == 0
+    doc = json.loads((out / "tune.json").read_text())
+    for axis in ("roll", "pitch", "yaw"):
+        row = doc["axes"][axis]
+        for label in ("current", "default", "proposed"):
+            assert {"p50_deg", "p90_deg", "p99_deg", "p90_deg_interval", "gain_margin_db", "phase_margin_deg",
+                    "gains"} <= set(row[label])
+        assert row["proposed"]["gain_margin_db"] >= 6.0 and row["proposed"]["phase_margin_deg"] >= 45.0
+    assert doc["loop_rate_hz"] == 400.0 and doc["command_scale"]["roll"] == 12.0
+    for name in ("ardupilot.param", "ardupilot.current.param", "tune.md", "tune.html"):
+        assert (out / name).is_file()
+    assert "Flight-test card" in (out / "tune.md").read_text()
+    values = plain.read_param_file(out / "ardupilot.param")
+    assert 3.0 <= values["ATC_ANG_RLL_P"] <= 12.0 and 0.0 <= values["ATC_RAT_RLL_P"] <= 0.35
+    assert values == pytest.approx(doc["written_values"])
