@@ -16,11 +16,12 @@ response is that of the physics core linearised about hover at the flights' mean
 delay and lag of eq. 31, gains scheduled on the collective), from one stick to its own axis' rate with the
 other sticks still.
 
-Two things bias ``H`` that the model does not have: a pilot who moves the stick against gusts (closed-loop
-piloting correlates the stick with the wind, pulling ``H`` towards the inverse of his own law where his
-corrections dominate the stick's power, mostly below the sweeps' band), and sticks of other axes moved together
-with this one (a single-input estimate; CIFER conditions on the other inputs). Both lower the coherence where
-they matter, which is why the comparison keeps to the coherent band.
+Two things bias ``H`` that the model does not have. A pilot who moves the stick against gusts (closed-loop
+piloting correlates the stick with the wind) pulls ``H`` towards the inverse of his own law where his
+corrections dominate the stick's power, mostly below the sweeps' band; the coherence does not warn of it, for
+stick and rate stay linearly related there, only not through the aircraft (on the project's windy synthetic
+flights it is most of the true model's cost, docs/method.md). Sticks of other axes moved together with this
+one bias a single-input estimate too (CIFER conditions on the other inputs); that one lowers the coherence.
 """
 
 from __future__ import annotations
