@@ -14,7 +14,12 @@ from heli_core.quaternion import euler_from_quaternion_scalar, quaternion_from_e
 from .errors import ActionError
 from .spec import MAX_RATE, action_space, build_spec, observation_space, real_actions, reset_options
 from .spec import OBS_DIM  # noqa: F401  (it lived here)
-from .tasks import NOISE_BLOCK, draw_episode, line_phases, reward_of, wrap
+from .sensor_noise import draw_noise_key, noise_block
+from .tasks import draw_episode, line_phases, reward_of, wrap
+
+NOISE_STEPS = 256
+"""Steps of sensor noise the single env computes at once (:func:`heli_env.sensor_noise.noise_block`): one
+compiled call per 256 steps instead of one per step. The values depend only on the episode's key and the step."""
 
 
 class HeliAttitudeEnv(gym.Env):
@@ -81,8 +86,10 @@ class HeliAttitudeEnv(gym.Env):
 
     The attitude and rates are measured through the model's identified sensors
     (``model.json["sensors"]``: white noise on the attitude estimate and the gyros, the gyros'
-    vibration lines at a random phase per episode; all drawn from ``np_random``), or through
-    ``obs_noise``; the reward, termination and ``info`` use the true state.
+    vibration lines at a random phase per episode), or through ``obs_noise``; the reward, termination
+    and ``info`` use the true state. The phases and a 64-bit noise key are drawn from ``np_random`` at
+    reset; the white noise of each step is a function of the key and the step
+    (:mod:`heli_env.sensor_noise`), so the vector env computes the same noise in its compiled loop.
 
     ## Rewards
 
@@ -172,7 +179,9 @@ class HeliAttitudeEnv(gym.Env):
             for i, (axis, amp) in enumerate(zip(s.line_axis, s.line_amp)):  # the vector env's order and operations
                 table[axis] += amp * (s.line_sin[i] * phase[i][0] + s.line_cos[i] * phase[i][1])
             self._lines = table.T.tolist()
-        self._noise_used = NOISE_BLOCK  # a fresh block at the episode's first observation
+        if s.measured:  # the episode's sensor noise: a pure function of this key and the step (drawn last)
+            self._noise_key = draw_noise_key(self.np_random)
+            self._noise_first = None
         self._gust = gust
         self._base = int(s.model.starts[ep.trace]) + ep.offset
         self._end = int(s.model.starts[ep.trace] + s.model.lengths[ep.trace])  # exclusive
@@ -268,11 +277,11 @@ class HeliAttitudeEnv(gym.Env):
         self._errors = ((0.0, 0.0, 0.0) if s.task.task == "rate" else shown, e_rate)
         m_shown, m_rate, mp, mq, mr = shown, e_rate, p, q, r
         if s.measured:
-            if self._noise_used >= NOISE_BLOCK:
-                self._noise = self.np_random.normal(0.0, 1.0, (NOISE_BLOCK, 6)).tolist()
-                self._noise_used = 0
-            n = self._noise[self._noise_used]
-            self._noise_used += 1
+            k = self._k
+            if self._noise_first is None or not 0 <= k - self._noise_first < NOISE_STEPS:
+                self._noise = noise_block(self._noise_key, k, NOISE_STEPS).tolist()
+                self._noise_first = k
+            n = self._noise[k - self._noise_first]
             na, nr = s.obs_noise
             mp, mq, mr = p + nr[0] * n[3], q + nr[1] * n[4], r + nr[2] * n[5]
             if self._lines is not None:

@@ -241,10 +241,3 @@ def line_phases(rng: np.random.Generator, n_lines: int) -> list:
     norm = np.sqrt(g[:, 0] * g[:, 0] + g[:, 1] * g[:, 1])
     return (g / norm[:, None]).tolist()
 
-
-NOISE_BLOCK = 256
-"""Steps of sensor noise an environment copy draws at once from its generator (6 normals a step). The single
-and the vector environment draw the same blocks at the same moments (the first observation of an episode,
-then every ``NOISE_BLOCK`` steps), so a vector copy equals its single env bit for bit, while the vector env
-calls each copy's generator once per block instead of once per step (at 4096 copies that loop cost 23x the
-step itself)."""

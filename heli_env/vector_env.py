@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 from gymnasium.error import ResetNeeded
 from gymnasium.utils import seeding
@@ -15,13 +14,9 @@ from heli_core.quaternion import quaternion_from_euler
 from .errors import ActionError
 from .kernels import ROW_PAD, advance_kernel, batch_rows, clip_actions, euler_arguments_kernel, observe_kernel
 from .spec import MAX_RATE, OBS_DIM, action_space, build_spec, observation_space, real_actions, reset_options
-from .tasks import N_SINES, NOISE_BLOCK, draw_episode, line_phases, reward_coefficients
-
-THREADED_FROM = 256
-"""Copies from which the default ``threads`` is numba's thread count (all cores). Measured step
-times, 1 vs 2 threads on 2 cores: 8 copies 15.3 vs 16.4 us, 64: 17.8 vs 18.3, 256: 26.1 vs 24.7,
-1024: 57.6 vs 49.2, 4096: 205 vs 159."""
-
+from .sensor_noise import draw_noise_key
+from .tasks import N_SINES, draw_episode, line_phases, reward_coefficients
+from .threads import ThreadChoice
 
 class HeliAttitudeVectorEnv(VectorEnv):
     """``num_envs`` copies of :class:`heli_env.env.HeliAttitudeEnv`, batched in numpy.
@@ -32,7 +27,8 @@ class HeliAttitudeVectorEnv(VectorEnv):
     a fused numba loop compiled from the same statements as the single
     environment's physics core (:func:`heli_core.discrete.discrete_step_statements`,
     :mod:`heli_env.kernels`). ``threads`` is how many threads share the copies
-    (default: all of numba's from :data:`THREADED_FROM` copies, else one);
+    (default None: one, or numba's pool while it measures faster on a large
+    batch; ``$HELI_NUM_THREADS`` fixes it too: :mod:`heli_env.threads`);
     results do not depend on it. Every episode
     is drawn by the same function from a per-copy random generator seeded
     ``seed + i``, so copy ``i`` reproduces a single
@@ -57,12 +53,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
                  library_version=None, render_mode: str | None = None, threads: int | None = None):
         if int(num_envs) != num_envs or num_envs < 1:
             raise ValueError(f"num_envs must be a positive whole number, got {num_envs!r}")
-        most = numba.config.NUMBA_NUM_THREADS
-        if threads is not None and (int(threads) != threads or not 1 <= threads <= most):
-            raise ValueError(f"threads must be a whole number from 1 to {most} (numba's thread pool), got {threads!r}")
-        if threads is None:  # below a few hundred copies, handing work to threads costs more than it saves
-            threads = most if num_envs >= THREADED_FROM else 1
-        self._threads = int(threads)
+        self._thread_choice = ThreadChoice(int(num_envs), threads)
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be 'rgb_array' or None for the vector env, got {render_mode!r}")
         self.spec_ = s = build_spec(model, task, reference, dt, episode_seconds, collective, gust_scale, obs_noise,
@@ -77,14 +68,15 @@ class HeliAttitudeVectorEnv(VectorEnv):
         # contiguous memory: trims (3), collective, gust torque (3), u_d (3).
         self._table = np.ascontiguousarray(np.vstack([s.trim, s.col[None, :], s.torque, s.model.ud]).T)
         self._x = None  # (N_STATE, n) once reset
-        self._advance = advance_kernel(s.model.params, s.dt, self._threads > 1)
+        self._advance = advance_kernel(s.model.params, s.dt, parallel=False)
+        self._advance_pool = (advance_kernel(s.model.params, s.dt, parallel=True)
+                              if self._thread_choice.compiled_parallel else None)
         self._euler_arguments = euler_arguments_kernel()
-        self._observe_loop = observe_kernel(s.task.task, s.measured, self._threads > 1, s.task.axis_weighted)
+        self._observe_loop = observe_kernel(s.task.task, s.measured, s.task.axis_weighted, s.line_axis)
         self._trig = batch_rows(5, n)  # arguments of atan2 / asin / atan2 (eqs. 27-29)
         self._att = batch_rows(3, n)  # roll, pitch, yaw [rad]
         self._coef = np.array(reward_coefficients(s.task))
         self._no_ref = np.zeros((3, n))
-        self._no_meas = np.zeros((3, 0))
         self._rngs = [None] * n
         self._k = np.zeros(n, dtype=np.int64)
         self._base = np.zeros(n, dtype=np.int64)
@@ -102,15 +94,15 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._amp = np.zeros((3, N_SINES, n))
         self._freq = np.zeros((3, N_SINES, n))
         self._phase = np.zeros((3, N_SINES, n))
-        self._line_cos = np.zeros((len(s.line_axis), n))  # each gyro line's phase per copy, as (cos, sin)
-        self._line_sin = np.zeros((len(s.line_axis), n))
-        self._noise = np.zeros((NOISE_BLOCK, 6, n)) if s.measured else None  # each copy's block of sensor noise
-        self._noise_used = np.full(n, NOISE_BLOCK, dtype=np.int64)  # steps of it used
+        n_lines = len(s.line_axis)  # the gyro lines: sin, cos of each at every step; each copy's phases
+        self._line_amp = np.array(s.line_amp, dtype=float)
+        self._line_table = np.ascontiguousarray(np.stack([s.line_sin, s.line_cos], axis=-1).transpose(1, 0, 2)
+                                                .reshape(s.line_sin.shape[1], 2 * n_lines))
+        self._line_phase = np.zeros((n, 2 * n_lines))  # (cos, sin) of each line, one row per copy
+        self._key = np.zeros(n, dtype=np.uint64)  # each copy's episode noise key (heli_env.sensor_noise)
+        self._noise_std = np.array([*s.obs_noise[0], *s.obs_noise[1]], dtype=float)
         self._last_obs = None  # the observation each copy was last given (a masked reset leaves the others')
-        self._att_noise = np.array(s.obs_noise[0])[:, None]
-        self._rate_noise = np.array(s.obs_noise[1])[:, None]
         self._ones = np.ones(n, dtype=bool)
-        self._copies = np.arange(n)
         self._renderer = None
         self._history = []
 
@@ -148,14 +140,9 @@ class HeliAttitudeVectorEnv(VectorEnv):
         j = self._base + np.minimum(self._k, self._last) * s.ratio
         self._ud = batch_rows(3, n, fill=None)
         np.multiply(np.take(self._table, j, axis=0).T[7:10], self._gust, out=self._ud)  # the gust about to act
-        if self._threads > 1:  # (setting the count launches numba's pool, even to 1: single-threaded never does)
-            numba.set_num_threads(self._threads)
-        used = self._noise_used.copy()
         obs, info, _, _, _ = self._observe()
-        if self._last_obs is not None and not mask.all():  # a copy not reset keeps its observation and its noise
-            keep = ~mask
-            obs[keep] = self._last_obs[keep]
-            self._noise_used[keep] = used[keep]
+        if self._last_obs is not None and not mask.all():  # a copy not reset keeps its observation
+            obs[~mask] = self._last_obs[~mask]
         self._last_obs = obs.copy()
         return obs, info
 
@@ -167,11 +154,11 @@ class HeliAttitudeVectorEnv(VectorEnv):
         eps = [draw_episode(self._rngs[i], s, options) for i in which.tolist()]
         if not eps:
             return
-        self._noise_used[which] = NOISE_BLOCK  # a fresh block at the episode's first observation
         if s.line_axis:  # drawn after the episode, from the copy's generator, as the single env does
             phases = np.array([line_phases(self._rngs[i], len(s.line_axis)) for i in which.tolist()])
-            self._line_cos[:, which] = phases[:, :, 0].T
-            self._line_sin[:, which] = phases[:, :, 1].T
+            self._line_phase[which] = phases.reshape(len(which), -1)
+        if s.measured:  # then the episode's noise key
+            self._key[which] = [draw_noise_key(self._rngs[i]) for i in which.tolist()]
         traces = np.array([ep.trace for ep in eps], dtype=np.int64)
         base = s.model.starts[traces] + np.array([ep.offset for ep in eps], dtype=np.int64)
         stop = np.minimum(s.model.starts[traces] + s.model.lengths[traces], base + s.needed)
@@ -220,11 +207,9 @@ class HeliAttitudeVectorEnv(VectorEnv):
         else:
             self._prev, self._incoming = incoming, self._prev
         applied = self._prev  # the action that acts in this step, observed after it
-        if self._threads > 1:  # (setting the count launches numba's pool, even to 1: single-threaded never does)
-            numba.set_num_threads(self._threads)
         self._ud = ud = batch_rows(3, n, fill=None)  # the gust of this step, reported in info
-        self._advance(self._table, self._base, self._k, self._last, s.ratio, applied, self._gust, self._x, ud,
-                      self._trig)
+        self._thread_choice.run(self._advance, self._advance_pool, self._table, self._base, self._k, self._last,
+                                s.ratio, applied, self._gust, self._x, ud, self._trig)
         if restart.any():
             which = np.flatnonzero(restart)
             self._reset_envs(which, {})
@@ -268,22 +253,8 @@ class HeliAttitudeVectorEnv(VectorEnv):
         np.arctan2(trig[3], trig[4], out=att[2])
         t = self._k * s.dt
         ref_att, ref_rate = self._reference(t)
-        # Reward, termination and info score the true state; only the observation is measured.
-        meas_att = meas_rate = self._no_meas
-        if s.measured:
-            for i in np.flatnonzero(self._noise_used >= NOISE_BLOCK).tolist():  # as each single env draws them
-                self._noise[:, :, i] = self._rngs[i].normal(0.0, 1.0, (NOISE_BLOCK, 6))
-                self._noise_used[i] = 0
-            noise = self._noise[self._noise_used, :, self._copies].T  # (6, n): each copy's next step
-            self._noise_used += 1
-            meas_att = att + self._att_noise * noise[0:3]
-            meas_rate = x[0:3] + self._rate_noise * noise[3:6]
-            if s.line_axis:  # the gyros' vibration lines, each copy at its episode's phase
-                k = np.minimum(self._k, s.line_sin.shape[1] - 1)
-                lines = np.zeros((3, n))
-                for i, (axis, amp) in enumerate(zip(s.line_axis, s.line_amp)):
-                    lines[axis] += amp * (s.line_sin[i, k] * self._line_cos[i] + s.line_cos[i, k] * self._line_sin[i])
-                meas_rate = meas_rate + lines
+        # Reward, termination and info score the true state; only the observation is measured (in the loop:
+        # each copy's noise from its key and step, its gyro lines at its phase).
         obs = np.empty((n, OBS_DIM), dtype=np.float32)
         deg_att = batch_rows(3, n, fill=None)
         deg_rate = batch_rows(3, n, fill=None)
@@ -291,9 +262,9 @@ class HeliAttitudeVectorEnv(VectorEnv):
         terminated = np.empty(n, dtype=bool)
         truncated = np.empty(n, dtype=bool)
         self._observe_loop(att, x, self._no_ref if ref_att is None else ref_att,
-                           self._no_ref if ref_rate is None else ref_rate, meas_att, meas_rate, self._prev, MAX_RATE,
-                           s.task.max_angle, self._coef, self._k, self._nsteps, obs, deg_att, deg_rate, reward,
-                           terminated, truncated)
+                           self._no_ref if ref_rate is None else ref_rate, self._prev, MAX_RATE, s.task.max_angle,
+                           self._coef, self._k, self._nsteps, self._key, self._noise_std, self._line_amp,
+                           self._line_table, self._line_phase, obs, deg_att, deg_rate, reward, terminated, truncated)
         ud = self._ud
         m = self._ones
         info = {"time": t, "_time": m, "disturbance": ud.T, "_disturbance": m,

@@ -278,6 +278,31 @@ def test_thread_count_does_not_change_results():
         assert all(np.array_equal(a, b) for a, b in zip(trail, trail0))
 
 
+def test_copies_of_every_chunk_step_as_their_own_env():
+    """The loop takes CHUNK copies at a time, on one thread or the pool, switching between them from step to
+    step as the measured default does: copies in the first, a middle and the last chunk equal lone copies."""
+    import numba
+
+    from heli_env.kernels import CHUNK
+
+    n = 2 * CHUNK + 5
+    most = numba.config.NUMBA_NUM_THREADS
+    big = HeliAttitudeVectorEnv(n, episode_seconds=0.5, threads=most)
+    picks = [0, CHUNK + 1, n - 1]
+    lone = [HeliAttitudeVectorEnv(1, episode_seconds=0.5, threads=1) for _ in picks]
+    big.reset(seed=11)
+    for env, i in zip(lone, picks):
+        env.reset(seed=11 + i)
+    for k, actions in enumerate(_actions(80, n, seed=3)):
+        big._thread_choice.parallel = most > 1 and k % 3 != 0  # the pool's loop and the one-thread loop in turn
+        obs, rew, term, trunc, info = big.step(actions)
+        for env, i in zip(lone, picks):
+            o, r, te, tr, inf = env.step(actions[i:i + 1])
+            assert np.array_equal(obs[i], o[0]) and rew[i] == r[0] and term[i] == te[0] and trunc[i] == tr[0]
+            assert np.array_equal(info["disturbance"][i], inf["disturbance"][0])
+            assert np.array_equal(big._x[:, i], env._x[:, 0])
+
+
 @pytest.mark.parametrize("threads", [0, 1.5, 10_000])
 def test_bad_thread_count_raises(threads):
     with pytest.raises(ValueError, match="threads must be a whole number from 1 to"):
@@ -360,14 +385,22 @@ def test_a_rejected_action_changes_nothing(delay):
     assert np.array_equal(np.array(clean._x), np.array(hit._x))
 
 
-def test_default_thread_count_follows_the_batch_size():
+def test_default_thread_count_follows_the_batch_size(monkeypatch):
+    """One thread below THREADED_FROM copies (the pool is never compiled in); measured from there."""
     import numba
 
-    from heli_env.vector_env import THREADED_FROM
+    from heli_env.threads import THREADED_FROM
 
-    assert HeliAttitudeVectorEnv(8)._threads == 1
-    assert HeliAttitudeVectorEnv(THREADED_FROM)._threads == numba.config.NUMBA_NUM_THREADS
-    assert HeliAttitudeVectorEnv(8, threads=numba.config.NUMBA_NUM_THREADS)._threads == numba.config.NUMBA_NUM_THREADS
+    monkeypatch.delenv("HELI_NUM_THREADS", raising=False)
+    small = HeliAttitudeVectorEnv(8)
+    assert small._thread_choice.threads == 1 and small._advance_pool is None
+    most = numba.config.NUMBA_NUM_THREADS
+    big = HeliAttitudeVectorEnv(THREADED_FROM)
+    assert big._thread_choice.measured == (most > 1)
+    fixed = HeliAttitudeVectorEnv(8, threads=most)
+    assert fixed._thread_choice.threads == most and not fixed._thread_choice.measured
+    monkeypatch.setenv("HELI_NUM_THREADS", "1")
+    assert HeliAttitudeVectorEnv(THREADED_FROM)._advance_pool is None
 
 
 def test_a_masked_reset_leaves_the_other_copies_alone():

@@ -1,0 +1,176 @@
+"""How many threads the native vector env's step loop uses: one, unless more measure faster now.
+
+Handing a loop to threads pays only where the batch is large, and only while the other cores are free:
+on a 2-core machine with one core taken by another process, every parallel region waits for a thread
+that is not running, and a step that takes 0.4 ms on one thread took 20 ms. So the vector env's
+default (``threads=None``) measures instead of assuming:
+
+* Fewer than :data:`THREADED_FROM` copies, or a thread pool of one: always one thread. The step's
+  loop is then compiled without ``prange`` and numba's pool is never started.
+* Otherwise the step times its loop (the only parallel region of a step) on one thread and on the
+  pool, a few steps each, and keeps the pool only while its median is at most :data:`KEEP_BELOW`
+  of one thread's. A threaded step that comes out slower than that (a neighbour took a core) sends
+  the env back to one thread at once; a new trial of the pool follows after :data:`FIRST_RETRIAL`
+  steps, then twice as late after each trial the pool loses, up to :data:`LAST_RETRIAL`. The decision
+  costs a few timer reads a step; a lost trial costs :data:`TRIAL_STEPS` slow steps.
+
+``threads=k`` (the env's argument) or the environment variable ``HELI_NUM_THREADS=k`` fixes the count
+instead (``1``: never start the pool); ``threads`` wins over ``HELI_NUM_THREADS``, and both are capped
+at numba's pool size (``NUMBA_NUM_THREADS``, all cores by default). The results never depend on the
+count: copies are independent and each is computed by the same code.
+
+Numba's threading layer is chosen on purpose: :func:`prefer_workqueue` asks for ``workqueue``, numba's
+own pool, unless ``NUMBA_THREADING_LAYER`` is set or numba's pool already runs. Measured on 2 cores
+(``docs/benchmarks.md``): OpenMP's threads spin after each region, so with another process on the
+second core they took its time and the threaded step collapsed; ``workqueue`` threads sleep. TBB was
+not installed here to compare.
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import time
+
+import numba
+
+THREADED_FROM = 1024
+"""Copies from which the default may try threads. Measured (2 cores, quiet, one region per step): below
+about a thousand copies a parallel region costs as much as it saves."""
+
+TRIAL_STEPS = 5
+"""Steps timed on each side of a trial; the first threaded step of a trial is not counted (it wakes the pool)."""
+
+KEEP_BELOW = 0.85
+"""The pool is kept while its median step loop takes at most this share of one thread's."""
+
+FIRST_RETRIAL = 64
+LAST_RETRIAL = 16384
+"""Steps between trials of the pool: the first, and the most after the pool lost again and again."""
+
+ENV_VAR = "HELI_NUM_THREADS"
+
+
+def pool_size() -> int:
+    """Numba's thread pool size (``NUMBA_NUM_THREADS``, all cores by default)."""
+    return int(numba.config.NUMBA_NUM_THREADS)
+
+
+def requested_threads(threads=None) -> int | None:
+    """The fixed thread count asked for, or None for the measured default.
+
+    ``threads`` (the env's argument) wins over ``$HELI_NUM_THREADS``. Raises ValueError for a count that
+    is not a whole number from 1 to :func:`pool_size` (the variable: for one that is not a whole number
+    >= 1; a larger count is capped at the pool, since the variable is meant for every machine it meets).
+    """
+    most = pool_size()
+    if threads is not None:
+        if isinstance(threads, bool) or int(threads) != threads or not 1 <= threads <= most:
+            raise ValueError(f"threads must be a whole number from 1 to {most} (numba's thread pool), got {threads!r}")
+        return int(threads)
+    text = os.environ.get(ENV_VAR, "").strip()
+    if not text:
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise ValueError(f"{ENV_VAR} must be a whole number >= 1 (threads of the vector env's step), got {text!r}")
+    return min(value, most)
+
+
+def prefer_workqueue() -> None:
+    """Ask numba for its ``workqueue`` layer before its pool starts, unless the user chose a layer."""
+    from numba.np.ufunc import parallel
+
+    if "NUMBA_THREADING_LAYER" not in os.environ and not parallel._is_initialized:
+        numba.config.THREADING_LAYER = "workqueue"
+
+
+class ThreadChoice:
+    """Per step, whether the vector env's loop runs on one thread or on ``threads`` (see the module docstring).
+
+    Parameters
+    ----------
+    n_copies : int
+        Copies stepped per call.
+    threads : int, optional
+        A fixed count (the env's ``threads`` argument); None reads ``$HELI_NUM_THREADS``, then measures.
+    """
+
+    def __init__(self, n_copies: int, threads: int | None = None):
+        fixed = requested_threads(threads)
+        most = pool_size()
+        self.measured = fixed is None and most > 1 and n_copies >= THREADED_FROM
+        self.threads = fixed if fixed is not None else (most if self.measured else 1)
+        self.parallel = self.threads > 1 and not self.measured  # the loop to run this step
+        self._retrial = FIRST_RETRIAL
+        self._countdown = TRIAL_STEPS  # the first trial soon: the pool's worth is unknown
+        self._trial = None  # (one-thread times, pool times) while a trial runs
+        self._one = []  # recent one-thread loop times [s]
+        self._pool = []  # recent pool loop times [s]
+        if self.threads > 1:
+            prefer_workqueue()
+
+    @property
+    def compiled_parallel(self) -> bool:
+        """A ``prange`` loop is needed at all (a fixed count above one, or the measured default)."""
+        return self.threads > 1
+
+    def run(self, serial, parallel, *args):
+        """Call the one-thread loop ``serial`` or the pool's ``parallel`` on ``args``, as decided; time it."""
+        if not self.measured:
+            if self.parallel:
+                numba.set_num_threads(self.threads)
+                return parallel(*args)
+            return serial(*args)
+        pool = self.parallel
+        if pool:
+            numba.set_num_threads(self.threads)
+        t0 = time.perf_counter()
+        out = (parallel if pool else serial)(*args)
+        self._record(pool, time.perf_counter() - t0)
+        return out
+
+    def _record(self, pool: bool, seconds: float) -> None:
+        if self._trial is not None:
+            self._trial_step(pool, seconds)
+            return
+        if pool:
+            self._pool = (self._pool + [seconds])[-TRIAL_STEPS:]
+            one = statistics.median(self._one) if self._one else None
+            if one is not None and len(self._pool) == TRIAL_STEPS and statistics.median(self._pool) > one * KEEP_BELOW:
+                self._lose()  # a neighbour took a core: back to one thread now
+                return
+        else:
+            self._one = (self._one + [seconds])[-TRIAL_STEPS:]
+        self._countdown -= 1
+        if self._countdown <= 0:  # time for a trial: one-thread steps, then pool steps
+            self._trial = ([], [])
+            self.parallel = False
+
+    def _trial_step(self, pool: bool, seconds: float) -> None:
+        ones, pools = self._trial
+        if not pool:
+            ones.append(seconds)
+            if len(ones) == TRIAL_STEPS:
+                self.parallel = True
+            return
+        pools.append(seconds)
+        if len(pools) <= TRIAL_STEPS:  # the first pool step wakes the pool's threads: not counted
+            return
+        self._trial = None
+        self._one, self._pool = ones, pools[1:]
+        if statistics.median(self._pool) <= statistics.median(self._one) * KEEP_BELOW:
+            self.parallel = True
+            self._retrial = FIRST_RETRIAL
+            self._countdown = LAST_RETRIAL  # re-measure one thread now and then: the machine changes
+        else:
+            self._lose()
+
+    def _lose(self) -> None:
+        self.parallel = False
+        self._pool = []
+        self._countdown = self._retrial
+        self._retrial = min(2 * self._retrial, LAST_RETRIAL)
