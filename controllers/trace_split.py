@@ -159,14 +159,15 @@ def segment_rooms(env_model, segments, needed: int) -> np.ndarray:
                 f"trace {seg.trace} ({env_model.trace_ids[seg.trace]}) from {first / env_model.sample_rate:g} s to "
                 f"{end / env_model.sample_rate:g} s is shorter than one episode of "
                 f"{(needed - 1) / env_model.sample_rate:g} s; the longest episode that fits every trace is "
-                f"{_longest_episode_s(env_model, segments):g} s: pass episode_seconds="
-                f"{_longest_episode_s(env_model, segments):g} or less")
+                f"{longest_episode_s(env_model, segments):g} s: pass episode_seconds="
+                f"{longest_episode_s(env_model, segments):g} or less")
         rooms.append(room)
     return np.array(rooms, dtype=np.int64)
 
 
-def _longest_episode_s(env_model, segments) -> float:
-    """The longest episode [s, floored to 10 ms] whose window fits in every segment."""
+def longest_episode_s(env_model, segments) -> float:
+    """The longest episode [s, floored to 10 ms] whose window fits in every segment (``heli evaluate`` flies
+    it when its default of 30 s does not fit a short flight's traces)."""
     spans = [(lambda fe: fe[1] - fe[0] - 1)(seg.samples(int(env_model.lengths[seg.trace]))) for seg in segments
              if seg.trace < env_model.n_traces]
     return math.floor(100.0 * max(min(spans), 0) / env_model.sample_rate) / 100.0

@@ -9,6 +9,11 @@ from .argtypes import number, output_path, seed, whole
 from .model_gate import add_accept_option, check_model
 
 DEFAULT_OUT = "evaluation"
+DEFAULT_EPISODE_S = 30.0
+"""Episode length flown unless told [s]."""
+MIN_EPISODE_S = 5.0
+"""Shortest episode the default is shortened to for a short flight's traces [s]: below it an episode says little
+of the gusts, and the refusal names the longest that fits instead."""
 
 
 def register(sub):
@@ -30,7 +35,8 @@ def register(sub):
                    help="which library traces to fly (default held-out)")
     p.add_argument("--episodes-per-trace", type=whole(1), default=4, help="episodes per trace (default 4)")
     p.add_argument("--episode-seconds", type=number("seconds >= 0.01 (one control period)", 0.01, low_open=False),
-                   default=30.0, help="episode length in s (default 30)")
+                   default=None, help=f"episode length in s (default {DEFAULT_EPISODE_S:g}, or the longest that fits "
+                   "every flown trace when a short flight's traces are shorter; said when so)")
     p.add_argument("--seed", type=seed(), default=0, help="seed of the gust windows (default 0)")
     p.add_argument("--split-seed", type=seed(), default=None, metavar="N",
                    help="held-out traces of 'heli train --split-seed N', for an agent that carries no split (a PD "
@@ -42,6 +48,19 @@ def register(sub):
                    "higher (same windows); prints the p90 degradation and writes DIR/robustness.json and "
                    "robustness.md")
     p.set_defaults(func=run, out_kind="dir")
+
+
+def _episode_seconds(args, env_model, split) -> tuple[float, str | None]:
+    """The episode length flown, and a note when the default was shortened to fit the traces."""
+    if args.episode_seconds is not None:
+        return args.episode_seconds, None
+    from controllers.trace_split import as_segments, longest_episode_s
+
+    longest = longest_episode_s(env_model, as_segments(args.traces, split, "held-out"))
+    if longest >= DEFAULT_EPISODE_S or longest < MIN_EPISODE_S:  # fits, or too short: the flight says why
+        return DEFAULT_EPISODE_S, None
+    return longest, (f"note: episodes of {longest:g} s, the longest that fits every {args.traces} trace (the default "
+                     f"{DEFAULT_EPISODE_S:g} s does not); pass --episode-seconds to choose")
 
 
 def run(args) -> int:
@@ -68,9 +87,12 @@ def run(args) -> int:
     else:
         split = split_traces(env_model.n_traces, seed=args.split_seed or 0)
         origin = "default split" if not args.split_seed else f"split seed {args.split_seed}"
+    episode_seconds, note = _episode_seconds(args, env_model, split)
+    if note:
+        print(note)
     progress.stage(f"flying {args.traces} traces' episodes")
     episodes = EvaluationConfig(traces=args.traces, episodes_per_trace=args.episodes_per_trace,
-                                episode_seconds=args.episode_seconds, seed=args.seed, split=split)
+                                episode_seconds=episode_seconds, seed=args.seed, split=split)
     res = evaluate_agent(agent, env_model, episodes,
                          name=f"{Path(args.agent).name} ({describe_agent(agent)[0]})")
     out = Path(args.out)

@@ -312,3 +312,24 @@ def test_cli_episode_longer_than_the_traces_names_the_option_and_the_longest_tha
     assert advised and "episode_seconds=" not in err, err
     assert main(["evaluate", agent, "--episode-seconds", advised.group(1), "--episodes-per-trace", "1", "--out",
                  str(tmp_path / "ev"), "--no-plots", "-q"]) == 0
+
+
+def test_default_episode_fits_a_short_flights_traces():
+    """A short flight's held-out trace (the T-REX hover's 20 s) is flown in the longest episode that fits,
+    said in a note; a trace that fits the default, or one too short for any useful episode, keeps 30 s."""
+    from argparse import Namespace
+    from types import SimpleNamespace
+
+    from controllers.trace_split import split_traces
+    from heli_cli.evaluate import DEFAULT_EPISODE_S, _episode_seconds
+
+    def model(seconds):
+        return SimpleNamespace(lengths=np.array([int(seconds * 100)]), n_traces=1, trace_ids=["t0"], sample_rate=100.0)
+
+    split = split_traces(1, seed=0)  # one trace: its last quarter held out
+    args = Namespace(episode_seconds=None, traces="held-out")
+    length, note = _episode_seconds(args, model(80.0), split)
+    assert length == pytest.approx(19.99, abs=0.011) and "--episode-seconds" in note and "19.9" in note
+    assert _episode_seconds(args, model(400.0), split) == (DEFAULT_EPISODE_S, None)
+    assert _episode_seconds(args, model(12.0), split) == (DEFAULT_EPISODE_S, None)  # 3 s: refused, naming why
+    assert _episode_seconds(Namespace(episode_seconds=7.5, traces="held-out"), model(80.0), split) == (7.5, None)
