@@ -216,6 +216,8 @@ def _print_flight_checks(checks) -> None:
 def _print_run(run, n_flights: int, method: str) -> None:
     """The model's verdict, the identified parameters, the validation errors, warnings and the files written so
     far."""
+    from identification.alignment_check import MIN_EXPLAINED
+
     if run.verdict is not None:
         print_verdict(run.verdict)
     params = run.params.values()
@@ -226,6 +228,9 @@ def _print_run(run, n_flights: int, method: str) -> None:
         delay = f", delay {fit.delay:.3f} s" if fit.delay else ""
         if getattr(fit, "input_shift", 0.0) < 0.0:
             delay += f", stick logged {-fit.input_shift:.3f} s late (advanced)"
+            if fit.r2 < MIN_EXPLAINED:  # as the alignment check says it: the value is the likelihood's, weakly placed
+                delay += (f", weakly placed: the stick explains {100 * max(fit.r2, 0.0):.0f} % of the rate, "
+                          "too little to time it")
         if getattr(fit, "lag_lr", None) is not None:
             delay += (f", servo lag {fit.lag:.3f} s (LR {fit.lag_lr:.1f})" if fit.lag
                       else f", no servo lag supported (LR {fit.lag_lr:.1f})")
