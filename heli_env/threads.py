@@ -9,10 +9,14 @@ default (``threads=None``) measures instead of assuming:
   loop is then compiled without ``prange`` and numba's pool is never started.
 * Otherwise the step times its loop (the only parallel region of a step) on one thread and on the
   pool, a few steps each, and keeps the pool only while its median is at most :data:`KEEP_BELOW`
-  of one thread's. A threaded step that comes out slower than that (a neighbour took a core) sends
-  the env back to one thread at once; a new trial of the pool follows after :data:`FIRST_RETRIAL`
-  steps, then twice as late after each trial the pool loses, up to :data:`LAST_RETRIAL`. The decision
-  costs a few timer reads a step; a lost trial costs :data:`TRIAL_STEPS` slow steps.
+  of one thread's. Pooled steps whose median comes out slower than that, or one that takes
+  :data:`GIVE_UP` times one thread's (a neighbour took a core), send the env back to one thread at
+  once; a new trial of the pool follows after :data:`FIRST_RETRIAL` steps, then twice as late after
+  each trial the pool loses, up to :data:`LAST_RETRIAL`. A trial is not even started while the
+  operating system counts a running thread on every other core (:func:`cores_taken`:
+  ``/proc/loadavg``'s running count on Linux), and it takes one thread per free core (at most the
+  pool); it stops at its first slow pooled step. The decision costs two timer reads a step; a lost
+  trial, two slow steps.
 
 ``threads=k`` (the env's argument) or the environment variable ``HELI_NUM_THREADS=k`` fixes the count
 instead (``1``: never start the pool); ``threads`` wins over ``HELI_NUM_THREADS``, and both are capped
@@ -44,7 +48,10 @@ TRIAL_STEPS = 5
 KEEP_BELOW = 0.85
 """The pool is kept while its median step loop takes at most this share of one thread's."""
 
-FIRST_RETRIAL = 64
+GIVE_UP = 2.0
+"""A pooled step loop this many times slower than one thread's ends the pool (or its trial) at once."""
+
+FIRST_RETRIAL = 256
 LAST_RETRIAL = 16384
 """Steps between trials of the pool: the first, and the most after the pool lost again and again."""
 
@@ -80,6 +87,27 @@ def requested_threads(threads=None) -> int | None:
     return min(value, most)
 
 
+def usable_cores() -> int:
+    """Cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def cores_taken() -> int:
+    """Threads running now on the machine besides the caller's (Linux: ``/proc/loadavg``; elsewhere the
+    1-minute load average, rounded). Cheap enough for a trial's start, not for every step."""
+    try:
+        with open("/proc/loadavg") as f:
+            return max(int(f.read().split()[3].split("/")[0]) - 1, 0)
+    except (OSError, IndexError, ValueError):
+        try:
+            return int(round(os.getloadavg()[0]))
+        except OSError:
+            return 0
+
+
 def prefer_workqueue() -> None:
     """Ask numba for its ``workqueue`` layer before its pool starts, unless the user chose a layer."""
     from numba.np.ufunc import parallel
@@ -104,6 +132,7 @@ class ThreadChoice:
         most = pool_size()
         self.measured = fixed is None and most > 1 and n_copies >= THREADED_FROM
         self.threads = fixed if fixed is not None else (most if self.measured else 1)
+        self._most = self.threads
         self.parallel = self.threads > 1 and not self.measured  # the loop to run this step
         self._retrial = FIRST_RETRIAL
         self._countdown = TRIAL_STEPS  # the first trial soon: the pool's worth is unknown
@@ -140,13 +169,19 @@ class ThreadChoice:
         if pool:
             self._pool = (self._pool + [seconds])[-TRIAL_STEPS:]
             one = statistics.median(self._one) if self._one else None
-            if one is not None and len(self._pool) == TRIAL_STEPS and statistics.median(self._pool) > one * KEEP_BELOW:
+            if one is not None and (seconds > one * GIVE_UP or (
+                    len(self._pool) == TRIAL_STEPS and statistics.median(self._pool) > one * KEEP_BELOW)):
                 self._lose()  # a neighbour took a core: back to one thread now
                 return
         else:
             self._one = (self._one + [seconds])[-TRIAL_STEPS:]
         self._countdown -= 1
-        if self._countdown <= 0:  # time for a trial: one-thread steps, then pool steps
+        if self._countdown <= 0:  # time for a trial (one-thread steps, then pool steps) if a core looks free
+            free = usable_cores() - 1 - cores_taken()
+            if free < 1:
+                self._lose()
+                return
+            self.threads = min(self._most, 1 + free)
             self._trial = ([], [])
             self.parallel = False
 
@@ -158,6 +193,10 @@ class ThreadChoice:
                 self.parallel = True
             return
         pools.append(seconds)
+        if len(pools) > 1 and seconds > statistics.median(ones) * GIVE_UP:
+            self._trial = None
+            self._lose()
+            return
         if len(pools) <= TRIAL_STEPS:  # the first pool step wakes the pool's threads: not counted
             return
         self._trial = None
