@@ -15,7 +15,9 @@ from .errors import ActionError
 from .spec import MAX_RATE, action_space, build_spec, observation_space, real_actions, reset_options
 from .spec import OBS_DIM  # noqa: F401  (it lived here)
 from .sensor_noise import draw_noise_key, noise_block
-from .tasks import draw_episode, line_phases, reward_of, wrap
+from .tasks import TWO_PI, draw_episode, line_phases, reward_of, wrap
+
+_DEGREES = 180.0 / math.pi
 
 NOISE_STEPS = 256
 """Steps of sensor noise the single env computes at once (:func:`heli_env.sensor_noise.noise_block`): one
@@ -226,14 +228,19 @@ class HeliAttitudeEnv(gym.Env):
             a0, a1, a2 = a.tolist()
         if not (math.isfinite(a0) and math.isfinite(a1) and math.isfinite(a2)):
             raise ActionError(f"action must be finite, got {[a0, a1, a2]}")
-        a0, a1, a2 = min(1.0, max(-1.0, a0)), min(1.0, max(-1.0, a1)), min(1.0, max(-1.0, a2))
+        # min(1.0, max(-1.0, v)) written out (the builtins cost a call each, a third of a step's Python)
+        a0 = (a0 if a0 < 1.0 else 1.0) if a0 > -1.0 else -1.0
+        a1 = (a1 if a1 < 1.0 else 1.0) if a1 > -1.0 else -1.0
+        a2 = (a2 if a2 < 1.0 else 1.0) if a2 > -1.0 else -1.0
         if self._queue is not None:
             self._queue.append((a0, a1, a2))
             a0, a1, a2 = self._queue.popleft()
         k = self._k
         seq = self._seq
-        sticks = (min(1.0, max(-1.0, seq[0][k] + a0)), min(1.0, max(-1.0, seq[1][k] + a1)), seq[3][k],
-                  min(1.0, max(-1.0, seq[2][k] + a2)))
+        lat, lon, ped = seq[0][k] + a0, seq[1][k] + a1, seq[2][k] + a2
+        sticks = ((lat if lat < 1.0 else 1.0) if lat > -1.0 else -1.0,
+                  (lon if lon < 1.0 else 1.0) if lon > -1.0 else -1.0, seq[3][k],
+                  (ped if ped < 1.0 else 1.0) if ped > -1.0 else -1.0)
         self._x = s.dstep(self._x, sticks, (seq[4][k], seq[5][k], seq[6][k]))
         self._k = k + 1
         self._prev = (a0, a1, a2)
@@ -289,17 +296,21 @@ class HeliAttitudeEnv(gym.Env):
                 mp, mq, mr = mp + lines[0], mq + lines[1], mr + lines[2]
             m_shown, m_rate = self._error_terms(ref_att, ref_rate, phi + na[0] * n[0], theta + na[1] * n[1],
                                                 psi + na[2] * n[2], mp, mq, mr)
-            m_shown = (wrap(m_shown[0]), wrap(m_shown[1]), wrap(m_shown[2]))  # noise may cross +-pi
+            m0, m1, m2 = m_shown  # noise may cross +-pi: wrapped (tasks.wrap on floats, written out)
+            m_shown = (m0 - TWO_PI * round(m0 / TWO_PI), m1 - TWO_PI * round(m1 / TWO_PI),
+                       m2 - TWO_PI * round(m2 / TWO_PI))
         a = self._prev
-        lim = MAX_RATE
-        obs = np.array([m_shown[0], m_shown[1], m_shown[2], min(lim, max(-lim, mp)), min(lim, max(-lim, mq)),
-                        min(lim, max(-lim, mr)), min(lim, max(-lim, m_rate[0])), min(lim, max(-lim, m_rate[1])),
-                        min(lim, max(-lim, m_rate[2])), a[0], a[1], a[2]], dtype=np.float32)
-        j = max(self._k - 1, 0)  # the gust of the step just taken (at reset: the one about to act)
+        lim, low = MAX_RATE, -MAX_RATE  # min(lim, max(-lim, v)) written out
+        r0, r1, r2 = m_rate
+        obs = np.array([m_shown[0], m_shown[1], m_shown[2], (mp if mp < lim else lim) if mp > low else low,
+                        (mq if mq < lim else lim) if mq > low else low, (mr if mr < lim else lim) if mr > low else low,
+                        (r0 if r0 < lim else lim) if r0 > low else low, (r1 if r1 < lim else lim) if r1 > low else low,
+                        (r2 if r2 < lim else lim) if r2 > low else low, a[0], a[1], a[2]], dtype=np.float32)
+        j = self._k - 1 if self._k else 0  # the gust of the step just taken (at reset: the one about to act)
         seq = self._seq
-        buf = np.array([seq[7][j], seq[8][j], seq[9][j], math.degrees(shown[0]), math.degrees(shown[1]),
-                        math.degrees(shown[2]), math.degrees(e_rate[0]), math.degrees(e_rate[1]),
-                        math.degrees(e_rate[2])])
+        deg = _DEGREES  # math.degrees(v) is v * (180 / pi), one multiplication
+        buf = np.array([seq[7][j], seq[8][j], seq[9][j], shown[0] * deg, shown[1] * deg, shown[2] * deg,
+                        e_rate[0] * deg, e_rate[1] * deg, e_rate[2] * deg])
         info = {"time": t, "disturbance": buf[0:3], "attitude_error_deg": buf[3:6], "rate_error_deg_s": buf[6:9],
                 "trace": self._episode.trace, "trace_id": s.model.trace_ids[self._episode.trace]}
         if self._history is not None:

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -104,6 +105,13 @@ class TaskConfig:
     def axis_weighted(self) -> bool:
         """The axes weigh differently in the reward (``axis_weights`` is not all ones)."""
         return self.axis_weights != (1.0, 1.0, 1.0)
+
+    @cached_property
+    def reward_coefficients(self) -> tuple[float, ...]:
+        """:func:`reward_coefficients`, computed once (the single env reads them every step)."""
+        wa, wr, wu = self.weights
+        return (wa / (self.attitude_scale * self.attitude_scale), wr / (self.rate_scale * self.rate_scale), wu,
+                *self.axis_weights)
 
 
 @dataclass
@@ -205,9 +213,7 @@ def wrap(angle):
 def reward_coefficients(cfg: TaskConfig) -> tuple[float, ...]:
     """Weights of the squared attitude error [1/rad^2], rate error [s^2/rad^2] and action in the reward,
     then the three axis weights (roll, pitch, yaw)."""
-    wa, wr, wu = cfg.weights
-    return (wa / (cfg.attitude_scale * cfg.attitude_scale), wr / (cfg.rate_scale * cfg.rate_scale), wu,
-            *cfg.axis_weights)
+    return cfg.reward_coefficients
 
 
 def reward_of(cfg: TaskConfig, e_att, e_rate, action):
@@ -220,7 +226,7 @@ def reward_of(cfg: TaskConfig, e_att, e_rate, action):
     (:func:`heli_env.kernels.observe_kernel`) evaluates the same expression with
     :func:`reward_coefficients`.
     """
-    ca, cr, cu, w0, w1, w2 = reward_coefficients(cfg)
+    ca, cr, cu, w0, w1, w2 = cfg.reward_coefficients
     e, r, a = e_att, e_rate, action
     if cfg.axis_weighted:
         att2 = w0 * e[0] * e[0] + w1 * e[1] * e[1] + w2 * e[2] * e[2]
