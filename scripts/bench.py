@@ -9,11 +9,13 @@ Sections (``--only NAME`` runs one):
   all three axes. Target: <= 10 ms median (issue #2).
 * ``physics`` — the physics core: one RK4 step on the scalar path, a 300 s
   forward simulation, a batched step over 4096 states.
-* ``env`` — ``HeliAttitude-v0`` steps/s through ``gym.make`` against
-  ``Pendulum-v1`` (target ratio >= 1.0), and the native vector env's
-  env-steps/s at 4096 copies against Gymnasium's ``CartPoleVectorEnv``
-  (target ratio >= 1.0), with numba's default thread count (all cores) and
-  with ``threads=1``; the envs of each comparison are timed interleaved.
+* ``env`` — issue #33's env figures in the default configuration (the shipped
+  model's sensors on), quiet and then beside a CPU-bound neighbour process the
+  section starts itself: the native vector env at 4096 copies (default thread
+  choice) against Gymnasium's ``CartPoleVectorEnv(4096)`` (target >= 1.0) and
+  against its own ``threads=1`` figure (target >= 0.9), and ``HeliAttitude-v0``
+  through ``gym.make`` against ``Pendulum-v1`` (target >= 1.0); the envs of
+  each comparison are timed in turn.
 * ``sweep`` — a 20 x 20 PD gain grid x 10 gust windows x 60 s at 100 Hz through
   ``controllers.sweep.sweep_gains`` (target <= 10 s on 2 cores, issue #5), and its
   prediction checked against fresh-wind flights (KS statistic, target <= 0.1).
@@ -129,64 +131,110 @@ def _steps_per_second(env, action, steps: int, blocks: int, vector: bool = False
     return statistics.median(rates)
 
 
+def _interleaved(runs: dict, steps: int, blocks: int) -> dict:
+    """Median steps/s of each ``name: (env, action, copies)``, their blocks of ``steps`` taken in turn."""
+    rates = {name: [] for name in runs}
+    for _ in range(blocks):
+        for name, (env, action, copies) in runs.items():
+            rates[name].append(copies * _steps_per_second(env, action, steps, 1, vector=copies > 1))
+    return {name: statistics.median(r) for name, r in rates.items()}
+
+
+def _neighbour():
+    """Start a CPU-bound process (a Python busy loop, one core) beside the benchmark; the caller stops it."""
+    import subprocess
+    import sys
+
+    return subprocess.Popen([sys.executable, "-c", "while True: pass"])
+
+
+def _load() -> str:
+    import os
+
+    try:
+        return " / ".join(f"{v:.2f}" for v in os.getloadavg())
+    except OSError:
+        return "unknown"
+
+
+class _PoolCounter:
+    """Steps a vector env and counts the steps its thread choice ran on numba's pool."""
+
+    def __init__(self, env, choice):
+        self.env, self.choice, self.steps, self.pooled = env, choice, 0, 0
+
+    def step(self, actions):
+        self.steps += 1
+        self.pooled += self.choice.parallel
+        return self.env.step(actions)
+
+    def share(self) -> float:
+        return self.pooled / max(self.steps, 1)
+
+
+ENV_COPIES = 4096
+
+
 def bench_env(repeats: int) -> dict:
+    """The env targets of issue #33, each measured quiet and then with a CPU-bound neighbour process.
+
+    Every figure is the default configuration (the shipped model's sensors on). In each condition the
+    native vector env at 4096 copies with its default thread choice, the same with ``threads=1`` and
+    Gymnasium's ``CartPoleVectorEnv(4096)`` are timed in turn (blocks of 40 steps), then the single env
+    and ``Pendulum-v1`` through ``gym.make`` (blocks of 2000 steps); medians and their ratios. "Quiet"
+    is whatever else the machine runs: the load average is printed beside it.
+    """
+    import os
+
     import gymnasium as gym
+    import numba
     from gymnasium.envs.classic_control.cartpole import CartPoleVectorEnv
 
     import heli_env  # noqa: F401  (registers HeliAttitude-v0)
+    from heli_env.threads import ENV_VAR
 
-    out = {}
-    # the comparisons with Pendulum and CartPole, which measure nothing through sensors, are made on the true
-    # state (obs_noise=0); the shipped model's sensors (the env's default) are timed beside them
-    heli = gym.make("HeliAttitude-v0", obs_noise=0.0)
-    noisy = gym.make("HeliAttitude-v0")
-    pend = gym.make("Pendulum-v1")
-    heli.reset(seed=0)
-    noisy.reset(seed=0)
-    pend.reset(seed=0)
-    a_h = np.zeros(3, dtype=np.float32)
-    a_p = np.zeros(1, dtype=np.float32)
-    # interleave the two so that machine noise hits both alike
-    h_rates, p_rates, s_rates = [], [], []
-    for _ in range(max(5, repeats // 3)):
-        h_rates.append(_steps_per_second(heli, a_h, 2000, 1))
-        p_rates.append(_steps_per_second(pend, a_p, 2000, 1))
-        s_rates.append(_steps_per_second(noisy, a_h, 2000, 1))
-    h, p = statistics.median(h_rates), statistics.median(p_rates)
-    out["single env steps/s, HeliAttitude-v0 via gym.make (true state)"] = h
-    out["single env steps/s, HeliAttitude-v0 through the shipped model's sensors (default)"] = statistics.median(
-        s_rates)
-    out["single env steps/s, Pendulum-v1 via gym.make"] = p
-    out["single env ratio heli / Pendulum (target >= 1.0)"] = h / p
-    n = 4096
-    import numba
-
-    threads = numba.config.NUMBA_NUM_THREADS
-    venv = gym.make_vec("HeliAttitude-v0", num_envs=n, vectorization_mode="vector_entry_point", obs_noise=0.0)
-    venv1 = gym.make_vec("HeliAttitude-v0", num_envs=n, vectorization_mode="vector_entry_point", threads=1,
-                         obs_noise=0.0)
-    venv_s = gym.make_vec("HeliAttitude-v0", num_envs=n, vectorization_mode="vector_entry_point")
-    venv_s.reset(seed=0)
+    n = ENV_COPIES
+    vec = gym.make_vec("HeliAttitude-v0", num_envs=n, vectorization_mode="vector_entry_point")
+    vec1 = gym.make_vec("HeliAttitude-v0", num_envs=n, vectorization_mode="vector_entry_point", threads=1)
     cart = CartPoleVectorEnv(num_envs=n)
-    venv.reset(seed=0)
-    venv1.reset(seed=0)
-    cart.reset(seed=0)
-    a_v = np.zeros((n, 3), dtype=np.float32)
-    a_c = np.zeros(n, dtype=np.int64)
-    v_rates, v1_rates, c_rates, vs_rates = [], [], [], []
-    for _ in range(max(9, repeats // 3)):
-        v_rates.append(n * _steps_per_second(venv, a_v, 100, 1, vector=True))
-        c_rates.append(n * _steps_per_second(cart, a_c, 100, 1, vector=True))
-        v1_rates.append(n * _steps_per_second(venv1, a_v, 100, 1, vector=True))
-        vs_rates.append(n * _steps_per_second(venv_s, a_v, 100, 1, vector=True))
-    v, v1, c = statistics.median(v_rates), statistics.median(v1_rates), statistics.median(c_rates)
-    out[f"vector env-steps/s at {n} envs, HeliAttitude-v0 native vector env ({threads} threads, true state)"] = v
-    out[f"vector env-steps/s at {n} envs, HeliAttitude-v0 native vector env (threads=1)"] = v1
-    out[f"vector env-steps/s at {n} envs, CartPoleVectorEnv (numpy, 1 thread)"] = c
-    out["vector ratio heli / CartPole (target >= 1.0)"] = v / c
-    out["vector ratio heli threads=1 / CartPole"] = v1 / c
-    out[f"vector env-steps/s at {n} envs through the shipped model's sensors (default; 6 normals per copy "
-        "and step from each copy's generator)"] = statistics.median(vs_rates)
+    heli = gym.make("HeliAttitude-v0")
+    pend = gym.make("Pendulum-v1")
+    for env in (vec, vec1, cart, heli, pend):
+        env.reset(seed=0)
+    a_v, a_c = np.zeros((n, 3), dtype=np.float32), np.zeros(n, dtype=np.int64)
+    a_h, a_p = np.zeros(3, dtype=np.float32), np.zeros(1, dtype=np.float32)
+    choice = vec.unwrapped._thread_choice
+    out = {"cpus": os.cpu_count(), "numba pool": f"{numba.config.NUMBA_NUM_THREADS} threads",
+           ENV_VAR: os.environ.get(ENV_VAR, "unset")}
+    blocks = max(7, repeats // 2)
+    for condition in ("quiet", "busy"):
+        neighbour = _neighbour() if condition == "busy" else None
+        try:
+            time.sleep(0.5 if neighbour else 0.0)
+            before = _load()
+            for env, action in ((vec, a_v), (vec1, a_v), (cart, a_c)):  # warm-up; the default settles its choice
+                _steps_per_second(env, action, 300 if env is vec else 20, 1, vector=True)
+            counted = _PoolCounter(vec, choice)
+            rates = _interleaved({"vector": (counted, a_v, n), "vector threads=1": (vec1, a_v, n),
+                                  "CartPoleVectorEnv": (cart, a_c, n)}, 40, blocks)
+            pooled = counted.share()
+            rates.update(_interleaved({"single": (heli, a_h, 1), "Pendulum-v1": (pend, a_p, 1)}, 2000, blocks))
+            after = _load()
+        finally:
+            if neighbour is not None:
+                neighbour.terminate()
+                neighbour.wait()
+        c = f"{condition}"
+        out[f"{c}: load average before / after (1, 5, 15 min)"] = f"{before}; {after}"
+        out[f"{c}: vector env-steps/s, HeliAttitude-v0 x {n}, default threads (sensors on)"] = rates["vector"]
+        out[f"{c}:   its steps on numba's pool (the rest on one thread)"] = f"{100 * pooled:.0f} %"
+        out[f"{c}: vector env-steps/s, the same with threads=1"] = rates["vector threads=1"]
+        out[f"{c}: vector env-steps/s, CartPoleVectorEnv x {n}"] = rates["CartPoleVectorEnv"]
+        out[f"{c}: ratio vector / CartPoleVectorEnv (target >= 1.0)"] = rates["vector"] / rates["CartPoleVectorEnv"]
+        out[f"{c}: ratio vector / its threads=1 figure (target >= 0.9)"] = rates["vector"] / rates["vector threads=1"]
+        out[f"{c}: single env steps/s, HeliAttitude-v0 via gym.make (sensors on)"] = rates["single"]
+        out[f"{c}: single env steps/s, Pendulum-v1 via gym.make"] = rates["Pendulum-v1"]
+        out[f"{c}: ratio single / Pendulum-v1 (target >= 1.0)"] = rates["single"] / rates["Pendulum-v1"]
     return out
 
 
