@@ -101,7 +101,6 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._line_phase = np.zeros((n, 2 * n_lines))  # (cos, sin) of each line, one row per copy
         self._key = np.zeros(n, dtype=np.uint64)  # each copy's episode noise key (heli_env.sensor_noise)
         self._noise_std = np.array([*s.obs_noise[0], *s.obs_noise[1]], dtype=float)
-        self._last_obs = None  # the observation each copy was last given (a masked reset leaves the others')
         self._ones = np.ones(n, dtype=bool)
         self._renderer = None
         self._history = []
@@ -140,10 +139,9 @@ class HeliAttitudeVectorEnv(VectorEnv):
         j = self._base + np.minimum(self._k, self._last) * s.ratio
         self._ud = batch_rows(3, n, fill=None)
         np.multiply(np.take(self._table, j, axis=0).T[7:10], self._gust, out=self._ud)  # the gust about to act
+        # a copy not reset is observed again as it was last: its observation is a function of its state, step
+        # and noise key, all unchanged
         obs, info, _, _, _ = self._observe()
-        if self._last_obs is not None and not mask.all():  # a copy not reset keeps its observation
-            obs[~mask] = self._last_obs[~mask]
-        self._last_obs = obs.copy()
         return obs, info
 
     def _reset_envs(self, which, options):
@@ -217,7 +215,6 @@ class HeliAttitudeVectorEnv(VectorEnv):
             j = self._base[which]
             ud[:, which] = self._table[j, 7:10].T * self._gust[which]
         obs, info, rew, terminated, truncated = self._observe()
-        self._last_obs = obs.copy()
         if restart.any():
             rew[restart] = 0.0
             terminated &= ~restart
