@@ -51,14 +51,13 @@ def run(args) -> int:
 
     progress = progress_of(args)
     backend = flight_backend(args)
-    progress.stage(f"refitting {args.model_dir} with {len(args.flights)} new flight(s), the drift's uncertainty "
-                   "and the new wind (the figures after the commit)")
-    try:
+    progress.stage(f"reading {args.model_dir} and checking the new flights")
+    try:  # each step that can take seconds says so as it starts (issue 31: 17 s with nothing moving)
         result = refresh_model(
             args.model_dir, args.flights, previous_flights=args.previous_flights, fit=args.fit,
             n_replicates=args.bootstrap, block=args.block, seed=args.seed, alpha=args.alpha,
-            min_relative=args.min_change, plots=not args.no_plots, progress=not args.quiet, backend=backend,
-            wait=not args.no_wait,
+            min_relative=args.min_change, plots=not args.no_plots, progress=progress.bars, backend=backend,
+            wait=not args.no_wait, stage=progress.stage,
         )
     finally:
         progress.done()

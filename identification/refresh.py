@@ -285,6 +285,10 @@ class RefreshSettings:
     backend : None, {"local", "ray"} or identification.backends.Backend
         Where the new flights' winds are identified, one task per flight
         (:func:`identification.report.identify_and_report`); None: in this process.
+    stage : callable, optional
+        Called with a few words as each step that can take seconds starts (reading and fitting the new
+        flights, their uncertainty, refitting the previous flights, the refreshed model's fit and winds,
+        the figures), e.g. ``heli refresh``'s progress lines; None: nothing is said.
 
     Raises
     ------
@@ -302,6 +306,7 @@ class RefreshSettings:
     plots: bool = True
     progress: bool | None = None
     backend: object = None
+    stage: object = None
 
     def __post_init__(self):
         if self.fit not in FIT_CHOICES:
@@ -364,8 +369,15 @@ def refresh_model(model_dir, new_flights, *, settings: RefreshSettings | None = 
     with ModelDir(root).transaction(wait=wait, what="refresh") as tx:
         result = _Refresh(tx, new_paths, settings).run()
     if result.run.figures:
+        _say(settings, "drawing the report's figures")
         result.paths.update(result.run.draw_figures())
     return result
+
+
+def _say(settings: RefreshSettings, text: str) -> None:
+    """Tell ``settings.stage`` that a step starts (nothing without one)."""
+    if settings.stage is not None:
+        settings.stage(text)
 
 
 def _read_flights(paths, desc: str, show: bool) -> list:
@@ -424,15 +436,23 @@ class _Refresh:
         if self.estimator == "ml":
             return fisher_result(fitted, compared_parameters(fitted, self.estimator))
         s = self.settings
+        _say(s, f"{desc}: {s.n_replicates} replicates")
         return interval_bootstrap(flights, fitted, s.n_replicates, s.block, seq, progress=bool(self.show), desc=desc)
+
+    def fitted(self, paths, what: str, why: str):
+        """(flights, the model's identifier fitted on them), the step announced with ``why``."""
+        n = len(paths)
+        _say(self.settings, f"reading and fitting {n} {what} flight{'s' if n != 1 else ''} "
+                            f"({'maximum likelihood' if self.estimator == 'ml' else 'integral method'}) {why}")
+        flights = _read_flights(paths, f"reading {what} flights", self.show)
+        return flights, self.identifier().fit(flights)
 
     def run(self) -> RefreshResult:
         """Steps 1-6 of the module docstring; the files are staged in the transaction."""
         s = self.settings
         digests = [sha256_of(p) for p in self.new_paths]
         _check_new_flights(self.new_paths, digests, self.old_sources, self.tx.base.entries)
-        flights = _read_flights(self.new_paths, "reading new flights", self.show)
-        new_ident = self.identifier().fit(flights)
+        flights, new_ident = self.fitted(self.new_paths, "new", "for the drift table")
         boot_new = self.uncertainty(new_ident, flights, self.seeds[0], "bootstrap (new flights)")
         names = list(boot_new.names)
         previous = self.previous(names, boot_new)
@@ -444,6 +464,8 @@ class _Refresh:
         fit_flights = flights + (previous.flights if mode == "pooled" else [])
         boot_model = boot_new
         if mode == "pooled":
+            if self.estimator != "integral":
+                _say(s, f"fitting the {len(fit_flights)} pooled flights for the refreshed model's uncertainty")
             pooled = self.identifier() if self.estimator == "integral" else self.identifier().fit(fit_flights)
             boot_model = self.uncertainty(pooled, fit_flights, self.seeds[2], "bootstrap (refreshed model)")
         criterion = {"alpha": s.alpha, "z": z_crit, "n_parameters": len(names), "min_relative": s.min_relative,
@@ -463,8 +485,8 @@ class _Refresh:
             se_old, se_source, note = previous_std_errors(self.doc, names, boot_new, self.tx.base.entries,
                                                           self.old_sources, self.estimator)
             return _Previous(found, missing, [], None, se_old, se_source, None, [note] if note else [])
-        old_flights = _read_flights([f["path"] for f in found], "reading previous flights", self.show)
-        old_ident = self.identifier().fit(old_flights)
+        old_flights, old_ident = self.fitted([f["path"] for f in found], "previous", "for the current model's "
+                                             "uncertainty")
         boot_old = self.uncertainty(old_ident, old_flights, self.seeds[1], "bootstrap (previous flights)")
         old_params = self.tx.base.params
         diff = max((abs(old_ident.params_.get(k) - old_params.get(k)) / max(abs(old_params.get(k)), 1e-12)
@@ -530,6 +552,7 @@ class _Refresh:
             flight_paths=fit_paths, plots=s.plots, disturbances=True, progress=self.show,
             wind_flights=range(len(flights)), model_extra={"refresh": record}, backend=s.backend,
             method=self.estimator, transaction=tx, draw_figures=False,
+            stage=None if s.stage is None else (lambda text: s.stage(f"refreshed model: {text}")),
         )
         result.run, result.library_version = run, run.library_version
         doc_out = self.document(result, record, flights, new_ident, kept)

@@ -60,13 +60,24 @@ def model_dir(identified_base, tmp_path):
     return out
 
 
+STAGES = {}
+"""What the ``refreshed`` fixture's command printed on stderr (its progress), under "stderr"."""
+
+
 @pytest.fixture(scope="session")
 def refreshed(identified_base, flights, tmp_path_factory):
     """``heli refresh DIR f2.csv`` on a copy of the identified model; returns (DIR, bytes before)."""
+    import contextlib
+    import io
+
     out = tmp_path_factory.mktemp("refreshed") / "DIR"
     shutil.copytree(identified_base, out)
     before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
-    assert main(["refresh", str(out), str(flights["f2"]), "--bootstrap", REPLICATES, "--seed", "0", "--no-plots"]) == 0
+    err = io.StringIO()  # not a terminal: one line per stage
+    with contextlib.redirect_stderr(err):
+        assert main(["refresh", str(out), str(flights["f2"]), "--bootstrap", REPLICATES, "--seed", "0",
+                     "--no-plots"]) == 0
+    STAGES["stderr"] = err.getvalue()
     return out, before
 
 
@@ -100,6 +111,20 @@ def test_changed_damping_is_flagged_and_nothing_else(refreshed):
     assert_allclose(z, 2.690, atol=1e-3)  # Bonferroni, alpha 0.05 over 7 parameters
     for r in rows.values():
         assert_allclose(r["z"], abs(r["delta"]) / np.hypot(r["se_old"], r["se_new"]), rtol=1e-12)
+
+
+def test_refresh_announces_each_long_step_as_it_starts(refreshed):
+    """Issue 31: 'heli refresh' showed nothing moving for 17 s. Off a terminal each step that can take seconds is
+    one line as it starts: the new flight's fit, the previous flight's refit, the refreshed model's fit and wind."""
+    lines = STAGES["stderr"].splitlines()
+    assert lines[0].startswith("refresh: reading ") and lines[0].endswith(" and checking the new flights ...")
+    steps = [ln for ln in lines if ln.startswith("refresh: ")]
+    assert steps[1] == "refresh: reading and fitting 1 new flight (maximum likelihood) for the drift table ..."
+    assert steps[2] == ("refresh: reading and fitting 1 previous flight (maximum likelihood) for the current model's "
+                        "uncertainty ...")
+    assert any(ln.startswith("refresh: refreshed model: fitting ") for ln in steps)
+    assert "refresh: refreshed model: identifying the wind of 1 flight ..." in steps
+    assert not any("drawing" in ln for ln in steps)  # --no-plots
 
 
 def test_changed_aircraft_is_refitted_on_the_new_flight_alone(refreshed, flights):
