@@ -384,7 +384,8 @@ def test_d_filter_off_reproduces_the_unfiltered_pd_exactly(default_params, defau
     want = np.clip(np.array(old.signs) * (np.array(old.gains.kp) * obs[:, 0:3] + np.array(old.gains.kd)
                                           * obs[:, 6:9]), -1, 1).astype(np.float32)
     act, state = off.predict(obs, state="untouched", episode_start=np.ones(6, bool))
-    assert_array_equal(act, want) and state == "untouched"
+    assert_array_equal(act, want)
+    assert state == "untouched"
     assert_array_equal(off.step(obs)[0], old.command(obs))
     rp = prepare(None, "roll", 2.0, 0.01, 0, None, 2)
     nominal = nominal_gains(hover_plant(rp.params, 0.01))
@@ -392,7 +393,8 @@ def test_d_filter_off_reproduces_the_unfiltered_pd_exactly(default_params, defau
                                    Autopilot(0, np.array([20.0]), np.array([3.0]), nominal,
                                              np.sign(rp.params.control_gains), poles), progress=False)][0]
             for poles in (None, [0.0, 0.0, 0.0])]
-    assert_array_equal(runs[0].act, runs[1].act) and assert_array_equal(runs[0].att, runs[1].att) is None
+    assert_array_equal(runs[0].act, runs[1].act)
+    assert_array_equal(runs[0].att, runs[1].att)
 
 
 def test_d_filter_reduces_the_stick_increment_on_a_fixed_episode(default_params, default_gains):

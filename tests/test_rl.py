@@ -860,3 +860,41 @@ def test_cli_train_with_a_time_budget_alone_stops_on_time_under_a_plain_label(tm
     assert "(time budget reached)" in capsys.readouterr().out
     bar = terminal.getvalue()
     assert "train PPO for 0.02 min: " in bar and "step/s" in bar and "ppo ppo" not in bar
+
+
+def test_a_residual_on_a_filtered_pd_filters_its_base_as_the_pd_alone_does(shipped):
+    """A residual whose policy says 0 flies its base exactly, derivative filter included: the filter state rides
+    beside the policy's in ``state`` (reset by episode_start), the training wrapper keeps it per copy (reset at
+    each copy's episode end), and the base travels in the metadata with its filter."""
+    from controllers.residual import ResidualAgent, residual_env, residual_from_metadata, residual_metadata
+    from controllers.sb3_vec_env import GymnasiumVecEnv
+    from heli_env.vector_env import HeliAttitudeVectorEnv
+
+    class Zero:
+        def predict(self, obs, state=None, episode_start=None, deterministic=False):
+            return np.zeros(np.shape(obs)[:-1] + (3,), np.float32), state
+
+    base = PDController(PDGains([20.0, 30.0, 4.0], [3.0, 5.0, 0.5], 6.0), [1, -1, 1])
+    agent = ResidualAgent(base, Zero(), 0.1, history=2)
+    obs = np.random.default_rng(7).normal(0.0, 0.1, (5, 3, 12)).astype(np.float32)
+    s_pd = s_res = None
+    for k in range(5):
+        start = np.full(3, k in (0, 3))
+        a_pd, s_pd = base.predict(obs[k], s_pd, start)
+        a_res, s_res = agent.predict(obs[k], s_res, start)
+        assert_array_equal(a_res, a_pd)
+    assert_array_equal(s_res[1], s_pd)  # (the history's stack, the filter state)
+    loaded = residual_from_metadata({"residual": residual_metadata(base, 0.1, {}, 2)}, Zero(), "x.zip")
+    assert loaded.base.gains == base.gains and loaded.base.filtered
+    venv = residual_env(GymnasiumVecEnv(HeliAttitudeVectorEnv(2, model=shipped, episode_seconds=0.05)), base, 0.1)
+    plain = GymnasiumVecEnv(HeliAttitudeVectorEnv(2, model=shipped, episode_seconds=0.05))
+    venv.seed(4)
+    plain.seed(4)
+    o_res, o_pd, state = venv.reset(), plain.reset(), None
+    done = np.ones(2, bool)
+    for _ in range(12):  # two episode ends
+        act, state = base.predict(o_pd, state, done)
+        o_pd, _, done, _ = plain.step(act)
+        o_res, _, d_res, _ = venv.step(np.zeros((2, 3), np.float32))
+        assert_array_equal(o_res, o_pd)
+        assert_array_equal(d_res, done)
