@@ -167,18 +167,28 @@ class ClosedLoop:
     def n_plant(self) -> int:
         return self.plant.n
 
-    def stable(self) -> tuple[np.ndarray, np.ndarray]:
+    def stable(self, axis: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(spectral radius (G,), stable (G,)) of the tick's closed loop, neutral constants left out.
 
         A mode at exactly ``z = 1`` that the gusts cannot excite is a conserved constant, not an instability:
         Rotorflight's tail holds the integral of the yaw rate (its I-term), not a heading, so heading plus the
         accumulated error stays where it started. Such modes (``|λ − 1| < 1e-8`` and a gust input below 1e-9 of
-        the largest) are left out of the radius.
+        the largest) are left out of the radius. With ``axis``, only the modes that show in that axis' attitude
+        or rate (a component above 1e-9 of the largest) count: on a decoupled plant an unstable roll loop does
+        not make the tail's unstable.
         """
         radius = np.empty(self.A.shape[0])
+        rows = None
+        if axis is not None:
+            rows = np.zeros((2, self.A.shape[-1]))
+            rows[0, self.plant.angle_idx[axis]] = 1.0
+            rows[1, self.plant.rate_idx[axis]] = 1.0
         for g, A in enumerate(self.A):
             lam, V = np.linalg.eig(A)
             mags = np.abs(lam)
+            if rows is not None:
+                seen = np.abs(rows @ V).max(axis=0) / np.maximum(np.abs(V).max(axis=0), 1e-300)
+                mags = np.where(seen > 1e-9, mags, 0.0)
             near = np.abs(lam - 1.0) < 1e-8
             if np.any(near):
                 try:
@@ -247,7 +257,7 @@ def attitude_std(cl: ClosedLoop, m: int, axis: int, freq: np.ndarray, psd: np.nd
 
     T = cl.h * m
     A_T, B_T = lifted(cl, m)
-    _, stable = cl.stable()
+    _, stable = cl.stable(axis)
     grid, w = _frequency_grid(freq, T, n_freq)
     S = np.array([np.interp(grid, freq, p) for p in psd]) * w[None, :]  # (3, F)
     z = np.exp(2j * math.pi * grid * T)
@@ -261,7 +271,9 @@ def attitude_std(cl: ClosedLoop, m: int, axis: int, freq: np.ndarray, psd: np.nd
             right = np.linalg.solve(V, B_T[g])  # (N, 3)
             res = left[:, None] * right
             # modes the gusts do not reach (a neutral constant at z = 1, see ClosedLoop.stable) add nothing
-            live = np.abs(res).max(axis=1) > 1e-12 * max(np.abs(res).max(), 1e-300)
+            reach = np.abs(right).max(axis=1)
+            neutral = (np.abs(lam - 1.0) < 1e-8) & (reach < 1e-9 * max(reach.max(), 1e-300))
+            live = (np.abs(res).max(axis=1) > 1e-12 * max(np.abs(res).max(), 1e-300)) & ~neutral
             H = (res[live][None, :, :] / (z[:, None, None] - lam[live][None, :, None])).sum(axis=1)
         else:
             M = z[:, None, None] * np.eye(N)[None] - A_T[g][None]
@@ -343,9 +355,9 @@ def _decoupled(plant, axis: int) -> bool:
             and not np.any(plant.Bu[np.ix_(own, other_sticks)]) and not np.any(plant.Bu[np.ix_(others, [axis])]))
 
 
-def _margins_of(L: np.ndarray, grid: np.ndarray) -> tuple[float, float]:
-    """(gain margin factor, phase margin [deg]) of a loop gain ``L`` on ``grid`` [rad/s] (its last point the
-    Nyquist frequency), crossings by linear interpolation (module :func:`stick_margins`)."""
+def _margins_of(L: np.ndarray, grid: np.ndarray) -> tuple[float, float, float]:
+    """(gain margin factor, phase margin [deg], delay margin [s]) of a loop gain ``L`` on ``grid`` [rad/s] (its
+    last point the Nyquist frequency), crossings by linear interpolation (:func:`stick_margins`)."""
     factors = []
     im = L.imag
     for f in np.flatnonzero(im[:-2] * im[1:-1] < 0):
@@ -357,16 +369,20 @@ def _margins_of(L: np.ndarray, grid: np.ndarray) -> tuple[float, float]:
         factors.append(1.0 / abs(L[-1].real))
     gm = min(factors, key=lambda v: abs(math.log(v))) if factors else math.inf
     mag = np.abs(L) - 1.0
-    phases = []
+    phases, delays = [], []
     for f in np.flatnonzero(mag[:-1] * mag[1:] < 0):
         t = mag[f] / (mag[f] - mag[f + 1])
         x = L[f] + t * (L[f + 1] - L[f])
-        phases.append(float(np.remainder(np.angle(x, deg=True), 360.0) - 180.0))
+        phase = float(np.remainder(np.angle(x, deg=True), 360.0) - 180.0)
+        phases.append(phase)
+        w = grid[f] * (grid[f + 1] / grid[f]) ** t
+        delays.append(math.radians(phase) / w if phase > 0 else 0.0)
     pm = min(phases, key=abs) if phases else math.inf
-    return gm, pm
+    dm = min(delays) if delays else math.inf
+    return gm, pm, dm
 
 
-def stick_margins(cl: ClosedLoop, axis: int, sets=None) -> tuple[np.ndarray, np.ndarray]:
+def stick_margins(cl: ClosedLoop, axis: int, sets=None, delay: bool = False):
     """Gain [dB] and phase [deg] margins of the loop broken at ``axis``' stick, per set, at the tick.
 
     ``L(z) = −K(z)·P(z)``: ``K`` the set's loop on ``axis`` (attitude error and gyro in, stick out), ``P`` the
@@ -375,12 +391,16 @@ def stick_margins(cl: ClosedLoop, axis: int, sets=None) -> tuple[np.ndarray, np.
     linear interpolation. Definitions of :mod:`controllers.sweep_margins`: the gain margin is ``1/|L|`` at a
     phase crossover (L real and negative; the Nyquist end counted when ``L(−1) < 0``) nearest to 1 on a log
     scale, the phase margin ``(∠L mod 360°) − 180°`` at the gain crossover of smallest ``|margin|``; +inf
-    where there is none. NaN for sets not in ``sets`` (default: every set). When the other axes' loops do not
-    enter (a decoupled plant) or every set holds them alike (a sweep of ``axis``), ``P`` is evaluated once.
+    where there is none. With ``delay`` also the **delay margin** [s]: the smallest ``PM/ω`` over the gain
+    crossovers, the extra transport delay (an unmodelled servo lag) that would bring the loop to the edge;
+    0 where a crossover has no phase margin. NaN for sets not in ``sets`` (default: every set). When the
+    other axes' loops do not enter (a decoupled plant) or every set holds them alike (a sweep of ``axis``),
+    ``P`` is evaluated once.
     """
     G = cl.A.shape[0]
     gm = np.full(G, np.nan)
     pm = np.full(G, np.nan)
+    dm = np.full(G, np.nan)
     w_nyq = math.pi / cl.h
     grid = np.geomspace(w_nyq * 1e-4, w_nyq, _N_MARGIN)
     grid[-1] = w_nyq
@@ -393,6 +413,7 @@ def stick_margins(cl: ClosedLoop, axis: int, sets=None) -> tuple[np.ndarray, np.
         K = _block_response(_axis_block(cl.ctrl, g, axis), z)
         L = -(K * Pg).sum(axis=1)
         L[-1] = L[-1].real
-        gm[g], pm[g] = _margins_of(L, grid)
+        gm[g], pm[g], dm[g] = _margins_of(L, grid)
     with np.errstate(divide="ignore"):
-        return 20.0 * np.log10(gm), pm
+        gm_db = 20.0 * np.log10(gm)
+    return (gm_db, pm, dm) if delay else (gm_db, pm)

@@ -5,8 +5,8 @@ the command scale, and:
 
 1. sweeps, per axis, the firmware's own gains in the frequency domain
    (:mod:`controllers.firmware.tune_sweep`; :mod:`controllers.firmware.firmwares` says which gains) and
-   keeps the sets with a gain margin of at least 6 dB and a phase margin of at least 45° (the loop broken at
-   the axis' stick, at the loop's tick), best predicted p90 first;
+   keeps the sets with a gain margin of at least 6 dB, a phase margin of at least 45° and a delay margin of
+   25 ms (the loop broken at the axis' stick, at the loop's tick), best predicted p90 first;
 2. flies, in the time domain, the current gains, the firmware's defaults and the best few robust candidates
    through the one batched closed loop (:func:`controllers.replay.fly` via
    :func:`controllers.firmware.autopilot.fly_firmware`): the firmware's loop at its own rate, the physics
@@ -171,10 +171,10 @@ def _fly_sets(env_model, spec, sets, scale, signs, dt, cfg: TuneConfig) -> list:
 
 
 def _fd_row(spec, params, axis, model_params, scale, signs, m, freq, psd, collective) -> dict:
-    radius, stable, p90, gm, pm = evaluate_sets(spec, [params], axis, model_params, scale, signs, m, freq, psd,
-                                                collective)
+    radius, stable, p90, gm, pm, dm = evaluate_sets(spec, [params], axis, model_params, scale, signs, m, freq, psd,
+                                                    collective)
     return {"stable": bool(stable[0]), "spectral_radius": float(radius[0]), "fd_p90_deg": float(p90[0]),
-            "gain_margin_db": float(gm[0]), "phase_margin_deg": float(pm[0])}
+            "gain_margin_db": float(gm[0]), "phase_margin_deg": float(pm[0]), "delay_margin_s": float(dm[0])}
 
 
 def tune_gains(env_model, spec, current, scale, config: TuneConfig | None = None, stage=None) -> TuneResult:
@@ -252,8 +252,8 @@ def _choose(spec, current, sets, flown, groups):
     for g, choices in groups.items():
         names = "/".join(AXES[a] for a in g)
         if not choices:
-            notes.append(f"{names}: no swept set keeps a 6 dB gain margin and a 45 deg phase margin; the current "
-                         "gains are kept")
+            notes.append(f"{names}: no swept set keeps a 6 dB gain margin, a 45 deg phase margin and a 25 ms delay "
+                         "margin; the current gains are kept")
             continue
         best_j, best = None, math.inf
         for j in range(2, len(sets)):  # set j carries each group's choice j - 2 (or its last)
@@ -272,10 +272,12 @@ def _choose(spec, current, sets, flown, groups):
 def _verdicts(row: dict, sweep: AxisSweep) -> dict:
     """Whether the proposed set beats the defaults (time domain, keeping the margins) and whether the defaults
     are already near best."""
+    from .tune_sweep import robust
+
     prop, default = row["proposed"], row["default"]
     p_prop, p_def = _p90(prop), _p90(default)
-    robust_default = (default.get("gain_margin_db") or -math.inf) >= 6.0 and (
-        default.get("phase_margin_deg") or -math.inf) >= 45.0
-    return {"proposed_beats_default": bool(p_prop < p_def),
+    robust_default = bool(robust(default["stable"], default["gain_margin_db"], default["phase_margin_deg"],
+                                 default["delay_margin_s"]))
+    return {"proposed_beats_default": bool(p_prop < p_def), "default_robust": robust_default,
             "defaults_near_best": bool(robust_default and math.isfinite(p_def) and p_def <= (1 + NEAR_BEST) * p_prop),
             "robust_candidates": int(sweep.robust.sum()), "swept_sets": int(sweep.a.size)}

@@ -1,0 +1,236 @@
+"""Does ``heli tune``'s prediction hold when an independent implementation of the firmware flies its file?
+
+Per bench aircraft (:data:`AIRCRAFT`: three truths — the paper's aircraft with a 40/40/25 ms servo delay
+(the shipped model's), an agile one with four times its control power and damping and 30 ms servos, a
+heavier one in between with 50 ms servos — each in a bench cell's weather,
+:data:`identification.bench.BENCH_CELLS`):
+
+1. a 300 s synthetic flight of the truth (``heli simulate-flight``'s generator) written as a CSV;
+2. ``heli tune FLIGHT.csv --firmware F --params FLOWN --scale S --out DIR`` for ArduPilot (identifying the
+   model, ``--delay auto``) and Rotorflight (on the model the first run identified); FLOWN are the
+   firmware's default gains (the aircraft "flew" an untuned firmware) and ``S`` the bench's command scale,
+   the one at which each firmware's default feed-forward holds a rate target in steady state on the truth
+   (``s = k_damp/(|k|·FF_default)``; :func:`bench_scale`);
+3. the exported file (``ardupilot.param`` / ``rotorflight.txt``), read by the plain loop's own reader, and
+   the firmware's defaults, flown by **the plain, per-tick implementation of each firmware written apart
+   from the package** (``tests/firmware_plain_loop.py``) around the physics core's scalar RK4 on the
+   **truth** aircraft, in **fresh gusts of the cell's own generator** (new seeds; the identification never
+   saw them) with the cell's sensors and the identified trim, ``--flights`` flights of ``--duration`` s.
+
+Prints per aircraft, firmware and axis the predicted p90 |attitude error| of the proposed gains
+(``tune.json["axes"][axis]["proposed"]["p90_deg"]``), the flown one and their ratio (target: within
+15 %), the flown p90 of the defaults (target: the proposed beat them, keeping 6 dB and 45°), and the time
+``heli tune`` took (target: <= 60 s for the 300 s flight, identification included, on two cores).
+
+Usage::
+
+    python scripts/firmware_tune_check.py [--aircraft paper-40ms agile heavy] [--firmware ardupilot rotorflight]
+                                          [--flights 2] [--duration 120] [--out DIR] [--json FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))  # the plain loop lives with the tests
+
+_DEG = 180.0 / math.pi
+AXES = ("roll", "pitch", "yaw")
+
+
+def _aircraft() -> dict:
+    from heli_core.params import ModelParams
+    from identification.synthetic import PAPER_PARAMS
+
+    paper = replace(PAPER_PARAMS, tau_roll=0.04, tau_pitch=0.04, tau_yaw=0.025)
+    agile = ModelParams(k2=12.0, k3=9.0, kd1=0.3, k6=-10.0, k7=9.5, kd2=0.1, k10=40.0, k11=6.0, k12=-1.5,
+                        kd3=0.3, tau_roll=0.03, tau_pitch=0.03, tau_yaw=0.02)
+    heavy = ModelParams(k2=5.0, k3=5.0, kd1=0.1, k6=-4.0, k7=5.5, kd2=0.05, k10=20.0, k11=4.0, k12=-1.0,
+                        kd3=0.2, tau_roll=0.05, tau_pitch=0.05, tau_yaw=0.03)
+    return {"paper-40ms": ("independent", paper), "agile": ("default", agile), "heavy": ("broadband-pd-half", heavy)}
+
+
+AIRCRAFT = ("paper-40ms", "agile", "heavy")
+"""The bench aircraft (:func:`_aircraft`: cell, truth)."""
+
+
+def bench_scale(truth, firmware: str) -> tuple:
+    """The bench's command scale: the one at which the firmware's default feed-forward is the steady-state one.
+
+    ArduPilot: ``s = k_damp/(|k|·FF)`` with the default FF (0.15 roll, pitch; 0.024 yaw). Rotorflight:
+    ``s = k_damp/(|k|·Kf)`` with ``Kf = F·2.5e-5`` mixer units per deg/s in rad/s (F 100 roll, pitch). The
+    tail: ArduPilot's default yaw FF (0.024) is a small part of its yaw loop, and Rotorflight's tail has no
+    default F, so on yaw the scale is the one at which ArduPilot's default yaw *P* (0.18) doubles the tail's own
+    damping, ``s = k11/(|k10|·0.18)``, for both firmwares.
+    """
+    damp = (truth.k3, truth.k7, truth.k11)
+    gains = np.abs(truth.control_gains)
+    if firmware == "ardupilot":
+        ff = (0.15, 0.15, 0.18)
+    else:
+        kf = 100 * 2.5e-5 * _DEG  # per rad/s
+        ff = (kf, kf, 0.18)
+    return tuple(float(d / (g * f)) for d, g, f in zip(damp, gains, ff))
+
+
+def flown_file(firmware: str, path: Path) -> Path:
+    """The gains the bench aircraft "flew": the firmware's defaults (a file with one default value in it)."""
+    if firmware == "ardupilot":
+        path.write_text("# the firmware's defaults\nATC_RAT_RLL_P,0.024\n")
+    else:
+        path.write_text("# the firmware's defaults\nset roll_p_gain = 50\nset pid_process_denom = 8\n")
+    return path
+
+
+def fresh_gusts(cfg, truth, ident_params, steps: int, dt: float, seed: int):
+    """Gust torque (3, n), collective (n,), identified trim (3, n), gyro and attitude errors (3, n) of a flight in
+    fresh weather of the cell's generator."""
+    from heli_core.physics import trim_sticks
+    from identification.synthetic import coloured_noise, gust_trace, sensor_errors
+
+    rng = np.random.default_rng([seed, 0xF1A])
+    level = np.broadcast_to(np.asarray(cfg.wind_level, dtype=float), (3,))
+    gust = np.array([gust_trace(rng, steps, 1.0 / dt, cfg, level[i] / 1.6449) for i in range(3)])
+    col = np.clip(cfg.collective_trim + coloured_noise(rng, steps, 1.0 / dt, 0.05, cfg.collective_wander), -1, 1)
+    terms, attn = sensor_errors(rng, cfg, np.arange(steps) * dt)
+    gyro = sum(terms[1:], terms[0])
+    torque = truth.control_gains[:, None] * gust
+    trim = np.array(trim_sticks(ident_params, col))
+    return torque, col, trim, gyro, attn
+
+
+def fly_plain(firmware: str, values: dict, truth, ident_params, scale, cfg, n_flights, duration, seed, rate_hz):
+    """p90 |attitude error| [deg] per axis of the plain loop flying ``values`` on the truth in fresh gusts."""
+    import firmware_plain_loop as plain
+
+    dt = 0.01
+    steps = int(round(duration / dt))
+    signs = tuple(float(v) for v in np.sign(ident_params.control_gains))
+    errors = [[], [], []]
+    for f in range(n_flights):
+        torque, col, trim, gyro, attn = fresh_gusts(cfg, truth, ident_params, steps, dt, seed + f)
+        ctrl = plain.PlainArduPilot(values) if firmware == "ardupilot" else plain.PlainRotorflight(values, rate_hz)
+        e = plain.fly(truth, ctrl, scale, signs, torque, col, trim, dt, attn, gyro)
+        if len(e[0]) < steps:
+            return None  # left +-60 deg
+        for i in range(3):
+            errors[i] += e[i]
+    return [float(np.percentile(np.abs(np.array(errors[i])) * _DEG, 90)) for i in range(3)]
+
+
+def run_aircraft(name: str, firmwares, args, work: Path) -> list:
+    """Every row of one aircraft: its flight, its tunes, the plain loop's flights."""
+    import firmware_plain_loop as plain
+
+    from heli_cli.main import main
+    from identification.bench import BENCH_CELLS
+    from identification.io import write_csv_flight
+    from identification.synthetic import simulate_flight
+    from model_store.model_file import load_model
+
+    cell, truth = _aircraft()[name]
+    cfg = replace(BENCH_CELLS[cell], duration=300.0)
+    folder = work / name
+    folder.mkdir(parents=True, exist_ok=True)
+    csv = write_csv_flight(simulate_flight(300.0, seed=args.seed, config=cfg, truth=truth).flight, folder / "flight.csv")
+    rows, model = [], None
+    for fw in firmwares:
+        scale = bench_scale(truth, fw)
+        out = folder / fw
+        argv = ["-q", "tune", str(csv), "--firmware", fw, "--params", str(flown_file(fw, folder / f"{fw}.flown")),
+                "--scale", ",".join(f"{v:.6g}" for v in scale), "--out", str(out), "--no-plots"]
+        if model is not None:
+            argv += ["--model", str(model)]
+        t0 = time.perf_counter()
+        code = main(argv)
+        seconds = time.perf_counter() - t0
+        if code != 0:
+            rows.append({"aircraft": name, "firmware": fw, "error": f"heli tune exited {code}"})
+            continue
+        model = model or out / "model"
+        ident, _ = load_model(model / "model.json")
+        doc = json.loads((out / "tune.json").read_text())
+        spec_file = out / doc["files"]["proposed"]
+        values = plain.read_param_file(spec_file) if fw == "ardupilot" else plain.read_cli_file(spec_file)
+        defaults = {} if fw == "ardupilot" else {"pid_process_denom": 8}
+        rate = doc["loop_rate_hz"]
+        flown_prop = fly_plain(fw, values, truth, ident, scale, cfg, args.flights, args.duration, args.seed + 1000, rate)
+        flown_def = fly_plain(fw, defaults, truth, ident, scale, cfg, args.flights, args.duration, args.seed + 1000, rate)
+        for i, axis in enumerate(AXES):
+            row = doc["axes"][axis]
+            pred = row["proposed"].get("p90_deg")
+            fp = None if flown_prop is None else flown_prop[i]
+            rows.append({"aircraft": name, "cell": cell, "firmware": fw, "axis": axis, "scale": scale[i],
+                         "tune_seconds": seconds, "predicted_p90": pred, "flown_p90": fp,
+                         "ratio": None if (fp is None or pred is None) else pred / fp,
+                         "interval": row["proposed"].get("p90_deg_interval"),
+                         "predicted_default_p90": row["default"].get("p90_deg"),
+                         "flown_default_p90": None if flown_def is None else flown_def[i],
+                         "gain_margin_db": row["proposed"]["gain_margin_db"],
+                         "phase_margin_deg": row["proposed"]["phase_margin_deg"],
+                         "kept_current": row["kept_current"], "defaults_near_best": row["defaults_near_best"]})
+    return rows
+
+
+def _print(rows) -> None:
+    print("aircraft     firmware    axis   predicted  flown   pred/flown  flown default  margins        tune s")
+    for r in rows:
+        if "error" in r:
+            print(f"{r['aircraft']:12s} {r['firmware']:11s} {r['error']}")
+            continue
+
+        def f(v, d=3):
+            return "   –  " if v is None else f"{v:.{d}g}"
+
+        gm, pm = r["gain_margin_db"], r["phase_margin_deg"]
+        print(f"{r['aircraft']:12s} {r['firmware']:11s} {r['axis']:6s} {f(r['predicted_p90']):>8s}  "
+              f"{f(r['flown_p90']):>6s}  {f(r['ratio']):>9s}  {f(r['flown_default_p90']):>12s}  "
+              f"{f(gm)} dB/{f(pm)}°  {r['tune_seconds']:6.1f}")
+    ok = [r for r in rows if r.get("ratio") is not None]
+    if ok:
+        dev = np.abs(np.array([r["ratio"] for r in ok]) - 1.0)
+        within = int(np.sum(dev <= 0.15))
+        beats = sum(1 for r in ok if r["flown_default_p90"] is None or r["flown_p90"] < r["flown_default_p90"])
+        robust = sum(1 for r in ok if (r["gain_margin_db"] or math.inf) >= 6 and (r["phase_margin_deg"] or math.inf) >= 45)
+        print(f"|predicted/flown - 1|: mean {dev.mean() * 100:.1f} %, worst {dev.max() * 100:.1f} %; within 15 %: "
+              f"{within}/{len(ok)}; proposed beat the defaults (flown): {beats}/{len(ok)}; keep 6 dB / 45°: "
+              f"{robust}/{len(ok)}")
+    secs = sorted({(r['aircraft'], r['firmware'], round(r['tune_seconds'], 1)) for r in rows if 'tune_seconds' in r})
+    print("heli tune seconds (the first firmware of each aircraft identifies the 300 s flight): "
+          + ", ".join(f"{a}/{fw} {s:g}" for a, fw, s in secs))
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--aircraft", nargs="+", default=list(AIRCRAFT), choices=AIRCRAFT)
+    p.add_argument("--firmware", nargs="+", default=["ardupilot", "rotorflight"], choices=("ardupilot", "rotorflight"))
+    p.add_argument("--flights", type=int, default=2, help="fresh-gust flights per gain set (default 2)")
+    p.add_argument("--duration", type=float, default=120.0, help="seconds per fresh flight (default 120)")
+    p.add_argument("--seed", type=int, default=7)
+    p.add_argument("--out", default=None, help="keep the tunes in this folder (default: a temporary one)")
+    p.add_argument("--json", default=None, help="write the rows as JSON here")
+    args = p.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(args.out) if args.out else Path(tmp)
+        rows = []
+        for name in args.aircraft:
+            rows += run_aircraft(name, args.firmware, args, work)
+            _print([r for r in rows if r["aircraft"] == name])
+        print()
+        _print(rows)
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
