@@ -240,6 +240,10 @@ def run(args) -> int:
     from .progress import progress_of
 
     check_model(args, "train an agent on it")  # an unusable model is refused before any work
+    if args.compare_pd is not None and not args.no_compare:  # a bad PD file is named before training, not after
+        from controllers.rl.residual_agent import as_base
+
+        as_base(args.compare_pd, "--compare-pd")
     progress = progress_of(args)
     progress.stage("loading stable-baselines3, torch and the model; training shows its own bar on a terminal")
     from controllers.errors import TrainingInterrupted

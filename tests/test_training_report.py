@@ -83,3 +83,23 @@ def test_heli_train_warns_when_the_agent_is_worse_than_the_pd(tmp_path, capsys):
     assert (run_dir / "report.html").exists()
     comparison = json.loads((run_dir / "comparison.json").read_text())
     assert comparison["worse_axes"] and comparison["pd"] == "heli design's defaults"
+
+
+def test_the_pd_compared_with_is_named_and_a_bad_one_refused_before_training(tmp_path, capsys):
+    """--compare-pd names its file, a --residual run compares with its base; a file that is no PD ends the
+    command before any training (exit 2, nothing written)."""
+    import argparse
+
+    from controllers.pd import PDGains
+    from heli_cli.train import _comparison_pd
+
+    pd_file = PDController(PDGains([20.0, 30.0, 4.0], [3.0, 5.0, 0.5]), [1, -1, 1]).save(tmp_path / "pd.json")
+    pd, label = _comparison_pd(argparse.Namespace(compare_pd=str(pd_file), residual=None), None, 0.01)
+    assert label == str(pd_file) and pd.gains.kp == (20.0, 30.0, 4.0)
+    _, label = _comparison_pd(argparse.Namespace(compare_pd=None, residual=str(pd_file)), None, 0.01)
+    assert label == f"the residual's base {pd_file}"
+    (tmp_path / "bad.json").write_text("{}")
+    assert main(["train", "--algo", "ppo", "--timesteps", "64", "--out", str(tmp_path / "a"), "--compare-pd",
+                 str(tmp_path / "bad.json"), "--no-progress"]) == 2
+    assert "--compare-pd must be a PD controller JSON" in capsys.readouterr().err
+    assert not (tmp_path / "a.zip").exists() and not (tmp_path / "a_training").exists()
