@@ -857,3 +857,13 @@ def test_a_filtered_sweep_predicts_its_smoother_stick_in_both_domains(shipped):
     assert_allclose(smooth.table["att_p90_deg"], smooth.table["pred_att_p90_deg"], rtol=0.2)
     with pytest.raises(SweepError, match="d_filter_hz must be a cutoff frequency > 0 Hz"):
         sweep_pairs(shipped, pairs, duration=1.0, windows=1, progress=False, d_filter_hz=-2.0)
+
+
+def test_cli_sweep_takes_a_derivative_filter(tmp_path, capsys):
+    assert main(["sweep", "--kp", "10", "--kd", "1", "--duration", "2", "--windows", "1", "--no-extend",
+                 "--d-filter-hz", "5", "--no-plots", "--out", str(tmp_path / "sw"), "-q"]) == 0
+    assert json.loads((tmp_path / "sw" / "sweep.json").read_text())["settings"]["d_filter_hz"] == [5.0] * 3
+    assert "low-passed" in (tmp_path / "sw" / "sweep.md").read_text()
+    with pytest.raises(SystemExit):
+        main(["sweep", "--kp", "10", "--kd", "1", "--d-filter-hz", "0"])
+    assert "expected one positive cutoff in Hz or three" in capsys.readouterr().err
