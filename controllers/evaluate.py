@@ -53,7 +53,9 @@ SCHEMA = "heli-env/agent-evaluation"
 
 def describe_agent(agent) -> tuple[str, str]:
     """(kind, description) of an agent: ("pd", "PD kp=.. kd=.."), ("ppo", "PPO"),
-    ("ppo-residual", "PPO ±0.05 stick on PD kp=.. kd=.."), ..."""
+    ("ppo-residual", "PPO ±0.05 stick on PD kp=.. kd=.."), ("lqg", "LQG (Kalman filter + LQR, 11/11/11
+    states)"), ..."""
+    from .lqg.controller import LQGController
     from .pd.controller import PDController
     from .rl.residual_agent import ResidualAgent
 
@@ -65,6 +67,9 @@ def describe_agent(agent) -> tuple[str, str]:
     if isinstance(agent, ResidualAgent):
         kind, desc = describe_agent(agent.policy)
         return f"{kind}-residual", f"{desc} ±{agent.scale:g} stick on {describe_agent(agent.base)[1]}"
+    if isinstance(agent, LQGController):
+        states = "/".join(str(len(a["states"])) for a in agent.axes)
+        return "lqg", f"LQG (Kalman filter + LQR, {states} states)"
     kind = type(agent).__name__.lower()
     return kind, type(agent).__name__
 
