@@ -16,6 +16,9 @@ Sections (``--only NAME`` runs one):
   against its own ``threads=1`` figure (target >= 0.9), and ``HeliAttitude-v0``
   through ``gym.make`` against ``Pendulum-v1`` (target >= 1.0); the envs of
   each comparison are timed in turn.
+* ``env-threads`` — the vector env with numba's whole pool fixed against one
+  thread, quiet and busy, under the threading layer in use (run it once per
+  ``NUMBA_THREADING_LAYER``).
 * ``sweep`` — a 20 x 20 PD gain grid x 10 gust windows x 60 s at 100 Hz through
   ``controllers.sweep.sweep_gains`` (target <= 10 s on 2 cores, issue #5), and its
   prediction checked against fresh-wind flights (KS statistic, target <= 0.1).
@@ -206,7 +209,7 @@ def bench_env(repeats: int) -> dict:
     choice = vec.unwrapped._thread_choice
     out = {"cpus": os.cpu_count(), "numba pool": f"{numba.config.NUMBA_NUM_THREADS} threads",
            ENV_VAR: os.environ.get(ENV_VAR, "unset")}
-    blocks = max(7, repeats // 2)
+    blocks = max(9, repeats)  # the envs of a comparison differ by a few per cent: many blocks, in turn
     for condition in ("quiet", "busy"):
         neighbour = _neighbour() if condition == "busy" else None
         try:
@@ -235,6 +238,42 @@ def bench_env(repeats: int) -> dict:
         out[f"{c}: single env steps/s, HeliAttitude-v0 via gym.make (sensors on)"] = rates["single"]
         out[f"{c}: single env steps/s, Pendulum-v1 via gym.make"] = rates["Pendulum-v1"]
         out[f"{c}: ratio single / Pendulum-v1 (target >= 1.0)"] = rates["single"] / rates["Pendulum-v1"]
+    return out
+
+
+def bench_env_threads(repeats: int) -> dict:
+    """The vector env (4096 copies, sensors on) with numba's pool fixed (``threads=`` all of it) against
+    ``threads=1``, quiet and beside a CPU-bound neighbour, under the threading layer numba uses
+    (``NUMBA_THREADING_LAYER=omp|workqueue|tbb`` chooses it; unset, heli_env asks for workqueue)."""
+    import os
+
+    import numba
+
+    from heli_env.vector_env import HeliAttitudeVectorEnv
+
+    n, most = ENV_COPIES, numba.config.NUMBA_NUM_THREADS
+    envs = {f"threads={most}": HeliAttitudeVectorEnv(n, threads=most), "threads=1": HeliAttitudeVectorEnv(n, threads=1)}
+    for env in envs.values():
+        env.reset(seed=0)
+    action = np.zeros((n, 3), dtype=np.float32)
+    for env in envs.values():
+        _steps_per_second(env, action, 50, 1, vector=True)
+    out = {"cpus": os.cpu_count(), "threading layer": numba.threading_layer(),
+           "NUMBA_THREADING_LAYER": os.environ.get("NUMBA_THREADING_LAYER", "unset")}
+    for condition in ("quiet", "busy"):
+        neighbour = _neighbour() if condition == "busy" else None
+        try:
+            time.sleep(0.5 if neighbour else 0.0)
+            load = _load()
+            rates = _interleaved({k: (env, action, n) for k, env in envs.items()}, 40, max(9, repeats // 2))
+        finally:
+            if neighbour is not None:
+                neighbour.terminate()
+                neighbour.wait()
+        out[f"{condition}: load average (1, 5, 15 min)"] = load
+        for k, v in rates.items():
+            out[f"{condition}: vector env-steps/s, {k}"] = v
+        out[f"{condition}: ratio threads={most} / threads=1"] = rates[f"threads={most}"] / rates["threads=1"]
     return out
 
 
@@ -464,7 +503,8 @@ def bench_rl_seeds(repeats: int) -> dict:
     return out
 
 
-SECTIONS = {"identification": bench_identification, "physics": bench_physics, "env": bench_env, "sweep": bench_sweep,
+SECTIONS = {"identification": bench_identification, "physics": bench_physics, "env": bench_env,
+            "env-threads": bench_env_threads, "sweep": bench_sweep,
             "backends": bench_backends, "cli": bench_cli, "rl-seeds": bench_rl_seeds}
 
 
