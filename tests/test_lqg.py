@@ -269,3 +269,19 @@ def test_loop_margins_of_an_unstable_loop_says_so(shipped):
     m = axis_model(shipped.params, shipped.sensors, None, "roll", 0.01, lines=False)
     d = design_axis(m, recovery=0.0)
     assert not loop_margins(m, -d.K, d.M)["stable"]
+
+
+def test_load_agent_reads_an_lqg_file(design, tmp_path):
+    """``heli evaluate`` loads agents by content: an LQG JSON comes back as the LQG; a broken one says why."""
+    from controllers.rl.agent_file import load_agent
+
+    path = design.controller().save(tmp_path / "agent.json")
+    back = load_agent(path)
+    assert isinstance(back, LQGController)
+    obs = np.random.default_rng(6).normal(0, 0.01, (2, 12))
+    np.testing.assert_array_equal(back.predict(obs)[0], design.controller().predict(obs)[0])
+    doc = json.loads(path.read_text())
+    doc["axes"][1]["M"] = [[0.0]]
+    path.write_text(json.dumps(doc))
+    with pytest.raises(AgentError, match=r"agent.json: pitch: M must have shape \(11, 2\)"):
+        load_agent(path)

@@ -2,7 +2,8 @@
 
 An agent is a stable-baselines3 zip (PPO or SAC) that carries ``heli_agent.json``
 beside SB3's own entries (algo, split, settings; for a residual agent the base PD
-and the bound), or a PD controller JSON (:meth:`controllers.pd.PDController.save`).
+and the bound), a PD controller JSON (:meth:`controllers.pd.PDController.save`) or an
+LQG controller JSON (:meth:`controllers.lqg.LQGController.save`).
 :func:`load_agent` tells them apart by content and returns an object with SB3's
 ``predict``; :func:`agent_metadata` reads the zip's ``heli_agent.json``.
 """
@@ -104,15 +105,17 @@ def _zip_algo(path: Path) -> str:
 
 
 def load_agent(path):
-    """Load any agent: a PD controller JSON (:meth:`controllers.pd.PDController.load`) or a PPO/SAC zip.
+    """Load any agent: a PD or LQG controller JSON (:meth:`controllers.pd.PDController.load`,
+    :meth:`controllers.lqg.LQGController.load`) or a PPO/SAC zip.
 
     The kind is read from the file, not its name: a zip is an SB3 agent (its
-    ``heli_agent.json``, else SB3's saved policy class, tells PPO from SAC), anything
-    else must be a PD controller JSON. ``agents/ppo`` finds ``agents/ppo.zip``.
+    ``heli_agent.json``, else SB3's saved policy class, tells PPO from SAC), a JSON of
+    the LQG schema an LQG controller, anything else must be a PD controller JSON.
+    ``agents/ppo`` finds ``agents/ppo.zip``.
 
     Returns
     -------
-    PDController, stable_baselines3 PPO / SAC, or ResidualAgent (a PPO / SAC residual on a PD)
+    PDController, LQGController, stable_baselines3 PPO / SAC, or ResidualAgent (a PPO / SAC residual on a PD)
         Each has ``predict(observation, state=None, episode_start=None, deterministic=False)``.
 
     Raises
@@ -120,8 +123,8 @@ def load_agent(path):
     FileNotFoundError
         No such file.
     AgentError
-        Neither kind, an agent zip whose metadata or model data is not readable JSON, or
-        an SB3 agent of another algorithm.
+        Neither kind, an agent zip whose metadata or model data is not readable JSON,
+        an SB3 agent of another algorithm, or an LQG file with bad matrices.
     """
     path = _resolve(path)
     if zipfile.is_zipfile(path):
@@ -132,9 +135,22 @@ def load_agent(path):
             raise AgentError(f"{path}: cannot load the {algo.upper()} agent: {e}") from e
         meta = agent_metadata(path) or {}
         return residual_from_metadata(meta, policy, path) if meta.get("residual") else policy
+    from ..lqg.controller import SCHEMA as LQG_SCHEMA
+    from ..lqg.controller import LQGController
     from ..pd.controller import PDController
 
+    if _json_schema(path) == LQG_SCHEMA:
+        return LQGController.load(path)
     try:
         return PDController.load(path)
     except (ValueError, UnicodeDecodeError) as e:
-        raise AgentError(f"{path}: neither a PPO/SAC zip nor a PD controller JSON ({e})") from e
+        raise AgentError(f"{path}: neither a PPO/SAC zip nor a PD controller JSON nor an LQG one ({e})") from e
+
+
+def _json_schema(path: Path):
+    """The ``schema`` entry of a JSON object file, or None (not JSON, not an object, no entry)."""
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (ValueError, UnicodeDecodeError):
+        return None
+    return doc.get("schema") if isinstance(doc, dict) else None
