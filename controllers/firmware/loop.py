@@ -163,6 +163,30 @@ class FirmwareLoop:
             self._shaped[ndim] = {k: self.shaped(v, ndim) for k, v in self.coef.items()}
         return self._shaped[ndim]
 
+    coef_order = ()
+    """The coefficients the compiled tick reads, in the order of its rows (subclasses)."""
+
+    def kernel_coef(self, batch_shape: tuple) -> np.ndarray:
+        """:attr:`coef` in :attr:`coef_order` broadcast over a batch and flattened: ``(K, 3, B)``, cached."""
+        key = ("kernel", tuple(batch_shape))
+        if key not in self._shaped:
+            ndim = 1 + len(batch_shape)
+            rows = [np.broadcast_to(self.shaped(self.coef[name], ndim), (3,) + tuple(batch_shape)).reshape(3, -1)
+                    for name in self.coef_order]
+            self._shaped[key] = np.ascontiguousarray(np.stack(rows))
+        return self._shaped[key]
+
+    def flat_inputs(self, memory, att_error, gyro, ff_rate):
+        """The tick's inputs as contiguous float arrays over a flattened batch: memory (R, 3, B), error, gyro and
+        feed-forward (3, B); and the batch's shape."""
+        e = np.asarray(att_error, dtype=float)
+        shape = e.shape[1:]
+        flat = (3, int(np.prod(shape, dtype=int)))
+        mem = np.ascontiguousarray(np.asarray(memory, dtype=float).reshape((self.memory_rows,) + flat))
+        ff = np.zeros(flat) if ff_rate is None else np.broadcast_to(np.asarray(ff_rate, float), e.shape).reshape(flat)
+        return (mem, np.ascontiguousarray(e.reshape(flat)), np.ascontiguousarray(
+            np.broadcast_to(np.asarray(gyro, dtype=float), e.shape).reshape(flat)), np.ascontiguousarray(ff), shape)
+
     # ----------------------------------------------------------------- stepping
     memory_rows = 0
     """Rows of the memory array (filter states, integrators, flags) per axis."""

@@ -42,9 +42,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
-from .filters import dif_apply, first_order_apply, rf_dif, rf_first_order, rf_pt1
+from .filters import rf_dif, rf_first_order, rf_pt1
 from .loop import FirmwareLoop, check_axes, check_scalar
 
 SCALES = {
@@ -197,34 +198,62 @@ class Rotorflight(FirmwareLoop):
             raise ValueError("the parameter sets of one loop must share gyro_lpf1_static_hz (one gyro)")
         return c
 
+    coef_order = ("p", "i", "d", "f", "b", "error_limit", "relax_level", "relax_on", "relax_a", "d_a", "d_b", "b_a",
+                  "b_b", "g_on", "g_b", "g_a1", "decay_rate", "decay_limit", "level", "cw", "ccw", "limit", "yaw")
+
     def tick(self, memory, att_error, gyro, ff_rate=None):
-        """One pass of the loop (module docstring; :meth:`FirmwareLoop.tick` for the arguments)."""
-        e_deg = np.asarray(att_error, dtype=float) * _RAD
-        k = self.gains(e_deg.ndim)
-        dt = self.dt
-        lp, gx1, gy1, dx1, dy1, bx1, by1, E, relax, saturated = memory
-        lpn = lp + self.lpf1 * (np.asarray(gyro, dtype=float) * _RAD - lp)
-        # first-order bandwidth limiter: y = b0·x + b1·x1 − a1·y1 (b0 = b1); off: y = x
-        gn = np.where(k["g_on"] > 0, k["g_b"] * (lpn + gx1) - k["g_a1"] * gy1, lpn)
-        # angle mode: sp = L·(ref − θ); the caller's reference lies within ±angle_level_limit
-        sp = k["level"] * e_deg
-        if ff_rate is not None:
-            sp = sp + np.asarray(ff_rate, dtype=float) * _RAD
-        err = sp - gn
-        stop = np.clip((err + 10.0) / 20.0, 0.0, 1.0)  # transition(err, -10, 10, ccw, cw)
-        stop_gain = k["ccw"] + (k["cw"] - k["ccw"]) * stop
-        P = k["p"] * err * np.where(k["yaw"] > 0, stop_gain, 1.0)
-        dterm, dx1n, dy1n = dif_apply((k["d_a"], k["d_b"]), -gn, dx1, dy1)
-        relaxn = relax + k["relax_a"] * (sp - relax)
-        factor = np.where(k["relax_on"] > 0, np.maximum(0.0, 1.0 - np.abs(sp - relaxn) / k["relax_level"]), 1.0)
-        ierr = err * factor
-        hold = (saturated > 0) & (E * ierr > 0)
-        En = np.clip(E + np.where(hold, 0.0, ierr * dt), -k["error_limit"], k["error_limit"])
-        I = k["i"] * En
-        En = En - np.clip(En * k["decay_rate"], -k["decay_limit"], k["decay_limit"]) * dt
-        bterm, bx1n, by1n = dif_apply((k["b_a"], k["b_b"]), sp, bx1, by1)
-        total = P + I + k["d"] * dterm + k["f"] * sp + k["b"] * bterm
-        out = np.clip(total, -k["limit"], k["limit"])
-        sat = out != total
-        new = np.stack([lpn, lpn, gn, dx1n, dy1n, bx1n, by1n, En, relaxn, sat.astype(float)])
-        return out, new, sat
+        """One pass of the loop (module docstring; :meth:`FirmwareLoop.tick` for the arguments).
+
+        The statements are :func:`_tick_kernel`'s, compiled by numba and run element by element over the batch.
+        """
+        mem, e, g, ff, shape = self.flat_inputs(memory, att_error, gyro, ff_rate)
+        out, new, sat = np.empty_like(e), np.empty_like(mem), np.empty(e.shape, dtype=np.bool_)
+        _tick_kernel(mem, e, g, ff, self.kernel_coef(shape), self.lpf1, self.dt, out, new, sat)
+        return out.reshape((3,) + shape), new.reshape(new.shape[:2] + shape), sat.reshape((3,) + shape)
+
+
+@numba.njit(cache=True)
+def _tick_kernel(mem, e, gyro, ff, k, lpf1, dt, out, new, sat):  # pragma: no cover (compiled)
+    """One tick of every loop of a flattened batch, in the order of pid.c's statements (module docstring).
+
+    ``mem``/``new`` (10, 3, B) memory in and out; ``e``, ``gyro``, ``ff`` (3, B) in rad and rad/s; ``k``
+    (23, 3, B) the coefficients of :attr:`Rotorflight.coef_order`; ``lpf1`` the gyro_lpf1 PT1 gain; ``out``
+    (3, B) the PID sum after the mixer's limit, ``sat`` (3, B) where it was limited.
+    """
+    rad = 180.0 / math.pi
+    B = e.shape[1]
+    for b in range(B):
+        for i in range(3):
+            lp, gx1, gy1, dx1, dy1, bx1, by1, E, relax, saturated = (
+                mem[0, i, b], mem[1, i, b], mem[2, i, b], mem[3, i, b], mem[4, i, b], mem[5, i, b], mem[6, i, b],
+                mem[7, i, b], mem[8, i, b], mem[9, i, b])
+            lp = lp + lpf1 * (gyro[i, b] * rad - lp)
+            if k[13, i, b] > 0.0:  # the per-axis bandwidth limiter: y = b0·x + b1·x1 − a1·y1 (b0 = b1)
+                g = k[14, i, b] * (lp + gx1) - k[15, i, b] * gy1
+            else:
+                g = lp
+            sp = k[18, i, b] * e[i, b] * rad + ff[i, b] * rad  # angle mode: L·(ref − θ)
+            err = sp - g
+            if k[22, i, b] > 0.0:  # the tail's stop gains: transition(err, -10, 10, ccw, cw)
+                x = min(max((err + 10.0) / 20.0, 0.0), 1.0)
+                P = k[0, i, b] * err * (k[20, i, b] + (k[19, i, b] - k[20, i, b]) * x)
+            else:
+                P = k[0, i, b] * err
+            dterm = k[10, i, b] * (-g) - k[10, i, b] * dx1 - k[9, i, b] * dy1  # D on the gyro only
+            relax = relax + k[8, i, b] * (sp - relax)
+            ierr = err
+            if k[7, i, b] > 0.0:
+                ierr = err * max(0.0, 1.0 - abs(sp - relax) / k[6, i, b])
+            if not (saturated > 0.0 and E * ierr > 0.0):
+                E = E + ierr * dt
+            E = min(max(E, -k[5, i, b]), k[5, i, b])
+            I = k[1, i, b] * E
+            E = E - min(max(E * k[16, i, b], -k[17, i, b]), k[17, i, b]) * dt
+            bterm = k[12, i, b] * sp - k[12, i, b] * bx1 - k[11, i, b] * by1
+            total = P + I + k[2, i, b] * dterm + k[3, i, b] * sp + k[4, i, b] * bterm
+            c = min(max(total, -k[21, i, b]), k[21, i, b])
+            out[i, b] = c
+            sat[i, b] = c != total
+            new[0, i, b], new[1, i, b], new[2, i, b] = lp, lp, g
+            new[3, i, b], new[4, i, b], new[5, i, b], new[6, i, b] = -g, dterm, sp, bterm
+            new[7, i, b], new[8, i, b], new[9, i, b] = E, relax, 1.0 if c != total else 0.0
