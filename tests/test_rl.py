@@ -279,7 +279,8 @@ def test_agent_metadata_with_a_corrupt_split(ppo_run, tmp_path, capsys):
 def test_heli_train_cli(tmp_path, capsys):
     out = tmp_path / "cli_ppo"
     assert main(["train", "--algo", "ppo", "--timesteps", "64", "--out", str(out), "--n-envs", "1",
-                 "--episode-seconds", "1", "--eval-freq", "0", "--checkpoint-freq", "0", "--no-progress"]) == 0
+                 "--episode-seconds", "1", "--eval-freq", "0", "--checkpoint-freq", "0", "--no-progress",
+                 "--no-compare"]) == 0
     printed = capsys.readouterr().out
     assert "PPO trained for" in printed
     # the files the help names and this run did not write are said to be absent, with the reason
@@ -293,7 +294,7 @@ def test_heli_train_cli_residual_settings(tmp_path, ideal_model_dir):
     out = tmp_path / "res"
     assert main(["train", "--algo", "ppo", "--model", str(ideal_model_dir), "--timesteps", "64", "--out", str(out),
                  "--n-envs", "1", "--episode-seconds", "1", "--eval-freq", "0", "--checkpoint-freq", "0",
-                 "--no-progress", "--residual", str(pd_file), "--paired-baseline", "--no-axis-balance",
+                 "--no-progress", "--no-compare", "--residual", str(pd_file), "--paired-baseline", "--no-axis-balance",
                  "--normalize-obs", "--curriculum", "1000", "--curriculum-start", "0.3", "--lr-schedule", "linear",
                  "--reward-weights", "1,0.01,0.01"]) == 0
     meta = agent_metadata(tmp_path / "res.zip")
@@ -312,7 +313,7 @@ def test_heli_train_cli_reward_reference_and_algo_kwargs(tmp_path, ideal_model_d
     out = tmp_path / "res"
     assert main(["train", "--algo", "ppo", "--model", str(ideal_model_dir), "--timesteps", "64", "--out", str(out),
                  "--n-envs", "1", "--episode-seconds", "1", "--eval-freq", "0", "--checkpoint-freq", "0",
-                 "--no-progress", "--residual", str(base), "--reward-reference", str(reference),
+                 "--no-progress", "--no-compare", "--residual", str(base), "--reward-reference", str(reference),
                  "--algo-kwargs", '{"use_sde": false, "n_steps": 32, "batch_size": 32}']) == 0
     meta = agent_metadata(tmp_path / "res.zip")
     assert meta["reward_reference"]["kp"] == [180.0, 539.0, 66.0]
@@ -856,7 +857,7 @@ def test_cli_train_with_a_time_budget_alone_stops_on_time_under_a_plain_label(tm
     terminal = _Terminal()
     monkeypatch.setattr("sys.stderr", terminal)
     assert main(["train", "--algo", "ppo", "--minutes", "0.02", "--n-envs", "2", "--eval-freq", "0",
-                 "--checkpoint-freq", "0", "--out", str(tmp_path / "ppo")]) == 0
+                 "--checkpoint-freq", "0", "--out", str(tmp_path / "ppo"), "--no-compare"]) == 0
     assert "(time budget reached)" in capsys.readouterr().out
     bar = terminal.getvalue()
     assert "train PPO for 0.02 min: " in bar and "step/s" in bar and "ppo ppo" not in bar
