@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from .argtypes import INPUT_HOLD_HELP, input_hold, number, output_path, whole
 
 
@@ -53,7 +55,7 @@ def run(args) -> int:
     flight = read_flight(args.flight)
     model = document = None
     if args.model is not None:
-        model, document = load_model(args.model)
+        model, document = load_model(_existing_model(args.model))
     with progress_of(args) as progress:
         if args.method == "ml":
             return _run_ml(args, flight, model, document, source_entry(args.flight), progress)
@@ -76,6 +78,18 @@ def run(args) -> int:
             + (f"runner-up {s.runner_up} by {100 * s.margin:.1f} %" if s.runner_up else "no runner-up")))
         progress.draw_figures(run_)
     return _write_html(run_)
+
+
+def _existing_model(path):
+    """``--model``'s path, refused when no file is there with the way on: the README's ``heli identify`` before
+    ``heli diagnose --model model/model.json`` may have refused the flight, and writing one with ``heli identify``
+    would send the user back to that refusal; without ``--model`` the diagnosis fits the paper's model itself."""
+    from model_store.errors import ModelFileError
+
+    if not Path(path).exists():
+        raise ModelFileError(f"model file {str(path)!r} does not exist: write one with 'heli identify', or leave "
+                             "out --model and heli diagnose fits the paper's decoupled model to the flight itself")
+    return path
 
 
 def _write_html(run_) -> int:

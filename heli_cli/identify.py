@@ -162,8 +162,20 @@ def _identify_or_explain(args, flights, kwargs: dict, progress, identify):
         else:
             # no command advised: none is known to change the outcome (another input source of the same log
             # ended in the same refusal on the ArduCopter fixture)
-            advice = f"Searching the alignment (--delay auto) does not mend it: {finding.describe()}."
+            advice = (f"Searching the alignment (--delay auto) does not mend it: {finding.describe()}."
+                      + _weak_axes_advice(finding))
         raise SimulationDivergedError(f"{e} {advice}") from None
+
+
+def _weak_axes_advice(finding) -> str:
+    """What to try when the alignment does not mend a diverging fit: the axes the sticks barely move are the
+    ones the data cannot place (the ArduCopter fixture: 8 % and 0 % of roll's and pitch's rate from the sticks),
+    and only a flight that moves them can (no command: none known changes the outcome on this flight)."""
+    weak = [a for a in finding.explained if a not in finding.excited]
+    if not weak:
+        return ""
+    return (f" What to try: identify from a flight whose sticks move the aircraft on {', '.join(weak)} (stick doublets "
+            "or frequency sweeps of a few seconds on each)")
 
 
 def next_command(argv, option: str, value: str) -> str:

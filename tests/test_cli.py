@@ -194,6 +194,33 @@ def test_identify_missing_file_exits_2(tmp_path, capsys):
     assert "nowhere.csv' does not exist" in err
 
 
+def test_diagnose_of_a_missing_model_says_it_can_fit_its_own(flight_csv, tmp_path, capsys):
+    """The README's 'heli diagnose flight.csv --model model/model.json' after identify refused the flight: one
+    line that names the way on without identify (leave out --model), not only the refusal it came from."""
+    assert main(["diagnose", str(flight_csv), "--model", str(tmp_path / "model" / "model.json"), "--out",
+                 str(tmp_path / "diag")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "ModelFileError" in err
+    assert "model.json' does not exist" in err and "leave out --model" in err
+    assert not (tmp_path / "diag").exists()
+
+
+def test_identify_refusal_that_alignment_cannot_mend_says_what_to_try():
+    """A diverging fit the alignment does not mend (the ArduCopter fixture) advises a flight that moves the axes
+    the sticks barely move: no command, as none is known to change the outcome on the same flight."""
+    from identification.alignment_check import AlignmentFinding
+    from heli_cli.identify import _weak_axes_advice
+
+    finding = AlignmentFinding(shifts={}, delays={"roll": 0.0, "pitch": 0.51, "yaw": 0.02},
+                               dampings={"roll": 198.0, "pitch": 200.0, "yaw": 2.5},
+                               explained={"roll": 0.08, "pitch": 0.0, "yaw": 0.6}, physical=True, stable=False,
+                               seconds=15.0)
+    advice = _weak_axes_advice(finding)
+    assert advice.startswith(" What to try: identify from a flight whose sticks move the aircraft on roll, pitch")
+    assert "heli " not in advice
+    assert _weak_axes_advice(AlignmentFinding({}, {}, {"roll": 1.0}, {"roll": 0.5}, True, False, 1.0)) == ""
+
+
 @pytest.mark.parametrize(
     "option, value", [("--delay", "bogus"), ("--delay", "nan"), ("--delay", "-0.1"), ("--delay", "5"),
                       ("--interval", "nan"), ("--interval", "-1")],
