@@ -186,6 +186,11 @@ class EvaluationConfig:
         Default ``split_traces(n_traces)`` (fraction 0.25, seed 0).
     init_angle_deg, init_rate_deg : float
         Initial roll/pitch and rate ranges [deg], [deg/s], >= 0 (default 0: start at rest).
+    dt : float, optional
+        Control period the environment runs at [s], > 0 and a whole number of the gust traces' sample periods;
+        None (default): a PD controller's own ``dt`` (the period it was designed for), for any other agent the
+        environment's 0.01 s. A PD is flown at the period it was designed for, its D filter's pole with it; a
+        model identified from a 50 Hz log can only be flown at 0.02 s or a multiple.
 
     Raises
     ------
@@ -203,6 +208,7 @@ class EvaluationConfig:
     split: TraceSplit | None = None
     init_angle_deg: float = 0.0
     init_rate_deg: float = 0.0
+    dt: float | None = None
 
     def __post_init__(self):
         for name, minimum in (("episodes_per_trace", 1), ("seed", 0)):
@@ -214,6 +220,8 @@ class EvaluationConfig:
             check(is_real(value) and value >= 0, name, "a number >= 0", value, AgentError)
         check(self.split is None or isinstance(self.split, TraceSplit), "split", "a TraceSplit or None", self.split,
               AgentError)
+        check(self.dt is None or (is_real(self.dt) and self.dt > 0), "dt", "None or a positive control period in s",
+              self.dt, AgentError)
 
 
 def evaluate_agent(agent, model=None, config: EvaluationConfig | None = None, *, name: str | None = None,
@@ -260,8 +268,10 @@ def evaluate_agent(agent, model=None, config: EvaluationConfig | None = None, *,
         split = split_traces(env_model.n_traces) if cfg.split is None else cfg.split
         segments = as_segments(traces, split, "held-out")
         E = len(segments) * cfg.episodes_per_trace  # draw_windows(per_segment=) gives that many, in order
+        dt = cfg.dt if cfg.dt is not None else (agent.dt if kind == "pd" else None)
         env = HeliAttitudeVectorEnv(E, model=env_model, task=cfg.task, episode_seconds=cfg.episode_seconds,
-                                    init_angle_deg=cfg.init_angle_deg, init_rate_deg=cfg.init_rate_deg)
+                                    init_angle_deg=cfg.init_angle_deg, init_rate_deg=cfg.init_rate_deg,
+                                    **({"dt": float(dt)} if is_real(dt) else {}))
         windows = draw_windows(env_model, segments, env.spec_.needed, np.random.default_rng(cfg.seed),
                                per_segment=cfg.episodes_per_trace)
     except ValueError as e:  # bad traces, task or episode length; episodes longer than the segments

@@ -17,6 +17,8 @@ from .argtypes import number, output_path
 from .model_gate import add_accept_option, check_model
 
 DEFAULT_OUT = "pd"
+DEFAULT_DT = 0.01
+"""Control period designed for unless told [s]: the environment's."""
 AXES = ("roll", "pitch", "yaw")
 
 
@@ -74,7 +76,8 @@ def register(sub):
                    "crossover (controllers.pd.D_FILTER_RATIO), 'off' none, or a cutoff in Hz for every axis or "
                    "roll,pitch,yaw; the design keeps the phase margin with the filter in the loop")
     p.add_argument("--dt", type=number("a control period in s, 0 < dt < 1", 0.0, 1.0),
-                   default=0.01, help="control period in s (default 0.01, the env's)")
+                   default=None, help=f"control period in s (default {DEFAULT_DT:g}, the env's, or the shortest "
+                   "whole number of the model's gust sample periods above it: 0.02 for a model of a 50 Hz log)")
     p.add_argument("--out", default=DEFAULT_OUT, type=output_path, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
     p.add_argument("--no-plots", action="store_true",
                    help="do not draw step.png, the Bode figures and servo.png (nor fly the design for the last)")
@@ -110,13 +113,23 @@ def design_markdown(model_path, analyses, phase_margin, bandwidth, plots: bool =
         lines += ["## Servo activity", "", activity, ""]
     if plots:
         lines += ["![step responses](step.png)", ""] + [f"![Bode {an.axis}](bode_{an.axis}.png)" for an in analyses]
-        if activity:
+        if activity and not activity.startswith("Not flown"):
             lines += ["", "![servo activity](servo.png)"]
     return "\n".join(lines) + "\n"
 
 
 ACTIVITY_EPISODES = {"traces": "held-out", "episodes_per_trace": 2, "episode_seconds": 10.0}
-"""The gusts a design is flown on for its servo activity (a few seconds of work)."""
+"""The gusts a design is flown on for its servo activity (a few seconds of work); a short flight's held-out
+trace (a 27 s Betaflight log leaves 6.8 s) is flown in the longest episode that fits it instead."""
+
+
+def _activity_episodes(env_model) -> dict:
+    """:data:`ACTIVITY_EPISODES`, the episode shortened to the longest that fits every held-out trace."""
+    from controllers.trace_split import as_segments, longest_episode_s, split_traces
+
+    longest = longest_episode_s(env_model, as_segments("held-out", split_traces(env_model.n_traces)))
+    return {**ACTIVITY_EPISODES, "episode_seconds": min(ACTIVITY_EPISODES["episode_seconds"], longest)
+            if longest > 0 else ACTIVITY_EPISODES["episode_seconds"]}  # none fits: the evaluator says why
 
 
 def _servo_activity(env_model, params, gains, dt, out, design_kwargs):
@@ -130,7 +143,8 @@ def _servo_activity(env_model, params, gains, dt, out, design_kwargs):
     flown = [("this design", gains)]
     if gains.filtered:
         flown.append(("same request, no D filter", design_gains(params, **{**design_kwargs, "d_filter_hz": None})))
-    results = [evaluate_agent(PDController.from_model(params, g, dt), env_model, name=name, **ACTIVITY_EPISODES)
+    episodes = _activity_episodes(env_model)
+    results = [evaluate_agent(PDController.from_model(params, g, dt), env_model, name=name, **episodes)
                for name, g in flown]
     st = results[0].settings
     where = (f"Flown in the model's gusts ({len(results[0].episodes)} episodes of {st['episode_seconds']:g} s on "
@@ -142,8 +156,21 @@ def _servo_activity(env_model, params, gains, dt, out, design_kwargs):
     return text, results[0].plot_servo_activity(out / "servo.png", others=results[1:])
 
 
+def control_period(sample_rate: float) -> tuple[float, str | None]:
+    """The default control period [s] for a model whose gust traces are sampled at ``sample_rate`` [Hz]:
+    :data:`DEFAULT_DT`, or the shortest whole number of sample periods above it (the environment steps whole
+    samples of a trace: a PD designed for 0.01 s could not be flown on a 50 Hz log's model), and a note then."""
+    periods = max(1, math.ceil(DEFAULT_DT * sample_rate - 1e-6))
+    dt = round(periods / sample_rate, 9)  # a measured 50.000000001 Hz still designs for 0.02 s
+    if abs(dt - DEFAULT_DT) <= 1e-9:
+        return DEFAULT_DT, None
+    what = "the sample period" if periods == 1 else f"{periods} sample periods"
+    return dt, (f"note: control period {dt:.4g} s, {what} of the model's {sample_rate:g} Hz gust traces (the "
+                f"default {DEFAULT_DT:g} s is not a whole number of them); pass --dt to choose")
+
+
 def run(args) -> int:
-    from controllers.errors import DesignError
+    from controllers.errors import AgentError, DesignError
     from controllers.pd.analysis import loop_analysis
     from controllers.pd.controller import PDController
     from controllers.pd.design import design_gains
@@ -158,6 +185,11 @@ def run(args) -> int:
         progress.stage("designing the PD gains and analysing each axis' loop")
         env_model = load_env_model(args.model)
         params = env_model.params
+        if args.dt is None:
+            args.dt, note = control_period(env_model.sample_rate)
+            if note:
+                progress.done()
+                print(note)
         request = {"bandwidth": args.bandwidth, "phase_margin": args.phase_margin, "dt": args.dt,
                    "d_filter_hz": args.d_filter_hz}
         try:
@@ -167,10 +199,15 @@ def run(args) -> int:
         analyses = [loop_analysis(params, ax, gains.kp[i], gains.kd[i], args.dt, d_filter_hz=gains.d_filter_hz[i])
                     for i, ax in enumerate(AXES)]
         out = Path(args.out)
-        activity = None
+        activity = servo = None
         if not args.no_plots:
             progress.stage("flying the design in the model's gusts for its servo activity")
-            activity, servo = _servo_activity(env_model, params, gains, args.dt, out, request)
+            try:
+                activity, servo = _servo_activity(env_model, params, gains, args.dt, out, request)
+            except AgentError as e:  # a side figure: the design stands without it, and the report says why
+                activity = f"Not flown in the model's gusts: {e}."
+                progress.done()
+                print(f"note: the servo activity was not flown: {e}")
         pd = PDController.from_model(params, gains, args.dt)
         paths = [pd.save(out / "pd.json", {"model": str(env_model.path), "how": "heli design",
                                            "phase_margin_deg": args.phase_margin, "bandwidth_rad_s": args.bandwidth,
@@ -195,6 +232,6 @@ def run(args) -> int:
             figures += [plot_bode(params, an.axis, an.kp, an.kd, out / f"bode_{an.axis}.png", dt=args.dt,
                                   d_filter_hz=an.d_filter_hz) for an in analyses]
             progress.done()
-            for path in [*figures, servo]:
+            for path in [*figures, *([servo] if servo else [])]:
                 print(f"wrote {path}")
     return 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -83,3 +84,47 @@ def test_bad_arguments_exit_2_naming_what_was_expected(args, capsys):
 def test_missing_model_directory(tmp_path, capsys):
     assert main(["design", "--model", str(tmp_path / "nope"), "--out", str(tmp_path / "o")]) == 2
     assert "EnvModelError" in capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def model_50hz_40s(tmp_path_factory):
+    """A model identified (integral method) from a 40 s flight logged at 50 Hz: gust traces at 0.02 s, the
+    held-out quarter 10 s long (one sample short of the servo activity's 10 s episode)."""
+    folder = tmp_path_factory.mktemp("model50")
+    full = folder / "f100.csv"
+    assert main(["simulate-flight", "--duration", "40", "--seed", "4", "--out", str(full), "-q"]) == 0
+    lines = full.read_text().splitlines()
+    (folder / "f50.csv").write_text("\n".join(lines[:1] + lines[1::2]) + "\n")  # every other sample: 50 Hz
+    assert main(["identify", str(folder / "f50.csv"), "--method", "integral", "--no-plots", "-q",
+                 "--out", str(folder / "model")]) == 0
+    return folder / "model"
+
+
+def test_a_50hz_models_controller_is_designed_for_and_flown_at_its_period(model_50hz_40s, tmp_path, capsys):
+    """The default control period is the gust traces' (0.02 s), said in a note; the servo activity is flown in the
+    longest episode the short held-out trace holds, and heli evaluate flies the PD at the period it was designed
+    for (a 0.01 s design could be flown on neither: 'dt=0.01 s must be a whole number of ... 0.02 s')."""
+    out = tmp_path / "pd"
+    capsys.readouterr()
+    assert main(["design", "--model", str(model_50hz_40s), "--out", str(out), "-q"]) == 0
+    printed = capsys.readouterr().out
+    assert "note: control period 0.02 s, the sample period of the model's 50 Hz gust traces" in printed
+    assert PDController.load(out / "pd.json").dt == 0.02
+    report = (out / "design.md").read_text()
+    assert re.search(r"episodes of 9\.\d+ s", report) and "![servo activity](servo.png)" in report  # not 10 s
+    assert main(["evaluate", str(out / "pd.json"), "--model", str(model_50hz_40s), "--out", str(tmp_path / "ev"),
+                 "--episodes-per-trace", "1", "--no-plots", "-q"]) == 0
+    assert json.loads((tmp_path / "ev" / "evaluation.json").read_text())["settings"]["dt"] == 0.02
+
+
+def test_servo_activity_that_cannot_be_flown_leaves_the_design_standing(model_50hz_40s, tmp_path, capsys):
+    """--dt 0.01 on a 50 Hz model: the loop is designed and written; the servo activity, which the model's
+    traces cannot fly at that period, is a note in the terminal and in design.md instead of the command's end."""
+    out = tmp_path / "pd"
+    capsys.readouterr()
+    assert main(["design", "--model", str(model_50hz_40s), "--dt", "0.01", "--out", str(out), "-q"]) == 0
+    printed = capsys.readouterr().out
+    assert "note: the servo activity was not flown: dt=0.01 s must be a whole number" in printed
+    report = (out / "design.md").read_text()
+    assert "Not flown in the model's gusts" in report and "servo.png" not in report
+    assert not (out / "servo.png").exists() and (out / "pd.json").is_file()
