@@ -83,15 +83,17 @@ def agents(env_model, split, grid: int, seed: int) -> tuple[list, dict]:
 
 
 def p90_table(results) -> str:
-    """Markdown: p90 |attitude error| per axis, and as a multiple of the best swept PD's."""
+    """Markdown: p90 |attitude error| per axis, as a multiple of the best swept PD's, and the stick's RMS and
+    RMS increment per control period (:func:`controllers.servo_activity.stick_activity`)."""
     ref = next(r for r in results if r.name == BEST)
     lines = ["| agent | roll p90 [deg] | pitch p90 [deg] | yaw p90 [deg] | ÷ best swept PD (roll / pitch / yaw) "
-             "| stick RMS (roll / pitch / yaw) |", "|---|---|---|---|---|---|"]
+             "| stick RMS (roll / pitch / yaw) | stick RMS step per period |", "|---|---|---|---|---|---|---|"]
     for r in results:
         p90 = [r.metrics[a]["att_p90_deg"] for a in AXES]
         ratio = " / ".join(f"{v / ref.metrics[a]['att_p90_deg']:.2f}" for v, a in zip(p90, AXES))
         stick = " / ".join(f"{r.metrics[a]['stick_rms']:.3f}" for a in AXES)
-        lines.append(f"| {r.name} | " + " | ".join(f"{v:.4f}" for v in p90) + f" | {ratio} | {stick} |")
+        step = " / ".join(f"{r.activity[a]['stick_step_rms']:.3f}" for a in AXES)
+        lines.append(f"| {r.name} | " + " | ".join(f"{v:.4f}" for v in p90) + f" | {ratio} | {stick} | {step} |")
     return "\n".join(lines)
 
 
