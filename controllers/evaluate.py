@@ -188,9 +188,10 @@ class EvaluationConfig:
         Initial roll/pitch and rate ranges [deg], [deg/s], >= 0 (default 0: start at rest).
     dt : float, optional
         Control period the environment runs at [s], > 0 and a whole number of the gust traces' sample periods;
-        None (default): a PD controller's own ``dt`` (the period it was designed for), for any other agent the
-        environment's 0.01 s. A PD is flown at the period it was designed for, its D filter's pole with it; a
-        model identified from a 50 Hz log can only be flown at 0.02 s or a multiple.
+        None (default): a PD or LQG controller's own ``dt`` (the period it was designed for), for any other agent
+        the environment's 0.01 s. A PD is flown at the period it was designed for, its D filter's pole with it (an
+        LQG's matrices are sampled at it); a model identified from a 50 Hz log can only be flown at 0.02 s or a
+        multiple.
 
     Raises
     ------
@@ -268,7 +269,7 @@ def evaluate_agent(agent, model=None, config: EvaluationConfig | None = None, *,
         split = split_traces(env_model.n_traces) if cfg.split is None else cfg.split
         segments = as_segments(traces, split, "held-out")
         E = len(segments) * cfg.episodes_per_trace  # draw_windows(per_segment=) gives that many, in order
-        dt = cfg.dt if cfg.dt is not None else (agent.dt if kind == "pd" else None)
+        dt = cfg.dt if cfg.dt is not None else (agent.dt if kind in ("pd", "lqg") else None)
         env = HeliAttitudeVectorEnv(E, model=env_model, task=cfg.task, episode_seconds=cfg.episode_seconds,
                                     init_angle_deg=cfg.init_angle_deg, init_rate_deg=cfg.init_rate_deg,
                                     **({"dt": float(dt)} if is_real(dt) else {}))

@@ -285,3 +285,16 @@ def test_load_agent_reads_an_lqg_file(design, tmp_path):
     path.write_text(json.dumps(doc))
     with pytest.raises(AgentError, match=r"agent.json: pitch: M must have shape \(11, 2\)"):
         load_agent(path)
+
+
+def test_evaluator_flies_an_lqg_at_its_own_period(shipped):
+    """An LQG sampled at 0.02 s is flown at 0.02 s (its matrices are a 0.02 s period's), not the env's 0.01 s."""
+    from controllers.evaluate import evaluate_agent
+
+    axes = []
+    for axis in AXES:
+        m = axis_model(shipped.params, shipped.sensors, WindModel.from_document(shipped.document, axis), axis, 0.02)
+        d = design_axis(m, LQGWeights(0.3, 1.5), recovery=0.0)
+        axes.append({"A": m.A, "B": m.B, "C": m.C, "K": d.K, "M": d.M})
+    res = evaluate_agent(LQGController(axes, dt=0.02), shipped, episodes_per_trace=1, episode_seconds=2.0)
+    assert res.settings["dt"] == 0.02 and res.n_terminated == 0
