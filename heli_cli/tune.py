@@ -45,8 +45,8 @@ def register(sub):
         "SCHED_LOOP_RATE, or Rotorflight's pid_mode 3 in angle mode at its PID rate, the physics sub-stepped to "
         "it — in the identified gusts. Sweeps the firmware's gains (ArduPilot: ATC_ANG_*_P x ATC_RAT_*_P with FF "
         "from the model; Rotorflight: P x angle_level_strength with F from the model, yaw P x I), keeps the sets "
-        "with 6 dB and 45 deg margins, flies the best few beside the current and the default gains, and writes "
-        "DIR/ardupilot.param or DIR/rotorflight.txt (the proposed gains), the current gains to revert to, "
+        "with 6 dB, 45 deg and 25 ms (delay) margins, flies the best few beside the current and the default "
+        "gains, and writes DIR/ardupilot.param or DIR/rotorflight.txt (the proposed gains), the current gains to revert to, "
         "DIR/tune.json (per axis the current, default and proposed gains with their predicted p50/p90/p99 "
         "attitude error and 90 %% intervals, margins, loop rate and command scale), DIR/tune.md and tune.html "
         "with a flight-test card.",
@@ -185,8 +185,9 @@ def _print_summary(result, scale) -> None:
 
         tail = " (defaults already near best)" if row["defaults_near_best"] else ""
         kept = " (kept: no robust set)" if row["kept_current"] else ""
+        prop = row["proposed"]
         print(f"  {axis:5s}: p90 |attitude error| current {p90(row['current'])}, default {p90(row['default'])}, "
-              f"proposed {p90(row['proposed'])} deg; proposed margins "
-              f"{row['proposed']['gain_margin_db']:.3g} dB / {row['proposed']['phase_margin_deg']:.3g} deg{kept}{tail}")
+              f"proposed {p90(prop)} deg; proposed margins {prop['gain_margin_db']:.3g} dB / "
+              f"{prop['phase_margin_deg']:.3g} deg / {prop['delay_margin_s'] * 1000:.3g} ms{kept}{tail}")
     for note in result.notes:
         print(f"note: {note}")

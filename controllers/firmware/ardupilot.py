@@ -125,29 +125,20 @@ class ArduPilotHeliParams:
 def sqrt_controller(error, p, second_ord_lim, dt):
     """AP_Math ``sqrt_controller``: a P controller with square-root branches that bound the deceleration.
 
+    Element by element over arrays (the compiled tick's own :func:`_sqrt_scalar`).
+
     Parameters
     ----------
-    error : ndarray
+    error : float or ndarray
         Error [rad].
-    p : ndarray
+    p : float or ndarray
         Gain [1/s].
-    second_ord_lim : ndarray
+    second_ord_lim : float or ndarray
         Acceleration limit [rad/s²]; <= 0 gives the linear ``error·p``.
     dt : float
         Tick [s]: the result is limited to ``|error|/dt`` (no overshoot within one tick).
     """
-    e = np.asarray(error, dtype=float)
-    lim = np.asarray(second_ord_lim, dtype=float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        linear_dist = np.where((lim > 0) & (p != 0), lim / np.where(p != 0, p * p, 1.0), np.inf)
-        root = np.sqrt(np.maximum(2.0 * lim * (np.abs(e) - 0.5 * linear_dist), 0.0))
-    rate = np.where(np.abs(e) > linear_dist, np.sign(e) * root, e * p)
-    zero_p = (p == 0) & (lim > 0)
-    if np.any(zero_p):
-        rate = np.where(zero_p, np.sign(e) * np.sqrt(2.0 * np.maximum(lim, 0.0) * np.abs(e)), rate)
-    if dt > 0:
-        rate = np.clip(rate, -np.abs(e) / dt, np.abs(e) / dt)
-    return rate
+    return np.vectorize(_sqrt_scalar, otypes=[float])(error, p, second_ord_lim, float(dt))
 
 
 def input_shaping_angle(error_angle, input_tc, accel_max, target_ang_vel, dt):

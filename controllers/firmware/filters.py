@@ -1,22 +1,20 @@
-"""The discrete filters of the two firmwares, as coefficients and one-tick updates over numpy batches.
-
-Every function takes and returns arrays of any shape (a batch of loops), so one call steps every loop of a
-sweep at once. A filter's memory is passed in and returned; nothing is kept here.
+"""The coefficients of the two firmwares' discrete filters (the compiled ticks apply them).
 
 ArduPilot (master, libraries/Filter/LowPassFilter2p.cpp ``DigitalBiquadFilter::compute_params`` and
 ``apply``; libraries/AP_Math ``calc_lowpass_alpha_dt``):
 
 * :func:`ap_alpha` — the first-order low-pass of AC_PID's target, error and derivative filters,
   ``a = dt/(dt + 1/(2π f))``, 1 (no filter) when ``f <= 0``;
-* :func:`biquad_lpf2p` / :func:`biquad_apply` — the gyro's 2-pole Butterworth low-pass
-  (``INS_GYRO_FILTER``), direct form II with delay elements ``d1, d2``; ``f <= 0`` passes through.
+* :func:`biquad_lpf2p` — the gyro's 2-pole Butterworth low-pass (``INS_GYRO_FILTER``), applied in direct
+  form II with delay elements ``d1, d2`` (``d0 = x − a1·d1 − a2·d2``, ``y = b0·d0 + b1·d1 + b2·d2``);
+  ``f <= 0`` passes through.
 
 Rotorflight (rotorflight-firmware src/main/common/filter.c, read at 0185315f/b92aac00):
 
 * :func:`rf_first_order` — ``firstOrderFilterUpdate``: bilinear first-order low-pass,
-  ``W = tan(π f/fs)``, ``a1 = (W − 1)/(W + 1)``, ``b0 = b1 = W/(W + 1)`` (the per-axis ``gyro_cutoff``
-  with ``gyro_filter_type`` LPF_1ST_ORDER, the research notes' reading of ``lowpassFilterInit``, not
-  checked line by line);
+  ``W = tan(π f/fs)``, ``a1 = (W − 1)/(W + 1)``, ``b0 = b1 = W/(W + 1)``, ``y = b0·x + b1·x₁ − a1·y₁``
+  (the per-axis ``gyro_cutoff`` with ``gyro_filter_type`` LPF_1ST_ORDER, the research notes' reading of
+  ``lowpassFilterInit``, not checked line by line);
 * :func:`rf_pt1` — ``pt1FilterGain``: ``a = f/(f + fs/2π)`` (``gyro_lpf1`` of type PT1 and the I-term
   relax filter);
 * :func:`rf_dif` — ``difFilterUpdate`` / ``difFilterApply``: the band-limited differentiator of the D and
@@ -24,14 +22,12 @@ Rotorflight (rotorflight-firmware src/main/common/filter.c, read at 0185315f/b92
   ``y = b·x − b·x₁ − a·y₁``.
 
 Cut-offs above 47.5 % of the sample rate are limited there, as Rotorflight's ``limitCutoff`` does.
-The firmware uses ``tan_approx``/``sin_approx``; here numpy's exact functions (differences below 1e-6).
+The firmware uses ``tan_approx``/``sin_approx``; here the exact functions (differences below 1e-6).
 """
 
 from __future__ import annotations
 
 import math
-
-import numpy as np
 
 
 def ap_alpha(cutoff_hz: float, dt: float) -> float:
@@ -69,19 +65,6 @@ def biquad_lpf2p(sample_hz: float, cutoff_hz: float) -> tuple | None:
     return b0, 2.0 * b0, b0, 2.0 * (ohm * ohm - 1.0) / c, (1.0 - 2.0 * math.cos(math.pi / 4.0) * ohm + ohm * ohm) / c
 
 
-def biquad_apply(coef, x, d1, d2):
-    """One tick of a direct-form-II biquad: ``(y, d1', d2')``; ``coef`` None passes ``x`` through.
-
-    ``d0 = x − a1·d1 − a2·d2``, ``y = b0·d0 + b1·d1 + b2·d2``, then ``d2 ← d1``, ``d1 ← d0`` (ArduPilot's
-    ``DigitalBiquadFilter::apply``).
-    """
-    if coef is None:
-        return x, d1, d2
-    b0, b1, b2, a1, a2 = coef
-    d0 = x - a1 * d1 - a2 * d2
-    return b0 * d0 + b1 * d1 + b2 * d2, d0, d1
-
-
 def _limit(cutoff_hz: float, sample_hz: float) -> float:
     """Rotorflight's ``limitCutoff``: at most 95 % of the Nyquist frequency."""
     return min(float(cutoff_hz), 0.475 * float(sample_hz))
@@ -96,15 +79,6 @@ def rf_first_order(cutoff_hz: float, sample_hz: float) -> tuple | None:
         return None
     w = math.tan(math.pi * _limit(cutoff_hz, sample_hz) / sample_hz)
     return w / (w + 1.0), w / (w + 1.0), (w - 1.0) / (w + 1.0)
-
-
-def first_order_apply(coef, x, x1, y1):
-    """One tick of :func:`rf_first_order`: ``(y, x1', y1')``; ``coef`` None passes ``x`` through."""
-    if coef is None:
-        return x, x, x
-    b0, b1, a1 = coef
-    y = b0 * x + b1 * x1 - a1 * y1
-    return y, x, y
 
 
 def rf_pt1(cutoff_hz: float, sample_hz: float) -> float:
@@ -126,30 +100,3 @@ def rf_dif(cutoff_hz: float, sample_hz: float) -> tuple:
     return (k - 1.0) / (k + 1.0), 2.0 * math.pi * f / (k + 1.0)
 
 
-def dif_apply(coef, x, x1, y1):
-    """One tick of :func:`rf_dif`: ``(y, x1', y1')``."""
-    a, b = coef
-    y = b * x - b * x1 - a * y1
-    return y, x, y
-
-
-def lowpass_response(kind: str, coef, w: np.ndarray, dt: float) -> np.ndarray:
-    """Frequency response of one of the filters above at ``w`` [rad/s] (for reports and tests).
-
-    ``kind`` is ``"alpha"`` (``coef`` the gain ``a``), ``"biquad"``, ``"first_order"`` or ``"dif"``.
-    """
-    z = np.exp(1j * np.asarray(w, dtype=float) * dt)
-    if kind == "alpha":
-        return coef / (1.0 - (1.0 - coef) / z)
-    if coef is None:
-        return np.ones_like(z)
-    if kind == "biquad":
-        b0, b1, b2, a1, a2 = coef
-        return (b0 + b1 / z + b2 / z**2) / (1.0 + a1 / z + a2 / z**2)
-    if kind == "first_order":
-        b0, b1, a1 = coef
-        return (b0 + b1 / z) / (1.0 + a1 / z)
-    if kind == "dif":
-        a, b = coef
-        return b * (1.0 - 1.0 / z) / (1.0 + a / z)
-    raise ValueError(f"kind must be 'alpha', 'biquad', 'first_order' or 'dif', got {kind!r}")

@@ -15,7 +15,8 @@ the command scale, and:
 3. proposes per axis (Rotorflight's roll and pitch together: they share ``angle_level_strength``) the
    candidate with the lowest time-domain p90 |attitude error|, and reports every set's p50/p90/p99 with
    their 90 % intervals (Woodruff's, over blocks of library time: :mod:`controllers.sweep_interval`), its
-   margins and its frequency-domain p90.
+   margins, its frequency-domain p90 and, for the current and proposed sets, the response to a 10° step
+   of the attitude reference (:mod:`controllers.firmware.step_response`, the flight-test card's raps).
 
 An axis' time-domain figures of the proposed set come from the flown candidate whose gains it takes on that
 axis (the candidates differ on every axis at once); the other axes' gains of that flight matter only through
@@ -38,6 +39,7 @@ from ..sweep_inputs import prepare
 from ..sweep_interval import quantiles_at, woodruff_levels
 from .autopilot import FirmwareAutopilot, fly_firmware
 from .errors import FirmwareMappingError
+from .step_response import step_response
 from .tune_sweep import AxisSweep, evaluate_sets, joint_choices, sweep_axis
 
 _DEG = 180.0 / math.pi
@@ -223,7 +225,8 @@ def tune_gains(env_model, spec, current, scale, config: TuneConfig | None = None
         f"physics sub-stepped {m}x per {dt:g} s)")
     flown, windows = _fly_sets(env_model, spec, sets, scale.scale, signs, dt, cfg)
     proposed, chosen, notes = _choose(spec, current, sets, flown, groups)
-    say("margins and the frequency-domain prediction of the current, default and proposed sets")
+    say("margins, the frequency-domain prediction and the 10 deg step responses of the current, default and "
+        "proposed sets")
     axes = {}
     for axis in range(3):
         name = AXES[axis]
@@ -231,6 +234,8 @@ def tune_gains(env_model, spec, current, scale, config: TuneConfig | None = None
         for label, p, j in (("current", current, 0), ("default", defaults, 1), ("proposed", proposed, chosen[axis])):
             fd = _fd_row(spec, p, axis, params, scale.scale, signs, m, freq, psd, collective)
             row[label] = {"gains": spec.axis_gains(p, axis), **flown[j][name], **fd, "flown_set": labels[j]}
+            if label != "default":
+                row[label]["step"] = step_response(spec, p, params, scale.scale, signs, axis, collective=collective)
         row.update(_verdicts(row, sweeps[axis]))
         row["kept_current"] = chosen[axis] == 0
         axes[name] = row

@@ -8,7 +8,8 @@ Files in the output folder:
 * ``ardupilot.current.param`` or ``rotorflight.current.txt`` — the gains the log flew, to revert to;
 * ``tune.json`` — :meth:`~controllers.firmware.tune.TuneResult.to_dict`, with the files' names, the clamps,
   and what the log flew;
-* ``tune.md`` and its figures ``tune_p90.png``, ``tune_sweep.png`` (``heli tune`` adds ``tune.html``).
+* ``tune.md`` and its figures ``tune_p90.png``, ``tune_sweep.png``, ``tune_steps.png`` (``heli tune`` adds
+  ``tune.html``).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from pathlib import Path
 
 from heli_core.files import jsonable, write_text
 
-from .tune_report import plot_comparison, plot_sweeps, to_markdown
+from .tune_report import plot_comparison, plot_steps, plot_sweeps, to_markdown
 
 
 def file_names(spec) -> dict:
@@ -51,7 +52,8 @@ def write_outputs(result, out, flown=None, context=(), plots: bool = True, comma
                                    [f"{spec.name} gains the log flew (read by heli tune), to revert to"])}
     figures = []
     if plots:
-        figures = [plot_comparison(result, out / "tune_p90.png"), plot_sweeps(result, out / "tune_sweep.png")]
+        figures = [plot_comparison(result, out / "tune_p90.png"), plot_sweeps(result, out / "tune_sweep.png"),
+                   plot_steps(result, out / "tune_steps.png")]
         paths["figures"] = figures
     doc = result.to_dict()
     doc["files"] = {k: str(Path(v).name) for k, v in paths.items() if k in ("proposed", "current")}

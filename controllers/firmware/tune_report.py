@@ -115,6 +115,14 @@ def flight_card(result, files: dict) -> list:
                  f"{files['proposed']} (it ends with `save`)")
     revert = (f"load `{files['current']}` the same way" if fw == "ardupilot"
               else f"paste `{files['current']}` in the CLI the same way")
+    raps = []
+    for axis in AXES:
+        cur, prop = (result.axes[axis][k].get("step") for k in ("current", "proposed"))
+        if prop and not prop.get("diverged") and prop.get("rise_90_s") is not None:
+            was = "" if not cur or cur.get("diverged") or cur.get("overshoot_pct") is None else \
+                f" (current gains: {cur['overshoot_pct']:.0f} %)"
+            raps.append(f"{axis} reaches 90 % of a {prop['step_deg']:g}° command in {prop['rise_90_s']:.2f} s and "
+                        f"overshoots {prop['overshoot_pct']:.0f} %{was}")
     worst = max(AXES, key=lambda a: (result.axes[a]["proposed"].get("p90_deg") or 0.0))
     pm = min((result.axes[a]["proposed"].get("phase_margin_deg") or math.inf) for a in AXES)
     lines = ["## Flight-test card", "",
@@ -129,7 +137,8 @@ def flight_card(result, files: dict) -> list:
              f"{pm:.0f}° of phase margin in the model; a real rotor with more lag than identified has less) — land "
              "and revert at once. In gusts like the log's the attitude should stay within the proposed p90 "
              f"(the largest: {worst}, {result.axes[worst]['proposed'].get('p90_deg', float('nan')):.2g} deg) nine "
-             "tenths of the time. Raps should stop without overshooting more than a few degrees.", "",
+             "tenths of the time. In the model " + ("; ".join(raps) if raps else "no step response was computed")
+             + ": a rap that overshoots clearly more, or rings, says the aircraft has more lag than the model.", "",
              f"**Revert**: {revert}; nothing else was changed.", ""]
     return lines
 
@@ -226,4 +235,26 @@ def plot_sweeps(result, path):
                         markersize=10 if label == "proposed" else 7, label=label)
         ax.set_title(f"{AXES[i]} (inside white: 6 dB, 45°, 25 ms)")
         ax.legend(loc="lower left", fontsize=7)
+    return save_figure(fig, path)
+
+
+def plot_steps(result, path):
+    """The 10° step responses of the current and proposed sets per axis (the flight-test card's raps)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from heli_core.files import save_figure
+
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.4))
+    for ax, axis in zip(axes, AXES):
+        for label, style in (("current", "--"), ("proposed", "-")):
+            st = result.axes[axis][label].get("step")
+            if st and not st.get("diverged"):
+                ax.plot(st["time_s"], st["angle_deg"], style, label=label)
+        ax.set_title(axis)
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("attitude [deg]")
+        ax.legend(fontsize=7)
     return save_figure(fig, path)
