@@ -4,7 +4,8 @@ Writes the controller that ``heli evaluate`` flies (``pd.json``), a Markdown tab
 the loop properties of each axis (``design.md``), the closed-loop step responses
 (``step.png``), one Bode figure per axis (``bode_<axis>.png``) and the servo activity of
 the design flown in the model's gusts beside the same design without its derivative
-filter (``servo.png``).
+filter (``servo.png``). With ``--lqg`` it designs the LQG of :mod:`controllers.lqg` instead
+(:mod:`heli_cli.design_lqg`: ``lqg.json`` and ``lqg.md``).
 """
 
 from __future__ import annotations
@@ -81,6 +82,10 @@ def register(sub):
     p.add_argument("--out", default=DEFAULT_OUT, type=output_path, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
     p.add_argument("--no-plots", action="store_true",
                    help="do not draw step.png, the Bode figures and servo.png (nor fly the design for the last)")
+    p.add_argument("--lqg", action="store_true",
+                   help="design the LQG instead (controllers.lqg: a Kalman filter on the identified wind model and "
+                   "sensors, an LQR, >= 6 dB and --phase-margin at the plant input); writes DIR/lqg.json, which "
+                   "heli evaluate flies, and lqg.md")
     p.set_defaults(func=run, out_kind="dir")
 
 
@@ -181,6 +186,10 @@ def run(args) -> int:
     from .progress import progress_of
 
     check_model(args, "design a controller on it")  # an unusable model is refused before any work
+    if args.lqg:
+        from .design_lqg import run_lqg
+
+        return run_lqg(args)
     with progress_of(args) as progress:
         progress.stage("designing the PD gains and analysing each axis' loop")
         env_model = load_env_model(args.model)

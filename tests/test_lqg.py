@@ -298,3 +298,26 @@ def test_evaluator_flies_an_lqg_at_its_own_period(shipped):
         axes.append({"A": m.A, "B": m.B, "C": m.C, "K": d.K, "M": d.M})
     res = evaluate_agent(LQGController(axes, dt=0.02), shipped, episodes_per_trace=1, episode_seconds=2.0)
     assert res.settings["dt"] == 0.02 and res.n_terminated == 0
+
+
+@pytest.mark.slow
+def test_heli_design_lqg_writes_an_agent_heli_evaluate_flies(tmp_path):
+    """``heli design --lqg`` writes lqg.json (load_agent reads it back as the LQG) and lqg.md (5-12 s: the
+    whole design)."""
+    from controllers.rl.agent_file import load_agent
+    from heli_cli.main import main
+
+    assert main(["design", "--lqg", "--out", str(tmp_path)]) == 0
+    assert isinstance(load_agent(tmp_path / "lqg.json"), LQGController)
+    text = (tmp_path / "lqg.md").read_text()
+    assert "Bryson's weights" in text and "| roll | 11 |" in text
+
+
+def test_heli_design_lqg_refuses_a_pd_option_and_a_model_without_wind(tmp_path, ideal_model_dir, capsys):
+    from heli_cli.main import main
+
+    assert main(["design", "--lqg", "--bandwidth", "5", "--out", str(tmp_path)]) == 2
+    assert "--bandwidth sets a PD's bandwidth" in capsys.readouterr().err
+    assert main(["design", "--lqg", "--model", str(ideal_model_dir), "--out", str(tmp_path)]) == 2
+    assert "ideal_model: model.json fit_statistics.axes.roll.wind is missing" in capsys.readouterr().err
+    assert not (tmp_path / "lqg.json").exists()

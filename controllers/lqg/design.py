@@ -366,8 +366,8 @@ def design_lqg(model=None, dt: float = 0.01, weights: LQGWeights | None = None, 
     lines : bool
         Model the gyros' vibration lines as estimator states (default True).
     wind : None, WindModel, or dict of axis to WindModel or None
-        None: each axis' identified wind model (``model.json``); a WindModel for every axis; per axis in a dict,
-        where None leaves that axis' gust states out.
+        None: each axis' identified wind model (``model.json``); a WindModel for every axis; per axis in a dict
+        (an axis left out keeps its identified one), where None leaves that axis' gust states out.
     collective : float, optional
         Collective of the hover point (default: the library's mean, as the sweep's plant).
 
@@ -389,16 +389,22 @@ def design_lqg(model=None, dt: float = 0.01, weights: LQGWeights | None = None, 
     col = float(np.mean(env_model.collective)) if collective is None else collective
     if not (is_real(col) and -1.0 <= col <= 1.0):
         raise DesignError(f"collective must be a stick value in [-1, 1], got {collective!r}")
+    def identified(axis):
+        try:
+            return WindModel.from_document(env_model.document, axis)
+        except DesignError as e:
+            raise DesignError(f"{env_model.path}: {e}") from e
+
     winds, sources = {}, {}
     for axis in AXES:
         if wind is None:
-            winds[axis], sources[axis] = WindModel.from_document(env_model.document, axis), "model.json"
+            winds[axis], sources[axis] = identified(axis), "model.json"
         elif isinstance(wind, WindModel):
             winds[axis], sources[axis] = wind, "given"
         elif isinstance(wind, dict) and set(wind) <= set(AXES):
             w = wind.get(axis, "identified")
             if w == "identified":
-                winds[axis], sources[axis] = WindModel.from_document(env_model.document, axis), "model.json"
+                winds[axis], sources[axis] = identified(axis), "model.json"
             elif w is None or isinstance(w, WindModel):
                 winds[axis], sources[axis] = w, "none" if w is None else "given"
             else:
