@@ -26,8 +26,9 @@ class AgentError(HeliError, ValueError):
 
 
 class DesignError(HeliError, ValueError):
-    """A PD design cannot meet the request (bandwidth beyond what the phase margin allows); the message
-    says what is achievable."""
+    """A PD or LQG design cannot meet the request (bandwidth beyond what the phase margin allows, margins no
+    recovery weight keeps, a model without the identified wind model, bad weights); the message says what is
+    achievable or what is missing."""
 
 
 class TrainingInterrupted(KeyboardInterrupt):

@@ -158,8 +158,8 @@ class LQGController:
             "law": "per axis: y = -(obs[i], obs[6+i]); x_f = x_p + M (y - C x_p); u = clip(-K x_f, -1, 1); "
                    "x_p <- A x_f + B u; x_p = 0 at an episode's start",
             "units": {"dt": "s", "y": "rad, rad/s", "u": "stick"},
-            "axes": [{"axis": name, "states": list(a["states"]), **{k: a[k].tolist() for k in ("A", "B", "C", "K", "M")}}
-                     for name, a in zip(AXES, self.axes)],
+            "axes": [{"axis": name, "states": list(a["states"]),
+                      **{k: a[k].tolist() for k in ("A", "B", "C", "K", "M")}} for name, a in zip(AXES, self.axes)],
             "metadata": dict(metadata or {})})
 
     @classmethod
