@@ -129,6 +129,7 @@ def run(args) -> int:
                 progress=progress.bars and len(flights) > 1, draw_figures=False, stage=progress.stage,
                 wait=not args.no_wait, validate_flights=others,
                 validate_names=[Path(p).name for p in args.validate],
+                validate_paths=[str(Path(p).resolve()) for p in args.validate],
             ))
         finally:
             if backend is not None:

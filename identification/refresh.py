@@ -37,7 +37,10 @@ directory written by ``heli identify``:
    is kept under ``history/``, and so are the replaced ``report.md``, figures and
    previous refresh files), which identifies each *new* flight's wind with the
    refreshed model (eqs. 41-47) and appends the traces to the library as one new
-   version (earlier versions untouched).
+   version (earlier versions untouched). The flights the model was validated on
+   (``heli identify --validate``) validate the refreshed model again where their
+   files are found; a lost one's scores are carried over, marked with the model
+   they were computed on (:mod:`identification.refresh_validation`).
 6. **Provenance.** ``model.json`` gets a ``"refresh"`` entry (previous model's
    SHA-256 and history file, its sources, the new sources, the fit decision, the
    flags and the written model's bootstrap standard errors, which the next refresh
@@ -546,6 +549,9 @@ class _Refresh:
         }
         fit_paths = [str(p) for p in self.new_paths] + (
             [f["path"] for f in result.previous_flights["found"]] if pooled else [])
+        checked = self.validation(list(digests) + ([f["sha256"] for f in result.previous_flights["found"]]
+                                                   if pooled else []), fit_flights[0].sample_rate)
+        result.notes += checked.notes
         run = identify_and_report(
             fit_flights, tx.root, coupled=self.structure == "coupled",
             sources=new_sources + (self.old_sources if pooled else []), identifier_kwargs=self.kw,
@@ -553,6 +559,8 @@ class _Refresh:
             wind_flights=range(len(flights)), model_extra={"refresh": record}, backend=s.backend,
             method=self.estimator, transaction=tx, draw_figures=False,
             stage=None if s.stage is None else (lambda text: s.stage(f"refreshed model: {text}")),
+            validate_flights=checked.flights, validate_names=checked.names, validate_paths=checked.paths,
+            carried_validation=checked.carried,
         )
         result.run, result.library_version = run, run.library_version
         doc_out = self.document(result, record, flights, new_ident, kept)
@@ -561,6 +569,16 @@ class _Refresh:
                                                 json.dumps(jsonable(doc_out), indent=2, allow_nan=False) + "\n")
         paths["refresh_md"] = tx.write_report("refresh.md", refresh_markdown(result, doc_out))
         result.paths = paths
+
+    def validation(self, fitted_sha256, sample_rate: float):
+        """The earlier model's ``--validate`` flights for the refreshed one (fitted on ``fitted_sha256``):
+        validated again where found, else carried over marked
+        (:func:`identification.refresh_validation.kept_validation`)."""
+        from .refresh_validation import kept_validation
+
+        search = [self.tx.root, *dict.fromkeys(Path(p).resolve().parent for p in self.new_paths), Path.cwd()]
+        return kept_validation(self.doc, self.tx.base.model_sha256, search, self.settings.previous_flights or (),
+                               fitted_sha256, sample_rate)
 
     def document(self, result: RefreshResult, record: dict, flights, new_ident, kept) -> dict:
         """``refresh.json``: the drift table with what it compared, the decision and the library's new version."""

@@ -213,6 +213,12 @@ class IdentifyOptions:
         :mod:`identification.validation_flights`); checked before anything is fitted or written.
     validate_names : sequence of str, optional
         Their names in the report (default each flight's ``source``).
+    validate_paths : sequence of str, optional
+        Their files' paths, recorded in ``model.json`` so that ``heli refresh`` validates on them again.
+    carried_validation : sequence of FlightValidation
+        Results on flights that could not be validated on again, carried over from an earlier model with their
+        ``computed_on`` (``heli refresh``, :mod:`identification.refresh_validation`): shown after the new ones,
+        marked.
     """
 
     coupled: bool = False
@@ -232,6 +238,8 @@ class IdentifyOptions:
     wait: bool = True
     validate_flights: Sequence = ()
     validate_names: Sequence | None = None
+    validate_paths: Sequence | None = None
+    carried_validation: Sequence = ()
 
     def say(self, text: str) -> None:
         """Tell :attr:`stage` that a step starts (nothing without one)."""
@@ -319,8 +327,8 @@ def _comparisons(ident, chosen: str, opts: IdentifyOptions) -> tuple:
     if opts.validate_flights:
         n = len(opts.validate_flights)
         opts.say(f"simulating the model on {n} flight{'s' if n != 1 else ''} not used for the fit")
-        checks = validate_on_flights(ident, opts.validate_flights, chosen, opts.validate_names)
-    return frequency, checks
+        checks = validate_on_flights(ident, opts.validate_flights, chosen, opts.validate_names, opts.validate_paths)
+    return frequency, checks + list(opts.carried_validation)
 
 
 def _validate(flight: Flight, identifiers: dict, chosen: str):

@@ -66,6 +66,13 @@ class FlightValidation:
     diverged : str or None
         Why the simulation diverged (the message of
         :class:`~identification.errors.SimulationDivergedError`), else None.
+    path : str or None
+        Where the flight file was read (absolute), so that ``heli refresh`` can validate the refreshed model on
+        it again; None when not read from a file, or for an entry written before paths were recorded.
+    computed_on : dict or None
+        None for a result of the model it is stored with; for one carried over from an earlier model (``heli
+        refresh`` found the flight file no more), ``{"model_sha256", "reason"}``: which model's numbers they are
+        and why they were not computed again.
     """
 
     name: str
@@ -78,6 +85,8 @@ class FlightValidation:
     cost: dict | None
     validation: ValidationResult | None
     diverged: str | None = None
+    path: str | None = None
+    computed_on: dict | None = None
 
     @property
     def axes(self) -> list[str]:
@@ -88,7 +97,22 @@ class FlightValidation:
         """Plain JSON-ready values (non-finite numbers become None; the histories are left out)."""
         return jsonable({"file": self.name, "sha256": self.sha256, "duration_s": self.duration_s,
                          "model": self.model, "fit_pct": self.fit_pct, "r2": self.r2, "ahead_r2": self.ahead_r2,
-                         "frequency_response_cost": self.cost, "diverged": self.diverged})
+                         "frequency_response_cost": self.cost, "diverged": self.diverged,
+                         **({"path": self.path} if self.path else {}),
+                         **({"computed_on": self.computed_on} if self.computed_on else {})})
+
+    @classmethod
+    def from_dict(cls, entry: dict, computed_on: dict | None = None) -> "FlightValidation":
+        """The result as :meth:`to_dict` stored it (None back to NaN; no simulation, so no figure), with
+        ``computed_on`` when it is carried over from another model (an entry's own ``computed_on`` wins: it
+        says where the numbers were first computed)."""
+        def numbers(values):
+            return None if values is None else {a: math.nan if v is None else float(v) for a, v in values.items()}
+
+        return cls(str(entry.get("file")), entry.get("sha256"), float(entry.get("duration_s") or math.nan),
+                   str(entry.get("model")), numbers(entry.get("fit_pct")) or {}, numbers(entry.get("r2")) or {},
+                   numbers(entry.get("ahead_r2")), numbers(entry.get("frequency_response_cost")), None,
+                   entry.get("diverged"), entry.get("path"), entry.get("computed_on") or computed_on)
 
 
 def check_validation_flights(flights, others, names=None) -> None:
@@ -148,7 +172,8 @@ def as_fitted(identifier, flight: Flight) -> Flight:
     return flight
 
 
-def validate_on_flight(identifier, flight: Flight, label: str, name: str | None = None) -> FlightValidation:
+def validate_on_flight(identifier, flight: Flight, label: str, name: str | None = None,
+                       path: str | None = None) -> FlightValidation:
     """Simulate ``identifier``'s model on ``flight`` (one it was not fitted on) and score it per axis.
 
     Parameters
@@ -161,6 +186,8 @@ def validate_on_flight(identifier, flight: Flight, label: str, name: str | None 
         The model's label (``"decoupled"``, ``"coupled"``).
     name : str, optional
         The flight's name in reports (default its metadata's ``source``).
+    path : str, optional
+        The flight file's path, recorded for ``heli refresh`` (:attr:`FlightValidation.path`).
 
     Returns
     -------
@@ -180,10 +207,10 @@ def validate_on_flight(identifier, flight: Flight, label: str, name: str | None 
         result = validate_models(prepared, {label: identifier.params_})
     except SimulationDivergedError as e:
         nan = {a: math.nan for a in axes}
-        return FlightValidation(name, sha, flight.duration, label, nan, dict(nan), ahead, cost, None, str(e))
+        return FlightValidation(name, sha, flight.duration, label, nan, dict(nan), ahead, cost, None, str(e), path)
     stats = rate_fit_stats(result.measured_rates, result.simulated[label])
     return FlightValidation(name, sha, flight.duration, label, {a: stats[a]["fit_pct"] for a in axes},
-                            {a: stats[a]["r2"] for a in axes}, ahead, cost, result)
+                            {a: stats[a]["r2"] for a in axes}, ahead, cost, result, path=path)
 
 
 def _frequency_cost(params, flight: Flight, axes) -> dict | None:
@@ -198,7 +225,8 @@ def _frequency_cost(params, flight: Flight, axes) -> dict | None:
     return {a: r.cost for a, r in result.axes.items()}
 
 
-def validate_on_flights(identifier, flights, label: str, names=None) -> list[FlightValidation]:
-    """:func:`validate_on_flight` on each of ``flights`` (named by ``names``), in order."""
+def validate_on_flights(identifier, flights, label: str, names=None, paths=None) -> list[FlightValidation]:
+    """:func:`validate_on_flight` on each of ``flights`` (named by ``names``, read from ``paths``), in order."""
     names = list(names) if names is not None else [None] * len(flights)
-    return [validate_on_flight(identifier, f, label, n) for f, n in zip(flights, names)]
+    paths = list(paths) if paths is not None else [None] * len(flights)
+    return [validate_on_flight(identifier, f, label, n, p) for f, n, p in zip(flights, names, paths)]

@@ -78,14 +78,19 @@ def flight_validation_markdown(checks, figures: bool = True) -> list[str]:
 
     rows, notes = [], []
     for c in checks:
+        name = f"{c.name} †" if c.computed_on else c.name
         for axis in c.axes:
             ahead = "—" if c.ahead_r2 is None else format_r2(c.ahead_r2.get(axis))
             fit = "diverged" if c.diverged else f"{c.fit_pct[axis]:.1f}"
             cost = c.cost.get(axis) if c.cost else None
-            rows.append([c.name, axis, fit, "diverged" if c.diverged else format_r2(c.r2[axis]), ahead,
+            rows.append([name, axis, fit, "diverged" if c.diverged else format_r2(c.r2[axis]), ahead,
                          "—" if cost is None or not np.isfinite(cost) else f"{cost:.1f}"])
         if c.diverged:
-            notes.append(f"- {c.name}: {c.diverged}")
+            notes.append(f"- {name}: {c.diverged}")
+        if c.computed_on:  # carried over by heli refresh: another model's numbers, said so
+            sha = str(c.computed_on.get("model_sha256") or "")
+            notes.append(f"- {name}: computed on an earlier model (model.json SHA-256 `{sha[:12]}…`), not on this "
+                         f"one: {c.computed_on.get('reason', 'not computed again')}")
     first = checks[0]
     lines = [
         f"The {first.model} model simulated from each flight's sticks alone, from its measured first state and "
