@@ -8,6 +8,11 @@ margin >= 45 deg) and to the best swept PD of any margin, and the two targets:
 * **beats the robust PD**: p90 below the robust PD's on every axis (target: 3 of 3 seeds);
 * **near the best PD**: within 10 % of the best swept PD on at least two axes.
 
+Beside the two ratios stands the agent's p90 over the **LQG baseline**'s (``÷ LQG``, where the run flew it:
+``train_compare.py`` does, :mod:`controllers.lqg`, docs/controllers.md "An LQG baseline"): the controller a
+control engineer would try first, designed on the identified model and its wind model with 6 dB and 45° of
+margin. An RL agent at or below 1 there has reached it; "—" for a run that did not fly it.
+
 A run folder that also holds the robustness checks of its agent and of its best swept PD
 (``heli evaluate RUN/ppo-residual.zip --robustness --out RUN/robust`` and ``heli evaluate
 RUN/pd_swept.json --robustness --out RUN/robust_pd_best``) gets a second table, the proposed
@@ -41,6 +46,8 @@ from pathlib import Path
 
 AXES = ("roll", "pitch", "yaw")
 ROBUST, BEST = "PD robust swept", "PD best swept"
+LQG = "LQG"
+"""The LQG baseline's row (``train_compare.py`` flies it beside the PDs): not an RL agent, a reference."""
 NEAR = 1.10
 """Within 10 % of the best swept PD."""
 
@@ -71,13 +78,14 @@ def rows(run: Path, agent: str | None) -> list[dict]:
         raise ValueError(f"{path}: the run has no {' and no '.join(missing)} row; expected a train_compare.py report")
     out = []
     for name, values in table.items():
-        if name.startswith("PD") or (agent and name != agent):
+        if name.startswith("PD") or name == LQG or (agent and name != agent):
             continue
         robust = [v / r for v, r in zip(values, table[ROBUST])]
         best = [v / b for v, b in zip(values, table[BEST])]
+        lqg = [v / q for v, q in zip(values, table[LQG])] if LQG in table else None
         training = report.get("training", {}).get(name.lower(), {})
         out.append({"run": run.name, "held_out": held_out(report), "agent": name, "p90": values,
-                    "vs_robust": robust, "vs_best": best,
+                    "vs_robust": robust, "vs_best": best, "vs_lqg": lqg,
                     "beats_robust": all(r < 1.0 for r in robust), "near_best": near(best),
                     "timesteps": training.get("timesteps"), "seconds": training.get("seconds")})
     return out
@@ -222,12 +230,15 @@ def main(argv=None) -> int:
     print(f"Command: python scripts/rl_targets.py {' '.join(str(r) for r in args.runs)}"
           + (f" --agent {args.agent}" if args.agent else "") + (f" --refly {args.refly}" if args.refly else "")
           + (f" --model {args.model}" if args.model else "") + "\n")
-    print("| run | agent | steps | p90 roll / pitch / yaw [°] | ÷ robust PD | ÷ best PD | beats robust | near best |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| run | agent | steps | p90 roll / pitch / yaw [°] | ÷ robust PD | ÷ best PD | ÷ LQG | beats robust "
+          "| near best |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for r in table:
         steps = f"{r['timesteps'] / 1e6:.1f} M" if r["timesteps"] else "—"
+        lqg = "—" if r["vs_lqg"] is None else _fmt(r["vs_lqg"], 2)
         print(f"| {r['run']} | {r['agent']} | {steps} | {_fmt(r['p90'])} | {_fmt(r['vs_robust'], 2)} "
-              f"| {_fmt(r['vs_best'], 2)} | {'yes' if r['beats_robust'] else 'no'} | {'yes' if r['near_best'] else 'no'} |")
+              f"| {_fmt(r['vs_best'], 2)} | {lqg} | {'yes' if r['beats_robust'] else 'no'} "
+              f"| {'yes' if r['near_best'] else 'no'} |")
     n = len(table)
     beats = sum(r["beats_robust"] for r in table)
     close = sum(r["near_best"] for r in table)

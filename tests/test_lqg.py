@@ -319,3 +319,31 @@ def test_heli_design_lqg_refuses_a_pd_option_and_a_model_without_wind(tmp_path, 
     assert main(["design", "--lqg", "--model", str(ideal_model_dir), "--out", str(tmp_path)]) == 2
     assert "ideal_model: model.json fit_statistics.axes.roll.wind is missing" in capsys.readouterr().err
     assert not (tmp_path / "lqg.json").exists()
+
+
+def test_rl_targets_puts_the_lqg_beside_the_best_pd(tmp_path, capsys):
+    """scripts/rl_targets.py: a run that flew the LQG (train_compare.py does) gets each RL agent's p90 over the
+    LQG's in the targets table; the LQG is a reference, not a row of its own; a run without it shows '—'."""
+    import importlib.util
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location("rl_targets", Path(__file__).parents[1] / "scripts" / "rl_targets.py")
+    targets = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(targets)
+
+    def run(folder, p90):
+        results = [{"summary": {"name": name, "axes": {a: {"att_p90_deg": v} for a, v in zip(AXES, values)}}}
+                   for name, values in p90.items()]
+        folder.mkdir()
+        (folder / "comparison.json").write_text(json.dumps({"results": results, "training": {}}))
+        return folder
+
+    pds = {"PD robust swept": (0.20, 0.10, 0.30), "PD best swept": (0.10, 0.09, 0.12)}
+    with_lqg = run(tmp_path / "a", {**pds, "PPO-RESIDUAL": (0.10, 0.09, 0.12), "LQG": (0.08, 0.09, 0.10)})
+    without = run(tmp_path / "b", {**pds, "PPO-RESIDUAL": (0.10, 0.09, 0.12)})
+    assert targets.main([str(with_lqg), str(without)]) == 0
+    out = capsys.readouterr().out
+    assert "| ÷ best PD | ÷ LQG |" in out
+    assert "| 1.00 / 1.00 / 1.00 | 1.25 / 1.00 / 1.20 | yes | yes |" in out
+    assert "| 1.00 / 1.00 / 1.00 | — | yes | yes |" in out
+    assert "| a | LQG |" not in out
