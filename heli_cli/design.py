@@ -4,8 +4,9 @@ Writes the controller that ``heli evaluate`` flies (``pd.json``), a Markdown tab
 the loop properties of each axis (``design.md``), the closed-loop step responses
 (``step.png``), one Bode figure per axis (``bode_<axis>.png``) and the servo activity of
 the design flown in the model's gusts beside the same design without its derivative
-filter (``servo.png``). With ``--lqg`` it designs the LQG of :mod:`controllers.lqg` instead
-(:mod:`heli_cli.design_lqg`: ``lqg.json`` and ``lqg.md``).
+filter (``servo.png``); ``design.html`` is the report with its figures inside. With ``--lqg``
+it designs the LQG of :mod:`controllers.lqg` instead (:mod:`heli_cli.design_lqg`: ``lqg.json`` and
+``lqg.md``).
 """
 
 from __future__ import annotations
@@ -63,7 +64,7 @@ def register(sub):
         "half the largest the margin allows). The D term is low-passed (--d-filter-hz; default: a cutoff 20 "
         "times the loop's crossover) and the design includes the filter, so the margins hold for the filtered "
         "PD. Writes DIR/pd.json (the controller), design.md (margins, crossover, bandwidth, closed-loop poles, "
-        "servo activity), step.png, bode_<axis>.png and servo.png.",
+        "servo activity), step.png, bode_<axis>.png and servo.png, and design.html (the report, figures inside).",
     )
     p.add_argument("--model", metavar="DIR", default=None,
                    help="model directory written by 'heli identify' (default: the model shipped with heli-env)")
@@ -243,4 +244,7 @@ def run(args) -> int:
             progress.done()
             for path in [*figures, *([servo] if servo else [])]:
                 print(f"wrote {path}")
+    from .html_report import write_html_report  # after the figures: it embeds them
+
+    print(f"wrote {write_html_report(out / 'design.md')}")
     return 0

@@ -21,7 +21,8 @@ def designed(tmp_path_factory):
 
 
 def test_writes_the_controller_report_and_figures(designed):
-    for name in ("pd.json", "design.md", "step.png", "bode_roll.png", "bode_pitch.png", "bode_yaw.png", "servo.png"):
+    for name in ("pd.json", "design.md", "step.png", "bode_roll.png", "bode_pitch.png", "bode_yaw.png", "servo.png",
+                 "design.html"):
         assert (designed / name).stat().st_size > 0, name
     doc = json.loads((designed / "pd.json").read_text())
     assert [a["stable"] for a in doc["metadata"]["analysis"]] == [True, True, True]
