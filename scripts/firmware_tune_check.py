@@ -15,7 +15,12 @@ heavier one in between with 50 ms servos — each in a bench cell's weather,
    the firmware's defaults, flown by **the plain, per-tick implementation of each firmware written apart
    from the package** (``tests/firmware_plain_loop.py``) around the physics core's scalar RK4 on the
    **truth** aircraft, in **fresh gusts of the cell's own generator** (new seeds; the identification never
-   saw them) with the cell's sensors and the identified trim, ``--flights`` flights of ``--duration`` s.
+   saw them) with the cell's sensors and the identified trim, ``--flights`` flights of ``--duration`` s each
+   from rest, the length of ``heli tune``'s windows (20 s): Rotorflight's tail holds the integral of the
+   *measured* yaw rate, so its heading wanders as the integral of the gyro's noise and its error grows as
+   √t — a yaw p90 is a p90 over flights of a given length, and both sides use the same one. The same
+   file is flown on the identified model too (the truth's gusts), which separates model error from the
+   difference between the library's wind and the fresh one.
 
 Prints per aircraft, firmware and axis the predicted p90 |attitude error| of the proposed gains
 (``tune.json["axes"][axis]["proposed"]["p90_deg"]``), the flown one and their ratio (target: within
@@ -25,7 +30,7 @@ Prints per aircraft, firmware and axis the predicted p90 |attitude error| of the
 Usage::
 
     python scripts/firmware_tune_check.py [--aircraft paper-40ms agile heavy] [--firmware ardupilot rotorflight]
-                                          [--flights 2] [--duration 120] [--out DIR] [--json FILE]
+                                          [--flights 12] [--duration 20] [--out DIR] [--json FILE]
 """
 
 from __future__ import annotations
@@ -108,8 +113,13 @@ def fresh_gusts(cfg, truth, ident_params, steps: int, dt: float, seed: int):
     return torque, col, trim, gyro, attn
 
 
-def fly_plain(firmware: str, values: dict, truth, ident_params, scale, cfg, n_flights, duration, seed, rate_hz):
-    """p90 |attitude error| [deg] per axis of the plain loop flying ``values`` on the truth in fresh gusts."""
+def fly_plain(firmware: str, values: dict, truth, ident_params, scale, cfg, n_flights, duration, seed, rate_hz,
+              gust_gains=None):
+    """p90 |attitude error| [deg] per axis of the plain loop flying ``values`` on ``truth`` in fresh gusts.
+
+    ``gust_gains``: the control gains the gust's torque was drawn with (default the flown aircraft's); the
+    identified model flies the truth's gust torque ``k_truth·u_d`` when given the truth's gains, so that the
+    two differ by the model alone."""
     import firmware_plain_loop as plain
 
     dt = 0.01
@@ -118,6 +128,8 @@ def fly_plain(firmware: str, values: dict, truth, ident_params, scale, cfg, n_fl
     errors = [[], [], []]
     for f in range(n_flights):
         torque, col, trim, gyro, attn = fresh_gusts(cfg, truth, ident_params, steps, dt, seed + f)
+        if gust_gains is not None:
+            torque = torque / truth.control_gains[:, None] * np.asarray(gust_gains)[:, None]
         ctrl = plain.PlainArduPilot(values) if firmware == "ardupilot" else plain.PlainRotorflight(values, rate_hz)
         e = plain.fly(truth, ctrl, scale, signs, torque, col, trim, dt, attn, gyro)
         if len(e[0]) < steps:
@@ -163,8 +175,11 @@ def run_aircraft(name: str, firmwares, args, work: Path) -> list:
         values = plain.read_param_file(spec_file) if fw == "ardupilot" else plain.read_cli_file(spec_file)
         defaults = {} if fw == "ardupilot" else {"pid_process_denom": 8}
         rate = doc["loop_rate_hz"]
-        flown_prop = fly_plain(fw, values, truth, ident, scale, cfg, args.flights, args.duration, args.seed + 1000, rate)
-        flown_def = fly_plain(fw, defaults, truth, ident, scale, cfg, args.flights, args.duration, args.seed + 1000, rate)
+        seed = args.seed + 1000
+        flown_prop = fly_plain(fw, values, truth, ident, scale, cfg, args.flights, args.duration, seed, rate)
+        flown_def = fly_plain(fw, defaults, truth, ident, scale, cfg, args.flights, args.duration, seed, rate)
+        flown_model = fly_plain(fw, values, ident, ident, scale, cfg, args.flights, args.duration, seed, rate,
+                                gust_gains=truth.control_gains)
         for i, axis in enumerate(AXES):
             row = doc["axes"][axis]
             pred = row["proposed"].get("p90_deg")
@@ -175,6 +190,7 @@ def run_aircraft(name: str, firmwares, args, work: Path) -> list:
                          "interval": row["proposed"].get("p90_deg_interval"),
                          "predicted_default_p90": row["default"].get("p90_deg"),
                          "flown_default_p90": None if flown_def is None else flown_def[i],
+                         "flown_on_model_p90": None if flown_model is None else flown_model[i],
                          "gain_margin_db": row["proposed"]["gain_margin_db"],
                          "phase_margin_deg": row["proposed"]["phase_margin_deg"],
                          "kept_current": row["kept_current"], "defaults_near_best": row["defaults_near_best"]})
@@ -182,7 +198,8 @@ def run_aircraft(name: str, firmwares, args, work: Path) -> list:
 
 
 def _print(rows) -> None:
-    print("aircraft     firmware    axis   predicted  flown   pred/flown  flown default  margins        tune s")
+    print("aircraft     firmware    axis   predicted  flown   pred/flown  on model  flown default  margins        "
+          "tune s")
     for r in rows:
         if "error" in r:
             print(f"{r['aircraft']:12s} {r['firmware']:11s} {r['error']}")
@@ -193,7 +210,8 @@ def _print(rows) -> None:
 
         gm, pm = r["gain_margin_db"], r["phase_margin_deg"]
         print(f"{r['aircraft']:12s} {r['firmware']:11s} {r['axis']:6s} {f(r['predicted_p90']):>8s}  "
-              f"{f(r['flown_p90']):>6s}  {f(r['ratio']):>9s}  {f(r['flown_default_p90']):>12s}  "
+              f"{f(r['flown_p90']):>6s}  {f(r['ratio']):>9s}  {f(r['flown_on_model_p90']):>8s}  "
+              f"{f(r['flown_default_p90']):>12s}  "
               f"{f(gm)} dB/{f(pm)}°  {r['tune_seconds']:6.1f}")
     ok = [r for r in rows if r.get("ratio") is not None]
     if ok:
@@ -213,8 +231,9 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--aircraft", nargs="+", default=list(AIRCRAFT), choices=AIRCRAFT)
     p.add_argument("--firmware", nargs="+", default=["ardupilot", "rotorflight"], choices=("ardupilot", "rotorflight"))
-    p.add_argument("--flights", type=int, default=2, help="fresh-gust flights per gain set (default 2)")
-    p.add_argument("--duration", type=float, default=120.0, help="seconds per fresh flight (default 120)")
+    p.add_argument("--flights", type=int, default=12, help="fresh-gust flights per gain set (default 12)")
+    p.add_argument("--duration", type=float, default=20.0,
+                   help="seconds per fresh flight, each from rest (default 20: heli tune's windows; see the docstring)")
     p.add_argument("--seed", type=int, default=7)
     p.add_argument("--out", default=None, help="keep the tunes in this folder (default: a temporary one)")
     p.add_argument("--json", default=None, help="write the rows as JSON here")

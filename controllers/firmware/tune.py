@@ -225,6 +225,7 @@ def tune_gains(env_model, spec, current, scale, config: TuneConfig | None = None
         f"physics sub-stepped {m}x per {dt:g} s)")
     flown, windows = _fly_sets(env_model, spec, sets, scale.scale, signs, dt, cfg)
     proposed, chosen, notes = _choose(spec, current, sets, flown, groups)
+    notes += _edge_notes(spec, proposed, chosen)
     say("margins, the frequency-domain prediction and the 10 deg step responses of the current, default and "
         "proposed sets")
     axes = {}
@@ -272,6 +273,24 @@ def _choose(spec, current, sets, flown, groups):
         for ax in g:
             chosen[ax] = best_j
     return proposed, chosen, notes
+
+
+def _edge_notes(spec, proposed, chosen) -> list:
+    """A note for each swept gain of the proposal at the end of its grid (the firmware's documented range, or
+    the sweep's own end): the optimum may lie beyond."""
+    notes = []
+    for axis in range(3):
+        if chosen[axis] == 0:
+            continue
+        gains = spec.axis_gains(proposed, axis)
+        for name, values in zip(spec.swept[axis], spec.grid(axis)):
+            v = gains.get(name)
+            if v is not None and (math.isclose(v, values.min(), rel_tol=1e-3) or math.isclose(v, values.max(), rel_tol=1e-3)):
+                end = "top" if math.isclose(v, values.max(), rel_tol=1e-3) else "bottom"
+                notes.append(f"{AXES[axis]}: {name} = {v:.4g} is at the {end} of the swept range "
+                             f"[{values.min():.4g}, {values.max():.4g}] (the firmware's documented range where it "
+                             "has one): the best set may lie beyond it")
+    return notes
 
 
 def _verdicts(row: dict, sweep: AxisSweep) -> dict:
