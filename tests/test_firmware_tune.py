@@ -1,0 +1,87 @@
+"""The pieces of ``heli tune`` below the command: the delay margin, the joint choice of Rotorflight's roll and
+pitch, the step response of the flight-test card, and what the log flew against its desired attitude."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from controllers.firmware import ArduPilotHeli, ArduPilotHeliParams, RotorflightParams
+from controllers.firmware.firmwares import FIRMWARES
+from controllers.firmware.flown import flown_errors, steady_errors
+from controllers.firmware.linear import closed_loop, stick_margins
+from controllers.firmware.step_response import step_response
+from controllers.firmware.tune_sweep import AxisSweep, joint_choices
+
+LOGS = Path(__file__).resolve().parents[2] / "shared" / "fixtures" / "logs"
+
+
+def test_delay_margin_is_the_phase_margin_over_the_crossover(shipped):
+    """At 100 Hz the PD-equivalent loop's delay margin is python-control's PM / ω at the gain crossover of the
+    same sampled loop (controllers.sweep_margins' broken loop)."""
+    import control
+
+    from controllers.closed_loop import hover_plant
+    from controllers.sweep_margins import _broken_loop
+
+    params = shipped.params
+    signs = np.sign(params.control_gains)
+    rat_p, ang_p = np.array([0.4, 0.5, 0.08]), np.array([5.0, 5.0, 4.0])
+    p = ArduPilotHeliParams(rat_fltt=0.0, rat_flte=0.0, rat_fltd=0.0, gyro_filter_hz=0.0, rat_i=0.0, rat_d=0.0,
+                            rat_ff=0.0, rat_p=tuple(rat_p), ang_p=tuple(ang_p), loop_rate_hz=100.0)
+    gm, pm, dm = stick_margins(closed_loop(params, ArduPilotHeli([p], 1.0, signs)), 0, delay=True)
+    plant = hover_plant(params, 0.01)
+    nominal = np.column_stack([ang_p * rat_p, rat_p])
+    A_o, b, c_angle, c_rate = _broken_loop(plant, 0, nominal)
+    loop = control.ss(A_o, b[:, None], (nominal[0, 0] * c_angle + nominal[0, 1] * c_rate)[None, :], 0.0, 0.01)
+    _, pm_ref, _, _, wc, _ = control.stability_margins(loop, method="frd")
+    assert_allclose(pm, [pm_ref], rtol=2e-3)
+    assert_allclose(dm, [np.radians(pm_ref) / wc], rtol=5e-3)
+
+
+def _sweep(axis, a, b, p90, robust=True):
+    n = len(a)
+    ones = np.ones(n)
+    return AxisSweep(axis, ("P", "L"), np.array(a, float), np.array(b, float), tuple(range(n)), ones * 0.9,
+                     np.ones(n, bool), np.array(p90, float), ones * (10.0 if robust else 1.0), ones * 60.0,
+                     ones * 0.1)
+
+
+def test_roll_and_pitch_share_the_level_strength():
+    """Rotorflight's roll and pitch are chosen at one angle_level_strength, by the sum of their p90s."""
+    roll = _sweep(0, [10, 10, 20, 20], [5, 9, 5, 9], [1.0, 0.5, 0.9, 0.6])
+    pitch = _sweep(1, [10, 10, 20, 20], [5, 9, 5, 9], [0.4, 0.9, 0.3, 0.8])
+    choices = joint_choices({0: roll, 1: pitch}, (0, 1), 2)
+    assert choices[0] == {0: 2, 1: 2} and choices[1] == {0: 1, 1: 3}  # level 5: 0.9 + 0.3; level 9: 0.5 + 0.8
+    assert joint_choices({0: _sweep(0, [1], [1], [1.0], robust=False)}, (0,), 3) == []
+
+
+def test_step_response_of_the_card(ideal):
+    spec = FIRMWARES["ardupilot"]
+    signs = tuple(np.sign(ideal.params.control_gains))
+    st = step_response(spec, ArduPilotHeliParams(), ideal.params, (12.0, 12.0, 1.4), signs, 0, seconds=2.0)
+    assert not st["diverged"] and 0.1 < st["rise_90_s"] < 1.5 and st["overshoot_pct"] >= 0.0
+    assert_allclose(st["angle_deg"][0], 0.0, atol=1e-9)
+    rf = FIRMWARES["rotorflight"]
+    assert step_response(rf, RotorflightParams(), ideal.params, (1.0, 1.0, 1.0), signs, 2) is None
+
+
+def test_steady_blocks_of_the_flown_error():
+    t = np.arange(0, 20, 0.1)
+    desired = np.zeros((3, t.size))
+    desired[0, (t >= 4) & (t < 6)] = np.linspace(0, 20, int(np.sum((t >= 4) & (t < 6))))  # a commanded move
+    actual = desired + 0.5 * np.sin(t)[None, :]
+    actual[2] += 360.0  # yaw wraps
+    out = steady_errors(t, desired, actual)
+    assert out.available and out.seconds == pytest.approx(18.0, abs=0.2)
+    assert out.axes["roll"]["p90_deg"] < 0.5 + 1e-9 and out.axes["yaw"]["p99_deg"] < 0.5 + 1e-9
+
+
+@pytest.mark.skipif(not LOGS.is_dir(), reason="the shared real-log fixtures are absent")
+def test_what_the_log_flew():
+    pytest.importorskip("pymavlink")
+    out = flown_errors(LOGS / "ardupilot_copter_log171.bin", (83.958, 237.358))
+    assert out.available and out.seconds > 20
+    assert_allclose([out.axes[a]["p90_deg"] for a in ("roll", "pitch", "yaw")], [1.108, 0.754, 0.414], atol=1e-3)
+    assert not flown_errors(LOGS / "rotorflight_k110_LOG246.TXT").available
