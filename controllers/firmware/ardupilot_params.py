@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import fields
 from pathlib import Path
 
 from heli_core.files import write_text
@@ -303,8 +302,3 @@ def _format(value: float) -> str:
     if v == int(v) and abs(v) < 1e7:
         return str(int(v))
     return f"{v:.6g}"
-
-
-def field_names() -> tuple:
-    """The fields of :class:`ArduPilotHeliParams` (for reports)."""
-    return tuple(f.name for f in fields(ArduPilotHeliParams))

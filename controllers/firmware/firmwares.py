@@ -85,11 +85,6 @@ class FirmwareSpec:
         fn = ap_io.write_ardupilot_param if self.name == "ardupilot" else rf_io.write_rotorflight_cli
         return fn(path, values, header)
 
-    def from_names(self, values: dict):
-        """Parameters from a full ``names`` dict (after clamping): the loop that flies the file as written."""
-        params, _ = self.params_from(values, "the written file", False)
-        return params
-
     # ----------------------------------------------------------------------------- gains
     def defaults(self, current):
         """The firmware's default gains with the aircraft's hardware settings (loop rate, gyro filter, limits)."""

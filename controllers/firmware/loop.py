@@ -39,8 +39,6 @@ tick sees the state of its own instant.
 from __future__ import annotations
 
 import math
-from dataclasses import fields
-
 import numpy as np
 
 from .errors import FirmwareMappingError
@@ -121,7 +119,7 @@ class FirmwareLoop:
         self.loop_rate_hz = float(sets[0].loop_rate_hz)
         self.dt = 1.0 / self.loop_rate_hz
         self._stick = (sg * sc)
-        self._shaped: dict = {}
+        self._shaped: dict = {}  # kernel coefficients per batch shape
         self.coef = self._coefficients()
 
     # ----------------------------------------------------------------- batching
@@ -156,12 +154,6 @@ class FirmwareLoop:
     def _coefficients(self) -> dict:
         """Arrays the tick reads, (3, G) or (G,), keyed by name (filled by the subclasses)."""
         return {}
-
-    def gains(self, ndim: int) -> dict:
-        """:attr:`coef` shaped for arrays of ``ndim`` dimensions, cached per ``ndim``."""
-        if ndim not in self._shaped:
-            self._shaped[ndim] = {k: self.shaped(v, ndim) for k, v in self.coef.items()}
-        return self._shaped[ndim]
 
     coef_order = ()
     """The coefficients the compiled tick reads, in the order of its rows (subclasses)."""
@@ -272,8 +264,3 @@ class FirmwareLoop:
             out, memory, _ = self.tick(memory, err, rate)
         action = np.clip(self.sticks(out), -1.0, 1.0).T.astype(np.float32)
         return action, memory
-
-    def describe(self) -> dict:
-        """The first parameter set as a plain dict (for reports)."""
-        p = self.params[0]
-        return {f.name: getattr(p, f.name) for f in fields(p)}
