@@ -85,3 +85,13 @@ def test_what_the_log_flew():
     assert out.available and out.seconds > 20
     assert_allclose([out.axes[a]["p90_deg"] for a in ("roll", "pitch", "yaw")], [1.108, 0.754, 0.414], atol=1e-3)
     assert not flown_errors(LOGS / "rotorflight_k110_LOG246.TXT").available
+
+
+def test_a_firmware_loop_flies_through_the_evaluator(shipped):
+    """The one policy interface: controllers.evaluate flies a firmware loop as it flies PD and RL agents."""
+    from controllers.evaluate import evaluate_agent
+
+    loop = ArduPilotHeli(ArduPilotHeliParams(), (12.0, 12.0, 1.4), tuple(np.sign(shipped.params.control_gains)))
+    summary = evaluate_agent(loop, None, episodes_per_trace=1, episode_seconds=4.0, name="ardupilot").summary()
+    assert summary["terminated_episodes"] == 0
+    assert 0.0 < summary["axes"]["roll"]["att_p90_deg"] < 5.0
