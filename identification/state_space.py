@@ -100,52 +100,16 @@ def discrete_model(damping: float, t_slow: float, t_fast: float, q_slow: float, 
     return Ad, g0, g1, 0.5 * (Qd + Qd.T)
 
 
-DOUBLING_TOL = 1e-13
-"""Relative change of the Riccati iterate at which :func:`filter_riccati`'s doubling has converged."""
-DOUBLING_STEPS = 60
-"""Doubling steps before :func:`filter_riccati` hands the equation to ``scipy.linalg.solve_discrete_are`` (each
-step doubles the horizon, so only an equation without a stabilising solution gets there)."""
-
-
-def filter_riccati(Ad, Qd, R: float = 1.0) -> np.ndarray:
-    """The predicted covariance of the steady-state filter of a first-state measurement with noise variance
-    ``R``: the solution of ``P = Ad P Ad' - Ad P c (c'P c + R)^-1 c'P Ad' + Qd``, ``c = e0``.
-
-    Solved by the structure-preserving doubling algorithm (Chu, Fan, Lin & Wang 2004, "Structure-preserving
-    algorithms for periodic discrete-time algebraic Riccati equations", Int. J. Control 77(8)): the solution of
-    ``scipy.linalg.solve_discrete_are(Ad.T, c, Qd, R)`` (the fallback, and the tests' reference) at about a
-    third of its cost on an axis' 3-4 states, where the likelihood search solves it thousands of times per fit
-    (a quarter of an evaluation's time with scipy's general solver: its balancing and QZ dominate at this size).
-    """
-    m = Ad.shape[0]
-    a = np.array(Ad, dtype=float).T
-    g = np.zeros((m, m))
-    g[0, 0] = 1.0 / R
-    h = np.array(Qd, dtype=float)
-    eye = np.eye(m)
-    for _ in range(DOUBLING_STEPS):
-        w = np.linalg.solve(eye + g @ h, np.hstack([a, g]))
-        wa, wg = w[:, :m], w[:, m:]
-        h_next = h + a.T @ h @ wa
-        if not np.all(np.isfinite(h_next)):
-            break
-        g = g + a @ wg @ a.T
-        a = a @ wa
-        if np.max(np.abs(h_next - h)) <= DOUBLING_TOL * max(1.0, float(np.max(np.abs(h_next)))):
-            return 0.5 * (h_next + h_next.T)
-        h = h_next
-    c = np.zeros((m, 1))
-    c[0, 0] = 1.0
-    return solve_discrete_are(Ad.T, c, Qd, np.array([[R]]))
-
-
 def kalman(Ad, Qd, R: float = 1.0):
     """Steady-state Kalman filter of a rate (the first state) measured with white noise of variance ``R``.
 
     Returns the predicted covariance ``P`` (m, m), the filter gain ``L`` (m,)
     (``x_{k|k} = x_{k|k-1} + L e_k``) and the innovation variance ``S``.
     """
-    P = filter_riccati(Ad, Qd, R)
+    m = Ad.shape[0]
+    C = np.zeros((m, 1))
+    C[0, 0] = 1.0
+    P = solve_discrete_are(Ad.T, C, Qd, np.array([[R]]))
     S = float(P[0, 0] + R)
     L = P[:, 0] / S
     return P, L, S
