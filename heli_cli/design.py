@@ -162,6 +162,19 @@ def _servo_activity(env_model, params, gains, dt, out, design_kwargs):
     return text, results[0].plot_servo_activity(out / "servo.png", others=results[1:])
 
 
+def _filter_notes(analyses, dt: float) -> list[str]:
+    """A note per axis whose D-filter cutoff lies above the loop's Nyquist frequency ``0.5 / dt``: sampled at
+    ``dt`` its pole ``exp(-2 pi f dt)`` is all but zero, so it filters nothing (the auto rule, 20 times the
+    crossover, gives 226 Hz at a 100 Hz loop on the Betaflight quad's fast model)."""
+    nyquist = 0.5 / dt
+    high = [an for an in analyses if an.d_filter_hz is not None and an.d_filter_hz > nyquist]
+    if not high:
+        return []
+    cuts = ", ".join(f"{an.axis} {an.d_filter_hz:.4g} Hz" for an in high)
+    return [f"note: D filter above the loop's Nyquist frequency ({nyquist:g} Hz at --dt {dt:g} s): {cuts}; it "
+            "filters nothing there (pass --d-filter-hz below it, or off)"]
+
+
 def control_period(sample_rate: float) -> tuple[float, str | None]:
     """The default control period [s] for a model whose gust traces are sampled at ``sample_rate`` [Hz]:
     :data:`DEFAULT_DT`, or the shortest whole number of sample periods above it (the environment steps whole
@@ -234,6 +247,8 @@ def run(args) -> int:
                   f"{an.phase_margin:.1f} deg, gain margin {an.gain_margin_db:.1f} dB, crossover "
                   f"{an.gain_crossover:.3g} rad/s, bandwidth {an.bandwidth:.3g} rad/s, "
                   f"{'stable' if s['stable'] else 'UNSTABLE'}")
+        for line in _filter_notes(analyses, args.dt):
+            print(line)
         for path in paths:
             print(f"wrote {path}")
         if not args.no_plots:

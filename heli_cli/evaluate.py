@@ -63,6 +63,30 @@ def _episode_seconds(args, env_model, split) -> tuple[float, str | None]:
                      f"{DEFAULT_EPISODE_S:g} s does not); pass --episode-seconds to choose")
 
 
+def _check_control_period(agent, env_model, args) -> None:
+    """Refuse a PD designed for a control period the model's gust traces cannot be stepped at (a 0.01 s design
+    on a 50 Hz log's model), naming the design that can be flown (a PD is flown at the period it was designed
+    for, :class:`controllers.evaluate.EvaluationConfig`)."""
+    import math
+
+    from controllers.errors import AgentError
+    from controllers.pd.controller import PDController
+
+    from .design import control_period
+
+    if not isinstance(agent, PDController):
+        return
+    ratio = agent.dt * env_model.sample_rate
+    if round(ratio) >= 1 and math.isclose(ratio, round(ratio), abs_tol=1e-6):
+        return
+    fits = control_period(env_model.sample_rate)[0]
+    model = f" --model {args.model}" if args.model else ""
+    raise AgentError(f"{args.agent} was designed for a control period of {agent.dt:g} s, which is not a whole number "
+                     f"of this model's gust sample period ({1.0 / env_model.sample_rate:g} s, {env_model.sample_rate:g} "
+                     f"Hz traces): design the PD on this model (heli design{model}, which picks {fits:g} s) or with "
+                     f"heli design --dt {fits:g}")
+
+
 def run(args) -> int:
     from controllers.errors import AgentError
     from controllers.evaluate import EvaluationConfig, describe_agent, evaluate_agent
@@ -87,6 +111,7 @@ def run(args) -> int:
     else:
         split = split_traces(env_model.n_traces, seed=args.split_seed or 0)
         origin = "default split" if not args.split_seed else f"split seed {args.split_seed}"
+    _check_control_period(agent, env_model, args)
     episode_seconds, note = _episode_seconds(args, env_model, split)
     if note:
         print(note)

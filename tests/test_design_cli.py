@@ -129,3 +129,26 @@ def test_servo_activity_that_cannot_be_flown_leaves_the_design_standing(model_50
     report = (out / "design.md").read_text()
     assert "Not flown in the model's gusts" in report and "servo.png" not in report
     assert not (out / "servo.png").exists() and (out / "pd.json").is_file()
+
+
+def test_a_pd_of_another_control_period_is_refused_naming_the_design_that_flies(model_50hz_40s, tmp_path, capsys):
+    """heli evaluate of a 0.01 s PD on a 50 Hz log's model: one line that names the design to fly instead
+    (before: 'dt=0.01 s must be a whole number ...', naming an option heli evaluate does not have)."""
+    assert main(["design", "--model", str(model_50hz_40s), "--dt", "0.01", "--no-plots", "-q",
+                 "--out", str(tmp_path / "pd")]) == 0
+    capsys.readouterr()
+    assert main(["evaluate", str(tmp_path / "pd" / "pd.json"), "--model", str(model_50hz_40s), "--no-plots", "-q",
+                 "--out", str(tmp_path / "ev")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "designed for a control period of 0.01 s" in err
+    assert f"heli design --model {model_50hz_40s}, which picks 0.02 s" in err
+    assert not (tmp_path / "ev").exists()
+
+
+def test_a_d_filter_above_nyquist_is_said_to_filter_nothing(tmp_path, capsys):
+    """A cutoff above the loop's Nyquist frequency is designed (its discrete pole is ~0: no filter) and said."""
+    assert main(["design", "--d-filter-hz", "1000", "--no-plots", "-q", "--out", str(tmp_path / "pd")]) == 0
+    out = capsys.readouterr().out
+    assert "note: D filter above the loop's Nyquist frequency (50 Hz at --dt 0.01 s): roll 1000 Hz" in out
+    assert main(["design", "--d-filter-hz", "20", "--no-plots", "-q", "--out", str(tmp_path / "pd20")]) == 0
+    assert "Nyquist" not in capsys.readouterr().out
