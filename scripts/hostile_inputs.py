@@ -40,7 +40,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 COMMANDS = ("simulate-flight", "import", "identify", "diagnose", "refresh", "check", "compare-methods", "design",
-            "sweep", "train", "evaluate")
+            "sweep", "train", "evaluate", "tune")
 MEMORY_CAP = 6 * 2**30
 """Address space of each case (bytes): a request for more ends in MemoryError instead of swapping."""
 
@@ -84,8 +84,16 @@ def make_fixtures(tmp: Path) -> dict:
         _heli(tmp, "simulate-flight", "--duration", 30, "--seed", seed, "--out", f"f{seed}.csv")
     _heli(tmp, "identify", "f1.csv", "--out", "model", "--method", "integral", "--no-plots")
     _heli(tmp, "design", "--model", "model", "--out", "pd", "--no-plots")
+    # models whose gust traces a default episode does not fit: a 15 s flight (held-out 3.7 s) and a 50 Hz log
+    _heli(tmp, "simulate-flight", "--duration", 15, "--seed", 4, "--out", "short.csv")
+    _heli(tmp, "identify", "short.csv", "--out", "model_short", "--method", "integral", "--no-plots")
+    lines = (tmp / "f1.csv").read_text().splitlines()
+    (tmp / "f50.csv").write_text("\n".join(lines[:1] + lines[1::2]) + "\n")  # every other sample: 50 Hz
+    _heli(tmp, "identify", "f50.csv", "--out", "model_50hz", "--method", "integral", "--no-plots")
+    _heli(tmp, "design", "--model", "model_50hz", "--out", "pd_50hz", "--no-plots")
     fx = {"good": tmp / "f1.csv", "good2": tmp / "f2.csv", "good3": tmp / "f3.csv", "model": tmp / "model",
-          "pd": tmp / "pd" / "pd.json"}
+          "pd": tmp / "pd" / "pd.json", "model_short": tmp / "model_short", "model_50hz": tmp / "model_50hz",
+          "good_50hz": tmp / "f50.csv", "pd_50hz": tmp / "pd_50hz" / "pd.json"}
     good = fx["good"]
     text = good.read_text()
     header = text.splitlines()[0].split(",")
@@ -245,9 +253,7 @@ def make_fixtures(tmp: Path) -> dict:
 
     def set_param(d, key, value):
         m = json.loads((d / "model.json").read_text())
-        m_params = m.get("params", m)
-        if isinstance(m_params, dict):
-            m_params[key] = value
+        m["parameters"][key] = value  # the model file's key (a top-level "k2" was ignored: no corruption at all)
         (d / "model.json").write_text(json.dumps(m, allow_nan=True))
 
     model_variant("flipped_trace", flip_trace)
@@ -265,6 +271,15 @@ def make_fixtures(tmp: Path) -> dict:
     model_variant("huge_param", lambda d: set_param(d, "k3", 1e300))
     model_variant("string_param", lambda d: set_param(d, "k2", "fast"))
     model_variant("model_json_dir", lambda d: ((d / "model.json").unlink(), (d / "model.json").mkdir()))
+
+    def set_verdict(d, verdict):
+        m = json.loads((d / "model.json").read_text())
+        m["verdict"] = verdict
+        (d / "model.json").write_text(json.dumps(m))
+
+    model_variant("unusable", lambda d: set_verdict(d, {"level": "unusable", "reasons": [
+        "roll: damping k3 = 200 1/s is at the upper bound of the estimator's search (the data did not place it)"]}))
+    model_variant("bad_verdict", lambda d: set_verdict(d, {"level": "great", "reasons": "none"}))
     fx["model_empty_dir"] = models / "empty"
     fx["model_empty_dir"].mkdir()
     fx["model_is_file"] = fx["good"]
@@ -302,6 +317,20 @@ def make_fixtures(tmp: Path) -> dict:
     pd_variant("pd_string", lambda p: set_first_number(p, "big"))
     pd_variant("pd_dropped_key", lambda p: p.pop(next(iter(p))) if isinstance(p, dict) and p else None)
     fx["agent_csv"] = fx["good"]
+    # the gains a firmware flew (heli tune --params): good, and bad in each way a file can be
+    params = tmp / "params"
+    params.mkdir()
+    for name, content in {"ap.param": "ATC_ANG_RLL_P,4.5\nATC_RAT_RLL_P,0.05\nATC_ANG_PIT_P,4.5\n",
+                          "ap_unknown.param": "ATC_RAT_RLL_PP,0.1\n", "ap_range.param": "ATC_RAT_RLL_P,0.9\n",
+                          "ap_nan.param": "ATC_RAT_RLL_P,nan\n", "ap_inf.param": "ATC_ANG_RLL_P,inf\n",
+                          "ap_words.param": "ATC_RAT_RLL_P 0.1 7\n", "ap_empty.param": "",
+                          "ap_loop250.param": "SCHED_LOOP_RATE,250\n", "ap_loop0.param": "SCHED_LOOP_RATE,0\n",
+                          "ap_huge.param": "ATC_ANG_RLL_P,1e300\n", "rf.txt": "set pid_mode = 3\n",
+                          "rf_garbage.txt": "set = = =\n", "rf_nan.txt": "set angle_level_strength = nan\n"}.items():
+        (params / name).write_text(content)
+        fx[f"params_{name.replace('.', '_')}"] = params / name
+    (params / "binary.param").write_bytes(bytes(np.random.default_rng(4).integers(0, 256, 4096, dtype=np.uint8)))
+    fx["params_binary"] = params / "binary.param"
     fx["agent_dir"] = agents
     fx["agent_missing"] = agents / "nowhere.zip"
     return fx
@@ -334,6 +363,16 @@ def make_cases(fx: dict, tmp: Path) -> list[Case]:
 
     def add(command, name, *args):
         cases.append(Case(command, name, list(args)))
+
+    copies = iter(range(10**6))
+
+    def model_copy(src):
+        """A copy of a model folder for a case that writes into it (the cases share the fixtures)."""
+        d = tmp / "copies" / f"m{next(copies)}"
+        if Path(src).is_dir():
+            shutil.copytree(src, d)
+            return d
+        return src
 
     bad_csvs = [k for k in fx if Path(fx[k]).parent.name == "bad" and k not in ("dir",)] + ["dir", "missing"]
     out_paths = ("out_file", "out_under_file", "out_ro", "out_proc")
@@ -389,11 +428,18 @@ def make_cases(fx: dict, tmp: Path) -> list[Case]:
             "--validate", fx[k])
     add("identify", "--validate the fitted flight", fx["good"], "--out", out(), "--method", "integral", "--no-plots",
         "--validate", fx["good"])
+    add("identify", "--validate a 50 Hz flight", fx["good"], "--out", out(), "--method", "integral", "--no-plots",
+        "--validate", fx["good_50hz"])
+    add("identify", "--validate twice the same", fx["good"], "--out", out(), "--method", "integral", "--no-plots",
+        "--validate", fx["good2"], fx["good2"])
+    add("identify", "--validate, figures", fx["good"], "--out", out(), "--method", "integral", "--validate",
+        fx["good2"], fx["zero_sticks"])
     add("identify", "--validate (ml)", fx["good"], "--out", out(), "--no-plots", "--no-disturbances", "--validate",
         fx["good2"], fx["constant_stick"])
     for m in ("flipped_trace", "truncated_model", "no_manifest", "model_json_dir"):
-        add("identify", f"--out into model {m}", fx["good2"], "--out", fx[f"model_{m}"], "--method", "integral",
-            "--no-plots")
+        # into a copy: writing into the shared corrupt folder repaired it for every later case that reads it
+        add("identify", f"--out into model {m}", fx["good2"], "--out", model_copy(fx[f"model_{m}"]), "--method",
+            "integral", "--no-plots")
 
     # diagnose
     for k in ("empty", "binary", "utf16", "truncated", "nan", "ms_time", "deg_rates", "constant_stick", "dir",
@@ -414,13 +460,6 @@ def make_cases(fx: dict, tmp: Path) -> list[Case]:
             "--no-plots")
 
     # refresh: on copies of the model (it writes into the folder)
-    refresh_n = iter(range(10**6))
-
-    def model_copy(src):
-        d = tmp / "refresh" / f"m{next(refresh_n)}"
-        shutil.copytree(src, d)
-        return d
-
     for k in ("empty", "binary", "utf16", "truncated", "nan", "ms_time", "constant_stick", "dir", "missing", "good"):
         add("refresh", f"flight {k}", model_copy(fx["model"]), fx[k], "--no-plots", "--bootstrap", 20)
     for m in ("flipped_trace", "truncated_model", "no_manifest", "truncated_trace", "no_library", "nan_param",
@@ -461,9 +500,20 @@ def make_cases(fx: dict, tmp: Path) -> list[Case]:
                         "--dt": ("0", "1", "nan", "1e-300", "-0.01")}.items():
         for v in values:
             add("design", f"{opt} {v!r}", "--model", fx["model"], "--out", out(), "--no-plots", opt, v)
+    for v in ("0", "-1", "nan", "inf", "1e300", "1e-300", "1,2", "1,2,3,4", "x", "", "auto,off", "off,1,2", "1000",
+              "0.001", "off", "auto", "5,off,5"):
+        add("design", f"--d-filter-hz {v!r}", "--model", fx["model"], "--out", out(), "--no-plots", "--d-filter-hz", v)
+    for v in ("1000", "0.001", "off"):  # flown for the servo activity too
+        add("design", f"--d-filter-hz {v!r} (flown)", "--model", fx["model"], "--out", out(), "--d-filter-hz", v)
     for m in ("truncated_model", "nan_param", "huge_param", "empty_dir", "missing", "is_file", "string_param",
-              "no_library"):
+              "no_library", "unusable", "bad_verdict"):
         add("design", f"--model {m}", "--model", fx[f"model_{m}"], "--out", out(), "--no-plots")
+    add("design", "--model unusable --accept-unusable-model", "--model", fx["model_unusable"], "--out", out(),
+        "--no-plots", "--accept-unusable-model")
+    for m in ("model_short", "model_50hz"):  # the servo activity's episode does not fit / another period
+        add("design", f"--model {m}", "--model", fx[m], "--out", out())
+        add("design", f"--model {m} --dt 0.01", "--model", fx[m], "--out", out(), "--dt", "0.01")
+        add("design", f"--model {m} --dt 0.03", "--model", fx[m], "--out", out(), "--dt", "0.03")
     for o in out_paths:
         add("design", f"--out {o}", "--model", fx["model"], "--out", fx[o], "--no-plots")
 
@@ -531,6 +581,55 @@ def make_cases(fx: dict, tmp: Path) -> list[Case]:
             "--episode-seconds", 2, "--out", out())
     for o in out_paths:
         add("evaluate", f"--out {o}", fx["pd"], *ev, "--out", fx[o])
+    # no --episode-seconds: the default 30 s does not fit a short flight's traces
+    for agent, m in (("pd", "model"), ("pd", "model_short"), ("pd", "model_50hz"), ("pd_50hz", "model_50hz"),
+                     ("pd_50hz", "model"), ("pd", "model_unusable")):
+        add("evaluate", f"{agent} on {m}, default episode", fx[agent], "--model", fx[m], "--episodes-per-trace", 1,
+            "--no-plots", "--out", out())
+    for traces in ("all", "train"):
+        add("evaluate", f"--traces {traces}, default episode", fx["pd"], "--model", fx["model_short"],
+            "--episodes-per-trace", 1, "--no-plots", "--traces", traces, "--out", out())
+    add("evaluate", "default episode, figures", fx["pd"], "--model", fx["model"], "--episodes-per-trace", 1,
+        "--out", out())
+    add("evaluate", "unusable --accept-unusable-model", fx["pd"], "--model", fx["model_unusable"],
+        "--episodes-per-trace", 1, "--no-plots", "--accept-unusable-model", "--out", out())
+
+    # tune: its flight, its parameter files, its options (on the integral model: no identification inside)
+    tn = ("--firmware", "ardupilot", "--model", fx["model"], "--window", 5, "--candidates", 1, "--no-plots")
+    add("tune", "csv with --params", fx["good"], *tn, "--params", fx["params_ap_param"], "--out", out())
+    add("tune", "csv without --params", fx["good"], *tn, "--out", out())
+    add("tune", "rotorflight --params", fx["good"], "--firmware", "rotorflight", "--model", fx["model"], "--window", 5,
+        "--candidates", 1, "--no-plots", "--params", fx["params_rf_txt"], "--out", out())
+    for k in [k for k in fx if k.startswith("params_")]:
+        add("tune", f"--params {k}", fx["good"], *tn, "--params", fx[k], "--out", out())
+    for k in ("params_rf_garbage_txt", "params_rf_nan_txt", "params_ap_param"):
+        add("tune", f"rotorflight --params {k}", fx["good"], "--firmware", "rotorflight", "--model", fx["model"],
+            "--window", 5, "--candidates", 1, "--no-plots", "--params", fx[k], "--out", out())
+    for k in ("empty", "binary", "utf16", "truncated", "nan", "ms_time", "dir", "missing", "short_flight",
+              "garbage_bin", "garbage_bbl", "bbl_header_only"):
+        add("tune", f"flight {k}", fx[k], *tn, "--params", fx["params_ap_param"], "--out", out())
+    for m in ("truncated_model", "nan_param", "huge_param", "empty_dir", "missing", "is_file", "no_library",
+              "flipped_trace", "unusable", "short", "50hz"):
+        add("tune", f"--model {m}", fx["good"], "--firmware", "ardupilot", "--model", fx[f"model_{m}"], "--window", 5,
+            "--candidates", 1, "--no-plots", "--params", fx["params_ap_param"], "--out", out())
+    add("tune", "--model unusable --accept-unusable-model", fx["good"], *tn[:2], "--model", fx["model_unusable"],
+        "--window", 5, "--candidates", 1, "--no-plots", "--params", fx["params_ap_param"], "--accept-unusable-model",
+        "--out", out())
+    for opt, values in {"--scale": ("0", "-1", "nan", "inf", "1e300", "1e-300", "1,2", "x", ""),
+                        "--delay": ("-1", "3", "nan", "x", ""), "--window": BAD_FLOATS + ("1e9", "0.001"),
+                        "--candidates": ("0", "-1", "1e9", "100000", "x"), "--seed": ("-1", "1.5", "1e30"),
+                        "--firmware": ("px4", "")}.items():
+        for v in values:
+            args = list(tn)
+            if opt in args:
+                i = args.index(opt)
+                del args[i:i + 2]
+            add("tune", f"{opt} {v!r}", fx["good"], *args, "--params", fx["params_ap_param"], opt, v, "--out", out())
+    add("tune", "no --model (identify inside)", fx["good"], "--firmware", "ardupilot", "--window", 5, "--candidates", 1,
+        "--no-plots", "--params", fx["params_ap_param"], "--delay", "none", "--out", out())
+    add("tune", "figures", fx["good"], *tn[:-1], "--params", fx["params_ap_param"], "--out", out())
+    for o in out_paths + ("out_dir",):
+        add("tune", f"--out {o}", fx["good"], *tn, "--params", fx["params_ap_param"], "--out", fx[o])
     return cases
 
 
@@ -601,7 +700,8 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=2, help="cases run at once (default 2)")
     ap.add_argument("--timeout", type=float, default=120.0, help="seconds per case (default 120)")
     ap.add_argument("--only", default=None, help="comma-separated commands to run (default all)")
-    ap.add_argument("--match", default=None, help="only cases whose name contains this text")
+    ap.add_argument("--match", default=None, help="only cases whose name matches this regular expression "
+                    "(e.g. 'nan_param|truncated')")
     ap.add_argument("--keep", action="store_true", help="keep the temporary folder and print its path")
     ap.add_argument("--verbose", action="store_true", help="print each case as it ends")
     args = ap.parse_args(argv)
@@ -614,7 +714,7 @@ def main(argv=None) -> int:
             keep = set(args.only.split(","))
             cases = [c for c in cases if c.command in keep]
         if args.match:
-            cases = [c for c in cases if args.match in c.name]
+            cases = [c for c in cases if re.search(args.match, c.name)]
         print(f"{len(cases)} hostile cases over {len({c.command for c in cases})} commands "
               f"(fixtures in {time.monotonic() - t0:.0f} s), {args.jobs} at a time, timeout {args.timeout:g} s",
               file=sys.stderr)
