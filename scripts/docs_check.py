@@ -12,7 +12,7 @@ flight of twenty.
 
 Usage::
 
-    python scripts/docs_check.py            # all checks, about 3 minutes on 2 cores
+    python scripts/docs_check.py            # all checks, 10-11 minutes on 2 busy cores (2026-11-27)
     python scripts/docs_check.py --list     # what is checked
     make docs-check
 """
