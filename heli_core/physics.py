@@ -25,6 +25,8 @@ yaw [rad/s^2], i.e. the ``k2*u_d`` part of eq. (42) (the constant offsets
 
 from __future__ import annotations
 
+import math
+
 import warnings
 
 from functools import lru_cache
@@ -52,8 +54,10 @@ ZERO_DISTURBANCE = (0.0, 0.0, 0.0)
 
 
 def _fmt(v: float) -> str:
-    """A float as a Python literal that reads back to the same float."""
-    return repr(float(v))
+    """A float as a Python expression that reads back to the same float (``float('nan')`` for a coefficient
+    that overflowed: a model with a damping of 1e300/s discretised over a control period)."""
+    v = float(v)
+    return repr(v) if math.isfinite(v) else f"float('{v!r}')"
 
 
 @lru_cache(maxsize=256)

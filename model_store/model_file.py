@@ -44,6 +44,11 @@ from heli_core.terms import AXES, BASE_PARAMS, EXTRA_PARAMS, TERMS
 SCHEMA = "heli-env/model"
 SCHEMA_VERSION = 1
 MODEL_FILENAME = "model.json"
+MAX_PARAMETER = 1e6
+"""Largest |value| a model file's parameter may have. The estimators' searches stop far below it (a damping at
+most 200 1/s; the largest control gain a real log gave, a 5-inch quad's, about 2100 rad/s² per unit stick): a value
+beyond it is a file edited or corrupted, or a fit that failed, and would overflow the discretised model (k3 = 1e300
+gave NaN states)."""
 
 
 def _version() -> str:
@@ -178,6 +183,12 @@ def params_from_document(doc: dict, where: str = "model") -> ModelParams:
     lags = doc.get("servo_lag_s") or {}
     if not isinstance(lags, dict) or set(lags) - set(AXES):
         raise ModelFileError(f"{where}: 'servo_lag_s' must be an object with keys among {', '.join(AXES)}, got {lags!r}")
+    huge = {k: v for k, v in list(params.items()) + list(added.items())
+            if isinstance(v, (int, float)) and not isinstance(v, bool) and MAX_PARAMETER < abs(v) < float("inf")}
+    if huge:
+        raise ModelFileError(f"{where}: parameter(s) beyond any aircraft: " + ", ".join(
+            f"{k} = {v:g}" for k, v in huge.items()) + f" (|value| > {MAX_PARAMETER:g} in the model's units, 1/s "
+            "and rad/s² per unit stick): the file was edited or corrupted, or its fit failed; identify the model again")
     try:
         return ModelParams(
             **{k: params[k] for k in BASE_PARAMS},

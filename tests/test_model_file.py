@@ -228,3 +228,22 @@ def test_an_unstorable_value_writes_nothing(tmp_path):
     with pytest.raises(TypeError, match="cannot store object in model.json"):
         save_model(tmp_path, PARAMS, identification={"settings": object()})
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_parameter_beyond_any_aircraft_is_refused(tmp_path, doc):
+    """k3 = 1e300 (finite, so the params' own check passed it) overflowed the discretised model into NaN states
+    that `heli tune` flew; a model file with it is now refused where it is read."""
+    doc["parameters"]["k3"] = 1e300
+    with pytest.raises(ModelFileError, match=r"parameter\(s\) beyond any aircraft: k3 = 1e\+300 \(\|value\| > 1e\+06"):
+        load_model(_write(tmp_path, doc))
+    doc["parameters"]["k3"] = 200.0  # the search's bound stays readable (its verdict says what it is)
+    load_model(_write(tmp_path, doc))
+
+
+def test_a_nan_coefficient_compiles_into_the_physics_as_nan():
+    """A coefficient that overflowed is written as an expression the generated step can run (it was the bare
+    name 'nan', a NameError), so what flies it sees NaN states, not a crash."""
+    from heli_core.physics import _fmt
+
+    assert eval(_fmt(float("nan"))) != eval(_fmt(float("nan")))
+    assert eval(_fmt(float("-inf"))) == float("-inf") and eval(_fmt(0.1)) == 0.1

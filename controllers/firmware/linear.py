@@ -184,6 +184,9 @@ class ClosedLoop:
             rows[0, self.plant.angle_idx[axis]] = 1.0
             rows[1, self.plant.rate_idx[axis]] = 1.0
         for g, A in enumerate(self.A):
+            if not np.all(np.isfinite(A)):  # a plant whose discretisation overflowed (a damping of 1e300/s)
+                radius[g] = np.inf
+                continue
             lam, V = np.linalg.eig(A)
             mags = np.abs(lam)
             if rows is not None:
