@@ -62,10 +62,11 @@ statistics follow the chi-square law of one degree of freedom per term (70 fligh
 cell: the median of a flight's largest of its ~14 term statistics 3.5, chi-square's 4.3), and a flight's largest
 reached 10.2 and 10.5 (two 2 Hz Dryden flights of 20, each naming a wrong effect at the earlier floor of 10:
 10 % of the cell, above the issue's 5 %). At 12 a flight of 14 chi-square statistics names a wrong term with
-probability 0.7 %; a hidden effect's statistic grows with the flight's length (the weakest of the study,
-collective torque and 5x quadratic damping, 10-12 on 180 s and about 1.7 times that on 300 s), so flights of a
-few minutes keep their power and shorter ones are told why nothing was named (the candidates' table)
-(``scripts/likelihood_diagnosis_study.py --null-cells`` prints the statistics)."""
+probability 0.7 %. A hidden effect's statistic grows with the flight's length: on 300 s flights of fresh seeds
+the weakest of the study scored 12.8 (collective torque) and 14.0 (5x quadratic damping), every case named 6/6,
+and 0 of 50 effect-free flights named a wrong term; on 180 s flights some axes of those effects scored 10.3-12,
+which this floor no longer names (docs/diagnosis.md; ``scripts/likelihood_diagnosis_study.py --null-cells``
+prints the statistics)."""
 MIN_LR_ALIGNMENT = 20.0
 """Smallest likelihood-ratio statistic of the alignment candidate (servo delay / input shift). Timing is where
 the model is misspecified in small ways the chi-square law does not know (a hold between samples, a digital
