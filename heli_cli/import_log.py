@@ -70,11 +70,11 @@ def register(sub):
 
 
 def meta_path(out):
-    """Where ``heli import`` writes the metadata of ``out``: ``flight.csv`` -> ``flight.meta.json``."""
-    from pathlib import Path
+    """Where ``heli import`` writes the metadata of ``out``: ``flight.csv`` -> ``flight.meta.json``
+    (:func:`identification.io.meta_path`, which the readers use to know an imported CSV's log)."""
+    from identification.io import meta_path as _meta_path
 
-    out = Path(out)
-    return out.with_name(out.stem + ".meta.json")
+    return _meta_path(out)
 
 
 def _print_list(path, allow_damaged, progress, options=()) -> int:

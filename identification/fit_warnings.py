@@ -71,14 +71,30 @@ def require_moving_sticks(flights, axes) -> None:
         if values.size and float(np.std(values)) < CONSTANT_STICK_STD:
             raise IdentifiabilityError(
                 f"the {stick} stick is constant ({float(values[0]):.4g} over the whole flight): {axis}'s gain and "
-                f"damping cannot be identified without input changes; fly sweeps on {stick}, or check the input "
-                "source (heli import --inputs)")
+                f"damping cannot be identified without input changes; fly sweeps on {stick}"
+                + (", or check the input source (heli import --inputs)" if from_a_log(flights) else ""))
 
 
 STATIC_INPUT_STD = MIN_STICK_STD
 """A modulating input (the collective) whose standard deviation within every flight is below this [stick
 units] does not vary: a term it multiplies is the offset (``k12·col``) or the control gain (``gs·u·col``)
 under another name, and is not fitted."""
+
+
+LOG_FORMATS_OF_ONE_SOURCE = ("csv", "synthetic")
+"""Flight formats whose inputs are what they are: a CSV the user wrote, a synthetic flight."""
+
+
+def from_a_log(flights) -> bool:
+    """Whether any flight was read from a flight controller's log, directly or as the CSV ``heli import`` wrote
+    (its ``.meta.json`` beside it): only then can importing it again with another input source
+    (``heli import --inputs``) change a fit, so only then is it advised."""
+    flights = [flights] if hasattr(flights, "time") else list(flights)
+    for f in flights:
+        meta = dict(getattr(f, "metadata", {}) or {})
+        if meta.get("imported_from") or meta.get("format") not in (None, *LOG_FORMATS_OF_ONE_SOURCE):
+            return True
+    return False
 
 
 def static_collective(flights) -> float | None:
@@ -177,6 +193,7 @@ def fit_warnings(flights, r2: Mapping | None = None, r2_label: str = "fit", *, m
         if band is not None and band.filtered:
             out.append(f"{_name(f, k, len(flights))}: {band.describe()}")
     collective = static_collective(flights) if flights else None
+    imported = bool(flights) and from_a_log(flights)
     if collective is not None:
         out.append(f"the collective does not vary (std {round(collective, 6):g} within each flight): the collective torque "
                    "(k12) and gain scheduling are not fitted (with a constant collective they are the offset and "
@@ -191,7 +208,8 @@ def fit_warnings(flights, r2: Mapping | None = None, r2_label: str = "fit", *, m
                 out.append(f"{axis} is barely excited: the {stick} stick varies by {s_std:.3g} (std; "
                            f"{100 * s_std / 2:.2g} % of its [-1, 1] range) and the {axis} rate by "
                            f"{math.degrees(r_std):.2g} deg/s (std); its gain and damping are not identifiable "
-                           f"from these data (fly sweeps on {stick}, or check the input source: heli import --inputs)")
+                           f"from these data (fly sweeps on {stick}"
+                           + (", or check the input source: heli import --inputs)" if imported else ")"))
     for axis in AXES:
         value = None if r2 is None else r2.get(axis)
         if value is None or np.isnan(value):
@@ -199,6 +217,7 @@ def fit_warnings(flights, r2: Mapping | None = None, r2_label: str = "fit", *, m
         if value < min_r2:
             shown = f"{value:.2f}" if np.isfinite(value) else "diverged"
             out.append(f"{axis}: the model explains {100 * max(value, 0.0):.0f} % of the rate variance ({r2_label} "
-                       f"R² {shown}), below {100 * min_r2:.0f} %: it says little about this axis; check the input "
-                       "source (heli import --inputs), the segment and the logging rate")
+                       f"R² {shown}), below {100 * min_r2:.0f} %: it says little about this axis; check "
+                       + ("the input source (heli import --inputs), " if imported else "") + "the segment and the "
+                       "logging rate")
     return out

@@ -42,9 +42,34 @@ def test_a_short_flight_is_named_with_its_length():
 def test_a_weak_fit_names_the_axis_and_the_share_explained():
     lines = fit_warnings([_flight()], {**GOOD, "pitch": 0.02})
     assert lines == [f"pitch: the model explains 2 % of the rate variance (fit R² 0.02), below {100 * MIN_R2:.0f} %: "
-                     "it says little about this axis; check the input source (heli import --inputs), the segment and "
-                     "the logging rate"]
+                     "it says little about this axis; check the segment and the logging rate"]
     assert len(fit_warnings([_flight()], {**GOOD, "roll": -0.5})) == 1  # a negative R² reads as 0 %
+
+
+def test_another_input_source_is_advised_only_for_a_flight_from_a_log():
+    """``heli import --inputs`` can change a fit only where a flight controller's log was imported: a CSV the user
+    wrote, or a synthetic flight, gets no advice it cannot follow (#31.3)."""
+    imported = _flight().with_metadata(imported_from={"format": "betaflight-blackbox", "input_source": "controller"})
+    (line,) = fit_warnings([imported], {**GOOD, "pitch": 0.02})
+    assert "check the input source (heli import --inputs), the segment and the logging rate" in line
+    raw = _flight().with_metadata(format="ardupilot-dataflash")  # read from the .bin itself
+    assert "heli import --inputs" in fit_warnings([raw], {**GOOD, "pitch": 0.02})[0]
+    (line,) = fit_warnings([_flight(ped=0.0)], GOOD)
+    assert line.endswith("(fly sweeps on ped)")
+
+
+def test_an_imported_csv_knows_its_log_from_the_metadata_beside_it(tmp_path):
+    import json
+
+    from identification.io import meta_path, read_flight, write_csv_flight
+
+    csv = write_csv_flight(_flight(), tmp_path / "bf.csv")
+    assert "imported_from" not in read_flight(csv).metadata
+    meta_path(csv).write_text(json.dumps({"format": "betaflight-blackbox", "input_source": "controller"}))
+    assert dict(read_flight(csv).metadata)["imported_from"] == {"format": "betaflight-blackbox",
+                                                               "input_source": "controller"}
+    meta_path(csv).write_text("{not json")  # a damaged sidecar is no import record, never an error
+    assert "imported_from" not in read_flight(csv).metadata
 
 
 @pytest.mark.parametrize("kwargs", [{"ped": 0.0}, {"r_scale": 0.0}], ids=["stick-still", "rate-still"])
@@ -101,7 +126,8 @@ def test_a_model_of_sticks_that_are_not_the_inputs_is_warned_about(windy_yaw):
     other = simulate_flight(duration=300.0, seed=2).flight
     sticks = sim.flight.sticks.copy()
     sticks[3] = other.sticks[3][: sticks.shape[1]]
-    wrong = make_flight(sim.flight.time, sim.flight.rates, sticks, metadata={"source": "wrong.csv"})
+    wrong = make_flight(sim.flight.time, sim.flight.rates, sticks,
+                        metadata={"source": "wrong.log", "format": "ardupilot-dataflash"})
     ident = MaximumLikelihoodIdentifier(axes=("yaw",)).fit([wrong])
     lines = [line for line in fit_warnings([wrong], *judged_r2(ident, [wrong])) if line.startswith("yaw:")]
     assert len(lines) == 1 and "0.5 s-ahead prediction R²" in lines[0] and "heli import --inputs" in lines[0]

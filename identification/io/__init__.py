@@ -74,7 +74,7 @@ def _read_csv(path, inputs, segment, calibration):
         if calibration is not None:
             raise InputSourceError(f"{path}: a servo calibration was given but the CSV has no servo columns "
                                    f"{','.join(SERVO_COLUMNS)}")
-        flight = read_csv_flight(path).with_metadata(input_source="sticks")
+        flight = read_csv_flight(path).with_metadata(input_source="sticks", **_imported_from(path))
     if segment in (None, "all"):
         return flight
     if segment == "auto":
@@ -84,6 +84,27 @@ def _read_csv(path, inputs, segment, calibration):
 
     _, (t0, t1) = _parse_segment(segment)
     return flight.segment(t0, t1)
+
+
+def meta_path(csv_path) -> Path:
+    """Where ``heli import`` writes the metadata of the CSV it writes: ``flight.csv`` -> ``flight.meta.json``."""
+    csv_path = Path(csv_path)
+    return csv_path.with_name(csv_path.stem + ".meta.json")
+
+
+def _imported_from(csv_path) -> dict:
+    """``{"imported_from": {"format", "input_source"}}`` when ``heli import`` wrote this CSV from a log (its
+    ``.meta.json`` beside it names the log's format), else ``{}``: advice to import the log again with another
+    input source (``heli import --inputs``) is given only for such a flight, where it can change the outcome."""
+    import json
+
+    try:
+        meta = json.loads(meta_path(csv_path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    if not isinstance(meta, dict) or not isinstance(meta.get("format"), str):
+        return {}
+    return {"imported_from": {"format": meta["format"], "input_source": str(meta.get("input_source", ""))}}
 
 
 def _check_regular_file(path: Path) -> None:
