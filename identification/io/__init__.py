@@ -33,7 +33,7 @@ from .errors import (
 __all__ = [
     "read_csv_flight", "read_servo_csv", "sticks_from_servos", "write_csv_flight", "read_flight", "read_log",
     "detect_format", "list_logs", "LogFormatError", "DamagedLogError", "MissingStreamError", "InputSourceError",
-    "LogSelectionError", "NotAirborneError", "SegmentError", "InsufficientLogError", "FORMATS",
+    "LogSelectionError", "NotAirborneError", "SegmentError", "InsufficientLogError", "FORMATS", "meta_path",
 ]
 
 FORMATS = ("csv", "px4-ulog", "ardupilot-dataflash", "ardupilot-dataflash-text", "blackbox")
