@@ -108,14 +108,11 @@ def heldout_ahead_r2(identifier, flight: Flight, folds: int = 4, horizon_s: floa
     ValueError
         Fewer than 2 folds, or blocks shorter than 20 s.
     """
-    from .ml_estimator import BURN_IN
-
     if folds < 2 or flight.duration / folds < 20.0:
         raise ValueError(f"need at least 2 folds of 20 s each; got {folds} folds of a {flight.duration:.1f} s flight")
     edges = np.linspace(flight.time[0], flight.time[-1], folds + 1)
     blocks = [flight.segment(edges[i], edges[i + 1]) for i in range(folds)]
-    horizon = max(1, int(round(horizon_s * flight.sample_rate)))
-    burn = int(round(BURN_IN * flight.sample_rate))
+    horizon, burn = _samples(horizon_s, flight.sample_rate)
     out = {axis: [] for axis in identifier.axes}
     for i, block in enumerate(blocks):
         fitted = _clone(identifier).fit([b for j, b in enumerate(blocks) if j != i])
@@ -123,6 +120,13 @@ def heldout_ahead_r2(identifier, flight: Flight, folds: int = 4, horizon_s: floa
         for axis, fit in fitted.axes_.items():  # the block's offset is the model's: it was not fitted on it
             out[axis].append(_axis_r2(fitted, axis, fit, cleaned, burn, horizon))
     return out
+
+
+def _samples(horizon_s: float, sample_rate: float) -> tuple[int, int]:
+    """The prediction horizon (at least one sample) and the likelihood's burn-in, in samples of the flight."""
+    from .ml_estimator import BURN_IN
+
+    return max(1, int(round(horizon_s * sample_rate))), int(round(BURN_IN * sample_rate))
 
 
 def _clone(identifier):
@@ -163,12 +167,8 @@ def fitted_ahead_r2(identifier, flights, horizon_s: float = AHEAD_S) -> dict:
     dict
         ``{axis: r2}``, NaN for a diverged prediction (:func:`format_r2`).
     """
-    from .ml_estimator import BURN_IN
-
     flights = [flights] if isinstance(flights, Flight) else list(flights)
-    rate = flights[0].sample_rate
-    horizon = max(1, int(round(horizon_s * rate)))
-    burn = int(round(BURN_IN * rate))
+    horizon, burn = _samples(horizon_s, flights[0].sample_rate)
     cleaned = [identifier._clean(identifier.aligned(f))[0] for f in flights]
     return {axis: _axis_r2(identifier, axis, fit, cleaned, burn, horizon, own_offsets=True)
             for axis, fit in identifier.axes_.items()}
@@ -195,8 +195,5 @@ def flight_ahead_r2(identifier, flight: Flight, horizon_s: float = AHEAD_S) -> d
     dict
         ``{axis: r2}``, NaN for a diverged prediction (:func:`format_r2`).
     """
-    from .ml_estimator import BURN_IN
-
-    horizon = max(1, int(round(horizon_s * flight.sample_rate)))
-    burn = int(round(BURN_IN * flight.sample_rate))
+    horizon, burn = _samples(horizon_s, flight.sample_rate)
     return {axis: _axis_r2(identifier, axis, fit, [flight], burn, horizon) for axis, fit in identifier.axes_.items()}
