@@ -10,6 +10,8 @@ from .argtypes import number, output_path, seed, whole
 from .model_gate import add_accept_option, check_model
 
 FIRMWARE_CHOICES = ("ardupilot", "rotorflight")
+OWN_FORMATS = {"ardupilot": ("ardupilot-dataflash", "ardupilot-dataflash-text"), "rotorflight": ("blackbox",)}
+"""The log formats each firmware writes (``identification.io.detect_format``'s names)."""
 
 
 def _scale(text):
@@ -92,14 +94,34 @@ def _flown_gains(args, spec):
         params, notes = spec.params_from(values, str(path), from_file=(kind == "file"))
         return params, notes, str(path)
     fmt = detect_format(args.log)
-    wanted = {"ardupilot": ("ardupilot-dataflash", "ardupilot-dataflash-text"), "rotorflight": ("blackbox",)}
-    if fmt not in wanted[spec.name]:
+    if fmt not in OWN_FORMATS[spec.name]:
         kind = "a CSV flight holds no parameters" if fmt == "csv" else f"{args.log} is a {fmt} log, not {spec.name}'s"
         raise FirmwareParamError(f"{kind}: give the gains the aircraft flew with --params FILE "
                                  f"({'NAME,VALUE lines' if spec.name == 'ardupilot' else 'CLI set lines'})")
     values, _ = spec.read(args.log)
     params, notes = spec.params_from(values, str(args.log), from_file=False)
     return params, notes, str(args.log)
+
+
+def _own_log(args, spec) -> str | None:
+    """None when LOG is the tuned firmware's own log or a CSV flight, else why its controller output and desired
+    attitude are not the firmware's (a log of another firmware given with ``--params``: its flight is used, its
+    output units and attitude target are not)."""
+    from controllers.firmware.errors import FirmwareParamError
+    from identification.io import detect_format
+
+    fmt = detect_format(args.log)
+    if fmt == "csv":
+        return None
+    why = f"{args.log} is a {fmt} log, not {spec.name}'s"
+    if fmt not in OWN_FORMATS[spec.name]:
+        return why
+    if fmt == "blackbox":
+        try:
+            spec.read(args.log)  # a Betaflight blackbox is refused here as not Rotorflight's
+        except FirmwareParamError:
+            return why
+    return None
 
 
 def _check_mapping(spec, current, sample_rate: float, params=None) -> None:
@@ -110,8 +132,30 @@ def _check_mapping(spec, current, sample_rate: float, params=None) -> None:
     spec.loop_class(current, 1.0, signs).substeps(1.0 / sample_rate)
 
 
+def _checked_log(args, spec, progress):
+    """The flight in LOG, read and checked before any work, with ``--model`` too: ``(Flight or None, input source)``.
+
+    LOG gives the gains (without ``--params``), the command scale (without ``--scale``) and what the log flew
+    against its desired attitude; with ``--model`` it is still read whole by the one loader
+    (:func:`identification.io.read_log`, its whole length: a flight that never left the ground still gives its
+    parameters), so a truncated, damaged or foreign file is refused in one line instead of tuning on and
+    falling back to defaults in silence. An ArduPilot text log holds no flight by design (no body rates); its
+    ``PARM`` messages are what is read of it.
+    """
+    from identification.io import detect_format, read_log
+
+    fmt = detect_format(args.log)
+    if fmt == "ardupilot-dataflash-text":
+        if spec.name == "ardupilot":
+            spec.read(args.log)  # refuses a text log without PARM messages
+        return None, None
+    progress.stage(f"reading {args.log}")
+    flight = read_log(args.log, segment="all" if args.model is not None else None)
+    return flight, flight.metadata.get("input_source")
+
+
 def _model(args, spec, current, progress):
-    """``(EnvModel, model folder, the input source the model was identified on or None, segment or None)``."""
+    """``(EnvModel, model folder, the input source of LOG's flight or None, segment or None)``."""
     from heli_env.model_dir import load_env_model
 
     if args.model is not None:
@@ -120,12 +164,15 @@ def _model(args, spec, current, progress):
         check_model(args, "tune firmware gains on it")
         env_model = load_env_model(args.model)
         _check_mapping(spec, current, env_model.sample_rate, env_model.params)
-        return env_model, Path(args.model), None, None
-    from identification.io import read_flight
+        _, source = _checked_log(args, spec, progress)
+        return env_model, Path(args.model), source, None
     from identification.report import identify_and_report, source_entry
 
-    progress.stage(f"reading {args.log}")
-    flight = read_flight(args.log)
+    flight, _ = _checked_log(args, spec, progress)
+    if flight is None:
+        from identification.io import read_flight
+
+        read_flight(args.log)  # an ArduPilot text log: refused here, saying what it holds and lacks
     _check_mapping(spec, current, flight.sample_rate)
     folder = Path(args.out) / "model"
     delay = None if args.delay == "none" else args.delay
@@ -139,8 +186,8 @@ def _model(args, spec, current, progress):
 
 def run(args) -> int:
     from controllers.firmware.firmwares import FIRMWARES
-    from controllers.firmware.flown import flown_errors
-    from controllers.firmware.scale import measure_scale, user_scale
+    from controllers.firmware.flown import FlownErrors, flown_errors
+    from controllers.firmware.scale import default_scale, measure_scale, user_scale
     from controllers.firmware.tune import TuneConfig, tune_gains
     from controllers.firmware.tune_output import write_outputs
 
@@ -153,12 +200,19 @@ def run(args) -> int:
     progress = progress_of(args)
     env_model, folder, input_source, segment = _model(args, spec, current, progress)
     progress.stage("measuring the command scale" if args.scale is None else "using the given command scale")
-    scale = user_scale(args.scale) if args.scale is not None else measure_scale(args.log, input_source)
+    foreign = _own_log(args, spec)
+    if args.scale is not None:
+        scale = user_scale(args.scale)
+    elif foreign:
+        scale = default_scale(f"{foreign}: its controller output is in another firmware's units")
+    else:
+        scale = measure_scale(args.log, input_source)
     cfg = TuneConfig(window_s=args.window, candidates=args.candidates, seed=args.seed, sensors=not args.no_sensors,
                      progress=progress.bars)
     result = tune_gains(env_model, spec, current, scale, cfg, stage=progress.stage)
     result.notes[:0] = [f"gains read from {source}: {n}" for n in read_notes]
-    flown = flown_errors(args.log, segment)
+    flown = (FlownErrors(False, f"{foreign}: what it flew is another firmware's loop") if foreign
+             else flown_errors(args.log, segment))
     progress.stage("writing the parameter files, tune.json and the report")
     context = [f"Model: `{folder}`; flight: `{args.log}`; gains flown: `{source}`."]
     paths = write_outputs(result, args.out, flown, context, plots=not args.no_plots,

@@ -54,6 +54,53 @@ def test_a_log_of_the_other_firmware_is_refused(tmp_path, capsys, ideal_model_di
               str(ideal_model_dir), "--out", str(out)], capsys, "ardupilot-dataflash log, not rotorflight's", out)
 
 
+@pytest.mark.parametrize("firmware, content, match", [
+    ("rotorflight", "ATC_RAT_RLL_P,0.05\nATC_ANG_RLL_P,4.5\n", "an ArduPilot parameter file (line 1"),
+    ("rotorflight", "# nothing\nsave\n", "no 'set name = value' line"),
+    ("ardupilot", "set roll_p_gain = 50\n", "a Rotorflight CLI line"),
+    ("ardupilot", "# only a comment\n", "no 'NAME,VALUE' line"),
+])
+def test_the_other_firmwares_file_or_an_empty_one_is_refused(tmp_path, capsys, flight_csv, ideal_model_dir, firmware,
+                                                              content, match):
+    """A parameter file of the other firmware, or one without any setting, would tune from the defaults in silence."""
+    params = tmp_path / "flown.txt"
+    params.write_text(content)
+    out = tmp_path / "out"
+    _refused(["tune", str(flight_csv), "--firmware", firmware, "--model", str(ideal_model_dir), "--params",
+              str(params), "--out", str(out)], capsys, match, out)
+
+
+@pytest.mark.parametrize("content, match", [
+    (b"time,p\nfoo,bar\n", "FlightLogError"),
+    (b"\x9aX\x89y\xf2<\xda\x99" * 50, "LogFormatError: "),
+])
+def test_with_model_and_params_the_log_is_still_read(tmp_path, capsys, ideal_model_dir, ap_params, content, match):
+    """LOG gives the scale and what the log flew even when --model and --params give the rest: a file that does not
+    read as a flight is refused before any work, as it is without them."""
+    log = tmp_path / "flight.csv"
+    log.write_bytes(content)
+    out = tmp_path / "out"
+    _refused(["-q", "tune", str(log), "--firmware", "ardupilot", "--model", str(ideal_model_dir), "--params",
+              str(ap_params), "--scale", "12", "--out", str(out)], capsys, match, out)
+
+
+@pytest.mark.skipif(not LOGS.is_dir(), reason="the shared real-log fixtures are absent")
+def test_a_log_of_another_firmware_gives_neither_scale_nor_flown_errors(flight_csv):
+    """Given with --params, another firmware's log is a flight: its output units and attitude target are not the
+    tuned firmware's, so neither the scale nor 'what the log flew' is taken from it."""
+    from argparse import Namespace
+
+    from controllers.firmware.firmwares import FIRMWARES
+    from heli_cli.tune import _own_log
+
+    ap = Namespace(log=str(LOGS / "ardupilot_copter_log171.bin"))
+    rf = Namespace(log=str(LOGS / "rotorflight_k110_LOG246.TXT"))
+    assert _own_log(ap, FIRMWARES["ardupilot"]) is None and _own_log(rf, FIRMWARES["rotorflight"]) is None
+    assert "not rotorflight's" in _own_log(ap, FIRMWARES["rotorflight"])
+    assert "not ardupilot's" in _own_log(rf, FIRMWARES["ardupilot"])
+    assert _own_log(Namespace(log=str(flight_csv)), FIRMWARES["rotorflight"]) is None
+
+
 def test_a_missing_model_and_a_bad_scale_are_refused(tmp_path, capsys, flight_csv, ap_params):
     out = tmp_path / "out"
     _refused(["tune", str(flight_csv), "--firmware", "ardupilot", "--model", str(tmp_path / "nope"), "--params",

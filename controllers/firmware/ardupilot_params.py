@@ -77,13 +77,23 @@ def _parse_float(text: str, where: str) -> float:
 
 
 def parse_param_text(text: str, name: str) -> dict:
-    """``{NAME: value}`` of a parameter file's text (module docstring); malformed lines are an error."""
+    """``{NAME: value}`` of a parameter file's text (module docstring).
+
+    Raises
+    ------
+    FirmwareParamError
+        A malformed line (a Rotorflight/Betaflight CLI ``set`` line is named as such), or no parameter at all:
+        taking every gain at its default would tune from gains the aircraft never flew.
+    """
     values = {}
     for number, raw in enumerate(text.splitlines(), start=1):
         line = raw.split("#", 1)[0].strip()
         if not line:
             continue
         where = f"{name} line {number}"
+        if re.match(r"^set\s+[a-z]", line):
+            raise FirmwareParamError(f"{where}: a Rotorflight CLI line ({raw.strip()!r}), not ArduPilot's "
+                                     "'NAME,VALUE': tune Rotorflight gains with --firmware rotorflight")
         parts = [p for p in re.split(r"[,\s]+", line) if p]
         if len(parts) == 5 and parts[0].isdigit() and parts[1].isdigit():  # QGroundControl
             parts = parts[2:4]
@@ -94,6 +104,9 @@ def parse_param_text(text: str, name: str) -> dict:
             raise FirmwareParamError(f"{where}: {key!r} is not an ArduPilot parameter name (expected upper-case "
                                      "letters, digits and '_', at most 16 characters)")
         values[key] = _parse_float(parts[1], where)
+    if not values:
+        raise FirmwareParamError(f"{name}: no 'NAME,VALUE' line: expected an ArduPilot parameter file (Mission "
+                                 "Planner, MAVProxy or QGroundControl)")
     return values
 
 

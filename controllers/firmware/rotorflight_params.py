@@ -57,12 +57,26 @@ def _number_list(text: str, where: str) -> list:
         raise FirmwareParamError(f"{where}: expected a number or numbers separated by ',', got {text.strip()!r}") from e
 
 
+_ARDUPILOT_LINE = re.compile(r"^[A-Z][A-Z0-9_]{0,15}\s*[,\s]\s*[-+0-9.eE]+$")
+"""A line of an ArduPilot parameter file (``NAME,VALUE`` or ``NAME VALUE``), refused in a Rotorflight file."""
+
+
 def parse_cli_text(text: str, name: str) -> dict:
-    """``{name: value or list}`` of a CLI file's ``set`` lines (profile 0 where profiles are given)."""
-    values, profile = {}, 0
+    """``{name: value or list}`` of a CLI file's ``set`` lines (profile 0 where profiles are given).
+
+    Raises
+    ------
+    FirmwareParamError
+        A malformed ``set`` line, or a text without any ``set`` line: an ArduPilot parameter file (its
+        ``NAME,VALUE`` lines are named) or no settings at all. Taking every setting at its default would tune
+        from gains the aircraft never flew.
+    """
+    values, profile, sets, foreign = {}, 0, 0, None
     for number, raw in enumerate(text.splitlines(), start=1):
         line = raw.split("#", 1)[0].strip()
         where = f"{name} line {number}"
+        if foreign is None and _ARDUPILOT_LINE.match(line):
+            foreign = (number, line)
         m = re.match(r"^profile\s+(\d+)$", line)
         if m:
             profile = int(m.group(1))
@@ -72,11 +86,18 @@ def parse_cli_text(text: str, name: str) -> dict:
         m = re.match(r"^set\s+([a-z][a-z0-9_]*)\s*=\s*(\S.*)$", line)
         if not m:
             raise FirmwareParamError(f"{where}: expected 'set name = value', got {raw.strip()!r}")
+        sets += 1
         if profile != 0:
             continue
         key, value = m.group(1), m.group(2).strip()
         parts = _number_list(value, where) if re.match(r"^[-0-9.,\s]+$", value) else None
         values[key] = value if parts is None else (parts[0] if len(parts) == 1 else parts)
+    if not sets:
+        if foreign is not None:
+            raise FirmwareParamError(f"{name}: an ArduPilot parameter file (line {foreign[0]}: {foreign[1]!r}), not a "
+                                     "Rotorflight CLI file: tune ArduPilot gains with --firmware ardupilot, or give "
+                                     "the CLI's 'diff' ('set name = value' lines)")
+        raise FirmwareParamError(f"{name}: no 'set name = value' line: expected a Rotorflight CLI 'diff' or 'dump'")
     return values
 
 
