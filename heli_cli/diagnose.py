@@ -144,9 +144,10 @@ def _run_ml(args, flight, model, document, source, progress) -> int:
                                   plots=not args.no_plots, diagnoser=diagnoser, wait=not args.no_wait)
     progress.done()
     from identification.ahead_prediction import format_r2
+    from identification.ml_diagnosis_report import heldout_change
 
     _print_run(run_, lambda s: (
         f"LR {s.lr:.1f} > {s.threshold:.1f}; 0.5 s-ahead R² {format_r2(s.r2_before['ahead_0.5s'])} -> "
-        f"{format_r2(s.r2_after['ahead_0.5s'])}; "
+        f"{format_r2(s.r2_after['ahead_0.5s'])} (held out {heldout_change(s.r2_before, s.r2_after)}); "
         + (f"runner-up {s.runner_up} (LR {s.runner_up_lr:.1f})" if s.runner_up else "no runner-up")))
     return _write_html(run_)

@@ -48,6 +48,14 @@ def ahead_r2(like: AxisLikelihood, x, theta, horizon: int) -> float:
     ``x_{k+h|k} = Ad^h (x_{k|k} - F_k) + F_{k+h}`` with ``F`` the response from rest
     to the known inputs: the gust estimate decays as the wind model says.
     """
+    num, den = _ahead_sums(like, x, theta, horizon)
+    r2 = 1.0 - num / (den or 1.0)
+    return math.nan if is_diverged(r2) else r2
+
+
+def _ahead_sums(like: AxisLikelihood, x, theta, horizon: int) -> tuple[float, float]:
+    """The squared ``horizon``-ahead prediction errors and the squared deviations of the rate from its mean,
+    each summed over the flights of ``like`` after the burn-in (:func:`ahead_r2` is ``1 - num / den``)."""
     d = like.data
     Ad, g0, g1, Qd = like.discrete(x)
     _, L, _ = kalman(Ad, Qd)
@@ -69,6 +77,33 @@ def ahead_r2(like: AxisLikelihood, x, theta, horizon: int) -> float:
             keep = slice(d.burn, None)
             num += float(np.sum((target - p)[keep] ** 2))
             den += float(np.sum((target[keep] - target[keep].mean()) ** 2))
+    return num, den
+
+
+def blocked_ahead_r2(identifier, a: int, names, blocks, burn: int, tau: float, x0, kind: str, nfev: int,
+                     horizon: int) -> float:
+    """The ``horizon``-ahead prediction R² of one axis' structure on data the fit did not see: each of
+    ``blocks`` (contiguous pieces of one flight, sticks already aligned) predicted by the structure fitted on
+    the others, the errors pooled over the blocks; NaN when a prediction diverged.
+
+    Each fit is searched from ``x0`` (the structure's fit on the whole flight) with ``nfev`` evaluations, the
+    wind model ``kind``, servo delay ``tau`` and the identifier's input hold held; the held-out block's offset
+    is the mean of the fitted blocks' (it was not fitted on it), as in :func:`heldout_ahead_r2`.
+    """
+    names = tuple(names)
+    num = den = 0.0
+    for i, block in enumerate(blocks):
+        train = [b for j, b in enumerate(blocks) if j != i]
+        _, x, kind_i, _ = identifier._best(a, names, train, burn, tau, x0, (kind,), True, nfev)
+        data = identifier._axis_data(a, names, train, burn, tau, kind_i)[0]
+        like = AxisLikelihood(data)
+        _, theta, _ = like.solve_linear(x)
+        fitted = dict(zip(data.names, theta))
+        offsets = [v for n, v in fitted.items() if "@" in n]
+        held = identifier._axis_data(a, names, [block], burn, tau, kind_i)[0]
+        theta_held = np.array([np.mean(offsets) if "@" in n else fitted[n] for n in held.names])
+        b_num, b_den = _ahead_sums(AxisLikelihood(held), x, theta_held, horizon)
+        num, den = num + b_num, den + b_den
     r2 = 1.0 - num / (den or 1.0)
     return math.nan if is_diverged(r2) else r2
 

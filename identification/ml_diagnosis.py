@@ -46,7 +46,8 @@ from heli_core.terms import AXES, DECOUPLED, RATE_DEPENDENCE, STICK_ROW, TERMS
 
 from .effects import CATALOGUE, MAX_ALIGNMENT, NONE, SERVO_DELAY, UNDECIDED, DiagnosisResult, implausible, shift_inputs
 from .flight import Flight
-from .ahead_prediction import AHEAD_S, ahead_r2
+from .ahead_prediction import AHEAD_S, ahead_r2, blocked_ahead_r2
+from .axis_pool import check_workers, in_worker, map_axes
 from .axis_likelihood import AxisLikelihood as _AxisLikelihood
 from .fit_warnings import on_static_input, static_collective
 from .input_hold import check_hold
@@ -97,6 +98,12 @@ into a likelihood: on effect-free flights of the autopilot bench cell the alignm
 NFEV = 12
 """Likelihood searches' evaluation budget per candidate (warm-started from the axis' current fit; each
 Jacobian costs one evaluation per nonlinear parameter more)."""
+HELDOUT_BLOCKS = 3
+"""Contiguous blocks a candidate about to be accepted is checked on, each predicted by the structure fitted on
+the others (:func:`~identification.ahead_prediction.blocked_ahead_r2`); blocks shorter than
+:data:`MIN_BLOCK_S` are not cut, and the check is then left out (the step's ``"heldout_0.5s"`` R² None)."""
+MIN_BLOCK_S = 20.0
+"""Shortest held-out block [s]."""
 
 
 @dataclass
@@ -171,14 +178,16 @@ def _fresh(x) -> np.ndarray:
                      float(x[HOLD_INDEX])])
 
 
-def _predicts_worse(before: dict, after: dict, of_rates: bool = False) -> str | None:
+def _predicts_worse(before: dict, after: dict, of_rates: bool = False, key: str = "ahead_0.5s",
+                    where: str = "") -> str | None:
     """Why a candidate's model predicts worse than the base ``AHEAD_S`` ahead, or None; ``of_rates``: the
-    candidate adds terms of the measured rates (:data:`AHEAD_R2_TOLERANCE`)."""
-    b, c = before.get("ahead_0.5s"), after.get("ahead_0.5s")
+    candidate adds terms of the measured rates (:data:`AHEAD_R2_TOLERANCE`); ``key`` the R² compared (in the
+    fit, or ``"heldout_0.5s"`` on blocks the fit did not see, ``where`` saying so)."""
+    b, c = before.get(key), after.get(key)
     if c is None or not np.isfinite(c):
-        return f"its {AHEAD_S:g} s-ahead prediction diverges"
+        return f"its {AHEAD_S:g} s-ahead prediction{where} diverges"
     if b is not None and np.isfinite(b) and c < b - AHEAD_R2_TOLERANCE[int(of_rates)]:
-        return f"it lowers the {AHEAD_S:g} s-ahead prediction R² from {b:.3f} to {c:.3f}"
+        return f"it lowers the {AHEAD_S:g} s-ahead prediction R²{where} from {b:.3f} to {c:.3f}"
     return None
 
 
@@ -207,6 +216,10 @@ class LikelihoodDiagnoser(DiagnosisResult):
     progress : callable or None
         Called with a few words as each step of the fit starts (``"round 1, roll: trying cross_coupling"``),
         e.g. to show progress; None (default) shows nothing.
+    workers : int or None
+        Processes the axes are fitted and their candidates scored in, side by side
+        (:mod:`identification.axis_pool`; the result is the same bit for bit): None (default) every core this
+        process may use, capped by ``HELI_WORKERS``; 1 one after another.
 
     Attributes
     ----------
@@ -237,7 +250,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
 
     def __init__(self, alpha: float = ALPHA, min_lr_per_parameter: float = MIN_LR_PER_PARAMETER,
                  max_rounds: int = 3, min_duration: float = MIN_DURATION, input_hold: str = "auto", axes=AXES,
-                 min_lr_alignment: float = MIN_LR_ALIGNMENT, progress=None):
+                 min_lr_alignment: float = MIN_LR_ALIGNMENT, progress=None, workers=None):
         self.alpha = alpha
         self.min_lr_per_parameter = min_lr_per_parameter
         self.min_lr_alignment = min_lr_alignment
@@ -246,9 +259,10 @@ class LikelihoodDiagnoser(DiagnosisResult):
         self.input_hold = input_hold
         self.axes = axes
         self.progress = progress
+        self.workers = workers
 
     def _say(self, text: str) -> None:
-        if self.progress is not None:
+        if self.progress is not None and not in_worker():  # a worker's axis: the caller's line stands
             self.progress(text)
 
     def _check(self):
@@ -260,6 +274,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
         if not (isinstance(self.max_rounds, (int, np.integer)) and self.max_rounds >= 1):
             raise ValueError(f"max_rounds must be a whole number >= 1, got {self.max_rounds!r}")
         check_hold(self.input_hold)
+        check_workers(self.workers)
         bad = [a for a in self.axes if a not in AXES]
         if bad or not self.axes:
             raise ValueError(f"axes must be a non-empty subset of {AXES}, got {self.axes!r}")
@@ -312,6 +327,23 @@ class LikelihoodDiagnoser(DiagnosisResult):
                     "ahead_0.5s": ahead_r2(like, np.array(score.x), theta, int(round(AHEAD_S * self._fs))),
                     "simulation": fit.r2}
         return score
+
+    def _heldout(self, a, score: AxisScore) -> None:
+        """Add to ``score.r2`` its ``AHEAD_S``-ahead R² on :data:`HELDOUT_BLOCKS` blocks of the flight, each
+        predicted by the structure fitted on the others (``"heldout_0.5s"``; None when the flight is too short
+        to cut, the check then left out)."""
+        if "heldout_0.5s" in score.r2:
+            return
+        flight = self._shifted(a, score.alignment)
+        if flight.duration / HELDOUT_BLOCKS < MIN_BLOCK_S:
+            score.r2["heldout_0.5s"] = None
+            return
+        edges = np.linspace(flight.time[0], flight.time[-1], HELDOUT_BLOCKS + 1)
+        blocks = [flight.segment(edges[i], edges[i + 1]) for i in range(HELDOUT_BLOCKS)]
+        with np.errstate(all="ignore"):
+            score.r2["heldout_0.5s"] = blocked_ahead_r2(
+                self._ident, a, score.names, blocks, self._burn, max(score.alignment, 0.0), score.x, score.kind,
+                NFEV, int(round(AHEAD_S * self._fs)))
 
     def _alignment_candidate(self, a, base: AxisScore) -> AxisScore:
         """The best alignment: a scan with the wind and damping held (linear parameters solved), then a
@@ -389,7 +421,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
         self.input_hold_ = self.input_hold
         self.hold_fractions_ = {}
         self.hold_decision_ = None
-        self._ident = MaximumLikelihoodIdentifier(input_hold=self.input_hold_)
+        self._ident = MaximumLikelihoodIdentifier(input_hold=self.input_hold_, workers=self.workers)
         cleaned, _ = self._ident._clean(flight)
         self._flight = cleaned
         self._fs = flight.sample_rate
@@ -422,7 +454,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
         todo = list(self.axes)
         for rnd in range(1, self.max_rounds + 1):
             rows = []
-            todo = [axis for axis in todo if self._round_on_axis(rnd, axis, current, rows)]
+            todo = self._round(rnd, todo, current, rows)
             self.rounds_.append(rows)
             if not todo:
                 break
@@ -432,12 +464,12 @@ class LikelihoodDiagnoser(DiagnosisResult):
         self._final_fit(cleaned, current)
         self.verdict_ = "found" if self.steps_ else NONE
 
-    @staticmethod
-    def _fit_structure(cleaned: Flight, structure: dict, alignment, axes, hold) -> MaximumLikelihoodIdentifier:
+    def _fit_structure(self, cleaned: Flight, structure: dict, alignment, axes, hold) -> MaximumLikelihoodIdentifier:
         """``structure`` fitted in full by maximum likelihood on the cleaned flight at ``alignment`` (positive:
         servo delays; negative: the sticks advanced), the input's ``hold`` as given."""
         est = MaximumLikelihoodIdentifier(structure=structure, delay=[max(v, 0.0) for v in alignment], axes=axes,
-                                          input_hold=hold, remove_vibration=False)  # cleaned already
+                                          input_hold=hold, remove_vibration=False,  # cleaned already
+                                          workers=self.workers)
         shifts = [min(v, 0.0) for v in alignment]
         est._fit([shift_inputs(cleaned, shifts) if min(shifts) < 0 else cleaned])
         return est
@@ -454,7 +486,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
         est = self._fit_structure(cleaned, full, alignment, self.axes, "auto")
         self.input_hold_ = float(est.hold_decision_["fraction"])
         self.hold_decision_ = est.hold_decision_
-        self._ident = MaximumLikelihoodIdentifier(input_hold=self.input_hold_)
+        self._ident = MaximumLikelihoodIdentifier(input_hold=self.input_hold_, workers=self.workers)
 
     def _baseline(self, cleaned: Flight, structure: dict, alignment: list) -> dict:
         """Each diagnosed axis' starting structure fitted in full, scored by the candidates' likelihood."""
@@ -465,6 +497,37 @@ class LikelihoodDiagnoser(DiagnosisResult):
             fit = start.axes_[axis]  # the same likelihood as the candidates': evaluated here, on the same data
             current[axis] = self._score(a, structure[a], alignment[a], fit.state, (fit.wind["model"],), 0)
         return current
+
+    def _round(self, rnd: int, todo: list, current: dict, rows: list) -> list:
+        """One round on the axes of ``todo``, side by side (:mod:`identification.axis_pool`: an axis' candidates
+        depend on its own fit only), merged in the axes' order. Returns the axes that changed."""
+
+        def one(axis):
+            n_steps, n_found = len(self.steps_), len(self.effects_found_)
+            mine, own_rows = dict(current), []
+            changed = self._round_on_axis(rnd, axis, mine, own_rows)
+            out = changed, mine[axis], own_rows, self.steps_[n_steps:], self.effects_found_[n_found:]
+            del self.steps_[n_steps:], self.effects_found_[n_found:]  # merged below, as a worker's would be
+            return out
+
+        waiting = list(todo)
+
+        def finished(axis):
+            waiting.remove(axis)
+            if waiting:
+                self._say(f"round {rnd}: {axis} done, every candidate on {', '.join(waiting)}")
+
+        if len(todo) > 1:
+            self._say(f"round {rnd}: every candidate on {', '.join(todo)}")
+        changed = []
+        for axis, (moved, score, own_rows, steps, found) in zip(todo, map_axes(one, todo, self.workers, finished)):
+            current[axis] = score
+            rows += own_rows
+            self.steps_ += steps
+            self.effects_found_ += found
+            if moved:
+                changed.append(axis)
+        return changed
 
     def _round_on_axis(self, rnd: int, axis: str, current: dict, rows: list) -> bool:
         """One round on one axis: every candidate scored into ``rows``, the best accepted one added to
@@ -498,6 +561,12 @@ class LikelihoodDiagnoser(DiagnosisResult):
             after = self._describe(a, scored[0][3])
             of_rates = any(TERMS[p].feature in RATE_DEPENDENCE for p in scored[0][3].names if p not in base.names)
             worse = _predicts_worse(base.r2, after.r2, of_rates)
+            if worse is None:
+                self._say(f"round {rnd}, {axis}: checking {scored[0][1]} on held-out blocks")
+                self._heldout(a, base)
+                self._heldout(a, after)
+                if after.r2["heldout_0.5s"] is not None:
+                    worse = _predicts_worse(base.r2, after.r2, of_rates, "heldout_0.5s", " on held-out blocks")
             if worse is None:
                 break
             row = next(r for r in rows if r["effect"] == scored[0][1] and r["axis"] == axis)

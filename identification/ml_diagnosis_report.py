@@ -83,6 +83,14 @@ def _r2(r: dict) -> str:
             f"{format_r2(r.get('simulation'))}")
 
 
+def heldout_change(before: dict, after: dict) -> str:
+    """A step's ``AHEAD_S``-ahead R² on held-out blocks, before -> after, or why it was not checked."""
+    b, a = before.get("heldout_0.5s"), after.get("heldout_0.5s")
+    if a is None:
+        return "not checked (flight too short to cut into blocks)"
+    return f"{format_r2(b)} -> {format_r2(a)}"
+
+
 HELD = 0.5
 """A hold fraction below this reads as sticks held over each sample (0 held, 1 interpolated)."""
 
@@ -126,13 +134,16 @@ def diagnosis_markdown(d: LikelihoodDiagnoser, figure: Path | None, verdict: Mod
         md += [f"- `{name}`: {why}" for name, why in d.untestable_.items()] + [""]
     if d.steps_:
         md += ["## Effects added", "",
-               f"R² columns: one-step prediction / {AHEAD_S:g} s ahead / simulation from the sticks alone.", "",
+               f"R² columns: one-step prediction / {AHEAD_S:g} s ahead / simulation from the sticks alone; "
+               f"held out: the {AHEAD_S:g} s-ahead R² of blocks of the flight each predicted by the structure "
+               "fitted on the others (an effect is added only when neither gets worse).", "",
                _table(["Round", "Axis", "Effect", "Parameters", "LR", "threshold", "runner-up (LR)", "R² before",
-                       "R² after"],
+                       "R² after", "held out"],
                       [[s.round, s.axis, describe(s.effect, AXES.index(s.axis)),
                         ", ".join(f"{k} = {v:.4g}" for k, v in s.parameters.items()), f"{s.lr:.1f}",
                         f"{s.threshold:.1f}", f"{s.runner_up} ({s.runner_up_lr:.1f})" if s.runner_up else "—",
-                        _r2(s.r2_before), _r2(s.r2_after)] for s in d.steps_]), ""]
+                        _r2(s.r2_before), _r2(s.r2_after), heldout_change(s.r2_before, s.r2_after)]
+                       for s in d.steps_]), ""]
     for i, rows in enumerate(d.rounds_, start=1):
         md += [f"## Candidates, round {i}", "",
                _table(["Axis", "Effect", "k", "LR", "threshold", "alignment (s)", "accepted"],

@@ -65,6 +65,7 @@ from heli_core.servo import pade_filter, per_axis
 from heli_core.terms import AXES, DECOUPLED, FEATURES, RATE_DEPENDENCE, STICK_ROW, TERMS
 
 from .axis_likelihood import AxisData, AxisLikelihood, simulation_r2
+from .axis_pool import check_workers, map_axes
 from .effects import shift_inputs
 from .errors import IdentifiabilityError, NotFittedError
 from .fit_warnings import on_static_input, require_moving_sticks, static_collective
@@ -161,6 +162,10 @@ class MaximumLikelihoodIdentifier:
         The servo's first-order lag per axis [s] (None: none); "auto" profiles the likelihood over
         :data:`identification.servo_lag.LAG_GRID` (the delay searched with it when ``delay="auto"``) and keeps
         the best lag only where the data support it (:func:`identification.servo_lag.profile_lag`).
+    workers : int or None
+        Processes the axes are fitted in side by side (:mod:`identification.axis_pool`; the result is the
+        same bit for bit): None (default) every core this process may use, capped by ``HELI_WORKERS``; 1 one
+        after another.
 
     Attributes
     ----------
@@ -187,7 +192,7 @@ class MaximumLikelihoodIdentifier:
     def __init__(self, structure="decoupled", extra_terms=(), input_hold="auto", delay=None,
                  delay_grid=None, wind_model: str = "auto", remove_vibration: bool = True,
                  vibration_min_hz: float = 8.0, axes=AXES, max_nfev: int = 100, select_terms: bool = False,
-                 servo_lag=None):
+                 servo_lag=None, workers=None):
         self.structure = structure
         self.extra_terms = extra_terms
         self.input_hold = input_hold
@@ -200,6 +205,7 @@ class MaximumLikelihoodIdentifier:
         self.max_nfev = max_nfev
         self.select_terms = select_terms
         self.servo_lag = servo_lag
+        self.workers = workers
 
     # ----------------------------------------------------------------- set-up
     def _param_names(self) -> dict[int, tuple[str, ...]]:
@@ -214,6 +220,7 @@ class MaximumLikelihoodIdentifier:
     def _check_settings(self):
         self._lags()  # a bad servo_lag is named before any work
         check_hold(self.input_hold)
+        check_workers(self.workers)
         if self.wind_model not in ("auto",) + WIND_MODELS:
             raise ValueError(f"wind_model must be 'auto' or one of {WIND_MODELS}, got {self.wind_model!r}")
         if not (isinstance(self.max_nfev, (int, np.integer)) and self.max_nfev >= 5):
@@ -278,11 +285,10 @@ class MaximumLikelihoodIdentifier:
         # The integral method (Fig. 5) on the same structure is the starting point.
         start = IntegralIdentifier(structure=names, delay=0.0, axes=self.axes).fit(flights)
         delays, lags = self._delays(), self._lags()
-        fits, values = {}, {}
-        for axis_name in self.axes:
+        values = {}
+
+        def one_axis(axis_name):
             a = AXES.index(axis_name)
-            if not names.get(a):
-                continue
             fit = self._fit_axis(a, names[a], flights, burn, start.params_, delays[a], lags[a])
             whole = round(fit.delay * fs) / fs
             if fit.delay < -0.5 / fs and abs(whole - fit.delay) > 1e-9:
@@ -293,7 +299,10 @@ class MaximumLikelihoodIdentifier:
                 fit = self._supported(a, names[a], fit, flights, burn, start.params_)
             if static[a]:  # terms of an input that does not vary: not fitted, listed as dropped
                 fit = replace(fit, dropped=tuple(fit.dropped) + static[a])
-            fits[axis_name] = fit
+            return fit
+
+        fitted = [axis for axis in self.axes if names.get(AXES.index(axis))]
+        fits = dict(zip(fitted, map_axes(one_axis, fitted, self.workers)))
         self.hold_decision_ = self._decide_log_hold(fits, names, flights, burn)
         flights = self._apply_shifts(fits, flights)
         for axis_name, fit in fits.items():
@@ -315,12 +324,16 @@ class MaximumLikelihoodIdentifier:
         decision = decide_hold({a: (f.input_hold, f.input_hold_se) for a, f in fits.items()},
                                sum(f.n_samples for f in fits.values()) / len(fits))
         self._decided_hold = decision["fraction"]
-        for axis_name, fit in list(fits.items()):
-            if abs(fit.input_hold - self._decided_hold) > (fit.input_hold_se or 0.0):
-                a = AXES.index(axis_name)
-                kept = tuple(p for p in names[a] if p not in fit.dropped)
-                fits[axis_name] = self._refit(a, kept, flights, burn, fit,
-                                              tau=fit.delay if fit.delay < 0.0 else None)  # a shift stays whole
+
+        def again(axis_name):
+            fit, a = fits[axis_name], AXES.index(axis_name)
+            kept = tuple(p for p in names[a] if p not in fit.dropped)
+            # a shift stays whole
+            return self._refit(a, kept, flights, burn, fit, tau=fit.delay if fit.delay < 0.0 else None)
+
+        redo = [axis for axis, fit in fits.items()
+                if abs(fit.input_hold - self._decided_hold) > (fit.input_hold_se or 0.0)]
+        fits.update(zip(redo, map_axes(again, redo, self.workers)))
         self._decided_hold = None
         return decision
 

@@ -176,3 +176,27 @@ def test_a_timing_change_below_two_samples_is_the_logs_convention_not_a_servo_de
     delay = [r for r in d.rounds_[0] if r["effect"] == "servo_delay"][0]
     assert d.verdict_ == "none" and abs(delay["alignment_s"]) < 0.02
     assert delay["lr"] > delay["threshold"] and "below a log's timing resolution" in delay["implausible"]
+
+
+def test_an_added_effect_predicts_better_on_blocks_the_fit_did_not_see(coupled_flight):
+    d = LikelihoodDiagnoser(axes=("pitch",), max_rounds=1).fit(coupled_flight.flight)
+    assert d.effects_found_ == [("cross_coupling", "pitch")]
+    before, after = d.steps_[0].r2_before["heldout_0.5s"], d.steps_[0].r2_after["heldout_0.5s"]
+    assert after > before + 0.03  # the coupling is real: it predicts the unseen block better (0.68 -> 0.75)
+
+
+def test_a_candidate_that_predicts_held_out_blocks_worse_is_never_accepted(coupled_flight, monkeypatch):
+    import identification.ml_diagnosis as ml
+
+    real = ml.blocked_ahead_r2
+
+    def worse_with_k8(ident, a, names, *args):  # as if the coupling fitted only the blocks it saw
+        r2 = real(ident, a, names, *args)
+        return r2 - 0.2 if "k8" in names else r2
+
+    monkeypatch.setattr(ml, "blocked_ahead_r2", worse_with_k8)
+    d = LikelihoodDiagnoser(axes=("pitch",), max_rounds=1).fit(coupled_flight.flight)
+    assert ("cross_coupling", "pitch") not in d.effects_found_
+    row = next(r for r in d.rounds_[0] if r["effect"] == "cross_coupling")
+    assert row["lr"] > row["threshold"] and not row["accepted"]
+    assert "on held-out blocks" in row["implausible"]

@@ -1,0 +1,112 @@
+"""Axes fitted side by side, one process each, on the cores this process may use.
+
+Each axis' likelihood is its own: the wind-state model of an axis (eqs. 18 and 21 with its gust state) takes
+the other axes' measured rates as inputs, so the search on one axis never waits for another's, and on two
+cores a fit of three axes takes about two axes' time. The workers are forked children of the caller: they
+inherit its state (the flight, the fitted pieces, BLAS held to one thread), only the results travel back
+(pickled), and each result is the serial one bit for bit (the same code on the same data).
+
+The axes are fitted one after another when only one core is available, when ``HELI_WORKERS=1``, inside a
+process that is itself a worker (a study's process pool: no pools within pools), or where the platform
+cannot fork. A task that fails in a worker is run again in the caller, so that its exception reaches the
+user exactly as a serial fit raises it.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+from concurrent.futures import ProcessPoolExecutor, as_completed
+
+import numpy as np
+
+WORKERS_ENV = "HELI_WORKERS"
+"""Environment variable capping the number of processes the axes are fitted in (1: one after another)."""
+
+_TASK = None
+_IN_WORKER = False
+
+
+def workers_available() -> int:
+    """The cores this process may run on, capped by ``HELI_WORKERS`` when it is set.
+
+    Raises
+    ------
+    ValueError
+        ``HELI_WORKERS`` set to anything but a whole number >= 1.
+    """
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        cores = os.cpu_count() or 1
+    text = os.environ.get(WORKERS_ENV, "").strip()
+    if not text:
+        return cores
+    if not text.isdigit() or int(text) < 1:
+        raise ValueError(f"{WORKERS_ENV} must be a whole number >= 1 (1 fits the axes one after another); "
+                         f"got {text!r}")
+    return min(int(text), cores)
+
+
+def check_workers(workers) -> None:
+    """Raise ``ValueError`` unless ``workers`` is None or a whole number >= 1 (an estimator's setting)."""
+    if workers is not None and not (isinstance(workers, (int, np.integer)) and not isinstance(workers, bool)
+                                    and workers >= 1):
+        raise ValueError(f"workers must be None (every core available) or a whole number >= 1, got {workers!r}")
+
+
+def in_worker() -> bool:
+    """True inside a worker of :func:`map_axes` (where progress is the caller's to show)."""
+    return _IN_WORKER
+
+
+def map_axes(fn, items, workers: int | None = None, on_done=None) -> list:
+    """``[fn(item) for item in items]``, the items in separate forked processes when more than one core is
+    available (module docstring); the results in the order of ``items``.
+
+    Parameters
+    ----------
+    fn : callable
+        Called with one item; may be a closure or a bound method (it is inherited by the fork, never pickled).
+        Its result must pickle.
+    items : iterable
+        Typically axis names.
+    workers : int or None
+        Largest number of processes; None: :func:`workers_available`.
+    on_done : callable or None
+        Called in the caller with each item as its task ends (in the order they end), e.g. to show progress.
+    """
+    items = list(items)
+    report = on_done or (lambda item: None)
+    n = min(len(items), workers_available() if workers is None else int(workers))
+    if n <= 1 or _IN_WORKER or mp.parent_process() is not None or "fork" not in mp.get_all_start_methods():
+        out = []
+        for item in items:
+            out.append(fn(item))
+            report(item)
+        return out
+    global _TASK
+    _TASK = fn
+    try:
+        with ProcessPoolExecutor(n, mp_context=mp.get_context("fork"), initializer=_mark_worker) as pool:
+            futures = {pool.submit(_run, item): i for i, item in enumerate(items)}
+            done = [None] * len(items)
+            for future in as_completed(futures):
+                done[futures[future]] = future.result()
+                report(items[futures[future]])
+    finally:
+        _TASK = None
+    return [result if ok else fn(item) for item, (ok, result) in zip(items, done)]
+
+
+def _mark_worker() -> None:
+    global _IN_WORKER
+    _IN_WORKER = True
+
+
+def _run(item):
+    """One task in a worker: ``(True, result)``, or ``(False, None)`` when it raised (run again by the caller)."""
+    try:
+        return True, _TASK(item)
+    except Exception:  # noqa: BLE001 - re-raised by the caller's own run of the same task
+        return False, None
