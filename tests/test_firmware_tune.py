@@ -95,3 +95,24 @@ def test_a_firmware_loop_flies_through_the_evaluator(shipped):
     summary = evaluate_agent(loop, None, episodes_per_trace=1, episode_seconds=4.0, name="ardupilot").summary()
     assert summary["terminated_episodes"] == 0
     assert 0.0 < summary["axes"]["roll"]["att_p90_deg"] < 5.0
+
+
+def test_legacy_arducopter_outputs_are_converted_to_the_firmwares_unit():
+    """ArduCopter <= 3.3 logs RATE.ROut/POut against +-5000 (the importer's divisor) where the motors' full scale,
+    the unit of the later +-1 output, is +-4500: one imported unit is 0.9 of the loop's output unit."""
+    from controllers.firmware.scale import legacy_output_unit
+
+    legacy = ("RATE ROut/5000->lat, POut/5000->lon, 2*AOut/1000-1->col, YOut/4500->ped (rate-controller outputs, "
+              "ArduCopter <= 3.3 motor-mix units)")
+    assert legacy_output_unit(legacy) == (0.9, 0.9, 1.0)
+    assert legacy_output_unit("RATE ROut/1->lat, POut/1->lon, 2*AOut/1-1->col, YOut/1->ped") == (1.0, 1.0, 1.0)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not LOGS.is_dir(), reason="the shared real-log fixtures are absent")
+def test_the_scale_of_an_arducopter_3_3_log():
+    """log171 (ArduCopter 3.3, identified on its RATE outputs): the scale is 0.9, 0.9, 1, not 1 (6 s: the 3 MB log is read twice)."""
+    from controllers.firmware.scale import measure_scale
+
+    scale = measure_scale(LOGS / "ardupilot_copter_log171.bin", None)
+    assert scale.source == "identity" and scale.scale == (0.9, 0.9, 1.0)

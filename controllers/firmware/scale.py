@@ -6,7 +6,9 @@ loop outputs its own units (ArduPilot: the rate controller's normalised output, 
 …; Rotorflight: the PID sum in mixer units, logged as ``mixer[0..2]``). :func:`measure_scale` reads both from
 the same log on the same grid and fits, per axis, ``stick − mean = s·(output − mean)`` by least squares
 through the origin, with its R²: the scale [model stick per firmware unit] the loop multiplies its output
-by. A model identified on the firmware's output itself has ``s = 1`` exactly. Where the log has no output
+by. A model identified on the firmware's output itself has ``s = 1`` exactly — except on an ArduCopter <= 3.3
+log, whose roll and pitch outputs the importer scales by ±5000 where the firmware's unit is ±4500
+(:data:`LEGACY_FULL_SCALE`): there ``s = 0.9`` on roll and pitch. Where the log has no output
 stream (a CSV flight, a log without ``RATE``/``mixer``), the scale is the stated default 1, which the user
 overrides with ``heli tune --scale``.
 """
@@ -21,6 +23,13 @@ from heli_core.terms import AXES
 
 from .errors import FirmwareMappingError
 
+LEGACY_FULL_SCALE = 4500.0
+"""ArduCopter <= 3.3's full-scale motor input for roll, pitch and yaw (AP_MotorsHeli ``move_swash``: "roll :
+-4500 ~ 4500", the same for pitch and yaw), the unit the ±1 output of later versions replaced: ArduCopter 3.4's
+``convert_pid_parameters`` scales the rate gains by 1.27 = (18000/π)/4500. The rate controller clamped its
+roll and pitch output at ±5000 (``AC_ATTITUDE_RATE_RP_CONTROLLER_OUT_MAX``), which is what
+:mod:`identification.io.ardupilot` divides ``RATE.ROut``/``POut`` by (``LEGACY_RP_SCALE``; yaw by 4500): on
+such a log one imported unit is 5000/4500 of the firmware's output unit this loop flies in."""
 DEFAULT_SCALE = 1.0
 """The scale used where none can be measured: the model's stick taken as the firmware's output unit."""
 MIN_R2 = 0.5
@@ -83,6 +92,17 @@ def fit_scale(stick: np.ndarray, output: np.ndarray) -> tuple[np.ndarray, np.nda
     return s, r2
 
 
+def legacy_output_unit(mapping_note: str) -> tuple:
+    """Model stick per firmware output unit of one imported ``controller`` unit, per axis: (0.9, 0.9, 1) where
+    the importer read ArduCopter <= 3.3's ``RATE`` outputs (:data:`LEGACY_FULL_SCALE`; its mapping note names
+    the divisor), else 1."""
+    from identification.io.ardupilot import LEGACY_RP_SCALE, LEGACY_YAW_SCALE
+
+    if f"ROut/{LEGACY_RP_SCALE:g}" not in mapping_note:
+        return (1.0, 1.0, 1.0)
+    return (LEGACY_FULL_SCALE / LEGACY_RP_SCALE,) * 2 + (LEGACY_FULL_SCALE / LEGACY_YAW_SCALE,)
+
+
 def measure_scale(log_path, model_source: str | None) -> CommandScale:
     """The scale measured from ``log_path`` against the model's input source (module docstring).
 
@@ -105,7 +125,12 @@ def measure_scale(log_path, model_source: str | None) -> CommandScale:
         return default_scale(f"the log has no firmware output stream to measure the scale against ({e})")
     source = model_source or read_log(log_path).metadata.get("input_source")
     note = ctrl.metadata.get("input_mapping", "")
+    unit = legacy_output_unit(note)
     if source == "controller":
+        if unit != (1.0, 1.0, 1.0):
+            return CommandScale(unit, "identity", f"the model's sticks are the firmware's logged output ({note}); "
+                                f"ArduCopter <= 3.3 logged it against a full scale of +-{LEGACY_FULL_SCALE:g}, so one "
+                                f"imported unit is {unit[0]:.3g} of the output unit on roll and pitch")
         return CommandScale((1.0,) * 3, "identity", f"the model's sticks are the firmware's logged output ({note})")
     try:
         model = read_log(log_path, inputs=source)
@@ -119,6 +144,7 @@ def measure_scale(log_path, model_source: str | None) -> CommandScale:
     stick = np.vstack([np.interp(t, model.time, v) for v in (model.lat, model.lon, model.ped)])
     output = np.vstack([np.interp(t, ctrl.time, v) for v in (ctrl.lat, ctrl.lon, ctrl.ped)])
     s, r2 = fit_scale(stick, output)
+    s = s * np.asarray(unit)  # per imported output unit -> per firmware output unit
     notes, scale = [], []
     for a, si, ri in zip(AXES, s, r2):
         if not (np.isfinite(si) and np.isfinite(ri)) or ri < MIN_R2 or si == 0:
