@@ -334,3 +334,61 @@ def test_bad_scale_and_sets_are_refused():
         ArduPilotHeliParams(rat_p=(-1.0, 0.0, 0.0))
     with pytest.raises(ValueError, match="p gain must be finite"):
         RotorflightParams(p=(2000.0, 0.0, 0.0))
+
+
+# ---------------------------------------------------------------------- the environment at the loop's rate
+def test_the_env_at_the_tick_flies_like_the_replay(shipped):
+    """On the library held at the loop's rate (controllers.firmware.loop_rate_env) the vector environment runs at
+    the tick and the loop acts every tick through predict: the same 2 s of gusts as the replay (the physics
+    sub-stepped to the tick) to within 1e-5 rad (the observation is float32)."""
+    from controllers.firmware.autopilot import FirmwareAutopilot, fly_firmware
+    from controllers.firmware.loop_rate_env import TickAgent, held_library
+    from controllers.sweep_inputs import prepare
+    from heli_env.vector_env import HeliAttitudeVectorEnv
+
+    params = shipped.params
+    signs = tuple(np.sign(params.control_gains))
+    ap_params = _ap_params_from_names(AP_NAMES)
+    rp = prepare(shipped, "roll", 2.0, 0.01, 0, [(0, 500)], None, sensors=False)
+    auto = FirmwareAutopilot(ArduPilotHeli, [ap_params], (1.0, 1.0, 1.0), signs, 0.01)
+    (_, rec), = list(fly_firmware(params, rp.inputs, auto, progress=False))
+    replay = rec.axes[:, 0, :, 0]  # (3, 200): attitude error at each period's start
+
+    loop = ArduPilotHeli(ap_params, (1.0, 1.0, 1.0), signs)
+    held = held_library(shipped, 4)
+    assert held.sample_rate == 4 * shipped.sample_rate and held_library(shipped, 1) is shipped
+    assert_allclose(held.sensors.gyro_noise, 2.0 * np.asarray(shipped.sensors.gyro_noise))
+
+    def fly(model, agent, dt, per_period):
+        env = HeliAttitudeVectorEnv(1, model=model, dt=dt, episode_seconds=2.0, obs_noise=0.0, init_angle_deg=0.0,
+                                    init_rate_deg=0.0)
+        obs, info = env.reset(seed=0, options={"trace": 0, "offset": 500 * per_period})
+        state, errors = None, []
+        for k in range(int(round(2.0 / dt))):
+            if k % per_period == 0:
+                errors.append(np.radians(info["attitude_error_deg"][0]))
+            a, state = agent.predict(obs, state, episode_start=np.array([k == 0]))
+            obs, _, _, _, info = env.step(a)
+        return np.array(errors).T
+
+    at_tick = fly(held, TickAgent(loop), loop.dt, 4)
+    assert_allclose(at_tick, replay, atol=1e-5)
+    assert np.max(np.abs(replay)) > 1e-3  # the gusts moved it
+
+
+def test_evaluate_firmware_flies_every_tick(shipped):
+    """controllers.firmware.loop_rate_env.evaluate_firmware: the evaluator at the loop's tick on the held library,
+    a sample per tick; dt cannot be given; a rate the library's period cannot hold is refused."""
+    from controllers.firmware.loop_rate_env import evaluate_firmware
+
+    signs = tuple(np.sign(shipped.params.control_gains))
+    loop = ArduPilotHeli(ArduPilotHeliParams(), (12.0, 12.0, 1.4), signs)
+    result = evaluate_firmware(loop, shipped, episodes_per_trace=1, episode_seconds=2.0)
+    assert result.settings["dt"] == 0.0025 and result.settings["sample_rate"] == pytest.approx(400.0)
+    assert result.summary()["terminated_episodes"] == 0
+    assert result.metrics["roll"]["n_samples"] == 800 * len(result.episodes)
+    with pytest.raises(FirmwareMappingError, match="own tick"):
+        evaluate_firmware(loop, shipped, dt=0.01)
+    slow = ArduPilotHeli(ArduPilotHeliParams(loop_rate_hz=250.0), 1.0, signs)
+    with pytest.raises(FirmwareMappingError, match="whole multiple"):
+        evaluate_firmware(slow, shipped)

@@ -9,7 +9,9 @@
   firmware's output and the model's sticks, SB3's ``predict``.
 
 Both fly in the project's one batched closed loop (:func:`controllers.replay.fly`) with the physics
-sub-stepped to their own rate (:class:`controllers.firmware.autopilot.FirmwareAutopilot`).
+sub-stepped to their own rate (:class:`controllers.firmware.autopilot.FirmwareAutopilot`), and in the
+environments and the evaluator at their own tick on the library held at that rate
+(:mod:`controllers.firmware.loop_rate_env`).
 """
 
 from .ardupilot import ArduPilotHeli, ArduPilotHeliParams
