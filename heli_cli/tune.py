@@ -47,7 +47,7 @@ def register(sub):
         "SCHED_LOOP_RATE, or Rotorflight's pid_mode 3 in angle mode at its PID rate, the physics sub-stepped to "
         "it — in the identified gusts. Sweeps the firmware's gains (ArduPilot: ATC_ANG_*_P x ATC_RAT_*_P with FF "
         "from the model; Rotorflight: P x angle_level_strength with F from the model, yaw P x I), keeps the sets "
-        "with 6 dB, 45 deg and 25 ms (delay) margins, flies the best few beside the current and the default "
+        "with 6 dB, 45 deg and 25 ms (delay; --delay-margin) margins, flies the best few beside the current and the default "
         "gains, and writes DIR/ardupilot.param or DIR/rotorflight.txt (the proposed gains), the current gains to revert to, "
         "DIR/tune.json (per axis the current, default and proposed gains with their predicted p50/p90/p99 "
         "attitude error and 90 %% intervals, margins, loop rate and command scale), DIR/tune.md and tune.html "
@@ -74,6 +74,10 @@ def register(sub):
                    help="length of the gust windows flown in the time domain (default 20 s; they tile the library)")
     p.add_argument("--candidates", type=whole(1, 10), default=3,
                    help="robust candidate sets per axis flown in the time domain (default 3)")
+    p.add_argument("--delay-margin", type=number("seconds in [0, 1]", 0.0, 1.0, low_open=False, high_open=False),
+                   default=None, metavar="S",
+                   help="delay margin a robust set keeps besides 6 dB and 45 deg, in seconds (default 0.025: the "
+                   "loop survives 25 ms more servo delay than identified; 0 drops the criterion)")
     p.add_argument("--seed", type=seed(), default=0, help="seed of the windows and sensor errors (default 0)")
     p.add_argument("--no-sensors", action="store_true",
                    help="the loop reads the true state (default: through the model's identified sensors)")
@@ -207,8 +211,9 @@ def run(args) -> int:
         scale = default_scale(f"{foreign}: its controller output is in another firmware's units")
     else:
         scale = measure_scale(args.log, input_source)
+    margin = {} if args.delay_margin is None else {"delay_margin_s": args.delay_margin}
     cfg = TuneConfig(window_s=args.window, candidates=args.candidates, seed=args.seed, sensors=not args.no_sensors,
-                     progress=progress.bars)
+                     progress=progress.bars, **margin)
     result = tune_gains(env_model, spec, current, scale, cfg, stage=progress.stage)
     result.notes[:0] = [f"gains read from {source}: {n}" for n in read_notes]
     flown = (FlownErrors(False, f"{foreign}: what it flew is another firmware's loop") if foreign

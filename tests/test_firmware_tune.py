@@ -116,3 +116,24 @@ def test_the_scale_of_an_arducopter_3_3_log():
 
     scale = measure_scale(LOGS / "ardupilot_copter_log171.bin", None)
     assert scale.source == "identity" and scale.scale == (0.9, 0.9, 1.0)
+
+
+def test_the_delay_margin_criterion_and_its_option(tmp_path, flight_csv, ideal_model_dir):
+    """A robust set keeps 25 ms of delay margin by default (the agile bench aircraft's measurement in
+    docs/firmware.md); --delay-margin 0 drops the criterion, and a value outside [0, 1] s is refused by the parser."""
+    from controllers.firmware.tune import TuneConfig
+    from controllers.firmware.tune_sweep import ROBUST_DELAY_MARGIN_S, robust
+    from heli_cli.main import main
+
+    ones = np.ones(3)
+    dm = np.array([0.01, 0.03, np.inf])
+    assert ROBUST_DELAY_MARGIN_S == 0.025 and TuneConfig().delay_margin_s == 0.025
+    assert robust(ones > 0, 10 * ones, 60 * ones, dm).tolist() == [False, True, True]
+    assert robust(ones > 0, 10 * ones, 60 * ones, dm, 0.0).tolist() == [True, True, True]
+    assert _sweep(0, [1, 2], [1, 1], [1.0, 1.0]).robust.all()  # 0.1 s of delay margin: robust
+    with pytest.raises(ValueError, match="delay_margin_s"):
+        TuneConfig(delay_margin_s=-0.01)
+    with pytest.raises(SystemExit) as e:
+        main(["tune", str(flight_csv), "--firmware", "ardupilot", "--model", str(ideal_model_dir),
+              "--delay-margin", "2", "--out", str(tmp_path / "o")])
+    assert e.value.code == 2

@@ -6,7 +6,8 @@ the command scale, and:
 1. sweeps, per axis, the firmware's own gains in the frequency domain
    (:mod:`controllers.firmware.tune_sweep`; :mod:`controllers.firmware.firmwares` says which gains) and
    keeps the sets with a gain margin of at least 6 dB, a phase margin of at least 45° and a delay margin of
-   25 ms (the loop broken at the axis' stick, at the loop's tick), best predicted p90 first;
+   25 ms by default (``TuneConfig.delay_margin_s``; the loop broken at the axis' stick, at the loop's tick),
+   best predicted p90 first;
 2. flies, in the time domain, the current gains, the firmware's defaults and the best few robust candidates
    through the one batched closed loop (:func:`controllers.replay.fly` via
    :func:`controllers.firmware.autopilot.fly_firmware`): the firmware's loop at its own rate, the physics
@@ -40,7 +41,7 @@ from ..sweep_interval import quantiles_at, woodruff_levels
 from .autopilot import FirmwareAutopilot, fly_firmware
 from .errors import FirmwareMappingError
 from .step_response import step_response
-from .tune_sweep import AxisSweep, evaluate_sets, joint_choices, sweep_axis
+from .tune_sweep import ROBUST_DELAY_MARGIN_S, AxisSweep, evaluate_sets, joint_choices, sweep_axis
 
 _DEG = 180.0 / math.pi
 QUANTILES = (50, 90, 99)
@@ -67,6 +68,9 @@ class TuneConfig:
         A bar over the time-domain flights (on a terminal).
     max_batch : int
         Set × window states stepped at once.
+    delay_margin_s : float
+        Delay margin a robust set keeps besides 6 dB and 45° [s], >= 0 (0: none;
+        :data:`controllers.firmware.tune_sweep.ROBUST_DELAY_MARGIN_S` by default, where it is measured).
     """
 
     window_s: float = 20.0
@@ -75,8 +79,11 @@ class TuneConfig:
     sensors: bool = True
     progress: bool = True
     max_batch: int = 4096
+    delay_margin_s: float = ROBUST_DELAY_MARGIN_S
 
     def __post_init__(self):
+        if not (math.isfinite(self.delay_margin_s) and 0.0 <= self.delay_margin_s <= 1.0):
+            raise ValueError(f"delay_margin_s must be in [0, 1] s, got {self.delay_margin_s!r}")
         if not (math.isfinite(self.window_s) and self.window_s > 0):
             raise ValueError(f"window_s must be a positive number of seconds, got {self.window_s!r}")
         if int(self.candidates) != self.candidates or self.candidates < 1:
@@ -208,7 +215,8 @@ def tune_gains(env_model, spec, current, scale, config: TuneConfig | None = None
     for axis in range(3):
         say(f"sweeping {' x '.join(spec.swept[axis])} on {AXES[axis]} (frequency domain, margins at "
             f"{current.loop_rate_hz:g} Hz)")
-        sweeps[axis] = sweep_axis(spec, current, axis, params, scale.scale, signs, m, freq, psd, collective)
+        sweeps[axis] = sweep_axis(spec, current, axis, params, scale.scale, signs, m, freq, psd, collective,
+                                  cfg.delay_margin_s)
     groups = {g: joint_choices(sweeps, g, cfg.candidates) for g in spec.joint}
     n_cand = max([len(c) for c in groups.values()] + [0])
     sets, labels = [current, defaults], ["current", "default"]
@@ -224,7 +232,7 @@ def tune_gains(env_model, spec, current, scale, config: TuneConfig | None = None
     say(f"flying {len(sets)} gain sets in the identified gusts (the {spec.name} loop at {current.loop_rate_hz:g} Hz, "
         f"physics sub-stepped {m}x per {dt:g} s)")
     flown, windows = _fly_sets(env_model, spec, sets, scale.scale, signs, dt, cfg)
-    proposed, chosen, notes = _choose(spec, current, sets, flown, groups)
+    proposed, chosen, notes = _choose(spec, current, sets, flown, groups, cfg.delay_margin_s)
     notes += _edge_notes(spec, proposed, chosen)
     say("margins, the frequency-domain prediction and the 10 deg step responses of the current, default and "
         "proposed sets")
@@ -241,6 +249,7 @@ def tune_gains(env_model, spec, current, scale, config: TuneConfig | None = None
         row["kept_current"] = chosen[axis] == 0
         axes[name] = row
     settings = {"windows": windows, "seed": cfg.seed, "sensors": cfg.sensors, "substeps": m,
+                "min_delay_margin_s": cfg.delay_margin_s,
                 "candidates_flown": n_cand, "collective": collective, "seconds": time.perf_counter() - t_start,
                 "sets": [{"label": lab, "values": spec.names(s)} for lab, s in zip(labels, sets)]}
     flown_rows = [{"label": lab, "axes": f} for lab, f in zip(labels, flown)]
@@ -252,14 +261,14 @@ def _p90(stats: dict) -> float:
     return math.inf if stats.get("diverged", True) else stats["p90_deg"]
 
 
-def _choose(spec, current, sets, flown, groups):
+def _choose(spec, current, sets, flown, groups, min_delay_s: float = ROBUST_DELAY_MARGIN_S):
     """The proposed set, the flown set each axis' figures come from, and notes."""
     proposed, chosen, notes = current, {0: 0, 1: 0, 2: 0}, []
     for g, choices in groups.items():
         names = "/".join(AXES[a] for a in g)
         if not choices:
-            notes.append(f"{names}: no swept set keeps a 6 dB gain margin, a 45 deg phase margin and a 25 ms delay "
-                         "margin; the current gains are kept")
+            notes.append(f"{names}: no swept set keeps a 6 dB gain margin, a 45 deg phase margin and a "
+                         f"{min_delay_s * 1000:g} ms delay margin; the current gains are kept")
             continue
         best_j, best = None, math.inf
         for j in range(2, len(sets)):  # set j carries each group's choice j - 2 (or its last)
@@ -301,7 +310,7 @@ def _verdicts(row: dict, sweep: AxisSweep) -> dict:
     prop, default = row["proposed"], row["default"]
     p_prop, p_def = _p90(prop), _p90(default)
     robust_default = bool(robust(default["stable"], default["gain_margin_db"], default["phase_margin_deg"],
-                                 default["delay_margin_s"]))
+                                 default["delay_margin_s"], sweep.min_delay_margin_s))
     return {"proposed_beats_default": bool(p_prop < p_def), "default_robust": robust_default,
             "defaults_near_best": bool(robust_default and math.isfinite(p_def) and p_def <= (1 + NEAR_BEST) * p_prop),
             "robust_candidates": int(sweep.robust.sum()), "swept_sets": int(sweep.a.size)}

@@ -68,6 +68,12 @@ def gains_table(result) -> list:
     return lines
 
 
+def _delay_ms(result) -> str:
+    """The delay margin a robust set keeps, as the report words it ("25 ms of delay margin" or "no delay margin")."""
+    ms = 1000.0 * result.settings.get("min_delay_margin_s", 0.025)
+    return f"{ms:g} ms of delay margin" if ms > 0 else "no delay margin required"
+
+
 def verdict_lines(result) -> list:
     """One sentence per axis: change against current and defaults, and whether the defaults are near best."""
     out = []
@@ -75,7 +81,7 @@ def verdict_lines(result) -> list:
         row = result.axes[axis]
         cur, dflt, prop = (row[k] for k in LABELS)
         if row["kept_current"]:
-            out.append(f"- **{axis}**: no swept set kept 6 dB, 45° and 25 ms; the current gains are kept.")
+            out.append(f"- **{axis}**: no swept set kept 6 dB, 45° and {_delay_ms(result)}; the current gains are kept.")
             continue
         p_prop = prop.get("p90_deg")
         parts = []
@@ -168,7 +174,7 @@ def to_markdown(result, files: dict, flown=None, figures=(), context=()) -> str:
         "gusts) with the 90 % interval of the p90 over blocks of library time; margins of the loop broken at the "
         "axis' stick at the loop's tick (inf: never crosses; the delay margin is the extra servo delay the loop "
         "survives, PM/ω at the gain crossover); the frequency-domain p90 is the Gaussian one of the linearised "
-        "loop. The proposal keeps 6 dB, 45° and 25 ms.", ""] + verdict_lines(result) + ["", "## Gains", ""] + gains_table(result) + [""]
+        f"loop. The proposal keeps 6 dB, 45° and {_delay_ms(result)}.", ""] + verdict_lines(result) + ["", "## Gains", ""] + gains_table(result) + [""]
     lines += flown_lines(result, flown)
     lines += flight_card(result, files)
     lines += notes_lines(result)
@@ -233,7 +239,7 @@ def plot_sweeps(result, path):
             if sw.names[0] in g and sw.names[1] in g:
                 ax.plot(g[sw.names[1]], g[sw.names[0]], marker, color="red" if label == "proposed" else "white",
                         markersize=10 if label == "proposed" else 7, label=label)
-        ax.set_title(f"{AXES[i]} (inside white: 6 dB, 45°, 25 ms)")
+        ax.set_title(f"{AXES[i]} (inside white: 6 dB, 45°, {_delay_ms(result)})")
         ax.legend(loc="lower left", fontsize=7)
     return save_figure(fig, path)
 

@@ -5,7 +5,8 @@ For one axis a :class:`~controllers.firmware.firmwares.FirmwareSpec` gives a gri
 set; all of an axis' sets are linearised, closed around the hover plant at the loop's tick and lifted to the
 gusts' period at once (:mod:`controllers.firmware.linear`). Per set: the tick's spectral radius (stable or
 not), the gain, phase and delay margins of the loop broken at the axis' stick, and the p90 |attitude error| of a
-Gaussian error with the standard deviation the library's spectrum gives (``1.645·σ``). The time domain
+Gaussian error with the standard deviation the library's spectrum gives (``1.645·σ``). A set is robust when it
+keeps 6 dB, 45° and a delay margin (:data:`ROBUST_DELAY_MARGIN_S` by default). The time domain
 (:mod:`controllers.firmware.tune`) then flies the best robust sets.
 """
 
@@ -21,10 +22,12 @@ from .linear import attitude_std, closed_loop, stick_margins
 
 _DEG = 180.0 / np.pi
 ROBUST_DELAY_MARGIN_S = 0.025
-"""Delay margin a robust set keeps besides 6 dB and 45° [s]: the loop survives 25 ms more transport delay
-than identified. A servo delay the identification missed (the tail's 20 ms on the bench's agile aircraft,
-identified as 0) otherwise lets the sweep pick gains whose crossover lies where that delay alone takes the
-phase margin (yaw P at the grid's top: 127 rad/s, 66° of margin in the model, unstable on the aircraft)."""
+"""Default delay margin a robust set keeps besides 6 dB and 45° [s] (``heli tune --delay-margin``): the loop
+survives 25 ms more transport delay than identified. Measured on the bench's agile aircraft, whose tail servo
+delay of 20 ms the identification's ``--delay auto`` put at 0 (docs/firmware.md): without this criterion the
+Rotorflight yaw sweep took ``yaw_p_gain`` and ``yaw_i_gain`` 1000 (66° of phase margin and 9.8 ms of delay
+margin in the model) and the plain loop flying that file on the truth lost its heading (yaw p90 26° against 0.32°
+predicted); with it the proposal flew 0.34°. 25 ms covers that error of the delay with a little to spare."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -47,6 +50,8 @@ class AxisSweep:
         Gaussian p90 of |attitude error| from the spectrum [deg]; NaN where unstable.
     gain_margin_db, phase_margin_deg, delay_margin_s : ndarray (G,)
         NaN where unstable.
+    min_delay_margin_s : float
+        The delay margin a robust set keeps [s] (:data:`ROBUST_DELAY_MARGIN_S` by default; 0: none).
     """
 
     axis: int
@@ -60,11 +65,13 @@ class AxisSweep:
     gain_margin_db: np.ndarray
     phase_margin_deg: np.ndarray
     delay_margin_s: np.ndarray
+    min_delay_margin_s: float = ROBUST_DELAY_MARGIN_S
 
     @property
     def robust(self) -> np.ndarray:
-        """Stable sets keeping the margins: 6 dB, 45° and a delay margin of :data:`ROBUST_DELAY_MARGIN_S`."""
-        return robust(self.stable, self.gain_margin_db, self.phase_margin_deg, self.delay_margin_s)
+        """Stable sets keeping the margins: 6 dB, 45° and a delay margin of :attr:`min_delay_margin_s`."""
+        return robust(self.stable, self.gain_margin_db, self.phase_margin_deg, self.delay_margin_s,
+                      self.min_delay_margin_s)
 
     def ranked(self) -> np.ndarray:
         """Indices of the robust sets, best (lowest predicted p90) first."""
@@ -83,12 +90,15 @@ class AxisSweep:
                 "delay_margin_s": _list(self.delay_margin_s)}
 
 
-def robust(stable, gain_margin_db, phase_margin_deg, delay_margin_s) -> np.ndarray:
-    """Stable and keeping 6 dB, 45° and :data:`ROBUST_DELAY_MARGIN_S` (arrays, element by element)."""
+def robust(stable, gain_margin_db, phase_margin_deg, delay_margin_s,
+           min_delay_margin_s: float = ROBUST_DELAY_MARGIN_S) -> np.ndarray:
+    """Stable and keeping 6 dB, 45° and ``min_delay_margin_s`` (arrays, element by element)."""
     with np.errstate(invalid="ignore"):
+        keeps_delay = np.asarray(delay_margin_s) >= min_delay_margin_s
+        if min_delay_margin_s <= 0:
+            keeps_delay = np.ones(np.shape(delay_margin_s), dtype=bool)
         return (np.asarray(stable, bool) & (np.asarray(gain_margin_db) >= ROBUST_GAIN_MARGIN_DB)
-                & (np.asarray(phase_margin_deg) >= ROBUST_PHASE_MARGIN_DEG)
-                & (np.asarray(delay_margin_s) >= ROBUST_DELAY_MARGIN_S))
+                & (np.asarray(phase_margin_deg) >= ROBUST_PHASE_MARGIN_DEG) & keeps_delay)
 
 
 def _list(a):
@@ -110,7 +120,7 @@ def evaluate_sets(spec, sets, axis: int, model_params, scale, signs, m: int, fre
 
 
 def sweep_axis(spec, base, axis: int, model_params, scale, signs, m: int, freq, psd,
-               collective: float = 0.0) -> AxisSweep:
+               collective: float = 0.0, min_delay_margin_s: float = ROBUST_DELAY_MARGIN_S) -> AxisSweep:
     """The frequency-domain table of ``axis``' grid around ``base`` (module docstring)."""
     ga, gb = spec.grid(axis)
     ff = spec.feed_forward(model_params, axis, scale[axis])
@@ -119,7 +129,7 @@ def sweep_axis(spec, base, axis: int, model_params, scale, signs, m: int, freq, 
     sets = tuple(spec.candidate(base, axis, x, y, ff) for x, y in zip(a, b))
     radius, stable, p90, gm, pm, dm = evaluate_sets(spec, sets, axis, model_params, scale, signs, m, freq, psd,
                                                     collective)
-    return AxisSweep(axis, spec.swept[axis], a, b, sets, radius, stable, p90, gm, pm, dm)
+    return AxisSweep(axis, spec.swept[axis], a, b, sets, radius, stable, p90, gm, pm, dm, float(min_delay_margin_s))
 
 
 def joint_choices(sweeps: dict, axes: tuple, count: int) -> list:
