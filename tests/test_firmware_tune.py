@@ -137,3 +137,27 @@ def test_the_delay_margin_criterion_and_its_option(tmp_path, flight_csv, ideal_m
         main(["tune", str(flight_csv), "--firmware", "ardupilot", "--model", str(ideal_model_dir),
               "--delay-margin", "2", "--out", str(tmp_path / "o")])
     assert e.value.code == 2
+
+
+def test_the_stop_gains_act_near_hover_through_their_mean_only(shipped):
+    """Rotorflight's tail P is scaled by transition(error, -10, 10, ccw, cw) (pid.c pidApplyYawMode3): about hover
+    the linearised loop sees (cw + ccw)/2 alone, so (120, 80), (100, 100), (150, 50) and (80, 120) give the same
+    margins and spectrum p90, and (150, 150) is yaw P x 1.5. The yaw sweep's P covers their mean; their ratio
+    answers an asymmetry of the tail the symmetric model (eq. 21) does not have, so it is not swept
+    (docs/firmware.md has the time-domain check)."""
+    from dataclasses import replace
+
+    from controllers.closed_loop import disturbance_spectrum
+    from controllers.firmware.linear import attitude_std
+
+    base = RotorflightParams()
+    pairs = ((120, 80), (100, 100), (150, 50), (80, 120), (150, 150))
+    sets = [replace(base, yaw_cw_stop_gain=cw, yaw_ccw_stop_gain=ccw) for cw, ccw in pairs]
+    sets.append(replace(base, p=base.p[:2] + (base.p[2] * 1.5,), yaw_cw_stop_gain=100, yaw_ccw_stop_gain=100))
+    loop = FIRMWARES["rotorflight"].loop_class(sets, 1.0, tuple(np.sign(shipped.params.control_gains)))
+    cl = closed_loop(shipped.params, loop, float(np.mean(shipped.collective)))
+    freq, psd = disturbance_spectrum(shipped, 0.01)
+    table = np.vstack([*stick_margins(cl, 2, delay=True), attitude_std(cl, 10, 2, freq, psd)])
+    assert_allclose(table[:, 1:4], table[:, [0] * 3], rtol=1e-9)
+    assert_allclose(table[:, 5], table[:, 4], rtol=1e-9)
+    assert not np.allclose(table[:, 4], table[:, 0], rtol=1e-3)
