@@ -3,9 +3,10 @@
 A numpy batch pays one pass over memory and one interpreter round trip per
 arithmetic operation: stepping the model (eqs. 18, 21, 25-26, 31) and building
 the observation takes about 150 of them per step. The loops here do the same
-arithmetic in one pass per copy:
+arithmetic over the copies' rows of one :class:`BlockLayout`, a block of
+:data:`BLOCK` copies at a time:
 
-* :func:`clip_actions` checks and clips the actions.
+* :func:`load_actions` checks and clips the actions.
 * :func:`advance_kernel` compiles the physics core's own statements
   (:func:`heli_core.discrete.discrete_step_statements`, the text the single
   environment's step is compiled from) into a loop that also adds the trim
@@ -14,15 +15,17 @@ arithmetic in one pass per copy:
   and does not contract multiply-adds (``fastmath`` is off), so every copy's
   state equals the single environment's bit for bit.
 * The three inverse trigonometric functions stay with numpy, whose SIMD
-  ``arctan2`` / ``arcsin`` cost a few microseconds for thousands of copies,
-  where a scalar libm call in the loop would cost tens of nanoseconds per copy.
-* :func:`observe_kernel` turns the angles into the observation, the reward,
-  the info arrays in degrees and the episode ends.
+  ``arctan2`` / ``arcsin`` cost a few nanoseconds per copy, where a scalar libm
+  call in the loop would cost tens.
+* :func:`observe_kernel` draws the sensor noise, turns the angles into the
+  observation, the reward, the info arrays in degrees and the episode ends.
 
-The two long loops run over the copies with ``numba.prange`` on numba's thread
-pool (all cores from 256 copies by default; ``HeliAttitudeVectorEnv(threads=...)`` or
-``NUMBA_NUM_THREADS`` limit it). Copies are independent, so the results are the
-same for any number of threads.
+Every row of a block lies a compile-time constant (:data:`ROW`) from the next, so
+the compiler can prove that a loop's rows do not overlap and runs the arithmetic
+8 copies an AVX-512 instruction (4 with AVX2); the same values come out as one
+copy at a time, since vector lanes round as scalars do. The blocks of the step
+loop are a ``numba.prange`` when numba's pool is used (:mod:`heli_env.threads`).
+Copies are independent, so the results are the same for any number of threads.
 """
 
 from __future__ import annotations
@@ -45,22 +48,9 @@ from heli_core.params import ModelParams
 from heli_core.quaternion import EULER_ARGUMENTS
 
 from . import sensor_noise
-from .sensor_noise import normal_pair
+from .sensor_noise import LOW32, fast_normal, standard_normal, stream_bits
+from .spec import OBS_DIM
 from .tasks import TWO_PI
-
-ROW_PAD = 8
-"""Extra columns per row of the batched arrays. Rows of exactly 4096 float64 lie 32 KiB
-apart and fall into the same cache sets; a loop that reads and writes a dozen such rows
-per copy evicts its own lines (measured: the step loop took 225 us instead of 61 us)."""
-
-
-def batch_rows(rows: int, n: int, fill: float | None = 0.0) -> np.ndarray:
-    """A float64 ``(rows, n)`` array whose rows are :data:`ROW_PAD` columns apart in memory.
-
-    Filled with ``fill``, or left uninitialised with ``fill=None`` (for outputs a loop writes whole).
-    """
-    buf = np.empty((rows, n + ROW_PAD)) if fill is None else np.full((rows, n + ROW_PAD), fill)
-    return buf[:, :n]
 
 
 def _clip_line(name: str) -> str:
@@ -109,7 +99,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from heli_env.sensor_noise import normal_pair
+from heli_env.sensor_noise import LOW32, fast_normal, standard_normal, stream_bits
 
 """
 
@@ -145,119 +135,232 @@ def _compile(lines: list[str], name: str, tag: str, parallel: bool = True):
             spec.loader.exec_module(module)
         return getattr(module, name)
     except OSError:
-        namespace = {"np": np, "isfinite": math.isfinite, "prange": numba.prange, "normal_pair": normal_pair}
+        namespace = {"np": np, "isfinite": math.isfinite, "prange": numba.prange, "LOW32": LOW32,
+                     "fast_normal": fast_normal, "standard_normal": standard_normal, "stream_bits": stream_bits}
         exec(compile(source, f"<heli-env {tag} {digest}>", "exec"), namespace)  # noqa: S102
         return numba.njit(error_model="numpy", parallel="prange(" in source)(namespace[name])
 
 
-CHUNK = 256
-"""Copies one task of the step loop handles: its library rows (80 bytes each, 20 KiB) are touched first
-and are still in the first-level cache when the loop body reads them; threads take whole chunks."""
+BLOCK = 256
+"""Copies per block of the batch state (:class:`BlockLayout`): the loops take a block at a time, numba's
+threads whole blocks."""
+
+ROW = BLOCK + 8
+"""Distance in float64 between two rows of a block. A compile-time constant, so that the compiler sees that
+the rows a loop reads and writes never overlap and steps 8 copies per AVX-512 instruction (with rows of a
+runtime length it must assume they might, and steps one copy at a time: 38 ns per copy instead of 5). Eight
+more than :data:`BLOCK`: rows 2 KiB apart would fall into the same cache sets."""
+
+CHUNK = BLOCK
+"""Copies one task of the step loop handles (the threads take whole blocks)."""
+
+_ROWS = ("x0 x1 x2 x3 x4 x5 x6 x7 x8 x9 act0 act1 act2 gust lib0 lib1 lib2 lib3 lib4 lib5 lib6 lib7 lib8 lib9 "
+         "trig0 trig1 trig2 trig3 trig4 att0 att1 att2 noise0 noise1 noise2 noise3 noise4 noise5 slow "
+         "line0 line1 line2 refatt0 refatt1 refatt2 refrate0 refrate1 refrate2 in0 in1 in2 "
+         "ud0 ud1 ud2 degatt0 degatt1 degatt2 degrate0 degrate1 degrate2 reward end").split()
+R = {name: i for i, name in enumerate(_ROWS)}
+"""Row of each per-copy quantity in a block: the state (10), the action applied (3), the gust scale, the
+library row of the step (10: trims, collective, gust torque, u_d), the Euler-angle arguments (5) and angles
+(3), the step's sensor normals (6) and which of them need the ziggurat's slow path, the gyro lines (3), the
+references (3 + 3), the incoming action of a delayed env (3), and the step's outputs (u_d scaled, attitude and
+rate errors in degrees, reward, episode end: 0 running, 1 terminated, 2 truncated), kept together last."""
+N_ROWS = len(_ROWS)
+OUT_ROWS = slice(R["ud0"], N_ROWS)
+"""The outputs copied out each step (fresh arrays)."""
+
+
+class BlockLayout:
+    """The batch state of ``n`` copies: ``S`` (blocks, (:data:`N_ROWS` + ``extra_rows``) x :data:`ROW`) float64,
+    copy ``i`` in lane ``i % BLOCK`` of block ``i // BLOCK``; lanes past ``n`` stay zero. The extra rows
+    follow :data:`R`'s: the phases of the gyro lines (:func:`observe_kernel`)."""
+
+    def __init__(self, n: int, extra_rows: int = 0):
+        self.n = n
+        self.blocks = -(-n // BLOCK)
+        self.S = np.zeros((self.blocks, (N_ROWS + extra_rows) * ROW))
+        self._cube = self.S.reshape(self.blocks, N_ROWS + extra_rows, ROW)
+        self._lane = np.arange(n) % BLOCK
+        self._block = np.arange(n) // BLOCK
+
+    def view(self, row: int) -> np.ndarray:
+        """Row ``row`` of every block, (blocks, BLOCK) (one block: its first ``n`` lanes): a view, for numpy's
+        elementwise functions."""
+        return self._cube[:, row, :BLOCK if self.blocks > 1 else self.n]
+
+    def get(self, first: int, stop: int, which=None) -> np.ndarray:
+        """Rows ``first .. stop - 1`` of copies ``which`` (all by default), a fresh (rows, copies) array."""
+        if which is None:
+            out = np.empty((stop - first, self.blocks, BLOCK))
+            np.copyto(out, self._cube[:, first:stop, :BLOCK].transpose(1, 0, 2))
+            return out.reshape(stop - first, -1)[:, :self.n]
+        return self._cube[self._block[which], first:stop, self._lane[which]].T
+
+    def put(self, first: int, values, which=None) -> None:
+        """Write ``values`` (rows, copies) or a scalar into rows ``first ..`` of copies ``which`` (all by default)."""
+        values = np.asarray(values, dtype=float)
+        rows = values.shape[0] if values.ndim == 2 else 1
+        which = np.arange(self.n) if which is None else np.asarray(which)
+        if values.ndim < 2:
+            values = np.broadcast_to(values, (rows, which.size))
+        self._cube[self._block[which][None, :], np.arange(first, first + rows)[:, None],
+                   self._lane[which][None, :]] = values
+
+
+def _at(name: str) -> str:
+    """Row ``name`` of the block's copy ``l``, in generated source over ``Sb`` (one block's row of ``S``)."""
+    return f"Sb[{R[name] * ROW} + l]"
+
+
+def _block_loop_head(signature: str, copies: str) -> list[str]:
+    """Open a function looping over the blocks of ``S``; ``Sb`` is the block, ``_i0`` its first copy, ``_m``
+    its copies."""
+    return [f"def {signature}:",
+            f"    _copies = {copies}",
+            f"    for _b in prange((_copies + {BLOCK - 1}) // {BLOCK}):",
+            "        Sb = S[_b]",
+            f"        _i0 = _b * {BLOCK}",
+            f"        _m = min({BLOCK}, _copies - _i0)"]
 
 
 @lru_cache(maxsize=16)
 def advance_kernel(params: ModelParams, dt: float, parallel: bool = True):
-    """The compiled loop ``advance(table, base, k, last, ratio, act, gust, x, ud, trig)`` of one control period.
+    """The compiled loop ``advance(S, table, base, k, last, ratio)`` of one control period over the blocks of
+    ``S`` (:class:`BlockLayout`).
 
     For each copy ``i``: reads library row ``j = base[i] + min(k[i], last[i]) * ratio``
     of ``table`` (trim lat/lon/ped, collective, gust torque roll/pitch/yaw, u_d
-    roll/pitch/yaw) and increments ``k[i]``. Steps the state ``x[:, i]`` in
-    place with the sticks ``clip(trim + act[:, i])`` and the torque
-    ``gust[i] * torque``, writes the reported gust ``gust[i] * u_d`` to
-    ``ud[:, i]`` and the Euler-angle arguments of the new attitude to
-    ``trig[:, i]`` (see :data:`_EULER_ARGUMENTS`).
+    roll/pitch/yaw) and increments ``k[i]``. Steps the state rows in place with
+    the sticks ``clip(trim + act)`` and the torque ``gust * torque``, writes the
+    reported gust ``gust * u_d`` and the Euler-angle arguments of the new
+    attitude (see :data:`_EULER_ARGUMENTS`).
 
-    The copies are taken :data:`CHUNK` at a time, in one ``prange`` over the chunks: the step's only
-    parallel region (``parallel=True``; with ``parallel=False`` the same loop on the calling thread). In
-    each chunk the rows are first touched in a short loop: its loads are independent, so the processor
-    keeps many cache misses in flight; the long loop body that follows finds the rows in cache instead
-    of waiting on them one by one. Returns the touched sum, which keeps those loads from being dropped.
+    Per block, the library rows are gathered first in a short loop (its loads are independent: the
+    processor keeps many cache misses in flight), then the physics runs over the block's rows, 8 copies an
+    instruction. The blocks are one ``prange`` (``parallel=True``): the step's only parallel region; with
+    ``parallel=False`` the same loop on the calling thread.
     """
     lines = [
-        "def advance(table, base, k, last, ratio, act, gust, x, ud, trig):",
-        "    _copies = base.shape[0]",  # (underscored: the physics' statements name their own variables, n among them)
-        "    _touched = 0.0",
-        f"    for _chunk in prange((_copies + {CHUNK - 1}) // {CHUNK}):",
-        f"        _lo = _chunk * {CHUNK}",
-        f"        _hi = min(_lo + {CHUNK}, _copies)",
-        "        _t = 0.0",
-        "        for i in range(_lo, _hi):",
-        "            j = base[i] + min(k[i], last[i]) * ratio",
-        "            _t += table[j, 0] + table[j, 9]",
-        "        _touched += _t",
-        "        for i in range(_lo, _hi):",
+        *_block_loop_head("advance(S, table, base, k, last, ratio)", "base.shape[0]"),
+        "        for l in range(_m):",
+        "            i = _i0 + l",
         "            j = base[i] + min(k[i], last[i]) * ratio",
         "            k[i] += 1",
-        "            g = gust[i]",
-        "            lat = table[j, 0] + act[0, i]",
+        *(f"            {_at(f'lib{c}')} = table[j, {c}]" for c in range(10)),
+        "        for l in range(_m):",
+        f"            g = {_at('gust')}",
+        f"            lat = {_at('lib0')} + {_at('act0')}",
         "            " + _clip_line("lat"),
-        "            lon = table[j, 1] + act[1, i]",
+        f"            lon = {_at('lib1')} + {_at('act1')}",
         "            " + _clip_line("lon"),
-        "            ped = table[j, 2] + act[2, i]",
+        f"            ped = {_at('lib2')} + {_at('act2')}",
         "            " + _clip_line("ped"),
-        "            col = table[j, 3]",
-        "            d0 = g * table[j, 4]",
-        "            d1 = g * table[j, 5]",
-        "            d2 = g * table[j, 6]",
-        *(f"            {name} = x[{row}, i]" for row, name in enumerate(DISCRETE_INPUTS[:10])),
+        f"            col = {_at('lib3')}",
+        f"            d0 = g * {_at('lib4')}",
+        f"            d1 = g * {_at('lib5')}",
+        f"            d2 = g * {_at('lib6')}",
+        *(f"            {name} = {_at(f'x{row}')}" for row, name in enumerate(DISCRETE_INPUTS[:10])),
         *("            " + line for line in discrete_step_statements(params, float(dt))),
-        *(f"            x[{row}, i] = {name}" for row, name in enumerate(DISCRETE_OUTPUTS)),
-        "            ud[0, i] = g * table[j, 7]; ud[1, i] = g * table[j, 8]; ud[2, i] = g * table[j, 9]",
-        *("            " + line for line in _EULER_ARGUMENTS),
-        "    return _touched",
+        *(f"            {_at(f'x{row}')} = {name}" for row, name in enumerate(DISCRETE_OUTPUTS)),
+        *(f"            {_at(f'ud{c}')} = g * {_at(f'lib{7 + c}')}" for c in range(3)),
+        *("            " + _on_rows(line) for line in _EULER_ARGUMENTS),
     ]
     return _compile(lines, "advance", "fused step", parallel)
 
 
+def _on_rows(line: str) -> str:
+    """A line of :data:`_EULER_ARGUMENTS` writing the block's trig rows."""
+    return re.sub(r"trig\[(\d), i\]", lambda m: _at(f"trig{m.group(1)}"), line)
+
+
 @lru_cache(maxsize=1)
 def euler_arguments_kernel():
-    """The compiled loop ``euler_arguments(x, trig, which)``: :data:`_EULER_ARGUMENTS` of copies ``which``."""
+    """The compiled loop ``euler_arguments(S, which)``: :data:`_EULER_ARGUMENTS` of copies ``which``."""
     lines = [
-        "def euler_arguments(x, trig, which):",
+        "def euler_arguments(S, which):",
         "    for i in which:",
-        "        b0 = x[6, i]; b1 = x[7, i]; b2 = x[8, i]; b3 = x[9, i]",
-        *("        " + line for line in _EULER_ARGUMENTS),
+        f"        Sb = S[i // {BLOCK}]",
+        f"        l = i % {BLOCK}",
+        *(f"        b{c} = {_at(f'x{6 + c}')}" for c in range(4)),
+        *("        " + _on_rows(line) for line in _EULER_ARGUMENTS),
     ]
     return _compile(lines, "euler_arguments", "euler arguments")
 
 
 @numba.njit(error_model="numpy", cache=True)
-def clip_actions(actions, out):
-    """Clip ``actions`` (n, 3) to [-1, 1] into ``out`` (3, n); return the first copy with a non-finite action, or -1."""
+def load_actions(actions, S, row):
+    """Clip ``actions`` (n, 3) to [-1, 1] into rows ``row .. row + 2`` of ``S`` (:class:`BlockLayout`).
+
+    Returns the first copy with a non-finite action, or -1; ``S`` is written only when every action is finite.
+    """
     for i in range(actions.shape[0]):
         for c in range(3):
-            v = float(actions[i, c])
-            if not math.isfinite(v):
+            if not math.isfinite(float(actions[i, c])):
                 return i
-            out[c, i] = -1.0 if v < -1.0 else (1.0 if v > 1.0 else v)
+    for i in range(actions.shape[0]):
+        Sb = S[i // BLOCK]
+        for c in range(3):
+            v = float(actions[i, c])
+            Sb[(row + c) * ROW + i % BLOCK] = -1.0 if v < -1.0 else (1.0 if v > 1.0 else v)
     return -1
+
+
+def _line_loops(line_axes: tuple) -> list[str]:
+    """The gyro lines of a block's copies as the single env tabulates them: each axis' lines summed in order
+    from 0.0, line ``m`` reading sin and cos of its frequency at step ``k`` (``line_table[k, 2 m : 2 m + 2]``)
+    and the copy's phase (rows ``N_ROWS + 2 m``, ``+ 1``). Where every copy of the block is at the same step
+    (copies reset together) the table's values are read once and the loop runs 8 copies an instruction;
+    otherwise the same arithmetic one copy at a time, each reading its own step's row."""
+
+    def sums(table):
+        out = ["l0 = 0.0", "l1 = 0.0", "l2 = 0.0"]
+        out += [f"l{axis} += _amp{m} * ({table(2 * m)} * Sb[{(N_ROWS + 2 * m) * ROW} + l] + {table(2 * m + 1)}"
+                f" * Sb[{(N_ROWS + 2 * m + 1) * ROW} + l])" for m, axis in enumerate(line_axes)]
+        return out + [f"{_at(f'line{c}')} = l{c}" for c in range(3)]
+
+    width = 2 * len(line_axes)
+    return [*(f"        _amp{m} = line_amp[{m}]" for m in range(len(line_axes))),
+            "        _last_row = line_table.shape[0] - 1",
+            "        _k0 = kb[0]",
+            "        _same = True",
+            "        for l in range(_m):",
+            "            _same = _same and kb[l] == _k0",
+            "        if _same:",
+            "            _kl = min(_k0, _last_row)",
+            *(f"            _t{c} = line_table[_kl, {c}]" for c in range(width)),
+            "            for l in range(_m):",
+            *("                " + line for line in sums(lambda c: f"_t{c}")),
+            "        else:",
+            "            for l in range(_m):",
+            "                kl = min(kb[l], _last_row)",
+            *("                " + line for line in sums(lambda c: f"line_table[kl, {c}]"))]
 
 
 @lru_cache(maxsize=8)
 def observe_kernel(task: str, noisy: bool, axis_weighted: bool = False, line_axes: tuple = ()):
-    """The compiled loop ``observe(att, x, ref_att, ref_rate, prev, max_rate, max_angle, coef, k, steps, key,
-    noise_std, line_amp, line_table, line_phase, obs, deg_att, deg_rate, reward, terminated, truncated)``,
-    specialised on the task, the noise and the axes of the gyro lines. It runs on the calling thread:
-    the step's one parallel region is :func:`advance_kernel`'s.
+    """The compiled loop ``observe(S, k, steps, key, noise_std, line_amp, line_table, max_rate, max_angle, coef,
+    obs)`` over the blocks of ``S`` (:class:`BlockLayout`), specialised on the task, the noise
+    and the axes of the gyro lines. It runs on the calling thread: the step's one parallel region is
+    :func:`advance_kernel`'s.
 
-    ``att`` (3, n): roll, pitch, yaw [rad]; ``ref_att``/``ref_rate`` (3, n): the
-    references (read only where the task has them: attitude for ``"track"``,
-    rate for ``"track"`` and ``"rate"``). Read only when ``noisy``: ``key`` (n,
-    uint64) each copy's noise key, ``noise_std`` (6,) the attitude [rad] and
-    gyro [rad/s] white-noise standard deviations, and the gyro lines (on
-    axes ``line_axes``): ``line_amp`` (L,), ``line_table`` (steps + 1, 2 L)
-    holding sin(w t), cos(w t) of each line at each step, and each copy's
-    phases ``line_phase`` (n, 2 L) as (cos, sin) pairs. The measured
-    attitude adds ``std * z_c`` and the measured rate ``std * z_(c+3)`` plus
-    its lines, as the single env does, where ``z`` are the step's normals
-    ``6 k .. 6 k + 5`` of the copy's key (:mod:`heli_env.sensor_noise`). ``prev`` (3, n): the
-    action applied; ``coef``: :func:`heli_env.tasks.reward_coefficients`;
-    ``k``/``steps`` (n): steps taken and allowed. Writes ``obs`` (n, 12)
-    float32, ``deg_att``/``deg_rate`` (3, n), ``reward`` (n), ``terminated``
-    (attitude beyond ``max_angle`` or a rate not finite) and ``truncated``
-    (otherwise, at the step limit). The same expressions as the single
-    environment's ``_observe`` and :func:`heli_env.tasks.reward_of`,
-    written out per axis (``axis_weighted``: with ``coef[3:6]`` weighing each axis' errors).
+    Reads the angles (rows ``att``, [rad]), the rates (``x0..x2``), the action applied (``act``), the
+    references where the task has them (``refatt`` for ``"track"``, ``refrate`` for ``"track"`` and
+    ``"rate"``); ``k``/``steps`` (n): steps taken and allowed; ``coef``:
+    :func:`heli_env.tasks.reward_coefficients`. When ``noisy``: ``key`` (n, uint64) each copy's noise key,
+    ``noise_std`` (6,) the attitude [rad] and gyro [rad/s] white-noise standard deviations, and the gyro lines
+    (on axes ``line_axes``): ``line_amp`` (L,), ``line_table`` (steps + 1, 2 L) holding sin(w t), cos(w t)
+    of each line at each step, and each copy's phases in the rows after :data:`R`'s (2 L: the (cos, sin)
+    pair of each line). The
+    measured attitude adds ``std * z_c`` and the measured rate ``std * z_(c+3)`` plus its lines, as the
+    single env does, where ``z`` are the step's normals ``6 k .. 6 k + 5`` of the copy's key
+    (:mod:`heli_env.sensor_noise`). Writes ``obs`` (n * 12, float32: the (n, 12) observations) and the
+    output rows: ``degatt``/``degrate``, ``reward`` and ``end`` (1: attitude beyond ``max_angle`` or a rate
+    not finite; 2: otherwise, at the step limit; 0: running). The same expressions as the single
+    environment's ``_observe`` and :func:`heli_env.tasks.reward_of`, written out per axis
+    (``axis_weighted``: with ``coef[3:6]`` weighing each axis' errors).
+
+    Per block, three loops: the normals by the ziggurat's rectangles, 8 copies an instruction, marking the
+    about 1 % of samples that need its slow path; those samples and the gyro lines (table reads), one copy
+    at a time; then the observation, reward and episode end, 8 copies an instruction.
     """
     two_pi = repr(TWO_PI)
 
@@ -268,41 +371,65 @@ def observe_kernel(task: str, noisy: bool, axis_weighted: bool = False, line_axe
         return f"-max_rate if {v} < -max_rate else (max_rate if {v} > max_rate else {v})"
 
     lines = [
-        "def observe(att, x, ref_att, ref_rate, prev, max_rate, max_angle, coef, k, steps, key, noise_std,",
-        "            line_amp, line_table, line_phase, obs, deg_att, deg_rate, reward, terminated, truncated):",
-        "    ca = coef[0]",
-        "    cr = coef[1]",
-        "    cu = coef[2]",
-        *(["    w0 = coef[3]", "    w1 = coef[4]", "    w2 = coef[5]"] if axis_weighted else []),
-        *([f"    na{c} = noise_std[{c}]" for c in range(3)] + [f"    nr{c} = noise_std[{3 + c}]" for c in range(3)]
-          if noisy else []),
-        "    for i in prange(att.shape[1]):",
+        *_block_loop_head("observe(S, k, steps, key, noise_std, line_amp, line_table, max_rate, max_angle, coef, "
+                          "obs)", "k.shape[0]"),
+        "        ca = coef[0]",
+        "        cr = coef[1]",
+        "        cu = coef[2]",
+        *(["        w0 = coef[3]", "        w1 = coef[4]", "        w2 = coef[5]"] if axis_weighted else []),
+        "        kb = k[_i0:_i0 + _m]",
+        "        sb = steps[_i0:_i0 + _m]",
+        f"        ob = obs[_i0 * {OBS_DIM}:(_i0 + _m) * {OBS_DIM}]",
     ]
-    if noisy:  # the gyro lines as the single env tabulates them: each axis' lines summed in order from 0.0
-        lines += ["        ki = k[i]", "        kl = min(ki, line_table.shape[0] - 1)",
-                  "        l0 = 0.0", "        l1 = 0.0", "        l2 = 0.0"]
-        lines += [f"        l{axis} += line_amp[{n}] * (line_table[kl, {2 * n}] * line_phase[i, {2 * n}]"
-                  f" + line_table[kl, {2 * n + 1}] * line_phase[i, {2 * n + 1}])" for n, axis in enumerate(line_axes)]
-        lines += ["        key_i = key[i]",  # the step's 6 normals: 3 words of the key's stream (heli_env.sensor_noise)
-                  "        n0, n1 = normal_pair(key_i, ki * 3)", "        n2, n3 = normal_pair(key_i, ki * 3 + 1)",
-                  "        n4, n5 = normal_pair(key_i, ki * 3 + 2)"]
+    if noisy:
+        lines += [*(f"        na{c} = noise_std[{c}]" for c in range(3)),
+                  *(f"        nr{c} = noise_std[{3 + c}]" for c in range(3)),
+                  "        keyb = key[_i0:_i0 + _m]",
+                  "        for l in range(_m):",  # the step's 6 normals: 3 words of the key's stream
+                  "            _pair = np.uint64(kb[l]) * np.uint64(3)",
+                  "            _key = keyb[l]",
+                  "            _slow = 0.0"]
+        for word in range(3):
+            lines.append(f"            _b = stream_bits(_key, _pair + np.uint64({word}))")
+            for half in range(2):
+                c = 2 * word + half
+                lines += [f"            _z, _again = fast_normal({'_b & LOW32' if half == 0 else '_b >> np.uint64(32)'})",
+                          f"            {_at(f'noise{c}')} = _z",
+                          f"            _slow += {float(1 << c)!r} if _again else 0.0"]
+        lines += [f"            {_at('slow')} = _slow"]
+        lines += ["        for l in range(_m):",  # the slow path where the rectangles rejected
+                  f"            _slow = {_at('slow')}",
+                  "            if _slow != 0.0:",
+                  "                _flags = int(_slow)",
+                  "                for _c in range(6):",
+                  "                    if _flags & (1 << _c):",
+                  f"                        Sb[({R['noise0']} + _c) * {ROW} + l] = standard_normal(keyb[l], kb[l] * 6 + _c)"]
+        if line_axes:
+            lines += _line_loops(line_axes)
+    lines.append("        for l in range(_m):")
     for c, w in enumerate(("p", "q", "r")):
-        err = wrap(f"ref_att[{c}, i] - att[{c}, i]") if task == "track" else f"-att[{c}, i]"
-        ref = f"ref_rate[{c}, i]" if task in ("track", "rate") else "0.0"
-        lines += [f"        e{c} = {err}", f"        {w} = x[{c}, i]", f"        r{c} = {ref} - {w}",
-                  f"        u{c} = prev[{c}, i]",
-                  f"        deg_att[{c}, i] = e{c} * {repr(180.0 / math.pi)}",
-                  f"        deg_rate[{c}, i] = r{c} * {repr(180.0 / math.pi)}"]
+        att = _at(f"att{c}")
+        err = wrap(f"{_at(f'refatt{c}')} - {att}") if task == "track" else f"-{att}"
+        ref = _at(f"refrate{c}") if task in ("track", "rate") else "0.0"
+        lines += [f"            a{c} = {att}",
+                  f"            e{c} = {err}", f"            {w} = {_at(f'x{c}')}", f"            r{c} = {ref} - {w}",
+                  f"            u{c} = {_at(f'act{c}')}",
+                  f"            {_at(f'degatt{c}')} = e{c} * {repr(180.0 / math.pi)}",
+                  f"            {_at(f'degrate{c}')} = r{c} * {repr(180.0 / math.pi)}"]
         if noisy:  # heli_env.env.HeliAttitudeEnv._observe: attitude + noise, (rate + noise) + lines
-            lines += [f"        ma{c} = att[{c}, i] + na{c} * n{c}", f"        m{c} = ({w} + nr{c} * n{3 + c}) + l{c}"]
-            shown = wrap(f"ref_att[{c}, i] - ma{c}") if task == "track" else wrap(f"-ma{c}")
-            lines += [f"        mr{c} = {ref} - m{c}", f"        obs[i, {c}] = {shown}"]
+            line = _at(f"line{c}") if c in line_axes else "0.0"
+            lines += [f"            ma{c} = a{c} + na{c} * {_at(f'noise{c}')}",
+                      f"            m{c} = ({w} + nr{c} * {_at(f'noise{3 + c}')}) + {line}"]
+            shown = wrap(f"{_at(f'refatt{c}')} - ma{c}") if task == "track" else wrap(f"-ma{c}")
+            lines += [f"            mr{c} = {ref} - m{c}", f"            ob[l * {OBS_DIM} + {c}] = {shown}"]
             rate, rate_err = f"m{c}", f"mr{c}"
         else:
-            lines.append(f"        obs[i, {c}] = e{c}")
+            lines.append(f"            ob[l * {OBS_DIM} + {c}] = e{c}")
             rate, rate_err = w, f"r{c}"
-        lines += [f"        obs[i, {3 + c}] = {bound(rate)}", f"        obs[i, {6 + c}] = {bound(rate_err)}",
-                  f"        obs[i, {9 + c}] = u{c}"]
+        lines += [f"            ob[l * {OBS_DIM} + {3 + c}] = {bound(rate)}",
+                  f"            ob[l * {OBS_DIM} + {6 + c}] = {bound(rate_err)}",
+                  f"            ob[l * {OBS_DIM} + {9 + c}] = u{c}"]
+
     def squares(v):  # heli_env.tasks.reward_of
         if axis_weighted:
             return f"(w0 * {v}0 * {v}0 + w1 * {v}1 * {v}1 + w2 * {v}2 * {v}2)"
@@ -310,11 +437,9 @@ def observe_kernel(task: str, noisy: bool, axis_weighted: bool = False, line_axe
 
     att2 = "0.0" if task == "rate" else squares("e")
     lines += [
-        f"        reward[i] = -(ca * {att2} + cr * {squares('r')} + cu * (u0 * u0 + u1 * u1 + u2 * u2))",
-        "        ok = (abs(att[0, i]) <= max_angle and abs(att[1, i]) <= max_angle and isfinite(p) and isfinite(q)",
-        "              and isfinite(r))",
-        "        terminated[i] = not ok",
-        "        truncated[i] = ok and k[i] >= steps[i]",
+        f"            {_at('reward')} = -(ca * {att2} + cr * {squares('r')} + cu * (u0 * u0 + u1 * u1 + u2 * u2))",
+        "            ok = abs(a0) <= max_angle and abs(a1) <= max_angle and isfinite(p) and isfinite(q) and isfinite(r)",
+        f"            {_at('end')} = (2.0 if kb[l] >= sb[l] else 0.0) if ok else 1.0",
     ]
     tag = f"observe {task}{' noisy' if noisy else ''}{' axis-weighted' if axis_weighted else ''}"
     return _compile(lines, "observe", tag, parallel=False)

@@ -12,7 +12,7 @@ from heli_core.physics import N_STATE
 from heli_core.quaternion import quaternion_from_euler
 
 from .errors import ActionError
-from .kernels import ROW_PAD, advance_kernel, batch_rows, clip_actions, euler_arguments_kernel, observe_kernel
+from .kernels import N_ROWS, OUT_ROWS, R, BlockLayout, advance_kernel, euler_arguments_kernel, load_actions, observe_kernel
 from .spec import MAX_RATE, OBS_DIM, action_space, build_spec, observation_space, real_actions, reset_options
 from .sensor_noise import draw_noise_key
 from .tasks import N_SINES, draw_episode, line_phases, reward_coefficients
@@ -67,16 +67,13 @@ class HeliAttitudeVectorEnv(VectorEnv):
         # Library columns gathered once per step, one row per sample so that a gather reads
         # contiguous memory: trims (3), collective, gust torque (3), u_d (3).
         self._table = np.ascontiguousarray(np.vstack([s.trim, s.col[None, :], s.torque, s.model.ud]).T)
-        self._x = None  # (N_STATE, n) once reset
+        self._rows = None  # BlockLayout: the state and every per-copy row the step loops share, once reset
         self._advance = advance_kernel(s.model.params, s.dt, parallel=False)
         self._advance_pool = (advance_kernel(s.model.params, s.dt, parallel=True)
                               if self._thread_choice.compiled_parallel else None)
         self._euler_arguments = euler_arguments_kernel()
         self._observe_loop = observe_kernel(s.task.task, s.measured, s.task.axis_weighted, s.line_axis)
-        self._trig = batch_rows(5, n)  # arguments of atan2 / asin / atan2 (eqs. 27-29)
-        self._att = batch_rows(3, n)  # roll, pitch, yaw [rad]
         self._coef = np.array(reward_coefficients(s.task))
-        self._no_ref = np.zeros((3, n))
         self._rngs = [None] * n
         self._k = np.zeros(n, dtype=np.int64)
         self._base = np.zeros(n, dtype=np.int64)
@@ -84,10 +81,8 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._nsteps = np.zeros(n, dtype=np.int64)
         self._gust = np.zeros(n)
         self._trace = np.zeros(n, dtype=np.int64)
-        self._prev = batch_rows(3, n)
-        self._incoming = batch_rows(3, n)  # this step's actions, clipped, before they are accepted
         self._done = np.zeros(n, dtype=bool)
-        self._queue = np.zeros((s.action_delay, 3, n + ROW_PAD))[..., :n] if s.action_delay else None
+        self._queue = np.zeros((s.action_delay, 3, n)) if s.action_delay else None
         n_seg = int(s.episode_steps * s.dt // s.task.step_period) + 1
         self._smooth = np.zeros(n, dtype=bool)
         self._steps = np.zeros((3, n_seg, n))
@@ -98,12 +93,22 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._line_amp = np.array(s.line_amp, dtype=float)
         self._line_table = np.ascontiguousarray(np.stack([s.line_sin, s.line_cos], axis=-1).transpose(1, 0, 2)
                                                 .reshape(s.line_sin.shape[1], 2 * n_lines))
-        self._line_phase = np.zeros((n, 2 * n_lines))  # (cos, sin) of each line, one row per copy
         self._key = np.zeros(n, dtype=np.uint64)  # each copy's episode noise key (heli_env.sensor_noise)
         self._noise_std = np.array([*s.obs_noise[0], *s.obs_noise[1]], dtype=float)
         self._ones = np.ones(n, dtype=bool)
+        self._out = None  # the last step's output rows (u_d, errors, reward, end): a fresh array each step
         self._renderer = None
         self._history = []
+
+    @property
+    def _x(self) -> np.ndarray:
+        """The state of every copy, (N_STATE, num_envs): a copy."""
+        return self._rows.get(R["x0"], R["x0"] + N_STATE)
+
+    @property
+    def _prev(self) -> np.ndarray:
+        """The action applied in the last step, (3, num_envs): a copy."""
+        return self._rows.get(R["act0"], R["act0"] + 3)
 
     @property
     def model(self):
@@ -129,16 +134,16 @@ class HeliAttitudeVectorEnv(VectorEnv):
         for i in range(n):
             if self._rngs[i] is None:
                 self._rngs[i] = seeding.np_random(None)[0]
-        if self._x is None:
+        if self._rows is None:
             if not mask.all():
                 raise ResetNeeded("the first reset must reset every copy (no reset_mask)")
-            self._x = batch_rows(N_STATE, n)
+            self._rows = BlockLayout(n, extra_rows=2 * len(s.line_axis))  # the lines' phases after R's rows
         which = np.flatnonzero(mask)
         self._reset_envs(which, options)
-        self._euler_arguments(self._x, self._trig, which)
+        rows = self._rows
+        self._euler_arguments(rows.S, which)
         j = self._base + np.minimum(self._k, self._last) * s.ratio
-        self._ud = batch_rows(3, n, fill=None)
-        np.multiply(np.take(self._table, j, axis=0).T[7:10], self._gust, out=self._ud)  # the gust about to act
+        rows.put(R["ud0"], self._table[j, 7:10].T * self._gust)  # the gust about to act
         # a copy not reset is observed again as it was last: its observation is a function of its state, step
         # and noise key, all unchanged
         obs, info, _, _, _ = self._observe()
@@ -154,7 +159,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
             return
         if s.line_axis:  # drawn after the episode, from the copy's generator, as the single env does
             phases = np.array([line_phases(self._rngs[i], len(s.line_axis)) for i in which.tolist()])
-            self._line_phase[which] = phases.reshape(len(which), -1)
+            self._rows.put(N_ROWS, phases.reshape(len(which), -1).T, which)  # (cos, sin) of each line
         if s.measured:  # then the episode's noise key
             self._key[which] = [draw_noise_key(self._rngs[i]) for i in which.tolist()]
         traces = np.array([ep.trace for ep in eps], dtype=np.int64)
@@ -169,11 +174,12 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._trace[which] = traces
         self._gust[which] = gust_default
         angles = np.array([ep.angles for ep in eps]).T
-        x = self._x
-        x[0:3, which] = np.array([ep.rates for ep in eps]).T
-        x[3:6, which] = s.trim[:, base]
-        x[6:10, which] = quaternion_from_euler(angles[0], angles[1], 0.0)  # elementwise as on one copy
-        self._prev[:, which] = 0.0
+        rows = self._rows
+        rows.put(R["x0"], np.array([ep.rates for ep in eps]).T, which)
+        rows.put(R["x3"], s.trim[:, base], which)
+        rows.put(R["x6"], quaternion_from_euler(angles[0], angles[1], 0.0), which)  # elementwise as on one copy
+        rows.put(R["act0"], np.zeros((3, which.size)), which)
+        rows.put(R["gust"], self._gust[which], which)
         if self._queue is not None:
             self._queue[:, :, which] = 0.0
         self._smooth[which] = [ep.smooth for ep in eps]
@@ -185,7 +191,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
 
     # ------------------------------------------------------------------- step
     def step(self, actions):
-        if self._x is None:
+        if self._rows is None:
             raise ResetNeeded("call reset() before step()")
         s = self.spec_
         n = self.num_envs
@@ -193,27 +199,23 @@ class HeliAttitudeVectorEnv(VectorEnv):
         a = actions if native else real_actions(actions, "actions")  # the loop reads float32 or float64
         if a.shape != (n, 3):
             raise ActionError(f"actions must have shape ({n}, 3) (lat, lon, ped per copy), got {a.shape}")
-        incoming = self._incoming
-        bad = clip_actions(a, incoming)
+        rows = self._rows
+        delayed = self._queue is not None
+        bad = load_actions(a, rows.S, R["in0"] if delayed else R["act0"])
         if bad >= 0:  # nothing has changed yet
             raise ActionError(f"actions must be finite; copy {bad} got {a[bad].tolist()}")
         restart = self._done.copy()
-        if self._queue is not None:
-            self._prev[:] = self._queue[0]
+        if delayed:  # the action that acts in this step, observed after it
+            rows.put(R["act0"], self._queue[0])
             self._queue[:-1] = self._queue[1:]
-            self._queue[-1] = incoming
-        else:
-            self._prev, self._incoming = incoming, self._prev
-        applied = self._prev  # the action that acts in this step, observed after it
-        self._ud = ud = batch_rows(3, n, fill=None)  # the gust of this step, reported in info
-        self._thread_choice.run(self._advance, self._advance_pool, self._table, self._base, self._k, self._last,
-                                s.ratio, applied, self._gust, self._x, ud, self._trig)
+            self._queue[-1] = rows.get(R["in0"], R["in0"] + 3)
+        self._thread_choice.run(self._advance, self._advance_pool, rows.S, self._table, self._base, self._k,
+                                self._last, s.ratio)
         if restart.any():
             which = np.flatnonzero(restart)
             self._reset_envs(which, {})
-            self._euler_arguments(self._x, self._trig, which)
-            j = self._base[which]
-            ud[:, which] = self._table[j, 7:10].T * self._gust[which]
+            self._euler_arguments(rows.S, which)
+            rows.put(R["ud0"], self._table[self._base[which], 7:10].T * self._gust[which], which)
         obs, info, rew, terminated, truncated = self._observe()
         if restart.any():
             rew[restart] = 0.0
@@ -242,37 +244,42 @@ class HeliAttitudeVectorEnv(VectorEnv):
     def _observe(self):
         s = self.spec_
         n = self.num_envs
-        x = self._x
-        att = self._att
-        trig = self._trig
+        rows = self._rows
+        att = [rows.view(R[f"att{c}"]) for c in range(3)]
+        trig = [rows.view(R[f"trig{c}"]) for c in range(5)]
         np.arctan2(trig[0], trig[1], out=att[0])
         np.arcsin(trig[2], out=att[1])
         np.arctan2(trig[3], trig[4], out=att[2])
         t = self._k * s.dt
         ref_att, ref_rate = self._reference(t)
+        if ref_att is not None:
+            rows.put(R["refatt0"], ref_att)
+        if ref_rate is not None:
+            rows.put(R["refrate0"], ref_rate)
         # Reward, termination and info score the true state; only the observation is measured (in the loop:
         # each copy's noise from its key and step, its gyro lines at its phase).
         obs = np.empty((n, OBS_DIM), dtype=np.float32)
-        deg_att = batch_rows(3, n, fill=None)
-        deg_rate = batch_rows(3, n, fill=None)
-        reward = np.empty(n)
-        terminated = np.empty(n, dtype=bool)
-        truncated = np.empty(n, dtype=bool)
-        self._observe_loop(att, x, self._no_ref if ref_att is None else ref_att,
-                           self._no_ref if ref_rate is None else ref_rate, self._prev, MAX_RATE, s.task.max_angle,
-                           self._coef, self._k, self._nsteps, self._key, self._noise_std, self._line_amp,
-                           self._line_table, self._line_phase, obs, deg_att, deg_rate, reward, terminated, truncated)
-        ud = self._ud
+        self._observe_loop(rows.S, self._k, self._nsteps, self._key, self._noise_std, self._line_amp,
+                           self._line_table, MAX_RATE, s.task.max_angle, self._coef, obs.reshape(-1))
+        self._out = out = rows.get(OUT_ROWS.start, OUT_ROWS.stop)  # fresh: what is returned may be kept
+        first = OUT_ROWS.start
+        ud = out[R["ud0"] - first:R["ud0"] - first + 3]
+        reward = out[R["reward"] - first]
+        end = out[R["end"] - first]
+        terminated = end == 1.0
+        truncated = end == 2.0
         m = self._ones
         info = {"time": t, "_time": m, "disturbance": ud.T, "_disturbance": m,
-                "attitude_error_deg": deg_att.T, "_attitude_error_deg": m,
-                "rate_error_deg_s": deg_rate.T, "_rate_error_deg_s": m, "trace": self._trace.copy(), "_trace": m}
+                "attitude_error_deg": out[R["degatt0"] - first:R["degatt0"] - first + 3].T, "_attitude_error_deg": m,
+                "rate_error_deg_s": out[R["degrate0"] - first:R["degrate0"] - first + 3].T, "_rate_error_deg_s": m,
+                "trace": self._trace.copy(), "_trace": m}
         if self.render_mode is not None:
+            x = self._x
             a = self._prev
             ra = (0.0, 0.0, 0.0) if ref_att is None else tuple(float(v[0]) for v in ref_att)
             rr = (0.0, 0.0, 0.0) if ref_rate is None else tuple(float(v[0]) for v in ref_rate)
-            self._history.append((float(t[0]), tuple(att[:, 0].tolist()), ra, rr, tuple(x[0:3, 0].tolist()),
-                                  tuple(ud[:, 0].tolist()), tuple(a[:, 0].tolist())))
+            self._history.append((float(t[0]), tuple(float(v[0, 0]) for v in att), ra, rr,
+                                  tuple(x[0:3, 0].tolist()), tuple(ud[:, 0].tolist()), tuple(a[:, 0].tolist())))
             self._history = self._history[-2000:]
         return obs, info, reward, terminated, truncated
 
