@@ -179,17 +179,23 @@ class BlockLayout:
         self.blocks = -(-n // BLOCK)
         self.S = np.zeros((self.blocks, (N_ROWS + extra_rows) * ROW))
         self._cube = self.S.reshape(self.blocks, N_ROWS + extra_rows, ROW)
+        self._views = {}
         self._lane = np.arange(n) % BLOCK
         self._block = np.arange(n) // BLOCK
 
     def view(self, row: int) -> np.ndarray:
         """Row ``row`` of every block, (blocks, BLOCK) (one block: its first ``n`` lanes): a view, for numpy's
         elementwise functions."""
-        return self._cube[:, row, :BLOCK if self.blocks > 1 else self.n]
+        view = self._views.get(row)
+        if view is None:
+            view = self._views[row] = self._cube[:, row, :BLOCK if self.blocks > 1 else self.n]
+        return view
 
     def get(self, first: int, stop: int, which=None) -> np.ndarray:
         """Rows ``first .. stop - 1`` of copies ``which`` (all by default), a fresh (rows, copies) array."""
         if which is None:
+            if self.blocks == 1:
+                return self._cube[0, first:stop, :self.n].copy()
             out = np.empty((stop - first, self.blocks, BLOCK))
             np.copyto(out, self._cube[:, first:stop, :BLOCK].transpose(1, 0, 2))
             return out.reshape(stop - first, -1)[:, :self.n]

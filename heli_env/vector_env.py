@@ -245,11 +245,10 @@ class HeliAttitudeVectorEnv(VectorEnv):
         s = self.spec_
         n = self.num_envs
         rows = self._rows
-        att = [rows.view(R[f"att{c}"]) for c in range(3)]
-        trig = [rows.view(R[f"trig{c}"]) for c in range(5)]
-        np.arctan2(trig[0], trig[1], out=att[0])
-        np.arcsin(trig[2], out=att[1])
-        np.arctan2(trig[3], trig[4], out=att[2])
+        view = rows.view
+        np.arctan2(view(R["trig0"]), view(R["trig1"]), out=view(R["att0"]))
+        np.arcsin(view(R["trig2"]), out=view(R["att1"]))
+        np.arctan2(view(R["trig3"]), view(R["trig4"]), out=view(R["att2"]))
         t = self._k * s.dt
         ref_att, ref_rate = self._reference(t)
         if ref_att is not None:
@@ -278,7 +277,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
             a = self._prev
             ra = (0.0, 0.0, 0.0) if ref_att is None else tuple(float(v[0]) for v in ref_att)
             rr = (0.0, 0.0, 0.0) if ref_rate is None else tuple(float(v[0]) for v in ref_rate)
-            self._history.append((float(t[0]), tuple(float(v[0, 0]) for v in att), ra, rr,
+            self._history.append((float(t[0]), tuple(float(view(R[f"att{c}"])[0, 0]) for c in range(3)), ra, rr,
                                   tuple(x[0:3, 0].tolist()), tuple(ud[:, 0].tolist()), tuple(a[:, 0].tolist())))
             self._history = self._history[-2000:]
         return obs, info, reward, terminated, truncated
