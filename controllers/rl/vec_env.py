@@ -139,8 +139,8 @@ class GymnasiumVecEnv(VecEnv):
             truncated = np.logical_or(truncated, np.concatenate([half, half]) & ~dones)
             dones = np.concatenate([half, half])
         infos = self._split_infos(info, range(self.num_envs))
-        for i in range(self.num_envs):
-            infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
+        for d, flag in zip(infos, (np.asarray(truncated, dtype=bool) & ~np.asarray(terminated, dtype=bool)).tolist()):
+            d["TimeLimit.truncated"] = flag
         if dones.any():
             which = np.flatnonzero(dones)
             for i in which:
@@ -151,19 +151,28 @@ class GymnasiumVecEnv(VecEnv):
 
     @staticmethod
     def _split_infos(info: dict, which) -> list[dict[str, Any]]:
-        """Gymnasium's vector info (dict of arrays with ``_name`` masks) as one dict per copy in ``which``."""
-        keys = [k for k in info if not k.startswith("_")]
-        out = []
-        for i in which:
-            d = {}
-            for k in keys:
-                mask = info.get("_" + k)
-                if mask is not None and not mask[i]:
-                    continue
-                v = info[k]
-                d[k] = v[i].copy() if isinstance(v, np.ndarray) and v.ndim > 1 else (
-                    v[i].item() if isinstance(v, np.ndarray) else v)
-            out.append(d)
+        """Gymnasium's vector info (dict of arrays with ``_name`` masks) as one dict per copy in ``which``.
+
+        Column by column (one ``tolist`` per key rather than one ``item`` per key and copy): at 8 copies the
+        per-copy form took more of a training step than the physics did.
+        """
+        rows = np.fromiter(which, dtype=np.intp)
+        out = [{} for _ in range(rows.size)]
+        for k, v in info.items():
+            if k.startswith("_"):
+                continue
+            if isinstance(v, np.ndarray):
+                values = list(v[rows]) if v.ndim > 1 else v[rows].tolist()  # rows: copies, not views
+            else:
+                values = [v] * rows.size
+            mask = info.get("_" + k)
+            if mask is None:
+                for d, value in zip(out, values):
+                    d[k] = value
+            else:
+                for d, value, present in zip(out, values, np.asarray(mask)[rows].tolist()):
+                    if present:
+                        d[k] = value
         return out
 
     # --------------------------------------------------------------- plumbing
