@@ -53,23 +53,97 @@ RESIDUAL_INIT_DEG = 0.5
 """Default initial roll/pitch range [deg] and rate range [deg/s] of residual training episodes."""
 
 
-def as_base(base, name: str = "residual") -> PDController:
-    """A PD controller from a :class:`PDController` or the path of a PD JSON (``heli design``, a sweep);
-    ``name`` is the setting's, for the messages.
+def as_base(base, name: str = "residual"):
+    """A base controller from a :class:`PDController`, an :class:`~controllers.lqg.controller.LQGController`
+    or the path of either's JSON (``heli design``, ``heli design --lqg``, a sweep); ``name`` is the setting's,
+    for the messages.
 
     Raises
     ------
     AgentError
-        Anything else, or a file that is not a PD controller.
+        Anything else, or a file that is neither controller.
     """
-    if isinstance(base, PDController):
+    from ..lqg.controller import SCHEMA as LQG_SCHEMA
+    from ..lqg.controller import LQGController
+
+    if isinstance(base, (PDController, LQGController)):
         return base
     if isinstance(base, (str, bytes)) or hasattr(base, "__fspath__"):
         try:
+            if _schema_of(base) == LQG_SCHEMA:
+                return LQGController.load(base)
             return PDController.load(base)
-        except (ValueError, UnicodeDecodeError) as e:
-            raise AgentError(f"{name} must be a PD controller JSON: {e}") from e
-    raise AgentError(f"{name} must be a PDController or the path of a PD controller JSON, got {base!r}")
+        except (ValueError, UnicodeDecodeError) as e:  # AgentError is a ValueError
+            raise AgentError(f"{name} must be a PD controller JSON or an LQG controller JSON: {e}") from e
+    raise AgentError(f"{name} must be a PDController or the path of a PD controller JSON, or an LQGController or "
+                     f"its JSON, got {base!r}")
+
+
+def _schema_of(path) -> str | None:
+    """The ``schema`` entry of a JSON file, None when it is not JSON or has none (its loader then says why)."""
+    import json
+    from pathlib import Path
+
+    try:
+        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        return None
+    return doc.get("schema") if isinstance(doc, dict) else None
+
+
+def base_from_document(doc: dict):
+    """The base controller of a residual's metadata entry (:meth:`document` of a PD or an LQG)."""
+    from ..lqg.controller import SCHEMA as LQG_SCHEMA
+    from ..lqg.controller import LQGController
+
+    if isinstance(doc, dict) and doc.get("schema") == LQG_SCHEMA:
+        return LQGController.from_document(doc)
+    return PDController.from_document(doc)
+
+
+def has_memory(base) -> bool:
+    """Whether the base carries a state from one period to the next (an LQG's filters, a PD's D filter)."""
+    return not isinstance(base, PDController) or base.filtered
+
+
+def base_step(base, observation, state=None, episode_start=None):
+    """The base's command and its new state for ``observation`` (12,) or (n, 12).
+
+    A PD's is :meth:`PDController.step` (unclipped); an LQG's is its ``predict`` (clipped, float64 here).
+    After the residual is added, pass the state through :func:`base_applied`, so that an LQG's filter
+    predicts with the stick the aircraft got.
+    """
+    if isinstance(base, PDController):
+        return base.step(observation, state, episode_start)
+    command, state = base.predict(observation, state, episode_start)
+    return np.asarray(command, dtype=np.float64), state
+
+
+def base_applied(base, state, command, applied):
+    """The base's state after the aircraft got ``applied`` instead of the base's own ``command``.
+
+    An LQG predicts its next state with its own stick (``x_p = A x_f + B u``); with a residual on top the
+    aircraft got another, and without this correction the filter would read the residual's effect as a
+    gust and work against it. A PD's state (its D filter's) does not depend on the stick.
+    """
+    if isinstance(base, PDController) or state is None:
+        return state
+    return state + (np.asarray(applied, dtype=np.float64) - command) @ _input_matrix(base)
+
+
+def _input_matrix(lqg) -> np.ndarray:
+    """(3, n_states): how each stick enters an LQG's stacked filter states (the axes' ``B`` blocks, in the
+    order of :class:`~controllers.lqg.controller.LQGController`'s state)."""
+    cached = getattr(lqg, "_residual_input_matrix", None)
+    if cached is None:
+        cached = np.zeros((3, lqg.n_states))
+        start = 0
+        for i, a in enumerate(lqg.axes):
+            n = a["A"].shape[0]
+            cached[i, start:start + n] = a["B"][:, 0]
+            start += n
+        lqg._residual_input_matrix = cached
+    return cached
 
 
 def check_scale(scale) -> float:
@@ -84,7 +158,8 @@ class ResidualAgent:
 
     Parameters
     ----------
-    base : PDController
+    base : PDController or LQGController
+        The controller the residual corrects (:func:`as_base`).
     policy : object with SB3's ``predict``
         The residual policy (a PPO or SAC model); its action in [-1, 1] is scaled by ``scale``.
     scale : float
@@ -95,8 +170,8 @@ class ResidualAgent:
         (zeros before an episode's first observation); pass ``episode_start`` at each episode's first
         step, as SB3's ``evaluate_policy`` and :func:`controllers.evaluate.evaluate_agent` do.
 
-    A base with a derivative filter keeps its filter state beside the policy's: ``state`` is then the
-    pair ``(policy or history state, filter state)``.
+    A base with a memory (an LQG's filters, a PD's derivative filter) keeps its state beside the policy's:
+    ``state`` is then the pair ``(policy or history state, base state)``.
     """
 
     def __init__(self, base: PDController, policy, scale: float = RESIDUAL_SCALE, history: int = 1):
@@ -114,7 +189,8 @@ class ResidualAgent:
         obs = np.asarray(observation, dtype=np.float64)
         seen = np.asarray(observation, dtype=np.float32)
         d_state = None
-        if self.base.filtered and state is not None:
+        memory = has_memory(self.base)
+        if memory and state is not None:
             state, d_state = state
         if self.history > 1:
             state = stack_observations(seen, state, episode_start, self.history)
@@ -122,10 +198,11 @@ class ResidualAgent:
         else:
             policy_state = state
         residual, policy_state = self.policy.predict(seen, policy_state, episode_start, deterministic)
-        command, d_state = self.base.step(obs, d_state, episode_start)
-        act = command + self.scale * np.clip(residual, -1.0, 1.0)
+        command, d_state = base_step(self.base, obs, d_state, episode_start)
+        act = np.clip(command + self.scale * np.clip(residual, -1.0, 1.0), -1.0, 1.0)
+        d_state = base_applied(self.base, d_state, command, act)
         state = state if self.history > 1 else policy_state
-        return np.clip(act, -1.0, 1.0).astype(np.float32), ((state, d_state) if self.base.filtered else state)
+        return act.astype(np.float32), ((state, d_state) if memory else state)
 
 
 def check_history(history) -> int:
@@ -187,11 +264,14 @@ def residual_env(venv, base: PDController, scale: float, paired: bool = False):
             return self._obs[:half]
 
         def step_async(self, actions):
-            command, self._filter = base.step(np.asarray(self._obs, dtype=np.float64), self._filter, self._starts)
+            command, self._filter = base_step(base, np.asarray(self._obs, dtype=np.float64), self._filter,
+                                              self._starts)
             act = command[:half] + scale * np.clip(actions, -1.0, 1.0)
             if paired:
                 act = np.concatenate([act, command[half:]])
-            self.venv.step_async(np.clip(act, -1.0, 1.0).astype(np.float32))
+            act = np.clip(act, -1.0, 1.0)
+            self._filter = base_applied(base, self._filter, command, act)
+            self.venv.step_async(act.astype(np.float32))
 
         def step_wait(self):
             obs, rewards, dones, infos = self.venv.step_wait()
@@ -219,11 +299,12 @@ def residual_from_metadata(meta: dict, policy, path) -> ResidualAgent:
     """
     entry = meta.get("residual")
     try:
-        base = PDController.from_document(entry["base"])
+        base = base_from_document(entry["base"])
         return ResidualAgent(base, policy, entry["scale"], entry.get("history", 1))
     except (TypeError, KeyError, ValueError, AgentError) as e:
         raise AgentError(f"{path}: the residual entry of its metadata is not a base PD and a scale ({e!r})") from e
 
 
-__all__ = ["RESIDUAL_INIT_DEG", "RESIDUAL_SCALE", "ResidualAgent", "as_base", "check_history", "check_scale",
+__all__ = ["RESIDUAL_INIT_DEG", "RESIDUAL_SCALE", "ResidualAgent", "as_base", "base_applied", "base_from_document",
+           "base_step", "check_history", "check_scale", "has_memory",
            "residual_env", "residual_from_metadata", "residual_metadata", "stack_observations"]

@@ -231,11 +231,11 @@ def _train(config: TrainConfig, env_model, out, split, segments, progress, verbo
     return _learn(agent, config, out, metadata, (env, eval_env), progress, callbacks)
 
 
-def residual_setup(base: PDController, env_model, segments, seed: int = 0, seconds: float = 10.0,
+def residual_setup(base, env_model, segments, seed: int = 0, seconds: float = 10.0,
                    axis_balance: bool = True, reference: PDController | None = None) -> dict:
     """Reward and observation scales for residual training, from the base's errors on training gusts.
 
-    Flies ``base`` for ``seconds`` on each training segment (starting at rest) and
+    Flies ``base`` (a PD or an LQG) for ``seconds`` on each training segment (starting at rest) and
     derives the scales listed in :mod:`controllers.rl.residual_agent`'s docstring. (It lives
     here, beside the training that uses it, so that the residual agent, which every agent
     loader needs, does not stand on the evaluation and its vector env.)
@@ -251,10 +251,13 @@ def residual_setup(base: PDController, env_model, segments, seed: int = 0, secon
         only), ``axis_weights`` are (R / R_i)² of its p90s R_i on the same gusts (R the largest, the same cap)
         and ``reference_axis_error_deg`` lists the R_i; the scales still follow the base.
     """
-    errors, stick = _p90_errors(base, env_model, segments, seed, seconds, "residual base")
+    errors, stick, rates = _p90_errors(base, env_model, segments, seed, seconds, "residual base")
     err = max(errors)
-    kp, kd = np.abs(base.gains.kp), np.abs(base.gains.kd)
-    corner = float(np.max(np.where(kd > 0, kp / np.where(kd > 0, kd, 1.0), 0.0)))
+    if isinstance(base, PDController):
+        kp, kd = np.abs(base.gains.kp), np.abs(base.gains.kd)
+        corner = float(np.max(np.where(kd > 0, kp / np.where(kd > 0, kd, 1.0), 0.0)))
+    else:  # an LQG has no kp/kd: the largest ratio of its p90 rate error to its p90 attitude error [1/s]
+        corner = max((r / e for r, e in zip(rates, errors) if e > 0), default=0.0)
     if not corner > 0.0:
         corner = 10.0  # a P-only or D-only base: weigh 1 rad/s of rate error as 0.1 rad of attitude error
     levels = _balanced(errors) if axis_balance else [err] * 3
@@ -267,14 +270,15 @@ def residual_setup(base: PDController, env_model, segments, seed: int = 0, secon
     if reference is not None:
         if not axis_balance:
             raise AgentError("a reward reference weighs the axes; it needs axis_balance")
-        ref, _ = _p90_errors(reference, env_model, segments, seed, seconds, "reward reference")
+        ref, _, _ = _p90_errors(reference, env_model, segments, seed, seconds, "reward reference")
         setup["reference_axis_error_deg"] = ref
         setup["axis_weights"] = _axis_weights(ref)
     return setup
 
 
-def _p90_errors(pd: PDController, env_model, segments, seed: int, seconds: float, role: str):
-    """(p90 |attitude error| per axis [deg], largest p99 |stick|) of ``pd`` flying ``seconds`` on each segment."""
+def _p90_errors(pd, env_model, segments, seed: int, seconds: float, role: str):
+    """(p90 |attitude error| per axis [deg], largest p99 |stick|, p90 |rate error| per axis [deg/s]) of the
+    controller ``pd`` (a PD or an LQG) flying ``seconds`` on each segment."""
     from ..evaluate import evaluate_agent
 
     res = evaluate_agent(pd, env_model, traces=list(segments), episodes_per_trace=1, episode_seconds=seconds,
@@ -283,7 +287,8 @@ def _p90_errors(pd: PDController, env_model, segments, seed: int, seconds: float
     if not (all(math.isfinite(v) for v in errors) and max(errors) > 0.0):
         raise AgentError(f"the {role} PD gives no usable error level on the training gusts (p90 {errors!r} "
                          "deg); is it stable on this model?")
-    return errors, max(float(res.metrics[a]["stick_p99"]) for a in AXES)
+    return (errors, max(float(res.metrics[a]["stick_p99"]) for a in AXES),
+            [float(res.metrics[a]["rate_p90_dps"]) for a in AXES])
 
 
 def _balanced(errors) -> list:
