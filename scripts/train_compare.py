@@ -142,8 +142,9 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--episodes-per-trace", type=int, default=6, help="held-out episodes per trace (default 6)")
     ap.add_argument("--grid", type=int, default=13, help="coarse PD sweep grid size per axis (default 13 x 13; "
                     "a 9 x 9 refinement follows)")
-    ap.add_argument("--residual-on", choices=("robust", "best"), default="robust",
-                    help="the swept PD a residual trains on (default robust: the best pair with 6 dB / 45 deg margins)")
+    ap.add_argument("--residual-on", choices=("robust", "best", "lqg"), default="robust",
+                    help="the controller a residual trains on: a swept PD (default robust: the best pair with 6 dB / "
+                    "45 deg margins; best) or the LQG baseline (lqg)")
     ap.add_argument("--residual-scale", type=float, default=RESIDUAL_SCALE,
                     help=f"bound of the residual in stick (default {RESIDUAL_SCALE:g})")
     ap.add_argument("--surrogates", type=int, default=0,
@@ -178,7 +179,9 @@ def main(argv=None) -> int:
           f"{time.perf_counter() - t0:.1f} s")
     agents = _pd_agents(env_model, out, (design, swept, robust), sweep_rows)
     lqg = _lqg_agent(env_model, out)  # designed before training: a model it cannot take is said at once
-    training = _train(ap, args, env_model, agents, out)
+    if args.residual_on == "lqg" and lqg is None:
+        ap.error("--residual-on lqg: this model has no LQG baseline (see the note above)")
+    training = _train(ap, args, env_model, agents, out, lqg)
     agents += [lqg] if lqg else []  # last: the residual's bases keep their places, results[3:] the others
 
     results = []
@@ -234,7 +237,7 @@ def _lqg_agent(env_model, out: Path):
     return ("LQG", lqg)
 
 
-def _train(ap, args, env_model, agents: list, out: Path) -> dict:
+def _train(ap, args, env_model, agents: list, out: Path, lqg=None) -> dict:
     """Train each algorithm of ``--algos`` within the budget; append the trained agents to ``agents``.
     Returns the training record per algorithm."""
     training = {}
@@ -246,7 +249,7 @@ def _train(ap, args, env_model, agents: list, out: Path) -> dict:
         res = train_agent(base, env_model, args.timesteps, out / algo, seed=args.seed, split_seed=args.split_seed,
                           n_envs=args.n_envs, eval_freq=200_000 if base == "ppo" else 50_000, checkpoint_freq=500_000,
                           progress=not args.no_progress, max_seconds=60.0 * args.minutes,
-                          residual=agents[2 if args.residual_on == "robust" else 1][1] if residual else None,
+                          residual=_residual_base(args, agents, lqg) if residual else None,
                           residual_scale=args.residual_scale, surrogates=args.surrogates,
                           normalize_reward=False if args.no_reward_normalisation else None,
                           reward_reference=agents[1][1] if residual and args.reward_reference == "best" else None,
@@ -260,11 +263,20 @@ def _train(ap, args, env_model, agents: list, out: Path) -> dict:
     return training
 
 
+def _residual_base(args, agents: list, lqg):
+    """The controller a residual trains on: the robust or best swept PD of ``agents``, or the LQG."""
+    if args.residual_on == "lqg":
+        return lqg[1]
+    return agents[2 if args.residual_on == "robust" else 1][1]
+
+
 def _training_notes(args, training: dict, agents: list) -> list[str]:
     """comparison.md's lines on the training budget and runs, and the PD gains compared."""
     notes = [f"Training on {os.cpu_count()} cores, one torch thread, {args.n_envs} environment copies, seed "
              f"{args.seed}" + (f", split seed {args.split_seed}" if args.split_seed else "")
              + f"; budget {args.minutes:g} min per algorithm; residual bound {args.residual_scale:g} stick"
+             + (f" on the {args.residual_on} {'PD' if args.residual_on != 'lqg' else 'baseline'}"
+                if "residual" in args.algos else "")
              + (f"; {args.surrogates} surrogates per training segment" if args.surrogates else "")
              + ("; raw rewards" if args.no_reward_normalisation else "")
              + ("; every axis scaled by the worst one" if args.no_axis_balance else "")
