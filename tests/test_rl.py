@@ -129,6 +129,7 @@ def test_tiny_ppo_run_writes_a_loadable_agent(ppo_run, tmp_path):
     assert len(res.evaluations) == 2
     record = json.loads((res.run_dir / "training.json").read_text())
     assert record["interrupted"] is False and record["timesteps_done"] == res.timesteps
+    assert record["cpu_seconds"] > 0 and record["steps_per_cpu_second"] == res.timesteps / record["cpu_seconds"]
     meta = agent_metadata(res.path)
     assert meta["algo"] == "ppo" and meta["seed"] == 3
     assert {s["trace"] for s in meta["train_segments"]}.isdisjoint({s["trace"] for s in meta["eval_segments"]})

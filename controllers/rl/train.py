@@ -479,23 +479,23 @@ def _learn(agent, config: TrainConfig, out, metadata: dict, envs, progress: bool
 
     path, run_dir, _ = out
     cb = _callbacks(config, envs[1], out, metadata, progress, extra)
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
     try:
         agent.learn(total_timesteps=config.timesteps, callback=CallbackList(cb.all), progress_bar=False)
     except KeyboardInterrupt as e:
         seconds = time.perf_counter() - t0
         saved = cb.checkpoint.save("_interrupted")
-        _write_record(run_dir, metadata, agent, seconds, cb, interrupted=True, path=None)
+        _write_record(run_dir, metadata, agent, (seconds, time.process_time() - cpu0), cb, interrupted=True, path=None)
         raise TrainingInterrupted(saved, int(agent.num_timesteps)) from e
     finally:
         cb.bar.close()
         for env in envs:
             env.close()
         _close_logger(agent)
-    seconds = time.perf_counter() - t0
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     metadata = {**metadata, "timesteps": int(agent.num_timesteps), "train_seconds": seconds}
     save_atomically(agent, path, metadata)
-    record = _write_record(run_dir, metadata, agent, seconds, cb, interrupted=False, path=path)
+    record = _write_record(run_dir, metadata, agent, (seconds, cpu), cb, interrupted=False, path=path)
     best = run_dir / "best_model.zip"
     return TrainingResult(path, config.algo, int(agent.num_timesteps), seconds, bool(cb.clock and cb.clock.reached),
                           run_dir, list(cb.checkpoint.paths), best if best.exists() else None, record["evaluations"],
@@ -529,8 +529,12 @@ def _torch_version() -> str:
     return f"{torch.__version__} ({torch.get_num_threads()} threads)"
 
 
-def _write_record(run_dir, metadata, agent, seconds, cb: _Callbacks, interrupted, path) -> dict:
-    """Write ``training.json``: settings, timing, held-out evaluations, checkpoints; returns what it wrote."""
+def _write_record(run_dir, metadata, agent, times, cb: _Callbacks, interrupted, path) -> dict:
+    """Write ``training.json``: settings, timing, held-out evaluations, checkpoints; returns what it wrote.
+
+    ``times`` is (wall, process CPU) seconds of ``learn``: on a machine shared with other work the steps per CPU
+    second are the nearer figure to what one quiet core would do (``steps_per_cpu_second``)."""
+    seconds, cpu = times
     evals = []
     if cb.evaluation is not None:
         for t, r in zip(cb.evaluation.evaluations_timesteps, cb.evaluation.evaluations_results):
@@ -538,6 +542,7 @@ def _write_record(run_dir, metadata, agent, seconds, cb: _Callbacks, interrupted
     record = jsonable({
         **metadata, "agent": None if path is None else str(path), "timesteps_done": int(agent.num_timesteps),
         "seconds": seconds, "steps_per_second": agent.num_timesteps / seconds if seconds > 0 else None,
+        "cpu_seconds": cpu, "steps_per_cpu_second": agent.num_timesteps / cpu if cpu > 0 else None,
         "cpu_count": os.cpu_count(), "interrupted": interrupted,
         "stopped_by_time": bool(cb.clock and cb.clock.reached), "evaluations": evals,
         "learning_curve": cb.curve.record(), "checkpoints": [str(p) for p in cb.checkpoint.paths],
