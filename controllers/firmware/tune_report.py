@@ -68,10 +68,10 @@ def gains_table(result) -> list:
     return lines
 
 
-def _delay_ms(result) -> str:
-    """The delay margin a robust set keeps, as the report words it ("25 ms of delay margin" or "no delay margin")."""
+def _robust_margins(result) -> str:
+    """The margins a robust set keeps, as the report words them ("6 dB, 45° and 25 ms of delay margin")."""
     ms = 1000.0 * result.settings.get("min_delay_margin_s", 0.025)
-    return f"{ms:g} ms of delay margin" if ms > 0 else "no delay margin required"
+    return f"6 dB, 45° and {ms:g} ms of delay margin" if ms > 0 else "6 dB and 45° (no delay margin: --delay-margin 0)"
 
 
 def verdict_lines(result) -> list:
@@ -81,7 +81,7 @@ def verdict_lines(result) -> list:
         row = result.axes[axis]
         cur, dflt, prop = (row[k] for k in LABELS)
         if row["kept_current"]:
-            out.append(f"- **{axis}**: no swept set kept 6 dB, 45° and {_delay_ms(result)}; the current gains are kept.")
+            out.append(f"- **{axis}**: no swept set kept {_robust_margins(result)}; the current gains are kept.")
             continue
         p_prop = prop.get("p90_deg")
         parts = []
@@ -174,7 +174,7 @@ def to_markdown(result, files: dict, flown=None, figures=(), context=()) -> str:
         "gusts) with the 90 % interval of the p90 over blocks of library time; margins of the loop broken at the "
         "axis' stick at the loop's tick (inf: never crosses; the delay margin is the extra servo delay the loop "
         "survives, PM/ω at the gain crossover); the frequency-domain p90 is the Gaussian one of the linearised "
-        f"loop. The proposal keeps 6 dB, 45° and {_delay_ms(result)}.", ""] + verdict_lines(result) + ["", "## Gains", ""] + gains_table(result) + [""]
+        f"loop. The proposal keeps {_robust_margins(result)}.", ""] + verdict_lines(result) + ["", "## Gains", ""] + gains_table(result) + [""]
     lines += flown_lines(result, flown)
     lines += flight_card(result, files)
     lines += notes_lines(result)
@@ -239,8 +239,10 @@ def plot_sweeps(result, path):
             if sw.names[0] in g and sw.names[1] in g:
                 ax.plot(g[sw.names[1]], g[sw.names[0]], marker, color="red" if label == "proposed" else "white",
                         markersize=10 if label == "proposed" else 7, label=label)
-        ax.set_title(f"{AXES[i]} (inside white: 6 dB, 45°, {_delay_ms(result)})")
+        ax.set_title(AXES[i])
         ax.legend(loc="lower left", fontsize=7)
+    fig.suptitle(f"frequency-domain p90; inside the white line: {_robust_margins(result)}", fontsize=10)
+    fig.tight_layout()
     return save_figure(fig, path)
 
 
