@@ -24,13 +24,18 @@ heavier one in between with 50 ms servos — each in a bench cell's weather,
 
 Prints per aircraft, firmware and axis the predicted p90 |attitude error| of the proposed gains
 (``tune.json["axes"][axis]["proposed"]["p90_deg"]``), the flown one and their ratio (target: within
-15 %), the flown p90 of the defaults (target: the proposed beat them, keeping 6 dB and 45°), and the time
-``heli tune`` took (target: <= 60 s for the 300 s flight, identification included, on two cores).
+15 %), the flown p90 of the defaults (target: the proposed beat them, keeping 6 dB and 45°), Rotorflight's
+yaw flown again with other stop gains (:data:`STOP_GAINS`: not swept, see tests/test_firmware_tune.py), and
+the wall and CPU time ``heli tune`` took (target: <= 60 s for the 300 s flight, identification included, on
+two cores; the CPU time says what a busy machine's wall clock cannot). ``--delay-margin 0`` tunes without
+the 25 ms delay margin (the measurement behind it, docs/firmware.md); ``--delay S`` identifies with the servo
+delay given instead of searched.
 
 Usage::
 
     python scripts/firmware_tune_check.py [--aircraft paper-40ms agile heavy] [--firmware ardupilot rotorflight]
-                                          [--flights 12] [--duration 20] [--out DIR] [--json FILE]
+                                          [--flights 12] [--duration 20] [--delay auto|S] [--delay-margin S]
+                                          [--out DIR] [--json FILE]
 """
 
 from __future__ import annotations
@@ -62,6 +67,20 @@ def _aircraft() -> dict:
     heavy = ModelParams(k2=5.0, k3=5.0, kd1=0.1, k6=-4.0, k7=5.5, kd2=0.05, k10=20.0, k11=4.0, k12=-1.0,
                         kd3=0.2, tau_roll=0.05, tau_pitch=0.05, tau_yaw=0.03)
     return {"paper-40ms": ("independent", paper), "agile": ("default", agile), "heavy": ("broadband-pd-half", heavy)}
+
+
+STOP_GAINS = ((100.0, 100.0), (150.0, 50.0))
+"""Rotorflight's ``yaw_cw_stop_gain``/``yaw_ccw_stop_gain`` the proposal (written with the defaults 120/80) is
+also flown with: not swept, as the linearised tail sees only their mean (tests/test_firmware_tune.py)."""
+
+
+def _cpu_seconds() -> float:
+    """CPU time so far of this process, its threads and its ended child processes (the identification fits the
+    axes in worker processes: identification.axis_pool), user + system [s]."""
+    import resource
+
+    return sum(r.ru_utime + r.ru_stime for r in (resource.getrusage(resource.RUSAGE_SELF),
+                                                 resource.getrusage(resource.RUSAGE_CHILDREN)))
 
 
 AIRCRAFT = ("paper-40ms", "agile", "heavy")
@@ -162,12 +181,17 @@ def run_aircraft(name: str, firmwares, args, work: Path) -> list:
                 "--scale", ",".join(f"{v:.6g}" for v in scale), "--out", str(out), "--no-plots"]
         if model is not None:
             argv += ["--model", str(model)]
-        t0 = time.perf_counter()
+        elif args.delay is not None:
+            argv += ["--delay", args.delay]
+        if args.delay_margin is not None:
+            argv += ["--delay-margin", f"{args.delay_margin:g}"]
+        t0, c0 = time.perf_counter(), _cpu_seconds()
         code = main(argv)
-        seconds = time.perf_counter() - t0
+        seconds, cpu = time.perf_counter() - t0, _cpu_seconds() - c0
         if code != 0:
             rows.append({"aircraft": name, "firmware": fw, "error": f"heli tune exited {code}"})
             continue
+        model_was_none = model is None
         model = model or out / "model"
         ident, _ = load_model(model / "model.json")
         doc = json.loads((out / "tune.json").read_text())
@@ -180,12 +204,19 @@ def run_aircraft(name: str, firmwares, args, work: Path) -> list:
         flown_def = fly_plain(fw, defaults, truth, ident, scale, cfg, args.flights, args.duration, seed, rate)
         flown_model = fly_plain(fw, values, ident, ident, scale, cfg, args.flights, args.duration, seed, rate,
                                 gust_gains=truth.control_gains)
+        stops = {}
+        if fw == "rotorflight":  # the tail's stop gains, not swept: the proposal flown with others (docstring)
+            for cw, ccw in STOP_GAINS:
+                flown = fly_plain(fw, {**values, "yaw_cw_stop_gain": cw, "yaw_ccw_stop_gain": ccw}, truth, ident,
+                                  scale, cfg, args.flights, args.duration, seed, rate)
+                stops[f"{cw:g}/{ccw:g}"] = None if flown is None else flown[2]
         for i, axis in enumerate(AXES):
             row = doc["axes"][axis]
             pred = row["proposed"].get("p90_deg")
             fp = None if flown_prop is None else flown_prop[i]
             rows.append({"aircraft": name, "cell": cell, "firmware": fw, "axis": axis, "scale": scale[i],
-                         "tune_seconds": seconds, "predicted_p90": pred, "flown_p90": fp,
+                         "tune_seconds": seconds, "tune_cpu_seconds": cpu, "identified": model_was_none,
+                         "predicted_p90": pred, "flown_p90": fp,
                          "ratio": None if (fp is None or pred is None) else pred / fp,
                          "interval": row["proposed"].get("p90_deg_interval"),
                          "predicted_default_p90": row["default"].get("p90_deg"),
@@ -193,6 +224,9 @@ def run_aircraft(name: str, firmwares, args, work: Path) -> list:
                          "flown_on_model_p90": None if flown_model is None else flown_model[i],
                          "gain_margin_db": row["proposed"]["gain_margin_db"],
                          "phase_margin_deg": row["proposed"]["phase_margin_deg"],
+                         "delay_margin_s": row["proposed"]["delay_margin_s"],
+                         "proposed_gains": row["proposed"]["gains"],
+                         **({"yaw_p90_with_stop_gains": stops} if stops and axis == "yaw" else {}),
                          "kept_current": row["kept_current"], "defaults_near_best": row["defaults_near_best"]})
     return rows
 
@@ -222,9 +256,15 @@ def _print(rows) -> None:
         print(f"|predicted/flown - 1|: mean {dev.mean() * 100:.1f} %, worst {dev.max() * 100:.1f} %; within 15 %: "
               f"{within}/{len(ok)}; proposed beat the defaults (flown): {beats}/{len(ok)}; keep 6 dB / 45°: "
               f"{robust}/{len(ok)}")
-    secs = sorted({(r['aircraft'], r['firmware'], round(r['tune_seconds'], 1)) for r in rows if 'tune_seconds' in r})
-    print("heli tune seconds (the first firmware of each aircraft identifies the 300 s flight): "
-          + ", ".join(f"{a}/{fw} {s:g}" for a, fw, s in secs))
+    stops = [r for r in rows if r.get("yaw_p90_with_stop_gains")]
+    for r in stops:
+        variants = ", ".join(f"{k} {'–' if v is None else f'{v:.3g}'}" for k, v in r["yaw_p90_with_stop_gains"].items())
+        print(f"{r['aircraft']:12s} rotorflight yaw flown p90 with stop gains cw/ccw 120/80 (written) "
+              f"{r['flown_p90'] if r['flown_p90'] is None else round(r['flown_p90'], 3)}, {variants}")
+    secs = sorted({(r['aircraft'], r['firmware'], r['tune_seconds'], r['tune_cpu_seconds'], r['identified'])
+                   for r in rows if 'tune_seconds' in r})
+    print("heli tune wall / CPU seconds (* identified the 300 s flight; the others took its model with --model): "
+          + ", ".join(f"{a}/{fw}{'*' if ident else ''} {w:.1f} / {c:.1f}" for a, fw, w, c, ident in secs))
 
 
 def main(argv=None) -> int:
@@ -237,6 +277,11 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=7)
     p.add_argument("--out", default=None, help="keep the tunes in this folder (default: a temporary one)")
     p.add_argument("--json", default=None, help="write the rows as JSON here")
+    p.add_argument("--delay", default=None,
+                   help="heli tune's --delay when it identifies the flight (default its own, auto; 0.02 reproduces "
+                   "the agile aircraft's yaw with its tail delay given, docs/firmware.md)")
+    p.add_argument("--delay-margin", type=float, default=None,
+                   help="passed to heli tune (default: its own, 25 ms; 0 reproduces the measurement without it)")
     args = p.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(args.out) if args.out else Path(tmp)
