@@ -1,11 +1,13 @@
-"""Residual RL on a PD controller: ``action = clip(PD(obs) + scale · π(obs), -1, 1)``.
+"""Residual RL on a PD or LQG controller: ``action = clip(base(obs) + scale · π(obs), -1, 1)``.
 
 Residual policy learning (Silver et al. 2018, "Residual Policy Learning";
 Johannink et al. 2019, "Residual Reinforcement Learning for Robot Control"): the
 agent learns a bounded correction on top of a working controller instead of the
 whole control law. Here the base is a :class:`controllers.pd.PDController`,
-typically a pair from a gain sweep, and the policy is a PPO or SAC network
-whose action in [-1, 1] is scaled to ±``scale`` stick.
+typically a pair from a gain sweep, or the LQG baseline
+(:class:`controllers.lqg.controller.LQGController`, whose Kalman filters are told
+the stick the aircraft got, correction included: :func:`base_applied`), and the
+policy is a PPO or SAC network whose action in [-1, 1] is scaled to ±``scale`` stick.
 
 Why it is needed here: swept PDs of the shipped model hold attitude to a few
 thousandths of a degree (p90) with gains of hundreds to thousands of stick/rad.
@@ -24,7 +26,8 @@ hundredths:
   ``E_i`` is the base's p90 |attitude error| on axis ``i`` (at least a tenth of the
   largest, ``E``; with ``axis_balance=False`` every axis takes ``E``) and ``ω_c`` the
   largest ``kp/kd`` of its axes (the PD's corner frequency, where a rate error
-  weighs as much as an attitude error in its own command); written as
+  weighs as much as an attitude error in its own command; for an LQG base its p90 rate error over its
+  p90 attitude error, the largest of its axes); written as
   ``attitude_scale = 2·E`` with ``axis_weights = (E/E_i)²``;
 * observations (:class:`controllers.sb3_training.ObservationScaler`): attitude
   errors by ``4·E_i``, rates and rate errors by ``4·E_i·ω_c``, the previous action by
@@ -230,8 +233,8 @@ def stack_observations(obs, stacked, episode_start, history: int) -> np.ndarray:
     return out
 
 
-def residual_env(venv, base: PDController, scale: float, paired: bool = False):
-    """SB3 ``VecEnv`` whose action is the residual: the base PD's command on the last observation plus
+def residual_env(venv, base, scale: float, paired: bool = False):
+    """SB3 ``VecEnv`` whose action is the residual: the base's (a PD's or an LQG's) command on the last observation plus
     ``scale`` times the action, clipped to [-1, 1], is what the wrapped env receives.
 
     With ``paired=True``, ``venv`` is a :class:`controllers.rl.vec_env.GymnasiumVecEnv` with
