@@ -64,7 +64,7 @@ from heli_core.params import ModelParams
 from heli_core.servo import pade_filter, per_axis
 from heli_core.terms import AXES, DECOUPLED, FEATURES, RATE_DEPENDENCE, STICK_ROW, TERMS
 
-from .axis_likelihood import AxisData, AxisLikelihood, simulation_r2
+from .axis_likelihood import MIN_SERVO_DELAY, AxisData, AxisLikelihood, simulation_r2
 from .axis_pool import check_workers, map_axes
 from .effects import shift_inputs
 from .errors import IdentifiabilityError, NotFittedError
@@ -111,6 +111,11 @@ helicopter's rate response) when the undelayed fit's is not positive and the int
 SUPPORT_Z = 3.0
 """With ``select_terms``: a term beyond the decoupled model is kept when ``|value| >= SUPPORT_Z * se``
 (two-sided 0.3 % level, about Bonferroni 1 % over the coupled model's five extra terms)."""
+
+TAU_UNIT = 2e4
+"""Unit of the alignment in a search started at no delay [s]: scipy's finite-difference step (sqrt(eps) of a
+unit) is then 0.3 ms, three times the band around 0 where no delay is modelled (MIN_SERVO_DELAY), a
+thirtieth of a 100 Hz sample."""
 
 TIME_CONSTANT_BOUNDS = ((0.8, 120.0), (0.02, 0.8))
 """Bounds of the slow and the fast gust time constants [s]."""
@@ -428,16 +433,26 @@ class MaximumLikelihoodIdentifier:
         for i, v in fixed.items():
             full[i] = v
         free = np.array([i not in fixed for i in range(full.size)])
-        z0 = np.clip(full[free], lo[free] + 1e-9, hi[free] - 1e-9)
+        # an alignment search started in the band where no delay is modelled (|tau| <= MIN_SERVO_DELAY, where
+        # the likelihood is flat) runs in units of TAU_UNIT: with x_scale="jac" the search is the same in any
+        # units but for its finite-difference step, which then reaches past the band; scipy's step in seconds
+        # (1.5e-8 s) saw no slope at 0 and the search never left it (a 20 ms tail delay identified as none,
+        # damping 3.3 for 6.0). Started elsewhere, the search keeps scipy's step: the larger one let a weakly
+        # excited axis leap 0.9 s into an unstable fit (the T-REX hover's yaw)
+        unit = np.ones(full.size)
+        if like.free_tau and abs(tau0) <= MIN_SERVO_DELAY:
+            unit[-1] = TAU_UNIT
+        lo, hi = lo / unit, hi / unit
+        z0 = np.clip(full[free] / unit[free], lo[free] + 1e-9 / unit[free], hi[free] - 1e-9 / unit[free])
 
         def residual(z):
             x = full.copy()
-            x[free] = z
+            x[free] = z * unit[free]
             return like.residual(x)
 
         res = optimize.least_squares(residual, z0, bounds=(lo[free], hi[free]), x_scale="jac",
                                      max_nfev=max_nfev or self.max_nfev, xtol=XTOL, ftol=FTOL)
-        full[free] = res.x
+        full[free] = res.x * unit[free]
         res.x = full
         return res
 

@@ -199,3 +199,22 @@ def test_smoother_wind_of_a_coupled_fit_with_dropped_terms(flight180):
     assert ident.axes_["roll"].dropped
     wind = ident.wind_torque(0)
     assert np.corrcoef(wind[0], flight180.wind_torque[0])[0, 1] > 0.95
+
+
+def test_a_small_servo_delay_is_found_when_the_profile_prefers_none():
+    # an agile aircraft's 20 ms tail servo: the profile, its damping held at the undelayed fit's, prefers no
+    # delay; the joint search from 0 must still leave it (it stayed at 0 with k11 3.4 for 6.0: issue #32's
+    # one tune beyond 15 %)
+    from dataclasses import replace
+
+    from heli_core.params import ModelParams
+    from identification.bench import BENCH_CELLS
+
+    agile = ModelParams(k2=12.0, k3=9.0, kd1=0.3, k6=-10.0, k7=9.5, kd2=0.1, k10=40.0, k11=6.0, k12=-1.5,
+                        kd3=0.3, tau_roll=0.03, tau_pitch=0.03, tau_yaw=0.02)
+    flight = simulate_flight(90, seed=1, config=replace(BENCH_CELLS["default"], duration=90), truth=agile).flight
+    est = MaximumLikelihoodIdentifier(delay="auto", axes=("yaw",)).fit(flight)
+    profile_best = min(est.axes_["yaw"].delay_profile, key=lambda p: p[1])[0]
+    assert profile_best == 0.0  # the trap this test is about
+    assert est.axes_["yaw"].delay == pytest.approx(0.02, abs=0.006)
+    assert est.params_.k11 == pytest.approx(6.0, rel=0.12)
