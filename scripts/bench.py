@@ -29,6 +29,9 @@ Sections (``--only NAME`` runs one):
   a fresh process of the installed console script (target <= 0.5 s each, issue 18).
 * ``rl-seeds`` — PPO steps/s of one seed alone and of ``--seeds 0,1`` side by side on
   the local backend, each seed's ratio to the one alone (target >= 0.8 on 2 cores, issue 17).
+* ``rl`` — issue #33's RL figures: the target runs' residual PPO (on the LQG baseline) alone, two seeds side by
+  side (target >= 0.8 of alone) and beside a CPU-bound neighbour, in steps/s and in minutes to the steps the
+  RL target was checked with (target <= 5 quiet).
 
 Usage::
 
@@ -503,9 +506,78 @@ def bench_rl_seeds(repeats: int) -> dict:
     return out
 
 
+RL_TARGET_STEPS = 3_000_000
+"""Environment steps of the residual runs that issue #33's RL target was checked with (docs/rl-experiments.md,
+seventh session): ``bench_rl`` turns its steps/s into minutes to that target."""
+RL_TARGET_SETTINGS = {"n_envs": 32, "delay_spread": 0.02,
+                      "algo_kwargs": {"n_steps": 128, "batch_size": 1024, "learning_rate": 1e-4}}
+"""The settings of those runs besides the residual's defaults (``train_compare.py --n-envs 32 --delay-spread 0.02
+--algo-kwargs ...``)."""
+
+
+def bench_rl(repeats: int) -> dict:
+    """Issue #33's RL figures: the residual PPO of the target's runs (on the shipped model's LQG baseline, with
+    :data:`RL_TARGET_SETTINGS`) trained for ``max(30, repeats)`` s of wall time, quiet: one seed alone,
+    then seeds 0 and 1 side by side (``train_seeds``, local backend, 2 workers) and each one's ratio to the one
+    alone (target >= 0.8); then one alone beside a CPU-bound neighbour process. Steps/s are ``learn``'s (the
+    set-up, which flies the base on the training gusts, is outside), and the minutes are those the target's
+    :data:`RL_TARGET_STEPS` take at that rate."""
+    import json
+    import os
+    import tempfile
+    from pathlib import Path
+
+    from controllers.lqg.design import design_lqg
+    from controllers.rl import train_agent, train_seeds
+    from heli_env import load_env_model
+
+    model = load_env_model()
+    base = design_lqg(model).controller()
+    kw = dict(algo="ppo", model=model, timesteps=10**9, max_seconds=max(30.0, float(repeats)), residual=base,
+              eval_freq=0, checkpoint_freq=0, progress=False, **RL_TARGET_SETTINGS)
+
+    def rate(folder: Path, key: str = "steps_per_second") -> float:
+        return json.loads((folder / "training.json").read_text())[key]
+
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        before = _load()
+        train_agent(out=Path(tmp) / "one", seed=0, **kw)
+        alone, alone_cpu = rate(Path(tmp) / "one_training"), rate(Path(tmp) / "one_training", "steps_per_cpu_second")
+        train_seeds(out=Path(tmp) / "two", seeds=(0, 1), backend="local", **kw)
+        side = [rate(Path(tmp) / f"two_seed{s}_training") for s in (0, 1)]
+        after = _load()
+        neighbour = _neighbour()
+        try:
+            busy_before = _load()
+            train_agent(out=Path(tmp) / "busy", seed=0, **kw)
+            busy = rate(Path(tmp) / "busy_training")
+            busy_after = _load()
+        finally:
+            neighbour.terminate()
+            neighbour.wait()
+    out["cores"] = os.cpu_count()
+    out["quiet: load average before / after (1, 5, 15 min)"] = f"{before}; {after}"
+    out["quiet: residual PPO on the LQG, one seed alone [steps/s]"] = alone
+    out["quiet: the same, per second of its process' CPU time [steps/s]"] = alone_cpu
+    out[f"quiet: minutes to the target's {RL_TARGET_STEPS / 1e6:g} M steps, one seed alone"] = (
+        RL_TARGET_STEPS / alone / 60)
+    for s, v in zip((0, 1), side):
+        out[f"quiet: seeds 0,1 side by side, seed {s} [steps/s]"] = v
+    worst = min(side) / alone
+    out["quiet: side by side / alone, worst seed (target >= 0.8)"] = worst
+    out["quiet: minutes to the target's steps, slower seed side by side"] = RL_TARGET_STEPS / min(side) / 60
+    out["busy: load average before / after"] = f"{busy_before}; {busy_after}"
+    out["busy: one seed beside a CPU-bound neighbour [steps/s]"] = busy
+    out["busy: minutes to the target's steps"] = RL_TARGET_STEPS / busy / 60
+    out["targets"] = (f"side by side {'met' if worst >= 0.8 else 'NOT met'}; minutes to target quiet "
+                      f"{'<=' if RL_TARGET_STEPS / alone <= 300 else '>'} 5")
+    return out
+
+
 SECTIONS = {"identification": bench_identification, "physics": bench_physics, "env": bench_env,
             "env-threads": bench_env_threads, "sweep": bench_sweep,
-            "backends": bench_backends, "cli": bench_cli, "rl-seeds": bench_rl_seeds}
+            "backends": bench_backends, "cli": bench_cli, "rl-seeds": bench_rl_seeds, "rl": bench_rl}
 
 
 def main(argv=None):
