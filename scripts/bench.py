@@ -546,6 +546,7 @@ def bench_rl(repeats: int) -> dict:
         alone, alone_cpu = rate(Path(tmp) / "one_training"), rate(Path(tmp) / "one_training", "steps_per_cpu_second")
         train_seeds(out=Path(tmp) / "two", seeds=(0, 1), backend="local", **kw)
         side = [rate(Path(tmp) / f"two_seed{s}_training") for s in (0, 1)]
+        side_cpu = [rate(Path(tmp) / f"two_seed{s}_training", "steps_per_cpu_second") for s in (0, 1)]
         after = _load()
         neighbour = _neighbour()
         try:
@@ -566,6 +567,8 @@ def bench_rl(repeats: int) -> dict:
         out[f"quiet: seeds 0,1 side by side, seed {s} [steps/s]"] = v
     worst = min(side) / alone
     out["quiet: side by side / alone, worst seed (target >= 0.8)"] = worst
+    out["quiet: the same per CPU second (what each gets of a core it has; other work's share left out)"] = (
+        min(side_cpu) / alone_cpu)
     out["quiet: minutes to the target's steps, slower seed side by side"] = RL_TARGET_STEPS / min(side) / 60
     out["busy: load average before / after"] = f"{busy_before}; {busy_after}"
     out["busy: one seed beside a CPU-bound neighbour [steps/s]"] = busy
