@@ -149,7 +149,7 @@ class SweepConfig:
         others geometric up to ``hist_max_deg``).
     max_batch : int
         Pair × window states stepped at once (memory: ~12 bytes × steps each).
-    backend : None, {"local", "ray"} or identification.backends.Backend
+    backend : None, {"local", "ray"} or heli_core.backends.Backend
         Where the time-domain replay runs. None (default): in this process, as one
         batch. Otherwise the stable pairs are split into chunks (``chunk_pairs``) run as
         tasks of the backend (``"local"``: every core of this machine; ``"ray"``:
@@ -409,10 +409,10 @@ def _make_backend(backend):
 
     Making a backend starts nothing (no processes, no Ray instance) until its first ``map``;
     ``"ray"`` without the ``cluster`` extra raises :class:`~heli_core.errors.MissingDependency`.
-    Looked up through :mod:`identification.backends` (its re-export), where the tests replace it.
+    Looked up through :mod:`heli_core.backends` (its re-export), where the tests replace it.
     """
     from heli_core.errors import BackendError
-    from identification.backends import make_backend
+    from heli_core.backends import make_backend
 
     try:
         return make_backend(backend)

@@ -25,7 +25,7 @@ def register(sub):
 def run(args) -> int:
     from pathlib import Path
 
-    from identification.errors import ModelDirError, ModelFileError
+    from model_store.errors import ModelDirError, ModelFileError
     from model_store.model_dir import ModelDir
 
     if Path(args.model_dir).is_file():
@@ -55,7 +55,8 @@ def run(args) -> int:
 def _check_file(path) -> int:
     """A file given where a model folder is expected: a canonical CSV flight is checked as a flight (read and
     validated as ``heli identify`` reads it); anything else is one line saying what was expected and what came."""
-    from identification.errors import FlightLogError, ModelFileError
+    from identification.errors import FlightLogError
+    from model_store.errors import ModelFileError
     from identification.io import detect_format, read_flight
 
     expected = f"expected a model folder (written by 'heli identify'), got the file {str(path)!r}"

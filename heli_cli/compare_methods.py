@@ -42,7 +42,7 @@ def register(sub):
 
 def run(args) -> int:
     from identification.io import read_flight
-    from identification.method_comparison import QUICK_NLR_MAX_NFEV, compare_methods
+    from identification.bench.method_comparison import QUICK_NLR_MAX_NFEV, compare_methods
 
     from .progress import progress_of
 
@@ -73,7 +73,7 @@ def run(args) -> int:
 
 def load_truth_if_any(flight_path):
     """The truth parameters saved beside a synthetic flight, or None (with a warning if unreadable)."""
-    from identification.synthetic import load_truth, truth_paths
+    from identification.bench.synthetic import load_truth, truth_paths
 
     if not truth_paths(flight_path)["truth"].exists():
         return None

@@ -37,7 +37,7 @@ def run_lqg(args) -> int:
     from controllers.errors import DesignError
     from controllers.lqg import design_lqg
     from heli_env.model_dir import load_env_model
-    from identification.files import write_text
+    from heli_core.files import write_text
 
     from .design import control_period
     from .progress import progress_of

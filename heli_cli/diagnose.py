@@ -47,8 +47,8 @@ def register(sub):
 
 def run(args) -> int:
     from identification.io import read_flight
-    from identification.model_file import load_model
-    from identification.report import source_entry
+    from model_store.model_file import load_model
+    from identification.workflows.identify import source_entry
 
     from .progress import progress_of
 
@@ -59,8 +59,8 @@ def run(args) -> int:
     with progress_of(args) as progress:
         if args.method == "ml":
             return _run_ml(args, flight, model, document, source_entry(args.flight), progress)
-        from identification.diagnose import ALPHA, MIN_GAIN, Diagnoser
-        from identification.diagnose_report import DiagnosisConfig, diagnose_and_report
+        from identification.diagnosis.heldout_diagnoser import ALPHA, MIN_GAIN, Diagnoser
+        from identification.reports.diagnosis import DiagnosisConfig, diagnose_and_report
 
         diagnoser = Diagnoser(folds=args.folds, window=args.window,
                               alpha=ALPHA if args.alpha is None else args.alpha,
@@ -118,7 +118,7 @@ def _print_run(run_, evidence) -> int:
     if hasattr(d, "closed_loop_"):
         print("stick share closed by the pilot/controller: "
               + ", ".join(f"{a} {100 * v:.0f} %" for a, v in d.closed_loop_.items()))
-        from identification.ml_diagnosis_report import flight_controller_note
+        from identification.reports.likelihood_diagnosis import flight_controller_note
 
         if flight_controller_note(d):
             print(flight_controller_note(d))
@@ -128,8 +128,13 @@ def _print_run(run_, evidence) -> int:
 
 
 def _run_ml(args, flight, model, document, source, progress) -> int:
-    from identification.ml_diagnosis import ALPHA, MIN_LR_ALIGNMENT, MIN_LR_PER_PARAMETER, LikelihoodDiagnoser
-    from identification.ml_diagnosis_report import diagnose_by_likelihood
+    from identification.diagnosis.likelihood_diagnoser import (
+        ALPHA,
+        MIN_LR_ALIGNMENT,
+        MIN_LR_PER_PARAMETER,
+        LikelihoodDiagnoser,
+    )
+    from identification.reports.likelihood_diagnosis import diagnose_by_likelihood
 
     progress.stage(f"diagnosing {args.flight} by likelihood (every catalogue effect on every axis"
                    + (", then the figures)" if not args.no_plots else ")"))
@@ -143,8 +148,8 @@ def _run_ml(args, flight, model, document, source, progress) -> int:
     run_ = diagnose_by_likelihood(flight, args.out, model=model, model_document=document, source=source,
                                   plots=not args.no_plots, diagnoser=diagnoser, wait=not args.no_wait)
     progress.done()
-    from identification.ahead_prediction import format_r2
-    from identification.ml_diagnosis_report import heldout_change
+    from identification.likelihood.ahead_prediction import format_r2
+    from identification.reports.likelihood_diagnosis import heldout_change
 
     _print_run(run_, lambda s: (
         f"LR {s.lr:.1f} > {s.threshold:.1f}; 0.5 s-ahead R² {format_r2(s.r2_before['ahead_0.5s'])} -> "

@@ -93,7 +93,7 @@ def run(args) -> int:
     from controllers.rl.agent_file import agent_metadata, load_agent
     from controllers.trace_split import TraceSplit, split_traces
     from heli_env.model_dir import load_env_model
-    from identification.files import write_text
+    from heli_core.files import write_text
 
     from .progress import progress_of
 

@@ -15,7 +15,7 @@ command prints, with nothing else to carry along:
   what the page was made from, so :func:`stale_reasons` (``heli check``) can tell a page that shows an older
   report (``heli refresh`` rewrote ``report.md`` and the figures) from a current one.
 
-The file is written atomically (:func:`identification.files.write_text`). ``markdown`` is imported when a
+The file is written atomically (:func:`heli_core.files.write_text`). ``markdown`` is imported when a
 report is converted, not when the ``heli`` parser is built, so ``heli --help`` stays fast.
 """
 
@@ -84,7 +84,7 @@ def write_html_report(markdown_path, figures=(), title: str | None = None) -> Pa
     FileNotFoundError
         ``markdown_path`` does not exist.
     """
-    from identification.files import write_text
+    from heli_core.files import write_text
 
     markdown_path = Path(markdown_path)
     text = markdown_path.read_text(encoding="utf-8")

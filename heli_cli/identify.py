@@ -44,7 +44,7 @@ def add_flight_backend_options(p):
 
 def flight_backend(args):
     """The backend of :func:`add_flight_backend_options`, or None (in this process) without ``--backend``."""
-    from identification.backends import make_backend
+    from heli_core.backends import make_backend
 
     return None if args.backend is None else make_backend(args.backend, workers=args.workers)
 
@@ -96,7 +96,7 @@ def register(sub):
 
 def run(args) -> int:
     from identification.io import read_flight
-    from identification.report import identify_and_report, source_entry
+    from identification.workflows.identify import identify_and_report, source_entry
 
     from .progress import progress_of
 
@@ -147,7 +147,7 @@ def run(args) -> int:
 def _identify_or_explain(args, flights, kwargs: dict, progress, identify):
     """``identify()``; when its model diverges, test whether searching the alignment (``--delay auto``) gives
     a physical, stable model, and say so in the error with the command to run next only if it does."""
-    from identification.alignment_check import check_alignment
+    from identification.diagnosis.alignment_check import check_alignment
     from identification.errors import SimulationDivergedError
 
     try:
@@ -208,7 +208,7 @@ def _print_flight_checks(checks) -> None:
     frequency-response cost J)."""
     if not checks:
         return
-    from identification.ahead_prediction import format_r2
+    from identification.likelihood.ahead_prediction import format_r2
 
     width = max(6, *(len(c.name) for c in checks))
     print(f"validation on {len(checks)} flight(s) not used for the fit ({checks[0].model} model simulated from "
@@ -229,7 +229,7 @@ def _print_flight_checks(checks) -> None:
 def _print_run(run, n_flights: int, method: str) -> None:
     """The model's verdict, the identified parameters, the validation errors, warnings and the files written so
     far."""
-    from identification.alignment_check import MIN_EXPLAINED
+    from identification.diagnosis.alignment_check import MIN_EXPLAINED
 
     if run.verdict is not None:
         print_verdict(run.verdict)

@@ -145,7 +145,7 @@ class _LogBar:
 def run(args) -> int:
     import json
 
-    from identification.files import jsonable, write_text
+    from heli_core.files import jsonable, write_text
     from identification.io import read_log, write_csv_flight
     from identification.io.raw_log import rate_attitude_agreement
 

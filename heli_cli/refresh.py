@@ -45,7 +45,7 @@ def register(sub):
 
 
 def run(args) -> int:
-    from identification.refresh import refresh_model
+    from identification.workflows.refresh import refresh_model
 
     from .progress import progress_of
 

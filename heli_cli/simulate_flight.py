@@ -6,15 +6,15 @@ from __future__ import annotations
 CELL_NAMES = ("default", "independent", "broadband-pd-half", "broadband-pd-2x", "broadband-pd-delay0.1",
               "broadband-pd-delay0.25", "dryden-0.2Hz-pid", "dryden-2Hz-pd", "broadband-autopilot",
               "held-sticks-pd", "broadband-pd-noisy-gyro")
-"""The names of :data:`identification.bench.BENCH_CELLS`, written here so that ``--help`` imports no numpy
+"""The names of :data:`identification.bench.cells.BENCH_CELLS`, written here so that ``--help`` imports no numpy
 (a test keeps the two equal)."""
 
 EFFECT_NAMES = ("servo_delay", "cross_coupling", "gyroscopic", "nonlinear_damping", "gain_scheduling",
                 "collective_torque", "servo_lag")
-"""The names of :data:`identification.synthetic.EFFECTS` (a test keeps the two equal)."""
+"""The names of :data:`identification.bench.synthetic.EFFECTS` (a test keeps the two equal)."""
 
 EFFECT_ALIAS_NAMES = ("flybar", "quadratic_damping", "collective_effectiveness")
-"""The names of :data:`identification.synthetic.EFFECT_ALIASES` (a test keeps the two equal)."""
+"""The names of :data:`identification.bench.synthetic.EFFECT_ALIASES` (a test keeps the two equal)."""
 
 from .argtypes import FLIGHT_BYTES_PER_SECOND, affordable, number, output_path, seed
 
@@ -81,7 +81,7 @@ def _line(text):
 
 
 def run(args) -> int:
-    from identification.synthetic import simulate_flight
+    from identification.bench.synthetic import simulate_flight
 
     from .progress import progress_of
 
@@ -113,8 +113,8 @@ def _config(args):
     """The flight's settings from a bench cell (or the default) and the options that change it."""
     from dataclasses import replace
 
-    from identification.bench import BENCH_CELLS
-    from identification.synthetic import MANOEUVRE_CONFIG, FlightConfig
+    from identification.bench.cells import BENCH_CELLS
+    from identification.bench.synthetic import MANOEUVRE_CONFIG, FlightConfig
 
     cfg = replace(BENCH_CELLS[args.cell], duration=args.duration) if args.cell else FlightConfig(duration=args.duration)
     if args.manoeuvre:

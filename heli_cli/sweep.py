@@ -14,7 +14,7 @@ MAX_EXTENSIONS = 4
 
 def backend_from_args(args):
     """The backend of ``--backend``/``--workers`` (a Ray instance is started or joined on first use)."""
-    from identification.backends import make_backend
+    from heli_core.backends import make_backend
 
     return make_backend(args.backend, workers=args.workers)
 
@@ -144,7 +144,7 @@ def run(args) -> int:
                                                d_filter_hz=args.d_filter_hz)
             paths["flights"] = flights.to_json(out / "flight_tests.json")
             report += "\n" + flights.to_markdown()
-    from identification.files import write_text
+    from heli_core.files import write_text
 
     paths["report"] = write_text(out / "sweep.md", report)
     progress.done()

@@ -153,7 +153,7 @@ def _config(args):
 
 def _run_seeds(args, config, progress) -> int:
     from controllers.rl.seeds import train_seeds
-    from identification.backends import make_backend
+    from heli_core.backends import make_backend
 
     backend = make_backend(args.backend, workers=args.workers)
     try:

@@ -170,7 +170,7 @@ def _model(args, spec, current, progress):
         _check_mapping(spec, current, env_model.sample_rate, env_model.params)
         _, source = _checked_log(args, spec, progress)
         return env_model, Path(args.model), source, None
-    from identification.report import identify_and_report, source_entry
+    from identification.workflows.identify import identify_and_report, source_entry
 
     flight, _ = _checked_log(args, spec, progress)
     if flight is None:

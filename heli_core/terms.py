@@ -11,7 +11,7 @@ measured or simulated signals (paper eqs. 18 and 21)::
 where ``u_*`` is the stick after the servo (the Padé-delayed command of eq. 31
 when a delay is identified, else the stick itself). The physics core
 (:mod:`heli_core.physics`, :mod:`heli_core.discrete`) evaluates these terms to
-step the model; the integral method (:mod:`identification.integral_method`)
+step the model; the integral method (:mod:`identification.integral.method`)
 integrates the same features to fit the parameters. Adding a physical effect is
 adding a term here, never editing the fitter or the simulator (the layout of
 pysindy's feature library vs its optimizers).

@@ -10,7 +10,7 @@ native numpy-batched :class:`heli_env.vector_env.HeliAttitudeVectorEnv`::
     env = gym.make("HeliAttitude-v0", model="out/model")      # a 'heli identify' output directory
     envs = gym.make_vec("HeliAttitude-v0", num_envs=64, vectorization_mode="vector_entry_point")
 
-Both step the identified model with the physics core of :mod:`identification.model`
+Both step the identified model with the physics core of :mod:`heli_core`
 and replay the disturbance library that ``heli identify`` writes.
 """
 

@@ -4,15 +4,14 @@ Every error says what was expected and what came, so a user can fix the input
 without reading a traceback. Each derives from the package-wide root
 :class:`heli_core.errors.HeliError` and from the standard exception that a
 caller would otherwise catch (``ValueError``, ``ImportError``).
-:class:`MissingDependency`, :class:`BackendError`, :class:`TaskFailed` and
-:func:`require` belong to the base layer (:mod:`heli_core.errors`) and are
-re-exported here under their old names.
+The errors of the base layer (:mod:`heli_core.errors`: the root, :class:`MissingDependency`, ...) and of
+the model folder (:mod:`model_store.errors`) are imported from there; their old names here are deprecated
+(:mod:`identification._deprecated`).
 """
 
 from __future__ import annotations
 
-from heli_core.errors import BackendError, HeliError, MissingDependency, TaskFailed, require
-from model_store.errors import LibraryError, ModelDirBusyError, ModelDirError, ModelFileError
+from heli_core.errors import HeliError
 
 
 class FlightLogError(HeliError, ValueError):
@@ -47,8 +46,12 @@ class DisturbanceError(HeliError, ValueError):
     """Disturbance identification cannot run as asked (Δt out of range, bad smoothing, axis without a control gain)."""
 
 
-__all__ = [
-    "BackendError", "DisturbanceError", "FlightLogError", "HeliError", "IdentifiabilityError", "LibraryError",
-    "MissingDependency", "ModelDirBusyError", "ModelDirError", "ModelFileError", "NotFittedError",
-    "SimulationDivergedError", "TaskFailed", "UnitError", "require",
-]
+__all__ = ["DisturbanceError", "FlightLogError", "IdentifiabilityError", "NotFittedError", "SimulationDivergedError",
+           "UnitError"]
+
+
+def __getattr__(name):
+    """The errors of other layers this module re-exported (deprecated: :mod:`identification._deprecated`)."""
+    from ._deprecated import moved_name
+
+    return moved_name(__name__, name)

@@ -166,7 +166,7 @@ class Flight:
         )
 
     def __reduce__(self):
-        """Pickle (to worker processes, :mod:`identification.backends`) with the read-only mappings as dicts."""
+        """Pickle (to worker processes, :mod:`heli_core.backends`) with the read-only mappings as dicts."""
         return _unpickle_flight, (self.time, self.rates, self.attitude, self.sticks, dict(self.metadata),
                                   dict(self.extra))
 

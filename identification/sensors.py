@@ -8,7 +8,7 @@ vibration lines are removed by regression on their sinusoids (:func:`identificat
 the lines themselves are kept, with their frequency as logged and their amplitude. Over several flights the
 levels are the median of the flights'; the lines those found in any flight, each at its largest amplitude.
 
-On the bench's flights (``identification.bench``: gyro noise 0.01 and 0.03 rad/s, attitude noise 0.003 rad,
+On the bench's flights (``identification.bench.cells``: gyro noise 0.01 and 0.03 rad/s, attitude noise 0.003 rad,
 lines at 27, 30, 40 and 41.5 Hz) the levels come out within 3 % and every line within 0.1 Hz and 0.001 rad/s
 (``tests/test_sensors.py``).
 """
@@ -18,9 +18,9 @@ from __future__ import annotations
 import numpy as np
 
 from heli_core.sensors import GyroLine, SensorModel
+from heli_core.terms import AXES
 
 from .flight import Flight
-from .terms import AXES
 from .vibration import remove_vibration_lines
 
 DIFFERENCE_ORDER = 3

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .terms import AXES
+from heli_core.terms import AXES
 
 
 def remove_vibration_lines(rates, fs: float, min_hz: float = 8.0, max_lines: int = 4, prominence: float = 30.0):

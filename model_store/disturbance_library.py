@@ -1,6 +1,6 @@
 """The disturbance library: identified wind traces on disk, versioned, for the environment to replay.
 
-Each flight identified with :func:`identification.disturbance.identify_disturbance`
+Each flight identified with :func:`identification.disturbance.equivalent_input.identify_disturbance`
 contributes one *trace*: the equivalent wind inputs u_d of eq. (42) on roll,
 pitch and yaw (zero-mean, stick units) and the collective the yaw model needs
 (``-k12*col`` in eq. 21), at the flight's sample rate. Several flights append
@@ -57,7 +57,7 @@ Manifest (``schema_version`` 1)::
       ]
     }
 
-Guarantees. Every file is written through :func:`identification.files.atomic_path`
+Guarantees. Every file is written through :func:`heli_core.files.atomic_path`
 (temporary file, fsync, atomic rename): trace files first, the new manifest
 last, so a crash at any point leaves every earlier version readable (at worst
 an unreferenced trace file or a hidden ``.tmp`` file remains, see
@@ -86,11 +86,11 @@ from types import MappingProxyType
 
 import numpy as np
 
-from .errors import LibraryError
+import model_store.faults as faults
 from heli_core.files import atomic_path, jsonable, sha256_of, write_text
 from heli_core.terms import AXES
 
-import model_store.faults as faults
+from .errors import LibraryError
 
 LIBRARY_DIRNAME = "disturbances"
 TRACES_DIRNAME = "traces"
@@ -200,7 +200,7 @@ class Trace:
 
     @classmethod
     def from_profile(cls, profile, **metadata) -> "Trace":
-        """The trace of a :class:`~identification.disturbance.DisturbanceProfile`, with its metadata.
+        """The trace of a :class:`~identification.disturbance.equivalent_input.DisturbanceProfile`, with its metadata.
 
         Keyword arguments are recorded under the entry's ``metadata``. The profile is read by its attributes
         (the store imports nothing of ``identification``); its ``smoothing_window`` names the smoother's

@@ -47,11 +47,11 @@ import uuid
 from dataclasses import dataclass
 from pathlib import Path
 
-from .errors import LibraryError, ModelDirBusyError, ModelDirError, ModelFileError
+import model_store.faults as faults
 from heli_core.files import keep_copy, write_bytes, write_text
 
-import model_store.faults as faults
 from .disturbance_library import LIBRARY_DIRNAME, DisturbanceLibrary, Trace
+from .errors import LibraryError, ModelDirBusyError, ModelDirError, ModelFileError
 from .model_file import MODEL_FILENAME, encode_model, model_document, params_from_document
 
 LOCK_NAME = ".heli-lock"
@@ -68,7 +68,7 @@ def _sha(data: bytes) -> str:
 
 
 def _history_name(name: str, digest: str) -> str:
-    """``history/<stem>-<sha256[:12]><suffix>``, the name :func:`identification.files.keep_copy` gives."""
+    """``history/<stem>-<sha256[:12]><suffix>``, the name :func:`heli_core.files.keep_copy` gives."""
     p = Path(name)
     return f"{HISTORY_NAME}/{p.stem}-{digest[:12]}{p.suffix}"
 

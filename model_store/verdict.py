@@ -1,7 +1,7 @@
 """A model's verdict: whether an identified model can be used, and why not.
 
 An estimator returns numbers for any flight. Whether they describe the aircraft is judged once, where the
-model is identified (:mod:`identification.model_verdict`), and stored in ``model.json`` beside the
+model is identified (:mod:`identification.validation.model_verdict`), and stored in ``model.json`` beside the
 parameters::
 
     "verdict": {"level": "unusable",

@@ -58,9 +58,9 @@ def _median_time(fn, repeats: int) -> float:
 
 
 def bench_identification(repeats: int) -> dict:
-    from identification.integral_method import IntegralIdentifier
+    from identification.integral.method import IntegralIdentifier
     from identification.preprocess import lowpass_flight
-    from identification.synthetic import simulate_flight
+    from identification.bench.synthetic import simulate_flight
 
     flight = simulate_flight(300, seed=1).flight
     filtered = lowpass_flight(flight)
@@ -77,8 +77,8 @@ def bench_identification(repeats: int) -> dict:
     }
     out["target (<= 10 ms, decoupled with prefilter)"] = (
         "met" if out["decoupled, 3 axes, with FIR prefilter [ms]"] <= 10.0 else "NOT met")
-    from identification.ml_diagnosis import LikelihoodDiagnoser
-    from identification.ml_estimator import MaximumLikelihoodIdentifier
+    from identification.diagnosis.likelihood_diagnoser import LikelihoodDiagnoser
+    from identification.likelihood.estimator import MaximumLikelihoodIdentifier
 
     few = max(3, repeats // 20)
     ml = _median_time(lambda: MaximumLikelihoodIdentifier().fit(flight), few)
@@ -103,8 +103,8 @@ def bench_identification(repeats: int) -> dict:
 
 
 def bench_physics(repeats: int) -> dict:
-    from identification.model import initial_state, simulate, step
-    from identification.synthetic import PAPER_PARAMS
+    from heli_core.physics import initial_state, simulate, step
+    from identification.bench.synthetic import PAPER_PARAMS
 
     x = [float(v) for v in initial_state()]
     u = [0.1, -0.05, 0.2, 0.01]
@@ -360,7 +360,7 @@ def bench_backends(repeats: int) -> dict:
     import pickle
 
     from controllers.sweep import TASK_STATES, _chunks, sweep_gains
-    from identification.backends import LocalBackend, RayBackend
+    from heli_core.backends import LocalBackend, RayBackend
 
     kp, kd = np.linspace(0.5, 10.0, 20), np.linspace(0.0, 3.0, 20)
     n_rep = max(3, repeats // 10)

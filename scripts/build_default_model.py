@@ -1,10 +1,10 @@
 """Build the model and disturbance library that ship with heli_env (``heli_env/data/default``).
 
 heli-env identifies its default model itself, by the pipeline a user runs on real logs: it flies its truth
-model (:mod:`identification.synthetic`: the paper's values) in realistic conditions — a pilot who fights
+model (:mod:`identification.bench.synthetic`: the paper's values) in realistic conditions — a pilot who fights
 the gusts with a PD on attitude and rate after a 0.18 s reaction and sweeps one stick at a time, slow plus
 broadband gusts at the paper's level, gyro noise, rotor vibration lines and attitude noise (the bench's
-``independent`` cell, :data:`identification.bench.BENCH_CELLS`) — and with a servo delay of
+``independent`` cell, :data:`identification.bench.cells.BENCH_CELLS`) — and with a servo delay of
 :data:`SERVO_DELAY` (Padé, eq. 31), for three seeded flights saved as CSV; then ``heli identify`` does the
 rest: the decoupled model by maximum likelihood with the servo delay profiled (``--delay auto``), the
 sensors (noise levels and vibration lines), and each flight's wind as a library trace. Rerunning this
@@ -22,8 +22,8 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from identification.bench import BENCH_CELLS
-from identification.synthetic import PAPER_PARAMS, simulate_flight
+from identification.bench.cells import BENCH_CELLS
+from identification.bench.synthetic import PAPER_PARAMS, simulate_flight
 
 SEEDS = (101, 102, 103)
 SERVO_DELAY = {"tau_roll": 0.045, "tau_pitch": 0.045, "tau_yaw": 0.035}
@@ -46,7 +46,7 @@ def main(argv=None):
             simulate_flight(args.duration, seed=seed, config=BENCH_CELLS[CELL], truth=truth).save(path)
             paths.append(path)
         from identification.io import read_csv_flight
-        from identification.report import identify_and_report, source_entry
+        from identification.workflows.identify import identify_and_report, source_entry
 
         flights = [read_csv_flight(p) for p in paths]
         staging = Path(tmp) / "model"

@@ -2,7 +2,7 @@
 
 Without a flight argument, flies a 300 s synthetic hover flight (seed 1, the
 paper's wind level) into a temporary folder, then runs the full comparison of
-:func:`identification.method_comparison.compare_methods`: the integral method
+:func:`identification.bench.method_comparison.compare_methods`: the integral method
 (median of 20 timed runs), nonlinear regression from Table 3's three start
 points (one run each; each costs tens of forward simulations of 300 s), and the
 EKF in Table 4's six cases and Table 5's three sample lengths (median of 3).
@@ -58,8 +58,8 @@ def main(argv=None) -> int:
 
     from heli_cli.compare_methods import load_truth_if_any
     from identification.io import read_flight
-    from identification.method_comparison import QUICK_NLR_MAX_NFEV, compare_methods
-    from identification.synthetic import simulate_flight
+    from identification.bench.method_comparison import QUICK_NLR_MAX_NFEV, compare_methods
+    from identification.bench.synthetic import simulate_flight
 
     with tempfile.TemporaryDirectory(prefix="heli-compare-") as tmp:
         path = args.flight
@@ -99,7 +99,7 @@ def fly_validation_twin(flight_path, directory: Path) -> Path:
     Reads ``<stem>.truth.json`` beside ``flight_path``; writes the twin (and its
     truth) into ``directory`` and returns its path.
     """
-    from identification.synthetic import FlightConfig, load_truth, simulate_flight, truth_paths
+    from identification.bench.synthetic import FlightConfig, load_truth, simulate_flight, truth_paths
 
     saved = json.loads(truth_paths(flight_path)["truth"].read_text())
     config = FlightConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in saved["config"].items()})

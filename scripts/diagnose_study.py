@@ -2,7 +2,7 @@
 
 For every case (a truth-model effect, a time-misaligned log, two effects, no effect, a too-short or a
 hover-only flight) and several seeds, flies a 180 s synthetic flight of the manoeuvre pilot
-(``identification.synthetic.MANOEUVRE_CONFIG``) in the paper's wind, runs the diagnosis without telling it
+(``identification.bench.synthetic.MANOEUVRE_CONFIG``) in the paper's wind, runs the diagnosis without telling it
 the truth and prints one Markdown row per flight: the effects named (axis), the runner-up and margin of the
 first step, and the held-out forward-simulation MAE before -> after on the axes that changed.
 
@@ -14,10 +14,10 @@ from __future__ import annotations
 import argparse
 import time
 
-from identification.diagnose import Diagnoser, heldout_stats
-from identification.effects import shift_inputs
-from identification.synthetic import EFFECTS, MANOEUVRE_CONFIG, PAPER_PARAMS, FlightConfig, simulate_flight
-from identification.terms import AXES
+from heli_core.terms import AXES
+from identification.bench.synthetic import EFFECTS, MANOEUVRE_CONFIG, PAPER_PARAMS, FlightConfig, simulate_flight
+from identification.diagnosis.effects import shift_inputs
+from identification.diagnosis.heldout_diagnoser import Diagnoser, heldout_stats
 
 CASES = {
     "none": {},

@@ -2,7 +2,7 @@
 
 On seeded synthetic flights, whose true wind is known, the model is identified
 with ``IntegralIdentifier()`` (default settings) and the disturbance with
-:func:`identification.disturbance.identify_disturbance` for every interval Δt
+:func:`identification.disturbance.equivalent_input.identify_disturbance` for every interval Δt
 and smoothing setting; the identified equivalent input u_d is compared with
 the true wind (correlation and RMS error per axis, mean over the seeds). Three
 scenarios: the default flight (pilot sweeps plus gust rejection); a hover
@@ -27,15 +27,15 @@ import time
 
 import numpy as np
 
-from identification.disturbance import (
+from heli_core.terms import AXES
+from identification.bench.synthetic import FlightConfig, simulate_flight
+from identification.disturbance.equivalent_input import (
     DEFAULT_INTERVAL,
     DEFAULT_SMOOTHING,
     compare_with_truth,
     identify_disturbance,
 )
-from identification.integral_method import IntegralIdentifier
-from identification.synthetic import FlightConfig, simulate_flight
-from identification.terms import AXES
+from identification.integral.method import IntegralIdentifier
 
 INTERVALS = (0.02, 0.05, 0.1, 0.2, 0.5)
 SMOOTHINGS = ("auto", 0, 1, 2, 3, 5, 8, 12, 20)

@@ -1,7 +1,7 @@
 """How much torque each hidden effect puts on each axis, against the gust's torque: what a diagnosis can see.
 
 A missing term can only be named where the torque it makes is a measurable share of what the
-model already calls wind. For every effect of :data:`identification.synthetic.EFFECTS` made of
+model already calls wind. For every effect of :data:`identification.bench.synthetic.EFFECTS` made of
 terms (the servo delay and lag are not), on default flights (the closed-loop pilot's gentle one-stick
 sweeps) and on manoeuvre flights (large sweeps on all sticks at once), the script flies the truth
 with the effect and prints, per axis, the standard deviation of the effect's torque
@@ -28,7 +28,7 @@ def torque_shares(sim, effect: str) -> list:
     """Per axis, std of ``effect``'s torque over std of the wind torque in the flight ``sim`` (NaN where it
     has no term)."""
     from heli_core.terms import AXES, FEATURES, STICK_ROW, TERMS
-    from identification.synthetic import EFFECTS
+    from identification.bench.synthetic import EFFECTS
 
     rates = sim.true_rates
     sticks = sim.flight.sticks
@@ -47,13 +47,13 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--duration", type=float, default=180.0)
-    ap.add_argument("--cell", default=None, help="a bench cell (identification.bench) instead of the default flight")
+    ap.add_argument("--cell", default=None, help="a bench cell (identification.bench.cells) instead of the default flight")
     args = ap.parse_args(argv)
     from dataclasses import replace
 
     from heli_core.terms import TERMS
-    from identification.bench import BENCH_CELLS
-    from identification.synthetic import EFFECTS, MANOEUVRE_CONFIG, FlightConfig, simulate_flight
+    from identification.bench.cells import BENCH_CELLS
+    from identification.bench.synthetic import EFFECTS, MANOEUVRE_CONFIG, FlightConfig, simulate_flight
 
     base = BENCH_CELLS[args.cell] if args.cell else FlightConfig()
     kinds = {"gentle": base, "manoeuvre": replace(base, sweep_amplitude=MANOEUVRE_CONFIG.sweep_amplitude,

@@ -1,15 +1,15 @@
 """End to end: does the sweep's prediction on an identified model hold for flights of the truth in its own gusts?
 
-Per bench cell and seed: a 300 s flight of the cell (:data:`identification.bench.BENCH_CELLS`; the paper's
+Per bench cell and seed: a 300 s flight of the cell (:data:`identification.bench.cells.BENCH_CELLS`; the paper's
 aircraft with a 40/40/25 ms servo delay); ``heli identify`` (maximum likelihood, ``--delay auto``, the
 sensors and the library's winds) into a scratch folder; then per axis three PD pairs — the design of
 ``heli design`` (45°) scaled by 0.5, 1 and 2 — predicted by ``heli sweep``'s defaults on the identified
 model (its library tiled by 60 s windows, its sensors; each p90 with its 90 % interval,
 :mod:`controllers.sweep_interval`) twice: replaying the library as ``heli identify`` writes it (a draw from
-the smoother's posterior, :mod:`identification.wind_posterior`) and replaying the smoother's mean in its
+the smoother's posterior, :mod:`identification.disturbance.wind_posterior`) and replaying the smoother's mean in its
 place (what it wrote before issue #30). The truth is then flown (RK4, the flight generator's sensors, PD
 autopilot at 100 Hz with the identified trim) in **fresh gusts of the cell's own generator**
-(:func:`identification.synthetic.gust_trace` at the cell's level and spectrum, new seeds): weather the
+(:func:`identification.bench.synthetic.gust_trace` at the cell's level and spectrum, new seeds): weather the
 identification never saw, from another generator than its Gauss-Markov gust model, ``--flights`` flights of
 ``--flight-duration`` s per pair.
 
@@ -45,7 +45,7 @@ def cell_gusts(cfg, truth, env_model, n_flights: int, steps: int, dt: float, see
     autopilot adds is the identified model's (:class:`controllers.replay.LoopInputs`)."""
     from controllers.replay import LoopInputs
     from heli_core.physics import trim_sticks
-    from identification.synthetic import coloured_noise, gust_trace, sensor_errors
+    from identification.bench.synthetic import coloured_noise, gust_trace, sensor_errors
 
     rng = np.random.default_rng([seed, 0xF17])
     level = np.broadcast_to(np.asarray(cfg.wind_level, dtype=float), (3,))
@@ -66,7 +66,7 @@ def cell_gusts(cfg, truth, env_model, n_flights: int, steps: int, dt: float, see
 def fly_truth(truth, inputs, axis: int, pairs, nominal, signs, dt: float):
     """|attitude error| [deg] of the truth under each pair, shape (pairs, steps, flights)."""
     from controllers.replay import Autopilot, fly, rk4_step
-    from identification.synthetic import FlightConfig
+    from identification.bench.synthetic import FlightConfig
 
     kp, kd = np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
     autopilot = Autopilot(axis, kp, kd, nominal, signs)
@@ -99,9 +99,9 @@ def _one_job(cell: str, seed: int, duration: float, n_flights: int, flight_durat
     from controllers.pd import design_gains
     from controllers.sweep import sweep_pairs
     from heli_env.model_dir import load_env_model
-    from identification.bench import BENCH_CELLS
-    from identification.report import identify_and_report
-    from identification.synthetic import simulate_flight
+    from identification.bench.cells import BENCH_CELLS
+    from identification.workflows.identify import identify_and_report
+    from identification.bench.synthetic import simulate_flight
 
     cfg = BENCH_CELLS[cell]
     sim = simulate_flight(duration, seed=seed, config=cfg, effects=("servo_delay",), effect_scale=0.5)
@@ -145,7 +145,7 @@ def summary(rows: list, label: str) -> str:
 
 
 def main(argv=None):
-    from identification.bench import BENCH_CELLS
+    from identification.bench.cells import BENCH_CELLS
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=3)

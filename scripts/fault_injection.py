@@ -58,8 +58,8 @@ def make_flights(folder: Path, n: int) -> list[Path]:
     short: its model may diverge, a failure of the input that this script is not about)."""
     from identification.errors import IdentifiabilityError
     from identification.io import read_flight
-    from identification.report import identify_and_report
-    from identification.synthetic import simulate_flight
+    from identification.workflows.identify import identify_and_report
+    from identification.bench.synthetic import simulate_flight
 
     paths, seed = [], 1000
     while len(paths) < n:

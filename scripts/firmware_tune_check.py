@@ -3,7 +3,7 @@
 Per bench aircraft (:data:`AIRCRAFT`: three truths — the paper's aircraft with a 40/40/25 ms servo delay
 (the shipped model's), an agile one with four times its control power and damping and 30 ms servos, a
 heavier one in between with 50 ms servos — each in a bench cell's weather,
-:data:`identification.bench.BENCH_CELLS`):
+:data:`identification.bench.cells.BENCH_CELLS`):
 
 1. a 300 s synthetic flight of the truth (``heli simulate-flight``'s generator) written as a CSV;
 2. ``heli tune FLIGHT.csv --firmware F --params FLOWN --scale S --out DIR`` for ArduPilot (identifying the
@@ -59,7 +59,7 @@ AXES = ("roll", "pitch", "yaw")
 
 def _aircraft() -> dict:
     from heli_core.params import ModelParams
-    from identification.synthetic import PAPER_PARAMS
+    from identification.bench.synthetic import PAPER_PARAMS
 
     paper = replace(PAPER_PARAMS, tau_roll=0.04, tau_pitch=0.04, tau_yaw=0.025)
     agile = ModelParams(k2=12.0, k3=9.0, kd1=0.3, k6=-10.0, k7=9.5, kd2=0.1, k10=40.0, k11=6.0, k12=-1.5,
@@ -119,7 +119,7 @@ def fresh_gusts(cfg, truth, ident_params, steps: int, dt: float, seed: int):
     """Gust torque (3, n), collective (n,), identified trim (3, n), gyro and attitude errors (3, n) of a flight in
     fresh weather of the cell's generator."""
     from heli_core.physics import trim_sticks
-    from identification.synthetic import coloured_noise, gust_trace, sensor_errors
+    from identification.bench.synthetic import coloured_noise, gust_trace, sensor_errors
 
     rng = np.random.default_rng([seed, 0xF1A])
     level = np.broadcast_to(np.asarray(cfg.wind_level, dtype=float), (3,))
@@ -163,9 +163,9 @@ def run_aircraft(name: str, firmwares, args, work: Path) -> list:
     import firmware_plain_loop as plain
 
     from heli_cli.main import main
-    from identification.bench import BENCH_CELLS
+    from identification.bench.cells import BENCH_CELLS
     from identification.io import write_csv_flight
-    from identification.synthetic import simulate_flight
+    from identification.bench.synthetic import simulate_flight
     from model_store.model_file import load_model
 
     cell, truth = _aircraft()[name]

@@ -1,6 +1,6 @@
 """Bias of every estimator over the test bench's grid of conditions (wind, pilot, sensors).
 
-Each cell of :data:`identification.bench.BENCH_CELLS` (wind spectrum and level, pilot,
+Each cell of :data:`identification.bench.cells.BENCH_CELLS` (wind spectrum and level, pilot,
 sensors) is flown with ``--seeds`` seeds; every flight is identified with the
 maximum-likelihood estimator (the default of ``heli identify``) and with the integral
 method of Fig. 5, and each identified parameter is compared with the truth. The script
@@ -39,9 +39,9 @@ def _one(job):
     """Fly one (cell, seed) and identify it with every estimator; relative errors in %."""
     from threadpoolctl import threadpool_limits
 
-    from identification.bench import bench_flight
-    from identification.integral_method import IntegralIdentifier
-    from identification.ml_estimator import MaximumLikelihoodIdentifier
+    from identification.bench.cells import bench_flight
+    from identification.integral.method import IntegralIdentifier
+    from identification.likelihood.estimator import MaximumLikelihoodIdentifier
 
     cell, seed, duration, ml_hold = job
     with threadpool_limits(limits=1, user_api="blas"):
@@ -71,7 +71,7 @@ def _stats(rows, method, names):
 
 
 def grid(args):
-    from identification.bench import BENCH_CELLS, PAPER_LEVEL_CLOSED_LOOP_BROADBAND
+    from identification.bench.cells import BENCH_CELLS, PAPER_LEVEL_CLOSED_LOOP_BROADBAND
 
     cells = args.cells or list(BENCH_CELLS)
     unknown = [c for c in cells if c not in BENCH_CELLS]
@@ -123,8 +123,8 @@ def grid(args):
 def integral_variants(args):
     from tqdm import tqdm
 
-    from identification.integral_method import IntegralIdentifier
-    from identification.synthetic import FlightConfig, simulate_flight
+    from identification.integral.method import IntegralIdentifier
+    from identification.bench.synthetic import FlightConfig, simulate_flight
 
     variants = {
         "global": dict(offsets="global"),

@@ -1,9 +1,9 @@
 """How often the likelihood diagnosis names a hidden effect, and how often it names one that is not there.
 
-For every case (a hidden effect of :data:`identification.synthetic.EFFECTS` at the size of the
+For every case (a hidden effect of :data:`identification.bench.synthetic.EFFECTS` at the size of the
 README's study, a time-misaligned log, or no effect) and every seed, flies a default synthetic
 flight (the closed-loop pilot of ``heli simulate-flight``, one-stick sweeps, the paper's wind; or a
-bench cell with ``--cell``), runs :class:`identification.ml_diagnosis.LikelihoodDiagnoser` without
+bench cell with ``--cell``), runs :class:`identification.diagnosis.likelihood_diagnoser.LikelihoodDiagnoser` without
 telling it the truth, and counts per case:
 
 * **named**: the true effect named on every axis it acts on (a delay within 15 ms), and nothing else;
@@ -54,15 +54,15 @@ TRUE_AXES = {
 
 
 def _flight(name, seed, duration, cell):
-    from identification.effects import shift_inputs
-    from identification.synthetic import MANOEUVRE_CONFIG, simulate_flight
+    from identification.diagnosis.effects import shift_inputs
+    from identification.bench.synthetic import MANOEUVRE_CONFIG, simulate_flight
 
     case = CASES[name]
     config = MANOEUVRE_CONFIG if case.get("manoeuvre") else None
     if cell is not None:  # the cell's wind, pilot and sensors; a manoeuvre case keeps its large sweeps
         from dataclasses import replace
 
-        from identification.bench import BENCH_CELLS
+        from identification.bench.cells import BENCH_CELLS
 
         config = BENCH_CELLS[cell]
         if case.get("manoeuvre"):
@@ -79,7 +79,7 @@ def _flight(name, seed, duration, cell):
 def _one(job):
     from threadpoolctl import threadpool_limits
 
-    from identification.ml_diagnosis import LikelihoodDiagnoser
+    from identification.diagnosis.likelihood_diagnoser import LikelihoodDiagnoser
 
     name, seed, duration, cell = job
     with threadpool_limits(limits=1, user_api="blas"):
@@ -115,8 +115,8 @@ def _one(job):
 
 def _null_table(rows, cells):
     """Per candidate effect: the largest round-1 statistic on effect-free flights, per cell and over all."""
-    from identification.effects import CATALOGUE
-    from identification.ml_diagnosis import LikelihoodDiagnoser
+    from identification.diagnosis.effects import CATALOGUE
+    from identification.diagnosis.likelihood_diagnoser import LikelihoodDiagnoser
 
     thr_terms, thr_align = LikelihoodDiagnoser().threshold(6, 1), LikelihoodDiagnoser().threshold(6, 1, True)
     print("\nEffect-free flights: the largest round-1 likelihood-ratio statistic of each candidate (any axis), "
@@ -153,7 +153,7 @@ def main(argv=None):
     ap.add_argument("--duration", type=float, default=180.0)
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES), metavar="CASE")
-    ap.add_argument("--cell", default=None, help="a bench cell (identification.bench) instead of the default flight")
+    ap.add_argument("--cell", default=None, help="a bench cell (identification.bench.cells) instead of the default flight")
     ap.add_argument("--null-cells", action="store_true",
                     help="instead: effect-free flights of every bench cell, and the largest statistic per candidate "
                     "(the calibration of the floors)")
@@ -164,7 +164,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     if args.null_cells:
-        from identification.bench import BENCH_CELLS
+        from identification.bench.cells import BENCH_CELLS
 
         cells = args.cells or list(BENCH_CELLS)
         unknown = [c for c in cells if c not in BENCH_CELLS]

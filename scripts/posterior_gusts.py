@@ -1,9 +1,9 @@
 """Do the replayed gusts have the true wind's power? The smoother's mean against a draw from its posterior.
 
-For every bench cell (:data:`identification.bench.BENCH_CELLS`) asked for and seed: a flight of the cell,
-:class:`identification.ml_estimator.MaximumLikelihoodIdentifier` with its defaults, then the wind torque
+For every bench cell (:data:`identification.bench.cells.BENCH_CELLS`) asked for and seed: a flight of the cell,
+:class:`identification.likelihood.estimator.MaximumLikelihoodIdentifier` with its defaults, then the wind torque
 the library would store — the Rauch-Tung-Striebel smoother's conditional mean (what ``heli identify``
-stored before issue #30) and one draw from its posterior (:func:`identification.wind_posterior.wind_posterior`,
+stored before issue #30) and one draw from its posterior (:func:`identification.disturbance.wind_posterior.wind_posterior`,
 seeded by the flight's SHA-256, what it stores now) — against the true wind torque of the flight
 (``SyntheticFlight.wind_torque``): the ratio of their powers (Welch, 20 s segments) in the bands 0-0.3,
 0.3-1, 1-3 and 3-8 Hz, and of their standard deviations, per axis. Target (issue #30): within ±10 % in every
@@ -45,10 +45,10 @@ def band_powers(x: np.ndarray, fs: float) -> np.ndarray:
 def _one(job):
     from threadpoolctl import threadpool_limits
 
-    from identification.bench import bench_flight
-    from identification.disturbance import source_of
-    from identification.ml_estimator import MaximumLikelihoodIdentifier
-    from identification.wind_posterior import flight_seed, wind_posterior
+    from identification.bench.cells import bench_flight
+    from identification.disturbance.equivalent_input import source_of
+    from identification.likelihood.estimator import MaximumLikelihoodIdentifier
+    from identification.disturbance.wind_posterior import flight_seed, wind_posterior
 
     cell, seed, duration = job
     with threadpool_limits(limits=1, user_api="blas"):
@@ -74,7 +74,7 @@ def _worst(ratios: np.ndarray) -> float:
 
 
 def main(argv=None):
-    from identification.bench import BENCH_CELLS
+    from identification.bench.cells import BENCH_CELLS
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=4)

@@ -8,7 +8,7 @@ the response), prints:
 * the fit with the alignment searched (``delay="auto"``, as ``heli identify LOG --delay auto``): each axis'
   input shift, damping, control gain, the share of the rate its stick explains;
 * the prediction R² ``h`` seconds ahead (0.1, 0.2, 0.5 s) on each of ``--folds`` contiguous blocks, each
-  predicted by the model fitted on the others (:func:`identification.ahead_prediction.heldout_ahead_r2`).
+  predicted by the model fitted on the others (:func:`identification.likelihood.ahead_prediction.heldout_ahead_r2`).
 
 Usage::
 
@@ -29,10 +29,10 @@ HORIZONS = (0.1, 0.2, 0.5)
 
 
 def main(argv=None):
-    from identification.ahead_prediction import format_r2, heldout_ahead_r2
+    from identification.likelihood.ahead_prediction import format_r2, heldout_ahead_r2
     from identification.io import read_log
     from identification.log_band import log_band
-    from identification.ml_estimator import MaximumLikelihoodIdentifier
+    from identification.likelihood.estimator import MaximumLikelihoodIdentifier
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--log", type=Path, default=DEFAULT_LOG)
@@ -75,7 +75,7 @@ def linear_ceiling(flight, horizon_s: float) -> dict:
     pedal sticks), fitted by least squares on the whole flight, predicting the rates ``horizon_s`` ahead from
     the measured state with the sticks known (Euler steps at the log's rate): what any linear model of these
     sticks can explain without a wind state, in sample (so an optimistic bound)."""
-    from identification.terms import STICK_ROW
+    from heli_core.terms import STICK_ROW
 
     dt, n = flight.dt, flight.n
     rates = np.asarray(flight.rates, dtype=float)

@@ -1,7 +1,7 @@
 """How often ``heli refresh`` flags an unchanged aircraft, and how often it catches a 10 % change of a damping.
 
 For each seed, two flights of the same aircraft (independent seeds, same conditions) are identified by
-maximum likelihood, and the drift table of :func:`identification.refresh.drift_table` is built exactly as
+maximum likelihood, and the drift table of :func:`identification.workflows.refresh.drift_table` is built exactly as
 ``heli refresh`` builds it (Fisher standard errors, offsets not compared, Bonferroni over the parameters
 compared at family-wise ``alpha``). A false flag is any parameter flagged. For the power, the second
 flight's aircraft has one damping (k3, k7 or k11, in turn) 10 % higher; a hit is that damping flagged.
@@ -23,12 +23,12 @@ DAMPINGS = ("k3", "k7", "k11")
 
 
 def _fit(seed, duration, cell, truth):
-    from identification.ml_estimator import MaximumLikelihoodIdentifier
-    from identification.synthetic import simulate_flight
+    from identification.likelihood.estimator import MaximumLikelihoodIdentifier
+    from identification.bench.synthetic import simulate_flight
 
     config = None
     if cell is not None:
-        from identification.bench import BENCH_CELLS
+        from identification.bench.cells import BENCH_CELLS
 
         config = BENCH_CELLS[cell]
     sim = simulate_flight(duration, seed=seed, config=config, truth=truth)
@@ -39,8 +39,8 @@ def _fit(seed, duration, cell, truth):
 def _one(job):
     from threadpoolctl import threadpool_limits
 
-    from identification.refresh import compared_parameters, critical_z, drift_table, fisher_result
-    from identification.synthetic import PAPER_PARAMS
+    from identification.validation.parameter_drift import compared_parameters, critical_z, drift_table, fisher_result
+    from identification.bench.synthetic import PAPER_PARAMS
 
     seed, duration, cell, change, alpha = job
     with threadpool_limits(limits=1, user_api="blas"):

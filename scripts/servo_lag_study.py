@@ -1,7 +1,7 @@
 """Does the likelihood find a servo lag where there is one, and only there?
 
 For every case (no servo dynamics, a transport delay only, a first-order lag only, both) and bench
-cell (:data:`identification.bench.BENCH_CELLS`), flies ``--seeds`` flights and identifies each with
+cell (:data:`identification.bench.cells.BENCH_CELLS`), flies ``--seeds`` flights and identifies each with
 ``MaximumLikelihoodIdentifier(delay="auto", servo_lag="auto")`` (what ``heli identify --delay auto
 --servo-lag auto`` runs). Prints per case and cell: on how many axes a lag was kept, the lags and delays
 found (median over seeds and axes, truth beside), the likelihood-ratio statistic of the best lag
@@ -33,9 +33,9 @@ DAMPINGS = ("k3", "k7", "k11")
 def _one(job):
     from threadpoolctl import threadpool_limits
 
-    from identification.bench import BENCH_CELLS
-    from identification.ml_estimator import MaximumLikelihoodIdentifier
-    from identification.synthetic import PAPER_PARAMS, simulate_flight
+    from identification.bench.cells import BENCH_CELLS
+    from identification.likelihood.estimator import MaximumLikelihoodIdentifier
+    from identification.bench.synthetic import PAPER_PARAMS, simulate_flight
 
     case, cell, seed, duration = job
     truth = PAPER_PARAMS.with_values(**CASES[case])

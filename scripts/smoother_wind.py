@@ -1,8 +1,8 @@
 """How well the maximum-likelihood smoother's wind matches the true wind, raw and as the aircraft feels it.
 
-For every bench cell (:data:`identification.bench.BENCH_CELLS`) and seed, flies a flight, fits
-:class:`identification.ml_estimator.MaximumLikelihoodIdentifier` and correlates its
-Rauch-Tung-Striebel wind torque (:meth:`~identification.ml_estimator.MaximumLikelihoodIdentifier.wind_torque`)
+For every bench cell (:data:`identification.bench.cells.BENCH_CELLS`) and seed, flies a flight, fits
+:class:`identification.likelihood.estimator.MaximumLikelihoodIdentifier` and correlates its
+Rauch-Tung-Striebel wind torque (:meth:`~identification.likelihood.estimator.MaximumLikelihoodIdentifier.wind_torque`)
 with the true one, per axis:
 
 * **raw**: sample by sample;
@@ -37,8 +37,8 @@ def as_felt(torque: np.ndarray, damping: float, fs: float) -> np.ndarray:
 def _one(job):
     from threadpoolctl import threadpool_limits
 
-    from identification.bench import bench_flight
-    from identification.ml_estimator import MaximumLikelihoodIdentifier
+    from identification.bench.cells import bench_flight
+    from identification.likelihood.estimator import MaximumLikelihoodIdentifier
 
     cell, seed, duration = job
     with threadpool_limits(limits=1, user_api="blas"):
@@ -56,7 +56,7 @@ def _one(job):
 
 
 def main(argv=None):
-    from identification.bench import BENCH_CELLS
+    from identification.bench.cells import BENCH_CELLS
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=5)

@@ -20,13 +20,20 @@ The figures of the redesign (issue 14) are measured here, not counted by hand:
   ``if TYPE_CHECKING:`` count, a package's ``__init__`` is a module of its own, and ``from pkg import
   name`` is an import of ``pkg``'s ``__init__`` as well as of ``pkg.name`` when that is a module;
   issue 14 asks for 11 or fewer: 11 after its flattening, from 18);
-* how many modules import each module from another package (fan-in).
+* how many modules import each module from another package (fan-in);
+* first-party imports of a deprecated name: an old module or name of a package's deprecation tables
+  (:data:`DEPRECATION_TABLES`: ``MOVED_MODULES``, old module -> its new homes, and ``MOVED_NAMES``, module ->
+  names it re-exported), e.g. ``from identification.ml_estimator import ...`` or ``from identification.errors
+  import ModelFileError``. A moved name has one home, and first-party code imports it from there;
+* shim modules still in the tree (a module of imports only, re-exporting another module's names) and the
+  first-party modules importing them, listed for a package that has no deprecation table yet.
 
 Usage::
 
     python scripts/structure_report.py [--max-lines 600] [--max-function 80] [--max-args 8]
 
-Exit status 1 when an upward import exists (so a script or CI can rely on it), 0 otherwise.
+Exit status 1 when an upward import or a first-party import of a deprecated name exists (so a script, CI
+and ``tests/test_structure_report.py`` can rely on it), 0 otherwise.
 """
 
 from __future__ import annotations
@@ -42,6 +49,8 @@ LAYERS = ("heli_core", "model_store", "identification", "heli_env", "controllers
 """The packages in the order data flows through them; each may import only those before it."""
 ALLOWED = {"heli_env": {"heli_core", "model_store"}}
 """Packages that may import fewer than all those before them."""
+DEPRECATION_TABLES = ("identification/_deprecated.py",)
+"""Modules holding a package's old names (``MOVED_MODULES`` and ``MOVED_NAMES`` dictionaries)."""
 
 
 def _modules():
@@ -105,12 +114,69 @@ def _functions(tree: ast.AST):
     yield from walk(tree, "")
 
 
+def _deprecation_tables() -> tuple[dict, dict, set]:
+    """``(moved_modules, moved_names, table modules)`` of :data:`DEPRECATION_TABLES`, read without importing."""
+    modules, names, homes = {}, {}, set()
+    for rel in DEPRECATION_TABLES:
+        path = ROOT / rel
+        if not path.exists():
+            continue
+        homes.add(_dotted(path))
+        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+            target = node.target if isinstance(node, ast.AnnAssign) else (
+                node.targets[0] if isinstance(node, ast.Assign) else None)
+            if isinstance(target, ast.Name) and target.id == "MOVED_MODULES":
+                modules.update(ast.literal_eval(node.value))
+            elif isinstance(target, ast.Name) and target.id == "MOVED_NAMES":
+                names.update(ast.literal_eval(node.value))
+    return modules, names, homes
+
+
+def _deprecated_imports(tree: ast.AST, module: str, is_package: bool, known: set, tables) -> list[str]:
+    """The deprecated names ``tree`` imports, as ``"line: old.name"``."""
+    moved_modules, moved_names, _ = tables
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found += [f"{node.lineno}: {a.name}" for a in node.names
+                      if a.name in moved_modules and a.name not in known]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = module.split(".")
+                base = base[: len(base) - node.level + (1 if is_package else 0)]
+                src = ".".join(base + ([node.module] if node.module else []))
+            else:
+                src = node.module or ""
+            for alias in node.names:
+                sub = f"{src}.{alias.name}"
+                old_module = src in moved_modules and src not in known  # an old module of no file
+                old_in_folder = src in moved_modules and src in known and sub not in known  # a folder's old name
+                if (old_module or old_in_folder or alias.name in moved_names.get(src, {})
+                        or (sub in moved_modules and sub not in known)):
+                    found.append(f"{node.lineno}: {sub}")
+    return found
+
+
+def _is_shim(tree: ast.AST) -> bool:
+    """A module of a docstring, imports of first-party names and ``__all__`` only: a re-export."""
+    body = [n for n in tree.body if not (isinstance(n, ast.Expr) and isinstance(n.value, ast.Constant))]
+    imports = [n for n in body if isinstance(n, (ast.Import, ast.ImportFrom))]
+    first_party = [n for n in imports if isinstance(n, ast.ImportFrom) and
+                   (n.level or (n.module or "").split(".")[0] in LAYERS)]
+    rest = [n for n in body if n not in imports and not (
+        isinstance(n, ast.Assign) and all(isinstance(t, ast.Name) for t in n.targets)
+        and (any(t.id == "__all__" for t in n.targets) or isinstance(n.value, ast.Name)))]
+    return bool(first_party) and not rest
+
+
 def measure():
     """Everything the report prints, as data (for tests and for the printout)."""
     sizes, functions, edges, by_convention = {}, [], defaultdict(set), set()
     fan_in = Counter()
     known = {_dotted(p) for _, p in _modules()}
     module_edges = defaultdict(set)  # first-party module -> first-party modules it imports
+    tables = _deprecation_tables()
+    deprecated, shims = {}, set()
     for pkg, path in _modules():
         text = path.read_text(encoding="utf-8")
         tree = ast.parse(text)
@@ -120,6 +186,12 @@ def measure():
             functions.append((module, name, line, n, settings))
             if convention:
                 by_convention.add(f"{module}.{name}")
+        if module not in tables[2]:
+            found = _deprecated_imports(tree, module, path.name == "__init__.py", known, tables)
+            if found:
+                deprecated[module] = found
+        if path.name != "__init__.py" and _is_shim(tree):  # a package's facade is no shim
+            shims.add(module)
         for imp in _imports(tree, module, path.name == "__init__.py"):
             if imp in known and imp != module:
                 module_edges[module].add(imp)
@@ -161,11 +233,38 @@ def measure():
         return d
 
     depths = {m: module_depth(m) for m in sorted(known)}
+    deprecated.update(_outside_imports(known, tables))
+    outside = _outside_edges(known)
+    shim_users = {shim: sorted(m for m, below in {**module_edges, **outside}.items() if shim in below)
+                  for shim in sorted(shims)}
     deepest = max(depths, key=depths.get)
     return {"sizes": sizes, "functions": functions, "by_convention": by_convention,
             "edges": {k: sorted(v) for k, v in edges.items()},
             "upward": upward, "depth": {p: depth(p) for p in LAYERS}, "fan_in": fan_in,
-            "module_depth": depths[deepest], "deepest_module": deepest}
+            "module_depth": depths[deepest], "deepest_module": deepest,
+            "deprecated": deprecated, "shims": shim_users}
+
+
+def _outside_files():
+    for folder in ("scripts", "tests"):
+        yield from sorted((ROOT / folder).rglob("*.py"))
+
+
+def _outside_edges(known: set) -> dict:
+    """File of ``scripts/`` or ``tests/`` -> the first-party modules it imports."""
+    return {str(path.relative_to(ROOT)): {imp for imp in _imports(ast.parse(path.read_text(encoding="utf-8")),
+                                                                   _dotted(path), False) if imp in known}
+            for path in _outside_files()}
+
+
+def _outside_imports(known: set, tables) -> dict:
+    """:func:`_deprecated_imports` of the first-party code outside the packages (``scripts/``, ``tests/``)."""
+    out = {}
+    for path in _outside_files():
+        found = _deprecated_imports(ast.parse(path.read_text(encoding="utf-8")), _dotted(path), False, known, tables)
+        if found:
+            out[str(path.relative_to(ROOT))] = found
+    return out
 
 
 def main(argv=None) -> int:
@@ -208,7 +307,15 @@ def main(argv=None) -> int:
     print("\nMost imported modules from other packages:")
     for mod, n in m["fan_in"].most_common(10):
         print(f"  {n:4d}  {mod}")
-    return 1 if m["upward"] else 0
+    n_deprecated = sum(len(v) for v in m["deprecated"].values())
+    print(f"\nFirst-party imports of a deprecated name ({', '.join(DEPRECATION_TABLES)}): {n_deprecated}")
+    for where, found in sorted(m["deprecated"].items()):
+        for item in found:
+            print(f"  {where}:{item}")
+    print(f"\nShim modules (imports only, re-exporting other modules' names): {len(m['shims'])}")
+    for shim, users in m["shims"].items():
+        print(f"  {shim}" + (f"  <- {', '.join(users)}" if users else ""))
+    return 1 if m["upward"] or m["deprecated"] else 0
 
 
 if __name__ == "__main__":

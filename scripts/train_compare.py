@@ -55,8 +55,8 @@ from controllers.rl import RESIDUAL_HISTORY, RESIDUAL_SCALE, load_agent, split_t
 from controllers.sweep import sweep_pairs
 from controllers.trace_split import draw_windows
 from heli_cli.train import add_learning_options, learning_settings
+from heli_core.files import jsonable, write_text
 from heli_env import load_env_model
-from identification.files import jsonable, write_text
 
 AXES = ("roll", "pitch", "yaw")
 

@@ -6,7 +6,7 @@ score a low fit and a J near 100-200, so a number alone says little. This script
 maximum-likelihood model on ``FIT.csv`` as ``heli identify`` does and prints, per flight and axis, the
 model's scores beside those of the flight's true parameters (read from the ``<stem>.truth.json`` that
 ``heli simulate-flight`` writes), each flight prepared as the model prepares it
-(:func:`identification.validation_flights.as_fitted`). The fitted flight itself is listed first, with its
+(:func:`identification.validation.other_flights.as_fitted`). The fitted flight itself is listed first, with its
 frequency-response cost only (a fit on it is not a validation).
 
 Usage::
@@ -26,12 +26,12 @@ from pathlib import Path
 
 
 def main(argv=None) -> int:
-    from identification.frequency_response import compare_frequency_response
+    from identification.validation.frequency_response import compare_frequency_response
     from identification.io import read_flight
-    from identification.ml_estimator import MaximumLikelihoodIdentifier
-    from identification.synthetic import load_truth
-    from identification.validation import rate_fit_stats, validate_models
-    from identification.validation_flights import as_fitted, validate_on_flight
+    from identification.likelihood.estimator import MaximumLikelihoodIdentifier
+    from identification.bench.synthetic import load_truth
+    from identification.validation.forward_simulation import rate_fit_stats, validate_models
+    from identification.validation.other_flights import as_fitted, validate_on_flight
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("fit", type=Path, help="the synthetic flight to identify from")

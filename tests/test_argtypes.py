@@ -70,7 +70,7 @@ def test_whole_with_a_maximum():
 
 def test_diagnose_folds_bound_is_the_diagnosers_minimum_of_windows():
     """--folds above Diagnoser.min_windows ended in 'ValueError: Diagnoser.min_windows out of range' (exit 1)."""
-    from identification.diagnose import MIN_WINDOWS
+    from identification.diagnosis.heldout_diagnoser import MIN_WINDOWS
 
     assert MIN_WINDOWS == 12  # the bound written in heli_cli/diagnose.py
 

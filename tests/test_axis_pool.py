@@ -1,12 +1,12 @@
-"""Axes fitted side by side (identification.axis_pool): the same result as one after another."""
+"""Axes fitted side by side (identification.likelihood.axis_pool): the same result as one after another."""
 
 from __future__ import annotations
 
 import pytest
 
-from identification.axis_pool import map_axes, workers_available
-from identification.ml_estimator import MaximumLikelihoodIdentifier
-from identification.synthetic import simulate_flight
+from identification.bench.synthetic import simulate_flight
+from identification.likelihood.axis_pool import map_axes, workers_available
+from identification.likelihood.estimator import MaximumLikelihoodIdentifier
 
 
 def test_the_axes_fitted_in_two_processes_equal_the_serial_fit_bit_for_bit():

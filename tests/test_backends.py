@@ -1,6 +1,6 @@
-"""Tests of the compute backends (:mod:`identification.backends`) and the work split over them: gain sweeps
+"""Tests of the compute backends (:mod:`heli_core.backends`) and the work split over them: gain sweeps
 (:func:`controllers.sweep.sweep_gains` with ``backend=``), flights identified one per task
-(:mod:`identification.fleet`), RL seeds (:func:`controllers.rl.train_seeds`) and the CLI options.
+(:mod:`identification.workflows.fleet`), RL seeds (:func:`controllers.rl.train_seeds`) and the CLI options.
 
 Every backend must give the single-process result bit for bit. A worker killed mid-task
 (``SIGKILL`` of its own process, once, guarded by a marker file) must cost a retry, never a
@@ -22,11 +22,11 @@ from numpy.testing import assert_array_equal
 from controllers.errors import SweepError
 from controllers.sweep import COLUMNS, TASK_STATES, _chunks, sweep_gains, sweep_pairs
 from heli_cli.main import main
+from heli_core.backends import Backend, LocalBackend, RayBackend, make_backend
+from heli_core.errors import BackendError, MissingDependency, TaskFailed
 from heli_env import load_env_model
-from identification.backends import Backend, LocalBackend, RayBackend, make_backend
-from identification.errors import BackendError, MissingDependency, TaskFailed
-from identification.fleet import disturbances_of, identify_each
-from identification.synthetic import simulate_flight
+from identification.bench.synthetic import simulate_flight
+from identification.workflows.fleet import disturbances_of, identify_each
 
 GRID = dict(kp_values=[0.0, 5.0, 20.0, 40.0], kd_values=[0.0, 1.0, 3.0])
 SWEEP = dict(duration=10.0, windows=3, seed=7, progress=False, keep_samples=True, extend=False)  # one batch of tasks

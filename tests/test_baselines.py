@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
+from heli_core.params import ModelParams
+from heli_core.physics import simulate
 from identification.baselines import (
     P0_EQ74,
     RATE_CAP,
@@ -18,7 +20,6 @@ from identification.baselines import (
     simulate_rate,
 )
 from identification.flight import make_flight
-from identification.model import ModelParams, simulate
 
 # Decoupled model with the paper's identified values, eqs. (68)-(70).
 TRUTH = ModelParams(

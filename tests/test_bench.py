@@ -1,4 +1,4 @@
-"""The test bench (identification.bench) and the generator's wind, pilot, sensor and log-timing options."""
+"""The test bench (identification.bench.cells) and the generator's wind, pilot, sensor and log-timing options."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from identification.bench import BENCH_CELLS, PAPER_LEVEL_CLOSED_LOOP_BROADBAND, bench_flight
-from identification.synthetic import MANOEUVRE_CONFIG, FlightConfig, simulate_flight
+from identification.bench.cells import BENCH_CELLS, PAPER_LEVEL_CLOSED_LOOP_BROADBAND, bench_flight
+from identification.bench.synthetic import MANOEUVRE_CONFIG, FlightConfig, simulate_flight
 
 
 def _digest(sim) -> str:

@@ -17,8 +17,8 @@ from pathlib import Path
 import pytest
 
 from heli_cli.main import main
-from identification.model_file import load_model
-from identification.terms import BASE_PARAMS
+from heli_core.terms import BASE_PARAMS
+from model_store.model_file import load_model
 
 
 @pytest.fixture(scope="session")
@@ -101,7 +101,7 @@ def test_identify_coupled_without_plots(identified_coupled):
 
 
 def test_identify_writes_the_disturbance_library(identified, flight_csv):
-    from identification.disturbance_library import DisturbanceLibrary
+    from model_store.disturbance_library import DisturbanceLibrary
 
     lib = DisturbanceLibrary.open(identified)
     (trace,) = lib.load()
@@ -120,7 +120,7 @@ def test_identifying_again_keeps_the_previous_model_and_library_version(flight_c
     other = tmp_path / "Y.csv"
     assert main(["simulate-flight", "--duration", "30", "--seed", "4", "--out", str(other)]) == 0
     assert main(["identify", str(other), "--out", str(out), "--no-plots"]) == 0
-    from identification.disturbance_library import DisturbanceLibrary
+    from model_store.disturbance_library import DisturbanceLibrary
 
     lib = DisturbanceLibrary.open(out)
     assert lib.versions() == [1, 2]
@@ -136,7 +136,7 @@ def test_identify_several_flights_pools_them(flight_csv, tmp_path):
     out = tmp_path / "DIR"
     assert main(["identify", str(flight_csv), str(other), "--out", str(out), "--no-plots"]) == 0
     assert len(_model(out)["provenance"]["sources"]) == 2
-    from identification.disturbance_library import DisturbanceLibrary
+    from model_store.disturbance_library import DisturbanceLibrary
 
     assert len(DisturbanceLibrary.open(out).load()) == 2
 
@@ -208,7 +208,7 @@ def test_diagnose_of_a_missing_model_says_it_can_fit_its_own(flight_csv, tmp_pat
 def test_identify_refusal_that_alignment_cannot_mend_says_what_to_try():
     """A diverging fit the alignment does not mend (the ArduCopter fixture) advises a flight that moves the axes
     the sticks barely move: no command, as none is known to change the outcome on the same flight."""
-    from identification.alignment_check import AlignmentFinding
+    from identification.diagnosis.alignment_check import AlignmentFinding
     from heli_cli.identify import _weak_axes_advice
 
     finding = AlignmentFinding(shifts={}, delays={"roll": 0.0, "pitch": 0.51, "yaw": 0.02},
@@ -348,10 +348,10 @@ def test_a_request_larger_than_memory_is_one_line_with_its_size_and_leaves_no_fo
 
 
 def test_a_constant_stick_is_an_identifiability_error_naming_the_stick(tmp_path, capsys):
-    from identification.integral_method import IntegralIdentifier
+    from identification.integral.method import IntegralIdentifier
     from identification.errors import IdentifiabilityError
     from identification.io import write_csv_flight
-    from identification.synthetic import simulate_flight
+    from identification.bench.synthetic import simulate_flight
 
     flight = simulate_flight(30, seed=2).flight
     sticks = flight.sticks.copy()
@@ -378,7 +378,7 @@ def test_simulate_flight_scales_effects_and_flies_the_manoeuvre(tmp_path, capsys
 
 def test_a_flight_logged_too_slowly_for_the_prefilter_is_named(tmp_path, capsys):
     from identification.io import write_csv_flight
-    from identification.synthetic import simulate_flight
+    from identification.bench.synthetic import simulate_flight
 
     flight = simulate_flight(120, seed=3).flight
     slow = dataclasses.replace(flight, time=flight.time[::50], rates=flight.rates[:, ::50],
@@ -394,8 +394,8 @@ def test_a_flight_logged_too_slowly_for_the_prefilter_is_named(tmp_path, capsys)
 def test_simulate_flight_lists_the_bench_cells_and_effects_the_library_has():
     # written out in heli_cli so that 'heli --help' needs no numpy; they must stay the library's names
     from heli_cli import simulate_flight as cli
-    from identification.bench import BENCH_CELLS
-    from identification.synthetic import EFFECT_ALIASES, EFFECTS
+    from identification.bench.cells import BENCH_CELLS
+    from identification.bench.synthetic import EFFECT_ALIASES, EFFECTS
 
     assert cli.CELL_NAMES == tuple(BENCH_CELLS)
     assert cli.EFFECT_NAMES == tuple(EFFECTS) and cli.EFFECT_ALIAS_NAMES == tuple(EFFECT_ALIASES)

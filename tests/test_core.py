@@ -88,15 +88,12 @@ def test_model_store_source_names_only_the_core():
     ("identification.model.trim_sticks", "heli_core.physics.trim_sticks"),
     ("identification.model.forward_rates", "heli_core.physics.forward_rates"),
     ("identification.model.model_source", "heli_core.physics.model_source"),
-    ("identification.model._kernel", "heli_core.physics.kernel"),
     ("identification.model.discrete_step", "heli_core.discrete.discrete_step"),
     ("identification.model.discrete_step_statements", "heli_core.discrete.discrete_step_statements"),
     ("identification.model.linear_structure", "heli_core.discrete.linear_structure"),
-    ("identification.model._discrete_kernel", "heli_core.discrete.discrete_kernel"),
     ("identification.model.servo_coefficients", "heli_core.servo.servo_coefficients"),
     ("identification.model.quaternion_from_euler", "heli_core.quaternion.quaternion_from_euler"),
     ("identification.model.euler_from_quaternion", "heli_core.quaternion.euler_from_quaternion"),
-    ("identification.model._CMD_INPUT", "heli_core.terms.STICK_ROW"),
     ("identification.integral_method.pade_filter", "heli_core.servo.pade_filter"),
     ("identification.terms.TERMS", "heli_core.terms.TERMS"),
     ("identification.terms.AXES", "heli_core.terms.AXES"),
@@ -105,19 +102,45 @@ def test_model_store_source_names_only_the_core():
     ("identification.files.atomic_path", "heli_core.files.atomic_path"),
     ("identification.backends.LocalBackend", "heli_core.backends.LocalBackend"),
     ("identification.backends.make_backend", "heli_core.backends.make_backend"),
-    ("controllers.backends.RayBackend", "heli_core.backends.RayBackend"),
+    ("identification.errors.ModelFileError", "model_store.errors.ModelFileError"),
+    ("identification.ml_estimator.MaximumLikelihoodIdentifier",
+     "identification.likelihood.estimator.MaximumLikelihoodIdentifier"),
+    ("identification.disturbance.identify_disturbance", "identification.disturbance.equivalent_input.identify_disturbance"),
+    ("identification.validation.ValidationResult", "identification.validation.result.ValidationResult"),
+    ("identification.bench.BENCH_CELLS", "identification.bench.cells.BENCH_CELLS"),
+    ("identification.report.identify_and_report", "identification.workflows.identify.identify_and_report"),
     ("identification.errors.MissingDependency", "heli_core.errors.MissingDependency"),
     ("identification.errors.BackendError", "heli_core.errors.BackendError"),
     ("identification.errors.TaskFailed", "heli_core.errors.TaskFailed"),
     ("identification.errors.require", "heli_core.errors.require"),
 ])
-def test_old_names_are_the_core_objects(old, new):
-    """The shims re-export, never copy: one class for isinstance checks, one cache of compiled kernels."""
+def test_old_names_warn_and_are_the_new_objects(old, new):
+    """An old name of identification's flat layout (or a shim's) is the object of its one home, read through
+    identification._deprecated with a DeprecationWarning naming that home: one class for isinstance checks,
+    one cache of compiled kernels."""
     def resolve(dotted):
         module, name = dotted.rsplit(".", 1)
         return getattr(importlib.import_module(module), name)
 
-    assert resolve(old) is resolve(new)
+    home = new.rsplit(".", 1)[0]
+    with pytest.warns(DeprecationWarning, match=f"import {old.rsplit('.', 1)[1]} from {home} .*0.2.0"):
+        found = resolve(old)
+    assert found is resolve(new)
+
+
+@pytest.mark.parametrize("old", ["identification.model._kernel", "identification.model._CMD_INPUT",
+                                 "identification.validation.no_such_name"])
+def test_private_and_unknown_old_names_are_gone(old):
+    module, name = old.rsplit(".", 1)
+    with pytest.raises(AttributeError, match=name):
+        getattr(importlib.import_module(module), name)
+
+
+def test_controllers_backends_is_the_core_object():
+    """controllers.backends (a shim of its own package, not identification's) re-exports, never copies."""
+    from controllers.backends import RayBackend
+
+    assert RayBackend is heli_core.backends.RayBackend
 
 
 def _error_classes():
@@ -151,10 +174,10 @@ def test_every_package_error_derives_from_the_one_root(cls):
     ("identification.errors.NotFittedError", ValueError),
     ("identification.errors.NotFittedError", AttributeError),
     ("identification.errors.DisturbanceError", ValueError),
-    ("identification.errors.LibraryError", ValueError),
-    ("identification.errors.MissingDependency", ImportError),
-    ("identification.errors.BackendError", ValueError),
-    ("identification.errors.TaskFailed", RuntimeError),
+    ("model_store.errors.LibraryError", ValueError),
+    ("heli_core.errors.MissingDependency", ImportError),
+    ("heli_core.errors.BackendError", ValueError),
+    ("heli_core.errors.TaskFailed", RuntimeError),
     ("identification.io.errors.LogFormatError", ValueError),
     ("heli_env.errors.EnvModelError", ValueError),
     ("heli_env.errors.ActionError", ValueError),
@@ -251,7 +274,7 @@ def test_one_linearisation_for_design_and_for_the_sweep():
     from controllers.pd.linearisation import _axis_ss
     from heli_core.linear import hover_linearisation
     from heli_core.servo import servo_coefficients
-    from identification.synthetic import PAPER_PARAMS
+    from identification.bench.synthetic import PAPER_PARAMS
 
     params = PAPER_PARAMS.with_values(gs1=-0.6, k4=0.8, tau_pitch=0.05)
     lin = hover_linearisation(params, 0.3)

@@ -14,10 +14,12 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
+from heli_core.params import ModelParams
+from heli_core.physics import QUAT, simulate
+from heli_core.quaternion import euler_from_quaternion
 from identification.errors import FlightLogError, UnitError
 from identification.flight import CSV_COLUMNS, make_flight
 from identification.io import read_csv_flight, read_flight, read_servo_csv, sticks_from_servos, write_csv_flight
-from identification.model import QUAT, ModelParams, euler_from_quaternion, simulate
 
 HEADER = ",".join(CSV_COLUMNS)
 
@@ -340,7 +342,7 @@ def test_servo_log_problems_name_the_servo_column(tmp_path):
 @pytest.fixture(scope="module")
 def synthetic_csv_flight():
     """One of our own synthetic flights (60 s, seed 3)."""
-    from identification.synthetic import simulate_flight
+    from identification.bench.synthetic import simulate_flight
 
     return simulate_flight(60.0, seed=3).flight
 

@@ -11,12 +11,12 @@ import json
 import numpy as np
 import pytest
 
-from identification.diagnose import Diagnoser, paired_log_test
-from identification.effects import CATALOGUE, shift_inputs
+from heli_core.terms import AXES, TERMS
+from identification.bench.synthetic import EFFECTS, MANOEUVRE_CONFIG, PAPER_PARAMS, FlightConfig, simulate_flight
+from identification.diagnosis.effects import CATALOGUE, shift_inputs
+from identification.diagnosis.heldout_diagnoser import Diagnoser, paired_log_test
+from identification.diagnosis.residual_tests import cross_correlation, whiteness
 from identification.errors import IdentifiabilityError, NotFittedError
-from identification.residual_tests import cross_correlation, whiteness
-from identification.synthetic import EFFECTS, MANOEUVRE_CONFIG, PAPER_PARAMS, FlightConfig, simulate_flight
-from identification.terms import AXES, TERMS
 
 DURATION = 180.0
 STRONG_NONLINEAR_DAMPING = {k: 5 * v for k, v in EFFECTS["nonlinear_damping"].items()}
@@ -121,7 +121,7 @@ def test_same_flight_same_diagnosis():
 def test_diagnose_and_report_takes_its_settings_as_one_config_or_by_keyword(tmp_path):
     """The same diagnosis files from a DiagnosisConfig and from its fields by keyword; a keyword given beside a
     config replaces the config's field (as SweepConfig's and TrainConfig's do); a bad field is named."""
-    from identification.diagnose_report import DiagnosisConfig, diagnose_and_report
+    from identification.reports.diagnosis import DiagnosisConfig, diagnose_and_report
 
     flight = _flight(seed=3, effects=("cross_coupling",), duration=70.0)
     source = {"file": "flight.csv", "sha256": "0" * 64}
@@ -150,7 +150,7 @@ def test_cli_writes_diagnosis_and_a_model_the_env_and_pd_accept(tmp_path):
     from controllers.pd import design_gains
     from heli_cli.main import main
     from heli_env import load_env_model
-    from identification.model_file import load_model
+    from model_store.model_file import load_model
 
     sim = simulate_flight(DURATION, seed=1, effects=("cross_coupling",), config=MANOEUVRE_CONFIG)
     sim.save(tmp_path / "flight.csv")
@@ -174,7 +174,7 @@ def test_cli_writes_diagnosis_and_a_model_the_env_and_pd_accept(tmp_path):
 
 
 def test_a_diverging_simulation_is_clipped_and_named_in_the_windows_plot():
-    from identification.diagnose_report import window_limits
+    from identification.reports.diagnosis import window_limits
 
     t = np.linspace(0, 4, 400)
     measured = 10 * np.sin(t)

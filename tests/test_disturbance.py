@@ -1,4 +1,4 @@
-"""Tests of identification.disturbance: eqs. (41)-(47), the smoothing rule of Section 3.3, Section 3.4.
+"""Tests of identification.disturbance.equivalent_input: eqs. (41)-(47), the smoothing rule of Section 3.3, Section 3.4.
 
 Thresholds were measured on 60 s synthetic flights (seeds 1-8, model identified
 with ``IntegralIdentifier()``, default Δt = 0.02 s and 5 smoothing passes):
@@ -15,22 +15,21 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 from scipy import stats
 
-from identification.disturbance import (
+from heli_core.params import ModelParams
+from heli_core.terms import AXES
+from identification.bench.synthetic import simulate_flight
+from identification.disturbance.equivalent_input import (
     DEFAULT_INTERVAL,
     DEFAULT_SMOOTHING,
-    MAX_PASSES,
     MODEL_LABELS,
     DisturbanceProfile,
     compare_with_truth,
     identify_disturbance,
     save_figures,
-    smooth,
 )
+from identification.disturbance.smoothing import MAX_PASSES, smooth
 from identification.errors import DisturbanceError
-from identification.integral_method import IntegralIdentifier
-from identification.model import ModelParams
-from identification.synthetic import simulate_flight
-from identification.terms import AXES
+from identification.integral.method import IntegralIdentifier
 
 MIN_CORRELATION = 0.9
 MAX_RMS_RATIO = 0.4
@@ -87,7 +86,7 @@ def test_trace_is_piecewise_constant_and_aligned(profile):
 def test_eq46_recovers_a_known_piecewise_constant_torque():
     """Noise-free flight driven by a piecewise-constant torque: eq. (46) returns it."""
     from identification.flight import make_flight
-    from identification.model import simulate
+    from heli_core.physics import simulate
 
     params = ModelParams(k2=1.3475, k3=2.4208, kd1=0.04, k6=-0.8903, k7=2.5188, kd2=0.01,
                          k10=13.47, k11=3.43, k12=-0.56, kd3=0.1)

@@ -1,4 +1,4 @@
-"""Tests of identification.disturbance_library: versions, validation on read, crash safety."""
+"""Tests of model_store.disturbance_library: versions, validation on read, crash safety."""
 
 import json
 import os
@@ -12,17 +12,12 @@ import numpy as np
 import pytest
 from numpy.testing import assert_array_equal
 
-from identification.disturbance import identify_disturbance
-from identification.disturbance_library import (
-    COLUMNS,
-    DisturbanceLibrary,
-    Trace,
-    manifest_name,
-)
-from identification.errors import LibraryError
-from identification.files import sha256_of
-from identification.integral_method import IntegralIdentifier
-from identification.synthetic import simulate_flight
+from heli_core.files import sha256_of
+from identification.bench.synthetic import simulate_flight
+from identification.disturbance.equivalent_input import identify_disturbance
+from identification.integral.method import IntegralIdentifier
+from model_store.disturbance_library import COLUMNS, DisturbanceLibrary, Trace, manifest_name
+from model_store.errors import LibraryError
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -234,7 +229,7 @@ def test_trace_path_must_stay_in_the_library(library):
 _CHILD = r"""
 import pathlib, sys, time
 import numpy as np
-from identification.disturbance_library import DisturbanceLibrary, Trace
+from model_store.disturbance_library import DisturbanceLibrary, Trace
 
 root, flag, phase = sys.argv[1], pathlib.Path(sys.argv[2]), sys.argv[3]
 original = {"trace": pathlib.Path.write_bytes, "manifest": pathlib.Path.write_text}[phase]

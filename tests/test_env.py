@@ -21,12 +21,13 @@ from numpy.testing import assert_allclose
 
 import heli_env
 from heli_cli.main import main
+from heli_core.physics import step, trim_sticks
+from heli_core.quaternion import euler_from_quaternion
 from heli_env import ActionError, EnvModelError, HeliAttitudeEnv, default_model_dir, load_env_model
 from heli_env.tasks import TaskConfig
 from heli_env.vector_env import HeliAttitudeVectorEnv
-from identification.disturbance_library import DisturbanceLibrary
-from identification.model import euler_from_quaternion, step, trim_sticks
-from identification.synthetic import EFFECTS
+from identification.bench.synthetic import EFFECTS
+from model_store.disturbance_library import DisturbanceLibrary
 
 ENV_ID = "HeliAttitude-v0"
 TASKS = ("hold", "track", "rate")
@@ -737,7 +738,7 @@ def test_human_mode_draws_each_step():
 
 def _model_copy_with_moved_gains(tmp_path, default_model):
     """The shipped model directory with k2 and k10 changed in model.json (as a refresh may do)."""
-    from identification.model_file import save_model
+    from model_store.model_file import save_model
 
     d = tmp_path / "model"
     shutil.copytree(default_model_dir(), d)

@@ -1,12 +1,12 @@
-"""Tests of :func:`identification.fit_warnings.fit_warnings`: one line per concern, none for good data."""
+"""Tests of :func:`identification.validation.fit_warnings.fit_warnings`: one line per concern, none for good data."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from identification.fit_warnings import MIN_DURATION_S, MIN_R2, fit_warnings
 from identification.flight import make_flight
+from identification.validation.fit_warnings import MIN_DURATION_S, MIN_R2, fit_warnings
 
 
 def _flight(duration=120.0, rate=50.0, source="f.csv", ped=0.3, r_scale=1.0, col=0.05, noise=0.005):
@@ -96,15 +96,15 @@ def test_thresholds_can_be_changed():
 def windy_yaw():
     """The project's own 300 s flight (seed 1, `heli simulate-flight --duration 300 --seed 1`): the yaw wind
     dominates the yaw rate, so the sticks alone explain 24 % of it although the model is right."""
-    from identification.ml_estimator import MaximumLikelihoodIdentifier
-    from identification.synthetic import simulate_flight
+    from identification.likelihood.estimator import MaximumLikelihoodIdentifier
+    from identification.bench.synthetic import simulate_flight
 
     sim = simulate_flight(duration=300.0, seed=1)
     return sim, MaximumLikelihoodIdentifier().fit([sim.flight])
 
 
 def test_a_correct_model_in_strong_wind_gets_no_weak_fit_warning(windy_yaw):
-    from identification.fit_warnings import AHEAD_LABEL, judged_r2
+    from identification.validation.fit_warnings import AHEAD_LABEL, judged_r2
 
     sim, ident = windy_yaw
     yaw = ident.axes_["yaw"]
@@ -118,9 +118,9 @@ def test_a_correct_model_in_strong_wind_gets_no_weak_fit_warning(windy_yaw):
 
 def test_a_model_of_sticks_that_are_not_the_inputs_is_warned_about(windy_yaw):
     """The same flight with its pedal replaced by another flight's: what identify must still call weak."""
-    from identification.fit_warnings import judged_r2
-    from identification.ml_estimator import MaximumLikelihoodIdentifier
-    from identification.synthetic import simulate_flight
+    from identification.validation.fit_warnings import judged_r2
+    from identification.likelihood.estimator import MaximumLikelihoodIdentifier
+    from identification.bench.synthetic import simulate_flight
 
     sim, _ = windy_yaw
     other = simulate_flight(duration=300.0, seed=2).flight

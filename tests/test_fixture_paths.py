@@ -27,10 +27,10 @@ import shutil
 from pathlib import Path
 
 import pytest
+from test_import_logs import _fixture
 
 from heli_cli.main import main
-from identification.model_verdict import BOUND_TOLERANCE, DAMPING, GAIN, ML_DAMPING_BOUNDS
-from test_import_logs import _fixture
+from identification.validation.model_verdict import BOUND_TOLERANCE, DAMPING, GAIN, ML_DAMPING_BOUNDS
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 STEPS = ("import", "identify", "diagnose", "design", "evaluate")
@@ -109,7 +109,7 @@ def check_verdict_speaks(model_json: Path, flight_csv: Path) -> dict:
     """A model.json with a damping at the search bound, or a control gain whose sign the integral method on the
     same flight contradicts (both clear of zero by two standard errors, on an axis whose sticks the model did not
     shift), carries a verdict that names it (issue #31: never confident nonsense); the verdict."""
-    from identification.integral_method import IntegralIdentifier
+    from identification.integral.method import IntegralIdentifier
     from identification.io import read_flight
 
     doc = json.loads(model_json.read_text())

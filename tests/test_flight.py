@@ -12,10 +12,12 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
+from heli_core.params import ModelParams
+from heli_core.physics import QUAT, simulate
+from heli_core.quaternion import euler_from_quaternion
+from identification.bench.synthetic import MANOEUVRE_CONFIG, simulate_flight
 from identification.errors import FlightLogError, UnitError
 from identification.flight import HOVER_RATE_RMS_MAX, Flight, make_flight, rate_attitude_ratio
-from identification.model import QUAT, ModelParams, euler_from_quaternion, simulate
-from identification.synthetic import MANOEUVRE_CONFIG, simulate_flight
 
 DT = 0.01
 N = 400

@@ -1,7 +1,7 @@
-"""Tests of identification.frequency_response (and its report): the flight's stick-to-rate response with
+"""Tests of identification.validation.frequency_response (and its report): the flight's stick-to-rate response with
 coherence against the model's, CIFER-style.
 
-The flights are synthetic (identification.synthetic), 60 s with all three sticks swept at once over
+The flights are synthetic (identification.bench.synthetic), 60 s with all three sticks swept at once over
 0.3-3 Hz. With no wind and a still collective nothing but the stick drives the rate, so the flight's
 estimate H = Pxy/Pxx must match the true model's response over the coherent band up to its random error
 (with 16 averages at coherence 0.6 about ±1.4 dB, ±10° at one frequency): the tolerances below are on the
@@ -16,9 +16,11 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from identification.bench.synthetic import FlightConfig, simulate_flight
 from identification.errors import IdentifiabilityError
 from identification.flight import Flight
-from identification.frequency_response import (
+from identification.reports.frequency_response import frequency_markdown, plot_frequency_response
+from identification.validation.frequency_response import (
     COHERENCE_MIN,
     cifer_cost,
     coherent_band,
@@ -26,8 +28,6 @@ from identification.frequency_response import (
     model_frequency_response,
     segment_samples,
 )
-from identification.frequency_response_report import frequency_markdown, plot_frequency_response
-from identification.synthetic import FlightConfig, simulate_flight
 
 CALM = FlightConfig(wind_level=0.0, collective_wander=0.0, sweep_mode="simultaneous")
 """No wind, a still collective, every stick swept at once: the stick alone drives the rate."""

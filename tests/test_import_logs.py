@@ -167,7 +167,7 @@ def test_detected_airborne_segments():
 
 @pytest.mark.parametrize("name, supported", [("betaflight", ("roll", "pitch", "yaw")), ("ardupilot", ("yaw",))])
 def test_identification_finds_positive_control_gains(name, supported):
-    from identification.integral_method import IntegralIdentifier
+    from identification.integral.method import IntegralIdentifier
 
     flight = to_flight(_raw(name))
     ident = IntegralIdentifier().fit(flight)

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from identification.bench import bench_flight
-from identification.input_hold import HOLD_BIC, check_hold, decide_hold, hold_fraction
-from identification.ml_estimator import MaximumLikelihoodIdentifier
-from identification.state_space import discrete_model
+from identification.bench.cells import bench_flight
+from identification.likelihood.estimator import MaximumLikelihoodIdentifier
+from identification.likelihood.input_hold import HOLD_BIC, check_hold, decide_hold, hold_fraction
+from identification.likelihood.state_space import discrete_model
 
 
 @pytest.fixture(scope="module")

@@ -4,11 +4,13 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from heli_core.params import ModelParams
+from heli_core.physics import simulate
+from heli_core.servo import pade_filter
+from identification.bench.synthetic import FlightConfig, simulate_flight
 from identification.errors import IdentifiabilityError, NotFittedError
 from identification.flight import make_flight
-from identification.integral_method import IntegralIdentifier, pade_filter
-from identification.model import ModelParams, simulate
-from identification.synthetic import FlightConfig, simulate_flight
+from identification.integral.method import IntegralIdentifier
 
 QUIET = dict(gyro_noise=0.0, vibration=0.0, attitude_noise=0.0)
 

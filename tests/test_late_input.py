@@ -7,15 +7,14 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-
-from identification.ahead_prediction import DIVERGED, format_r2, heldout_ahead_r2
-from identification.bench import BENCH_CELLS
-from identification.fit_warnings import static_collective
-from identification.log_band import log_band
-from identification.ml_estimator import MaximumLikelihoodIdentifier
-from identification.synthetic import simulate_flight
-
 from test_import_logs import _logs_dir
+
+from identification.bench.cells import BENCH_CELLS
+from identification.bench.synthetic import simulate_flight
+from identification.likelihood.ahead_prediction import DIVERGED, format_r2, heldout_ahead_r2
+from identification.likelihood.estimator import MaximumLikelihoodIdentifier
+from identification.log_band import log_band
+from identification.validation.fit_warnings import static_collective
 
 TREX = "trex550_hovertest.csv"
 
@@ -72,7 +71,7 @@ def test_an_unfiltered_log_has_a_noise_floor():
 
 
 def test_the_trex_hover_is_found_filtered_late_and_with_a_fixed_collective():
-    from identification.fit_warnings import fit_warnings
+    from identification.validation.fit_warnings import fit_warnings
     from identification.io import read_log
 
     flight = read_log(_trex())
@@ -84,7 +83,7 @@ def test_the_trex_hover_is_found_filtered_late_and_with_a_fixed_collective():
 
 @pytest.mark.slow
 def test_the_alignment_check_finds_the_trex_sticks_late_on_its_excited_axes():
-    from identification.alignment_check import check_alignment
+    from identification.diagnosis.alignment_check import check_alignment
     from identification.io import read_log
 
     finding = check_alignment([read_log(_trex())])

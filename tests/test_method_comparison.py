@@ -17,17 +17,17 @@ import pytest
 
 from heli_cli import main as cli
 from identification.baselines import TABLE3_STARTS, TABLE5_LENGTHS
-from identification.errors import FlightLogError, IdentifiabilityError
-from identification.io import read_flight
-from identification.method_comparison import (
+from identification.bench.method_comparison import (
     QUICK_NLR_MAX_NFEV,
     SCHEMA,
-    TABLE5_EKF,
     TABLE4_CASES,
     MethodComparison,
     compare_methods,
 )
-from identification.synthetic import FlightConfig, load_truth, simulate_flight
+from identification.bench.method_runs import TABLE5_EKF
+from identification.bench.synthetic import FlightConfig, load_truth, simulate_flight
+from identification.errors import FlightLogError, IdentifiabilityError
+from identification.io import read_flight
 
 SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "compare_methods.py"
 HELD_OUT_HEAD = "| Held-out MAE (deg/s) | Held-out p90 (deg/s) |"

@@ -1,4 +1,4 @@
-"""Diagnosis by likelihood (identification.ml_diagnosis) and ``heli diagnose``'s default method."""
+"""Diagnosis by likelihood (identification.diagnosis.likelihood_diagnoser) and ``heli diagnose``'s default method."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ import json
 
 import pytest
 
+from identification.bench.synthetic import simulate_flight
+from identification.diagnosis.likelihood_diagnoser import LikelihoodDiagnoser, closed_loop_share
 from identification.errors import NotFittedError
-from identification.ml_diagnosis import LikelihoodDiagnoser, closed_loop_share
-from identification.synthetic import simulate_flight
 
 
 @pytest.fixture(scope="module")
@@ -48,7 +48,7 @@ def test_servo_delay_is_named_with_its_value():
 
 
 def test_physical_bounds_of_candidate_terms():
-    from identification.effects import PHYSICAL_BOUNDS, implausible
+    from identification.diagnosis.effects import PHYSICAL_BOUNDS, implausible
 
     assert implausible({"nld2": 4.0, "k5": -0.9, "k4": 40.0}) is None  # k4 (flybar) has no bound
     assert "quadratic damping" in implausible({"nld1": -0.1})
@@ -59,7 +59,7 @@ def test_physical_bounds_of_candidate_terms():
 def test_an_unphysical_candidate_is_reported_but_never_accepted():
     # anti-damping on a flight whose roll rate grows faster than linear damping allows: the quadratic
     # term fits with the wrong sign, and that is not a physical effect
-    from identification.synthetic import PAPER_PARAMS
+    from identification.bench.synthetic import PAPER_PARAMS
 
     sf = simulate_flight(120, seed=4, truth=PAPER_PARAMS.with_values(nld1=-4.0))
     d = LikelihoodDiagnoser(axes=("roll",)).fit(sf.flight)
@@ -113,7 +113,7 @@ def test_heli_diagnose_by_likelihood_writes_the_model(tmp_path, coupled_flight):
     env = gym.make("HeliAttitude-v0", model=str(tmp_path / "d"))
     env.reset(seed=0)
     env.step(np.zeros(3, dtype=np.float32))
-    from identification.model_file import load_model
+    from model_store.model_file import load_model
 
     params, _ = load_model(tmp_path / "d")
     assert len(design_gains(params).kp) == 3
@@ -121,14 +121,14 @@ def test_heli_diagnose_by_likelihood_writes_the_model(tmp_path, coupled_flight):
 
 @pytest.mark.slow
 def test_log_whose_input_lags_is_named_as_a_negative_alignment():
-    from identification.effects import shift_inputs
+    from identification.diagnosis.effects import shift_inputs
 
     flight = shift_inputs(simulate_flight(150, seed=1).flight, (0.3, 0.3, 0.3))  # sticks recorded 0.3 s late
     d = LikelihoodDiagnoser(axes=("roll",)).fit(flight)
     assert d.effects_found_ == [("servo_delay", "roll")]
     assert d.alignment_[0] == pytest.approx(-0.3, abs=0.01)
     assert d.params_.tau_roll == 0.0  # a log correction, not a servo delay of the aircraft
-    from identification.ml_diagnosis_report import flight_controller_note
+    from identification.reports.likelihood_diagnosis import flight_controller_note
 
     assert flight_controller_note(d) is None  # a pilot's sticks: the share says who closes the loop
 
@@ -139,7 +139,7 @@ def test_a_flight_controllers_log_is_found_held_from_the_data_and_names_no_sub_s
     # commands it fed back, its effect-free flights named a sub-sample servo delay (statistic 30-135). The log
     # does not say how its sticks move (its metadata is dropped here, as a plain CSV drops it): the hold is
     # estimated with everything else
-    from identification.bench import bench_flight
+    from identification.bench.cells import bench_flight
 
     flight = bench_flight("broadband-autopilot", 1, 120.0).flight
     flight = flight.with_metadata(input_hold=None)
@@ -150,7 +150,7 @@ def test_a_flight_controllers_log_is_found_held_from_the_data_and_names_no_sub_s
     delay = [r for r in d.rounds_[0] if r["effect"] == "servo_delay"][0]
     assert delay["lr"] < delay["threshold"]
     # the report says the flight controller closes every axis, which the 0.1-0.5 s share cannot see
-    from identification.ml_diagnosis_report import diagnosis_markdown, flight_controller_note
+    from identification.reports.likelihood_diagnosis import diagnosis_markdown, flight_controller_note
 
     assert "flight controller's commands" in diagnosis_markdown(d, None) and flight_controller_note(d)
     with pytest.raises(ValueError, match="input_hold"):
@@ -163,7 +163,7 @@ def test_a_hidden_quadratic_damping_is_not_taken_for_a_hold():
     # fractions 0.33-0.45 and pitch's statistic below the floor; decided with every candidate's terms in, the
     # hold stays interpolated and the effect is named on every axis. 300 s, the bench's length: on 180 s
     # pitch's statistic is 11.4, under the term floor of 12 (docs/diagnosis.md states that cost)
-    from identification.synthetic import simulate_flight
+    from identification.bench.synthetic import simulate_flight
 
     flight = simulate_flight(300, seed=1, effects=("nonlinear_damping",), effect_scale=5.0).flight
     d = LikelihoodDiagnoser().fit(flight.with_metadata(input_hold=None))
@@ -187,7 +187,7 @@ def test_an_added_effect_predicts_better_on_blocks_the_fit_did_not_see(coupled_f
 
 
 def test_a_candidate_that_predicts_held_out_blocks_worse_is_never_accepted(coupled_flight, monkeypatch):
-    import identification.ml_diagnosis as ml
+    import identification.diagnosis.likelihood_diagnoser as ml
 
     real = ml.blocked_ahead_r2
 

@@ -6,9 +6,9 @@ import re
 
 import pytest
 
-from identification import diagnose_report, ml_diagnosis_report
-from identification.diagnose import Diagnoser
-from identification.ml_diagnosis import LikelihoodDiagnoser
+from identification.diagnosis.heldout_diagnoser import Diagnoser
+from identification.diagnosis.likelihood_diagnoser import LikelihoodDiagnoser
+from identification.reports import diagnosis as diagnose_report, likelihood_diagnosis as ml_diagnosis_report
 
 
 @pytest.mark.parametrize("module, diagnoser", [(ml_diagnosis_report, LikelihoodDiagnoser(min_duration=37.5)),

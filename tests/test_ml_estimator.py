@@ -1,4 +1,4 @@
-"""The maximum-likelihood estimator with a stochastic wind state (identification.ml_estimator)."""
+"""The maximum-likelihood estimator with a stochastic wind state (identification.likelihood.estimator)."""
 
 from __future__ import annotations
 
@@ -7,11 +7,11 @@ import json
 import numpy as np
 import pytest
 
+from identification.bench.synthetic import simulate_flight
 from identification.errors import IdentifiabilityError, NotFittedError
 from identification.flight import make_flight
-from identification.ml_estimator import MaximumLikelihoodIdentifier
+from identification.likelihood.estimator import MaximumLikelihoodIdentifier
 from identification.vibration import remove_common_lines, remove_vibration_lines
-from identification.synthetic import simulate_flight
 
 
 @pytest.fixture(scope="module")

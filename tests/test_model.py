@@ -1,4 +1,4 @@
-"""Tests of the physics core (:mod:`identification.model`) and of :mod:`identification.attitude`.
+"""Tests of the physics core (:mod:`heli_core`) and of :mod:`identification.attitude`.
 
 Eqs. (18) and (21) (rate dynamics), (25)-(29) (quaternion kinematics and Euler
 angles), (31) (Padé servo delay); the detrend of Section 3.2.
@@ -14,21 +14,11 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 from scipy.spatial.transform import Rotation
 
+from heli_core.params import ModelParams
+from heli_core.physics import N_STATE, QUAT, RATES, SERVO, derivatives, initial_state, simulate, step
+from heli_core.quaternion import euler_from_quaternion, quaternion_from_euler
+from heli_core.servo import servo_coefficients
 from identification.attitude import attitude_from_rates, detrend_piecewise, quaternions_from_rates
-from identification.model import (
-    N_STATE,
-    QUAT,
-    RATES,
-    SERVO,
-    ModelParams,
-    derivatives,
-    euler_from_quaternion,
-    initial_state,
-    quaternion_from_euler,
-    servo_coefficients,
-    simulate,
-    step,
-)
 
 COUPLED = ModelParams(
     k1=-0.05, k2=8.0, k3=3.0, k4=0.5, kd1=0.1, k5=0.05, k6=6.0, k7=3.0, k8=0.4, kd2=-0.05,
@@ -396,7 +386,7 @@ def test_the_old_disturbance_keyword_is_a_deprecated_name_of_the_wind_torque():
     t = np.arange(200) * 0.01
     sticks = np.zeros((4, t.size))
     torque = np.full((3, t.size), 0.5)
-    from identification.synthetic import PAPER_PARAMS as PAPER
+    from identification.bench.synthetic import PAPER_PARAMS as PAPER
 
     new = core_simulate(PAPER, t, sticks, torque=torque)
     with pytest.warns(DeprecationWarning, match="torque"):
@@ -406,8 +396,8 @@ def test_the_old_disturbance_keyword_is_a_deprecated_name_of_the_wind_torque():
 
 def test_servo_settings_per_axis_are_parsed_once_for_both_identifiers():
     from heli_core.servo import per_axis
-    from identification.integral_method import IntegralIdentifier
-    from identification.ml_estimator import MaximumLikelihoodIdentifier
+    from identification.integral.method import IntegralIdentifier
+    from identification.likelihood.estimator import MaximumLikelihoodIdentifier
 
     assert per_axis("delay", None, 2.0) == [0.0, 0.0, 0.0] and per_axis("delay", "auto", 2.0) == ["auto"] * 3
     assert per_axis("servo_lag", 0.03, 1.0) == [0.03] * 3 and per_axis("delay", (0.1, 0, 0.2), 2.0) == [0.1, 0, 0.2]

@@ -1,4 +1,4 @@
-"""Tests of :mod:`identification.model_file`: ``model.json`` round trip, checks and atomic writes.
+"""Tests of :mod:`model_store.model_file`: ``model.json`` round trip, checks and atomic writes.
 
 One ``pytest.raises(ModelFileError, match=...)`` per bad input class; each
 match checks that the message says what was expected and what came.
@@ -13,12 +13,18 @@ import pathlib
 import numpy as np
 import pytest
 
-from identification.errors import ModelFileError
-from identification.model import ModelParams
-from identification.model_file import (
-    MODEL_FILENAME, SCHEMA, SCHEMA_VERSION, load_model, model_document, params_from_document, save_model,
+from heli_core.params import ModelParams
+from heli_core.terms import BASE_PARAMS
+from model_store.errors import ModelFileError
+from model_store.model_file import (
+    MODEL_FILENAME,
+    SCHEMA,
+    SCHEMA_VERSION,
+    load_model,
+    model_document,
+    params_from_document,
+    save_model,
 )
-from identification.terms import BASE_PARAMS
 
 # Every one of the 15 base parameters non-zero and distinct, delays on all axes, two added terms.
 PARAMS = ModelParams(

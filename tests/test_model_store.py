@@ -20,13 +20,13 @@ from numpy.testing import assert_allclose, assert_array_equal
 from heli_cli.main import main
 from heli_env import load_env_model
 from heli_env.model_dir import default_model_dir
-from identification.errors import LibraryError, ModelDirBusyError, ModelFileError
+from identification.bench.synthetic import simulate_flight
 from identification.io import read_flight
-from identification.model_file import load_model
-from identification.refresh import DuplicateFlightError, refresh_model
-from identification.report import identify_and_report
-from identification.synthetic import simulate_flight
+from identification.workflows.identify import identify_and_report
+from identification.workflows.refresh import DuplicateFlightError, refresh_model
 from model_store import DisturbanceLibrary, ModelDir, Trace, faults
+from model_store.errors import LibraryError, ModelDirBusyError, ModelFileError
+from model_store.model_file import load_model
 
 DURATION = 30.0
 
@@ -355,7 +355,7 @@ def test_a_trace_staged_twice_is_written_once(folder):
 def test_heli_check_of_a_file_checks_a_flight_or_says_what_it_expected(tmp_path, capsys):
     """Issue 31: 'heli check flight.csv' said the (existing) file did not exist."""
     from heli_cli.main import main
-    from identification.synthetic import simulate_flight
+    from identification.bench.synthetic import simulate_flight
 
     flight = tmp_path / "flight.csv"
     simulate_flight(5, seed=1).save(flight)

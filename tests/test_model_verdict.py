@@ -1,4 +1,4 @@
-"""The model's verdict: judged from the fit (:mod:`identification.model_verdict`), stored in ``model.json``
+"""The model's verdict: judged from the fit (:mod:`identification.validation.model_verdict`), stored in ``model.json``
 (:mod:`model_store.verdict`), shown first by ``heli identify``, and enforced by the commands that build on a
 model (:mod:`heli_cli.model_gate`)."""
 
@@ -10,7 +10,7 @@ import shutil
 import pytest
 
 from heli_cli.main import main
-from identification.model_verdict import ML_DAMPING_BOUNDS, judge_fit
+from identification.validation.model_verdict import ML_DAMPING_BOUNDS, judge_fit
 from model_store.errors import ModelFileError, UnusableModelError
 from model_store.model_file import load_model, model_document, params_from_document
 from model_store.verdict import NOT_JUDGED, ModelVerdict, require_usable, verdict_of

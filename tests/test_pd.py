@@ -8,7 +8,7 @@ hold at ``T``, ``k G(z)`` with the textbook
 
 for the angle and ``k (1 - e) / (a (z - e))`` for the rate. Closed-loop checks
 run :class:`heli_env.env.HeliAttitudeEnv` (the shipped model) and the physics
-core :func:`identification.model.discrete_step`.
+core :func:`heli_core.discrete.discrete_step`.
 """
 
 from __future__ import annotations
@@ -36,9 +36,12 @@ from controllers.pd import (
     plot_step_responses,
     propose_gains,
 )
+from heli_core.discrete import discrete_step
+from heli_core.params import ModelParams
+from heli_core.physics import initial_state
+from heli_core.quaternion import euler_from_quaternion
 from heli_env.env import HeliAttitudeEnv
 from heli_env.model_dir import load_env_model
-from identification.model import ModelParams, discrete_step, euler_from_quaternion, initial_state
 
 DT = 0.01
 K2, K3 = 1.5, 2.0  # a simple roll axis [rad/s^2 per stick], [1/s]

@@ -72,8 +72,8 @@ def test_sweep_and_evaluate_skip_their_figures_with_no_plots(tmp_path):
 
 def test_the_likelihood_diagnosis_names_each_step_as_it_starts():
     """Issue 31: 'heli diagnose' showed one static line for 18-24 s; its diagnoser now says each step."""
-    from identification.ml_diagnosis import LikelihoodDiagnoser
-    from identification.synthetic import simulate_flight
+    from identification.diagnosis.likelihood_diagnoser import LikelihoodDiagnoser
+    from identification.bench.synthetic import simulate_flight
 
     steps = []
     LikelihoodDiagnoser(axes=("roll",), max_rounds=1, progress=steps.append).fit(simulate_flight(62, seed=3).flight)

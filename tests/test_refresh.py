@@ -1,4 +1,4 @@
-"""Tests of ``heli refresh`` (identification.refresh) and of the interval bootstrap (identification.bootstrap).
+"""Tests of ``heli refresh`` (identification.workflows.refresh) and of the interval bootstrap (identification.integral.bootstrap).
 
 Scenario: flight 1 (seed 11, the paper's wind) is identified with ``heli identify``;
 flight 2 (seed 12, half the wind, roll damping k3 raised by 30 %) refreshes it.
@@ -20,13 +20,13 @@ from numpy.testing import assert_allclose
 
 import heli_env  # noqa: F401  (registers HeliAttitude-v0)
 from heli_cli.main import main
-from identification.bootstrap import interval_bootstrap, interval_flights
-from identification.disturbance_library import DisturbanceLibrary
+from heli_core.files import sha256_of
+from identification.bench.synthetic import PAPER_PARAMS, FlightConfig, simulate_flight
 from identification.errors import IdentifiabilityError
-from identification.files import sha256_of
-from identification.integral_method import IntegralIdentifier
-from identification.refresh import DuplicateFlightError, RefreshError, refresh_model
-from identification.synthetic import PAPER_PARAMS, FlightConfig, simulate_flight
+from identification.integral.bootstrap import interval_bootstrap, interval_flights
+from identification.integral.method import IntegralIdentifier
+from identification.workflows.refresh import DuplicateFlightError, RefreshError, refresh_model
+from model_store.disturbance_library import DisturbanceLibrary
 
 DURATION = 120.0
 K3_CHANGE = 1.3

@@ -1,4 +1,4 @@
-"""``heli refresh`` keeps the ``--validate`` results (:mod:`identification.refresh_validation`).
+"""``heli refresh`` keeps the ``--validate`` results (:mod:`identification.workflows.refresh_validation`).
 
 A refresh rewrites ``model.json`` and ``report.md``; the model's scores on flights it was not fitted on must not
 disappear with them: the refreshed model is validated again on each flight whose file is still found (by its
@@ -15,10 +15,10 @@ import pytest
 
 from heli_cli.main import main
 from heli_core.files import sha256_of
-from identification.refresh_validation import kept_validation
-from identification.synthetic import simulate_flight
-from identification.validation_flights import FlightValidation
-from identification.validation_report import flight_validation_markdown
+from identification.bench.synthetic import simulate_flight
+from identification.reports.validation import flight_validation_markdown
+from identification.validation.other_flights import FlightValidation
+from identification.workflows.refresh_validation import kept_validation
 
 
 @pytest.fixture(scope="module")

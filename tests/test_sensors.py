@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from heli_core.sensors import GyroLine, SensorModel
-from identification.bench import bench_flight
+from identification.bench.cells import bench_flight
+from identification.bench.synthetic import simulate_flight
 from identification.sensors import identify_sensors, white_noise_level
-from identification.synthetic import simulate_flight
 
 
 @pytest.mark.parametrize("cell, gyro, lines", [

@@ -153,11 +153,12 @@ def cl_euler(q0, q1, q2, q3):
 # ------------------------------------------------------------- frequency domain
 def test_linear_plant_matches_the_physics_core(delayed):
     """The sampled linear plant reproduces the core's discrete step for small inputs (rates exactly)."""
-    from identification.model import _discrete_kernel, trim_sticks
+    from heli_core.discrete import discrete_kernel
+    from heli_core.physics import trim_sticks
 
     params, dt = delayed.params, 0.01
     plant = cl.hover_plant(params, dt, 0.2)
-    dstep = _discrete_kernel(params, dt)[0]
+    dstep = discrete_kernel(params, dt)[0]
     trim = trim_sticks(params, 0.2)
     rng = np.random.default_rng(0)
     u = 0.02 * rng.standard_normal((200, 3))
@@ -309,7 +310,7 @@ class _SpyBackend:
     """Stands in for the backend a sweep makes from a name; records whether the sweep closed it."""
 
     def __init__(self):
-        from identification.backends import LocalBackend
+        from heli_core.backends import LocalBackend
 
         self.inner, self.closed = LocalBackend(1), False
 
@@ -324,7 +325,7 @@ class _SpyBackend:
 
 
 def test_a_backend_made_from_a_name_is_closed_after_the_sweep(shipped, monkeypatch):
-    import identification.backends as backends
+    import heli_core.backends as backends
 
     made = []
     monkeypatch.setattr(backends, "make_backend", lambda name: made.append(_SpyBackend()) or made[-1])

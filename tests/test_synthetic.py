@@ -1,4 +1,4 @@
-"""Tests of :mod:`identification.synthetic`: the truth-model flights the other tests identify.
+"""Tests of :mod:`identification.bench.synthetic`: the truth-model flights the other tests identify.
 
 Session fixtures fly one 90 s flight twice with the same seed (about 1.5 s
 each); everything else uses flights of a few seconds or no simulation at all.
@@ -14,10 +14,17 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from identification.io import read_csv_flight
-from identification.synthetic import (
-    EFFECT_ALIASES, EFFECTS, PAPER_PARAMS, FlightConfig, load_truth, simulate_flight, truth_paths, truth_params,
+from identification.bench.synthetic import (
+    EFFECT_ALIASES,
+    EFFECTS,
+    PAPER_PARAMS,
+    FlightConfig,
+    load_truth,
+    simulate_flight,
+    truth_paths,
+    truth_params,
 )
+from identification.io import read_csv_flight
 
 SEED = 7
 DURATION = 90.0

@@ -1,4 +1,4 @@
-"""Tests of identification.validation: Tables 1-2 statistics, the 10 s detrend, plots."""
+"""Tests of identification.validation.forward_simulation: Tables 1-2 statistics, the 10 s detrend, plots."""
 
 import dataclasses
 import json
@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from heli_core.params import ModelParams
+from heli_core.physics import QUAT, simulate
+from heli_core.quaternion import euler_from_quaternion
+from heli_core.terms import AXES
 from identification.flight import make_flight
-from identification.model import QUAT, ModelParams, euler_from_quaternion, simulate
-from identification.terms import AXES
-from identification.validation import (
-    ValidationResult,
+from identification.validation.forward_simulation import (
     attitude_error_stats,
     between_models_mae,
     pick_windows,
@@ -20,6 +21,7 @@ from identification.validation import (
     rate_error_stats,
     validate_models,
 )
+from identification.validation.result import ValidationResult
 
 PAPER = ModelParams(k2=1.3475, k3=2.4208, kd1=0.0399, k6=-0.8903, k7=2.5188, kd2=0.0115,
                     k10=13.4702, k11=3.4342, k12=-0.5623, kd3=0.0964)
@@ -194,7 +196,7 @@ def test_validate_bad_inputs(truth_flight):
 
 
 def test_a_diverging_model_is_named_with_its_cause(truth_flight):
-    from identification.disturbance import identify_disturbance
+    from identification.disturbance.equivalent_input import identify_disturbance
     from identification.errors import IdentifiabilityError, SimulationDivergedError
 
     flight, _ = truth_flight
@@ -227,7 +229,7 @@ def test_a_damping_too_fast_for_the_step_is_named_as_such_not_as_added_terms(tru
 
 
 def test_divergence_names_the_terms_the_model_has():
-    from identification.validation import _divergence_cause
+    from identification.validation.forward_simulation import _divergence_cause
 
     plain = dataclasses.replace(PAPER, k1=0.0, k4=0.0, k5=0.0, k8=0.0, k9=0.0)
     assert "no added or coupling terms" in _divergence_cause(plain, 0.01)[0]

@@ -1,4 +1,4 @@
-"""Tests of identification.validation_flights and ``heli identify --validate``: the identified model simulated
+"""Tests of identification.validation.other_flights and ``heli identify --validate``: the identified model simulated
 on flights it was not fitted on, scored as MATLAB's ``compare`` does.
 
 Flights are synthetic, 60 s with every stick swept at once and the paper's wind (Section 3.3): aircraft A
@@ -18,13 +18,13 @@ import pytest
 from numpy.testing import assert_allclose
 
 from heli_cli.main import main
+from identification.bench.synthetic import PAPER_PARAMS, FlightConfig, simulate_flight
 from identification.errors import FlightLogError
 from identification.flight import Flight
-from identification.ml_estimator import MaximumLikelihoodIdentifier
-from identification.synthetic import PAPER_PARAMS, FlightConfig, simulate_flight
-from identification.validation import rate_fit_stats, validate_models
-from identification.validation_flights import as_fitted, check_validation_flights, validate_on_flight
-from identification.validation_report import flight_validation_markdown
+from identification.likelihood.estimator import MaximumLikelihoodIdentifier
+from identification.reports.validation import flight_validation_markdown
+from identification.validation.forward_simulation import rate_fit_stats, validate_models
+from identification.validation.other_flights import as_fitted, check_validation_flights, validate_on_flight
 
 SWEPT = FlightConfig(sweep_mode="simultaneous")
 OTHER_AIRCRAFT = PAPER_PARAMS.with_values(

@@ -1,4 +1,4 @@
-"""Draws of the wind from the smoother's posterior (identification.wind_posterior) and the library trace
+"""Draws of the wind from the smoother's posterior (identification.disturbance.wind_posterior) and the library trace
 ``heli identify`` writes from one.
 
 The statistical tests simulate the axis model itself (the wind a draw should have the distribution of), with
@@ -14,9 +14,14 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from identification.state_space import discrete_model, lti_apply, rts_smooth, wind_block
-from identification.wind_posterior import (WindPosterior, _root, axis_posterior_noise, flight_seed,
-                                           wind_posterior)
+from identification.disturbance.wind_posterior import (
+    WindPosterior,
+    _root,
+    axis_posterior_noise,
+    flight_seed,
+    wind_posterior,
+)
+from identification.likelihood.state_space import discrete_model, lti_apply, rts_smooth, wind_block
 
 MODEL = (2.4, 0.6, 0.08, 300.0, 600.0, 1.0)
 """(damping, T_slow, T_fast, var_slow/R, var_fast/R, zeta): quick gusts, many independent stretches."""
@@ -102,8 +107,8 @@ def test_flight_seed_from_sha256():
 # ----------------------------------------------------------- on a fitted model
 @pytest.fixture(scope="module")
 def fitted():
-    from identification.ml_estimator import MaximumLikelihoodIdentifier
-    from identification.synthetic import simulate_flight
+    from identification.likelihood.estimator import MaximumLikelihoodIdentifier
+    from identification.bench.synthetic import simulate_flight
 
     sf = simulate_flight(60, seed=3)
     return sf, MaximumLikelihoodIdentifier(axes=("roll", "yaw")).fit(sf.flight)
@@ -128,7 +133,7 @@ def test_wind_posterior_of_a_fit_is_seeded_and_about_the_mean(fitted):
 
 
 def test_profile_of_a_draw_keeps_the_mean_and_the_library_records_it(fitted, tmp_path):
-    from identification.disturbance import identify_disturbance
+    from identification.disturbance.equivalent_input import identify_disturbance
     from model_store.disturbance_library import DisturbanceLibrary
 
     sf, ident = fitted
@@ -153,8 +158,8 @@ def test_profile_of_a_draw_keeps_the_mean_and_the_library_records_it(fitted, tmp
 
 @pytest.mark.slow
 def test_heli_identify_stores_a_seeded_posterior_draw(tmp_path):
-    from identification.report import identify_and_report
-    from identification.synthetic import simulate_flight
+    from identification.workflows.identify import identify_and_report
+    from identification.bench.synthetic import simulate_flight
 
     sf = simulate_flight(60, seed=3)
     runs = [identify_and_report([sf.flight], tmp_path / name, plots=False) for name in ("a", "b")]

@@ -15,7 +15,7 @@ Per axis (roll, pitch, yaw) the model the estimator and the regulator are design
   (``model.json["fit_statistics"]["axes"][axis]["wind"]``, :class:`WindModel`): a slow plus a fast
   first-order Gauss-Markov torque (``"gm2"``) or a slow first-order plus a fast second-order one
   (``"gm_so"``), their states taken from the identification's own definition
-  (:func:`identification.state_space.wind_block`) and scaled to the fitted torque levels [rad/s²];
+  (:func:`identification.likelihood.state_space.wind_block`) and scaled to the fitted torque levels [rad/s²];
 * the sensors: the identified white noise of the attitude estimate and the gyro
   (``model.json["sensors"]``) as the measurement noise, and each of the gyro's vibration lines as a
   lightly damped oscillator state at its frequency (the environment draws each line's phase per episode;
@@ -42,7 +42,7 @@ from ..errors import DesignError
 
 WIND_KINDS = ("gm2", "gm_so")
 """Gust models the design takes: those the maximum-likelihood identification fits
-(:data:`identification.state_space.WIND_MODELS`)."""
+(:data:`identification.likelihood.state_space.WIND_MODELS`)."""
 LINE_COHERENCE_S = 2.0
 """Time constant [s] over which the estimator lets a gyro line's amplitude and phase wander (its oscillator
 decays by ``exp(-dt / LINE_COHERENCE_S)`` per period, driven so that its stationary amplitude is the
@@ -128,7 +128,7 @@ class WindModel:
     def states(self):
         """``(Aw, cw, G)``: the gust states' matrix (m, m), the row summing them into the torque (m,), and the
         noise input (m, 2) that gives each component its torque level (unit-intensity white noise in)."""
-        from identification.state_space import wind_block
+        from identification.likelihood.state_space import wind_block
 
         Aw, cw, cols = wind_block(self.kind, *self.time_constants_s, self.damping_ratio)
         G = np.column_stack([c * s for c, s in zip(cols, self.torque_std)])

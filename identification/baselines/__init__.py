@@ -11,9 +11,10 @@ parameters ``(k3, k2, kd1)`` = the paper's EKF/NLR ``(k1, k2, kd)``: damping,
 gain, offset) and both are scikit-learn style estimators: the constructor
 stores its arguments, ``fit(flight)`` returns ``self``, learned attributes end
 in ``_`` and ``predict(flight)`` forward-simulates the identified model through
-:func:`identification.model.simulate`.
+:func:`heli_core.physics.simulate`.
 """
 
+from ..errors import NotFittedError
 from .ekf import (
     P0_EQ74,
     TABLE4_M0,
@@ -26,15 +27,7 @@ from .ekf import (
     estimate_noise_variance,
 )
 from .nlr import TABLE3_STARTS, NLRHistory, NonlinearRegression
-from .single_axis import (
-    AXIS_PARAMS,
-    RATE_CAP,
-    NotFittedError,
-    RateErrors,
-    parameter_names,
-    rate_errors,
-    simulate_rate,
-)
+from .single_axis import AXIS_PARAMS, RATE_CAP, RateErrors, parameter_names, rate_errors, simulate_rate
 
 __all__ = [
     "AXIS_PARAMS", "EKFHistory", "NLRHistory", "NonlinearRegression", "NotFittedError",

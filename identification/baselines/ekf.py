@@ -19,7 +19,7 @@ The filter is a recursion over samples, so it runs as one loop over the data;
 everything that does not depend on the estimate (the stick and offset
 regressors) is computed for all samples at once from the term library.
 The identified model is judged as the paper does: by forward-simulating it
-(:meth:`ParameterEKF.predict`, through :func:`identification.model.simulate`).
+(:meth:`ParameterEKF.predict`, through :func:`heli_core.physics.simulate`).
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ minimise the output error of eq. (71)::
 where ``p_numerical`` is the numerical solution of the model on the measured
 sticks (eq. 72). The paper used Matlab's ``lsqnonlin`` (trust-region
 reflective) around ``ode45``; here :func:`scipy.optimize.least_squares`
-(``method="trf"``, the same algorithm) drives :func:`identification.model.simulate`
+(``method="trf"``, the same algorithm) drives :func:`heli_core.physics.simulate`
 (fixed-step RK4 at the data's sample interval). Every residual evaluation,
 including those of the finite-difference Jacobian, is one forward simulation,
 which is what makes the method slow (Table 3).

@@ -18,8 +18,8 @@ package keeps that *order* but uses the names of eq. (18):
 * yaw:   ``(k11, k10, kd3)``, plus ``k12`` last when the collective term is on.
 
 Forward simulations go through the one physics core,
-:func:`identification.model.simulate`; this module only builds the
-:class:`~identification.model.ModelParams` and guards against simulations that
+:func:`heli_core.physics.simulate`; this module only builds the
+:class:`~heli_core.params.ModelParams` and guards against simulations that
 blow up for absurd parameters.
 """
 
@@ -36,7 +36,7 @@ from heli_core.terms import AXES, STICK_ROW
 
 from ..errors import NotFittedError
 from ..flight import Flight
-from ..validation import PERCENTILE_METHOD
+from ..validation.forward_simulation import PERCENTILE_METHOD
 
 AXIS_PARAMS: dict[str, tuple[str, str, str]] = {
     "roll": ("k3", "k2", "kd1"),
@@ -116,7 +116,7 @@ def simulate_rate(params: ModelParams, flight: Flight, axis: str, substeps: int 
 
     The simulation starts from the measured rate of ``axis`` at the first
     sample (the other rates at 0, servo states settled on the first sticks) and
-    runs through :func:`identification.model.simulate` (eq. 72: the numerical
+    runs through :func:`heli_core.physics.simulate` (eq. 72: the numerical
     solution of eq. 18). The RK4 sub-steps are raised so that one sub-step
     spans at most ``MAX_DAMPING_STEP / |k_damp|`` (up to ``MAX_SUBSTEPS``),
     keeping the solution accurate for strongly damped parameter sets.
@@ -162,7 +162,7 @@ class RateErrors:
         Mean absolute error [deg/s].
     p90 : float
         90th percentile of the absolute error [deg/s], interpolated as Matlab's
-        ``prctile`` (:data:`identification.validation.PERCENTILE_METHOD`).
+        ``prctile`` (:data:`identification.validation.forward_simulation.PERCENTILE_METHOD`).
     """
 
     mae: float
@@ -172,7 +172,7 @@ class RateErrors:
 def rate_errors(simulated, measured) -> RateErrors:
     """Mean absolute error and 90th percentile of ``|simulated - measured|``.
 
-    The single-axis counterpart of :func:`identification.validation.rate_error_stats`.
+    The single-axis counterpart of :func:`identification.validation.forward_simulation.rate_error_stats`.
 
     Parameters
     ----------
@@ -221,7 +221,7 @@ class SingleAxisEstimator:
         """Simulated rate of :attr:`axis` [rad/s], shape (n,), on ``flight``'s sticks.
 
         Forward simulation of the identified model through
-        :func:`identification.model.simulate` from the measured initial rate;
+        :func:`heli_core.physics.simulate` from the measured initial rate;
         a diverging simulation is clipped to ``±RATE_CAP``.
         """
         self._check_fitted()

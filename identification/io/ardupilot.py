@@ -43,7 +43,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import require
+from heli_core.errors import require
+
 from .clock import continue_clock, describe
 from .container import DF_HEAD, PAD, locate, span_file
 from .errors import LogFormatError, MissingStreamError

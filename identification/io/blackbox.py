@@ -63,7 +63,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import require
+from heli_core.errors import require
+
 from .clock import continue_clock, describe
 from .container import BLACKBOX_MAGIC, PAD, Span, locate, span_file
 from .errors import LogFormatError, LogSelectionError, MissingStreamError, NotAirborneError

@@ -17,8 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
+from heli_core.files import atomic_path, sha256_of
+
 from ..errors import FlightLogError
-from ..files import atomic_path, sha256_of
 from ..flight import (
     ATTITUDE_COLUMNS, CSV_COLUMNS, RATE_COLUMNS, REQUIRED_COLUMNS, STICK_COLUMNS, Flight, _check_finite, make_flight,
 )

@@ -37,9 +37,9 @@ from pathlib import Path
 
 import numpy as np
 
+from heli_core.errors import require
 from heli_core.quaternion import euler_from_quaternion
 
-from ..errors import require
 from .container import PAD, ULOG_MAGIC, locate
 from .errors import LogFormatError, MissingStreamError
 from .raw_log import RawLog, captured_output, check_damage

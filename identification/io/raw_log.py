@@ -33,7 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import sha256_of
+from heli_core.files import sha256_of
+
 from ..flight import STICK_COLUMNS, Flight, make_flight
 from .csv_log import sticks_from_servos
 from .errors import DamagedLogError, InputSourceError, MissingStreamError, SegmentError

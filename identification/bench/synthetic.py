@@ -1,0 +1,595 @@
+"""Synthetic hover flights from a known truth model (the project's own test aircraft).
+
+A flight is flown by the physics core (:mod:`heli_core.physics`) with the
+paper's identified values as the default truth (eqs. 68-70), a closed-loop pilot
+model, coloured wind torque, and a sensor model:
+
+* **Pilot** (Section 2.1): holds the attitude with a PID law on the angle seen
+  ``reaction_delay`` seconds ago (bandwidth ``pilot_bandwidth`` rad/s, gains
+  scaled by his knowledge of the control gain), and flies frequency sweeps
+  (linear chirps, 0.3-3 Hz) on one stick at a time with rests in between. The
+  pilot reacts to gusts, so stick and wind are correlated, as in real flight.
+* **Collective** wanders slowly around a hover trim (altitude keeping) with
+  occasional climbs, so collective-dependent effects are excited.
+* **Wind**: per axis, white noise through a second-order low-pass
+  (``wind_corner_hz``), scaled so that the equivalent cyclic input ``u_d`` of
+  eq. (42) has a 90 % interval of ``±wind_level`` (paper: about ±0.09,
+  Section 3.3). The torque is ``k*u_d`` with the axis' control gain; the constant
+  offsets ``kd`` are part of the truth parameters.
+* **Sensors**: gyro white noise, rotor vibration (main-rotor 1/rev and 2/rev
+  sinusoids, aliased by the 100 Hz sampling), attitude noise; sticks are logged
+  as commanded (before the servo).
+
+Optional physical effects can be switched on to hide them in the data
+(:data:`EFFECTS`). The truth (parameters and wind) is kept beside the flight.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from heli_core.files import atomic_path, write_text
+from heli_core.params import ModelParams
+from heli_core.physics import initial_state, kernel
+from heli_core.quaternion import euler_from_quaternion, euler_from_quaternion_scalar
+from heli_core.terms import AXES
+
+from ..flight import Flight, make_flight
+from ..io.csv_log import write_csv_flight
+
+PAPER_PARAMS = ModelParams(
+    k2=1.3475, k3=2.4208, kd1=0.0399,
+    k6=-0.8903, k7=2.5188, kd2=0.0115,
+    k10=13.4702, k11=3.4342, k12=-0.5623, kd3=0.0964,
+)
+"""The paper's identified decoupled values, eqs. (68)-(70)."""
+
+EFFECTS: dict[str, dict[str, float]] = {
+    "servo_delay": {"tau_roll": 0.08, "tau_pitch": 0.08, "tau_yaw": 0.05},
+    "cross_coupling": {"k4": 0.8, "k8": 0.7},
+    "gyroscopic": {"k1": 0.8, "k5": 0.9, "k9": -0.95},
+    "nonlinear_damping": {"nld1": 2.0, "nld2": 2.0, "nld3": 0.6},
+    "gain_scheduling": {"gs1": -0.6 * 1.3475, "gs2": -0.6 * -0.8903, "gs3": -0.6 * 13.4702},
+    "collective_torque": {"ct1": 0.25, "ct2": -0.2},
+    "servo_lag": {"lag_roll": 0.04, "lag_pitch": 0.04, "lag_yaw": 0.03},
+}
+"""Physical effects that can be hidden in a synthetic flight, with their truth values.
+
+``servo_delay`` is a transport delay (Padé, eq. 31); ``cross_coupling`` the
+flybar terms k4, k8 (eq. 19, 22); ``gyroscopic`` the inertia ratios k1, k5, k9
+(inertias of a slender fuselage); ``nonlinear_damping`` a quadratic damping;
+``gain_scheduling`` control effectiveness falling by 60 % per unit collective;
+``collective_torque`` collective driving roll and pitch; ``servo_lag`` servos that lag their command by a
+first-order time constant (eq. 31's ``d1``).
+"""
+EFFECT_ALIASES = {"flybar": "cross_coupling", "quadratic_damping": "nonlinear_damping",
+                  "collective_effectiveness": "gain_scheduling"}
+
+
+def truth_params(effects=(), base: ModelParams = PAPER_PARAMS, scale: float = 1.0) -> ModelParams:
+    """Truth parameters: ``base`` with the named :data:`EFFECTS` switched on, their parameters times ``scale``."""
+    values = {}
+    for name in effects:
+        key = EFFECT_ALIASES.get(name, name)
+        if key not in EFFECTS:
+            raise ValueError(f"unknown effect {name!r}; known: {', '.join(list(EFFECTS) + list(EFFECT_ALIASES))}")
+        values.update({k: scale * v for k, v in EFFECTS[key].items()})
+    return base.with_values(**values)
+
+
+@dataclass(frozen=True)
+class FlightConfig:
+    """Settings of a synthetic flight.
+
+    Attributes
+    ----------
+    duration : float
+        Flight length [s].
+    sample_rate : float
+        Logging rate [Hz] (paper: 100 Hz).
+    wind_level : float or tuple of 3 float
+        Half-width of the 90 % interval of the equivalent cyclic (or pedal) wind
+        input u_d of eq. (42) per axis [stick units]. Paper: about 0.09 in roll
+        (Section 3.3). Yaw defaults to 0.03: the tail rotor's control power k10
+        is ten times the cyclic's, so the same gust torque is a smaller pedal.
+    wind_corner_hz : float
+        Corner frequency of the wind's second-order low-pass shaping [Hz].
+    pilot_bandwidth : float
+        Natural frequency of the pilot's attitude-hold loop [rad/s].
+    reaction_delay : float
+        Pilot reaction delay [s].
+    sweep_amplitude : tuple of 3 float
+        Stick amplitude of the frequency sweeps on lat, lon, ped.
+    sweep_band : tuple of 2 float
+        Start and end frequency of each sweep [Hz] (Section 2.1: about 1-3 Hz;
+        we start lower, 0.3 Hz, to excite the damping).
+    sweep_length, rest_length : float
+        Length of one sweep and of the hover rest after it [s].
+    sweep_mode : {"sequential", "simultaneous"}
+        One stick at a time (roll → pitch → yaw, the paper's Section 2.1), or
+        all three sticks at once as an aggressive multi-axis manoeuvre (pitch
+        sweeping the band downwards, yaw at a third of the roll frequency), so
+        that products of rates (gyroscopic terms) are excited.
+    stick_noise : float
+        Standard deviation of the pilot's own stick jitter [stick units].
+    collective_trim, collective_wander : float
+        Hover collective and the std of its slow wander [stick units].
+    gyro_noise : float
+        Gyro white-noise standard deviation [rad/s].
+    vibration : float
+        Amplitude of rotor vibration on each gyro axis [rad/s].
+    rotor_hz : float
+        Main-rotor rotation frequency [Hz].
+    attitude_noise : float
+        Attitude-sensor noise standard deviation [rad].
+    substeps : int
+        RK4 sub-steps of the truth simulation per sample.
+    wind_model : {"lowpass", "gauss_markov", "dryden"}
+        Shape of the gust spectrum: ``"lowpass"`` white noise through a second-order Butterworth at
+        ``wind_corner_hz`` (falls as 1/f^4); ``"gauss_markov"`` a first-order Gauss-Markov process of time
+        constant ``wind_fast_tau`` (falls as 1/f^2, broadband); ``"dryden"`` the lateral Dryden form
+        ``(1 + sqrt(3) s/w)/(1 + s/w)^2`` with ``w = 2 pi wind_corner_hz`` (a zero and a double pole).
+        Whatever the model, the total u_d is scaled to ``wind_level``.
+    wind_fast_tau : float
+        Time constant of the ``"gauss_markov"`` gusts [s].
+    wind_slow_fraction : float
+        Share of the wind's variance in a slow first-order Gauss-Markov part added to the model's (0..1).
+    wind_slow_tau : float
+        Its time constant [s].
+    pilot : {"pid", "pd", "autopilot"}
+        ``"pid"`` the human pilot above; ``"pd"`` a pilot who fights gusts with a PD on the attitude and the
+        rate seen ``reaction_delay`` ago (no integral; he knows the trim); ``"autopilot"`` a digital flight
+        controller: PD on attitude and rate one sample old, as its sensors read them (the gyro's noise and
+        vibration, through its D-term low-pass), the commands held between samples.
+    vibration_lines : tuple of (float, float)
+        Extra sinusoidal lines on every gyro axis: (frequency [Hz], amplitude [rad/s]).
+    input_shift : float
+        The logged sticks are shifted by this many seconds (whole samples): > 0 the log's input column lags
+        the true input (recorded late), < 0 it leads.
+    autopilot_dterm_hz : float
+        Corner of the autopilot's first-order low-pass on the gyro it flies on [Hz].
+    held_sticks : bool
+        The aircraft sees each logged stick held over its sample (a digital radio link or a flight
+        controller delivering the pilot's sticks at the log rate), not interpolated; the autopilot always
+        holds its commands.
+    command_noise : float
+        Standard deviation of white noise added to every logged command, sample by sample [stick units]
+        (a digital link's quantisation and the hand's tremor: what makes a held stick differ most from an
+        interpolated one).
+    """
+
+    duration: float = 300.0
+    sample_rate: float = 100.0
+    wind_level: tuple = (0.09, 0.09, 0.03)
+    wind_corner_hz: float = 0.5
+    pilot_bandwidth: float = 2.0
+    reaction_delay: float = 0.2
+    sweep_amplitude: tuple = (0.5, 0.5, 0.08)
+    sweep_band: tuple = (0.3, 3.0)
+    sweep_length: float = 20.0
+    rest_length: float = 8.0
+    sweep_mode: str = "sequential"
+    stick_noise: float = 0.01
+    collective_trim: float = 0.2
+    collective_wander: float = 0.12
+    gyro_noise: float = 0.01
+    vibration: float = 0.04
+    rotor_hz: float = 30.0
+    attitude_noise: float = 0.003
+    substeps: int = 4
+    wind_model: str = "lowpass"
+    wind_fast_tau: float = 0.35
+    wind_slow_fraction: float = 0.0
+    wind_slow_tau: float = 4.0
+    pilot: str = "pid"
+    vibration_lines: tuple = ()
+    input_shift: float = 0.0
+    autopilot_dterm_hz: float = 20.0
+    held_sticks: bool = False
+    command_noise: float = 0.0
+
+    def __post_init__(self):
+        wind = np.asarray(self.wind_level, dtype=float)
+        checks = {
+            "duration": 0 < self.duration < math.inf, "sample_rate": 0 < self.sample_rate < math.inf,
+            "wind_level": wind.ndim <= 1 and wind.size in (1, 3) and bool(np.all((wind >= 0) & np.isfinite(wind))),
+            "wind_corner_hz": self.wind_corner_hz > 0,
+            "pilot_bandwidth": self.pilot_bandwidth > 0, "reaction_delay": self.reaction_delay >= 0,
+            "substeps": isinstance(self.substeps, (int, np.integer)) and self.substeps >= 1,
+            "sweep_mode": self.sweep_mode in ("sequential", "simultaneous"),
+            "wind_model": self.wind_model in WIND_MODELS,
+            "wind_fast_tau": 0 < self.wind_fast_tau < math.inf,
+            "wind_slow_fraction": 0.0 <= self.wind_slow_fraction <= 1.0,
+            "wind_slow_tau": 0 < self.wind_slow_tau < math.inf,
+            "pilot": self.pilot in PILOTS,
+            "vibration_lines": all(len(line) == 2 and 0 < float(line[0]) < math.inf and float(line[1]) >= 0
+                                   for line in self.vibration_lines),
+            "input_shift": abs(self.input_shift) < self.duration / 2,
+            "autopilot_dterm_hz": 0 < self.autopilot_dterm_hz < math.inf,
+        }
+        for name in ("stick_noise", "collective_wander", "gyro_noise", "vibration", "attitude_noise", "command_noise"):
+            checks[name] = getattr(self, name) >= 0
+        expected = {"wind_model": f"one of {WIND_MODELS}", "pilot": f"one of {PILOTS}",
+                    "wind_slow_fraction": "a fraction in [0, 1]", "input_shift": "|shift| < half the duration",
+                    "vibration_lines": "(frequency Hz > 0, amplitude rad/s >= 0) pairs"}
+        for name, ok in checks.items():
+            if not ok:
+                hint = f"; expected {expected[name]}" if name in expected else ""
+                raise ValueError(f"FlightConfig.{name} out of range: {getattr(self, name)!r}{hint}")
+
+
+WIND_MODELS = ("lowpass", "gauss_markov", "dryden")
+"""Gust spectra of :class:`FlightConfig` (``wind_model``)."""
+PILOTS = ("pid", "pd", "autopilot")
+"""Pilots of :class:`FlightConfig` (``pilot``)."""
+
+
+def gust_trace(rng: np.random.Generator, n: int, fs: float, config: "FlightConfig", std: float) -> np.ndarray:
+    """One axis' zero-mean gust of standard deviation ``std`` with the spectrum of ``config.wind_model``,
+    plus the slow Gauss-Markov part of ``config.wind_slow_fraction`` (module docstring)."""
+    from scipy import signal  # here, not at import: the CLI reads this module's settings for --help
+
+    if std == 0:
+        return np.zeros(n)
+    if config.wind_model == "lowpass":
+        fast = coloured_noise(rng, n, fs, config.wind_corner_hz, 1.0)
+    elif config.wind_model == "gauss_markov":
+        fast = _first_order(rng, n, fs, config.wind_fast_tau)
+    else:  # lateral Dryden, discretised by the bilinear transform at the sample rate
+        w = 2 * np.pi * config.wind_corner_hz
+        b, a = signal.bilinear([np.sqrt(3.0) / w, 1.0], [1.0 / w ** 2, 2.0 / w, 1.0], fs)
+        warm = int(10 * fs / config.wind_corner_hz)
+        fast = signal.lfilter(b, a, rng.standard_normal(n + warm))[warm:]
+        fast = (fast - fast.mean()) / fast.std()
+    out = fast
+    if config.wind_slow_fraction > 0:
+        slow = _first_order(rng, n, fs, config.wind_slow_tau)
+        out = np.sqrt(1 - config.wind_slow_fraction) * fast + np.sqrt(config.wind_slow_fraction) * slow
+    out = out - out.mean()
+    return out * (std / out.std())
+
+
+def _first_order(rng, n, fs, tau):
+    """Unit-variance first-order Gauss-Markov process of time constant ``tau`` (exact AR(1))."""
+    from scipy import signal
+
+    a = np.exp(-1.0 / (fs * tau))
+    warm = int(5 * tau * fs)
+    x = signal.lfilter([np.sqrt(1 - a * a)], [1.0, -a], rng.standard_normal(n + warm))[warm:]
+    return (x - x.mean()) / x.std()
+
+
+MANOEUVRE_CONFIG = FlightConfig(sweep_amplitude=(0.8, 0.8, 0.25), sweep_mode="simultaneous")
+"""An aggressive pilot: large sweeps on all three sticks at once (rates to about 60 deg/s in roll and
+150 deg/s in yaw). Effects that scale with products or powers of the rates (gyroscopic, non-linear
+damping) are invisible under the gentle one-stick sweeps of the default flight."""
+
+
+@dataclass
+class SyntheticFlight:
+    """A synthetic flight and its truth.
+
+    Attributes
+    ----------
+    flight : Flight
+        What the logger recorded (noisy rates and attitude, commanded sticks).
+    truth : ModelParams
+        Parameters the aircraft was flown with.
+    wind : ndarray, shape (3, n)
+        Equivalent cyclic wind input u_d per axis, eq. (42) (zero-mean part).
+    wind_torque : ndarray, shape (3, n)
+        ``k*u_d`` [rad/s^2], the disturbance fed to the physics core.
+    true_rates : ndarray, shape (3, n)
+        Noise-free body rates [rad/s].
+    config : FlightConfig
+    seed : int
+    effects : tuple of str
+    """
+
+    flight: Flight
+    truth: ModelParams
+    wind: np.ndarray
+    wind_torque: np.ndarray
+    true_rates: np.ndarray
+    config: FlightConfig
+    seed: int
+    effects: tuple = field(default=())
+    effect_scale: float = 1.0
+
+    def save(self, path) -> dict[str, Path]:
+        """Write ``path`` (canonical CSV), ``<stem>.truth.json`` and ``<stem>.wind.csv`` atomically."""
+        path = Path(path)
+        paths = truth_paths(path)
+        write_csv_flight(self.flight, path)
+        truth = {
+            "schema": "heli-env/synthetic-truth/1",
+            "seed": self.seed,
+            "effects": list(self.effects),
+            "effect_scale": self.effect_scale,
+            "parameters": self.truth.values() | {k: getattr(self.truth, k) for k in ("tau_roll", "tau_pitch", "tau_yaw")}
+            | {f"lag_{a}": v for a, v in zip(AXES, self.truth.lags) if v},  # a servo lag only where there is one
+            "config": asdict(self.config),
+            "wind_file": paths["wind"].name,
+        }
+        write_text(paths["truth"], json.dumps(truth, indent=2) + "\n")
+        cols = np.vstack([self.flight.time, self.wind, self.wind_torque]).T
+        header = "time,ud_roll,ud_pitch,ud_yaw,torque_roll,torque_pitch,torque_yaw"
+        with atomic_path(paths["wind"]) as tmp:
+            np.savetxt(tmp, cols, delimiter=",", header=header, comments="", fmt="%.9g")
+        return {"flight": path, **paths}
+
+
+def truth_paths(flight_path) -> dict[str, Path]:
+    """Where the truth of a synthetic flight lies beside it."""
+    p = Path(flight_path)
+    return {"truth": p.with_name(p.stem + ".truth.json"), "wind": p.with_name(p.stem + ".wind.csv")}
+
+
+def load_truth(flight_path) -> tuple[ModelParams, np.ndarray]:
+    """Read the truth parameters and the wind u_d (3, n) saved beside a synthetic flight."""
+    paths = truth_paths(flight_path)
+    data = json.loads(paths["truth"].read_text())
+    params = dict(data["parameters"])
+    base = {k: v for k, v in params.items() if not k.startswith(("nld", "gs", "ct"))}
+    extra = tuple((k, v) for k, v in params.items() if k.startswith(("nld", "gs", "ct")))
+    wind = np.loadtxt(paths["wind"], delimiter=",", skiprows=1, ndmin=2).T[1:4]
+    return ModelParams(**base, extra=extra), wind
+
+
+def coloured_noise(rng: np.random.Generator, n: int, fs: float, corner_hz: float, std: float) -> np.ndarray:
+    """Zero-mean noise through a 2nd-order Butterworth low-pass, scaled to exactly ``std``."""
+    from scipy import signal
+
+    if std == 0:
+        return np.zeros(n)
+    b, a = signal.butter(2, corner_hz, fs=fs)
+    warm = int(5 * fs / corner_hz)
+    x = signal.lfilter(b, a, rng.standard_normal(n + warm))[warm:]
+    x -= x.mean()
+    return x * (std / x.std())
+
+
+def sweep_schedule(time: np.ndarray, config: FlightConfig) -> np.ndarray:
+    """Open-loop sweep part of the sticks (lat, lon, ped), shape (3, n).
+
+    Sweeps cycle roll → pitch → yaw: a linear chirp over ``sweep_band`` of
+    ``sweep_length`` seconds with a raised-cosine taper, then ``rest_length``
+    seconds of hover. The first 5 s are hover. With ``sweep_mode="simultaneous"``
+    every sweep moves all three sticks: roll up the band, pitch down it, yaw at
+    a third of the roll frequency.
+    """
+    from scipy import signal
+
+    out = np.zeros((3, time.size))
+    period = config.sweep_length + config.rest_length
+    t = time - 5.0
+    k = np.floor(t / period).astype(int)
+    tau = t - k * period
+    active = (t >= 0) & (tau < config.sweep_length)
+    axis = np.mod(k, 3)
+    f0, f1 = config.sweep_band
+    chirp = signal.chirp(tau, f0=f0, t1=config.sweep_length, f1=f1, method="linear")
+    taper = np.clip(np.minimum(tau, config.sweep_length - tau) / 1.0, 0.0, 1.0)
+    if config.sweep_mode == "simultaneous":
+        down = signal.chirp(tau, f0=f1, t1=config.sweep_length, f1=f0, method="linear")
+        slow = signal.chirp(tau, f0=f0 / 3, t1=config.sweep_length, f1=f1 / 3, method="linear", phi=90)
+        for i, c in enumerate((chirp, down, slow)):
+            out[i, active] = config.sweep_amplitude[i] * taper[active] * c[active]
+        return out
+    for i in range(3):
+        m = active & (axis == i)
+        out[i, m] = config.sweep_amplitude[i] * taper[m] * chirp[m]
+    return out
+
+
+def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), config: FlightConfig | None = None,
+                    truth: ModelParams | None = None, effect_scale: float = 1.0) -> SyntheticFlight:
+    """Fly a synthetic hover flight.
+
+    Parameters
+    ----------
+    duration : float, optional
+        Flight length [s]; overrides ``config.duration`` when given (default:
+        ``config.duration``, 300 s without a config).
+    seed : int
+        Seed of every random draw (wind, collective, pilot jitter, sensors):
+        same seed, same flight.
+    effects : sequence of str
+        Names from :data:`EFFECTS` to switch on in the truth model.
+    config : FlightConfig, optional
+    truth : ModelParams, optional
+        Truth parameters; default the paper's values (eqs. 68-70) with ``effects``.
+    effect_scale : float
+        Multiplies the parameters of ``effects`` (the diagnosis study's quadratic damping is 5).
+
+    Returns
+    -------
+    SyntheticFlight
+    """
+    cfg = config or FlightConfig()
+    if duration is not None and duration != cfg.duration:
+        cfg = FlightConfig(**{**asdict(cfg), "duration": float(duration)})
+    params = truth_params(effects, truth or PAPER_PARAMS, effect_scale)
+    rng = np.random.default_rng(seed)  # draws in a fixed order: wind, collective, jitter, then the sensors
+    fs = cfg.sample_rate
+    n = int(round(cfg.duration * fs)) + 1
+    time = np.arange(n) * (1.0 / fs)
+    wind = _wind(rng, n, cfg)
+    torque = params.control_gains[:, None] * wind
+    # Collective: slow wander plus occasional climbs, kept inside the stick range.
+    col = cfg.collective_trim + coloured_noise(rng, n, fs, 0.05, cfg.collective_wander)
+    col = np.clip(col, -1.0, 1.0)
+    jitter = np.array([coloured_noise(rng, n, fs, 2.0, cfg.stick_noise) for _ in range(3)])
+    errors = sensor_errors(rng, cfg, time)
+    if cfg.command_noise > 0:  # drawn last, so that flights without it keep their draws
+        jitter = jitter + rng.normal(0.0, cfg.command_noise, jitter.shape)
+    states, sticks = _fly(params, cfg, sweep_schedule(time, cfg), jitter, col, torque, errors)
+    true_rates = states[:, :3].T
+    rates, att = _sensors(errors, true_rates, euler_from_quaternion(states[:, 6:10].T))
+    flight = _logged_flight(cfg, seed, effects, time, rates, att, sticks)
+    return SyntheticFlight(flight, params, wind, torque, true_rates, cfg, int(seed), tuple(effects), float(effect_scale))
+
+
+def _wind(rng: np.random.Generator, n: int, cfg: FlightConfig) -> np.ndarray:
+    """The equivalent cyclic wind input u_d of eq. (42) per axis, shape (3, n), at ``cfg.wind_level``."""
+    level = np.broadcast_to(np.asarray(cfg.wind_level, dtype=float), (3,))
+    if cfg.wind_model == "lowpass" and cfg.wind_slow_fraction == 0:  # today's flights, draw for draw
+        return np.array([coloured_noise(rng, n, cfg.sample_rate, cfg.wind_corner_hz, lv / 1.6449) for lv in level])
+    return np.array([gust_trace(rng, n, cfg.sample_rate, cfg, lv / 1.6449) for lv in level])
+
+
+def _fly(params: ModelParams, cfg: FlightConfig, sweeps, jitter, col, torque, errors) -> tuple[np.ndarray, np.ndarray]:
+    """Fly the truth model with the pilot in the loop: states (n, 10) and the sticks he logged (n, 4).
+
+    The pilot (module docstring) holds the attitude with a PID on the angle (``"pid"``) or a PD on angle and
+    rate (``"pd"``, ``"autopilot"``) seen ``delay`` samples ago, scaled by the control gain he has learnt,
+    and adds the ``sweeps`` and his ``jitter`` (3, n); ``col`` (n,) is the collective and ``torque`` (3, n)
+    the wind [rad/s^2]. A human sees the aircraft; the autopilot reads its sensors, the true state plus
+    ``errors`` (:func:`sensor_errors`), the gyro through its D-term low-pass (``cfg.autopilot_dterm_hz``).
+    """
+    n = col.size
+    fs = cfg.sample_rate
+    dt = 1.0 / fs
+    gains = params.control_gains
+    wn = cfg.pilot_bandwidth
+    kp, kdr, ki = wn**2, 1.4 * wn, 0.3 * wn**3
+    if cfg.pilot != "pid":  # PD on attitude and rate; the trim is known, not integrated
+        ki = 0.0
+    inv_gain = [1.0 / g for g in gains]
+    trim = [-(params.kd1) / gains[0], -(params.kd2) / gains[1],
+            -(params.kd3 - params.k12 * cfg.collective_trim) / gains[2]]
+    delay = 1 if cfg.pilot == "autopilot" else max(1, int(round(cfg.reaction_delay * fs)))
+    sensed = _AutopilotSensing(cfg, errors, fs) if cfg.pilot == "autopilot" else None
+
+    rk4 = kernel(params)[0]["rk4"]
+    x = tuple(float(v) for v in initial_state(sticks=trim))
+    h = dt / cfg.substeps
+    states = np.empty((n, 10))
+    sticks = np.empty((n, 4))
+    hist_ang = [[0.0, 0.0, 0.0]] * (delay + 2)
+    hist_rate = [[0.0, 0.0, 0.0]] * (delay + 2)
+    integ = [trim[i] / (-ki * inv_gain[i]) if ki else 0.0 for i in range(3)]
+    pd_trim = [0.0, 0.0, 0.0] if ki else trim
+    sweeps_l = sweeps.T.tolist()
+    jitter_l = jitter.T.tolist()
+    col_l = col.tolist()
+    torque_l = torque.T.tolist()
+
+    def _pilot(k, ahead):
+        """Sticks at sample k from what the pilot saw ``delay`` samples earlier."""
+        seen_ang = hist_ang[-1 - delay + ahead]
+        seen_rate = hist_rate[-1 - delay + ahead]
+        u3 = []
+        for i in range(3):
+            integ[i] += seen_ang[i] * dt
+            cmd = -inv_gain[i] * (kp * seen_ang[i] + kdr * seen_rate[i] + ki * integ[i]) + pd_trim[i]
+            u3.append(max(-1.0, min(1.0, cmd + sweeps_l[k][i] + jitter_l[k][i])))
+        return [u3[0], u3[1], col_l[k], u3[2]]
+
+    # The pilot's hand moves continuously: the aircraft sees the logged sticks
+    # linearly interpolated between samples (first-order hold, sampled at every
+    # sub-step). A zero-order hold at the log rate would be a digital autopilot,
+    # not a pilot, and would look like a half-sample lead to any identifier.
+    u_next = None
+    hold = cfg.pilot == "autopilot" or cfg.held_sticks  # a flight controller or a digital link holds the sample
+    for k in range(n):
+        if sensed is None:
+            hist_ang.append(euler_from_quaternion_scalar(x[6], x[7], x[8], x[9]))
+            hist_rate.append(x[0:3])
+        else:
+            hist_ang.append(sensed.attitude(k, euler_from_quaternion_scalar(x[6], x[7], x[8], x[9])))
+            hist_rate.append(sensed.rate(k, x[0:3]))
+        states[k] = x
+        u = u_next if u_next is not None else _pilot(k, 0)
+        sticks[k] = u
+        if k == n - 1:
+            break
+        u_next = _pilot(k + 1, 1)
+        for j in range(cfg.substeps):
+            w = 0.0 if hold else (j + 0.5) / cfg.substeps
+            uj = [a + w * (b - a) for a, b in zip(u, u_next)]
+            x = rk4(x, uj, torque_l[k], h)
+        if len(hist_ang) > 4 * (delay + 2):
+            del hist_ang[: -(delay + 2)], hist_rate[: -(delay + 2)]
+    return states, sticks
+
+
+class _AutopilotSensing:
+    """What a flight controller flies on: the attitude its estimator reads (truth plus the attitude noise)
+    and the gyro it logs (truth plus noise and vibration) through a first-order D-term low-pass. Feeding
+    back the true state instead would put in the logged commands information about the gust that no sensor
+    has, which no model of the measured rates can use (an idealised loop; on the bench cell it made a
+    sub-sample input delay and a gain scheduling look likely, statistic 10-77)."""
+
+    def __init__(self, cfg: FlightConfig, errors: tuple, fs: float):
+        gyro, att = errors
+        self._gyro = sum(gyro[1:], gyro[0]).T.tolist()
+        self._att = att.T.tolist()
+        self._a = float(np.exp(-2.0 * np.pi * cfg.autopilot_dterm_hz / fs))
+        self._state = None
+
+    def attitude(self, k: int, true_att) -> list:
+        return [t + e for t, e in zip(true_att, self._att[k])]
+
+    def rate(self, k: int, true_rate) -> list:
+        raw = [t + e for t, e in zip(true_rate, self._gyro[k])]
+        if self._state is None:
+            self._state = raw
+        else:
+            self._state = [self._a * s + (1.0 - self._a) * r for s, r in zip(self._state, raw)]
+        return list(self._state)
+
+
+def sensor_errors(rng: np.random.Generator, cfg: FlightConfig, time) -> tuple[list, np.ndarray]:
+    """What the gyro and the attitude sensor add to the truth, drawn before the flight (a flight controller
+    flies on what its sensors read): the gyro's terms (noise, rotor vibration, ``cfg.vibration_lines``),
+    each (3, n), in the order they are added, and the attitude noise (3, n). The flight tests of
+    :mod:`controllers.flight_test` draw their sensors with it too."""
+    n = time.size
+    phase = rng.uniform(0, 2 * np.pi, size=(3, 2))
+    vib = sum(
+        cfg.vibration / (j + 1) * np.sin(2 * np.pi * (j + 1) * cfg.rotor_hz * time[None, :] + phase[:, j : j + 1])
+        for j in range(2)
+    )
+    gyro = [cfg.gyro_noise * rng.standard_normal((3, n)), vib]
+    att = cfg.attitude_noise * rng.standard_normal((3, n))
+    for hz, amp in cfg.vibration_lines:  # drawn after today's sensor noise: default flights unchanged
+        gyro.append(amp * np.sin(2 * np.pi * float(hz) * time[None, :] + rng.uniform(0, 2 * np.pi, (3, 1))))
+    return gyro, att
+
+
+def _sensors(errors: tuple, true_rates, true_att):
+    """What the gyro and the attitude sensor log: the truth plus :func:`sensor_errors`, yaw wrapped to
+    (-pi, pi]. Returns (rates, attitude), each (3, n)."""
+    gyro, att_noise = errors
+    rates = true_rates
+    for term in gyro:
+        rates = rates + term
+    att = true_att + att_noise
+    att[2] = np.angle(np.exp(1j * att[2]))
+    return rates, att
+
+
+def _logged_flight(cfg: FlightConfig, seed, effects, time, rates, att, sticks) -> Flight:
+    """The :class:`Flight` the logger wrote: sticks (n, 4) shifted by ``cfg.input_shift``, provenance."""
+    meta = {
+        "source": f"synthetic seed={seed}",
+        "format": "synthetic",
+        "seed": int(seed),
+        "effects": list(effects),
+        "input_source": "flight controller commands" if cfg.pilot == "autopilot" else "pilot sticks",
+        "input_hold": "zoh" if cfg.pilot == "autopilot" or cfg.held_sticks else "linear",
+    }
+    logged = np.ascontiguousarray(sticks.T)
+    n = time.size
+    shift = int(round(cfg.input_shift * cfg.sample_rate))
+    if shift:  # the log's stick column recorded late (> 0) or early (< 0), edges held
+        idx = np.clip(np.arange(n) - shift, 0, n - 1)
+        logged = np.ascontiguousarray(logged[:, idx])
+        meta["input_shift_s"] = shift / cfg.sample_rate
+    return make_flight(time, rates, logged, attitude=att, metadata=meta)

@@ -1,0 +1,183 @@
+"""The likelihood of one axis of the wind-state model, with the linear parameters projected out.
+
+For one body rate (eq. 18 or 21 with the wind of eqs. 41-42 as a random
+process, :mod:`identification.likelihood.state_space`), :class:`AxisLikelihood` turns a
+search vector (the damping, the gust time constants and levels, and the servo
+delay when it is searched) into the innovations of the steady-state Kalman
+filter, computed by linear filters (``scipy.signal.lfilter``) over every
+flight at once. The parameters that enter linearly (control gain, offsets,
+couplings, added terms) are solved exactly at every step (variable
+projection), so that the search of
+:class:`~identification.likelihood.estimator.MaximumLikelihoodIdentifier` only sees the
+concentrated likelihood. :meth:`AxisLikelihood.fisher` gives the standard errors
+of the optimum from the Fisher information of the innovations (Gauss-Newton).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import signal
+
+from .input_hold import hold_fraction
+from .state_space import (
+    HOLD_INDEX,
+    N_NONLINEAR,
+    discrete_model,
+    innovation_filters,
+    kalman,
+    servo_increments,
+    strictly_proper_tf,
+)
+
+MIN_SERVO_DELAY = 1e-4
+"""Delays below this are no delay (the Padé servo of eq. 31 degenerates at zero) [s]."""
+
+
+@dataclass
+class AxisData:
+    """Signals of one axis over one or more flights, as the likelihood needs them."""
+
+    y: list           # measured rate per flight (n_f,)
+    regressors: list  # per flight (m, n_f): sign * feature, one offset column per flight
+    names: tuple      # parameter names of the regressors (offsets as "kd1@0", "kd1@1", ...)
+    dt: float
+    hold: object  # the input's hold (name or fraction, state_space.hold_fraction): the search's start or fixed value
+    burn: int
+    wind_model: str = "gm2"
+    servo_row: int | None = None  # regressor driven through the servo (eq. 31), or None
+    servo_sticks: list | None = None  # the raw stick per flight for that regressor (sign applied)
+    tau: float = 0.0
+    causal_rows: tuple = ()  # regressors made of measured rates: held over the sample, never interpolated
+    rebuild: object = None  # shift (s, < 0: the log's input lags) -> regressors with the axis' stick advanced
+    lag: float = 0.0  # the servo's first-order lag (eq. 31's d1 grows by it) [s]
+
+
+class AxisLikelihood:
+    """The concentrated innovation likelihood of one axis, with the linear parameters projected out."""
+
+    def __init__(self, data: AxisData, free_tau: bool = False):
+        self.data = data
+        self.free_tau = free_tau
+        self.nw = N_NONLINEAR[data.wind_model]
+        """Length of the model part of the search vector (damping, wind, hold fraction); the servo delay follows
+        when ``free_tau``."""
+
+    def unpack(self, x):
+        """(damping, T_slow, T_fast, var_slow/R, var_fast/R, zeta) from the search vector."""
+        damping, lts, ltf, lqs, lqf = x[:5]
+        zeta = float(np.exp(x[HOLD_INDEX + 1])) if self.nw > HOLD_INDEX + 1 else 1.0
+        return (float(damping), float(np.exp(lts)), float(np.exp(ltf)), float(np.exp(lqs)), float(np.exp(lqf)),
+                zeta)
+
+    def tau_of(self, x) -> float:
+        """The alignment at ``x`` [s]: searched with the rest when ``free_tau``, else the data's servo delay.
+
+        A positive alignment is the Padé servo delay of eq. (31); a negative one (searched only) a log whose
+        input column lags the response, corrected by advancing the axis' stick.
+        """
+        return float(x[self.nw]) if self.free_tau else self.data.tau
+
+    @staticmethod
+    def hold_at(x) -> float:
+        """The input's hold fraction at ``x`` (0 held over the sample, 1 linearly interpolated)."""
+        return float(x[HOLD_INDEX])
+
+    def discrete(self, x):
+        return discrete_model(*self.unpack(x), self.data.dt, self.hold_at(x), self.data.wind_model)
+
+    def filtered(self, x):
+        """Innovation-domain measurements ``y~`` (n,) and regressors ``Z`` (m, n), burn-in removed, and ``S``."""
+        d = self.data
+        Ad, g0, g1, Qd = self.discrete(x)
+        _, L, S = kalman(Ad, Qd)
+        b_y, b_u, a = innovation_filters(Ad, g0, g1, L)
+        if d.causal_rows:  # a measured rate at k+1 carries the noise of y[k+1]: only u[k] may predict y[k+1]
+            b_c, _ = strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), g0 + g1)
+        tau = self.tau_of(x)
+        regressors = d.rebuild(tau) if tau < -MIN_SERVO_DELAY else d.regressors
+        servo = d.servo_row is not None and (tau > MIN_SERVO_DELAY or (d.lag > 0.0 and tau >= -MIN_SERVO_DELAY))
+        if servo:
+            b_v, _ = strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), np.eye(Ad.shape[0])[0])
+        ys, zs = [], []
+        for i, (y, X) in enumerate(zip(d.y, regressors)):
+            ys.append((y - signal.lfilter(b_y, a, y))[d.burn:])
+            Z = signal.lfilter(b_u, a, X, axis=-1)
+            for r in d.causal_rows:
+                Z[r] = signal.lfilter(b_c, a, X[r])
+            if servo:
+                v = servo_increments(d.servo_sticks[i], x[0], max(tau, 0.0), d.dt, self.hold_at(x), d.lag)
+                Z[d.servo_row] = signal.lfilter(b_v, a, v)
+            zs.append(Z[:, d.burn:])
+        return np.concatenate(ys), np.concatenate(zs, axis=1), S
+
+    def solve_linear(self, x):
+        """Innovations ``e``, the linear parameters ``theta`` minimising them at the nonlinear ``x``, and ``S``."""
+        yt, Z, S = self.filtered(x)
+        # normal equations of the column-scaled problem (a few columns, tens of thousands of rows)
+        G = Z @ Z.T
+        scale = np.sqrt(np.maximum(np.diag(G), 1e-300))
+        theta = np.linalg.lstsq(G / np.outer(scale, scale), (Z @ yt) / scale, rcond=None)[0] / scale
+        return yt - theta @ Z, theta, S
+
+    def residual(self, x):
+        return self.solve_linear(x)[0]
+
+    def residual_at(self, x, theta):
+        """Innovations at ``x`` with the linear parameters held at ``theta``."""
+        yt, Z, _ = self.filtered(x)
+        return yt - theta @ Z
+
+    def fisher(self, x, theta, mse: float, free_damping: bool = True, fixed=()) -> tuple[np.ndarray, float]:
+        """Standard errors of ``(x, theta)`` at the optimum and the condition number of the column-normalised
+        Fisher information (Gauss-Newton: de/dx by central differences, de/dtheta = -Z); ``mse`` is the mean
+        squared innovation. Entries of ``x`` not searched (``fixed`` indices; the damping of a structure
+        without one) are left out of the information and get a standard error of 0."""
+        _, Z, _ = self.filtered(x)
+        nx = len(x)
+        held = set(int(i) for i in fixed) | (set() if free_damping else {0})
+        J = np.zeros((Z.shape[1], nx + Z.shape[0]))
+        for j in range(nx):
+            if j in held:
+                continue
+            h = 1e-5 * max(1.0, abs(x[j]))
+            xp, xm = x.copy(), x.copy()
+            xp[j] += h
+            xm[j] -= h
+            J[:, j] = (self.residual_at(xp, theta) - self.residual_at(xm, theta)) / (2 * h)
+        J[:, nx:] = -Z.T
+        keep = np.array([j not in held for j in range(J.shape[1])])
+        F = J[:, keep].T @ J[:, keep]
+        dscale = np.sqrt(np.maximum(np.diag(F), 1e-300))
+        Fn = F / np.outer(dscale, dscale)
+        w = np.linalg.eigvalsh(Fn)
+        cond = float(w[-1] / max(w[0], 1e-300))
+        se = np.zeros(J.shape[1])
+        se[keep] = np.sqrt(np.maximum(np.diag(np.linalg.pinv(Fn)) * mse, 0.0)) / dscale
+        return se, cond
+
+
+def simulation_r2(data: AxisData, damping: float, theta, hold=None) -> float:
+    """R^2 of the wind- and noise-free response to the inputs, each flight started at its first sample, the
+    inputs under ``hold`` (a name or fraction; default the data's)."""
+    dt = data.dt
+    frac = hold_fraction(data.hold if hold is None else hold)
+    ad = float(np.exp(-damping * dt))
+    if abs(damping) > 1e-9:
+        g = (1.0 - ad) / damping
+        g1 = frac * (dt - g) / (damping * dt)
+    else:
+        g, g1 = dt, frac * dt / 2
+    g0 = g - g1
+    num = den = 0.0
+    for y, X in zip(data.y, data.regressors):
+        u = theta @ X
+        sim = np.empty_like(y)
+        sim[0] = y[0]
+        sim[1:] = signal.lfilter([1.0], [1.0, -ad], g0 * u[:-1] + g1 * u[1:], zi=[ad * y[0]])[0]
+        err = (y - sim)[data.burn:]
+        yc = y[data.burn:] - np.mean(y[data.burn:])
+        num += float(err @ err)
+        den += float(yc @ yc)
+    return 1.0 - num / (den or 1.0)

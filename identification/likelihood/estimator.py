@@ -1,0 +1,702 @@
+"""Maximum-likelihood identification with a stochastic wind state (filter-error method).
+
+The integral method of Fig. 5 (:mod:`identification.integral.method`) treats the
+wind as piecewise-smooth offsets and is biased when a pilot fights broadband
+turbulence: the stick is correlated with the part of the gust the offsets
+cannot follow. This estimator models the gust instead. Per axis, e.g. roll
+(eq. 18 with the wind of eqs. 41-42 as a random process)::
+
+    p'  = -k3 p + k2 c_lat + sum_j s_j theta_j f_j + kd1 + w_slow + w_fast
+    w_i' = -w_i / T_i + nu_i,         E[w_i^2] = sigma_i^2   (first-order Gauss-Markov)
+    y_k = p(t_k) + v_k,               E[v_k^2] = R           (white gyro noise)
+
+``c_lat`` is the command after the servo delay (the Padé model of eq. 31),
+``f_j`` the other features of the axis' terms (:mod:`heli_core.terms`;
+rates of the other axes enter as measured, causally, never filtered), and the
+damping term (the feature equal to the axis' own rate) sits in the state
+matrix. The model is discretised exactly (matrix exponential; the inputs
+either linearly interpolated between samples, a pilot's hand, or held, a
+digital controller; the process noise by Van Loan's method), the steady-state
+Kalman filter (discrete algebraic Riccati equation) gives the one-step
+prediction errors (innovations), and the likelihood, with the noise scale
+concentrated out, is minimised over the damping and the wind model
+(``scipy.optimize.least_squares``) while the parameters that enter linearly
+(control gain, offsets, couplings, added terms) are solved exactly at every
+step (variable projection, :mod:`identification.likelihood.axis_likelihood`). The
+innovations are computed by linear filters (``scipy.signal.lfilter``), never by
+a Python loop over samples.
+
+The result is consistent under closed-loop piloting: the pilot's stick may
+depend on past gusts, because the filter predicts the gust from the past
+rates, and what is left is white. Standard errors come from the Fisher
+information of the innovations (Gauss-Newton approximation). The servo delay is
+chosen by profiling the likelihood over a grid of delays. The Rauch-Tung-Striebel
+smoother of the fitted model estimates the wind torque at every sample
+(:meth:`MaximumLikelihoodIdentifier.wind_torque`), the disturbance the library
+stores and the environment replays.
+
+Several flights share the aircraft's parameters; each flight keeps its own
+offset ``kd`` (the trim and the day's mean wind) and its own filter start.
+
+How the sticks move between samples is a coordinate of the search too (a hold
+fraction, :mod:`identification.likelihood.input_hold`), decided once for the log from every
+axis' estimate; with ``delay="auto"`` a negative alignment is a log whose input
+column lags, applied as a shift of the stick by whole samples
+(:attr:`MaximumLikelihoodIdentifier.input_shifts_`).
+
+The module stands past 600 lines as one concept: the search of one axis and the
+decisions that tie the axes together (the log's hold, its shifts, the terms the
+data cannot carry) share the same search state, and split apart each half would
+reach into the other's privates. Its result type is :mod:`identification.likelihood.axis_fit`,
+the likelihood :mod:`identification.likelihood.axis_likelihood`.
+"""
+
+from __future__ import annotations
+
+import time as _time
+from dataclasses import replace
+
+import numpy as np
+from scipy import optimize
+from threadpoolctl import threadpool_limits
+
+from heli_core.params import ModelParams
+from heli_core.servo import pade_filter, per_axis
+from heli_core.terms import AXES, DECOUPLED, FEATURES, RATE_DEPENDENCE, STICK_ROW, TERMS
+
+from ..diagnosis.effects import shift_inputs
+from ..errors import IdentifiabilityError, NotFittedError
+from ..flight import Flight
+from ..integral.method import IntegralIdentifier
+from ..validation.fit_warnings import on_static_input, require_moving_sticks, static_collective
+from ..vibration import remove_common_lines
+from .axis_fit import MLAxisFit
+from .axis_likelihood import MIN_SERVO_DELAY, AxisData, AxisLikelihood, simulation_r2
+from .axis_pool import check_workers, map_axes
+from .input_hold import HOLD_START, check_hold, decide_hold, hold_fraction
+from .servo_lag import profile_lag
+from .state_space import HOLD_INDEX, N_NONLINEAR, WIND_MODELS, ZETA_BOUNDS, concentrated_nll, rts_smooth, wind_block
+
+OWN_RATE = ("p", "q", "r")
+"""The feature that is each axis' own rate: its term is the damping, a state coefficient."""
+
+COMMAND_FEATURE = ("u_lat", "u_lon", "u_ped")
+"""The feature that is each axis' own servo-side command: its term goes through the servo model exactly."""
+
+BURN_IN = 1.0
+"""Seconds at the start of each flight left out of the likelihood while the filter settles."""
+
+MAX_SHIFT = 0.6
+"""Largest input shift (a log whose input column lags the response) searched [s]."""
+
+DEFAULT_DELAY_GRID = np.round(np.arange(-MAX_SHIFT, 0.5001, 0.01), 4)
+"""Alignments profiled by ``delay="auto"`` [s]; from the best, the alignment is searched jointly with the rest.
+A positive one is the servo delay (Padé, eq. 31), a negative one a log whose input column lags the response
+(:attr:`MaximumLikelihoodIdentifier.input_shifts_`)."""
+
+XTOL, FTOL = 1e-6, 1e-8
+"""Stopping tolerances of the likelihood search: a relative cost change of 1e-8 is a change of the
+log-likelihood of about 1e-4 on a 300 s flight, far below any difference a test looks at."""
+
+MAX_DELAY = 0.6
+"""Largest servo delay searched [s]."""
+
+MIN_PROFILE_DAMPING = 0.05
+"""A damping [1/s] below which the undelayed fit is not held for the alignment profile of ``delay="auto"``."""
+
+NOMINAL_DAMPING = 1.0
+"""The damping [1/s] the alignment profile holds instead (a 1 s time constant, the order of a small
+helicopter's rate response) when the undelayed fit's is not positive and the integral method's start is not."""
+
+SUPPORT_Z = 3.0
+"""With ``select_terms``: a term beyond the decoupled model is kept when ``|value| >= SUPPORT_Z * se``
+(two-sided 0.3 % level, about Bonferroni 1 % over the coupled model's five extra terms)."""
+
+TAU_UNIT = 2e4
+"""Unit of the alignment in a search started at no delay [s]: scipy's finite-difference step (sqrt(eps) of a
+unit) is then 0.3 ms, three times the band around 0 where no delay is modelled (MIN_SERVO_DELAY), a
+thirtieth of a 100 Hz sample."""
+
+TIME_CONSTANT_BOUNDS = ((0.8, 120.0), (0.02, 0.8))
+"""Bounds of the slow and the fast gust time constants [s]."""
+
+
+
+class MaximumLikelihoodIdentifier:
+    """Identify the attitude model by maximum likelihood with a stochastic wind state.
+
+    Scikit-learn style: the constructor stores the settings, :meth:`fit`
+    returns ``self`` and sets the attributes ending in ``_``.
+
+    Parameters
+    ----------
+    structure : {"decoupled", "coupled"} or dict
+        Parameters to fit, as for :class:`~identification.integral.method.IntegralIdentifier`.
+    extra_terms : sequence of str
+        Catalogue terms fitted in addition (:data:`heli_core.terms.EXTRA_PARAMS`).
+    input_hold : "auto", "linear", "zoh" or float in [0, 1]
+        How the sticks move between samples: ``u(t) = u_k + a (u_{k+1} - u_k) (t - t_k)/dt`` with ``a`` the
+        hold fraction, 1 (``"linear"``) a pilot's hand sampled, 0 (``"zoh"``) a command held over its sample
+        (a digital radio link, a flight controller). ``"auto"`` (default) estimates ``a`` per axis with every
+        other parameter, as MATLAB's ``greyest`` would with a free ``InterSample``: a log rarely says which,
+        and assuming the wrong one biases the damping by 15-19 % (docs/method.md).
+    delay : None, float, sequence of 3 float, or "auto"
+        Servo delay per axis [s] (Padé, eq. 31); "auto" profiles the likelihood
+        over ``delay_grid`` (damping and wind held at the undelayed fit), then searches the delay jointly
+        with every other parameter from the best; its standard error is reported as ``tau_<axis>``. A
+        negative alignment found by "auto" is no servo delay but a log whose input column lags the
+        response: the axis' stick is advanced by it (:attr:`input_shifts_`) and the model's delay is 0.
+    delay_grid : sequence of float, optional
+        Candidate alignments for ``delay="auto"`` [s] (default -0.6 to 0.5 s in 10 ms).
+    wind_model : {"auto", "gm2", "gm_so"}
+        Gust model (:data:`WIND_MODELS`); "auto" fits both and keeps the one of
+        higher likelihood per axis (they have the same number of parameters).
+    remove_vibration : bool
+        Remove narrow spectral lines above ``vibration_min_hz`` (rotor
+        vibration) from the gyro by regression on their sinusoids before the fit.
+    vibration_min_hz : float
+        Lowest frequency treated as vibration [Hz].
+    axes : sequence of str
+        Axes to identify.
+    max_nfev : int
+        Largest number of likelihood evaluations per search.
+    select_terms : bool
+        Keep a term beyond the decoupled model (k1, k4, k5, k8, k9, catalogue terms) only where the data
+        support it: terms with ``|value| < SUPPORT_Z * se`` are dropped, weakest first, refitting each time.
+    servo_lag : None, float, sequence of 3 float, or "auto"
+        The servo's first-order lag per axis [s] (None: none); "auto" profiles the likelihood over
+        :data:`identification.likelihood.servo_lag.LAG_GRID` (the delay searched with it when ``delay="auto"``) and keeps
+        the best lag only where the data support it (:func:`identification.likelihood.servo_lag.profile_lag`).
+    workers : int or None
+        Processes the axes are fitted in side by side (:mod:`identification.likelihood.axis_pool`; the result is the
+        same bit for bit): None (default) every core this process may use, capped by ``HELI_WORKERS``; 1 one
+        after another.
+
+    Attributes
+    ----------
+    params_ : ModelParams
+    axes_ : dict of str to MLAxisFit
+    flights_ : list of Flight
+        The flights as fitted (vibration lines removed, sticks advanced by :attr:`input_shifts_`).
+    hold_decision_ : dict or None
+        With ``input_hold="auto"``, the log's hold decided from every axis' estimate (:func:`decide_hold`):
+        the axes whose estimate lay further from it than its standard error are fitted again at it.
+    input_shifts_ : dict of str to float
+        Per axis, the shift applied to its stick [s]: negative where ``delay="auto"`` found the log's input
+        column late (``metadata["input_shift_s"]`` of :attr:`flights_`), else 0.
+    static_collective_ : float or None
+        The collective's standard deviation when it does not vary (its terms not fitted), else None.
+    fit_time_ : float
+        Wall time of ``fit`` [s].
+    vibration_lines_ : list of list of dict
+        Lines removed, per flight (axis, frequency [Hz], amplitude [rad/s]).
+    """
+
+    method = "maximum likelihood (filter error, Gauss-Markov wind)"
+
+    def __init__(self, structure="decoupled", extra_terms=(), input_hold="auto", delay=None,
+                 delay_grid=None, wind_model: str = "auto", remove_vibration: bool = True,
+                 vibration_min_hz: float = 8.0, axes=AXES, max_nfev: int = 100, select_terms: bool = False,
+                 servo_lag=None, workers=None):
+        self.structure = structure
+        self.extra_terms = extra_terms
+        self.input_hold = input_hold
+        self.delay = delay
+        self.delay_grid = delay_grid
+        self.wind_model = wind_model
+        self.remove_vibration = remove_vibration
+        self.vibration_min_hz = vibration_min_hz
+        self.axes = axes
+        self.max_nfev = max_nfev
+        self.select_terms = select_terms
+        self.servo_lag = servo_lag
+        self.workers = workers
+
+    # ----------------------------------------------------------------- set-up
+    def _param_names(self) -> dict[int, tuple[str, ...]]:
+        return IntegralIdentifier(structure=self.structure, extra_terms=self.extra_terms)._param_names()
+
+    def _delays(self) -> list:
+        return per_axis("delay", self.delay, 2.0)  # the delays ModelParams accepts
+
+    def _lags(self) -> list:
+        return per_axis("servo_lag", self.servo_lag, 1.0)  # the lags ModelParams accepts
+
+    def _check_settings(self):
+        self._lags()  # a bad servo_lag is named before any work
+        check_hold(self.input_hold)
+        check_workers(self.workers)
+        if self.wind_model not in ("auto",) + WIND_MODELS:
+            raise ValueError(f"wind_model must be 'auto' or one of {WIND_MODELS}, got {self.wind_model!r}")
+        if not (isinstance(self.max_nfev, (int, np.integer)) and self.max_nfev >= 5):
+            raise ValueError(f"max_nfev must be a whole number >= 5, got {self.max_nfev!r}")
+        if not self.vibration_min_hz > 0:
+            raise ValueError(f"vibration_min_hz must be > 0 Hz, got {self.vibration_min_hz!r}")
+
+    def _clean(self, flight: Flight) -> tuple[Flight, list]:
+        if not self.remove_vibration:
+            return flight, []
+        rows = list(STICK_ROW)
+        rates, commands, found = remove_common_lines(flight.rates, flight.sticks[rows], flight.sample_rate,
+                                                     self.vibration_min_hz)
+        sticks = flight.sticks
+        if any(ln.get("signal") == "command" for ln in found):
+            sticks = np.array(flight.sticks, dtype=float, copy=True)
+            sticks[rows] = commands
+        meta = type(flight.metadata)({**flight.metadata, "vibration_lines": found})
+        return Flight(flight.time, rates, flight.attitude, sticks, meta, flight.extra), found
+
+    # ------------------------------------------------------------------- fit
+    def fit(self, flight) -> "MaximumLikelihoodIdentifier":
+        """Identify every requested axis from one flight or several (shared parameters, own offsets).
+
+        Raises
+        ------
+        IdentifiabilityError
+            Flights of different sample rates, a flight too short, or an axis whose
+            regressors are not excited.
+        """
+        t0 = _time.perf_counter()
+        self._check_settings()
+        # The likelihood works on 3x3 to 4x4 matrices and long 1-D filters: BLAS threads only cost here.
+        with threadpool_limits(limits=1, user_api="blas"):
+            self._fit(flight)
+        self.fit_time_ = _time.perf_counter() - t0
+        return self
+
+    def _fit(self, flight):
+        flights = [flight] if isinstance(flight, Flight) else list(flight)
+        if not flights:
+            raise ValueError("fit needs at least one flight")
+        require_moving_sticks(flights, self.axes)
+        fs = flights[0].sample_rate
+        for f in flights[1:]:
+            if abs(f.sample_rate - fs) > 1e-3 * fs:
+                raise IdentifiabilityError(
+                    f"flights must share one sample rate to be pooled; got {fs:.3f} Hz and {f.sample_rate:.3f} Hz")
+        burn = int(round(BURN_IN * fs))
+        for f in flights:
+            if f.n < 4 * burn + 50:
+                raise IdentifiabilityError(
+                    f"flight of {f.duration:.2f} s is too short for the likelihood fit; need at least "
+                    f"{(4 * burn + 50) / fs:.1f} s")
+        cleaned = [self._clean(f) for f in flights]
+        flights = [c[0] for c in cleaned]
+        names = self._param_names()
+        self.static_collective_ = static_collective(flights)
+        static = {a: tuple(p for p in names[a] if on_static_input(p, self.static_collective_ is not None))
+                  for a in names}
+        names = {a: tuple(p for p in names[a] if p not in static[a]) for a in names}
+        # The integral method (Fig. 5) on the same structure is the starting point.
+        start = IntegralIdentifier(structure=names, delay=0.0, axes=self.axes).fit(flights)
+        delays, lags = self._delays(), self._lags()
+        values = {}
+
+        def one_axis(axis_name):
+            a = AXES.index(axis_name)
+            fit = self._fit_axis(a, names[a], flights, burn, start.params_, delays[a], lags[a])
+            whole = round(fit.delay * fs) / fs
+            if fit.delay < -0.5 / fs and abs(whole - fit.delay) > 1e-9:
+                # a late input column is late by whole samples of the log's clock: the fraction of a sample
+                # is the hold's (the two trade against each other and the damping, 8 % on a 150 s flight)
+                fit = self._refit(a, names[a], flights, burn, fit, tau=whole)
+            if self.select_terms:
+                fit = self._supported(a, names[a], fit, flights, burn, start.params_)
+            if static[a]:  # terms of an input that does not vary: not fitted, listed as dropped
+                fit = replace(fit, dropped=tuple(fit.dropped) + static[a])
+            return fit
+
+        fitted = [axis for axis in self.axes if names.get(AXES.index(axis))]
+        fits = dict(zip(fitted, map_axes(one_axis, fitted, self.workers)))
+        self.hold_decision_ = self._decide_log_hold(fits, names, flights, burn)
+        flights = self._apply_shifts(fits, flights)
+        for axis_name, fit in fits.items():
+            values.update(fit.params)
+            values[f"tau_{axis_name}"] = fit.delay
+            values[f"lag_{axis_name}"] = fit.lag
+        self.axes_ = fits
+        self.params_ = ModelParams().with_values(**values)
+        self.flights_ = flights
+        self.vibration_lines_ = [c[1] for c in cleaned]
+
+    def _decide_log_hold(self, fits: dict, names: dict, flights, burn) -> dict | None:
+        """With ``input_hold="auto"``: one hold for the log from every axis' estimate (:func:`decide_hold`, a
+        named hold unless the data reject it); an axis whose estimate lies further from it than its standard
+        error is searched again at it from its optimum (in ``fits``). Returns the decision, else None."""
+        self._decided_hold = None
+        if self.input_hold != "auto" or not fits:
+            return None
+        decision = decide_hold({a: (f.input_hold, f.input_hold_se) for a, f in fits.items()},
+                               sum(f.n_samples for f in fits.values()) / len(fits))
+        self._decided_hold = decision["fraction"]
+
+        def again(axis_name):
+            fit, a = fits[axis_name], AXES.index(axis_name)
+            kept = tuple(p for p in names[a] if p not in fit.dropped)
+            # a shift stays whole
+            return self._refit(a, kept, flights, burn, fit, tau=fit.delay if fit.delay < 0.0 else None)
+
+        redo = [axis for axis, fit in fits.items()
+                if abs(fit.input_hold - self._decided_hold) > (fit.input_hold_se or 0.0)]
+        fits.update(zip(redo, map_axes(again, redo, self.workers)))
+        self._decided_hold = None
+        return decision
+
+    def _apply_shifts(self, fits: dict, flights: list) -> list:
+        """A log whose input lags (a negative alignment found by ``delay="auto"``): its sticks advanced, the
+        axis' delay 0 and its shift recorded (in ``fits``, :attr:`input_shifts_`). Returns the flights."""
+        shifts = [min(fits[a].delay, 0.0) if a in fits else 0.0 for a in AXES]
+        self.input_shifts_ = dict(zip(AXES, shifts))
+        if min(shifts) >= 0.0:
+            return flights
+        for a, shift in zip(AXES, shifts):
+            if shift < 0.0:
+                fits[a] = replace(fits[a], delay=0.0, input_shift=shift)
+        return [shift_inputs(f, shifts) for f in flights]
+
+    def _fitted_data(self, a: int, fit: MLAxisFit, flights, burn: int) -> AxisData:
+        """The likelihood's data of axis ``a`` as ``fit`` was fitted (its terms, delay, gust model and lag) over
+        ``flights`` (aligned and cleaned as :attr:`flights_` are)."""
+        kept = tuple(p for p in self._param_names()[a] if p not in fit.dropped)
+        return self._axis_data(a, kept, flights, burn, fit.delay, fit.wind["model"], fit.lag)[0]
+
+    def _supported(self, a, axis_params, fit, flights, burn, start_params):
+        """Drop, one at a time, the terms beyond the decoupled model whose ``|value / se|`` is below
+        :data:`SUPPORT_Z`, refitting the axis after each; the dropped terms are listed in ``fit.dropped``."""
+        names, dropped = tuple(axis_params), []
+        while True:
+            extra = [p for p in names if p not in DECOUPLED[a]]
+            z = {p: abs(fit.params[p]) / fit.std_errors[p] if fit.std_errors[p] > 0 else np.inf for p in extra}
+            weakest = min(z, key=z.get, default=None)
+            if weakest is None or z[weakest] >= SUPPORT_Z:
+                return replace(fit, dropped=tuple(dropped))
+            names = tuple(p for p in names if p != weakest)
+            dropped.append(weakest)
+            fit = self._fit_axis(a, names, flights, burn, start_params, fit.delay, fit.lag)  # delay, lag stay
+
+    def _axis_data(self, a: int, axis_params, flights, burn: int, tau: float, wind_model: str = "gm2",
+                   lag: float = 0.0):
+        """The likelihood's data for axis ``a`` at servo delay ``tau`` and lag ``lag``, and the name of its
+        damping term."""
+        damping_name = next((p for p in axis_params if TERMS[p].feature == OWN_RATE[a]), None)
+        linear = [p for p in axis_params if p != damping_name and TERMS[p].feature != "1"]
+        offset = next((p for p in axis_params if TERMS[p].feature == "1"), None)
+
+        def regressors(tau_or_shift):
+            """Every flight's regressors with the axis' command delayed (> 0, Padé) or advanced (< 0)."""
+            out = []
+            for i, f in enumerate(flights):
+                cmd = np.array([f.sticks[r] for r in STICK_ROW])
+                if tau_or_shift > 0 or (lag > 0 and tau_or_shift == 0):
+                    cmd[a] = pade_filter(f.sticks[STICK_ROW[a]], tau_or_shift, f.sample_rate, lag)
+                elif tau_or_shift < 0:
+                    cmd[a] = np.interp(f.time - tau_or_shift, f.time, f.sticks[STICK_ROW[a]])
+                rows = [TERMS[p].sign * np.broadcast_to(FEATURES[TERMS[p].feature](f.rates, cmd, f.sticks[2]),
+                                                        (f.n,)) for p in linear]
+                if offset is not None:
+                    rows += [np.full(f.n, float(j == i)) for j in range(len(flights))]
+                out.append(np.array(rows, dtype=float).reshape(len(rows), f.n))
+            return out
+
+        ys = [np.asarray(f.rates[a], dtype=float) for f in flights]
+        Xs = regressors(tau)
+        reg_names = tuple(linear) + (tuple(f"{offset}@{j}" for j in range(len(flights))) if offset else ())
+        command = next((j for j, p in enumerate(linear) if TERMS[p].feature == COMMAND_FEATURE[a]), None)
+        servo_sticks = None
+        if command is not None:
+            sign = TERMS[linear[command]].sign
+            servo_sticks = [sign * np.asarray(f.sticks[STICK_ROW[a]], dtype=float) for f in flights]
+        causal = tuple(j for j, p in enumerate(linear) if TERMS[p].feature in RATE_DEPENDENCE)
+        return AxisData(ys, Xs, reg_names, flights[0].dt, self._hold_start(), burn, wind_model, command,
+                        servo_sticks, float(tau), causal, regressors, float(lag)), damping_name
+
+    def _search(self, like: AxisLikelihood, x0, free_damping: bool, max_nfev=None, tau0: float = 0.0):
+        """Search the damping, the wind model and the input's hold fraction (and the delay when
+        ``like.free_tau``) from ``x0``, the model part of a search vector (of either wind model) and ``tau0``.
+        The damping stays at 0 without a damping term; the hold at the user's when one was set."""
+        lo = np.array([-2.0, np.log(TIME_CONSTANT_BOUNDS[0][0]), np.log(TIME_CONSTANT_BOUNDS[1][0]),
+                       np.log(1e-4), np.log(1e-4), 0.0, np.log(ZETA_BOUNDS[0])])
+        hi = np.array([200.0, np.log(TIME_CONSTANT_BOUNDS[0][1]), np.log(TIME_CONSTANT_BOUNDS[1][1]),
+                       np.log(1e9), np.log(1e9), 1.0, np.log(ZETA_BOUNDS[1])])
+        x0 = np.asarray(x0, dtype=float)
+        start = list(x0[:HOLD_INDEX]) + [x0[HOLD_INDEX] if x0.size > HOLD_INDEX else self._hold_start()]
+        if like.nw > HOLD_INDEX + 1:
+            start.append(x0[HOLD_INDEX + 1] if x0.size > HOLD_INDEX + 1 else np.log(0.8))
+        lo, hi = list(lo[:like.nw]), list(hi[:like.nw])
+        if like.free_tau:
+            start.append(tau0)
+            lo.append(-MAX_SHIFT)
+            hi.append(MAX_DELAY)
+        lo, hi = np.array(lo), np.array(hi)
+        fixed = self._fixed(free_damping)
+        full = np.array(start)
+        for i, v in fixed.items():
+            full[i] = v
+        free = np.array([i not in fixed for i in range(full.size)])
+        # an alignment search started in the band where no delay is modelled (|tau| <= MIN_SERVO_DELAY, where
+        # the likelihood is flat) runs in units of TAU_UNIT: with x_scale="jac" the search is the same in any
+        # units but for its finite-difference step, which then reaches past the band; scipy's step in seconds
+        # (1.5e-8 s) saw no slope at 0 and the search never left it (a 20 ms tail delay identified as none,
+        # damping 3.3 for 6.0). Started elsewhere, the search keeps scipy's step: the larger one let a weakly
+        # excited axis leap 0.9 s into an unstable fit (the T-REX hover's yaw)
+        unit = np.ones(full.size)
+        if like.free_tau and abs(tau0) <= MIN_SERVO_DELAY:
+            unit[-1] = TAU_UNIT
+        lo, hi = lo / unit, hi / unit
+        z0 = np.clip(full[free] / unit[free], lo[free] + 1e-9 / unit[free], hi[free] - 1e-9 / unit[free])
+
+        def residual(z):
+            x = full.copy()
+            x[free] = z * unit[free]
+            return like.residual(x)
+
+        res = optimize.least_squares(residual, z0, bounds=(lo[free], hi[free]), x_scale="jac",
+                                     max_nfev=max_nfev or self.max_nfev, xtol=XTOL, ftol=FTOL)
+        full[free] = res.x * unit[free]
+        res.x = full
+        return res
+
+    def _hold(self):
+        """The hold in force: the user's, the flight's once decided (:func:`decide_hold`), or "auto"."""
+        return getattr(self, "_decided_hold", None) if self.input_hold == "auto" and \
+            getattr(self, "_decided_hold", None) is not None else self.input_hold
+
+    def _hold_start(self) -> float:
+        """The hold fraction a search starts from (estimated) or keeps (set or decided)."""
+        hold = self._hold()
+        # estimated: from the middle, not from a bound where the trust region crawls (one in three fewer
+        # likelihood evaluations on bench flights, the same optimum)
+        return HOLD_START if hold == "auto" else hold_fraction(hold)
+
+    def _fixed(self, free_damping: bool = True) -> dict:
+        """Entries of the search vector that are not searched, with their values."""
+        fixed = {} if free_damping else {0: 0.0}
+        if self._hold() != "auto":
+            fixed[HOLD_INDEX] = hold_fraction(self._hold())
+        return fixed
+
+    def _per_kind(self, a, axis_params, flights, burn, tau, x0, models, free, max_nfev=None, free_tau=False,
+                  lag=0.0):
+        """Search each wind model from delay ``tau`` (held, or searched too with ``free_tau``) and from ``x0``
+        (one start for all, or a dict of starts by wind model).
+
+        Returns ``{model: (cost, x, tau, aic)}``, ``x`` the damping-and-wind part of the search vector.
+        """
+        out = {}
+        for kind in models:
+            like = AxisLikelihood(self._axis_data(a, axis_params, flights, burn, tau, kind, lag)[0], free_tau)
+            res = self._search(like, x0[kind] if isinstance(x0, dict) else x0, free, max_nfev, tau)
+            n = sum(len(y) - like.data.burn for y in like.data.y)
+            # Akaike: the concentrated NLL is n/2 log(2 cost / n) + const; one parameter more costs 1
+            aic = 0.5 * n * np.log(2.0 * res.cost / n) + N_NONLINEAR[kind]
+            out[kind] = (float(res.cost), res.x[:like.nw], like.tau_of(res.x), aic)
+        return out
+
+    def _best(self, a, axis_params, flights, burn, tau, x0, models, free, max_nfev=None, free_tau=False, lag=0.0):
+        """The wind model of :meth:`_per_kind` with the lowest Akaike criterion: ``(cost, x, model, tau)``."""
+        fits = self._per_kind(a, axis_params, flights, burn, tau, x0, models, free, max_nfev, free_tau, lag)
+        kind = min(fits, key=lambda k: fits[k][3])
+        cost, x, tau, _ = fits[kind]
+        return cost, x, kind, tau
+
+    def _fit_axis(self, a, axis_params, flights, burn, start_params, delay, lag=0.0) -> MLAxisFit:
+        """One axis fitted at servo delay ``delay`` and lag ``lag`` (seconds, or "auto": profiled)."""
+        first, damping_name = self._axis_data(a, axis_params, flights[:1], burn, 0.0)
+        free = damping_name is not None
+        damping0 = float(-TERMS[damping_name].sign * start_params.get(damping_name)) if free else 0.0
+        x0 = np.array([max(damping0, 0.1) if free else 0.0, np.log(4.0), np.log(0.3), np.log(100.0), np.log(100.0),
+                       self._hold_start()])
+        models = WIND_MODELS if self.wind_model == "auto" else (self.wind_model,)
+        fixed_lag = 0.0 if lag == "auto" else float(lag)
+        profile = []
+        if delay == "auto":
+            # the likelihood over a grid of delays with the damping and wind of the undelayed fit held (the
+            # linear parameters solved at each), then every parameter and the delay searched from the best
+            grid = np.asarray(self.delay_grid if self.delay_grid is not None else DEFAULT_DELAY_GRID, dtype=float)
+            undelayed = self._per_kind(a, axis_params, flights, burn, 0.0, x0, models, free, lag=fixed_lag)
+            kind = min(undelayed, key=lambda k: undelayed[k][3])
+            xb = np.array(undelayed[kind][1], dtype=float)
+            if free and xb[0] < MIN_PROFILE_DAMPING:
+                # an undelayed fit with a damping of the wrong sign (a log whose input lags by a large
+                # fraction of the response time): held at it, the profile ranks alignments by how well
+                # an unstable model fits, so it is held at the integral method's start or a nominal one
+                xb[0] = max(x0[0], NOMINAL_DAMPING)
+            for tau in grid:
+                like = AxisLikelihood(self._axis_data(a, axis_params, flights, burn, float(tau), kind, fixed_lag)[0])
+                e = like.residual(xb)
+                profile.append((float(tau), 0.5 * float(e @ e)))
+            tau0 = min(profile, key=lambda p: p[1])[0]
+            # the held damping biases the grid's best: every wind model is searched from it together with the
+            # delay, each from its own undelayed fit (a second-order gust started from a first-order one stalls)
+            fits = {}
+            for start in ({k: v[1] for k, v in undelayed.items()}, x0):  # two starts: the likelihood is multimodal
+                for k, v in self._per_kind(a, axis_params, flights, burn, tau0, start, models, free,
+                                           free_tau=True, lag=fixed_lag).items():
+                    if k not in fits or v[3] < fits[k][3]:
+                        fits[k] = v
+            kind = min(fits, key=lambda k: fits[k][3])
+            cost, x, tau, _ = fits[kind]
+        else:
+            cost, x, kind, tau = self._best(a, axis_params, flights, burn, float(delay), x0, models, free,
+                                            lag=fixed_lag)
+        free_tau = delay == "auto"
+        lag_profile, lag_lr = (), None
+        if lag == "auto" and first.servo_row is not None:  # an axis without its stick has no servo
+            found = profile_lag(self, a, axis_params, flights, burn, (cost, x, kind, tau), free, free_tau)
+            fixed_lag, (cost, x, kind, tau), lag_profile, lag_lr = found
+        return self._finish_axis(a, axis_params, flights, burn, x, kind, tau, fixed_lag, free_tau, damping_name,
+                                 profile, lag_profile, lag_lr)
+
+    def _finish_axis(self, a, axis_params, flights, burn, x, kind, tau, lag, free_tau, damping_name, profile=(),
+                     lag_profile=(), lag_lr=None) -> MLAxisFit:
+        """The fit of axis ``a`` at the searched optimum ``x`` (model part), gust model ``kind``, delay ``tau``."""
+        data, _ = self._axis_data(a, axis_params, flights, burn, tau, kind, lag)
+        like = AxisLikelihood(data, free_tau)
+        x = np.append(x, tau) if free_tau else x
+        e, theta, S = like.solve_linear(x)
+        n_burnt = int(sum(len(y) - burn for y in data.y))
+        fit = self._result(a, axis_params, like, x, theta, e, S, damping_name, float(tau), kind,
+                           tuple((t, float(concentrated_nll(c, n_burnt))) for t, c in profile))
+        return replace(fit, lag=float(lag), lag_profile=lag_profile, lag_lr=lag_lr)
+
+    def _refit(self, a, axis_params, flights, burn, fit: MLAxisFit, tau: float | None = None) -> MLAxisFit:
+        """Axis ``a`` searched again from its optimum ``fit``: at the hold now in force (the log's, once
+        decided) and at delay ``tau`` when given (else its own, searched again when profiled), its gust model
+        and lag kept. The few steps from a nearby optimum, not a new fit."""
+        damping_name = next((p for p in axis_params if TERMS[p].feature == OWN_RATE[a]), None)
+        x0 = np.array(fit.state, dtype=float)
+        if HOLD_INDEX in self._fixed():
+            x0[HOLD_INDEX] = self._fixed()[HOLD_INDEX]
+        free_tau = tau is None and self._delays()[a] == "auto"
+        kind = fit.wind["model"]
+        found = self._per_kind(a, axis_params, flights, burn, fit.delay if tau is None else tau, x0, (kind,),
+                               damping_name is not None, free_tau=free_tau, lag=fit.lag)
+        _, x, tau, _ = found[kind]
+        refit = self._finish_axis(a, axis_params, flights, burn, x, kind, tau, fit.lag, free_tau, damping_name)
+        return replace(refit, delay_profile=fit.delay_profile, lag_profile=fit.lag_profile, lag_lr=fit.lag_lr,
+                       dropped=fit.dropped)
+
+    def _result(self, a, axis_params, like, x, theta, e, S, damping_name, tau, kind, profile) -> MLAxisFit:
+        """Standard errors, wind levels and fit statistics of the optimum."""
+        data = like.data
+        n = e.size
+        mse = float(np.mean(e ** 2))
+        nx = len(x)
+        se, cond = like.fisher(x, theta, mse, free_damping=damping_name is not None, fixed=self._fixed())
+        damping, ts, tf, qs, qf, zeta = like.unpack(x)
+        R = mse / S
+        params, std = {}, {}
+        if like.free_tau:
+            std[f"tau_{AXES[a]}"] = float(se[like.nw])
+        if damping_name is not None:
+            params[damping_name] = float(-damping / TERMS[damping_name].sign)
+            std[damping_name] = float(se[0])
+        k_off = [i for i, nm in enumerate(data.names) if "@" in nm]
+        for i, nm in enumerate(data.names):
+            if "@" not in nm:
+                params[nm] = float(theta[i])
+                std[nm] = float(se[nx + i])
+        offs = ()
+        if k_off:
+            off_name = data.names[k_off[0]].split("@")[0]
+            offs = tuple(float(theta[i]) for i in k_off)
+            weights = np.array([len(y) - data.burn for y in data.y], dtype=float)
+            weights /= weights.sum()
+            params[off_name] = float(weights @ np.array(offs))
+            within = float(np.sqrt(np.sum(weights ** 2 * se[[nx + i for i in k_off]] ** 2)))
+            spread = float(np.std(offs, ddof=1) / np.sqrt(len(offs))) if len(offs) > 1 else 0.0
+            std[off_name] = float(np.hypot(within, spread))
+        gain_name = next((p for p in axis_params if TERMS[p].effect == "control"), None)
+        gain = abs(params.get(gain_name, 0.0)) if gain_name else 0.0
+        sd = np.sqrt([qs * R, qf * R])
+        wind = {
+            "model": kind,
+            "time_constants_s": [ts, tf],
+            "time_constants_se_s": [float(ts * se[1]), float(tf * se[2])],
+            "damping_ratio": zeta if kind == "gm_so" else None,
+            "torque_std": [float(sd[0]), float(sd[1])],
+            "torque_std_se": [float(0.5 * sd[0] * se[3]), float(0.5 * sd[1] * se[4])],
+            "ud_std": [float(s / gain) if gain else None for s in sd],
+            "total_torque_std": float(np.hypot(*sd)),
+        }
+        yall = np.concatenate([y[data.burn:] for y in data.y])
+        ss = float(np.sum((yall - yall.mean()) ** 2)) or 1.0
+        hold = like.hold_at(x)
+        return MLAxisFit(
+            AXES[a], params, std, tau, cond, simulation_r2(data, damping, theta, hold),
+            (float(np.mean(like.residual(np.asarray(x)) ** 2)), mse), wind, float(np.sqrt(R)),
+            float(0.5 * n * (np.log(2 * np.pi * mse) + 1.0)), int(n), offs, 1.0 - float(e @ e) / ss,
+            profile, state=np.asarray(x[:like.nw], dtype=float), input_hold=hold,
+            input_hold_se=float(se[HOLD_INDEX]) if HOLD_INDEX not in self._fixed() else None)
+
+    # ----------------------------------------------------------------- use
+    def _check_fitted(self):
+        if not hasattr(self, "params_"):
+            raise NotFittedError("this MaximumLikelihoodIdentifier is not fitted yet; call fit(flight) first")
+
+    def aligned(self, flight: Flight) -> Flight:
+        """``flight`` with its sticks advanced by :attr:`input_shifts_` (itself when there are none)."""
+        self._check_fitted()
+        shifts = [self.input_shifts_.get(a, 0.0) for a in AXES]
+        return shift_inputs(flight, shifts) if min(shifts) < 0.0 else flight
+
+    def predict(self, flight: Flight) -> np.ndarray:
+        """Forward-simulate the identified model with the flight's sticks (aligned, :meth:`aligned`); rates
+        (3, n) [rad/s]."""
+        self._check_fitted()
+        from heli_core.physics import forward_rates
+
+        return forward_rates(self.params_, self.aligned(flight))
+
+    def wind_torque(self, flight: Flight | int = 0) -> np.ndarray:
+        """The smoother's estimate of the wind torque at every sample, shape (3, n) [rad/s^2].
+
+        The Rauch-Tung-Striebel smoother of the fitted model runs over the flight
+        (an index into the fitted flights, or a new flight, whose vibration lines are
+        removed first) and returns the gust states' sum plus the flight's offset
+        less the model's: the disturbance torque of eq. (41) about the model's
+        offset ``kd``. Rows of axes not identified are zero.
+        """
+        self._check_fitted()
+        if isinstance(flight, Flight):
+            flight, index = self._clean(self.aligned(flight))[0], None
+        else:
+            index = int(flight)
+            flight = self.flights_[index]
+        out = np.zeros((3, flight.n))
+        for axis_name, fit in self.axes_.items():
+            a = AXES.index(axis_name)
+            data = self._fitted_data(a, fit, [flight], 0)
+            own = [n for n in data.names if "@" not in n]
+            off_name = next((n.split("@")[0] for n in data.names if "@" in n), None)
+            theta = np.array([fit.params[n] for n in own])
+            drive = theta @ data.regressors[0][:len(own)]
+            shift = 0.0
+            if off_name is not None:
+                if index is not None:
+                    shift = fit.flight_offsets[index] - fit.params[off_name]
+                drive = drive + fit.params[off_name] + shift
+            states = rts_smooth(data.y[0], drive, *AxisLikelihood(data).unpack(fit.state), data.dt, fit.input_hold,
+                                fit.wind["model"])
+            _, cw, _ = wind_block(fit.wind["model"], 1.0, 1.0)  # the same sum for every T, zeta
+            out[a] = cw @ states[1:] + shift
+        return out
+
+    def summary(self) -> dict:
+        """JSON-ready fit statistics per axis."""
+        self._check_fitted()
+        return {
+            name: {
+                "params": f.params, "std_errors": f.std_errors, "delay_s": f.delay,
+                "condition_number": f.condition, "r2": f.r2, "prediction_r2": f.prediction_r2,
+                "wind": f.wind, "noise_std": f.noise_std, "nll": f.nll, "n_samples": f.n_samples,
+                "flight_offsets": list(f.flight_offsets),
+                "dropped_terms": list(f.dropped),
+                "delay_profile": [list(p) for p in f.delay_profile],
+                "servo_lag_s": f.lag, "servo_lag_profile": [list(p) for p in f.lag_profile],
+                "servo_lag_lr": f.lag_lr,
+                "input_hold": f.input_hold, "input_hold_se": f.input_hold_se,
+                "mean_square_innovation": list(f.history),
+            }
+            for name, f in self.axes_.items()
+        }

@@ -1,0 +1,72 @@
+"""The servo's first-order lag as a profile of the likelihood, kept only where the data support it.
+
+A servo that lags its command by a time constant ``T`` is eq. (31) with ``T`` added to ``d1``
+(:func:`heli_core.servo.servo_coefficients`): ``(1 - s tau/2) / (1 + s (tau/2 + T))``. At low
+frequency a lag and a transport delay shape the phase alike (``tau + T`` of lag), so on most flights
+the delay alone explains the timing; what only a lag explains is the gain it takes off above
+``1/(2 pi T)``, which sweeps up to 2-3 Hz reach for servos of 30 ms and more.
+
+:func:`profile_lag` fits the axis at every lag of :data:`LAG_GRID` (the delay searched with it when
+the identifier profiles the delay, else held), refines the best by a parabola through its neighbours,
+fits there with every gust model, and keeps the lag when the likelihood-ratio statistic against no lag
+exceeds ``max(chi2_1(1 - ALPHA), MIN_LR_LAG)`` and the lag is not at the top of the grid. It is how
+:class:`~identification.likelihood.estimator.MaximumLikelihoodIdentifier` runs ``servo_lag="auto"``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import stats
+
+from .state_space import WIND_MODELS, concentrated_nll
+
+LAG_GRID = (0.01, 0.02, 0.03, 0.05, 0.08, 0.12, 0.2)
+"""Servo lags profiled [s]; the best is refined between its neighbours."""
+ALPHA = 0.01
+"""Level of the likelihood-ratio test of a lag against none."""
+MIN_LR_LAG = 10.0
+"""Smallest likelihood-ratio statistic of a lag kept (calibrated on flights whose servo has none)."""
+NFEV = 30
+"""Likelihood evaluations per grid point (each warm-started from the fit without a lag)."""
+
+
+def threshold() -> float:
+    """The statistic a lag must exceed to be kept."""
+    return max(float(stats.chi2.ppf(1.0 - ALPHA, 1)), MIN_LR_LAG)
+
+
+def _refined(profile: list) -> float:
+    """The lag at the vertex of the parabola through the best grid point and its neighbours."""
+    lags = [p[0] for p in profile]
+    i = int(np.argmin([p[1] for p in profile]))
+    if i in (0, len(profile) - 1):
+        return lags[i]
+    (x0, y0), (x1, y1), (x2, y2) = profile[i - 1:i + 2]
+    c = np.polyfit([x0, x1, x2], [y0, y1, y2], 2)
+    return float(np.clip(-c[1] / (2 * c[0]), x0, x2)) if c[0] > 0 else x1
+
+
+def profile_lag(ident, a: int, names, flights, burn: int, base: tuple, free: bool, free_tau: bool) -> tuple:
+    """Profile axis ``a``'s servo lag from ``base = (cost, x, wind model, delay)``, its fit without one.
+
+    Returns ``(lag, (cost, x, wind model, delay), profile, lr)``: the lag kept (0 when the data do not
+    support one, with ``base``), the fit at it, ``(lag, nll)`` over the grid (the refined lag included) and
+    the statistic of the best lag against none.
+    """
+    cost0, x0, kind0, tau0 = base
+    n = int(sum(f.n - burn for f in flights))
+    profile = [(0.0, concentrated_nll(cost0, n))]
+    for lag in LAG_GRID:
+        cost, _, _, _ = ident._best(a, names, flights, burn, tau0, x0, (kind0,), free, NFEV, free_tau, lag)
+        profile.append((float(lag), concentrated_nll(cost, n)))
+    best = _refined(profile)
+    if best <= 0.0:
+        return 0.0, base, tuple(profile), 0.0
+    models = WIND_MODELS if ident.wind_model == "auto" else (ident.wind_model,)
+    fit = ident._best(a, names, flights, burn, tau0, x0, models, free, None, free_tau, best)
+    nll = concentrated_nll(fit[0], n)
+    profile = sorted([p for p in profile if p[0] != best] + [(best, nll)])  # the refined lag's full fit
+    lr = 2.0 * (concentrated_nll(cost0, n) - nll)
+    if lr > threshold() and best < LAG_GRID[-1] - 1e-9:
+        return best, fit, tuple(profile), float(lr)
+    return 0.0, base, tuple(profile), float(lr)

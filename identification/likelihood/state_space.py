@@ -1,0 +1,229 @@
+"""The state-space pieces of the wind-state model: discretisation, Kalman filter, smoother (one axis).
+
+The maximum-likelihood estimator (:mod:`identification.likelihood.estimator`) and the likelihood diagnosis
+(:mod:`identification.diagnosis.likelihood_diagnoser`) model one body rate and its gust as a linear system::
+
+    rate' = -damping * rate + (inputs) + sum of gust states        (eq. 18 / 21 with the wind of eqs. 41-42)
+    gust states: a slow first-order Gauss-Markov process and a fast first- or second-order one
+    y = rate + white gyro noise
+
+This module discretises it exactly (matrix exponential under the stick's hold; Van Loan's method for
+the process noise), gives the steady-state Kalman filter and its innovation filters as transfer
+functions for ``scipy.signal.lfilter`` (no loop over samples), the command's exact path through the
+Padé servo of eq. (31), and the steady-state Rauch-Tung-Striebel smoother.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import signal
+from scipy.linalg import expm, solve_discrete_are
+
+from heli_core.servo import servo_coefficients
+
+from .input_hold import hold_fraction
+
+WIND_MODELS = ("gm2", "gm_so")
+"""Gust models: ``"gm2"`` a slow plus a fast first-order Gauss-Markov process (a
+Dryden-like spectrum falling as 1/f^2 above each corner); ``"gm_so"`` a slow
+first-order process plus a fast second-order one of natural period ``T_fast`` and
+damping ratio ``zeta`` (falling as 1/f^4: smooth gusts; a Butterworth low-pass at
+zeta = 0.71, two cascaded first-order stages at zeta = 1)."""
+
+ZETA_BOUNDS = (0.2, 3.0)
+"""Bounds of the fast second-order gust's damping ratio."""
+
+N_NONLINEAR = {"gm2": 6, "gm_so": 7}
+"""Length of the model part of the search vector: damping, log T_slow, log T_fast, log(var_slow/R),
+log(var_fast/R), the input's hold fraction (:data:`HOLD_INDEX`), and for ``"gm_so"`` log zeta. A part the
+caller fixes (the damping of a structure without one, a hold the user sets) stays in the vector, unsearched."""
+
+HOLD_INDEX = 5
+"""Index of the hold fraction in the search vector (the same for every wind model)."""
+
+
+def wind_block(kind: str, t_slow: float, t_fast: float, zeta: float = 1.0):
+    """The gust states of one wind model.
+
+    Returns ``Aw`` (m, m), the row ``cw`` (m,) summing the states into the
+    torque, and per noise channel its input column (m,) scaled so that the
+    channel's torque component has unit stationary variance.
+    """
+    if kind == "gm2":
+        Aw = np.diag([-1.0 / t_slow, -1.0 / t_fast])
+        cw = np.array([1.0, 1.0])
+        # x' = -x/T + sqrt(2/T) n  has unit variance
+        cols = [np.array([np.sqrt(2.0 / t_slow), 0.0]), np.array([0.0, np.sqrt(2.0 / t_fast)])]
+        return Aw, cw, cols
+    if kind == "gm_so":
+        cw = np.array([1.0, 1.0, 0.0])
+        # w'' + 2 zeta w w' + w^2 w = b n (w = 1/T_fast): var(w) = b^2 / (4 zeta w^3) for unit-intensity n
+        om = 1.0 / t_fast
+        Aw = np.array([[-1.0 / t_slow, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -om * om, -2.0 * zeta * om]])
+        return Aw, cw, [np.array([np.sqrt(2.0 / t_slow), 0.0, 0.0]), np.array([0.0, 0.0, np.sqrt(4 * zeta * om ** 3)])]
+    raise ValueError(f"wind model must be one of {WIND_MODELS}, got {kind!r}")
+
+
+def discrete_model(damping: float, t_slow: float, t_fast: float, q_slow: float, q_fast: float, zeta: float,
+                    dt: float, hold: str, kind: str = "gm2"):
+    """Exact discretisation of the axis model over one sample.
+
+    State ``(rate, gust states...)``. Returns ``Ad``, the input vectors ``g0``,
+    ``g1`` such that ``x[k+1] = Ad x[k] + g0 u[k] + g1 u[k+1]`` (``g1 = 0`` for a
+    held input; ``hold`` a name or fraction, :func:`hold_fraction`) and the process-noise
+    covariance ``Qd`` by Van Loan's method, for stationary gust-torque variances ``q_slow``, ``q_fast``.
+    """
+    Aw, cw, cols = wind_block(kind, t_slow, t_fast, zeta)
+    m = Aw.shape[0] + 1
+    A = np.zeros((m, m))
+    A[0, 0] = -damping
+    A[0, 1:] = cw
+    A[1:, 1:] = Aw
+    M = np.zeros((m + 2, m + 2))
+    M[:m, :m] = A * dt
+    M[0, m] = dt
+    M[m, m + 1] = 1.0
+    E = expm(M)
+    Ad = E[:m, :m]
+    ga, gb = E[:m, m], E[:m, m + 1]
+    frac = hold_fraction(hold)  # u(t) = u_k + frac (u_{k+1} - u_k) (t - t_k)/dt
+    g0, g1 = ga - frac * gb, frac * gb
+    Qd = np.zeros((m, m))
+    for q, col in zip((q_slow, q_fast), cols):  # unit intensities keep expm well scaled
+        b = np.concatenate([[0.0], col])
+        V = np.zeros((2 * m, 2 * m))
+        V[:m, :m] = -A * dt
+        V[:m, m:] = np.outer(b, b) * dt
+        V[m:, m:] = A.T * dt
+        F = expm(V)
+        Qd += q * (F[m:, m:].T @ F[:m, m:])
+    return Ad, g0, g1, 0.5 * (Qd + Qd.T)
+
+
+def kalman(Ad, Qd, R: float = 1.0):
+    """Steady-state Kalman filter of a rate (the first state) measured with white noise of variance ``R``.
+
+    Returns the predicted covariance ``P`` (m, m), the filter gain ``L`` (m,)
+    (``x_{k|k} = x_{k|k-1} + L e_k``) and the innovation variance ``S``.
+    """
+    m = Ad.shape[0]
+    C = np.zeros((m, 1))
+    C[0, 0] = 1.0
+    P = solve_discrete_are(Ad.T, C, Qd, np.array([[R]]))
+    S = float(P[0, 0] + R)
+    L = P[:, 0] / S
+    return P, L, S
+
+
+def strictly_proper_tf(A, b, den=None):
+    """Numerator and denominator (in z^-1) of ``e0' (zI - A)^-1 b``: the rate's response to input ``b``.
+
+    ``e0' adj(zI - A) b = det(zI - A + b e0') - det(zI - A)`` (the determinant lemma), so the numerator
+    is the difference of two characteristic polynomials; ``den`` (``np.poly(A)``) may be passed when it
+    is shared by several inputs.
+    """
+    if den is None:
+        den = np.poly(A)
+    shifted = A.copy()
+    shifted[:, 0] -= b
+    return np.real(np.poly(shifted) - den), np.real(den)
+
+
+def concentrated_nll(cost: float, n: int) -> float:
+    """Negative log-likelihood of ``n`` Gaussian innovations whose least-squares ``cost`` is half their sum of
+    squares, with their variance concentrated out (set to its estimate ``2 cost / n``)."""
+    return 0.5 * n * (np.log(2.0 * np.pi * 2.0 * cost / n) + 1.0)
+
+
+def innovation_filters(Ad, g0, g1, L):
+    """Linear filters giving the innovations from the measurements and each input.
+
+    With ``Phi = Ad (I - L e0')`` the predictor is
+    ``x_{k+1|k} = Phi x_{k|k-1} + Ad L y_k + g0 u_k + g1 u_{k+1}``, so
+    ``e = y - H_y(z) y - H_u(z) u`` with the returned ``(b_y, b_u, a)``.
+    """
+    Phi = Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0])
+    den = np.poly(Phi)
+    b_y, a = strictly_proper_tf(Phi, Ad @ L, den)
+    b0, _ = strictly_proper_tf(Phi, g0, den)
+    b1, _ = strictly_proper_tf(Phi, g1, den)
+    b_u = b0.copy()
+    b_u[:-1] += b1[1:]  # z * (strictly proper): the u_{k+1} path
+    return b_y, b_u, a
+
+
+def servo_increments(sticks, damping: float, tau: float, dt: float, hold: str, lag: float = 0.0) -> np.ndarray:
+    """The command's exact contribution to the rate over each sample, through the servo of eq. (31) (its
+    Padé delay ``tau`` and its first-order ``lag``, :func:`heli_core.servo.servo_coefficients`).
+
+    The continuous system ``rate' = -damping*rate + f*u + g*z``, ``z' = (u - z)/d1``
+    (the Padé servo split into feed-through ``f`` and state ``g``, :func:`heli_core.servo.servo_coefficients`)
+    is discretised exactly with the stick held, linearly interpolated or a fraction between (``hold``,
+    :func:`hold_fraction`); returns
+    ``v[k]``, the rate's increment from ``k`` to ``k+1`` due to the command (per unit
+    control gain), so that the rate sees ``k2*v[k]`` as a one-sample input. The
+    servo state starts settled on the first stick.
+    """
+    d1, n1, n2 = servo_coefficients(tau, lag)
+    f, g = -n2 / d1, n1 + n2 / d1
+    M = np.zeros((4, 4))
+    M[:2, :2] = np.array([[-damping, g], [0.0, -1.0 / d1]]) * dt
+    M[:2, 2] = np.array([f, 1.0 / d1]) * dt
+    M[2, 3] = 1.0
+    E = expm(M)
+    ga, gb = E[:2, 2], E[:2, 3]
+    frac = hold_fraction(hold)
+    h0, h1 = ga - frac * gb, frac * gb
+    u = np.asarray(sticks, dtype=float)
+    u_next = np.append(u[1:], u[-1])
+    w = h0[1] * u + h1[1] * u_next
+    z = np.empty_like(u)
+    z[0] = u[0]
+    z[1:] = signal.lfilter([1.0], [1.0, -E[1, 1]], w[:-1], zi=[E[1, 1] * u[0]])[0]
+    return E[0, 1] * z + h0[0] * u + h1[0] * u_next
+
+
+
+def lti_apply(A, B, C, D, u) -> np.ndarray:
+    """Output of ``x[k+1] = A x[k] + B u[k]``, ``y = C x + D u`` from rest, by transfer functions (lfilter)."""
+    y = np.zeros((C.shape[0], u.shape[1]))
+    for i in range(B.shape[1]):
+        num, den = signal.ss2tf(A, B, C, D, input=i)
+        y += np.array([signal.lfilter(row, den, u[i]) for row in np.atleast_2d(num)])
+    return y
+
+
+def rts_smooth(y, drive, damping, t_slow, t_fast, q_slow, q_fast, zeta, dt, hold="linear",
+               wind_model="gm2") -> np.ndarray:
+    """Steady-state Rauch-Tung-Striebel smoother of one axis: the states (rate, gust states...), shape (m, n).
+
+    ``y`` is the measured rate (n,), ``drive`` the known torque from the inputs
+    (the linear terms and the offset, n). Forward: the steady-state Kalman filter
+    started at the first measurement; backward:
+    ``x_{k|n} = x_{k|k} + G (x_{k+1|n} - x_{k+1|k})`` with the constant smoother gain
+    ``G = P_f Ad' P^-1``. Both passes are linear filters (no loop over samples).
+    """
+    Ad, g0, g1, Qd = discrete_model(damping, t_slow, t_fast, q_slow, q_fast, zeta, dt, hold, wind_model)
+    P, L, S = kalman(Ad, Qd)
+    m = Ad.shape[0]
+    I = np.eye(m)
+    Phi = Ad - np.outer(Ad @ L, I[0])
+    n = y.size
+    u_next = np.append(drive[1:], drive[-1])
+    x0 = np.zeros(m)
+    x0[0] = y[0]
+    # predicted states x_{k|k-1}; the initial state enters as an impulse one step before the record
+    U = np.vstack([np.concatenate([[0.0], y]), np.concatenate([[0.0], drive]), np.concatenate([[0.0], u_next]),
+                   np.concatenate([[1.0], np.zeros(n)])])
+    B = np.column_stack([Ad @ L, g0, g1, x0])
+    pred = lti_apply(Phi, B, I, np.zeros((m, 4)), U)[:, 1:]
+    e = y - pred[0]
+    filt = pred + np.outer(L, e)
+    Pf = P - np.outer(P[:, 0], P[0, :]) / S
+    G = Pf @ Ad.T @ np.linalg.inv(P)
+    pred_next = np.hstack([pred[:, 1:], np.zeros((m, 1))])  # the last smoothed state is the filtered one
+    g = (filt - G @ pred_next)[:, ::-1]
+    # backward in reversed time: z_j = G z_{j-1} + g_j, i.e. w_{j+1} = G w_j + G g_j, z_j = w_j + g_j
+    return lti_apply(G, G, I, I, g)[:, ::-1]
+
+

@@ -1,0 +1,250 @@
+"""What ``heli diagnose`` (by likelihood, the default) writes: ``diagnosis.json``, ``diagnosis.md``, a figure,
+and the new model version.
+
+:func:`diagnose_by_likelihood` runs :class:`identification.diagnosis.likelihood_diagnoser.LikelihoodDiagnoser` and writes,
+each file atomically (:mod:`heli_core.files`):
+
+* ``diagnosis.json`` — verdict, per step the axis, effect, parameters, likelihood-ratio statistic and
+  threshold, runner-up, R² (one step, 0.5 s ahead, sticks-only simulation) before and after; every
+  candidate's statistic per round; the share of each stick the pilot's or controller's loop explains;
+* ``diagnosis.md`` — the same as tables, with ``diagnosis_likelihood.png`` (each candidate's statistic
+  over its threshold, per axis and round);
+* when an effect was found, ``model.json`` (a new version, the replaced one in ``history/``) fitted by
+  maximum likelihood with the effect added (``added_terms``, ``"diagnosis"``), and this flight's wind (the
+  smoother's) appended to the disturbance library, so that the directory is a model the environment and the
+  controllers load. The model carries the verdict ``heli identify`` gives its models
+  (:func:`identification.validation.model_verdict.judge_identifier`, with the integral method beside it and its
+  simulation from the flight's sticks), also in ``diagnosis.json`` (``model_verdict``) and first in
+  ``diagnosis.md``: where ``heli identify`` refuses a flight as diverging, the diagnosis does not write a
+  model of it that reads as sound.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from heli_core.files import jsonable, save_figure
+from heli_core.params import ModelParams
+from heli_core.terms import AXES
+from model_store.model_file import model_document as new_model_document
+from model_store.verdict import ModelVerdict, verdict_of
+
+from ..diagnosis.effects import CATALOGUE, alignment_parts, describe, shift_inputs
+from ..diagnosis.likelihood_diagnoser import LikelihoodDiagnoser
+from ..flight import Flight
+from ..likelihood.ahead_prediction import AHEAD_S, format_r2
+from ..log_band import log_band
+from .diagnosis import DiagnosisRun, write_diagnosis
+from .figures import pyplot
+
+SCHEMA = "heli-env/diagnosis"
+SCHEMA_VERSION = 2
+
+
+def criterion_text(d: LikelihoodDiagnoser) -> str:
+    """The acceptance rule, in words, with the settings used."""
+    return (
+        "Each axis is fitted by maximum likelihood with a stochastic wind (a slow and a fast Gauss-Markov gust, "
+        "white gyro noise), then with each candidate effect added. A candidate is accepted when the "
+        "likelihood-ratio statistic LR = 2 (NLL before - NLL after) exceeds both the chi-square quantile of its k "
+        f"added parameters at 1 - {d.alpha:g}/m (m candidates on the axis, Bonferroni) and "
+        f"{d.min_lr_per_parameter:g}·k ({d.min_lr_alignment:g} for the alignment; floors calibrated on flights "
+        "without a missing effect). The best "
+        "accepted candidate per axis (largest LR over its threshold) is added and the search repeats on the axes "
+        f"that changed (at most {d.max_rounds} rounds). A candidate whose fitted terms break a physical bound "
+        "(an inertia ratio outside [-1, 1], a negative quadratic damping) is not accepted, whatever its LR: it fits "
+        f"something else, such as a controller's loop or a misread input. Undecided: a flight shorter than {d.min_duration:g} s."
+    )
+
+
+def diagnosis_document(d: LikelihoodDiagnoser, source: dict | None = None, model_path=None,
+                       verdict: ModelVerdict | None = None) -> dict:
+    """The content of ``diagnosis.json``; ``verdict``: the written model's (:mod:`model_store.verdict`)."""
+    out = {"schema": SCHEMA, "schema_version": SCHEMA_VERSION, "method": "likelihood",
+           "source": source or {"name": str(d._flight.metadata.get("source", "flight"))}}
+    out.update(d.summary())
+    out["criterion"]["text"] = criterion_text(d)
+    out["parameters_after"] = d.params_.values() | {f"tau_{a}": d.params_.taus[i] for i, a in enumerate(AXES)}
+    out["model_written"] = str(model_path) if model_path else None
+    if verdict is not None:
+        out["model_verdict"] = verdict.to_dict()
+    return jsonable(out)
+
+
+def _table(header, rows) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * len(header)) + "|"]
+    return "\n".join(lines + ["| " + " | ".join(str(c) for c in r) + " |" for r in rows])
+
+
+def _r2(r: dict) -> str:
+    return (f"{format_r2(r.get('one_step'), 4)} / {format_r2(r.get('ahead_0.5s'))} / "
+            f"{format_r2(r.get('simulation'))}")
+
+
+def heldout_change(before: dict, after: dict) -> str:
+    """A step's ``AHEAD_S``-ahead R² on held-out blocks, before -> after, or why it was not checked."""
+    b, a = before.get("heldout_0.5s"), after.get("heldout_0.5s")
+    if a is None:
+        return "not checked (flight too short to cut into blocks)"
+    return f"{format_r2(b)} -> {format_r2(a)}"
+
+
+HELD = 0.5
+"""A hold fraction below this reads as sticks held over each sample (0 held, 1 interpolated)."""
+
+
+def flight_controller_note(d: LikelihoodDiagnoser) -> str | None:
+    """What the closed-loop share cannot show when the sticks are held over each sample (a flight controller's
+    commands, or a digital link's), else None."""
+    fractions = getattr(d, "hold_fractions_", {}) or {}
+    held = d.input_hold_ == "zoh" or (fractions and max(fractions.values()) < HELD)
+    band = log_band(d._flight) if hasattr(d, "_flight") else None
+    if not held or (band is not None and band.filtered and d.input_hold_ != "zoh"):
+        return None  # a log with nothing near its Nyquist frequency cannot say how its sticks were held
+    said = "set" if d.input_hold_ == "zoh" else \
+        "estimated hold fraction " + ", ".join(f"{a} {v:.2f}" for a, v in fractions.items())
+    return (f"The sticks reach the aircraft held over each sample ({said}; 0 held, 1 interpolated). If they are a "
+            "flight controller's commands, it closes the loop within a sample, faster than the 0.1-0.5 s the share "
+            "looks at, so every axis is closed by it whatever the share says; the effects are judged on what its "
+            "corrections leave, with its gyro's vibration removed from the commands and the rates alike.")
+
+
+def diagnosis_markdown(d: LikelihoodDiagnoser, figure: Path | None, verdict: ModelVerdict | None = None) -> str:
+    """``diagnosis.md``: the written model's verdict, the diagnosis' verdict, closed-loop shares, the steps, and
+    every candidate per round."""
+    found = ", ".join(f"`{e}` on {a}" for e, a in d.effects_found_)
+    md = ["# Diagnosis (likelihood)", "", *(verdict.markdown() if verdict is not None else []), f"**Verdict: {d.verdict_}**" + (f" — added {found}." if found else "."), ""]
+    if d.verdict_ == "undecided":
+        md += [f"Evidence: {d.evidence_.get('reason', '')}", ""]
+    md += [criterion_text(d), ""]
+    md += ["## Who closes the loop", "",
+           "Share of each stick explained by the attitude and rate 0.1–0.5 s before (a pilot or a flight controller "
+           "holding the attitude). The estimator models the gust as a state, so a closed loop does not bias it; a "
+           "large share means the stick mirrors the response and the effects below are judged on what the "
+           "pilot's corrections leave.", "",
+           _table(["Axis", "closed-loop share of the stick"],
+                  [[a, f"{100 * v:.0f} %"] for a, v in d.closed_loop_.items()]), ""]
+    if flight_controller_note(d):
+        md += [flight_controller_note(d), ""]
+    if getattr(d, "untestable_", None):
+        md += ["## Not tested", "", "Effects whose regressor does not vary in this flight cannot be told from the "
+               "model's own terms, so they are not named either way:", ""]
+        md += [f"- `{name}`: {why}" for name, why in d.untestable_.items()] + [""]
+    if d.steps_:
+        md += ["## Effects added", "",
+               f"R² columns: one-step prediction / {AHEAD_S:g} s ahead / simulation from the sticks alone; "
+               f"held out: the {AHEAD_S:g} s-ahead R² of blocks of the flight each predicted by the structure "
+               "fitted on the others (an effect is added only when neither gets worse).", "",
+               _table(["Round", "Axis", "Effect", "Parameters", "LR", "threshold", "runner-up (LR)", "R² before",
+                       "R² after", "held out"],
+                      [[s.round, s.axis, describe(s.effect, AXES.index(s.axis)),
+                        ", ".join(f"{k} = {v:.4g}" for k, v in s.parameters.items()), f"{s.lr:.1f}",
+                        f"{s.threshold:.1f}", f"{s.runner_up} ({s.runner_up_lr:.1f})" if s.runner_up else "—",
+                        _r2(s.r2_before), _r2(s.r2_after), heldout_change(s.r2_before, s.r2_after)]
+                       for s in d.steps_]), ""]
+    for i, rows in enumerate(d.rounds_, start=1):
+        md += [f"## Candidates, round {i}", "",
+               _table(["Axis", "Effect", "k", "LR", "threshold", "alignment (s)", "accepted"],
+                      [[r["axis"], r["effect"], r["n_parameters"], f"{r['lr']:.1f}", f"{r['threshold']:.1f}",
+                        f"{r['alignment_s']:+.3f}" if r["effect"] == "servo_delay" else "—",
+                        "**yes**" if r["accepted"] else ("no: " + r["implausible"] if r.get("implausible") else "no")]
+                       for r in rows]), ""]
+    if figure is not None:
+        md += [f"![Likelihood-ratio statistics]({figure.name})", ""]
+    return "\n".join(md)
+
+
+def plot_statistics(d: LikelihoodDiagnoser, path) -> Path | None:
+    """Bar chart: each candidate's LR over its threshold per axis (round 1; 1 = the acceptance line)."""
+    if not d.rounds_:
+        return None
+    plt = pyplot()
+    rows = d.rounds_[0]
+    effects = list(CATALOGUE)
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.6), sharey=True)
+    for ax, axis in zip(axes, AXES):
+        vals = [next((r["lr"] / r["threshold"] for r in rows if r["axis"] == axis and r["effect"] == e), np.nan)
+                for e in effects]
+        colors = ["tab:red" if v > 1 else "tab:gray" for v in vals]
+        ax.barh(range(len(effects)), np.clip(np.nan_to_num(vals, nan=0.0), 1e-3, None), color=colors)
+        ax.axvline(1.0, color="k", lw=1, ls="--")
+        ax.set_xscale("log")
+        ax.set_title(axis)
+        ax.set_xlabel("LR / threshold")
+        ax.set_yticks(range(len(effects)))
+        ax.set_yticklabels(effects)
+    fig.suptitle("Likelihood-ratio statistic of each candidate effect, round 1 (right of the line: accepted)")
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def diagnose_by_likelihood(flight: Flight, out_dir, *, model: ModelParams | None = None, model_document=None,
+                           source: dict | None = None, plots: bool = True,
+                           diagnoser: LikelihoodDiagnoser | None = None, wait: bool = True) -> DiagnosisRun:
+    """Diagnose ``flight`` by likelihood and write the outputs into ``out_dir`` (module docstring).
+
+    When an effect is found, the new model, this flight's wind and the diagnosis files are written as one
+    transaction of the model folder (:class:`model_store.ModelDir`): after a kill at any instant the folder
+    reads as before or after. ``wait``: wait for another command writing ``out_dir`` (default), or raise
+    :class:`~identification.errors.ModelDirBusyError`. The figure is drawn after the numbers are written.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    d = (diagnoser or LikelihoodDiagnoser()).fit(flight, model=model)
+    figure = out / "diagnosis_likelihood.png" if plots and d.rounds_ else None
+    new_model = _new_model(d, flight, model_document, source) if d.steps_ else None
+    verdict = verdict_of(new_model[0]) if new_model is not None else None
+    doc, paths = write_diagnosis(out, new_model, lambda model_path: diagnosis_document(d, source, model_path, verdict),
+                                 lambda doc: diagnosis_markdown(d, figure, verdict), wait)
+    if figure is not None and plot_statistics(d, figure) is not None:
+        paths["likelihood_png"] = figure
+    return DiagnosisRun(d, doc, paths)
+
+
+def _verdict(ident, params: ModelParams, aligned: Flight) -> ModelVerdict:
+    """The verdict ``heli identify`` would give the diagnosed model: the same judge, the integral method on the
+    same flight beside it, and its simulation from the (aligned) flight's sticks, whose divergence
+    ``heli identify`` refuses."""
+    from ..errors import SimulationDivergedError
+    from ..integral.method import IntegralIdentifier
+    from ..validation.model_verdict import judge_identifier
+    from ..validation.forward_simulation import validate_models
+
+    try:
+        validate_models(aligned, {"diagnosed": params})
+        diverged = None
+    except SimulationDivergedError as e:
+        diverged = str(e).split(": ", 1)[-1].split(";")[0]  # "the roll rate leaves ±100 rad/s at t=... s"
+    # the integral method beside it on the flight as the diagnosis fitted it (its late sticks advanced): on the
+    # T-REX hover, fitted on the log as written, it gave k2 = -10.5 and called the aligned model unusable
+    return judge_identifier(ident, IntegralIdentifier(structure="decoupled").fit(aligned), diverged)
+
+
+def _new_model(d: LikelihoodDiagnoser, flight: Flight, model_document, source):
+    """The model with the added effects (its ``model.json`` document) and this flight's wind."""
+    from ..disturbance.equivalent_input import identify_disturbance
+    from ..workflows.identify import identification_settings
+
+    delays, log_shift = alignment_parts(d.alignment_)
+    ident = d.identifier_
+    diagnosis = {
+        "method": "likelihood",
+        "added": [{"round": s.round, "axis": s.axis, "effect": s.effect, "parameters": s.parameters, "lr": s.lr,
+                   "threshold": s.threshold} for s in d.steps_],
+        "input_alignment_s": {a: log_shift[i] for i, a in enumerate(AXES)},
+        "note": "A positive alignment is the servo delay of eq. (31) (first-order Padé). input_alignment_s < 0: "
+                "the log's input column lags the response; advance it by this much "
+                "(identification.diagnosis.effects.shift_inputs) before comparing this model with the log.",
+        "criterion": criterion_text(d),
+    }
+    sources = list((model_document or {}).get("provenance", {}).get("sources", [])) + ([source] if source else [])
+    settings = identification_settings(ident)
+    settings["method"] += " after heli diagnose"
+    aligned = shift_inputs(flight, log_shift) if min(log_shift) < 0 else flight
+    document = new_model_document(d.params_, structure="custom", sample_rate=flight.sample_rate,
+                                  identification=settings, fit_statistics={"axes": ident.summary()},
+                                  sources=sources, extra={"diagnosis": diagnosis},
+                                  verdict=_verdict(ident, d.params_, aligned))
+    return document, identify_disturbance(aligned, d.params_, wind_torque=ident.wind_torque(0))

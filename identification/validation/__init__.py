@@ -1,0 +1,13 @@
+"""How good an identified model is: forward simulation against flights, other flights, frequency response,
+the verdict stored in ``model.json``, the warnings of a fit and the drift of a refreshed model's parameters.
+
+:mod:`~identification.validation.forward_simulation` simulates models from a flight's sticks (Section 3.2,
+Tables 1-2) into a :class:`~identification.validation.result.ValidationResult`.
+"""
+
+
+def __getattr__(name):
+    """The names of the module this folder replaced (deprecated: :mod:`identification._deprecated`)."""
+    from .._deprecated import moved_name
+
+    return moved_name(__name__, name)

@@ -1,0 +1,223 @@
+"""Warnings about an identification the data cannot support well: weak fits, short flights, unexcited axes.
+
+An identifier returns numbers for any data it is given; whether they mean anything
+depends on the data. :func:`fit_warnings` looks at the flights and the per-axis fit
+quality and returns one line per concern, for the terminal and the report:
+
+* **Weak fit** -- the model explains less than :data:`MIN_R2` of an axis' rate
+  variance (R², the share of variance explained). A real ArduCopter log fitted at
+  2 % is a model of noise: the input source (``heli import --inputs``), the segment
+  or the logging rate is usually the cause. The R² that judges a maximum-likelihood
+  model is its 0.5 s-ahead prediction's (:func:`judged_r2`), not the share the sticks
+  explain alone: that one is low for a correct model when the wind dominates the axis
+  (on the project's own 300 s synthetic flight, yaw 0.24 with every yaw parameter within
+  2 % of the truth; 0.5 s ahead 0.66), and the one-step prediction's is near 1 for any
+  model sampled fast (0.985 on a Betaflight fit whose damping sits at its search bound;
+  0.5 s ahead 0.10).
+* **Short flight** -- a flight shorter than :data:`MIN_DURATION_S`: too few
+  independent gusts and manoeuvres for the parameters (and the wind statistics of
+  eqs. 41-47) to settle.
+* **Barely excited axis** -- the axis' stick moves with a standard deviation below
+  :data:`MIN_STICK_STD` (half a percent of the [-1, 1] range) or its rate below
+  :data:`MIN_RATE_STD` (half a degree per second): the control gain and damping of
+  that axis are then not identifiable from the data, whatever R² says.
+
+The function is pure: it reads the flights and the figures and returns strings.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+
+import numpy as np
+
+from ..log_band import log_band
+
+AXES = ("roll", "pitch", "yaw")
+"""Axes in the order of the rates p, q, r."""
+AXIS_STICK = {"roll": ("lat", 0), "pitch": ("lon", 1), "yaw": ("ped", 3)}
+"""The stick driving each axis and its row in ``Flight.sticks``."""
+MIN_R2 = 0.30
+"""Least share of an axis' rate variance a fit should explain."""
+MIN_DURATION_S = 60.0
+"""s: least length of a flight."""
+MIN_STICK_STD = 0.01
+"""Least standard deviation of an axis' stick (the range is [-1, 1])."""
+MIN_RATE_STD = math.radians(0.5)
+"""rad/s: least standard deviation of an axis' rate."""
+
+
+CONSTANT_STICK_STD = 1e-9
+"""A stick whose standard deviation is below this [stick units] is constant: its axis cannot be identified."""
+
+
+def require_moving_sticks(flights, axes) -> None:
+    """Refuse to fit an axis whose stick never moves (a barely moving one only warns, :func:`fit_warnings`).
+
+    Raises
+    ------
+    IdentifiabilityError
+        Names the axis, the stick and its constant value: with a constant input the gain and the
+        offset of eq. (18) are the same column, and the fit would return a gain of 0 and a damping of
+        whatever sign fits the wind.
+    """
+    from ..errors import IdentifiabilityError
+
+    flights = [flights] if hasattr(flights, "time") else list(flights)
+    for axis in axes:
+        stick, row = AXIS_STICK[axis]
+        values = np.concatenate([np.asarray(f.sticks[row], dtype=float) for f in flights])
+        if values.size and float(np.std(values)) < CONSTANT_STICK_STD:
+            raise IdentifiabilityError(
+                f"the {stick} stick is constant ({float(values[0]):.4g} over the whole flight): {axis}'s gain and "
+                f"damping cannot be identified without input changes; fly sweeps on {stick}"
+                + (", or check the input source (heli import --inputs)" if from_a_log(flights) else ""))
+
+
+STATIC_INPUT_STD = MIN_STICK_STD
+"""A modulating input (the collective) whose standard deviation within every flight is below this [stick
+units] does not vary: a term it multiplies is the offset (``k12·col``) or the control gain (``gs·u·col``)
+under another name, and is not fitted."""
+
+
+LOG_FORMATS_OF_ONE_SOURCE = ("csv", "synthetic")
+"""Flight formats whose inputs are what they are: a CSV the user wrote, a synthetic flight."""
+
+
+def from_a_log(flights) -> bool:
+    """Whether any flight was read from a flight controller's log, directly or as the CSV ``heli import`` wrote
+    (its ``.meta.json`` beside it): only then can importing it again with another input source
+    (``heli import --inputs``) change a fit, so only then is it advised."""
+    flights = [flights] if hasattr(flights, "time") else list(flights)
+    for f in flights:
+        meta = dict(getattr(f, "metadata", {}) or {})
+        if meta.get("imported_from") or meta.get("format") not in (None, *LOG_FORMATS_OF_ONE_SOURCE):
+            return True
+    return False
+
+
+def static_collective(flights) -> float | None:
+    """The collective's largest within-flight standard deviation when it is below :data:`STATIC_INPUT_STD`
+    in every flight (it does not vary), else None. Within each flight, since a collective constant in each
+    but different between flights is the flights' own offsets again."""
+    flights = [flights] if hasattr(flights, "time") else list(flights)
+    stds = [float(np.std(np.asarray(f.sticks[2], dtype=float))) for f in flights]
+    worst = max(stds, default=0.0)
+    return worst if worst < STATIC_INPUT_STD else None
+
+
+def on_static_input(term: str, collective_static: bool) -> bool:
+    """Whether ``term`` multiplies an input that does not vary (its feature uses the collective)."""
+    from heli_core.terms import TERMS
+
+    return collective_static and "col" in TERMS[term].feature.split("*")
+
+
+def _name(flight, k: int, n: int) -> str:
+    meta = getattr(flight, "metadata", {}) or {}
+    source = meta.get("source")
+    label = f"'{source}'" if source else (f"{k + 1} of {n}" if n > 1 else "")
+    return f"flight {label}".strip()
+
+
+AHEAD_LABEL = "0.5 s-ahead prediction"
+"""How :func:`judged_r2` names the R² of a maximum-likelihood model in the warning."""
+
+
+def judged_r2(identifier, flights) -> tuple[dict, str]:
+    """The R² per axis that says whether a fitted model describes the axis, and its name for the warning.
+
+    Parameters
+    ----------
+    identifier : MaximumLikelihoodIdentifier or IntegralIdentifier
+        Fitted on ``flights``.
+    flights : sequence of Flight
+        The flights as given to ``fit``.
+
+    Returns
+    -------
+    r2 : dict
+        ``{axis: r2}``: for maximum likelihood the 0.5 s-ahead prediction's on the fitted flights
+        (:func:`identification.likelihood.ahead_prediction.fitted_ahead_r2`; ``-inf`` where it diverged); for the
+        integral method its regression R² of the rate derivative.
+    label : str
+        :data:`AHEAD_LABEL` or ``"fit"``.
+    """
+    from ..likelihood.estimator import MaximumLikelihoodIdentifier
+
+    if not isinstance(identifier, MaximumLikelihoodIdentifier):
+        return {a: f.r2 for a, f in identifier.axes_.items()}, "fit"
+    from ..likelihood.ahead_prediction import fitted_ahead_r2
+
+    ahead = fitted_ahead_r2(identifier, flights)
+    return {a: (-math.inf if not np.isfinite(v) else v) for a, v in ahead.items()}, AHEAD_LABEL
+
+
+def fit_warnings(flights, r2: Mapping | None = None, r2_label: str = "fit", *, min_r2: float = MIN_R2,
+                 min_duration_s: float = MIN_DURATION_S, min_stick_std: float = MIN_STICK_STD,
+                 min_rate_std: float = MIN_RATE_STD) -> list[str]:
+    """One-line warnings about what the flights and the fit quality cannot support (module docstring).
+
+    Parameters
+    ----------
+    flights : Flight or iterable of Flight
+        The flights identified from (anything with ``time`` (n,), ``rates`` (3, n), ``sticks`` (4, n) and
+        ``metadata``).
+    r2 : mapping of str to float, optional
+        Share of variance the model explains per axis (``"roll"``, ``"pitch"``, ``"yaw"``), as
+        :func:`judged_r2` gives it; None or NaN for an axis that was not fitted, ``-inf`` for a prediction
+        that diverged. Without it only the data are checked.
+    r2_label : str
+        What ``r2`` is, for the warning ("fit", :data:`AHEAD_LABEL`).
+    min_r2, min_duration_s, min_stick_std, min_rate_std : float
+        Thresholds (defaults :data:`MIN_R2`, :data:`MIN_DURATION_S`, :data:`MIN_STICK_STD` [stick],
+        :data:`MIN_RATE_STD` [rad/s]).
+
+    Returns
+    -------
+    list of str
+        Flights first (in order), then per axis (roll, pitch, yaw) excitation and fit; empty when all is well.
+    """
+    if hasattr(flights, "time"):
+        flights = [flights]
+    flights = list(flights) if isinstance(flights, Iterable) else [flights]
+    out: list[str] = []
+    for k, f in enumerate(flights):
+        duration = float(f.time[-1] - f.time[0]) if len(f.time) > 1 else 0.0
+        if duration < min_duration_s:
+            out.append(f"{_name(f, k, len(flights))} lasts {duration:.1f} s, shorter than {min_duration_s:.0f} s: "
+                       "too short for the parameters and the wind statistics to settle; identify from a longer "
+                       "flight or several flights")
+        band = log_band(f) if hasattr(f, "sample_rate") else None
+        if band is not None and band.filtered:
+            out.append(f"{_name(f, k, len(flights))}: {band.describe()}")
+    collective = static_collective(flights) if flights else None
+    imported = bool(flights) and from_a_log(flights)
+    if collective is not None:
+        out.append(f"the collective does not vary (std {round(collective, 6):g} within each flight): the collective torque "
+                   "(k12) and gain scheduling are not fitted (with a constant collective they are the offset and "
+                   "the control gain again)")
+    if flights:
+        sticks = np.concatenate([np.asarray(f.sticks, dtype=float) for f in flights], axis=1)
+        rates = np.concatenate([np.asarray(f.rates, dtype=float) for f in flights], axis=1)
+        for i, axis in enumerate(AXES):
+            stick, row = AXIS_STICK[axis]
+            s_std, r_std = float(np.std(sticks[row])), float(np.std(rates[i]))
+            if s_std < min_stick_std or r_std < min_rate_std:
+                out.append(f"{axis} is barely excited: the {stick} stick varies by {s_std:.3g} (std; "
+                           f"{100 * s_std / 2:.2g} % of its [-1, 1] range) and the {axis} rate by "
+                           f"{math.degrees(r_std):.2g} deg/s (std); its gain and damping are not identifiable "
+                           f"from these data (fly sweeps on {stick}"
+                           + (", or check the input source: heli import --inputs)" if imported else ")"))
+    for axis in AXES:
+        value = None if r2 is None else r2.get(axis)
+        if value is None or np.isnan(value):
+            continue
+        if value < min_r2:
+            shown = f"{value:.2f}" if np.isfinite(value) else "diverged"
+            out.append(f"{axis}: the model explains {100 * max(value, 0.0):.0f} % of the rate variance ({r2_label} "
+                       f"R² {shown}), below {100 * min_r2:.0f} %: it says little about this axis; check "
+                       + ("the input source (heli import --inputs), " if imported else "") + "the segment and the "
+                       "logging rate")
+    return out

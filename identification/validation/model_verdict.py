@@ -1,0 +1,194 @@
+"""Judge a fitted model: usable, doubtful or unusable, with the reasons (stored as ``model.json``'s verdict).
+
+An estimator returns numbers for any flight; on a flight that does not show an axis' dynamics they are
+confident nonsense (a Betaflight quad: both dampings at the search's bound of 200 1/s, a roll gain of
+-2125 rad/s² where the integral method finds +788). :func:`judge_fit` reads the fitted identifier's
+per-axis summary and says so, once, for every command that writes a model (``heli identify``,
+``heli diagnose``, ``heli refresh``). The verdict's type and its place in ``model.json`` are
+:mod:`model_store.verdict`'s.
+
+What makes a model **unusable** (each on the parameters the fit estimated):
+
+* a damping (``k3``, ``k7``, ``k11``) at a bound of the estimator's search (:data:`ML_DAMPING_BOUNDS` for
+  the maximum-likelihood fit): the likelihood kept improving towards the bound, so the data did not place it;
+* a damping that is not positive: a rotor damps its rates; an axis that does not is unstable on its own and
+  a fit that finds one has fitted something else (a controller's loop, a misread input);
+* a control gain (``k2``, ``k6``, ``k10``) whose sign the other estimator on the same flight contradicts,
+  both clear of zero by :data:`SIGN_Z` standard errors: the data do not say which way the stick turns the
+  aircraft, and a controller with the wrong sign pushes the wrong way;
+* a simulation from the flight's sticks that diverges (passed in by the caller that ran it).
+
+What makes it **doubtful**:
+
+* an axis whose sticks-only simulation explains less than :data:`MIN_R2` of the rate variance (R²) *and*
+  whose gain or damping the data do not pin down: a standard error above :data:`PLACED_SE` of the value, or
+  the integral method on the same flight more than :data:`ESTIMATOR_RATIO` times it or less than its
+  inverse. A low R² alone is no doubt about the model: the rest of the rate is wind, and on the project's
+  own synthetic flights yaw's R² is near 0 with its parameters within a few % of the truth;
+* a control gain within :data:`SIGN_Z` standard errors of zero: the data do not show the stick's effect.
+
+The function is pure: summaries in, a :class:`~model_store.verdict.ModelVerdict` out.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+from heli_core.terms import AXES, TERMS
+from model_store.verdict import DOUBTFUL, UNUSABLE, USABLE, ModelVerdict
+
+from .fit_warnings import MIN_R2
+
+ML_DAMPING_BOUNDS = (-2.0, 200.0)
+"""1/s: the interval the maximum-likelihood estimator searches each damping in
+(:meth:`identification.likelihood.estimator.MaximumLikelihoodIdentifier._search`, its ``lo[0]``, ``hi[0]``)."""
+BOUND_TOLERANCE = 1e-3
+"""A damping closer to a bound than this share of the bounds' span sits at the bound."""
+SIGN_Z = 2.0
+"""Standard errors a gain must be clear of zero for its sign to count (about 95 %)."""
+PLACED_SE = 0.20
+"""A gain or damping whose standard error exceeds this share of its value is not pinned down by the data."""
+ESTIMATOR_RATIO = 2.0
+"""Two estimators whose gain or damping differ by more than this factor do not agree on it."""
+
+DAMPING = {a: next(p for p, t in TERMS.items() if t.axis == i and t.effect == "damping") for i, a in enumerate(AXES)}
+"""The damping parameter of each axis: roll ``k3``, pitch ``k7``, yaw ``k11``."""
+GAIN = {a: next(p for p, t in TERMS.items() if t.axis == i and t.effect == "control") for i, a in enumerate(AXES)}
+"""The control gain of each axis: roll ``k2``, pitch ``k6``, yaw ``k10``."""
+
+
+def _value(stats: Mapping, name: str) -> tuple[float, float] | None:
+    """(value, standard error) of ``name`` in one axis' summary, None when the fit did not estimate it."""
+    params = stats.get("params") or {}
+    if name not in params or params[name] is None:
+        return None
+    se = (stats.get("std_errors") or {}).get(name)
+    return float(params[name]), (float(se) if se is not None and math.isfinite(float(se)) else math.nan)
+
+
+def _clear_of_zero(value: float, se: float) -> bool:
+    """Whether ``value`` is at least :data:`SIGN_Z` standard errors from zero (no standard error: it is)."""
+    return not math.isfinite(se) or abs(value) >= SIGN_Z * se
+
+
+def _damping_findings(axis: str, stats: Mapping, bounds) -> list[str]:
+    name = DAMPING[axis]
+    got = _value(stats, name)
+    if got is None:
+        return []
+    value, _ = got
+    if bounds is not None:
+        lo, hi = bounds
+        tol = BOUND_TOLERANCE * (hi - lo)
+        for bound, side in ((hi, "upper"), (lo, "lower")):
+            if abs(value - bound) <= tol:
+                return [f"{axis}: damping {name} = {value:.4g} 1/s is at the {side} bound of the estimator's search "
+                        "(the data did not place it)"]
+    if not value > 0.0:
+        return [f"{axis}: damping {name} = {value:.4g} 1/s is not positive (an axis that does not settle by "
+                "itself: the fit describes something else, a controller's loop or a misread input)"]
+    return []
+
+
+def _gain_findings(axis: str, stats: Mapping, reference: Mapping | None) -> tuple[list[str], list[str]]:
+    """(unusable, doubtful) findings about the axis' control gain."""
+    name = GAIN[axis]
+    got = _value(stats, name)
+    if got is None:
+        return [], []
+    value, se = got
+    if not _clear_of_zero(value, se):
+        return [], [f"{axis}: control gain {name} = {value:.4g} ± {se:.2g} rad/s² is within {SIGN_Z:g} standard "
+                    "errors of zero (the data do not show which way the stick turns the aircraft)"]
+    ref = _value(reference.get(axis) or {}, name) if reference else None
+    if ref is not None and _clear_of_zero(*ref) and math.copysign(1.0, ref[0]) != math.copysign(1.0, value):
+        return [f"{axis}: control gain {name} = {value:.4g} rad/s² against {ref[0]:+.4g} by the integral method on "
+                "the same flight (the data do not say which way the stick turns the aircraft)"], []
+    return [], []
+
+
+def _unplaced(axis: str, stats: Mapping, reference: Mapping | None) -> list[str]:
+    """Why the axis' gain and damping are not pinned down (empty when both are)."""
+    out = []
+    for name in (GAIN[axis], DAMPING[axis]):
+        got = _value(stats, name)
+        if got is None or got[0] == 0.0:
+            continue
+        value, se = got
+        if math.isfinite(se) and se > PLACED_SE * abs(value):
+            out.append(f"{name} ±{100 * se / abs(value):.0f} %")
+        ref = _value(reference.get(axis) or {}, name) if reference else None
+        if ref is not None and not 1.0 / ESTIMATOR_RATIO <= ref[0] / value <= ESTIMATOR_RATIO:
+            out.append(f"{name} {value:.4g}, by the integral method {ref[0]:.4g}")
+    return out
+
+
+def _r2_finding(axis: str, stats: Mapping, reference: Mapping | None, min_r2: float) -> list[str]:
+    r2 = stats.get("r2")
+    if r2 is None or not math.isfinite(float(r2)) or float(r2) >= min_r2:
+        return []
+    unplaced = _unplaced(axis, stats, reference)
+    if not unplaced:
+        return []
+    return [f"{axis}: the sticks explain {100 * max(float(r2), 0.0):.0f} % of the rate in simulation "
+            f"(R² {float(r2):.2f}) and the data do not pin its parameters down ({'; '.join(unplaced)})"]
+
+
+def judge_fit(summary: Mapping, *, damping_bounds=None, reference: Mapping | None = None,
+              diverged: str | None = None, min_r2: float = MIN_R2) -> ModelVerdict:
+    """The verdict on a fitted model (module docstring).
+
+    Parameters
+    ----------
+    summary : mapping of str to mapping
+        Per axis (``"roll"``, ``"pitch"``, ``"yaw"``) the fit's statistics as the identifiers'
+        ``summary()`` returns them: ``"params"`` {name: value}, ``"std_errors"`` {name: se} and ``"r2"``
+        (the share of the rate variance the sticks-only simulation explains; the integral fit's R²).
+    damping_bounds : (float, float), optional
+        The interval the estimator searched the dampings in [1/s] (:data:`ML_DAMPING_BOUNDS` for the
+        maximum-likelihood fit); None for an estimator without bounds (the integral method).
+    reference : mapping, optional
+        Another estimator's summary on the same flights (the integral method beside a maximum-likelihood fit),
+        against whose control gains the signs are checked.
+    diverged : str, optional
+        Why the model diverged when simulated from the flight's sticks, when it did.
+    min_r2 : float
+        The least R² that raises no doubt (default :data:`identification.validation.fit_warnings.MIN_R2`).
+
+    Returns
+    -------
+    model_store.verdict.ModelVerdict
+        ``unusable`` with its reasons (and the doubts beside them), ``doubtful`` with the doubts, or ``usable``.
+    """
+    unusable, doubts = [], []
+    for axis in AXES:
+        stats = summary.get(axis)
+        if stats is None:
+            continue
+        unusable += _damping_findings(axis, stats, damping_bounds)
+        bad, doubt = _gain_findings(axis, stats, reference)
+        unusable += bad
+        doubts += doubt + _r2_finding(axis, stats, reference, min_r2)
+    if diverged:
+        unusable.append(f"diverges when simulated from the flight's sticks ({diverged})")
+    if unusable:
+        return ModelVerdict(UNUSABLE, tuple(unusable), tuple(doubts))
+    return ModelVerdict(DOUBTFUL, tuple(doubts)) if doubts else ModelVerdict(USABLE)
+
+
+def judge_identifier(ident, reference=None, diverged: str | None = None) -> ModelVerdict:
+    """:func:`judge_fit` on a fitted identifier (its ``summary()``), with the search's bounds of its estimator
+    and ``reference`` another fitted identifier on the same flights (or None), compared on the axes where both
+    used the same alignment (a stick advanced or delayed by one fit only changes the other's gains, even
+    their sign: the T-REX hover's sticks, 0.29 s late, give the unaligned integral fit k2 = -10.5)."""
+    from ..likelihood.estimator import MaximumLikelihoodIdentifier
+
+    bounds = ML_DAMPING_BOUNDS if isinstance(ident, MaximumLikelihoodIdentifier) else None
+    summary = ident.summary()
+    ref = reference.summary() if reference is not None else None
+    if ref is not None:  # compare only axes both fitted on the same alignment of sticks and response
+        shifts = getattr(ident, "input_shifts_", None) or {}
+        ref = {a: s for a, s in ref.items() if a in summary and not shifts.get(a)
+               and summary[a].get("delay_s", 0.0) == s.get("delay_s", 0.0)}
+    return judge_fit(summary, damping_bounds=bounds, reference=ref, diverged=diverged)

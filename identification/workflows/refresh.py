@@ -1,0 +1,618 @@
+"""Refresh an identified model with new flights: parameter drift, the refreshed model, a larger wind library.
+
+:func:`refresh_model` is what ``heli refresh MODEL_DIR NEW_FLIGHT...`` runs on a
+directory written by ``heli identify``:
+
+1. **Refuse duplicates.** A new flight whose file SHA-256 is already among the
+   model's sources or the disturbance library's traces (or given twice) raises
+   :class:`DuplicateFlightError` before anything is written: its intervals would
+   be counted twice and its wind replayed twice as often.
+2. **Identify the new flights alone** with the model's own structure and settings
+   (``model.json`` ``"structure"``, ``"identification"``, ``"filter"``,
+   ``"added_terms"``), so that the comparison with the current model involves two
+   independent data sets.
+3. **Uncertainty** of both by the interval bootstrap
+   (:func:`identification.integral.bootstrap.interval_bootstrap`). The current model's
+   source flights are looked for by name and SHA-256 (``model.json`` provenance) in
+   the model directory, beside the new flights and among ``previous_flights``; when
+   all are at hand they are bootstrapped too (and refitted, to check they still
+   give the current model). Otherwise the previous standard errors come from the
+   bootstrap recorded in ``model.json`` by an earlier refresh, or else the new
+   flights' bootstrap scaled by ``sqrt(n_new / n_old)`` intervals (the old interval
+   count from the library's record of the source flights' durations; equal counts
+   when unknown). The residual-based standard errors of the fit are never used:
+   they are 4-6 times too small (see :mod:`identification.integral.bootstrap`).
+4. **Drift and flags** (:mod:`identification.validation.parameter_drift`). Per parameter
+   Δ = new − old; it is flagged when ``|Δ| > z·sqrt(se_old² + se_new²)`` (and
+   ``|Δ| >= min_relative·|old|``), with
+   ``z = Φ⁻¹(1 − α/(2m))`` for the ``m`` parameters compared (Bonferroni: a false
+   flag anywhere in the table has probability about α when nothing changed).
+5. **The refreshed model.** ``fit="auto"`` pools the previous and the new flights
+   (eq. 35 over all intervals: the most data) when the previous flights are at hand
+   and nothing is flagged; when a parameter changed, the old flights describe an
+   aircraft that no longer exists, so the model is fitted on the new flights alone
+   (as it is when the old flights are missing). ``"pooled"`` and ``"new"`` force
+   the choice. The model is written by
+   :func:`identification.workflows.identify.identify_and_report` (the replaced ``model.json``
+   is kept under ``history/``, and so are the replaced ``report.md``, figures and
+   previous refresh files), which identifies each *new* flight's wind with the
+   refreshed model (eqs. 41-47) and appends the traces to the library as one new
+   version (earlier versions untouched). The flights the model was validated on
+   (``heli identify --validate``) validate the refreshed model again where their
+   files are found; a lost one's scores are carried over, marked with the model
+   they were computed on (:mod:`identification.workflows.refresh_validation`).
+6. **Provenance.** ``model.json`` gets a ``"refresh"`` entry (previous model's
+   SHA-256 and history file, its sources, the new sources, the fit decision, the
+   flags and the written model's bootstrap standard errors, which the next refresh
+   uses when these flights are gone); ``refresh.json`` and ``refresh.md``
+   (:mod:`identification.reports.refresh`) hold the drift table.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from heli_core.files import jsonable, keep_copy, sha256_of
+from heli_core.terms import AXES
+from model_store.errors import LibraryError, ModelFileError
+from model_store.model_dir import ModelDir
+from model_store.model_file import MODEL_FILENAME, load_model
+
+from ..integral.bootstrap import DEFAULT_REPLICATES, BootstrapResult, interval_bootstrap
+from ..reports.refresh import refresh_markdown
+from ..validation.parameter_drift import (
+    compared_parameters,
+    critical_z,
+    drift_table,
+    fisher_result,
+    previous_std_errors,
+)
+
+REFRESH_SCHEMA = "heli-env/refresh"
+REFRESH_SCHEMA_VERSION = 1
+FIT_CHOICES = ("auto", "pooled", "new")
+KEPT_FILES = ("report.md", "report.html", "refresh.md", "refresh.json")
+"""Top-level files of a model directory a refresh replaces; copied to ``history/`` first (with the PNG figures)."""
+REPRODUCE_RTOL = 1e-6
+"""Relative agreement expected between ``model.json`` and a refit of its source flights."""
+
+
+class RefreshError(ModelFileError):
+    """A model directory cannot be refreshed as asked (unknown structure, previous flights missing for pooling, bad option)."""
+
+
+class DuplicateFlightError(LibraryError):
+    """A new flight is already part of the model or of its disturbance library (same SHA-256)."""
+
+
+# ------------------------------------------------------------------ results
+@dataclass
+class RefreshResult:
+    """What :func:`refresh_model` found and wrote.
+
+    Attributes
+    ----------
+    drift : list of ParameterDrift
+    criterion : dict
+        ``alpha``, ``z``, ``n_parameters``, ``min_relative`` and the rule in words.
+    fit : str
+        ``"pooled"`` (previous + new flights) or ``"new"`` (new flights alone).
+    reason : str
+        Why that fit was chosen.
+    previous_flights : dict
+        ``found`` (list of {file, sha256, path}) and ``missing`` (list of {file, sha256}).
+    bootstrap_new, bootstrap_old, bootstrap_model : BootstrapResult or None
+        New flights; previous flights (when at hand); the written model.
+    run : IdentificationRun
+        The identification that wrote ``model.json``, ``report.md`` and the library version.
+    library_version : int or None
+    paths : dict of str to Path
+    """
+
+    drift: list
+    criterion: dict
+    fit: str
+    reason: str
+    previous_flights: dict
+    bootstrap_new: BootstrapResult
+    bootstrap_old: BootstrapResult | None
+    bootstrap_model: BootstrapResult
+    run: object
+    library_version: int | None
+    paths: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
+
+    @property
+    def flagged(self) -> list[str]:
+        """Names of the parameters whose change is significant."""
+        return [row.name for row in self.drift if row.flagged]
+
+
+# ------------------------------------------------------------------ helpers
+def estimator_of(doc: dict, where: str = "model.json") -> str:
+    """Which estimator identified a model: ``"ml"`` (maximum likelihood) or ``"integral"`` (Fig. 5).
+
+    Models written before the maximum-likelihood estimator existed record only ``method``
+    ("integral (Fig. 5)"), or nothing: they are integral-method models.
+    """
+    ident = doc.get("identification") or {}
+    est = ident.get("estimator")
+    method = str(ident.get("method", "integral"))
+    if est is None:
+        est = "ml" if method.startswith("maximum") else ("integral" if method.startswith("integral") else None)
+    if est not in ("ml", "integral"):
+        raise RefreshError(f"{where}: identified by {method!r}; refresh re-identifies with the maximum-likelihood "
+                           "or the integral method only")
+    return est
+
+
+def identifier_settings(doc: dict, where: str = "model.json") -> tuple[str, dict]:
+    """Structure and identifier keyword arguments the model was identified with (see :func:`estimator_of`).
+
+    Raises
+    ------
+    RefreshError
+        A structure ``heli identify`` does not write (``"custom"``), or an unknown method.
+    """
+    structure = doc.get("structure")
+    if structure not in ("decoupled", "coupled"):
+        raise RefreshError(
+            f"{where}: structure {structure!r} cannot be refreshed; expected 'decoupled' or 'coupled' "
+            "(a model written by 'heli identify')"
+        )
+    ident = doc.get("identification") or {}
+    estimator = estimator_of(doc, where)
+    keys = (("input_hold", "wind_model", "remove_vibration", "vibration_min_hz", "max_nfev", "select_terms")
+            if estimator == "ml"
+            else ("interval", "offsets", "disturbance_order", "input_hold", "prefilter", "max_iter", "tol"))
+    kw = {k: ident[k] for k in keys if ident.get(k) is not None}
+    if "delay" in ident:
+        kw["delay"] = ident["delay"]
+    filt = doc.get("filter") or {}
+    for k in ("pass_hz", "stop_hz"):
+        if filt.get(k) is not None and estimator == "integral":
+            kw[k] = float(filt[k])
+    extra = tuple((doc.get("added_terms") or {}).keys())
+    if extra:
+        kw["extra_terms"] = extra
+    return structure, kw
+
+
+def find_source_flights(sources, search_dirs=(), candidates=()) -> tuple[list, list]:
+    """Locate a model's source flights by file name and SHA-256.
+
+    Parameters
+    ----------
+    sources : sequence of dict
+        ``model.json`` provenance entries ``{"file": name, "sha256": hex}``.
+    search_dirs : sequence of path
+        Folders where a file of the source's name is looked for.
+    candidates : sequence of path
+        Files given explicitly; matched by SHA-256 whatever their name.
+
+    Returns
+    -------
+    found : list of dict
+        ``{"file", "sha256", "path"}`` per source found (its bytes hash to the recorded SHA-256).
+    missing : list of dict
+        Sources not found (or found with other content: ``"note"`` says so).
+    """
+    by_sha = {}
+    for c in candidates:
+        c = Path(c)
+        if not c.is_file():
+            raise FileNotFoundError(f"previous flight {str(c)!r} does not exist")
+        by_sha.setdefault(sha256_of(c), c)
+    found, missing = [], []
+    for src in sources:
+        name, sha = src.get("file"), src.get("sha256")
+        path = by_sha.get(sha)
+        note = None
+        if path is None and name:
+            for d in search_dirs:
+                p = Path(d) / Path(name).name
+                if p.is_file():
+                    if sha256_of(p) == sha:
+                        path = p
+                        break
+                    note = f"{p} has other content (SHA-256 differs)"
+        if path is not None:
+            found.append({"file": name, "sha256": sha, "path": str(path)})
+        else:
+            missing.append({"file": name, "sha256": sha} | ({"note": note} if note else {}))
+    return found, missing
+
+
+def _check_new_flights(paths, digests, model_sources, library_entries) -> None:
+    """Raise :class:`DuplicateFlightError` for a new flight already in the model or library, or given twice."""
+    problems = []
+    seen = {}
+    in_model = {s.get("sha256"): s.get("file") for s in model_sources}
+    in_library = {}
+    for e in library_entries:
+        src = e.get("source") or {}
+        if src.get("sha256"):
+            in_library.setdefault(src["sha256"], e)
+    for path, sha in zip(paths, digests):
+        name = Path(path).name
+        if sha in seen:
+            problems.append(f"{name} is the same file as {Path(seen[sha]).name} (SHA-256 {sha[:12]}…)")
+            continue
+        seen[sha] = path
+        if sha in in_library:
+            e = in_library[sha]
+            problems.append(
+                f"{name} (SHA-256 {sha[:12]}…) is already in the disturbance library as trace {e.get('id')} "
+                f"(from {(e.get('source') or {}).get('name')!r}, added in version {e.get('added_in_version')})"
+            )
+        elif sha in in_model:
+            problems.append(f"{name} (SHA-256 {sha[:12]}…) is already a source of model.json (as {in_model[sha]!r})")
+    if problems:
+        raise DuplicateFlightError(
+            "expected flights new to this model; " + "; ".join(problems)
+            + ". Refreshing with them again would count their intervals twice and duplicate their wind traces"
+        )
+
+
+def _keep_in_history(root: Path) -> list[Path]:
+    """Copy the files a refresh replaces to ``history/`` (see :func:`.files.keep_copy`); returns the copies."""
+    files = [root / n for n in KEPT_FILES] + sorted(root.glob("*.png"))
+    return [keep_copy(path) for path in files if path.is_file()]
+
+
+# ------------------------------------------------------------------ the refresh
+@dataclass(frozen=True)
+class RefreshSettings:
+    """How :func:`refresh_model` judges the drift and refits the model (module docstring).
+
+    Attributes
+    ----------
+    previous_flights : sequence of path
+        Where the current model's source flights are, if not in the model directory or beside the new flights.
+    fit : {"auto", "pooled", "new"}
+        Which flights the refreshed model is fitted on (module docstring, step 5).
+    n_replicates : int
+        Bootstrap replicates per data set.
+    block : int
+        Consecutive intervals per bootstrap block.
+    seed : int
+        Bootstrap seed (the same seed gives the same table).
+    alpha : float
+        Family-wise false-flag rate over the parameters compared, in (0, 1).
+    min_relative : float
+        Smallest relative change that may be flagged (0: any significant change).
+    plots : bool
+        Write the report's PNG figures.
+    progress : bool, optional
+        Progress bars (default: when there are several flights).
+    backend : None, {"local", "ray"} or heli_core.backends.Backend
+        Where the new flights' winds are identified, one task per flight
+        (:func:`identification.workflows.identify.identify_and_report`); None: in this process.
+    stage : callable, optional
+        Called with a few words as each step that can take seconds starts (reading and fitting the new
+        flights, their uncertainty, refitting the previous flights, the refreshed model's fit and winds,
+        the figures), e.g. ``heli refresh``'s progress lines; None: nothing is said.
+
+    Raises
+    ------
+    RefreshError
+        ``fit`` not one of :data:`FIT_CHOICES`, ``alpha`` outside (0, 1) or a negative ``min_relative``.
+    """
+
+    previous_flights: tuple = ()
+    fit: str = "auto"
+    n_replicates: int = DEFAULT_REPLICATES
+    block: int = 1
+    seed: int = 0
+    alpha: float = 0.05
+    min_relative: float = 0.0
+    plots: bool = True
+    progress: bool | None = None
+    backend: object = None
+    stage: object = None
+
+    def __post_init__(self):
+        if self.fit not in FIT_CHOICES:
+            raise RefreshError(f"fit must be one of {FIT_CHOICES}, got {self.fit!r}")
+        if not 0.0 < self.alpha < 1.0:
+            raise RefreshError(f"alpha must lie in (0, 1), got {self.alpha!r}")
+        if not self.min_relative >= 0.0:
+            raise RefreshError(f"min_relative must be >= 0, got {self.min_relative!r}")
+
+
+def refresh_model(model_dir, new_flights, *, settings: RefreshSettings | None = None, wait: bool = True,
+                  **options) -> RefreshResult:
+    """Refresh the model in ``model_dir`` with new flights (module docstring).
+
+    Parameters
+    ----------
+    model_dir : str or Path
+        A directory written by ``heli identify`` (``model.json``, optionally ``disturbances/``).
+    new_flights : sequence of path
+        Canonical flight logs not yet in the model.
+    settings : RefreshSettings, optional
+        How the drift is judged and the model refitted; default :class:`RefreshSettings`'s.
+    wait : bool
+        Wait for another command writing ``model_dir`` (default, saying so), or raise
+        :class:`~identification.errors.ModelDirBusyError`. The folder is locked from reading the current model
+        to writing the refreshed one, and everything is written as one transaction
+        (:class:`model_store.ModelDir`): after a crash it holds the model before or after the refresh.
+    **options
+        Fields of :class:`RefreshSettings` (``previous_flights``, ``fit``, ``n_replicates``, ``block``,
+        ``seed``, ``alpha``, ``min_relative``, ``plots``, ``progress``, ``backend``), replacing those of
+        ``settings``.
+
+    Raises
+    ------
+    ModelFileError
+        No readable ``model.json``.
+    RefreshError
+        A model of a structure or method refresh cannot re-identify, ``fit="pooled"`` without the
+        previous flights, or an option out of range.
+    DuplicateFlightError
+        A new flight already in the model or library, or given twice.
+    LibraryError
+        The existing library is corrupt or incomplete (nothing is written).
+    ModelDirBusyError
+        Another command is writing ``model_dir`` and ``wait`` is false.
+    FlightLogError, IdentifiabilityError
+        A new flight cannot be read or identified.
+    """
+    settings = RefreshSettings(**options) if settings is None else replace(settings, **options)
+    new_paths = [Path(p) for p in new_flights]
+    if not new_paths:
+        raise RefreshError("expected at least one new flight, got none")
+    root = Path(model_dir)
+    if root.suffix == ".json":
+        root = root.parent
+    load_model(root / MODEL_FILENAME)  # a missing or corrupt model is named before anything is locked or made
+    for p in new_paths:
+        if not p.is_file():
+            raise FileNotFoundError(f"new flight {str(p)!r} does not exist")
+    with ModelDir(root).transaction(wait=wait, what="refresh") as tx:
+        result = _Refresh(tx, new_paths, settings).run()
+    if result.run.figures:
+        _say(settings, "drawing the report's figures")
+        result.paths.update(result.run.draw_figures())
+    return result
+
+
+def _say(settings: RefreshSettings, text: str) -> None:
+    """Tell ``settings.stage`` that a step starts (nothing without one)."""
+    if settings.stage is not None:
+        settings.stage(text)
+
+
+def _read_flights(paths, desc: str, show: bool) -> list:
+    """Read ``paths`` with a bar only on a terminal (``disable=None``: tqdm's own check; off one, a failing
+    read's error would land on the bar's line), closed on an error too."""
+    from tqdm import tqdm
+
+    from ..io import read_flight
+
+    with tqdm(paths, desc=desc, unit="flight", disable=None if show else True) as bar:
+        return [read_flight(p) for p in bar]
+
+
+@dataclass
+class _Previous:
+    """The current model's side of the drift table: its source flights and their uncertainty (step 3)."""
+
+    found: list
+    missing: list
+    flights: list
+    bootstrap: BootstrapResult | None
+    std_errors: dict
+    source: str
+    ci: dict | None
+    notes: list
+
+
+class _Refresh:
+    """One refresh of :func:`refresh_model` inside its transaction ``tx``: read, compute, stage the files.
+
+    The model directory is read once here; :meth:`run` takes the steps of the module docstring.
+    """
+
+    def __init__(self, tx, new_paths, settings: RefreshSettings):
+        self.tx, self.new_paths, self.settings = tx, new_paths, settings
+        self.model_path = tx.root / MODEL_FILENAME
+        if tx.base.params is None:
+            load_model(self.model_path)  # raises the reader's error
+        self.doc = tx.base.document
+        self.structure, self.kw = identifier_settings(self.doc, str(self.model_path))
+        self.estimator = estimator_of(self.doc, str(self.model_path))
+        self.old_sources = list((self.doc.get("provenance") or {}).get("sources") or [])
+        self.show = (len(new_paths) > 1) if settings.progress is None else settings.progress
+        self.seeds = np.random.SeedSequence(settings.seed).spawn(3)
+
+    def identifier(self):
+        """An unfitted identifier of the model's method, structure and settings."""
+        from .identify import make_identifier
+
+        # the drift table compares the same parameters on both sides: no term selection there
+        return make_identifier(self.estimator, self.structure,
+                               **{k: v for k, v in self.kw.items() if k != "select_terms"})
+
+    def uncertainty(self, fitted, flights, seq, desc: str) -> BootstrapResult:
+        """Standard errors of a fit: Fisher information (maximum likelihood) or the interval bootstrap."""
+        if self.estimator == "ml":
+            return fisher_result(fitted, compared_parameters(fitted, self.estimator))
+        s = self.settings
+        _say(s, f"{desc}: {s.n_replicates} replicates")
+        return interval_bootstrap(flights, fitted, s.n_replicates, s.block, seq, progress=bool(self.show), desc=desc)
+
+    def fitted(self, paths, what: str, why: str):
+        """(flights, the model's identifier fitted on them), the step announced with ``why``."""
+        n = len(paths)
+        _say(self.settings, f"reading and fitting {n} {what} flight{'s' if n != 1 else ''} "
+                            f"({'maximum likelihood' if self.estimator == 'ml' else 'integral method'}) {why}")
+        flights = _read_flights(paths, f"reading {what} flights", self.show)
+        return flights, self.identifier().fit(flights)
+
+    def run(self) -> RefreshResult:
+        """Steps 1-6 of the module docstring; the files are staged in the transaction."""
+        s = self.settings
+        digests = [sha256_of(p) for p in self.new_paths]
+        _check_new_flights(self.new_paths, digests, self.old_sources, self.tx.base.entries)
+        flights, new_ident = self.fitted(self.new_paths, "new", "for the drift table")
+        boot_new = self.uncertainty(new_ident, flights, self.seeds[0], "bootstrap (new flights)")
+        names = list(boot_new.names)
+        previous = self.previous(names, boot_new)
+        z_crit = critical_z(s.alpha, len(names))
+        drift = drift_table(self.tx.base.params.values(), boot_new, previous.std_errors, previous.source,
+                            previous.ci, z_crit, s.min_relative)
+        flagged = [r.name for r in drift if r.flagged]
+        mode, reason = self.choose_fit(previous, flagged)
+        fit_flights = flights + (previous.flights if mode == "pooled" else [])
+        boot_model = boot_new
+        if mode == "pooled":
+            if self.estimator != "integral":
+                _say(s, f"fitting the {len(fit_flights)} pooled flights for the refreshed model's uncertainty")
+            pooled = self.identifier() if self.estimator == "integral" else self.identifier().fit(fit_flights)
+            boot_model = self.uncertainty(pooled, fit_flights, self.seeds[2], "bootstrap (refreshed model)")
+        criterion = {"alpha": s.alpha, "z": z_crit, "n_parameters": len(names), "min_relative": s.min_relative,
+                     "rule": "|new - old| > z * sqrt(se_old^2 + se_new^2), z = Phi^-1(1 - alpha / (2 m))"
+                     + (" and |new - old| >= min_relative * |old|" if s.min_relative > 0 else "")}
+        result = RefreshResult(drift, criterion, mode, reason, {"found": previous.found, "missing": previous.missing},
+                               boot_new, previous.bootstrap, boot_model, None, None, {}, previous.notes)
+        self.stage(result, fit_flights, digests, flights, new_ident)
+        return result
+
+    def previous(self, names, boot_new: BootstrapResult) -> _Previous:
+        """The current model's uncertainty: its flights refitted and bootstrapped when all are at hand, else
+        what ``model.json`` recorded or the new flights' scaled (module docstring, step 3)."""
+        search = [self.tx.root] + list(dict.fromkeys(p.resolve().parent for p in self.new_paths))
+        found, missing = find_source_flights(self.old_sources, search, self.settings.previous_flights)
+        if not (self.old_sources and not missing):
+            se_old, se_source, note = previous_std_errors(self.doc, names, boot_new, self.tx.base.entries,
+                                                          self.old_sources, self.estimator)
+            return _Previous(found, missing, [], None, se_old, se_source, None, [note] if note else [])
+        old_flights, old_ident = self.fitted([f["path"] for f in found], "previous", "for the current model's "
+                                             "uncertainty")
+        boot_old = self.uncertainty(old_ident, old_flights, self.seeds[1], "bootstrap (previous flights)")
+        old_params = self.tx.base.params
+        diff = max((abs(old_ident.params_.get(k) - old_params.get(k)) / max(abs(old_params.get(k)), 1e-12)
+                    for k in names), default=0.0)
+        notes = []
+        if diff > REPRODUCE_RTOL:
+            notes.append(f"refitting the previous flights gives parameters up to {diff:.2g} (relative) away from "
+                         "model.json; the table compares against model.json and takes its uncertainty from the refit")
+        return _Previous(found, missing, old_flights, boot_old, dict(boot_old.std_errors),
+                         "bootstrap" if self.estimator == "integral" else "Fisher", dict(boot_old.ci), notes)
+
+    def choose_fit(self, previous: _Previous, flagged) -> tuple[str, str]:
+        """Which flights the refreshed model is fitted on, and why (module docstring, step 5)."""
+        fit, missing = self.settings.fit, previous.missing
+        have_old = bool(self.old_sources) and not missing
+        if fit == "pooled" and not have_old:
+            raise RefreshError(
+                "fit='pooled' needs the previous model's flights; not found: "
+                + ", ".join(f"{m.get('file')} (SHA-256 {str(m.get('sha256'))[:12]}…)" for m in missing)
+                + (" (model.json records no sources)" if not self.old_sources else "")
+                + "; pass them with --previous-flights or refresh with --fit new"
+            )
+        if fit == "pooled":
+            return "pooled", "pooled on request (--fit pooled)"
+        if fit == "new":
+            return "new", "new flights alone on request (--fit new)"
+        if not have_old:
+            return "new", ("new flights alone: the previous flights are not at hand ("
+                           + ", ".join(str(m.get("file")) for m in missing) + " missing)"
+                           if self.old_sources else "new flights alone: model.json records no source flights")
+        if flagged:
+            return "new", ("new flights alone: " + ", ".join(flagged) + " changed significantly, so the previous "
+                           "flights no longer describe this aircraft")
+        return "pooled", "pooled previous and new flights: no parameter changed significantly"
+
+    def stage(self, result: RefreshResult, fit_flights, digests, flights, new_ident) -> None:
+        """Step 6: keep the files a refresh replaces in ``history/``, identify and report the refreshed model
+        with the new flights' winds as a library version (:func:`identification.workflows.identify.identify_and_report`),
+        and write ``refresh.json`` and ``refresh.md``; all is committed when the transaction ends. Sets
+        ``result.run``, ``result.library_version`` and ``result.paths``."""
+        from .identify import identify_and_report, source_entry
+
+        tx, s = self.tx, self.settings
+        pooled = result.fit == "pooled"
+        kept = _keep_in_history(tx.root)
+        old_digest = tx.base.model_sha256
+        new_sources = [source_entry(p, sha) for p, sha in zip(self.new_paths, digests)]
+        created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+        record = {
+            "created": created,
+            "previous_model": {"sha256": old_digest, "kept_as": f"history/model-{old_digest[:12]}.json",
+                               "sources": self.old_sources},
+            "new_sources": new_sources,
+            "fit": result.fit, "reason": result.reason, "flagged": result.flagged,
+            "drift_file": "refresh.json",
+            "bootstrap": result.bootstrap_model.to_dict(),
+        }
+        fit_paths = [str(p) for p in self.new_paths] + (
+            [f["path"] for f in result.previous_flights["found"]] if pooled else [])
+        checked = self.validation(list(digests) + ([f["sha256"] for f in result.previous_flights["found"]]
+                                                   if pooled else []), fit_flights[0].sample_rate)
+        result.notes += checked.notes
+        run = identify_and_report(
+            fit_flights, tx.root, coupled=self.structure == "coupled",
+            sources=new_sources + (self.old_sources if pooled else []), identifier_kwargs=self.kw,
+            flight_paths=fit_paths, plots=s.plots, disturbances=True, progress=self.show,
+            wind_flights=range(len(flights)), model_extra={"refresh": record}, backend=s.backend,
+            method=self.estimator, transaction=tx, draw_figures=False,
+            stage=None if s.stage is None else (lambda text: s.stage(f"refreshed model: {text}")),
+            validate_flights=checked.flights, validate_names=checked.names, validate_paths=checked.paths,
+            carried_validation=checked.carried,
+        )
+        result.run, result.library_version = run, run.library_version
+        doc_out = self.document(result, record, flights, new_ident, kept)
+        paths = dict(run.paths)
+        paths["refresh_json"] = tx.write_report("refresh.json",
+                                                json.dumps(jsonable(doc_out), indent=2, allow_nan=False) + "\n")
+        paths["refresh_md"] = tx.write_report("refresh.md", refresh_markdown(result, doc_out))
+        result.paths = paths
+
+    def validation(self, fitted_sha256, sample_rate: float):
+        """The earlier model's ``--validate`` flights for the refreshed one (fitted on ``fitted_sha256``):
+        validated again where found, else carried over marked
+        (:func:`identification.workflows.refresh_validation.kept_validation`)."""
+        from .refresh_validation import kept_validation
+
+        search = [self.tx.root, *dict.fromkeys(Path(p).resolve().parent for p in self.new_paths), Path.cwd()]
+        return kept_validation(self.doc, self.tx.base.model_sha256, search, self.settings.previous_flights or (),
+                               fitted_sha256, sample_rate)
+
+    def document(self, result: RefreshResult, record: dict, flights, new_ident, kept) -> dict:
+        """``refresh.json``: the drift table with what it compared, the decision and the library's new version."""
+        tx, run = self.tx, result.run
+        old_params = tx.base.params
+        taus = {"previous": dict(zip(AXES, old_params.taus)), "new flights": dict(zip(AXES, new_ident.params_.taus)),
+                "refreshed": dict(zip(AXES, run.params.taus))}
+        return {
+            "schema": REFRESH_SCHEMA, "schema_version": REFRESH_SCHEMA_VERSION, "created": record["created"],
+            "model_dir": str(tx.root), "structure": self.structure,
+            "previous_model": record["previous_model"],
+            "new_flights": [s | {"duration_s": f.duration} for s, f in zip(record["new_sources"], flights)],
+            "previous_flights": result.previous_flights,
+            "criterion": result.criterion,
+            "bootstrap_seed": self.settings.seed,
+            "drift": [r.to_dict() for r in result.drift],
+            "flagged": result.flagged,
+            "servo_delay_s": taus,
+            "fit": result.fit, "reason": result.reason,
+            "refreshed_parameters": {k: run.params.get(k) for k in result.bootstrap_new.names},
+            "estimator": self.estimator,
+            "flight_offsets": ({a: {"new flights": list(f.flight_offsets)} for a, f in new_ident.axes_.items()}
+                               if self.estimator == "ml" else None),
+            "bootstrap": {"new": result.bootstrap_new.to_dict(),
+                          "previous": result.bootstrap_old.to_dict() if result.bootstrap_old else None,
+                          "refreshed": result.bootstrap_model.to_dict()},
+            "library": {"previous_version": tx.base.library_version, "version": run.library_version,
+                        "added": [p.source for p in run.disturbances]},
+            "model_sha256": tx.model_sha256,
+            "kept_in_history": [str(p.relative_to(tx.root)) for p in kept],
+            "notes": result.notes,
+        }

@@ -1,0 +1,58 @@
+"""scripts/structure_report.py as a check: it fails (exit 1) when first-party code imports a deprecated name.
+
+A moved name has one home (issue 34): code of this project imports it from the module that defines it, never
+through an old module of ``identification._deprecated``'s tables.
+"""
+
+import ast
+import importlib.util
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SCRIPT = ROOT / "scripts" / "structure_report.py"
+
+
+@pytest.fixture(scope="module")
+def report():
+    spec = importlib.util.spec_from_file_location("structure_report", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_tree_imports_no_deprecated_name():
+    out = subprocess.run([sys.executable, str(SCRIPT)], capture_output=True, text=True, cwd=ROOT)
+    assert "First-party imports of a deprecated name (identification/_deprecated.py): 0" in out.stdout, out.stdout
+    assert "Upward imports: 0" in out.stdout
+    assert out.returncode == 0
+
+
+def test_each_form_of_a_deprecated_import_is_found(report):
+    """An old module, an old name of a module that became a stage's folder, a re-exported name of a module
+    that stays, and an old module imported by name from the package; a folder's submodule is no old name."""
+    known = {report._dotted(p) for _, p in report._modules()}
+    tables = report._deprecation_tables()
+    source = (
+        "from identification.ml_estimator import MaximumLikelihoodIdentifier\n"  # 1: an old module
+        "import identification.synthetic as synthetic\n"  # 2: the same, imported whole
+        "from identification.validation import validate_models\n"  # 3: the folder's old name
+        "from identification.validation import result\n"  # 4: a submodule of the folder: fine
+        "from identification.errors import ModelFileError, FlightLogError\n"  # 5: one re-export, one own
+        "from identification import fleet, io\n"  # 6: an old module by name; io is a package
+        "from identification.likelihood.estimator import BURN_IN\n"  # 7: the new home: fine
+    )
+    found = report._deprecated_imports(ast.parse(source), "tests.example", False, known, tables)
+    assert found == ["1: identification.ml_estimator.MaximumLikelihoodIdentifier", "2: identification.synthetic",
+                     "3: identification.validation.validate_models", "5: identification.errors.ModelFileError",
+                     "6: identification.fleet"]
+
+
+def test_a_deprecated_import_fails_the_report(report, monkeypatch, capsys):
+    found = {"tests/example.py": ["1: identification.model.ModelParams"]}
+    monkeypatch.setattr(report, "_outside_imports", lambda known, tables: found)
+    assert report.main([]) == 1
+    assert "tests/example.py:1: identification.model.ModelParams" in capsys.readouterr().out
