@@ -25,9 +25,9 @@ from identification.disturbance.equivalent_input import (
     DisturbanceProfile,
     compare_with_truth,
     identify_disturbance,
-    save_figures,
 )
 from identification.disturbance.smoothing import MAX_PASSES, smooth
+from identification.reports.disturbance import save_figures
 from identification.errors import DisturbanceError
 from identification.integral.method import IntegralIdentifier
 

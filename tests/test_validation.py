@@ -15,12 +15,10 @@ from identification.flight import make_flight
 from identification.validation.forward_simulation import (
     attitude_error_stats,
     between_models_mae,
-    pick_windows,
-    plot_attitude_fit,
-    plot_rate_fit,
     rate_error_stats,
     validate_models,
 )
+from identification.reports.validation import pick_windows, plot_attitude_fit, plot_rate_fit
 from identification.validation.result import ValidationResult
 
 PAPER = ModelParams(k2=1.3475, k3=2.4208, kd1=0.0399, k6=-0.8903, k7=2.5188, kd2=0.0115,
