@@ -42,7 +42,10 @@ def register(sub):
 
 def run(args) -> int:
     from identification.io import read_flight
-    from identification.bench.method_comparison import QUICK_NLR_MAX_NFEV, compare_methods
+    from identification.bench.comparison_config import QUICK_NLR_MAX_NFEV
+    from identification.bench.method_comparison import compare_methods
+    from identification.reports.method_comparison import comparison_markdown
+    from identification.workflows.method_comparison import write_comparison
 
     from .progress import progress_of
 
@@ -64,8 +67,8 @@ def run(args) -> int:
         result = compare_methods(flight, axis=args.axis, truth=truth, progress=progress.bars,
                                  validation=validation, validation_truth=validation_truth, stage=progress.items,
                                  **kwargs)
-    print(result.markdown())
-    paths = result.save(args.out)
+    print(comparison_markdown(result))
+    paths = write_comparison(result, args.out)
     for path in paths.values():
         print(f"wrote {path}")
     return 0

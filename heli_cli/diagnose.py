@@ -60,7 +60,7 @@ def run(args) -> int:
         if args.method == "ml":
             return _run_ml(args, flight, model, document, source_entry(args.flight), progress)
         from identification.diagnosis.heldout_diagnoser import ALPHA, MIN_GAIN, Diagnoser
-        from identification.reports.diagnosis import DiagnosisConfig, diagnose_and_report
+        from identification.workflows.diagnose import DiagnosisConfig, diagnose_and_report
 
         diagnoser = Diagnoser(folds=args.folds, window=args.window,
                               alpha=ALPHA if args.alpha is None else args.alpha,
@@ -134,7 +134,7 @@ def _run_ml(args, flight, model, document, source, progress) -> int:
         MIN_LR_PER_PARAMETER,
         LikelihoodDiagnoser,
     )
-    from identification.reports.likelihood_diagnosis import diagnose_by_likelihood
+    from identification.workflows.diagnose import diagnose_by_likelihood
 
     progress.stage(f"diagnosing {args.flight} by likelihood (every catalogue effect on every axis"
                    + (", then the figures)" if not args.no_plots else ")"))

@@ -8,6 +8,9 @@ vibration (Fig. 8). We design that filter with :func:`scipy.signal.kaiserord`
 response against the command (see :func:`zero_phase_lowpass`). It is applied to the rates *and* the sticks, so
 that any linear term of eqs. (18)/(21) holds between the filtered signals
 exactly as it held between the raw ones.
+
+A log whose input column lags the response (found by the alignment search of ``delay="auto"`` or by the
+diagnosis) is aligned before a model sees it by advancing its sticks (:func:`shift_inputs`).
 """
 
 from __future__ import annotations
@@ -18,6 +21,8 @@ from types import MappingProxyType
 import numpy as np
 from scipy import fft as sp_fft
 from scipy import signal
+
+from heli_core.terms import INPUT_FOR_AXIS
 
 from .errors import FlightLogError
 from .flight import Flight
@@ -141,3 +146,44 @@ def lowpass_flight(flight: Flight, pass_hz: float = DEFAULT_PASS_HZ, stop_hz: fl
                                              "stop_hz": stop_hz, "taps": int(fir_lowpass(flight.sample_rate, pass_hz, stop_hz).size)}}
     sticks = np.clip(both[3:], -1.0, 1.0, out=both[3:])
     return Flight(flight.time, both[:3], flight.attitude, sticks, MappingProxyType(meta), flight.extra)
+
+
+def shift_inputs(flight: Flight, shifts) -> Flight:
+    """Shift the cyclic and pedal stick columns of a flight in time.
+
+    Parameters
+    ----------
+    flight : Flight
+    shifts : sequence of 3 float
+        Per axis (roll, pitch, yaw: sticks lat, lon, ped) [s]. Positive ``s``
+        delays the stick (the result holds ``u(t - s)``), negative advances it
+        (``u(t + |s|)``). Values between samples are interpolated linearly;
+        beyond the ends the first or last value is held.
+
+    Returns
+    -------
+    Flight
+        The same flight with the shifted sticks (the collective is unchanged);
+        ``metadata["input_shift_s"]`` records the shifts.
+
+    Raises
+    ------
+    ValueError
+        ``shifts`` is not three finite numbers.
+    """
+    s = np.asarray(shifts, dtype=float)
+    if s.shape != (3,) or not np.all(np.isfinite(s)):
+        raise ValueError(f"shifts must be 3 finite seconds (roll, pitch, yaw), got {shifts!r}")
+    if not s.any():
+        return flight
+    sticks = np.array(flight.sticks)
+    for a, name in enumerate(INPUT_FOR_AXIS):
+        if s[a] != 0.0:
+            i = ("lat", "lon", "col", "ped").index(name)
+            sticks[i] = np.interp(flight.time - s[a], flight.time, flight.sticks[i])
+    sticks.setflags(write=False)
+    meta = dict(flight.metadata)
+    before = np.asarray(meta.get("input_shift_s", (0.0, 0.0, 0.0)), dtype=float)
+    meta["input_shift_s"] = [float(v) for v in before + s]
+    # the flight was validated at the edge; interpolation inside the stick range keeps it valid
+    return Flight(flight.time, flight.rates, flight.attitude, sticks, MappingProxyType(meta), flight.extra)

@@ -200,7 +200,7 @@ class Trace:
 
     @classmethod
     def from_profile(cls, profile, **metadata) -> "Trace":
-        """The trace of a :class:`~identification.disturbance.equivalent_input.DisturbanceProfile`, with its metadata.
+        """The trace of a :class:`~identification.disturbance.profile.DisturbanceProfile`, with its metadata.
 
         Keyword arguments are recorded under the entry's ``metadata``. The profile is read by its attributes
         (the store imports nothing of ``identification``); its ``smoothing_window`` names the smoother's

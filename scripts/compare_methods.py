@@ -58,7 +58,10 @@ def main(argv=None) -> int:
 
     from heli_cli.compare_methods import load_truth_if_any
     from identification.io import read_flight
-    from identification.bench.method_comparison import QUICK_NLR_MAX_NFEV, compare_methods
+    from identification.bench.comparison_config import QUICK_NLR_MAX_NFEV
+    from identification.bench.method_comparison import compare_methods
+    from identification.reports.method_comparison import comparison_markdown
+    from identification.workflows.method_comparison import write_comparison
     from identification.bench.synthetic import simulate_flight
 
     with tempfile.TemporaryDirectory(prefix="heli-compare-") as tmp:
@@ -84,11 +87,11 @@ def main(argv=None) -> int:
         result = compare_methods(flight, axis=args.axis, truth=truth, **kwargs)
         elapsed = time.perf_counter() - t0
 
-    print(result.markdown())
+    print(comparison_markdown(result))
     print(f"(whole comparison: {elapsed:.1f} s wall, BLAS threads: {os.environ['OPENBLAS_NUM_THREADS']} via "
           f"OPENBLAS_NUM_THREADS; threadpoolctl: {result.settings['blas_threads']})")
     if args.out:
-        for p in result.save(args.out).values():
+        for p in write_comparison(result, args.out).values():
             print(f"wrote {p}")
     return 0
 

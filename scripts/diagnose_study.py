@@ -16,8 +16,8 @@ import time
 
 from heli_core.terms import AXES
 from identification.bench.synthetic import EFFECTS, MANOEUVRE_CONFIG, PAPER_PARAMS, FlightConfig, simulate_flight
-from identification.diagnosis.effects import shift_inputs
 from identification.diagnosis.heldout_diagnoser import Diagnoser, heldout_stats
+from identification.preprocess import shift_inputs
 
 CASES = {
     "none": {},

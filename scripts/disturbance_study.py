@@ -29,12 +29,8 @@ import numpy as np
 
 from heli_core.terms import AXES
 from identification.bench.synthetic import FlightConfig, simulate_flight
-from identification.disturbance.equivalent_input import (
-    DEFAULT_INTERVAL,
-    DEFAULT_SMOOTHING,
-    compare_with_truth,
-    identify_disturbance,
-)
+from identification.disturbance.equivalent_input import DEFAULT_INTERVAL, DEFAULT_SMOOTHING, identify_disturbance
+from identification.disturbance.profile import compare_with_truth
 from identification.integral.method import IntegralIdentifier
 
 INTERVALS = (0.02, 0.05, 0.1, 0.2, 0.5)

@@ -54,7 +54,7 @@ TRUE_AXES = {
 
 
 def _flight(name, seed, duration, cell):
-    from identification.diagnosis.effects import shift_inputs
+    from identification.preprocess import shift_inputs
     from identification.bench.synthetic import MANOEUVRE_CONFIG, simulate_flight
 
     case = CASES[name]

@@ -170,7 +170,7 @@ def test_every_package_error_derives_from_the_one_root(cls):
     ("identification.errors.UnitError", ValueError),
     ("identification.errors.IdentifiabilityError", ValueError),
     ("identification.errors.SimulationDivergedError", ValueError),
-    ("identification.errors.ModelFileError", ValueError),
+    ("model_store.errors.ModelFileError", ValueError),
     ("identification.errors.NotFittedError", ValueError),
     ("identification.errors.NotFittedError", AttributeError),
     ("identification.errors.DisturbanceError", ValueError),

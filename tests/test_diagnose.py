@@ -13,10 +13,11 @@ import pytest
 
 from heli_core.terms import AXES, TERMS
 from identification.bench.synthetic import EFFECTS, MANOEUVRE_CONFIG, PAPER_PARAMS, FlightConfig, simulate_flight
-from identification.diagnosis.effects import CATALOGUE, shift_inputs
+from identification.diagnosis.effects import CATALOGUE
 from identification.diagnosis.heldout_diagnoser import Diagnoser, paired_log_test
 from identification.diagnosis.residual_tests import cross_correlation, whiteness
 from identification.errors import IdentifiabilityError, NotFittedError
+from identification.preprocess import shift_inputs
 
 DURATION = 180.0
 STRONG_NONLINEAR_DAMPING = {k: 5 * v for k, v in EFFECTS["nonlinear_damping"].items()}
@@ -121,7 +122,7 @@ def test_same_flight_same_diagnosis():
 def test_diagnose_and_report_takes_its_settings_as_one_config_or_by_keyword(tmp_path):
     """The same diagnosis files from a DiagnosisConfig and from its fields by keyword; a keyword given beside a
     config replaces the config's field (as SweepConfig's and TrainConfig's do); a bad field is named."""
-    from identification.reports.diagnosis import DiagnosisConfig, diagnose_and_report
+    from identification.workflows.diagnose import DiagnosisConfig, diagnose_and_report
 
     flight = _flight(seed=3, effects=("cross_coupling",), duration=70.0)
     source = {"file": "flight.csv", "sha256": "0" * 64}

@@ -18,18 +18,12 @@ from scipy import stats
 from heli_core.params import ModelParams
 from heli_core.terms import AXES
 from identification.bench.synthetic import simulate_flight
-from identification.disturbance.equivalent_input import (
-    DEFAULT_INTERVAL,
-    DEFAULT_SMOOTHING,
-    MODEL_LABELS,
-    DisturbanceProfile,
-    compare_with_truth,
-    identify_disturbance,
-)
+from identification.disturbance.equivalent_input import DEFAULT_INTERVAL, DEFAULT_SMOOTHING, identify_disturbance
+from identification.disturbance.profile import MODEL_LABELS, DisturbanceProfile, compare_with_truth
 from identification.disturbance.smoothing import MAX_PASSES, smooth
-from identification.reports.disturbance import save_figures
 from identification.errors import DisturbanceError
 from identification.integral.method import IntegralIdentifier
+from identification.reports.disturbance import profile_markdown, save_figures
 
 MIN_CORRELATION = 0.9
 MAX_RMS_RATIO = 0.4
@@ -210,7 +204,7 @@ def test_report_outputs(profile, synthetic, tmp_path):
     assert json.loads(text)["samples_per_interval"] == 2
     assert set(d["statistics"]) == set(AXES)
     assert set(d["simulation"]["rate_stats"]) == set(MODEL_LABELS)
-    md = profile.markdown()
+    md = profile_markdown(profile)
     assert "| Roll |" in md and "KS p-value" in md and "rate MAE with" in md
     paths = save_figures(profile, tmp_path, true_ud=synthetic.wind)
     assert set(paths) == {"profile", "distributions", "simulation"}

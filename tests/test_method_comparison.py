@@ -17,17 +17,13 @@ import pytest
 
 from heli_cli import main as cli
 from identification.baselines import TABLE3_STARTS, TABLE5_LENGTHS
-from identification.bench.method_comparison import (
-    QUICK_NLR_MAX_NFEV,
-    SCHEMA,
-    TABLE4_CASES,
-    MethodComparison,
-    compare_methods,
-)
+from identification.bench.comparison_config import QUICK_NLR_MAX_NFEV, TABLE4_CASES
+from identification.bench.method_comparison import SCHEMA, MethodComparison, compare_methods
 from identification.bench.method_runs import TABLE5_EKF
 from identification.bench.synthetic import FlightConfig, load_truth, simulate_flight
 from identification.errors import FlightLogError, IdentifiabilityError
 from identification.io import read_flight
+from identification.reports.method_comparison import comparison_markdown
 
 SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "compare_methods.py"
 HELD_OUT_HEAD = "| Held-out MAE (deg/s) | Held-out p90 (deg/s) |"
@@ -115,7 +111,7 @@ def test_speed_ratios_are_taken_from_this_run(comparison):
 
 
 def test_markdown_holds_all_tables_and_rows(comparison):
-    md = comparison.markdown()
+    md = comparison_markdown(comparison)
     for heading in ("Table 3", "Table 4", "Table 5", "Speed ratios", "Quick run"):
         assert heading in md
     labels = ["Integral method", "True parameters (reference)"] + [r.label for r in comparison.nlr + comparison.ekf]
@@ -132,7 +128,7 @@ def test_json_round_trips(comparison):
     assert loaded["schema"] == SCHEMA
     again = MethodComparison.from_dict(loaded)
     assert again.to_dict() == d
-    assert again.markdown() == comparison.markdown()
+    assert comparison_markdown(again) == comparison_markdown(comparison)
     with pytest.raises(ValueError, match="schema"):
         MethodComparison.from_dict({**loaded, "schema": "something/else"})
 
@@ -162,7 +158,7 @@ def test_target_states_in_sample_and_heldout(comparison):
     assert t["met"] == (t["faster"] and t["as_accurate"])  # in-sample, as before
     assert t["met_heldout"] == (t["faster"] and t["heldout_as_accurate"])
     assert t["heldout_mae_truth"] == c.validation["truth_errors"]["mae_deg_s"]
-    md = c.markdown()
+    md = comparison_markdown(c)
     assert f"speed ratio {t['speedup']:,.0f}x" in md
     assert f"In-sample (identification flight): MAE integral {t['mae_integral']:.4f} vs NLR {t['mae_nlr']:.4f}" in md
     assert f"ratio integral/NLR {t['mae_ratio']:.3f}" in md
@@ -172,7 +168,7 @@ def test_target_states_in_sample_and_heldout(comparison):
 
 
 def test_heldout_columns_in_tables_3_4_and_5(comparison):
-    md = comparison.markdown()
+    md = comparison_markdown(comparison)
     tables = {name: md.split(f"### {name}")[1].split("###")[0] for name in ("Table 3", "Table 4", "Table 5")}
     for name, text in tables.items():
         assert HELD_OUT_HEAD in text, name
@@ -202,7 +198,7 @@ def test_heldout_json_round_trips_and_version_1_still_reads(comparison):
     loaded = MethodComparison.from_dict(old)
     assert loaded.validation is None and loaded.integral.heldout_mae is None
     assert loaded.target()["heldout_mae_ratio"] is None and loaded.target()["met"] == comparison.target()["met"]
-    md = loaded.markdown()
+    md = comparison_markdown(loaded)
     assert "Held-out MAE" not in md and "Held-out: not evaluated (no validation flight)" in md
 
 
@@ -248,7 +244,7 @@ def test_cli_writes_json_and_markdown(heli, flight_path, tmp_path, capsys):
     assert saved["target"]["heldout_mae_ratio"] is None and "Held-out MAE" not in printed
     assert saved["truth"]["k2"] == pytest.approx(1.3475)
     md = (out / "comparison.md").read_text()
-    assert md == MethodComparison.from_dict(saved).markdown()
+    assert md == comparison_markdown(MethodComparison.from_dict(saved))
     assert not list(out.glob("*.tmp"))  # atomic writes leave no temporaries
 
 
@@ -268,7 +264,7 @@ def test_cli_validate_adds_heldout_errors(heli, flight_path, validation_path, tm
         assert math.isfinite(r["heldout_mae_deg_s"]) and r["heldout_p90_deg_s"] >= r["heldout_mae_deg_s"] > 0
     t = saved["target"]
     assert t["heldout_mae_ratio"] == pytest.approx(t["heldout_mae_integral"] / t["heldout_mae_nlr"])
-    assert (out / "comparison.md").read_text() == MethodComparison.from_dict(saved).markdown()
+    assert (out / "comparison.md").read_text() == comparison_markdown(MethodComparison.from_dict(saved))
 
 
 def test_cli_validate_at_another_sample_rate_exits_2(heli, flight_path, other_rate_path, tmp_path, capsys):

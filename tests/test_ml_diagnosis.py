@@ -121,7 +121,7 @@ def test_heli_diagnose_by_likelihood_writes_the_model(tmp_path, coupled_flight):
 
 @pytest.mark.slow
 def test_log_whose_input_lags_is_named_as_a_negative_alignment():
-    from identification.diagnosis.effects import shift_inputs
+    from identification.preprocess import shift_inputs
 
     flight = shift_inputs(simulate_flight(150, seed=1).flight, (0.3, 0.3, 0.3))  # sticks recorded 0.3 s late
     d = LikelihoodDiagnoser(axes=("roll",)).fit(flight)

@@ -23,7 +23,8 @@ from heli_env.model_dir import default_model_dir
 from identification.bench.synthetic import simulate_flight
 from identification.io import read_flight
 from identification.workflows.identify import identify_and_report
-from identification.workflows.refresh import DuplicateFlightError, refresh_model
+from identification.workflows.refresh import refresh_model
+from identification.workflows.refresh_sources import DuplicateFlightError
 from model_store import DisturbanceLibrary, ModelDir, Trace, faults
 from model_store.errors import LibraryError, ModelDirBusyError, ModelFileError
 from model_store.model_file import load_model

@@ -25,7 +25,8 @@ from identification.bench.synthetic import PAPER_PARAMS, FlightConfig, simulate_
 from identification.errors import IdentifiabilityError
 from identification.integral.bootstrap import interval_bootstrap, interval_flights
 from identification.integral.method import IntegralIdentifier
-from identification.workflows.refresh import DuplicateFlightError, RefreshError, refresh_model
+from identification.workflows.refresh import refresh_model
+from identification.workflows.refresh_sources import DuplicateFlightError, RefreshError
 from model_store.disturbance_library import DisturbanceLibrary
 
 DURATION = 120.0

@@ -12,13 +12,13 @@ from heli_core.physics import QUAT, simulate
 from heli_core.quaternion import euler_from_quaternion
 from heli_core.terms import AXES
 from identification.flight import make_flight
+from identification.reports.validation import pick_windows, plot_attitude_fit, plot_rate_fit, validation_markdown
 from identification.validation.forward_simulation import (
     attitude_error_stats,
     between_models_mae,
     rate_error_stats,
     validate_models,
 )
-from identification.reports.validation import pick_windows, plot_attitude_fit, plot_rate_fit
 from identification.validation.result import ValidationResult
 
 PAPER = ModelParams(k2=1.3475, k3=2.4208, kd1=0.0399, k6=-0.8903, k7=2.5188, kd2=0.0115,
@@ -195,6 +195,7 @@ def test_validate_bad_inputs(truth_flight):
 
 def test_a_diverging_model_is_named_with_its_cause(truth_flight):
     from identification.disturbance.equivalent_input import identify_disturbance
+    from identification.reports.disturbance import profile_markdown
     from identification.errors import IdentifiabilityError, SimulationDivergedError
 
     flight, _ = truth_flight
@@ -208,7 +209,7 @@ def test_a_diverging_model_is_named_with_its_cause(truth_flight):
     profile = identify_disturbance(flight, unstable)
     assert profile.simulation is None and "diverges" in profile.simulation_diverged
     assert profile.to_dict()["simulation_diverged"] == profile.simulation_diverged
-    assert "diverged" in profile.markdown()
+    assert "diverged" in profile_markdown(profile)
 
 
 def test_a_damping_too_fast_for_the_step_is_named_as_such_not_as_added_terms(truth_flight):
@@ -246,7 +247,7 @@ def test_result_to_dict_is_json(two_model_result):
 
 
 def test_markdown_tables(two_model_result):
-    md = two_model_result.markdown()
+    md = validation_markdown(two_model_result)
     assert "true: MAE (deg/s)" in md and "perturbed: MAE (deg/s)" in md
     assert "MAE between models (deg/s)" in md
     assert "perturbed: std (deg)" in md
@@ -258,7 +259,7 @@ def test_markdown_tables(two_model_result):
 
 def test_markdown_single_model_has_no_between(truth_flight):
     flight, _ = truth_flight
-    md = validate_models(flight, {"only": PAPER}).markdown()
+    md = validation_markdown(validate_models(flight, {"only": PAPER}))
     assert "only: MAE (deg/s)" in md and "between" not in md
 
 

@@ -134,6 +134,7 @@ def test_wind_posterior_of_a_fit_is_seeded_and_about_the_mean(fitted):
 
 def test_profile_of_a_draw_keeps_the_mean_and_the_library_records_it(fitted, tmp_path):
     from identification.disturbance.equivalent_input import identify_disturbance
+    from identification.reports.disturbance import profile_markdown
     from model_store.disturbance_library import DisturbanceLibrary
 
     sf, ident = fitted
@@ -146,7 +147,7 @@ def test_profile_of_a_draw_keeps_the_mean_and_the_library_records_it(fitted, tmp
     assert prof.estimate is prof.trace_mean
     assert prof.kd[0] == pytest.approx(ident.params_.kd1 + post.mean[0].mean())
     assert prof.statistics["roll"]["draw_ud_std"] > prof.statistics["roll"]["smoother_ud_std"]
-    assert "a draw from the smoother's posterior" in prof.markdown()
+    assert "a draw from the smoother's posterior" in profile_markdown(prof)
     lib = DisturbanceLibrary.create(tmp_path)
     lib.append(prof)
     entry = lib.manifest()["traces"][0]

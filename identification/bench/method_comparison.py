@@ -38,30 +38,30 @@ tables also show each parameter's error and a reference row with the true
 parameters simulated the same way (the wind is not modelled by any method, so
 its MAE is the floor none of the three can be expected to beat by much).
 
-Each method is fitted, timed and scored by :class:`identification.bench.method_runs.MethodRunner`;
-``comparison.md`` is written by :mod:`identification.reports.method_comparison`.
+Each method is fitted, timed and scored by :class:`identification.bench.method_runs.MethodRunner` with the
+settings of :class:`~identification.bench.comparison_config.ComparisonConfig`; the result,
+:class:`MethodComparison`, is data: ``comparison.md`` is drawn from it by
+:mod:`identification.reports.method_comparison` and both files are written by
+:func:`identification.workflows.method_comparison.write_comparison`.
 """
 
 from __future__ import annotations
 
-import json
 import math
 import platform
 import time
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 
 import numpy as np
 
-from heli_core.files import jsonable, write_text
+from heli_core.files import jsonable
 from heli_core.params import ModelParams
 
-from ..baselines.ekf import TABLE4_M0, TABLE4_Q, TABLE5_LENGTHS
-from ..baselines.nlr import TABLE3_STARTS
 from ..baselines.single_axis import make_params, parameter_names
 from ..errors import FlightLogError, IdentifiabilityError
 from ..flight import Flight
-from ..preprocess import DEFAULT_PASS_HZ, DEFAULT_STOP_HZ, lowpass_flight
+from ..preprocess import lowpass_flight
+from .comparison_config import ComparisonConfig
 from .method_runs import MethodRun, MethodRunner, limit_blas
 
 SCHEMA = "heli-env/method-comparison/2"
@@ -74,17 +74,6 @@ SAMPLE_RATE_TOLERANCE = 1e-3
 """Relative difference allowed between the sample rates of the identification
 and the validation flight (median sample intervals of logged data jitter)."""
 
-TABLE4_CASES: tuple[tuple[str, float, tuple[float, ...]], ...] = tuple(
-    (f"Case {c}({m})", TABLE4_Q[c], TABLE4_M0[m]) for c in (1, 2, 3) for m in ("a", "b")
-)
-"""Table 4's six EKF settings ``(label, Q [(rad/s)^2], m_o = [p0, k_damp, k_gain, kd])``."""
-
-DEFAULT_REPEATS = {"integral": 20, "ekf": 3, "nlr": 1}
-"""Timed runs per method; the median CPU and wall time are reported."""
-
-QUICK_NLR_MAX_NFEV = 10
-"""Objective evaluations allowed per NLR start with ``--quick`` (a converged
-roll fit from eq. (73)'s start takes about 8-9; far starts are cut short)."""
 
 TARGET_SPEEDUP = 1000.0
 """Issue target: the integral method at least this many times faster than NLR (CPU time)."""
@@ -249,90 +238,6 @@ class MethodComparison:
             truth=d["truth"], truth_errors=d["truth_errors"],
             settings=dict(d["settings"]), validation=d.get("validation"),
         )
-
-    def save(self, directory) -> dict[str, Path]:
-        """Write ``comparison.json`` and ``comparison.md`` into ``directory``, each atomically."""
-        directory = Path(directory)
-        paths = {"json": directory / "comparison.json", "markdown": directory / "comparison.md"}
-        write_text(paths["json"], json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n")
-        write_text(paths["markdown"], self.markdown())
-        return paths
-
-    # ---------------------------------------------------------- markdown
-    def markdown(self) -> str:
-        """Tables 3, 4 and 5 in the paper's layout, plus the speed ratios of this run
-        (:func:`identification.reports.method_comparison.comparison_markdown`).
-
-        With a validation flight, Tables 3-5 also hold each model's held-out
-        errors on it, and the target is judged both in-sample and held-out.
-        """
-        from ..reports.method_comparison import comparison_markdown
-
-        return comparison_markdown(self)
-
-
-# ------------------------------------------------------------------ settings
-@dataclass(frozen=True)
-class ComparisonConfig:
-    """What :func:`compare_methods` runs and how it times it.
-
-    Attributes
-    ----------
-    nlr_starts : tuple of tuple of float, shape (n_starts, 3)
-        NLR start points ``(k_damp, k_gain, kd)``; default Table 3's.
-    ekf_cases : tuple of (label, q, m0)
-        EKF settings; default Table 4's six cases (:data:`TABLE4_CASES`).
-    sample_lengths : tuple of float
-        Table 5 identification windows [s], each at most the flight's duration.
-        The EKF settings are :data:`TABLE5_EKF`.
-    repeats : dict, optional
-        Timed runs per method, merged into :data:`DEFAULT_REPEATS` (keys
-        ``"integral"``, ``"ekf"``, ``"nlr"``); Table 5 uses the EKF's. Once
-        built, the merged counts.
-    nlr_max_nfev : int, optional
-        Objective evaluations allowed per NLR start (``None``: scipy's default).
-    prefilter : bool
-        Low-pass filter the flight first (Section 3.1); off when it already is.
-    pass_hz, stop_hz : float
-        Band edges of the prefilter [Hz].
-    blas_threads : int or None
-        BLAS threads while timing (needs ``threadpoolctl``; ``None`` leaves them).
-    quick : bool
-        Recorded in the result (and the Markdown) to flag a shortened run.
-
-    Raises
-    ------
-    ValueError
-        Unknown repeat keys or counts that are not positive integers, bad start
-        points or EKF settings.
-    """
-
-    nlr_starts: tuple = TABLE3_STARTS
-    ekf_cases: tuple = TABLE4_CASES
-    sample_lengths: tuple = TABLE5_LENGTHS
-    repeats: dict | None = None
-    nlr_max_nfev: int | None = None
-    prefilter: bool = True
-    pass_hz: float = DEFAULT_PASS_HZ
-    stop_hz: float = DEFAULT_STOP_HZ
-    blas_threads: int | None = 1
-    quick: bool = False
-
-    def __post_init__(self):
-        reps = dict(DEFAULT_REPEATS)
-        if self.repeats:
-            unknown = set(self.repeats) - set(reps)
-            if unknown:
-                raise ValueError(f"repeats keys must be among {sorted(reps)}, got {sorted(unknown)}")
-            reps.update(self.repeats)
-        for k, v in reps.items():
-            if int(v) != v or v < 1:
-                raise ValueError(f"repeats[{k!r}] must be a positive integer, got {v!r}")
-        object.__setattr__(self, "repeats", reps)
-        object.__setattr__(self, "sample_lengths", tuple(float(v) for v in self.sample_lengths))
-        object.__setattr__(self, "nlr_starts", tuple(tuple(float(v) for v in s) for s in self.nlr_starts))
-        object.__setattr__(self, "ekf_cases", tuple((str(label), float(q), tuple(float(v) for v in m0))
-                                                    for label, q, m0 in self.ekf_cases))
 
 
 # ------------------------------------------------------------------ running

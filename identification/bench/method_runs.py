@@ -18,7 +18,6 @@ import statistics
 import sys
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from heli_core.files import jsonable
 
@@ -27,9 +26,7 @@ from ..baselines.nlr import NonlinearRegression
 from ..baselines.single_axis import axis_index, make_params, rate_errors, simulate_rate
 from ..flight import Flight
 from ..integral.method import IntegralIdentifier
-
-if TYPE_CHECKING:
-    from .method_comparison import ComparisonConfig
+from .comparison_config import ComparisonConfig
 
 TABLE5_EKF = {"q": TABLE4_Q[3], "m0": TABLE4_M0["a"]}
 """EKF settings of Table 5 (``Q = 1e-2`` and ``m_o`` of case (a), Section 3.6)."""

@@ -15,20 +15,18 @@ is a transport delay of the servo, modelled in the aircraft by the first-order
 Padé approximation of eq. (31) (``tau_<axis>`` of the model); a negative one
 means the log's input column lags the response — no aircraft answers a command
 before it is given, so this is a time misalignment of the log, corrected by
-advancing the logged input (:func:`shift_inputs`) before the model sees it.
+advancing the logged input (:func:`identification.preprocess.shift_inputs`) before the model sees it.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from types import MappingProxyType
 
 import numpy as np
 
-from heli_core.terms import AXES, INPUT_FOR_AXIS, TERMS
+from heli_core.terms import AXES, TERMS
 
 from ..errors import NotFittedError
-from ..flight import Flight
 
 NONE = "none"
 """The verdict when nothing significant is missing."""
@@ -145,47 +143,6 @@ def _catalogue() -> dict[str, Effect]:
 
 CATALOGUE: dict[str, Effect] = _catalogue()
 """Every effect a diagnosis can name, by name (``none`` and ``undecided`` are verdicts, not effects)."""
-
-
-def shift_inputs(flight: Flight, shifts) -> Flight:
-    """Shift the cyclic and pedal stick columns of a flight in time.
-
-    Parameters
-    ----------
-    flight : Flight
-    shifts : sequence of 3 float
-        Per axis (roll, pitch, yaw: sticks lat, lon, ped) [s]. Positive ``s``
-        delays the stick (the result holds ``u(t - s)``), negative advances it
-        (``u(t + |s|)``). Values between samples are interpolated linearly;
-        beyond the ends the first or last value is held.
-
-    Returns
-    -------
-    Flight
-        The same flight with the shifted sticks (the collective is unchanged);
-        ``metadata["input_shift_s"]`` records the shifts.
-
-    Raises
-    ------
-    ValueError
-        ``shifts`` is not three finite numbers.
-    """
-    s = np.asarray(shifts, dtype=float)
-    if s.shape != (3,) or not np.all(np.isfinite(s)):
-        raise ValueError(f"shifts must be 3 finite seconds (roll, pitch, yaw), got {shifts!r}")
-    if not s.any():
-        return flight
-    sticks = np.array(flight.sticks)
-    for a, name in enumerate(INPUT_FOR_AXIS):
-        if s[a] != 0.0:
-            i = ("lat", "lon", "col", "ped").index(name)
-            sticks[i] = np.interp(flight.time - s[a], flight.time, flight.sticks[i])
-    sticks.setflags(write=False)
-    meta = dict(flight.metadata)
-    before = np.asarray(meta.get("input_shift_s", (0.0, 0.0, 0.0)), dtype=float)
-    meta["input_shift_s"] = [float(v) for v in before + s]
-    # the flight was validated at the edge; interpolation inside the stick range keeps it valid
-    return Flight(flight.time, flight.rates, flight.attitude, sticks, MappingProxyType(meta), flight.extra)
 
 
 def alignment_parts(alignment) -> tuple[tuple, tuple]:

@@ -31,7 +31,7 @@ from heli_core.terms import AXES, DECOUPLED, STICK_ROW, TERMS
 from ..errors import IdentifiabilityError
 from ..flight import MAX_PLAUSIBLE_RATE, Flight
 from ..integral.method import IntegralIdentifier
-from .effects import shift_inputs
+from ..preprocess import shift_inputs
 
 
 @dataclass(frozen=True)
@@ -44,7 +44,7 @@ class Spec:
         Parameters fitted on roll, pitch, yaw (names of :data:`heli_core.terms.TERMS`).
     alignment : tuple of 3 float
         Command/response alignment per axis [s], applied as an exact time shift
-        of the axis' stick (:func:`identification.diagnosis.effects.shift_inputs`): > 0 a
+        of the axis' stick (:func:`identification.preprocess.shift_inputs`): > 0 a
         transport delay (the servo's, eq. 31, or a log whose input leads),
         < 0 a log whose input lags the response. A shift is exact at every
         frequency, where the first-order Padé filter of eq. (31) is not beyond
@@ -237,7 +237,7 @@ class HeldOut:
         return int(self.starts.size)
 
     def aligned(self, shifts) -> Flight:
-        """The flight with its inputs shifted by ``shifts`` (:func:`~identification.diagnosis.effects.shift_inputs`).
+        """The flight with its inputs shifted by ``shifts`` (:func:`~identification.preprocess.shift_inputs`).
 
         Only the last alignment is kept: the specs scored one after the other mostly share it, and a
         shifted copy of a long flight is large.

@@ -44,6 +44,7 @@ from threadpoolctl import threadpool_limits
 from heli_core.params import ModelParams
 from heli_core.terms import AXES, DECOUPLED, RATE_DEPENDENCE, STICK_ROW, TERMS
 
+from ..excitation import on_static_input, static_collective
 from ..flight import Flight
 from ..likelihood.ahead_prediction import AHEAD_S, ahead_r2, blocked_ahead_r2
 from ..likelihood.axis_likelihood import AxisLikelihood
@@ -58,8 +59,8 @@ from ..likelihood.estimator import (
 )
 from ..likelihood.input_hold import check_hold
 from ..likelihood.state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll
-from ..validation.fit_warnings import on_static_input, static_collective
-from .effects import CATALOGUE, MAX_ALIGNMENT, NONE, SERVO_DELAY, UNDECIDED, DiagnosisResult, implausible, shift_inputs
+from ..preprocess import shift_inputs
+from .effects import CATALOGUE, MAX_ALIGNMENT, NONE, SERVO_DELAY, UNDECIDED, DiagnosisResult, implausible
 
 ALPHA = 0.01
 """Family-wise level of the likelihood-ratio test per axis and round (Bonferroni over the candidates)."""

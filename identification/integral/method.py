@@ -48,9 +48,9 @@ from heli_core.servo import pade_filter, per_axis  # (pade_filter lived here bef
 from heli_core.terms import AXES, COUPLED, DECOUPLED, EXTRA_PARAMS, STICK_ROW, TERMS
 
 from ..errors import IdentifiabilityError, NotFittedError
+from ..excitation import require_moving_sticks
 from ..flight import Flight
 from ..preprocess import DEFAULT_PASS_HZ, DEFAULT_STOP_HZ, lowpass_flight
-from ..validation.fit_warnings import require_moving_sticks
 from .axis import AxisFit, IntegralAxisSystem, IntervalSignals
 from .intervals import pool_intervals, split_intervals
 

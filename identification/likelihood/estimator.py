@@ -64,11 +64,11 @@ from heli_core.params import ModelParams
 from heli_core.servo import pade_filter, per_axis
 from heli_core.terms import AXES, DECOUPLED, FEATURES, RATE_DEPENDENCE, STICK_ROW, TERMS
 
-from ..diagnosis.effects import shift_inputs
 from ..errors import IdentifiabilityError, NotFittedError
+from ..excitation import on_static_input, require_moving_sticks, static_collective
 from ..flight import Flight
 from ..integral.method import IntegralIdentifier
-from ..validation.fit_warnings import on_static_input, require_moving_sticks, static_collective
+from ..preprocess import shift_inputs
 from ..vibration import remove_common_lines
 from .axis_fit import MLAxisFit
 from .axis_likelihood import MIN_SERVO_DELAY, AxisData, AxisLikelihood, simulation_r2

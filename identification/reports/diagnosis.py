@@ -1,7 +1,7 @@
-"""What ``heli diagnose`` writes: ``diagnosis.json``, ``diagnosis.md``, figures and the new model version.
+"""The held-out diagnosis as ``heli diagnose --method integral`` reports it: ``diagnosis.json``'s document,
+``diagnosis.md`` and its figures, drawn from a fitted :class:`identification.diagnosis.heldout_diagnoser.Diagnoser`.
 
-:func:`diagnose_and_report` runs :class:`identification.diagnosis.heldout_diagnoser.Diagnoser` on a
-flight and writes, atomically (:mod:`heli_core.files`):
+:func:`identification.workflows.diagnose.diagnose_and_report` runs the diagnoser and writes, atomically:
 
 * ``diagnosis.json`` — verdict, per step the axis, effect, fitted parameters,
   held-out gap before and after, runner-up and margin; the criterion; every
@@ -18,51 +18,17 @@ flight and writes, atomically (:mod:`heli_core.files`):
 
 from __future__ import annotations
 
-import json
-from dataclasses import dataclass, field
-from functools import partial
-from pathlib import Path
-
 import numpy as np
 
-from heli_core.config import check, configured, is_flag
-from heli_core.files import jsonable, save_figure, write_text
-from heli_core.params import ModelParams
+from heli_core.files import jsonable, save_figure
 from heli_core.terms import AXES, INPUT_FOR_AXIS
-from model_store.model_dir import ModelDir
-from model_store.model_file import model_document as new_model_document
 
-from ..diagnosis.effects import CATALOGUE, alignment_parts, shift_inputs
+from ..diagnosis.effects import CATALOGUE
 from ..diagnosis.heldout_diagnoser import Diagnoser, heldout_stats
-from ..flight import Flight
-from .figures import DPI, PendingFigures, pyplot
+from .figures import DPI, pyplot
 
 SCHEMA = "heli-env/diagnosis"
 SCHEMA_VERSION = 1
-
-
-@dataclass
-class DiagnosisRun(PendingFigures):
-    """What :func:`diagnose_and_report` produced.
-
-    Attributes
-    ----------
-    diagnoser : Diagnoser
-        The fitted diagnosis.
-    document : dict
-        The content of ``diagnosis.json``.
-    paths : dict of str to Path
-        Files written.
-    figures : list of callable
-        Figures ``diagnosis.md`` links but :func:`diagnose_and_report` was asked to leave for later
-        (``draw_figures=False``); each returns ``{key: path}``. :meth:`draw_figures` draws them.
-    """
-
-    diagnoser: Diagnoser
-    document: dict
-    paths: dict = field(default_factory=dict)
-    figures: list = field(default_factory=list)
-
 
 
 def criterion_text(d: Diagnoser) -> str:
@@ -297,152 +263,3 @@ def window_limits(measured, simulated: dict, pad: float = 0.1, diverged: float =
     low, high = min(float(np.min(v)) for v in kept), max(float(np.max(v)) for v in kept)
     margin = pad * max(high - low, 1.0)
     return (low - margin, high + margin), notes
-
-
-# ------------------------------------------------------------------------ runner
-@dataclass(frozen=True)
-class DiagnosisConfig:
-    """How :func:`diagnose_and_report` diagnoses and writes (all but the flight, the folder and the model).
-
-    ``diagnose_and_report(flight, out_dir, config)`` runs it; keyword settings replace its fields
-    (``diagnose_and_report(flight, out_dir, config, plots=False)``).
-
-    Attributes
-    ----------
-    diagnoser : Diagnoser, optional
-        The diagnosis' settings (default :class:`Diagnoser` with ``progress``).
-    progress : bool
-        Progress bar over the candidate search (of the default diagnoser).
-    plots : bool
-        Draw the figures.
-    draw_figures : bool
-        With ``plots``: draw the figures before returning (default), or leave them to
-        :meth:`DiagnosisRun.draw_figures` (``diagnosis.md`` links them either way).
-    wait : bool
-        When an effect was found: wait for another command writing ``out_dir`` (default), or raise
-        :class:`~identification.errors.ModelDirBusyError`.
-
-    Raises
-    ------
-    ValueError
-        A diagnoser that is not a :class:`Diagnoser`, or a switch that is not True or False (the message names it).
-    """
-
-    diagnoser: Diagnoser | None = None
-    progress: bool = False
-    plots: bool = True
-    draw_figures: bool = True
-    wait: bool = True
-
-    def __post_init__(self):
-        check(self.diagnoser is None or isinstance(self.diagnoser, Diagnoser), "diagnoser", "a Diagnoser or None",
-              self.diagnoser)
-        for name in ("progress", "plots", "draw_figures", "wait"):
-            check(is_flag(getattr(self, name)), name, "True or False", getattr(self, name))
-
-
-def diagnose_and_report(flight: Flight, out_dir, config: DiagnosisConfig | None = None, *,
-                        model: ModelParams | None = None, model_document=None, source: dict | None = None,
-                        **settings) -> DiagnosisRun:
-    """Diagnose ``flight`` and write the outputs into ``out_dir``.
-
-    Parameters
-    ----------
-    flight : Flight
-        The raw flight (the diagnoser prefilters it).
-    out_dir : str or Path
-    config : DiagnosisConfig, optional
-        How it is diagnosed and written (default ``DiagnosisConfig()``), described there.
-    model : ModelParams, optional
-        The model whose structure is diagnosed (default: the paper's decoupled model).
-    model_document : dict, optional
-        Its ``model.json`` document (provenance carried into the new version).
-    source : dict, optional
-        Provenance of the flight file (``{"file": ..., "sha256": ...}``).
-    **settings
-        :class:`DiagnosisConfig` fields replacing the config's (``plots=False, wait=False, ...``).
-
-    When an effect was found, the new model, its wind and the diagnosis files are written as one
-    transaction (:class:`model_store.ModelDir`).
-
-    Raises
-    ------
-    TypeError
-        ``config`` is not a DiagnosisConfig, or a keyword is not one of its fields.
-    """
-    cfg = configured(DiagnosisConfig, config, settings, "diagnosis")
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    d = (cfg.diagnoser or Diagnoser(progress=cfg.progress)).fit(flight, model=model)
-    figures, pending = {}, []
-    if cfg.plots and d.baseline_score_ is not None:
-        figures = {"residual tests": out / "diagnosis_residuals.png",
-                   "worst held-out windows, before and after": out / "diagnosis_windows.png"}
-        pending.append(partial(_figures, d, out))
-    new_model = _new_model(d, flight, model_document, source) if d.steps_ else None
-    doc, paths = write_diagnosis(out, new_model, lambda model_path: diagnosis_document(d, source, model_path),
-                                 lambda doc: diagnosis_markdown(d, doc, figures), cfg.wait)
-    run = DiagnosisRun(d, doc, paths, pending)
-    if cfg.draw_figures:
-        run.draw_figures()
-    return run
-
-
-def write_diagnosis(out: Path, new_model, document_of, markdown_of, wait: bool = True) -> tuple[dict, dict]:
-    """Write ``diagnosis.json`` and ``diagnosis.md`` into ``out``; with ``new_model`` (a ``model.json``
-    document and the flight's wind profile) also the new model and its trace, all as one transaction of the
-    model folder (:class:`model_store.ModelDir`). Both diagnosis methods write through here.
-
-    ``document_of(model_path)`` builds the diagnosis document (``model_path`` None when no model is
-    written), ``markdown_of(document)`` the report. Returns ``(document, paths)``.
-    """
-    def text(doc):
-        return json.dumps(doc, indent=2, allow_nan=False) + "\n"
-
-    if new_model is None:
-        doc = document_of(None)
-        return doc, {"json": write_text(out / "diagnosis.json", text(doc)),
-                     "markdown": write_text(out / "diagnosis.md", markdown_of(doc))}
-    document, profile = new_model
-    with ModelDir(out).transaction(wait=wait, what="diagnose") as tx:
-        model_path = tx.write_model_document(document)
-        tx.add_traces([profile])
-        doc = document_of(model_path)
-        paths = {"model": model_path, "library": out / "disturbances",
-                 "json": tx.write_report("diagnosis.json", text(doc)),
-                 "markdown": tx.write_report("diagnosis.md", markdown_of(doc))}
-    return doc, paths
-
-
-def _figures(d: Diagnoser, out: Path) -> dict:
-    return {"residuals_png": plot_residual_tests(d, out / "diagnosis_residuals.png"),
-            "windows_png": plot_worst_windows(d, out / "diagnosis_windows.png")}
-
-
-def _new_model(d: Diagnoser, flight: Flight, model_document, source):
-    """The re-identified model with the added effects (its ``model.json`` document) and this flight's wind."""
-    from ..disturbance.equivalent_input import identify_disturbance
-
-    ident = d.identifier_
-    delays, log_shift = alignment_parts(d.spec_.alignment)
-    params = d.params_.with_values(**{f"tau_{a}": delays[i] for i, a in enumerate(AXES) if delays[i] > 0})
-    diagnosis = {
-        "added": [{"round": s.round, "axis": s.axis, "effect": s.effect, "terms": list(s.terms),
-                   "parameters": s.parameters} for s in d.steps_],
-        "input_alignment_s": {a: log_shift[i] for i, a in enumerate(AXES)},
-        "note": "A positive alignment found by the diagnosis (an exact transport delay) is stored as the servo "
-                "delay of eq. (31), a first-order Padé approximation. input_alignment_s < 0: the log's input "
-                "column lags the response; advance it by this much (identification.diagnosis.effects.shift_inputs) before "
-                "comparing this model with the log; the aircraft model itself needs no term for it.",
-        "criterion": criterion_text(d),
-    }
-    sources = list((model_document or {}).get("provenance", {}).get("sources", [])) + ([source] if source else [])
-    document = new_model_document(
-        params, structure="custom", sample_rate=d.flight_.sample_rate,
-        filter_settings=d.flight_.metadata.get("prefilter"),
-        identification={"method": "integral (Fig. 5) after heli diagnose", "interval": d.interval,
-                        "structure": d.spec_.to_dict(), "alpha": d.alpha},
-        fit_statistics={"axes": ident.summary(), "heldout_after": heldout_stats(d.final_score_)},
-        sources=sources, extra={"diagnosis": diagnosis},
-    )
-    return document, identify_disturbance(shift_inputs(flight, log_shift), params)

@@ -1,7 +1,7 @@
 """The identified disturbance in a report: its Markdown section and Figs. 19-21 of the paper.
 
 :func:`profile_markdown` writes the section of ``report.md`` on a
-:class:`~identification.disturbance.equivalent_input.DisturbanceProfile` (the disturbance table
+:class:`~identification.disturbance.profile.DisturbanceProfile` (the disturbance table
 of Section 3.3 and the simulation table of Section 3.4); :func:`save_figures`
 draws the profile (Fig. 19), the distributions of stick and disturbance
 (Figs. 20-21) and the rates simulated with the disturbance (Section 3.4).
@@ -18,7 +18,7 @@ from scipy import stats
 from heli_core.files import save_figure
 from heli_core.terms import AXES, INPUT_FOR_AXIS
 
-from ..disturbance.equivalent_input import MODEL_LABELS, compare_with_truth, interval90
+from ..disturbance.profile import MODEL_LABELS, compare_with_truth, interval90
 from ..disturbance.smoothing import SMOOTHING_WINDOW
 from ..errors import DisturbanceError
 from .figures import DPI, pyplot
@@ -26,7 +26,7 @@ from .tables import markdown_table
 from .validation import plot_rate_fit
 
 if TYPE_CHECKING:
-    from ..disturbance.equivalent_input import DisturbanceProfile
+    from ..disturbance.profile import DisturbanceProfile
 
 
 # ------------------------------------------------------------------- markdown

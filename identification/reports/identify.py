@@ -16,10 +16,10 @@ import numpy as np
 from heli_core.params import ModelParams
 from heli_core.terms import AXES, BASE_PARAMS, TERMS
 
-from ..disturbance.equivalent_input import compare_with_truth
+from ..disturbance.profile import compare_with_truth
 from ..validation.result import ValidationResult
-from .disturbance import figure_names, save_figures
-from .validation import flight_validation_markdown, plot_attitude_fit, plot_rate_fit
+from .disturbance import figure_names, profile_markdown, save_figures
+from .validation import flight_validation_markdown, plot_attitude_fit, plot_rate_fit, validation_markdown
 
 
 def parameter_table(identifiers: dict, truth: ModelParams | None) -> str:
@@ -138,7 +138,7 @@ def wind_table(ident) -> str:
 def wind_section(profile, title: str, true_ud=None, figure_prefix: str | None = None) -> list[str]:
     """The lines of one flight's wind in ``report.md``: the profile, its errors against a synthetic flight's
     true wind ``true_ud`` (3, n) when known, and links to its figures (named ``figure_prefix_*.png``)."""
-    section = [profile.markdown(title=title)]
+    section = [profile_markdown(profile, title)]
     if true_ud is not None:
         cmp = compare_with_truth(profile, true_ud)
         section += ["", "Against the true wind of this synthetic flight:", "",
@@ -237,7 +237,7 @@ def report_markdown(c: ReportContent) -> str:
     if c.method == "ml":
         md += _likelihood_sections(c, ident)
     md += ["## Fit statistics", "", fit_table(c.identifiers), "",
-           "## Validation by forward simulation (no disturbance)", "", c.validation.markdown()]
+           "## Validation by forward simulation (no disturbance)", "", validation_markdown(c.validation)]
     if c.plots:
         md += ["![Measured vs modelled body rates](rates.png)", "", "![Detrended attitude](attitude.png)", ""]
     if c.flight_checks:

@@ -1,8 +1,9 @@
-"""What ``heli diagnose`` (by likelihood, the default) writes: ``diagnosis.json``, ``diagnosis.md``, a figure,
-and the new model version.
+"""The diagnosis by likelihood as ``heli diagnose`` (the default) reports it: ``diagnosis.json``'s document,
+``diagnosis.md`` and its figure, drawn from a fitted
+:class:`identification.diagnosis.likelihood_diagnoser.LikelihoodDiagnoser`.
 
-:func:`diagnose_by_likelihood` runs :class:`identification.diagnosis.likelihood_diagnoser.LikelihoodDiagnoser` and writes,
-each file atomically (:mod:`heli_core.files`):
+:func:`identification.workflows.diagnose.diagnose_by_likelihood` runs the diagnoser and writes, each file
+atomically:
 
 * ``diagnosis.json`` — verdict, per step the axis, effect, parameters, likelihood-ratio statistic and
   threshold, runner-up, R² (one step, 0.5 s ahead, sticks-only simulation) before and after; every
@@ -26,17 +27,13 @@ from pathlib import Path
 import numpy as np
 
 from heli_core.files import jsonable, save_figure
-from heli_core.params import ModelParams
 from heli_core.terms import AXES
-from model_store.model_file import model_document as new_model_document
-from model_store.verdict import ModelVerdict, verdict_of
+from model_store.verdict import ModelVerdict
 
-from ..diagnosis.effects import CATALOGUE, alignment_parts, describe, shift_inputs
+from ..diagnosis.effects import CATALOGUE, describe
 from ..diagnosis.likelihood_diagnoser import LikelihoodDiagnoser
-from ..flight import Flight
 from ..likelihood.ahead_prediction import AHEAD_S, format_r2
 from ..log_band import log_band
-from .diagnosis import DiagnosisRun, write_diagnosis
 from .figures import pyplot
 
 SCHEMA = "heli-env/diagnosis"
@@ -178,73 +175,3 @@ def plot_statistics(d: LikelihoodDiagnoser, path) -> Path | None:
     fig.suptitle("Likelihood-ratio statistic of each candidate effect, round 1 (right of the line: accepted)")
     fig.tight_layout()
     return save_figure(fig, path)
-
-
-def diagnose_by_likelihood(flight: Flight, out_dir, *, model: ModelParams | None = None, model_document=None,
-                           source: dict | None = None, plots: bool = True,
-                           diagnoser: LikelihoodDiagnoser | None = None, wait: bool = True) -> DiagnosisRun:
-    """Diagnose ``flight`` by likelihood and write the outputs into ``out_dir`` (module docstring).
-
-    When an effect is found, the new model, this flight's wind and the diagnosis files are written as one
-    transaction of the model folder (:class:`model_store.ModelDir`): after a kill at any instant the folder
-    reads as before or after. ``wait``: wait for another command writing ``out_dir`` (default), or raise
-    :class:`~identification.errors.ModelDirBusyError`. The figure is drawn after the numbers are written.
-    """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    d = (diagnoser or LikelihoodDiagnoser()).fit(flight, model=model)
-    figure = out / "diagnosis_likelihood.png" if plots and d.rounds_ else None
-    new_model = _new_model(d, flight, model_document, source) if d.steps_ else None
-    verdict = verdict_of(new_model[0]) if new_model is not None else None
-    doc, paths = write_diagnosis(out, new_model, lambda model_path: diagnosis_document(d, source, model_path, verdict),
-                                 lambda doc: diagnosis_markdown(d, figure, verdict), wait)
-    if figure is not None and plot_statistics(d, figure) is not None:
-        paths["likelihood_png"] = figure
-    return DiagnosisRun(d, doc, paths)
-
-
-def _verdict(ident, params: ModelParams, aligned: Flight) -> ModelVerdict:
-    """The verdict ``heli identify`` would give the diagnosed model: the same judge, the integral method on the
-    same flight beside it, and its simulation from the (aligned) flight's sticks, whose divergence
-    ``heli identify`` refuses."""
-    from ..errors import SimulationDivergedError
-    from ..integral.method import IntegralIdentifier
-    from ..validation.model_verdict import judge_identifier
-    from ..validation.forward_simulation import validate_models
-
-    try:
-        validate_models(aligned, {"diagnosed": params})
-        diverged = None
-    except SimulationDivergedError as e:
-        diverged = str(e).split(": ", 1)[-1].split(";")[0]  # "the roll rate leaves ±100 rad/s at t=... s"
-    # the integral method beside it on the flight as the diagnosis fitted it (its late sticks advanced): on the
-    # T-REX hover, fitted on the log as written, it gave k2 = -10.5 and called the aligned model unusable
-    return judge_identifier(ident, IntegralIdentifier(structure="decoupled").fit(aligned), diverged)
-
-
-def _new_model(d: LikelihoodDiagnoser, flight: Flight, model_document, source):
-    """The model with the added effects (its ``model.json`` document) and this flight's wind."""
-    from ..disturbance.equivalent_input import identify_disturbance
-    from ..workflows.identify import identification_settings
-
-    delays, log_shift = alignment_parts(d.alignment_)
-    ident = d.identifier_
-    diagnosis = {
-        "method": "likelihood",
-        "added": [{"round": s.round, "axis": s.axis, "effect": s.effect, "parameters": s.parameters, "lr": s.lr,
-                   "threshold": s.threshold} for s in d.steps_],
-        "input_alignment_s": {a: log_shift[i] for i, a in enumerate(AXES)},
-        "note": "A positive alignment is the servo delay of eq. (31) (first-order Padé). input_alignment_s < 0: "
-                "the log's input column lags the response; advance it by this much "
-                "(identification.diagnosis.effects.shift_inputs) before comparing this model with the log.",
-        "criterion": criterion_text(d),
-    }
-    sources = list((model_document or {}).get("provenance", {}).get("sources", [])) + ([source] if source else [])
-    settings = identification_settings(ident)
-    settings["method"] += " after heli diagnose"
-    aligned = shift_inputs(flight, log_shift) if min(log_shift) < 0 else flight
-    document = new_model_document(d.params_, structure="custom", sample_rate=flight.sample_rate,
-                                  identification=settings, fit_statistics={"axes": ident.summary()},
-                                  sources=sources, extra={"diagnosis": diagnosis},
-                                  verdict=_verdict(ident, d.params_, aligned))
-    return document, identify_disturbance(aligned, d.params_, wind_torque=ident.wind_torque(0))

@@ -11,7 +11,7 @@ from model_store.model_file import MODEL_FILENAME
 from .tables import markdown_table
 
 if TYPE_CHECKING:
-    from ..workflows.refresh import RefreshResult
+    from ..workflows.refresh_result import RefreshResult
 
 
 def _fmt(v: float, digits: int = 4) -> str:

@@ -1,9 +1,9 @@
 """The result of a validation: the simulated histories and the error statistics of models on one flight.
 
 :func:`identification.validation.forward_simulation.validate_models` builds it; its tables and
-figures are :mod:`identification.reports.validation`'s. It stands apart from the
-simulation so that the report, which only reads it, does not import the
-simulation and the flight.
+figures are drawn from it by :mod:`identification.reports.validation`, which it does not import (a result
+never imports its report). It stands apart from the simulation so that the report, which only reads it,
+does not import the simulation and the flight.
 """
 
 from __future__ import annotations
@@ -79,10 +79,3 @@ class ValidationResult:
             "attitude_stats": self.attitude_stats,
             "between": self.between,
         })
-
-    def markdown(self) -> str:
-        """The rate table (Tables 1-2 layout, models side by side) and the attitude table
-        (:func:`identification.reports.validation.validation_markdown`)."""
-        from ..reports.validation import validation_markdown
-
-        return validation_markdown(self)

@@ -5,7 +5,7 @@ directory written by ``heli identify``:
 
 1. **Refuse duplicates.** A new flight whose file SHA-256 is already among the
    model's sources or the disturbance library's traces (or given twice) raises
-   :class:`DuplicateFlightError` before anything is written: its intervals would
+   :class:`~identification.workflows.refresh_sources.DuplicateFlightError` before anything is written: its intervals would
    be counted twice and its wind replayed twice as often.
 2. **Identify the new flights alone** with the model's own structure and settings
    (``model.json`` ``"structure"``, ``"identification"``, ``"filter"``,
@@ -52,14 +52,13 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from heli_core.files import jsonable, keep_copy, sha256_of
 from heli_core.terms import AXES
-from model_store.errors import LibraryError, ModelFileError
 from model_store.model_dir import ModelDir
 from model_store.model_file import MODEL_FILENAME, load_model
 
@@ -72,6 +71,8 @@ from ..validation.parameter_drift import (
     fisher_result,
     previous_std_errors,
 )
+from .refresh_result import RefreshResult
+from .refresh_sources import RefreshError, check_new_flights, estimator_of, find_source_flights, identifier_settings
 
 REFRESH_SCHEMA = "heli-env/refresh"
 REFRESH_SCHEMA_VERSION = 1
@@ -80,183 +81,6 @@ KEPT_FILES = ("report.md", "report.html", "refresh.md", "refresh.json")
 """Top-level files of a model directory a refresh replaces; copied to ``history/`` first (with the PNG figures)."""
 REPRODUCE_RTOL = 1e-6
 """Relative agreement expected between ``model.json`` and a refit of its source flights."""
-
-
-class RefreshError(ModelFileError):
-    """A model directory cannot be refreshed as asked (unknown structure, previous flights missing for pooling, bad option)."""
-
-
-class DuplicateFlightError(LibraryError):
-    """A new flight is already part of the model or of its disturbance library (same SHA-256)."""
-
-
-# ------------------------------------------------------------------ results
-@dataclass
-class RefreshResult:
-    """What :func:`refresh_model` found and wrote.
-
-    Attributes
-    ----------
-    drift : list of ParameterDrift
-    criterion : dict
-        ``alpha``, ``z``, ``n_parameters``, ``min_relative`` and the rule in words.
-    fit : str
-        ``"pooled"`` (previous + new flights) or ``"new"`` (new flights alone).
-    reason : str
-        Why that fit was chosen.
-    previous_flights : dict
-        ``found`` (list of {file, sha256, path}) and ``missing`` (list of {file, sha256}).
-    bootstrap_new, bootstrap_old, bootstrap_model : BootstrapResult or None
-        New flights; previous flights (when at hand); the written model.
-    run : IdentificationRun
-        The identification that wrote ``model.json``, ``report.md`` and the library version.
-    library_version : int or None
-    paths : dict of str to Path
-    """
-
-    drift: list
-    criterion: dict
-    fit: str
-    reason: str
-    previous_flights: dict
-    bootstrap_new: BootstrapResult
-    bootstrap_old: BootstrapResult | None
-    bootstrap_model: BootstrapResult
-    run: object
-    library_version: int | None
-    paths: dict = field(default_factory=dict)
-    notes: list = field(default_factory=list)
-
-    @property
-    def flagged(self) -> list[str]:
-        """Names of the parameters whose change is significant."""
-        return [row.name for row in self.drift if row.flagged]
-
-
-# ------------------------------------------------------------------ helpers
-def estimator_of(doc: dict, where: str = "model.json") -> str:
-    """Which estimator identified a model: ``"ml"`` (maximum likelihood) or ``"integral"`` (Fig. 5).
-
-    Models written before the maximum-likelihood estimator existed record only ``method``
-    ("integral (Fig. 5)"), or nothing: they are integral-method models.
-    """
-    ident = doc.get("identification") or {}
-    est = ident.get("estimator")
-    method = str(ident.get("method", "integral"))
-    if est is None:
-        est = "ml" if method.startswith("maximum") else ("integral" if method.startswith("integral") else None)
-    if est not in ("ml", "integral"):
-        raise RefreshError(f"{where}: identified by {method!r}; refresh re-identifies with the maximum-likelihood "
-                           "or the integral method only")
-    return est
-
-
-def identifier_settings(doc: dict, where: str = "model.json") -> tuple[str, dict]:
-    """Structure and identifier keyword arguments the model was identified with (see :func:`estimator_of`).
-
-    Raises
-    ------
-    RefreshError
-        A structure ``heli identify`` does not write (``"custom"``), or an unknown method.
-    """
-    structure = doc.get("structure")
-    if structure not in ("decoupled", "coupled"):
-        raise RefreshError(
-            f"{where}: structure {structure!r} cannot be refreshed; expected 'decoupled' or 'coupled' "
-            "(a model written by 'heli identify')"
-        )
-    ident = doc.get("identification") or {}
-    estimator = estimator_of(doc, where)
-    keys = (("input_hold", "wind_model", "remove_vibration", "vibration_min_hz", "max_nfev", "select_terms")
-            if estimator == "ml"
-            else ("interval", "offsets", "disturbance_order", "input_hold", "prefilter", "max_iter", "tol"))
-    kw = {k: ident[k] for k in keys if ident.get(k) is not None}
-    if "delay" in ident:
-        kw["delay"] = ident["delay"]
-    filt = doc.get("filter") or {}
-    for k in ("pass_hz", "stop_hz"):
-        if filt.get(k) is not None and estimator == "integral":
-            kw[k] = float(filt[k])
-    extra = tuple((doc.get("added_terms") or {}).keys())
-    if extra:
-        kw["extra_terms"] = extra
-    return structure, kw
-
-
-def find_source_flights(sources, search_dirs=(), candidates=()) -> tuple[list, list]:
-    """Locate a model's source flights by file name and SHA-256.
-
-    Parameters
-    ----------
-    sources : sequence of dict
-        ``model.json`` provenance entries ``{"file": name, "sha256": hex}``.
-    search_dirs : sequence of path
-        Folders where a file of the source's name is looked for.
-    candidates : sequence of path
-        Files given explicitly; matched by SHA-256 whatever their name.
-
-    Returns
-    -------
-    found : list of dict
-        ``{"file", "sha256", "path"}`` per source found (its bytes hash to the recorded SHA-256).
-    missing : list of dict
-        Sources not found (or found with other content: ``"note"`` says so).
-    """
-    by_sha = {}
-    for c in candidates:
-        c = Path(c)
-        if not c.is_file():
-            raise FileNotFoundError(f"previous flight {str(c)!r} does not exist")
-        by_sha.setdefault(sha256_of(c), c)
-    found, missing = [], []
-    for src in sources:
-        name, sha = src.get("file"), src.get("sha256")
-        path = by_sha.get(sha)
-        note = None
-        if path is None and name:
-            for d in search_dirs:
-                p = Path(d) / Path(name).name
-                if p.is_file():
-                    if sha256_of(p) == sha:
-                        path = p
-                        break
-                    note = f"{p} has other content (SHA-256 differs)"
-        if path is not None:
-            found.append({"file": name, "sha256": sha, "path": str(path)})
-        else:
-            missing.append({"file": name, "sha256": sha} | ({"note": note} if note else {}))
-    return found, missing
-
-
-def _check_new_flights(paths, digests, model_sources, library_entries) -> None:
-    """Raise :class:`DuplicateFlightError` for a new flight already in the model or library, or given twice."""
-    problems = []
-    seen = {}
-    in_model = {s.get("sha256"): s.get("file") for s in model_sources}
-    in_library = {}
-    for e in library_entries:
-        src = e.get("source") or {}
-        if src.get("sha256"):
-            in_library.setdefault(src["sha256"], e)
-    for path, sha in zip(paths, digests):
-        name = Path(path).name
-        if sha in seen:
-            problems.append(f"{name} is the same file as {Path(seen[sha]).name} (SHA-256 {sha[:12]}…)")
-            continue
-        seen[sha] = path
-        if sha in in_library:
-            e = in_library[sha]
-            problems.append(
-                f"{name} (SHA-256 {sha[:12]}…) is already in the disturbance library as trace {e.get('id')} "
-                f"(from {(e.get('source') or {}).get('name')!r}, added in version {e.get('added_in_version')})"
-            )
-        elif sha in in_model:
-            problems.append(f"{name} (SHA-256 {sha[:12]}…) is already a source of model.json (as {in_model[sha]!r})")
-    if problems:
-        raise DuplicateFlightError(
-            "expected flights new to this model; " + "; ".join(problems)
-            + ". Refreshing with them again would count their intervals twice and duplicate their wind traces"
-        )
 
 
 def _keep_in_history(root: Path) -> list[Path]:
@@ -459,7 +283,7 @@ class _Refresh:
         """Steps 1-6 of the module docstring; the files are staged in the transaction."""
         s = self.settings
         digests = [sha256_of(p) for p in self.new_paths]
-        _check_new_flights(self.new_paths, digests, self.old_sources, self.tx.base.entries)
+        check_new_flights(self.new_paths, digests, self.old_sources, self.tx.base.entries)
         flights, new_ident = self.fitted(self.new_paths, "new", "for the drift table")
         boot_new = self.uncertainty(new_ident, flights, self.seeds[0], "bootstrap (new flights)")
         names = list(boot_new.names)
