@@ -47,7 +47,7 @@ MOVED_MODULES: dict[str, tuple[str, ...]] = {
     "identification.interval_integrals": ("identification.integral.intervals",),
     "identification.bootstrap": ("identification.integral.bootstrap",),
     # likelihood/
-    "identification.ml_estimator": ("identification.likelihood.estimator",),
+    "identification.ml_estimator": ("identification.likelihood.estimator", "identification.likelihood.axis_search"),
     "identification.ml_axis_fit": ("identification.likelihood.axis_fit",),
     "identification.axis_likelihood": ("identification.likelihood.axis_likelihood",),
     "identification.state_space": ("identification.likelihood.state_space",),

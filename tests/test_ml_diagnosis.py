@@ -191,9 +191,9 @@ def test_a_candidate_that_predicts_held_out_blocks_worse_is_never_accepted(coupl
 
     real = ml.blocked_ahead_r2
 
-    def worse_with_k8(ident, a, names, *args):  # as if the coupling fitted only the blocks it saw
-        r2 = real(ident, a, names, *args)
-        return r2 - 0.2 if "k8" in names else r2
+    def worse_with_k8(problem, *args):  # as if the coupling fitted only the blocks it saw
+        r2 = real(problem, *args)
+        return r2 - 0.2 if "k8" in problem.names else r2
 
     monkeypatch.setattr(ml, "blocked_ahead_r2", worse_with_k8)
     d = LikelihoodDiagnoser(axes=("pitch",), max_rounds=1).fit(coupled_flight.flight)

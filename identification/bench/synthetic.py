@@ -232,7 +232,7 @@ PILOTS = ("pid", "pd", "autopilot")
 def gust_trace(rng: np.random.Generator, n: int, fs: float, config: "FlightConfig", std: float) -> np.ndarray:
     """One axis' zero-mean gust of standard deviation ``std`` with the spectrum of ``config.wind_model``,
     plus the slow Gauss-Markov part of ``config.wind_slow_fraction`` (module docstring)."""
-    from scipy import signal  # here, not at import: the CLI reads this module's settings for --help
+    from scipy import signal
 
     if std == 0:
         return np.zeros(n)

@@ -49,14 +49,8 @@ from ..flight import Flight
 from ..likelihood.ahead_prediction import AHEAD_S, ahead_r2, blocked_ahead_r2
 from ..likelihood.axis_likelihood import AxisLikelihood
 from ..likelihood.axis_pool import check_workers, in_worker, map_axes
-from ..likelihood.estimator import (
-    BURN_IN,
-    MAX_DELAY,
-    MAX_SHIFT,
-    MIN_PROFILE_DAMPING,
-    NOMINAL_DAMPING,
-    MaximumLikelihoodIdentifier,
-)
+from ..likelihood.axis_search import MAX_DELAY, MAX_SHIFT, AxisProblem
+from ..likelihood.estimator import BURN_IN, MIN_PROFILE_DAMPING, NOMINAL_DAMPING, MaximumLikelihoodIdentifier
 from ..likelihood.input_hold import check_hold
 from ..likelihood.state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll
 from ..preprocess import shift_inputs
@@ -293,10 +287,14 @@ class LikelihoodDiagnoser(DiagnosisResult):
             raise ValueError(f"axes must be a non-empty subset of {AXES}, got {self.axes!r}")
 
     # ------------------------------------------------------------------ fitting pieces
+    def _problem(self, a, names, flights) -> AxisProblem:
+        """Axis ``a``'s likelihood with the terms ``names`` over ``flights``, its damping searched."""
+        return self._ident.axis_problem(a, names, flights, self._burn, free_damping=True)
+
     def _data(self, a, names, alignment, kind):
         flight = self._shifted(a, alignment)
         tau = max(alignment, 0.0)
-        return self._ident._axis_data(a, names, [flight], self._burn, tau, kind)[0]
+        return self._problem(a, names, [flight]).data(tau, kind)
 
     def _shifted(self, a, alignment) -> Flight:
         if alignment >= 0:
@@ -320,8 +318,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
             cost, x, kind = 0.5 * float(e @ e), np.asarray(x0), kinds[0]
         else:
             start = alignment if free_tau else max(alignment, 0.0)
-            cost, x, kind, tau = self._ident._best(a, tuple(names), [flight], self._burn, start, x0, kinds, True,
-                                                   nfev, free_tau)
+            cost, x, kind, tau = self._problem(a, names, [flight]).best(start, x0, kinds, nfev, free_tau)
             if free_tau:
                 alignment = tau
         nll = concentrated_nll(cost, n)
@@ -332,9 +329,8 @@ class LikelihoodDiagnoser(DiagnosisResult):
         data = self._data(a, score.names, score.alignment, score.kind)
         like = AxisLikelihood(data)
         e, theta, S = like.solve_linear(score.x)
-        fit = self._ident._result(a, score.names, like, np.array(score.x), theta, e, S,
-                                  next((p for p in score.names if TERMS[p].feature == "pqr"[a]), None),
-                                  max(score.alignment, 0.0), score.kind, ())
+        problem = self._problem(a, score.names, [self._shifted(a, score.alignment)])
+        fit = problem.result(like, np.array(score.x), (e, theta, S), max(score.alignment, 0.0), score.kind)
         score.params = dict(fit.params)
         score.r2 = {"one_step": fit.prediction_r2,
                     "ahead_0.5s": ahead_r2(like, np.array(score.x), theta, int(round(AHEAD_S * self._fs))),
@@ -355,8 +351,8 @@ class LikelihoodDiagnoser(DiagnosisResult):
         blocks = [flight.segment(edges[i], edges[i + 1]) for i in range(HELDOUT_BLOCKS)]
         with np.errstate(all="ignore"):
             score.r2["heldout_0.5s"] = blocked_ahead_r2(
-                self._ident, a, score.names, blocks, self._burn, max(score.alignment, 0.0), score.x, score.kind,
-                NFEV, int(round(AHEAD_S * self._fs)))
+                self._problem(a, score.names, blocks), max(score.alignment, 0.0), score.x, score.kind, NFEV,
+                int(round(AHEAD_S * self._fs)))
 
     def _alignment_candidate(self, a, base: AxisScore) -> AxisScore:
         """The best alignment: a scan with the wind and damping held (linear parameters solved), then a

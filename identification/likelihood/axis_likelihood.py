@@ -21,15 +21,8 @@ import numpy as np
 from scipy import signal
 
 from .input_hold import hold_fraction
-from .state_space import (
-    HOLD_INDEX,
-    N_NONLINEAR,
-    discrete_model,
-    innovation_filters,
-    kalman,
-    servo_increments,
-    strictly_proper_tf,
-)
+from .state_space import (HOLD_INDEX, N_NONLINEAR, discrete_model, innovation_filters, kalman, servo_increments,
+                          strictly_proper_tf)
 
 MIN_SERVO_DELAY = 1e-4
 """Delays below this are no delay (the Padé servo of eq. 31 degenerates at zero) [s]."""

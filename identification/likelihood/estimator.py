@@ -44,11 +44,11 @@ axis' estimate; with ``delay="auto"`` a negative alignment is a log whose input
 column lags, applied as a shift of the stick by whole samples
 (:attr:`MaximumLikelihoodIdentifier.input_shifts_`).
 
-The module stands past 600 lines as one concept: the search of one axis and the
-decisions that tie the axes together (the log's hold, its shifts, the terms the
-data cannot carry) share the same search state, and split apart each half would
-reach into the other's privates. Its result type is :mod:`identification.likelihood.axis_fit`,
-the likelihood :mod:`identification.likelihood.axis_likelihood`.
+The search of one axis' likelihood (its data at a delay, the gust models tried, the optimum's standard
+errors and wind levels) is :class:`~identification.likelihood.axis_search.AxisProblem`, one object of what
+every search of the axis shares; this module holds the estimator's decisions over it: the delay profiled, the
+log's hold, its shifts, the terms the data cannot carry. Its result type is
+:mod:`identification.likelihood.axis_fit`, the likelihood :mod:`identification.likelihood.axis_likelihood`.
 """
 
 from __future__ import annotations
@@ -57,12 +57,11 @@ import time as _time
 from dataclasses import replace
 
 import numpy as np
-from scipy import optimize
 from threadpoolctl import threadpool_limits
 
 from heli_core.params import ModelParams
-from heli_core.servo import pade_filter, per_axis
-from heli_core.terms import AXES, DECOUPLED, FEATURES, RATE_DEPENDENCE, STICK_ROW, TERMS
+from heli_core.servo import per_axis
+from heli_core.terms import AXES, DECOUPLED, STICK_ROW, TERMS
 
 from ..errors import IdentifiabilityError, NotFittedError
 from ..excitation import on_static_input, require_moving_sticks, static_collective
@@ -71,35 +70,20 @@ from ..integral.method import IntegralIdentifier
 from ..preprocess import shift_inputs
 from ..vibration import remove_common_lines
 from .axis_fit import MLAxisFit
-from .axis_likelihood import MIN_SERVO_DELAY, AxisData, AxisLikelihood, simulation_r2
+from .axis_likelihood import AxisData, AxisLikelihood
 from .axis_pool import check_workers, map_axes
-from .input_hold import HOLD_START, check_hold, decide_hold, hold_fraction
+from .axis_search import MAX_SHIFT, AxisProblem, WindFit
+from .input_hold import check_hold, decide_hold
 from .servo_lag import profile_lag
-from .state_space import HOLD_INDEX, N_NONLINEAR, WIND_MODELS, ZETA_BOUNDS, concentrated_nll, rts_smooth, wind_block
-
-OWN_RATE = ("p", "q", "r")
-"""The feature that is each axis' own rate: its term is the damping, a state coefficient."""
-
-COMMAND_FEATURE = ("u_lat", "u_lon", "u_ped")
-"""The feature that is each axis' own servo-side command: its term goes through the servo model exactly."""
+from .state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll, rts_smooth, wind_block
 
 BURN_IN = 1.0
 """Seconds at the start of each flight left out of the likelihood while the filter settles."""
-
-MAX_SHIFT = 0.6
-"""Largest input shift (a log whose input column lags the response) searched [s]."""
 
 DEFAULT_DELAY_GRID = np.round(np.arange(-MAX_SHIFT, 0.5001, 0.01), 4)
 """Alignments profiled by ``delay="auto"`` [s]; from the best, the alignment is searched jointly with the rest.
 A positive one is the servo delay (Padé, eq. 31), a negative one a log whose input column lags the response
 (:attr:`MaximumLikelihoodIdentifier.input_shifts_`)."""
-
-XTOL, FTOL = 1e-6, 1e-8
-"""Stopping tolerances of the likelihood search: a relative cost change of 1e-8 is a change of the
-log-likelihood of about 1e-4 on a 300 s flight, far below any difference a test looks at."""
-
-MAX_DELAY = 0.6
-"""Largest servo delay searched [s]."""
 
 MIN_PROFILE_DAMPING = 0.05
 """A damping [1/s] below which the undelayed fit is not held for the alignment profile of ``delay="auto"``."""
@@ -111,15 +95,6 @@ helicopter's rate response) when the undelayed fit's is not positive and the int
 SUPPORT_Z = 3.0
 """With ``select_terms``: a term beyond the decoupled model is kept when ``|value| >= SUPPORT_Z * se``
 (two-sided 0.3 % level, about Bonferroni 1 % over the coupled model's five extra terms)."""
-
-TAU_UNIT = 2e4
-"""Unit of the alignment in a search started at no delay [s]: scipy's finite-difference step (sqrt(eps) of a
-unit) is then 0.3 ms, three times the band around 0 where no delay is modelled (MIN_SERVO_DELAY), a
-thirtieth of a 100 Hz sample."""
-
-TIME_CONSTANT_BOUNDS = ((0.8, 120.0), (0.02, 0.8))
-"""Bounds of the slow and the fast gust time constants [s]."""
-
 
 
 class MaximumLikelihoodIdentifier:
@@ -294,14 +269,15 @@ class MaximumLikelihoodIdentifier:
 
         def one_axis(axis_name):
             a = AXES.index(axis_name)
-            fit = self._fit_axis(a, names[a], flights, burn, start.params_, delays[a], lags[a])
+            problem = self.axis_problem(a, names[a], flights, burn)
+            fit = self._fit_axis(problem, start.params_, delays[a], lags[a])
             whole = round(fit.delay * fs) / fs
             if fit.delay < -0.5 / fs and abs(whole - fit.delay) > 1e-9:
                 # a late input column is late by whole samples of the log's clock: the fraction of a sample
                 # is the hold's (the two trade against each other and the damping, 8 % on a 150 s flight)
-                fit = self._refit(a, names[a], flights, burn, fit, tau=whole)
+                fit = self._refit(problem, fit, tau=whole)
             if self.select_terms:
-                fit = self._supported(a, names[a], fit, flights, burn, start.params_)
+                fit = self._supported(problem, fit, start.params_)
             if static[a]:  # terms of an input that does not vary: not fitted, listed as dropped
                 fit = replace(fit, dropped=tuple(fit.dropped) + static[a])
             return fit
@@ -334,7 +310,8 @@ class MaximumLikelihoodIdentifier:
             fit, a = fits[axis_name], AXES.index(axis_name)
             kept = tuple(p for p in names[a] if p not in fit.dropped)
             # a shift stays whole
-            return self._refit(a, kept, flights, burn, fit, tau=fit.delay if fit.delay < 0.0 else None)
+            return self._refit(self.axis_problem(a, kept, flights, burn), fit,
+                               tau=fit.delay if fit.delay < 0.0 else None)
 
         redo = [axis for axis, fit in fits.items()
                 if abs(fit.input_hold - self._decided_hold) > (fit.input_hold_se or 0.0)]
@@ -354,16 +331,22 @@ class MaximumLikelihoodIdentifier:
                 fits[a] = replace(fits[a], delay=0.0, input_shift=shift)
         return [shift_inputs(f, shifts) for f in flights]
 
+    def axis_problem(self, a: int, names, flights, burn: int, free_damping: bool | None = None) -> AxisProblem:
+        """Axis ``a``'s likelihood over ``flights`` with the parameters ``names``, searched at the hold in force
+        (:meth:`_hold`) with this estimator's budget; ``free_damping`` None: the damping is searched when
+        ``names`` hold one."""
+        return AxisProblem(a, tuple(names), flights, burn, self._hold(), self.max_nfev, free_damping)
+
     def _fitted_data(self, a: int, fit: MLAxisFit, flights, burn: int) -> AxisData:
         """The likelihood's data of axis ``a`` as ``fit`` was fitted (its terms, delay, gust model and lag) over
         ``flights`` (aligned and cleaned as :attr:`flights_` are)."""
         kept = tuple(p for p in self._param_names()[a] if p not in fit.dropped)
-        return self._axis_data(a, kept, flights, burn, fit.delay, fit.wind["model"], fit.lag)[0]
+        return self.axis_problem(a, kept, flights, burn).data(fit.delay, fit.wind["model"], fit.lag)
 
-    def _supported(self, a, axis_params, fit, flights, burn, start_params):
+    def _supported(self, problem: AxisProblem, fit: MLAxisFit, start_params) -> MLAxisFit:
         """Drop, one at a time, the terms beyond the decoupled model whose ``|value / se|`` is below
         :data:`SUPPORT_Z`, refitting the axis after each; the dropped terms are listed in ``fit.dropped``."""
-        names, dropped = tuple(axis_params), []
+        a, names, dropped = problem.axis, tuple(problem.names), []
         while True:
             extra = [p for p in names if p not in DECOUPLED[a]]
             z = {p: abs(fit.params[p]) / fit.std_errors[p] if fit.std_errors[p] > 0 else np.inf for p in extra}
@@ -372,262 +355,92 @@ class MaximumLikelihoodIdentifier:
                 return replace(fit, dropped=tuple(dropped))
             names = tuple(p for p in names if p != weakest)
             dropped.append(weakest)
-            fit = self._fit_axis(a, names, flights, burn, start_params, fit.delay, fit.lag)  # delay, lag stay
-
-    def _axis_data(self, a: int, axis_params, flights, burn: int, tau: float, wind_model: str = "gm2",
-                   lag: float = 0.0):
-        """The likelihood's data for axis ``a`` at servo delay ``tau`` and lag ``lag``, and the name of its
-        damping term."""
-        damping_name = next((p for p in axis_params if TERMS[p].feature == OWN_RATE[a]), None)
-        linear = [p for p in axis_params if p != damping_name and TERMS[p].feature != "1"]
-        offset = next((p for p in axis_params if TERMS[p].feature == "1"), None)
-
-        def regressors(tau_or_shift):
-            """Every flight's regressors with the axis' command delayed (> 0, Padé) or advanced (< 0)."""
-            out = []
-            for i, f in enumerate(flights):
-                cmd = np.array([f.sticks[r] for r in STICK_ROW])
-                if tau_or_shift > 0 or (lag > 0 and tau_or_shift == 0):
-                    cmd[a] = pade_filter(f.sticks[STICK_ROW[a]], tau_or_shift, f.sample_rate, lag)
-                elif tau_or_shift < 0:
-                    cmd[a] = np.interp(f.time - tau_or_shift, f.time, f.sticks[STICK_ROW[a]])
-                rows = [TERMS[p].sign * np.broadcast_to(FEATURES[TERMS[p].feature](f.rates, cmd, f.sticks[2]),
-                                                        (f.n,)) for p in linear]
-                if offset is not None:
-                    rows += [np.full(f.n, float(j == i)) for j in range(len(flights))]
-                out.append(np.array(rows, dtype=float).reshape(len(rows), f.n))
-            return out
-
-        ys = [np.asarray(f.rates[a], dtype=float) for f in flights]
-        Xs = regressors(tau)
-        reg_names = tuple(linear) + (tuple(f"{offset}@{j}" for j in range(len(flights))) if offset else ())
-        command = next((j for j, p in enumerate(linear) if TERMS[p].feature == COMMAND_FEATURE[a]), None)
-        servo_sticks = None
-        if command is not None:
-            sign = TERMS[linear[command]].sign
-            servo_sticks = [sign * np.asarray(f.sticks[STICK_ROW[a]], dtype=float) for f in flights]
-        causal = tuple(j for j, p in enumerate(linear) if TERMS[p].feature in RATE_DEPENDENCE)
-        return AxisData(ys, Xs, reg_names, flights[0].dt, self._hold_start(), burn, wind_model, command,
-                        servo_sticks, float(tau), causal, regressors, float(lag)), damping_name
-
-    def _search(self, like: AxisLikelihood, x0, free_damping: bool, max_nfev=None, tau0: float = 0.0):
-        """Search the damping, the wind model and the input's hold fraction (and the delay when
-        ``like.free_tau``) from ``x0``, the model part of a search vector (of either wind model) and ``tau0``.
-        The damping stays at 0 without a damping term; the hold at the user's when one was set."""
-        lo = np.array([-2.0, np.log(TIME_CONSTANT_BOUNDS[0][0]), np.log(TIME_CONSTANT_BOUNDS[1][0]),
-                       np.log(1e-4), np.log(1e-4), 0.0, np.log(ZETA_BOUNDS[0])])
-        hi = np.array([200.0, np.log(TIME_CONSTANT_BOUNDS[0][1]), np.log(TIME_CONSTANT_BOUNDS[1][1]),
-                       np.log(1e9), np.log(1e9), 1.0, np.log(ZETA_BOUNDS[1])])
-        x0 = np.asarray(x0, dtype=float)
-        start = list(x0[:HOLD_INDEX]) + [x0[HOLD_INDEX] if x0.size > HOLD_INDEX else self._hold_start()]
-        if like.nw > HOLD_INDEX + 1:
-            start.append(x0[HOLD_INDEX + 1] if x0.size > HOLD_INDEX + 1 else np.log(0.8))
-        lo, hi = list(lo[:like.nw]), list(hi[:like.nw])
-        if like.free_tau:
-            start.append(tau0)
-            lo.append(-MAX_SHIFT)
-            hi.append(MAX_DELAY)
-        lo, hi = np.array(lo), np.array(hi)
-        fixed = self._fixed(free_damping)
-        full = np.array(start)
-        for i, v in fixed.items():
-            full[i] = v
-        free = np.array([i not in fixed for i in range(full.size)])
-        # an alignment search started in the band where no delay is modelled (|tau| <= MIN_SERVO_DELAY, where
-        # the likelihood is flat) runs in units of TAU_UNIT: with x_scale="jac" the search is the same in any
-        # units but for its finite-difference step, which then reaches past the band; scipy's step in seconds
-        # (1.5e-8 s) saw no slope at 0 and the search never left it (a 20 ms tail delay identified as none,
-        # damping 3.3 for 6.0). Started elsewhere, the search keeps scipy's step: the larger one let a weakly
-        # excited axis leap 0.9 s into an unstable fit (the T-REX hover's yaw)
-        unit = np.ones(full.size)
-        if like.free_tau and abs(tau0) <= MIN_SERVO_DELAY:
-            unit[-1] = TAU_UNIT
-        lo, hi = lo / unit, hi / unit
-        z0 = np.clip(full[free] / unit[free], lo[free] + 1e-9 / unit[free], hi[free] - 1e-9 / unit[free])
-
-        def residual(z):
-            x = full.copy()
-            x[free] = z * unit[free]
-            return like.residual(x)
-
-        res = optimize.least_squares(residual, z0, bounds=(lo[free], hi[free]), x_scale="jac",
-                                     max_nfev=max_nfev or self.max_nfev, xtol=XTOL, ftol=FTOL)
-        full[free] = res.x * unit[free]
-        res.x = full
-        return res
+            # delay and lag stay
+            fit = self._fit_axis(replace(problem, names=names), start_params, fit.delay, fit.lag)
 
     def _hold(self):
         """The hold in force: the user's, the flight's once decided (:func:`decide_hold`), or "auto"."""
         return getattr(self, "_decided_hold", None) if self.input_hold == "auto" and \
             getattr(self, "_decided_hold", None) is not None else self.input_hold
 
-    def _hold_start(self) -> float:
-        """The hold fraction a search starts from (estimated) or keeps (set or decided)."""
-        hold = self._hold()
-        # estimated: from the middle, not from a bound where the trust region crawls (one in three fewer
-        # likelihood evaluations on bench flights, the same optimum)
-        return HOLD_START if hold == "auto" else hold_fraction(hold)
-
-    def _fixed(self, free_damping: bool = True) -> dict:
-        """Entries of the search vector that are not searched, with their values."""
-        fixed = {} if free_damping else {0: 0.0}
-        if self._hold() != "auto":
-            fixed[HOLD_INDEX] = hold_fraction(self._hold())
-        return fixed
-
-    def _per_kind(self, a, axis_params, flights, burn, tau, x0, models, free, max_nfev=None, free_tau=False,
-                  lag=0.0):
-        """Search each wind model from delay ``tau`` (held, or searched too with ``free_tau``) and from ``x0``
-        (one start for all, or a dict of starts by wind model).
-
-        Returns ``{model: (cost, x, tau, aic)}``, ``x`` the damping-and-wind part of the search vector.
-        """
-        out = {}
-        for kind in models:
-            like = AxisLikelihood(self._axis_data(a, axis_params, flights, burn, tau, kind, lag)[0], free_tau)
-            res = self._search(like, x0[kind] if isinstance(x0, dict) else x0, free, max_nfev, tau)
-            n = sum(len(y) - like.data.burn for y in like.data.y)
-            # Akaike: the concentrated NLL is n/2 log(2 cost / n) + const; one parameter more costs 1
-            aic = 0.5 * n * np.log(2.0 * res.cost / n) + N_NONLINEAR[kind]
-            out[kind] = (float(res.cost), res.x[:like.nw], like.tau_of(res.x), aic)
-        return out
-
-    def _best(self, a, axis_params, flights, burn, tau, x0, models, free, max_nfev=None, free_tau=False, lag=0.0):
-        """The wind model of :meth:`_per_kind` with the lowest Akaike criterion: ``(cost, x, model, tau)``."""
-        fits = self._per_kind(a, axis_params, flights, burn, tau, x0, models, free, max_nfev, free_tau, lag)
-        kind = min(fits, key=lambda k: fits[k][3])
-        cost, x, tau, _ = fits[kind]
-        return cost, x, kind, tau
-
-    def _fit_axis(self, a, axis_params, flights, burn, start_params, delay, lag=0.0) -> MLAxisFit:
+    def _fit_axis(self, problem: AxisProblem, start_params, delay, lag=0.0) -> MLAxisFit:
         """One axis fitted at servo delay ``delay`` and lag ``lag`` (seconds, or "auto": profiled)."""
-        first, damping_name = self._axis_data(a, axis_params, flights[:1], burn, 0.0)
+        first = problem.on(problem.flights[:1]).data(0.0)
+        damping_name = problem.damping_name
         free = damping_name is not None
         damping0 = float(-TERMS[damping_name].sign * start_params.get(damping_name)) if free else 0.0
         x0 = np.array([max(damping0, 0.1) if free else 0.0, np.log(4.0), np.log(0.3), np.log(100.0), np.log(100.0),
-                       self._hold_start()])
+                       problem.hold_start()])
         models = WIND_MODELS if self.wind_model == "auto" else (self.wind_model,)
         fixed_lag = 0.0 if lag == "auto" else float(lag)
         profile = []
         if delay == "auto":
-            # the likelihood over a grid of delays with the damping and wind of the undelayed fit held (the
-            # linear parameters solved at each), then every parameter and the delay searched from the best
-            grid = np.asarray(self.delay_grid if self.delay_grid is not None else DEFAULT_DELAY_GRID, dtype=float)
-            undelayed = self._per_kind(a, axis_params, flights, burn, 0.0, x0, models, free, lag=fixed_lag)
-            kind = min(undelayed, key=lambda k: undelayed[k][3])
-            xb = np.array(undelayed[kind][1], dtype=float)
-            if free and xb[0] < MIN_PROFILE_DAMPING:
-                # an undelayed fit with a damping of the wrong sign (a log whose input lags by a large
-                # fraction of the response time): held at it, the profile ranks alignments by how well
-                # an unstable model fits, so it is held at the integral method's start or a nominal one
-                xb[0] = max(x0[0], NOMINAL_DAMPING)
-            for tau in grid:
-                like = AxisLikelihood(self._axis_data(a, axis_params, flights, burn, float(tau), kind, fixed_lag)[0])
-                e = like.residual(xb)
-                profile.append((float(tau), 0.5 * float(e @ e)))
-            tau0 = min(profile, key=lambda p: p[1])[0]
-            # the held damping biases the grid's best: every wind model is searched from it together with the
-            # delay, each from its own undelayed fit (a second-order gust started from a first-order one stalls)
-            fits = {}
-            for start in ({k: v[1] for k, v in undelayed.items()}, x0):  # two starts: the likelihood is multimodal
-                for k, v in self._per_kind(a, axis_params, flights, burn, tau0, start, models, free,
-                                           free_tau=True, lag=fixed_lag).items():
-                    if k not in fits or v[3] < fits[k][3]:
-                        fits[k] = v
-            kind = min(fits, key=lambda k: fits[k][3])
-            cost, x, tau, _ = fits[kind]
+            found, profile = self._profile_delay(problem, x0, models, fixed_lag)
         else:
-            cost, x, kind, tau = self._best(a, axis_params, flights, burn, float(delay), x0, models, free,
-                                            lag=fixed_lag)
+            found = problem.best(float(delay), x0, models, lag=fixed_lag)
         free_tau = delay == "auto"
         lag_profile, lag_lr = (), None
         if lag == "auto" and first.servo_row is not None:  # an axis without its stick has no servo
-            found = profile_lag(self, a, axis_params, flights, burn, (cost, x, kind, tau), free, free_tau)
-            fixed_lag, (cost, x, kind, tau), lag_profile, lag_lr = found
-        return self._finish_axis(a, axis_params, flights, burn, x, kind, tau, fixed_lag, free_tau, damping_name,
-                                 profile, lag_profile, lag_lr)
+            fixed_lag, found, lag_profile, lag_lr = profile_lag(problem, found, models, free_tau)
+        return self._finish_axis(problem, found, fixed_lag, free_tau, profile, lag_profile, lag_lr)
 
-    def _finish_axis(self, a, axis_params, flights, burn, x, kind, tau, lag, free_tau, damping_name, profile=(),
-                     lag_profile=(), lag_lr=None) -> MLAxisFit:
-        """The fit of axis ``a`` at the searched optimum ``x`` (model part), gust model ``kind``, delay ``tau``."""
-        data, _ = self._axis_data(a, axis_params, flights, burn, tau, kind, lag)
+    def _profile_delay(self, problem: AxisProblem, x0, models, lag: float) -> tuple[WindFit, list]:
+        """``delay="auto"``: the likelihood over a grid of delays with the damping and wind of the undelayed fit
+        held (the linear parameters solved at each), then every parameter and the delay searched from the best.
+        Returns the optimum and the profile ``[(delay, cost)]``."""
+        grid = np.asarray(self.delay_grid if self.delay_grid is not None else DEFAULT_DELAY_GRID, dtype=float)
+        undelayed = problem.per_kind(0.0, x0, models, lag=lag)
+        kind = min(undelayed, key=lambda k: undelayed[k][3])
+        xb = np.array(undelayed[kind][1], dtype=float)
+        if problem.searches_damping and xb[0] < MIN_PROFILE_DAMPING:
+            # an undelayed fit with a damping of the wrong sign (a log whose input lags by a large
+            # fraction of the response time): held at it, the profile ranks alignments by how well
+            # an unstable model fits, so it is held at the integral method's start or a nominal one
+            xb[0] = max(x0[0], NOMINAL_DAMPING)
+        profile = []
+        for tau in grid:
+            like = AxisLikelihood(problem.data(float(tau), kind, lag))
+            e = like.residual(xb)
+            profile.append((float(tau), 0.5 * float(e @ e)))
+        tau0 = min(profile, key=lambda p: p[1])[0]
+        # the held damping biases the grid's best: every wind model is searched from it together with the
+        # delay, each from its own undelayed fit (a second-order gust started from a first-order one stalls)
+        fits = {}
+        for start in ({k: v[1] for k, v in undelayed.items()}, x0):  # two starts: the likelihood is multimodal
+            for k, v in problem.per_kind(tau0, start, models, free_tau=True, lag=lag).items():
+                if k not in fits or v[3] < fits[k][3]:
+                    fits[k] = v
+        kind = min(fits, key=lambda k: fits[k][3])
+        cost, x, tau, _ = fits[kind]
+        return WindFit(cost, x, kind, tau), profile
+
+    def _finish_axis(self, problem: AxisProblem, found: WindFit, lag, free_tau, profile=(), lag_profile=(),
+                     lag_lr=None) -> MLAxisFit:
+        """The fit of the axis at the searched optimum ``found`` (its model part, gust model and delay)."""
+        data = problem.data(found.tau, found.kind, lag)
         like = AxisLikelihood(data, free_tau)
-        x = np.append(x, tau) if free_tau else x
-        e, theta, S = like.solve_linear(x)
-        n_burnt = int(sum(len(y) - burn for y in data.y))
-        fit = self._result(a, axis_params, like, x, theta, e, S, damping_name, float(tau), kind,
-                           tuple((t, float(concentrated_nll(c, n_burnt))) for t, c in profile))
+        x = np.append(found.x, found.tau) if free_tau else found.x
+        solution = like.solve_linear(x)
+        n_burnt = int(sum(len(y) - problem.burn for y in data.y))
+        fit = problem.result(like, x, solution, float(found.tau), found.kind,
+                             tuple((t, float(concentrated_nll(c, n_burnt))) for t, c in profile))
         return replace(fit, lag=float(lag), lag_profile=lag_profile, lag_lr=lag_lr)
 
-    def _refit(self, a, axis_params, flights, burn, fit: MLAxisFit, tau: float | None = None) -> MLAxisFit:
-        """Axis ``a`` searched again from its optimum ``fit``: at the hold now in force (the log's, once
+    def _refit(self, problem: AxisProblem, fit: MLAxisFit, tau: float | None = None) -> MLAxisFit:
+        """The axis searched again from its optimum ``fit``: at the hold of ``problem`` (the log's, once
         decided) and at delay ``tau`` when given (else its own, searched again when profiled), its gust model
         and lag kept. The few steps from a nearby optimum, not a new fit."""
-        damping_name = next((p for p in axis_params if TERMS[p].feature == OWN_RATE[a]), None)
         x0 = np.array(fit.state, dtype=float)
-        if HOLD_INDEX in self._fixed():
-            x0[HOLD_INDEX] = self._fixed()[HOLD_INDEX]
-        free_tau = tau is None and self._delays()[a] == "auto"
+        fixed = problem.fixed()
+        if HOLD_INDEX in fixed:
+            x0[HOLD_INDEX] = fixed[HOLD_INDEX]
+        free_tau = tau is None and self._delays()[problem.axis] == "auto"
         kind = fit.wind["model"]
-        found = self._per_kind(a, axis_params, flights, burn, fit.delay if tau is None else tau, x0, (kind,),
-                               damping_name is not None, free_tau=free_tau, lag=fit.lag)
+        found = problem.per_kind(fit.delay if tau is None else tau, x0, (kind,), free_tau=free_tau, lag=fit.lag)
         _, x, tau, _ = found[kind]
-        refit = self._finish_axis(a, axis_params, flights, burn, x, kind, tau, fit.lag, free_tau, damping_name)
+        refit = self._finish_axis(problem, WindFit(found[kind][0], x, kind, tau), fit.lag, free_tau)
         return replace(refit, delay_profile=fit.delay_profile, lag_profile=fit.lag_profile, lag_lr=fit.lag_lr,
                        dropped=fit.dropped)
-
-    def _result(self, a, axis_params, like, x, theta, e, S, damping_name, tau, kind, profile) -> MLAxisFit:
-        """Standard errors, wind levels and fit statistics of the optimum."""
-        data = like.data
-        n = e.size
-        mse = float(np.mean(e ** 2))
-        nx = len(x)
-        se, cond = like.fisher(x, theta, mse, free_damping=damping_name is not None, fixed=self._fixed())
-        damping, ts, tf, qs, qf, zeta = like.unpack(x)
-        R = mse / S
-        params, std = {}, {}
-        if like.free_tau:
-            std[f"tau_{AXES[a]}"] = float(se[like.nw])
-        if damping_name is not None:
-            params[damping_name] = float(-damping / TERMS[damping_name].sign)
-            std[damping_name] = float(se[0])
-        k_off = [i for i, nm in enumerate(data.names) if "@" in nm]
-        for i, nm in enumerate(data.names):
-            if "@" not in nm:
-                params[nm] = float(theta[i])
-                std[nm] = float(se[nx + i])
-        offs = ()
-        if k_off:
-            off_name = data.names[k_off[0]].split("@")[0]
-            offs = tuple(float(theta[i]) for i in k_off)
-            weights = np.array([len(y) - data.burn for y in data.y], dtype=float)
-            weights /= weights.sum()
-            params[off_name] = float(weights @ np.array(offs))
-            within = float(np.sqrt(np.sum(weights ** 2 * se[[nx + i for i in k_off]] ** 2)))
-            spread = float(np.std(offs, ddof=1) / np.sqrt(len(offs))) if len(offs) > 1 else 0.0
-            std[off_name] = float(np.hypot(within, spread))
-        gain_name = next((p for p in axis_params if TERMS[p].effect == "control"), None)
-        gain = abs(params.get(gain_name, 0.0)) if gain_name else 0.0
-        sd = np.sqrt([qs * R, qf * R])
-        wind = {
-            "model": kind,
-            "time_constants_s": [ts, tf],
-            "time_constants_se_s": [float(ts * se[1]), float(tf * se[2])],
-            "damping_ratio": zeta if kind == "gm_so" else None,
-            "torque_std": [float(sd[0]), float(sd[1])],
-            "torque_std_se": [float(0.5 * sd[0] * se[3]), float(0.5 * sd[1] * se[4])],
-            "ud_std": [float(s / gain) if gain else None for s in sd],
-            "total_torque_std": float(np.hypot(*sd)),
-        }
-        yall = np.concatenate([y[data.burn:] for y in data.y])
-        ss = float(np.sum((yall - yall.mean()) ** 2)) or 1.0
-        hold = like.hold_at(x)
-        return MLAxisFit(
-            AXES[a], params, std, tau, cond, simulation_r2(data, damping, theta, hold),
-            (float(np.mean(like.residual(np.asarray(x)) ** 2)), mse), wind, float(np.sqrt(R)),
-            float(0.5 * n * (np.log(2 * np.pi * mse) + 1.0)), int(n), offs, 1.0 - float(e @ e) / ss,
-            profile, state=np.asarray(x[:like.nw], dtype=float), input_hold=hold,
-            input_hold_se=float(se[HOLD_INDEX]) if HOLD_INDEX not in self._fixed() else None)
 
     # ----------------------------------------------------------------- use
     def _check_fitted(self):

@@ -18,7 +18,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-from .state_space import WIND_MODELS, concentrated_nll
+from .axis_search import WindFit
+from .state_space import concentrated_nll
 
 LAG_GRID = (0.01, 0.02, 0.03, 0.05, 0.08, 0.12, 0.2)
 """Servo lags profiled [s]; the best is refined between its neighbours."""
@@ -46,24 +47,34 @@ def _refined(profile: list) -> float:
     return float(np.clip(-c[1] / (2 * c[0]), x0, x2)) if c[0] > 0 else x1
 
 
-def profile_lag(ident, a: int, names, flights, burn: int, base: tuple, free: bool, free_tau: bool) -> tuple:
-    """Profile axis ``a``'s servo lag from ``base = (cost, x, wind model, delay)``, its fit without one.
+def profile_lag(problem, base: WindFit, models, free_tau: bool) -> tuple:
+    """Profile the servo lag of ``problem``'s axis from ``base``, its fit without one.
 
-    Returns ``(lag, (cost, x, wind model, delay), profile, lr)``: the lag kept (0 when the data do not
-    support one, with ``base``), the fit at it, ``(lag, nll)`` over the grid (the refined lag included) and
-    the statistic of the best lag against none.
+    Parameters
+    ----------
+    problem : identification.likelihood.axis_search.AxisProblem
+        The axis' likelihood.
+    base : WindFit
+        Its optimum without a lag.
+    models : sequence of str
+        The gust models the best lag's fit chooses from.
+    free_tau : bool
+        Whether the delay is searched with the rest (``delay="auto"``).
+
+    Returns ``(lag, fit, profile, lr)``: the lag kept (0 when the data do not support one, with ``base``),
+    the fit at it (a :class:`WindFit`), ``(lag, nll)`` over the grid (the refined lag included) and the
+    statistic of the best lag against none.
     """
     cost0, x0, kind0, tau0 = base
-    n = int(sum(f.n - burn for f in flights))
+    n = int(sum(f.n - problem.burn for f in problem.flights))
     profile = [(0.0, concentrated_nll(cost0, n))]
     for lag in LAG_GRID:
-        cost, _, _, _ = ident._best(a, names, flights, burn, tau0, x0, (kind0,), free, NFEV, free_tau, lag)
+        cost, _, _, _ = problem.best(tau0, x0, (kind0,), NFEV, free_tau, lag)
         profile.append((float(lag), concentrated_nll(cost, n)))
     best = _refined(profile)
     if best <= 0.0:
         return 0.0, base, tuple(profile), 0.0
-    models = WIND_MODELS if ident.wind_model == "auto" else (ident.wind_model,)
-    fit = ident._best(a, names, flights, burn, tau0, x0, models, free, None, free_tau, best)
+    fit = problem.best(tau0, x0, models, None, free_tau, best)
     nll = concentrated_nll(fit[0], n)
     profile = sorted([p for p in profile if p[0] != best] + [(best, nll)])  # the refined lag's full fit
     lr = 2.0 * (concentrated_nll(cost0, n) - nll)
