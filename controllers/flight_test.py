@@ -17,7 +17,7 @@ fitted corner of the library's spectrum; a library of slow plus broadband gusts
 has more slow power than that low-pass, and a loose loop, whose error is the
 slow gust itself, then flies half the predicted error (KS 0.16–0.40 at
 Kp ≤ 4 on the shipped model, `scripts/bench.py --only sweep`'s grid). The autopilot sees the generator's sensor model (gyro noise, rotor
-vibration, attitude noise; :class:`identification.bench.synthetic.FlightConfig`)
+vibration, attitude noise; :class:`identification.bench.flight_config.FlightConfig`)
 and adds the trim of the *identified* model for the flown collective (what a
 real autopilot would know); the errors compared are those of the true state
 (the aircraft's, as a motion-capture reference would give them).
@@ -26,7 +26,7 @@ The truth is, by choice:
 
 * ``"model"`` — the model's own identified parameters: a clean check of the
   method (the wind library and the two predictions), free of model error;
-* ``"paper"`` — :data:`identification.bench.synthetic.PAPER_PARAMS`, the truth the
+* ``"paper"`` — :data:`identification.bench.flight_config.PAPER_PARAMS`, the truth the
   shipped model's synthetic flights were flown with: adds the identification
   error (e.g. k12, kd3 of the yaw axis);
 * a :class:`heli_core.params.ModelParams`.
@@ -54,7 +54,8 @@ from heli_core.files import jsonable, write_text
 from heli_core.params import ModelParams
 from heli_core.physics import trim_sticks
 from heli_core.terms import AXES
-from identification.bench.synthetic import PAPER_PARAMS, FlightConfig, coloured_noise, sensor_errors
+from identification.bench.flight_config import PAPER_PARAMS, FlightConfig
+from identification.bench.synthetic import coloured_noise, sensor_errors
 
 from .closed_loop import axis_index, d_cutoffs, d_poles_of, disturbance_spectrum, replay_segments
 from .errors import SweepError
@@ -393,7 +394,7 @@ def _fresh_wind(cfg: FlightTestConfig, wind: dict, params, env_model) -> LoopInp
     (``cfg.gusts``: surrogates of the library's traces, :func:`_surrogate_gust`, or coloured noise at its
     level and corner per axis), the collective (0.05 Hz low-pass around the library's mean), and with
     ``cfg.sensors`` the flight generator's gyro (noise + rotor vibration) and attitude noise
-    (:class:`~identification.bench.synthetic.FlightConfig`). The torque is the truth's ``k·u_d``; the trim the
+    (:class:`~identification.bench.flight_config.FlightConfig`). The torque is the truth's ``k·u_d``; the trim the
     autopilot adds is the identified model's (``env_model.params``).
     """
     rng, sensor = np.random.default_rng(cfg.seed), FlightConfig()

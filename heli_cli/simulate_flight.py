@@ -11,10 +11,10 @@ CELL_NAMES = ("default", "independent", "broadband-pd-half", "broadband-pd-2x", 
 
 EFFECT_NAMES = ("servo_delay", "cross_coupling", "gyroscopic", "nonlinear_damping", "gain_scheduling",
                 "collective_torque", "servo_lag")
-"""The names of :data:`identification.bench.synthetic.EFFECTS` (a test keeps the two equal)."""
+"""The names of :data:`identification.bench.flight_config.EFFECTS` (a test keeps the two equal)."""
 
 EFFECT_ALIAS_NAMES = ("flybar", "quadratic_damping", "collective_effectiveness")
-"""The names of :data:`identification.bench.synthetic.EFFECT_ALIASES` (a test keeps the two equal)."""
+"""The names of :data:`identification.bench.flight_config.EFFECT_ALIASES` (a test keeps the two equal)."""
 
 from .argtypes import FLIGHT_BYTES_PER_SECOND, affordable, number, output_path, seed
 
@@ -42,7 +42,7 @@ def register(sub):
     p.add_argument("--wind", type=number("a finite number >= 0", 0.0, low_open=False), default=None,
                    help="half-width of the 90%% interval of the cyclic wind u_d (default 0.09, the paper's level)")
     p.add_argument("--cell", default=None, choices=sorted(CELL_NAMES), metavar="NAME",
-                   help="start from a test-bench condition (identification/bench.py): "
+                   help="start from a test-bench condition (identification/bench/cells.py): "
                    + ", ".join(CELL_NAMES) + "; the options below change it further")
     p.add_argument("--wind-scale", type=number("a number > 0", 0.0), default=None,
                    help="multiply the wind level (0.5 to 2 spans calm to twice the paper's)")
@@ -114,7 +114,7 @@ def _config(args):
     from dataclasses import replace
 
     from identification.bench.cells import BENCH_CELLS
-    from identification.bench.synthetic import MANOEUVRE_CONFIG, FlightConfig
+    from identification.bench.flight_config import MANOEUVRE_CONFIG, FlightConfig
 
     cfg = replace(BENCH_CELLS[args.cell], duration=args.duration) if args.cell else FlightConfig(duration=args.duration)
     if args.manoeuvre:

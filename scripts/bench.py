@@ -104,7 +104,7 @@ def bench_identification(repeats: int) -> dict:
 
 def bench_physics(repeats: int) -> dict:
     from heli_core.physics import initial_state, simulate, step
-    from identification.bench.synthetic import PAPER_PARAMS
+    from identification.bench.flight_config import PAPER_PARAMS
 
     x = [float(v) for v in initial_state()]
     u = [0.1, -0.05, 0.2, 0.01]

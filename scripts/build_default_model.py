@@ -23,7 +23,8 @@ import tempfile
 from pathlib import Path
 
 from identification.bench.cells import BENCH_CELLS
-from identification.bench.synthetic import PAPER_PARAMS, simulate_flight
+from identification.bench.flight_config import PAPER_PARAMS
+from identification.bench.synthetic import simulate_flight
 
 SEEDS = (101, 102, 103)
 SERVO_DELAY = {"tau_roll": 0.045, "tau_pitch": 0.045, "tau_yaw": 0.035}

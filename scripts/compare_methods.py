@@ -102,7 +102,8 @@ def fly_validation_twin(flight_path, directory: Path) -> Path:
     Reads ``<stem>.truth.json`` beside ``flight_path``; writes the twin (and its
     truth) into ``directory`` and returns its path.
     """
-    from identification.bench.synthetic import FlightConfig, load_truth, simulate_flight, truth_paths
+    from identification.bench.flight_config import FlightConfig
+    from identification.bench.synthetic import load_truth, simulate_flight, truth_paths
 
     saved = json.loads(truth_paths(flight_path)["truth"].read_text())
     config = FlightConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in saved["config"].items()})

@@ -2,7 +2,7 @@
 
 For every case (a truth-model effect, a time-misaligned log, two effects, no effect, a too-short or a
 hover-only flight) and several seeds, flies a 180 s synthetic flight of the manoeuvre pilot
-(``identification.bench.synthetic.MANOEUVRE_CONFIG``) in the paper's wind, runs the diagnosis without telling it
+(``identification.bench.flight_config.MANOEUVRE_CONFIG``) in the paper's wind, runs the diagnosis without telling it
 the truth and prints one Markdown row per flight: the effects named (axis), the runner-up and margin of the
 first step, and the held-out forward-simulation MAE before -> after on the axes that changed.
 
@@ -15,7 +15,8 @@ import argparse
 import time
 
 from heli_core.terms import AXES
-from identification.bench.synthetic import EFFECTS, MANOEUVRE_CONFIG, PAPER_PARAMS, FlightConfig, simulate_flight
+from identification.bench.flight_config import EFFECTS, MANOEUVRE_CONFIG, PAPER_PARAMS, FlightConfig
+from identification.bench.synthetic import simulate_flight
 from identification.diagnosis.heldout_diagnoser import Diagnoser, heldout_stats
 from identification.preprocess import shift_inputs
 

@@ -28,7 +28,8 @@ import time
 import numpy as np
 
 from heli_core.terms import AXES
-from identification.bench.synthetic import FlightConfig, simulate_flight
+from identification.bench.flight_config import FlightConfig
+from identification.bench.synthetic import simulate_flight
 from identification.disturbance.equivalent_input import DEFAULT_INTERVAL, DEFAULT_SMOOTHING, identify_disturbance
 from identification.disturbance.profile import compare_with_truth
 from identification.integral.method import IntegralIdentifier

@@ -1,7 +1,7 @@
 """How much torque each hidden effect puts on each axis, against the gust's torque: what a diagnosis can see.
 
 A missing term can only be named where the torque it makes is a measurable share of what the
-model already calls wind. For every effect of :data:`identification.bench.synthetic.EFFECTS` made of
+model already calls wind. For every effect of :data:`identification.bench.flight_config.EFFECTS` made of
 terms (the servo delay and lag are not), on default flights (the closed-loop pilot's gentle one-stick
 sweeps) and on manoeuvre flights (large sweeps on all sticks at once), the script flies the truth
 with the effect and prints, per axis, the standard deviation of the effect's torque
@@ -28,7 +28,7 @@ def torque_shares(sim, effect: str) -> list:
     """Per axis, std of ``effect``'s torque over std of the wind torque in the flight ``sim`` (NaN where it
     has no term)."""
     from heli_core.terms import AXES, FEATURES, STICK_ROW, TERMS
-    from identification.bench.synthetic import EFFECTS
+    from identification.bench.flight_config import EFFECTS
 
     rates = sim.true_rates
     sticks = sim.flight.sticks
@@ -53,7 +53,8 @@ def main(argv=None):
 
     from heli_core.terms import TERMS
     from identification.bench.cells import BENCH_CELLS
-    from identification.bench.synthetic import EFFECTS, MANOEUVRE_CONFIG, FlightConfig, simulate_flight
+    from identification.bench.flight_config import EFFECTS, MANOEUVRE_CONFIG, FlightConfig
+    from identification.bench.synthetic import simulate_flight
 
     base = BENCH_CELLS[args.cell] if args.cell else FlightConfig()
     kinds = {"gentle": base, "manoeuvre": replace(base, sweep_amplitude=MANOEUVRE_CONFIG.sweep_amplitude,

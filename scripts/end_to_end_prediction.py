@@ -66,7 +66,7 @@ def cell_gusts(cfg, truth, env_model, n_flights: int, steps: int, dt: float, see
 def fly_truth(truth, inputs, axis: int, pairs, nominal, signs, dt: float):
     """|attitude error| [deg] of the truth under each pair, shape (pairs, steps, flights)."""
     from controllers.replay import Autopilot, fly, rk4_step
-    from identification.bench.synthetic import FlightConfig
+    from identification.bench.flight_config import FlightConfig
 
     kp, kd = np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
     autopilot = Autopilot(axis, kp, kd, nominal, signs)

@@ -59,7 +59,7 @@ AXES = ("roll", "pitch", "yaw")
 
 def _aircraft() -> dict:
     from heli_core.params import ModelParams
-    from identification.bench.synthetic import PAPER_PARAMS
+    from identification.bench.flight_config import PAPER_PARAMS
 
     paper = replace(PAPER_PARAMS, tau_roll=0.04, tau_pitch=0.04, tau_yaw=0.025)
     agile = ModelParams(k2=12.0, k3=9.0, kd1=0.3, k6=-10.0, k7=9.5, kd2=0.1, k10=40.0, k11=6.0, k12=-1.5,

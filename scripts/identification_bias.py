@@ -124,7 +124,8 @@ def integral_variants(args):
     from tqdm import tqdm
 
     from identification.integral.method import IntegralIdentifier
-    from identification.bench.synthetic import FlightConfig, simulate_flight
+    from identification.bench.flight_config import FlightConfig
+    from identification.bench.synthetic import simulate_flight
 
     variants = {
         "global": dict(offsets="global"),

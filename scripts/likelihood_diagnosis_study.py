@@ -1,6 +1,6 @@
 """How often the likelihood diagnosis names a hidden effect, and how often it names one that is not there.
 
-For every case (a hidden effect of :data:`identification.bench.synthetic.EFFECTS` at the size of the
+For every case (a hidden effect of :data:`identification.bench.flight_config.EFFECTS` at the size of the
 README's study, a time-misaligned log, or no effect) and every seed, flies a default synthetic
 flight (the closed-loop pilot of ``heli simulate-flight``, one-stick sweeps, the paper's wind; or a
 bench cell with ``--cell``), runs :class:`identification.diagnosis.likelihood_diagnoser.LikelihoodDiagnoser` without
@@ -55,7 +55,8 @@ TRUE_AXES = {
 
 def _flight(name, seed, duration, cell):
     from identification.preprocess import shift_inputs
-    from identification.bench.synthetic import MANOEUVRE_CONFIG, simulate_flight
+    from identification.bench.flight_config import MANOEUVRE_CONFIG
+    from identification.bench.synthetic import simulate_flight
 
     case = CASES[name]
     config = MANOEUVRE_CONFIG if case.get("manoeuvre") else None

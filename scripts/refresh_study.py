@@ -40,7 +40,7 @@ def _one(job):
     from threadpoolctl import threadpool_limits
 
     from identification.validation.parameter_drift import compared_parameters, critical_z, drift_table, fisher_result
-    from identification.bench.synthetic import PAPER_PARAMS
+    from identification.bench.flight_config import PAPER_PARAMS
 
     seed, duration, cell, change, alpha = job
     with threadpool_limits(limits=1, user_api="blas"):

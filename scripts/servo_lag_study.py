@@ -35,7 +35,8 @@ def _one(job):
 
     from identification.bench.cells import BENCH_CELLS
     from identification.likelihood.estimator import MaximumLikelihoodIdentifier
-    from identification.bench.synthetic import PAPER_PARAMS, simulate_flight
+    from identification.bench.flight_config import PAPER_PARAMS
+    from identification.bench.synthetic import simulate_flight
 
     case, cell, seed, duration = job
     truth = PAPER_PARAMS.with_values(**CASES[case])

@@ -10,7 +10,8 @@ import pytest
 from scipy import signal
 
 from identification.bench.cells import BENCH_CELLS, PAPER_LEVEL_CLOSED_LOOP_BROADBAND, bench_flight
-from identification.bench.synthetic import MANOEUVRE_CONFIG, FlightConfig, simulate_flight
+from identification.bench.flight_config import MANOEUVRE_CONFIG, FlightConfig
+from identification.bench.synthetic import simulate_flight
 
 
 def _digest(sim) -> str:

@@ -395,7 +395,7 @@ def test_simulate_flight_lists_the_bench_cells_and_effects_the_library_has():
     # written out in heli_cli so that 'heli --help' needs no numpy; they must stay the library's names
     from heli_cli import simulate_flight as cli
     from identification.bench.cells import BENCH_CELLS
-    from identification.bench.synthetic import EFFECT_ALIASES, EFFECTS
+    from identification.bench.flight_config import EFFECT_ALIASES, EFFECTS
 
     assert cli.CELL_NAMES == tuple(BENCH_CELLS)
     assert cli.EFFECT_NAMES == tuple(EFFECTS) and cli.EFFECT_ALIAS_NAMES == tuple(EFFECT_ALIASES)

@@ -274,7 +274,7 @@ def test_one_linearisation_for_design_and_for_the_sweep():
     from controllers.pd.linearisation import _axis_ss
     from heli_core.linear import hover_linearisation
     from heli_core.servo import servo_coefficients
-    from identification.bench.synthetic import PAPER_PARAMS
+    from identification.bench.flight_config import PAPER_PARAMS
 
     params = PAPER_PARAMS.with_values(gs1=-0.6, k4=0.8, tau_pitch=0.05)
     lin = hover_linearisation(params, 0.3)

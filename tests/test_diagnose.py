@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from heli_core.terms import AXES, TERMS
-from identification.bench.synthetic import EFFECTS, MANOEUVRE_CONFIG, PAPER_PARAMS, FlightConfig, simulate_flight
+from identification.bench.flight_config import EFFECTS, MANOEUVRE_CONFIG, PAPER_PARAMS, FlightConfig
+from identification.bench.synthetic import simulate_flight
 from identification.diagnosis.effects import CATALOGUE
 from identification.diagnosis.heldout_diagnoser import Diagnoser, paired_log_test
 from identification.diagnosis.residual_tests import cross_correlation, whiteness

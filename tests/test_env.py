@@ -26,7 +26,7 @@ from heli_core.quaternion import euler_from_quaternion
 from heli_env import ActionError, EnvModelError, HeliAttitudeEnv, default_model_dir, load_env_model
 from heli_env.tasks import TaskConfig
 from heli_env.vector_env import HeliAttitudeVectorEnv
-from identification.bench.synthetic import EFFECTS
+from identification.bench.flight_config import EFFECTS
 from model_store.disturbance_library import DisturbanceLibrary
 
 ENV_ID = "HeliAttitude-v0"

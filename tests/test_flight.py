@@ -15,7 +15,8 @@ from numpy.testing import assert_allclose, assert_array_equal
 from heli_core.params import ModelParams
 from heli_core.physics import QUAT, simulate
 from heli_core.quaternion import euler_from_quaternion
-from identification.bench.synthetic import MANOEUVRE_CONFIG, simulate_flight
+from identification.bench.flight_config import MANOEUVRE_CONFIG
+from identification.bench.synthetic import simulate_flight
 from identification.errors import FlightLogError, UnitError
 from identification.flight import HOVER_RATE_RMS_MAX, Flight, make_flight, rate_attitude_ratio
 

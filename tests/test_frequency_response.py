@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from identification.bench.synthetic import FlightConfig, simulate_flight
+from identification.bench.flight_config import FlightConfig
+from identification.bench.synthetic import simulate_flight
 from identification.errors import IdentifiabilityError
 from identification.flight import Flight
 from identification.reports.frequency_response import frequency_markdown, plot_frequency_response

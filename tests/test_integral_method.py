@@ -7,7 +7,8 @@ from numpy.testing import assert_allclose
 from heli_core.params import ModelParams
 from heli_core.physics import simulate
 from heli_core.servo import pade_filter
-from identification.bench.synthetic import FlightConfig, simulate_flight
+from identification.bench.flight_config import FlightConfig
+from identification.bench.synthetic import simulate_flight
 from identification.errors import IdentifiabilityError, NotFittedError
 from identification.flight import make_flight
 from identification.integral.method import IntegralIdentifier

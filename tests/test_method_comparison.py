@@ -18,9 +18,10 @@ import pytest
 from heli_cli import main as cli
 from identification.baselines import TABLE3_STARTS, TABLE5_LENGTHS
 from identification.bench.comparison_config import QUICK_NLR_MAX_NFEV, TABLE4_CASES
+from identification.bench.flight_config import FlightConfig
 from identification.bench.method_comparison import SCHEMA, MethodComparison, compare_methods
 from identification.bench.method_runs import TABLE5_EKF
-from identification.bench.synthetic import FlightConfig, load_truth, simulate_flight
+from identification.bench.synthetic import load_truth, simulate_flight
 from identification.errors import FlightLogError, IdentifiabilityError
 from identification.io import read_flight
 from identification.reports.method_comparison import comparison_markdown

@@ -59,7 +59,7 @@ def test_physical_bounds_of_candidate_terms():
 def test_an_unphysical_candidate_is_reported_but_never_accepted():
     # anti-damping on a flight whose roll rate grows faster than linear damping allows: the quadratic
     # term fits with the wrong sign, and that is not a physical effect
-    from identification.bench.synthetic import PAPER_PARAMS
+    from identification.bench.flight_config import PAPER_PARAMS
 
     sf = simulate_flight(120, seed=4, truth=PAPER_PARAMS.with_values(nld1=-4.0))
     d = LikelihoodDiagnoser(axes=("roll",)).fit(sf.flight)
@@ -187,15 +187,15 @@ def test_an_added_effect_predicts_better_on_blocks_the_fit_did_not_see(coupled_f
 
 
 def test_a_candidate_that_predicts_held_out_blocks_worse_is_never_accepted(coupled_flight, monkeypatch):
-    import identification.diagnosis.likelihood_diagnoser as ml
+    import identification.diagnosis.axis_scores as scores
 
-    real = ml.blocked_ahead_r2
+    real = scores.blocked_ahead_r2
 
     def worse_with_k8(problem, *args):  # as if the coupling fitted only the blocks it saw
         r2 = real(problem, *args)
         return r2 - 0.2 if "k8" in problem.names else r2
 
-    monkeypatch.setattr(ml, "blocked_ahead_r2", worse_with_k8)
+    monkeypatch.setattr(scores, "blocked_ahead_r2", worse_with_k8)
     d = LikelihoodDiagnoser(axes=("pitch",), max_rounds=1).fit(coupled_flight.flight)
     assert ("cross_coupling", "pitch") not in d.effects_found_
     row = next(r for r in d.rounds_[0] if r["effect"] == "cross_coupling")

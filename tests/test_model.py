@@ -386,7 +386,7 @@ def test_the_old_disturbance_keyword_is_a_deprecated_name_of_the_wind_torque():
     t = np.arange(200) * 0.01
     sticks = np.zeros((4, t.size))
     torque = np.full((3, t.size), 0.5)
-    from identification.bench.synthetic import PAPER_PARAMS as PAPER
+    from identification.bench.flight_config import PAPER_PARAMS as PAPER
 
     new = core_simulate(PAPER, t, sticks, torque=torque)
     with pytest.warns(DeprecationWarning, match="torque"):

@@ -21,7 +21,8 @@ from numpy.testing import assert_allclose
 import heli_env  # noqa: F401  (registers HeliAttitude-v0)
 from heli_cli.main import main
 from heli_core.files import sha256_of
-from identification.bench.synthetic import PAPER_PARAMS, FlightConfig, simulate_flight
+from identification.bench.flight_config import PAPER_PARAMS, FlightConfig
+from identification.bench.synthetic import simulate_flight
 from identification.errors import IdentifiabilityError
 from identification.integral.bootstrap import interval_bootstrap, interval_flights
 from identification.integral.method import IntegralIdentifier

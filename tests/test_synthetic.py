@@ -14,16 +14,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from identification.bench.synthetic import (
-    EFFECT_ALIASES,
-    EFFECTS,
-    PAPER_PARAMS,
-    FlightConfig,
-    load_truth,
-    simulate_flight,
-    truth_paths,
-    truth_params,
-)
+from identification.bench.flight_config import EFFECT_ALIASES, EFFECTS, PAPER_PARAMS, FlightConfig, truth_params
+from identification.bench.synthetic import load_truth, simulate_flight, truth_paths
 from identification.io import read_csv_flight
 
 SEED = 7

@@ -18,7 +18,8 @@ import pytest
 from numpy.testing import assert_allclose
 
 from heli_cli.main import main
-from identification.bench.synthetic import PAPER_PARAMS, FlightConfig, simulate_flight
+from identification.bench.flight_config import PAPER_PARAMS, FlightConfig
+from identification.bench.synthetic import simulate_flight
 from identification.errors import FlightLogError
 from identification.flight import Flight
 from identification.likelihood.estimator import MaximumLikelihoodIdentifier

@@ -1,6 +1,6 @@
 """The test bench: named conditions a user flies in, to judge estimators beyond the default flight.
 
-Each cell of :data:`BENCH_CELLS` is a :class:`~identification.bench.synthetic.FlightConfig` that changes
+Each cell of :data:`BENCH_CELLS` is a :class:`~identification.bench.flight_config.FlightConfig` that changes
 the wind (spectrum, level, slow gusts), the pilot (human PID or PD with a reaction delay, a digital
 autopilot holding its commands) or the sensors (vibration lines, gyro noise) of the default synthetic
 flight. :data:`PAPER_LEVEL_CLOSED_LOOP_BROADBAND` names the cells of the headline target: a pilot
@@ -21,7 +21,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from .synthetic import FlightConfig, SyntheticFlight, simulate_flight
+from .flight_config import FlightConfig
+from .synthetic import SyntheticFlight, simulate_flight
 
 PAPER_WIND = (0.09, 0.09, 0.03)
 """The paper's gust level: 90 % half-width of u_d on roll, pitch, yaw (Section 3.3)."""

@@ -35,7 +35,7 @@ The verdict is ``undecided`` when the flight is shorter than ``min_duration``.
 from __future__ import annotations
 
 import time as _time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
@@ -46,15 +46,13 @@ from heli_core.terms import AXES, DECOUPLED, RATE_DEPENDENCE, STICK_ROW, TERMS
 
 from ..excitation import on_static_input, static_collective
 from ..flight import Flight
-from ..likelihood.ahead_prediction import AHEAD_S, ahead_r2, blocked_ahead_r2
-from ..likelihood.axis_likelihood import AxisLikelihood
 from ..likelihood.axis_pool import check_workers, in_worker, map_axes
-from ..likelihood.axis_search import MAX_DELAY, MAX_SHIFT, AxisProblem
-from ..likelihood.estimator import BURN_IN, MIN_PROFILE_DAMPING, NOMINAL_DAMPING, MaximumLikelihoodIdentifier
+from ..likelihood.estimator import BURN_IN, MaximumLikelihoodIdentifier
 from ..likelihood.input_hold import check_hold
-from ..likelihood.state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll
+from ..likelihood.state_space import WIND_MODELS
 from ..preprocess import shift_inputs
-from .effects import CATALOGUE, MAX_ALIGNMENT, NONE, SERVO_DELAY, UNDECIDED, DiagnosisResult, implausible
+from .axis_scores import NFEV, AxisScore, FlightScorer, fresh_start, predicts_worse
+from .effects import CATALOGUE, NONE, SERVO_DELAY, UNDECIDED, DiagnosisResult
 
 ALPHA = 0.01
 """Family-wise level of the likelihood-ratio test per axis and round (Bonferroni over the candidates)."""
@@ -75,54 +73,6 @@ the model is misspecified in small ways the chi-square law does not know (a hold
 controller's sample of lag): on effect-free flights its statistic reaches 12.2, hence the higher floor."""
 MIN_DURATION = 60.0
 """Shortest flight a diagnosis decides on [s]."""
-ALIGNMENT_GRID = np.round(np.arange(-MAX_ALIGNMENT, 0.5001, 0.025), 4)
-"""Alignments the ``servo_delay`` candidate profiles [s]; the best is refined to 1 ms."""
-MAX_GAIN_RATIO = 3.0
-"""Largest factor a fitted gain scheduling may change the control gain by over the flight's collective range
-(a rotor's control power grows with its load, not several-fold within one flight)."""
-AHEAD_R2_TOLERANCE = (0.002, 0.05)
-"""A candidate that lowers the 0.5 s-ahead prediction R² by more than this is not accepted: a term that
-raises the one-step likelihood while the model predicts worse fits the noise or the wind, not the aircraft.
-The first for candidates driven by the inputs (an alignment, the collective), whose multi-step prediction is
-exact; the second for terms of the measured rates (coupling, gyroscopic, quadratic damping), which the
-predictor takes as known inputs rather than propagating them: its R² then moves for reasons of its own (a
-true quadratic damping lowered it by 0.037 on a 180 s flight), and only a large drop is read (the T-REX
-hover's roll: 0.52 to 0.42)."""
-AHEAD_R2_SHARE = 0.25
-"""Nor is a candidate that costs more than this share of the base's 0.5 s-ahead R² (where that is the smaller
-drop): on an axis the model hardly predicts, a fixed tolerance is no check at all (the T-REX hover's yaw, base
-0.058 held out, lost 0.044 of it to a quadratic damping, within the 0.05 of a rate term). Where the base
-predicts more than 0.2 (every bench flight) the tolerances above decide alone."""
-EDGE_S = 0.01
-"""An alignment within this of the searched range's edge [s] is a boundary hit, not a found value."""
-RESOLUTION_SAMPLES = 2
-"""Smallest alignment change read as a servo delay or an input shift, in samples. Below it the timing is the
-log's convention: where each stick is stamped (start or end of its sample, one sample), whether it is held
-or interpolated (half a sample), and a flight controller's sample of computation, which a tight loop turns
-into a likelihood: on effect-free flights of the autopilot bench cell the alignment found was 10-14 ms at
-100 Hz with a statistic of 30-135, against 50-80 ms for the servo delays of the study."""
-NFEV = 12
-"""Likelihood searches' evaluation budget per candidate (warm-started from the axis' current fit; each
-Jacobian costs one evaluation per nonlinear parameter more)."""
-HELDOUT_BLOCKS = 3
-"""Contiguous blocks a candidate about to be accepted is checked on, each predicted by the structure fitted on
-the others (:func:`~identification.likelihood.ahead_prediction.blocked_ahead_r2`); blocks shorter than
-:data:`MIN_BLOCK_S` are not cut, and the check is then left out (the step's ``"heldout_0.5s"`` R² None)."""
-MIN_BLOCK_S = 20.0
-"""Shortest held-out block [s]."""
-
-
-@dataclass
-class AxisScore:
-    """One fitted structure on one axis: its likelihood and how well it predicts."""
-
-    names: tuple
-    alignment: float
-    nll: float
-    x: np.ndarray
-    kind: str
-    params: dict = field(default_factory=dict)
-    r2: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -175,27 +125,6 @@ def _starting_structure(model: ModelParams | None) -> tuple[dict, list]:
     for a in range(3):
         structure[a] = tuple(p for p, v in values.items() if TERMS[p].axis == a and (v != 0.0 or p in DECOUPLED[a]))
     return structure, list(model.taus)
-
-
-def _fresh(x) -> np.ndarray:
-    """A second start for a search: the damping and hold fraction of ``x`` with the wind model's default
-    starting values."""
-    return np.array([max(float(x[0]), 0.5), np.log(4.0), np.log(0.3), np.log(100.0), np.log(100.0),
-                     float(x[HOLD_INDEX])])
-
-
-def _predicts_worse(before: dict, after: dict, of_rates: bool = False, key: str = "ahead_0.5s",
-                    where: str = "") -> str | None:
-    """Why a candidate's model predicts worse than the base ``AHEAD_S`` ahead, or None; ``of_rates``: the
-    candidate adds terms of the measured rates (:data:`AHEAD_R2_TOLERANCE`, :data:`AHEAD_R2_SHARE`); ``key``
-    the R² compared (in the fit, or ``"heldout_0.5s"`` on blocks the fit did not see, ``where`` saying so)."""
-    b, c = before.get(key), after.get(key)
-    if c is None or not np.isfinite(c):
-        return f"its {AHEAD_S:g} s-ahead prediction{where} diverges"
-    if b is not None and np.isfinite(b) and c < b - min(AHEAD_R2_TOLERANCE[int(of_rates)],
-                                                        AHEAD_R2_SHARE * max(b, 0.0)):
-        return f"it lowers the {AHEAD_S:g} s-ahead prediction R²{where} from {b:.3f} to {c:.3f}"
-    return None
 
 
 class LikelihoodDiagnoser(DiagnosisResult):
@@ -287,133 +216,6 @@ class LikelihoodDiagnoser(DiagnosisResult):
             raise ValueError(f"axes must be a non-empty subset of {AXES}, got {self.axes!r}")
 
     # ------------------------------------------------------------------ fitting pieces
-    def _problem(self, a, names, flights) -> AxisProblem:
-        """Axis ``a``'s likelihood with the terms ``names`` over ``flights``, its damping searched."""
-        return self._ident.axis_problem(a, names, flights, self._burn, free_damping=True)
-
-    def _data(self, a, names, alignment, kind):
-        flight = self._shifted(a, alignment)
-        tau = max(alignment, 0.0)
-        return self._problem(a, names, [flight]).data(tau, kind)
-
-    def _shifted(self, a, alignment) -> Flight:
-        if alignment >= 0:
-            return self._flight
-        key = (a, round(alignment, 6))
-        if key not in self._shift_cache:
-            shifts = [0.0, 0.0, 0.0]
-            shifts[a] = alignment
-            self._shift_cache[key] = shift_inputs(self._flight, shifts)
-        return self._shift_cache[key]
-
-    def _score(self, a, names, alignment, x0, kinds, nfev, free_tau=False) -> AxisScore:
-        """The likelihood of a structure and alignment: searched from ``x0`` (``nfev`` evaluations; with
-        ``free_tau`` a positive alignment, the servo delay, is searched too), or at ``x0`` itself with only
-        the linear parameters solved when ``nfev`` is 0."""
-        flight = self._flight if free_tau else self._shifted(a, alignment)
-        n = flight.n - self._burn
-        if nfev == 0:
-            like = AxisLikelihood(self._data(a, names, alignment, kinds[0]))
-            e = like.residual(np.asarray(x0))
-            cost, x, kind = 0.5 * float(e @ e), np.asarray(x0), kinds[0]
-        else:
-            start = alignment if free_tau else max(alignment, 0.0)
-            cost, x, kind, tau = self._problem(a, names, [flight]).best(start, x0, kinds, nfev, free_tau)
-            if free_tau:
-                alignment = tau
-        nll = concentrated_nll(cost, n)
-        return AxisScore(tuple(names), float(alignment), float(nll), np.asarray(x), kind)
-
-    def _describe(self, a, score: AxisScore) -> AxisScore:
-        """Parameters and R² (one step, 0.5 s ahead, sticks-only simulation) of a score."""
-        data = self._data(a, score.names, score.alignment, score.kind)
-        like = AxisLikelihood(data)
-        e, theta, S = like.solve_linear(score.x)
-        problem = self._problem(a, score.names, [self._shifted(a, score.alignment)])
-        fit = problem.result(like, np.array(score.x), (e, theta, S), max(score.alignment, 0.0), score.kind)
-        score.params = dict(fit.params)
-        score.r2 = {"one_step": fit.prediction_r2,
-                    "ahead_0.5s": ahead_r2(like, np.array(score.x), theta, int(round(AHEAD_S * self._fs))),
-                    "simulation": fit.r2}
-        return score
-
-    def _heldout(self, a, score: AxisScore) -> None:
-        """Add to ``score.r2`` its ``AHEAD_S``-ahead R² on :data:`HELDOUT_BLOCKS` blocks of the flight, each
-        predicted by the structure fitted on the others (``"heldout_0.5s"``; None when the flight is too short
-        to cut, the check then left out)."""
-        if "heldout_0.5s" in score.r2:
-            return
-        flight = self._shifted(a, score.alignment)
-        if flight.duration / HELDOUT_BLOCKS < MIN_BLOCK_S:
-            score.r2["heldout_0.5s"] = None
-            return
-        edges = np.linspace(flight.time[0], flight.time[-1], HELDOUT_BLOCKS + 1)
-        blocks = [flight.segment(edges[i], edges[i + 1]) for i in range(HELDOUT_BLOCKS)]
-        with np.errstate(all="ignore"):
-            score.r2["heldout_0.5s"] = blocked_ahead_r2(
-                self._problem(a, score.names, blocks), max(score.alignment, 0.0), score.x, score.kind, NFEV,
-                int(round(AHEAD_S * self._fs)))
-
-    def _alignment_candidate(self, a, base: AxisScore) -> AxisScore:
-        """The best alignment: a scan with the wind and damping held (linear parameters solved), then a
-        bounded search around the best with every parameter free."""
-        kinds = (base.kind,)
-        held = np.array(base.x, dtype=float)
-        if held[0] < MIN_PROFILE_DAMPING:  # as the identifier's profile: an unstable base ranks nothing
-            held[0] = NOMINAL_DAMPING
-        scan = [self._score(a, base.names, float(s), held, kinds, 0) for s in ALIGNMENT_GRID
-                if abs(s - base.alignment) > 1e-9]
-        best = min(scan, key=lambda sc: sc.nll)
-        # the scan held the undelayed fit's damping and wind, which a large alignment makes wrong: the
-        # alignment (a servo delay, or a shift of the log's input) is then searched with the rest, from the
-        # base fit and from a fresh start (the likelihood in the alignment is multimodal), and with every
-        # gust model, the best by Akaike as in the identifier: a delay changes which one fits (held at the
-        # undelayed choice, a 50 ms yaw delay came out 46 ms, 76 in NLL short, and a quadratic damping
-        # made up the difference). The base of each round gets the same choice.
-        tries = [self._score(a, base.names, best.alignment, start, WIND_MODELS, 3 * NFEV, free_tau=True)
-                 for start in (base.x, _fresh(base.x))]
-        return min(tries, key=lambda sc: sc.nll)
-
-    def _implausible(self, a, base: AxisScore, sc: AxisScore) -> str | None:
-        """Why a candidate's fitted added terms cannot be physical (:func:`identification.diagnosis.effects.implausible`)."""
-        added = [p for p in sc.names if p not in base.names]
-        if not added:  # the alignment candidate: a value pinned at the edge of the search was not found
-            edge = MAX_DELAY if sc.alignment > 0 else -MAX_SHIFT
-            if abs(sc.alignment - edge) < EDGE_S:
-                return (f"alignment {sc.alignment:+.3f} s at the edge of the searched range "
-                        f"[{-MAX_SHIFT:g}, {MAX_DELAY:g}] s: no delay or input shift within it explains the data")
-            if abs(sc.alignment - base.alignment) < RESOLUTION_SAMPLES / self._fs:
-                return (f"alignment {sc.alignment:+.4f} s moves the timing by less than {RESOLUTION_SAMPLES} samples "
-                        f"({1e3 * RESOLUTION_SAMPLES / self._fs:.0f} ms), below a log's timing resolution (a stick "
-                        "stamped at the start or the end of its sample, held or interpolated, a flight controller's "
-                        "sample of computation): not read as a servo delay")
-            return None
-        data = self._data(a, sc.names, sc.alignment, sc.kind)
-        _, theta, _ = AxisLikelihood(data).solve_linear(np.asarray(sc.x))
-        values = {nm: float(v) for nm, v in zip(data.names, theta)}
-        return implausible({nm: v for nm, v in values.items() if nm in added}) or \
-            self._scheduled_gain_implausible(values, added)
-
-    def _scheduled_gain_implausible(self, values: dict, added) -> str | None:
-        """Why a fitted gain scheduling cannot be physical: the control gain it gives changes sign, or by more
-        than :data:`MAX_GAIN_RATIO`, over the flight's collective range."""
-        for gs in (p for p in added if TERMS[p].effect == "gain_scheduling"):
-            gain = next((p for p in values if TERMS.get(p) is not None and TERMS[p].effect == "control"
-                         and TERMS[p].axis == TERMS[gs].axis), None)
-            if gain is None:
-                continue
-            col = self._flight.sticks[2]
-            lo, hi = float(np.min(col)), float(np.max(col))
-            ends = [TERMS[gain].sign * values[gain] + TERMS[gs].sign * values[gs] * c for c in (lo, hi)]
-            if ends[0] * ends[1] <= 0.0:
-                return (f"{gs} = {values[gs]:.3g} makes the control gain change sign over the flight's collective "
-                        f"[{lo:.3g}, {hi:.3g}] ({ends[0]:.3g} to {ends[1]:.3g}): not a rotor's load")
-            ratio = max(abs(ends[0]), abs(ends[1])) / min(abs(ends[0]), abs(ends[1]))
-            if ratio > MAX_GAIN_RATIO:
-                return (f"{gs} = {values[gs]:.3g} changes the control gain {ratio:.1f}-fold over the flight's "
-                        f"collective [{lo:.3g}, {hi:.3g}], more than x{MAX_GAIN_RATIO:g}: not a rotor's load")
-        return None
-
     # ------------------------------------------------------------------ fit
     def fit(self, flight: Flight, model: ModelParams | None = None) -> "LikelihoodDiagnoser":
         """Diagnose ``model``'s structure (default: the paper's decoupled model) against ``flight``."""
@@ -430,12 +232,10 @@ class LikelihoodDiagnoser(DiagnosisResult):
         self.input_hold_ = self.input_hold
         self.hold_fractions_ = {}
         self.hold_decision_ = None
-        self._ident = MaximumLikelihoodIdentifier(input_hold=self.input_hold_, workers=self.workers)
-        cleaned, _ = self._ident._clean(flight)
-        self._flight = cleaned
-        self._fs = flight.sample_rate
-        self._burn = int(round(BURN_IN * self._fs))
-        self._shift_cache = {}
+        ident = MaximumLikelihoodIdentifier(input_hold=self.input_hold_, workers=self.workers)
+        cleaned, _ = ident._clean(flight)
+        fs = flight.sample_rate
+        self._scores = FlightScorer(ident, cleaned, int(round(BURN_IN * fs)), fs)
         structure, alignment = _starting_structure(model)
         collective = static_collective(cleaned)
         self._static = collective is not None
@@ -495,7 +295,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
         est = self._fit_structure(cleaned, full, alignment, self.axes, "auto")
         self.input_hold_ = float(est.hold_decision_["fraction"])
         self.hold_decision_ = est.hold_decision_
-        self._ident = MaximumLikelihoodIdentifier(input_hold=self.input_hold_, workers=self.workers)
+        self._scores.ident = MaximumLikelihoodIdentifier(input_hold=self.input_hold_, workers=self.workers)
 
     def _baseline(self, cleaned: Flight, structure: dict, alignment: list) -> dict:
         """Each diagnosed axis' starting structure fitted in full, scored by the candidates' likelihood."""
@@ -504,7 +304,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
         for axis in self.axes:
             a = AXES.index(axis)
             fit = start.axes_[axis]  # the same likelihood as the candidates': evaluated here, on the same data
-            current[axis] = self._score(a, structure[a], alignment[a], fit.state, (fit.wind["model"],), 0)
+            current[axis] = self._scores.score(a, structure[a], alignment[a], fit.state, (fit.wind["model"],), 0)
         return current
 
     def _round(self, rnd: int, todo: list, current: dict, rows: list) -> list:
@@ -549,15 +349,15 @@ class LikelihoodDiagnoser(DiagnosisResult):
         # win it a likelihood ratio), with every gust model (switching models alone cannot win LR)
         free_tau = (SERVO_DELAY, axis) in self.effects_found_
         self._say(f"round {rnd}, {axis}: refitting the base")
-        tries = [base] + [self._score(a, base.names, base.alignment, start, WIND_MODELS, 3 * NFEV, free_tau)
-                          for start in (base.x, _fresh(base.x))]
-        base = current[axis] = self._describe(a, min(tries, key=lambda sc: sc.nll))
+        tries = [base] + [self._scores.score(a, base.names, base.alignment, start, WIND_MODELS, 3 * NFEV, free_tau)
+                          for start in (base.x, fresh_start(base.x))]
+        base = current[axis] = self._scores.describe(a, min(tries, key=lambda sc: sc.nll))
         cands = self._candidates(a, axis, base, free_tau, rnd)
         m = max(len(cands), 1)
         scored = []
         for name, k, sc, lr in cands:
             thr = self.threshold(m, k, alignment=CATALOGUE[name].is_alignment)
-            why = self._implausible(a, base, sc)
+            why = self._scores.implausible(a, base, sc)
             if why is None:  # an unphysical fit is reported, never accepted nor runner-up
                 scored.append((lr / thr, name, k, sc, lr, thr))
             rows.append({"round": rnd, "axis": axis, "effect": name, "lr": float(lr), "threshold": thr,
@@ -567,15 +367,15 @@ class LikelihoodDiagnoser(DiagnosisResult):
         after = None
         while scored and scored[0][0] > 1.0:
             self._say(f"round {rnd}, {axis}: checking {scored[0][1]}'s prediction")
-            after = self._describe(a, scored[0][3])
+            after = self._scores.describe(a, scored[0][3])
             of_rates = any(TERMS[p].feature in RATE_DEPENDENCE for p in scored[0][3].names if p not in base.names)
-            worse = _predicts_worse(base.r2, after.r2, of_rates)
+            worse = predicts_worse(base.r2, after.r2, of_rates)
             if worse is None:
                 self._say(f"round {rnd}, {axis}: checking {scored[0][1]} on held-out blocks")
-                self._heldout(a, base)
-                self._heldout(a, after)
+                self._scores.heldout(a, base)
+                self._scores.heldout(a, after)
                 if after.r2["heldout_0.5s"] is not None:
-                    worse = _predicts_worse(base.r2, after.r2, of_rates, "heldout_0.5s", " on held-out blocks")
+                    worse = predicts_worse(base.r2, after.r2, of_rates, "heldout_0.5s", " on held-out blocks")
             if worse is None:
                 break
             row = next(r for r in rows if r["effect"] == scored[0][1] and r["axis"] == axis)
@@ -603,14 +403,14 @@ class LikelihoodDiagnoser(DiagnosisResult):
                 if (name, axis) in self.effects_found_:
                     continue  # found in an earlier round: refined in the final fit, not added twice
                 self._say(f"round {rnd}, {axis}: trying {name}")
-                sc = self._alignment_candidate(a, base)
+                sc = self._scores.alignment_candidate(a, base)
                 k = 1
             else:
                 add = tuple(p for p in effect.terms_on(a) if p not in base.names)
                 if not add or name in self.untestable_:
                     continue
                 self._say(f"round {rnd}, {axis}: trying {name}")
-                sc = self._score(a, base.names + add, base.alignment, base.x, (base.kind,), NFEV, free_tau)
+                sc = self._scores.score(a, base.names + add, base.alignment, base.x, (base.kind,), NFEV, free_tau)
                 k = len(add)
             cands.append((name, k, sc, 2.0 * (base.nll - sc.nll)))
         return cands
