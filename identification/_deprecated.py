@@ -22,6 +22,7 @@ fails when it finds one (``tests/test_structure_report.py`` runs it).
 
 from __future__ import annotations
 
+import ast
 import importlib
 import importlib.abc
 import importlib.machinery
@@ -121,6 +122,26 @@ def _warn(old: str, name: str, home: str, stacklevel: int) -> None:
                   DeprecationWarning, stacklevel=stacklevel + 1)
 
 
+def _defines(module, name: str) -> bool:
+    """Whether ``module``'s own source assigns or defines ``name`` at its top level (not imports it)."""
+    path = getattr(module, "__file__", None)
+    if path not in _DEFINED:
+        names = set()
+        if path:
+            with open(path, encoding="utf-8") as f:
+                for node in ast.parse(f.read()).body:
+                    targets = (node.targets if isinstance(node, ast.Assign) else
+                               [node.target] if isinstance(node, ast.AnnAssign) else [])
+                    names.update(t.id for t in targets if isinstance(t, ast.Name))
+                    if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                        names.add(node.name)
+        _DEFINED[path] = names
+    return name in _DEFINED[path]
+
+
+_DEFINED: dict = {}
+
+
 def moved_name(old: str, name: str, stacklevel: int = 2):
     """The object old module ``old`` offered as ``name``, from its new home, with a ``DeprecationWarning``.
 
@@ -135,16 +156,15 @@ def moved_name(old: str, name: str, stacklevel: int = 2):
         _warn(old, name, home, stacklevel + 1)
         return getattr(importlib.import_module(home), name)
     if not name.startswith("_"):
-        for home in MOVED_MODULES.get(old, ()):
-            module = importlib.import_module(home)
-            if name in vars(module):
-                obj = vars(module)[name]
-                defined_in = getattr(obj, "__module__", None)
-                if not isinstance(defined_in, str) or not defined_in.startswith(("identification", "heli_core",
-                                                                                 "model_store")):
-                    defined_in = home
-                _warn(old, name, defined_in, stacklevel + 1)
-                return obj
+        homes = [importlib.import_module(home) for home in MOVED_MODULES.get(old, ())]
+        holding = [m for m in homes if name in vars(m)]
+        if holding:  # named by the module that defines it: among the homes, else a function's or class's own
+            module = next((m for m in holding if _defines(m, name)), holding[0])
+            obj = vars(module)[name]
+            own = getattr(obj, "__module__", None)
+            home = module.__name__ if _defines(module, name) or not isinstance(own, str) else own
+            _warn(old, name, home, stacklevel + 1)
+            return obj
     raise AttributeError(f"module {old!r} has no attribute {name!r}")
 
 

@@ -43,7 +43,7 @@ def test_each_form_of_a_deprecated_import_is_found(report):
         "from identification.validation import result\n"  # 4: a submodule of the folder: fine
         "from identification.errors import ModelFileError, FlightLogError\n"  # 5: one re-export, one own
         "from identification import fleet, io\n"  # 6: an old module by name; io is a package
-        "from identification.likelihood.estimator import BURN_IN\n"  # 7: the new home: fine
+        "from identification.likelihood.axis_search import BURN_IN\n"  # 7: the new home: fine
     )
     found = report._deprecated_imports(ast.parse(source), "tests.example", False, known, tables)
     assert found == ["1: identification.ml_estimator.MaximumLikelihoodIdentifier", "2: identification.synthetic",

@@ -47,7 +47,8 @@ from heli_core.terms import AXES, DECOUPLED, RATE_DEPENDENCE, STICK_ROW, TERMS
 from ..excitation import on_static_input, static_collective
 from ..flight import Flight
 from ..likelihood.axis_pool import check_workers, in_worker, map_axes
-from ..likelihood.estimator import BURN_IN, MaximumLikelihoodIdentifier
+from ..likelihood.axis_search import BURN_IN
+from ..likelihood.estimator import MaximumLikelihoodIdentifier
 from ..likelihood.input_hold import check_hold
 from ..likelihood.state_space import WIND_MODELS
 from ..preprocess import shift_inputs

@@ -29,6 +29,7 @@ from heli_core.terms import AXES
 
 from ..flight import Flight
 from .axis_likelihood import AxisLikelihood
+from .axis_search import BURN_IN
 from .state_space import kalman, lti_apply
 
 AHEAD_S = 0.5
@@ -159,8 +160,6 @@ def heldout_ahead_r2(identifier, flight: Flight, folds: int = 4, horizon_s: floa
 
 def _samples(horizon_s: float, sample_rate: float) -> tuple[int, int]:
     """The prediction horizon (at least one sample) and the likelihood's burn-in, in samples of the flight."""
-    from .estimator import BURN_IN
-
     return max(1, int(round(horizon_s * sample_rate))), int(round(BURN_IN * sample_rate))
 
 

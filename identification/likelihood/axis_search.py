@@ -34,6 +34,10 @@ OWN_RATE = ("p", "q", "r")
 COMMAND_FEATURE = ("u_lat", "u_lon", "u_ped")
 """The feature that is each axis' own servo-side command: its term goes through the servo model exactly."""
 
+BURN_IN = 1.0
+"""Seconds at the start of each flight left out of the likelihood while the filter settles (:attr:`AxisProblem.burn`
+in samples)."""
+
 MAX_SHIFT = 0.6
 """Largest input shift (a log whose input column lags the response) searched [s]."""
 

@@ -72,13 +72,10 @@ from ..vibration import remove_common_lines
 from .axis_fit import MLAxisFit
 from .axis_likelihood import AxisData, AxisLikelihood
 from .axis_pool import check_workers, map_axes
-from .axis_search import MAX_SHIFT, AxisProblem, WindFit
+from .axis_search import BURN_IN, MAX_SHIFT, AxisProblem, WindFit
 from .input_hold import check_hold, decide_hold
 from .servo_lag import profile_lag
 from .state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll, rts_smooth, wind_block
-
-BURN_IN = 1.0
-"""Seconds at the start of each flight left out of the likelihood while the filter settles."""
 
 DEFAULT_DELAY_GRID = np.round(np.arange(-MAX_SHIFT, 0.5001, 0.01), 4)
 """Alignments profiled by ``delay="auto"`` [s]; from the best, the alignment is searched jointly with the rest.
