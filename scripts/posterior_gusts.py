@@ -3,7 +3,8 @@
 For every bench cell (:data:`identification.bench.cells.BENCH_CELLS`) asked for and seed: a flight of the cell,
 :class:`identification.likelihood.estimator.MaximumLikelihoodIdentifier` with its defaults, then the wind torque
 the library would store — the Rauch-Tung-Striebel smoother's conditional mean (what ``heli identify``
-stored before issue #30) and one draw from its posterior (:func:`identification.disturbance.wind_posterior.wind_posterior`,
+stored before issue #30) and one draw from its posterior
+(:func:`identification.disturbance.wind_posterior.wind_posterior`,
 seeded by the flight's SHA-256, what it stores now) — against the true wind torque of the flight
 (``SyntheticFlight.wind_torque``): the ratio of their powers (Welch, 20 s segments) in the bands 0-0.3,
 0.3-1, 1-3 and 3-8 Hz, and of their standard deviations, per axis. Target (issue #30): within ±10 % in every

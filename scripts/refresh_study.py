@@ -1,8 +1,8 @@
 """How often ``heli refresh`` flags an unchanged aircraft, and how often it catches a 10 % change of a damping.
 
 For each seed, two flights of the same aircraft (independent seeds, same conditions) are identified by
-maximum likelihood, and the drift table of :func:`identification.validation.parameter_drift.drift_table` is built exactly as
-``heli refresh`` builds it (Fisher standard errors, offsets not compared, Bonferroni over the parameters
+maximum likelihood, and the drift table of :func:`identification.validation.parameter_drift.drift_table` is built
+exactly as ``heli refresh`` builds it (Fisher standard errors, offsets not compared, Bonferroni over the parameters
 compared at family-wise ``alpha``). A false flag is any parameter flagged. For the power, the second
 flight's aircraft has one damping (k3, k7 or k11, in turn) 10 % higher; a hit is that damping flagged.
 

@@ -150,9 +150,10 @@ def test_a_flight_controllers_log_is_found_held_from_the_data_and_names_no_sub_s
     delay = [r for r in d.rounds_[0] if r["effect"] == "servo_delay"][0]
     assert delay["lr"] < delay["threshold"]
     # the report says the flight controller closes every axis, which the 0.1-0.5 s share cannot see
-    from identification.reports.likelihood_diagnosis import diagnosis_markdown, flight_controller_note
+    from identification.reports.likelihood_diagnosis import diagnosis_document, diagnosis_markdown, flight_controller_note
 
     assert "flight controller's commands" in diagnosis_markdown(d, None) and flight_controller_note(d)
+    assert d.flight_.n == flight.n and diagnosis_document(d)["source"]["name"]  # the report reads the flight_ fitted
     with pytest.raises(ValueError, match="input_hold"):
         LikelihoodDiagnoser(input_hold="cubic").fit(flight)
 

@@ -1,4 +1,5 @@
-"""Tests of ``heli refresh`` (identification.workflows.refresh) and of the interval bootstrap (identification.integral.bootstrap).
+"""Tests of ``heli refresh`` (identification.workflows.refresh) and of the interval bootstrap
+(identification.integral.bootstrap).
 
 Scenario: flight 1 (seed 11, the paper's wind) is identified with ``heli identify``;
 flight 2 (seed 12, half the wind, roll damping k3 raised by 30 %) refreshes it.

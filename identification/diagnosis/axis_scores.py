@@ -214,7 +214,8 @@ class FlightScorer:
         return min(tries, key=lambda sc: sc.nll)
 
     def implausible(self, a, base: AxisScore, sc: AxisScore) -> str | None:
-        """Why a candidate's fitted added terms cannot be physical (:func:`identification.diagnosis.effects.implausible`)."""
+        """Why a candidate's fitted added terms cannot be physical
+        (:func:`identification.diagnosis.effects.implausible`)."""
         added = [p for p in sc.names if p not in base.names]
         if not added:  # the alignment candidate: a value pinned at the edge of the search was not found
             edge = MAX_DELAY if sc.alignment > 0 else -MAX_SHIFT

@@ -86,8 +86,8 @@ MAX_ALIGNMENT = 0.6
 
 class DiagnosisResult:
     """What both diagnosers (:class:`~identification.diagnosis.heldout_diagnoser.Diagnoser`,
-    :class:`~identification.diagnosis.likelihood_diagnoser.LikelihoodDiagnoser`) answer alike once fitted: the verdict, the
-    effects found and the steps that added them."""
+    :class:`~identification.diagnosis.likelihood_diagnoser.LikelihoodDiagnoser`) answer alike once fitted: the
+    verdict, the effects found and the steps that added them."""
 
     def _check_fitted(self):
         if not hasattr(self, "verdict_"):

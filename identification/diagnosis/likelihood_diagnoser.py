@@ -169,6 +169,8 @@ class LikelihoodDiagnoser(DiagnosisResult):
         Every candidate's statistic per round.
     closed_loop_ : dict of str to float
         Per axis, the share of the stick explained by the past attitude and rate.
+    flight_ : Flight
+        The flight as diagnosed (vibration lines removed), which the report reads.
     baseline_ : dict of str to AxisScore
     final_ : dict of str to AxisScore
     params_ : ModelParams
@@ -235,6 +237,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
         self.hold_decision_ = None
         ident = MaximumLikelihoodIdentifier(input_hold=self.input_hold_, workers=self.workers)
         cleaned, _ = ident._clean(flight)
+        self.flight_ = cleaned
         fs = flight.sample_rate
         self._scores = FlightScorer(ident, cleaned, int(round(BURN_IN * fs)), fs)
         structure, alignment = _starting_structure(model)
@@ -309,8 +312,8 @@ class LikelihoodDiagnoser(DiagnosisResult):
         return current
 
     def _round(self, rnd: int, todo: list, current: dict, rows: list) -> list:
-        """One round on the axes of ``todo``, side by side (:mod:`identification.likelihood.axis_pool`: an axis' candidates
-        depend on its own fit only), merged in the axes' order. Returns the axes that changed."""
+        """One round on the axes of ``todo``, side by side (:mod:`identification.likelihood.axis_pool`: an axis'
+        candidates depend on its own fit only), merged in the axes' order. Returns the axes that changed."""
 
         def one(axis):
             n_steps, n_found = len(self.steps_), len(self.effects_found_)

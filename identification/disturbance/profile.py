@@ -153,7 +153,8 @@ class DisturbanceProfile:
 
     @property
     def smoothing_window(self) -> int:
-        """Samples per pass of the smoother of eq. (46) (:data:`~identification.disturbance.smoothing.SMOOTHING_WINDOW`)."""
+        """Samples per pass of the smoother of eq. (46)
+        (:data:`~identification.disturbance.smoothing.SMOOTHING_WINDOW`)."""
         return SMOOTHING_WINDOW
 
     def to_trace(self, **metadata):

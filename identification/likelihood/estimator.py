@@ -137,8 +137,8 @@ class MaximumLikelihoodIdentifier:
         support it: terms with ``|value| < SUPPORT_Z * se`` are dropped, weakest first, refitting each time.
     servo_lag : None, float, sequence of 3 float, or "auto"
         The servo's first-order lag per axis [s] (None: none); "auto" profiles the likelihood over
-        :data:`identification.likelihood.servo_lag.LAG_GRID` (the delay searched with it when ``delay="auto"``) and keeps
-        the best lag only where the data support it (:func:`identification.likelihood.servo_lag.profile_lag`).
+        :data:`identification.likelihood.servo_lag.LAG_GRID` (the delay searched with it when ``delay="auto"``) and
+        keeps the best lag only where the data support it (:func:`identification.likelihood.servo_lag.profile_lag`).
     workers : int or None
         Processes the axes are fitted in side by side (:mod:`identification.likelihood.axis_pool`; the result is the
         same bit for bit): None (default) every core this process may use, capped by ``HELI_WORKERS``; 1 one

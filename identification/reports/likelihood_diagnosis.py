@@ -60,7 +60,7 @@ def diagnosis_document(d: LikelihoodDiagnoser, source: dict | None = None, model
                        verdict: ModelVerdict | None = None) -> dict:
     """The content of ``diagnosis.json``; ``verdict``: the written model's (:mod:`model_store.verdict`)."""
     out = {"schema": SCHEMA, "schema_version": SCHEMA_VERSION, "method": "likelihood",
-           "source": source or {"name": str(d._flight.metadata.get("source", "flight"))}}
+           "source": source or {"name": str(d.flight_.metadata.get("source", "flight"))}}
     out.update(d.summary())
     out["criterion"]["text"] = criterion_text(d)
     out["parameters_after"] = d.params_.values() | {f"tau_{a}": d.params_.taus[i] for i, a in enumerate(AXES)}
@@ -97,7 +97,7 @@ def flight_controller_note(d: LikelihoodDiagnoser) -> str | None:
     commands, or a digital link's), else None."""
     fractions = getattr(d, "hold_fractions_", {}) or {}
     held = d.input_hold_ == "zoh" or (fractions and max(fractions.values()) < HELD)
-    band = log_band(d._flight) if hasattr(d, "_flight") else None
+    band = log_band(d.flight_) if hasattr(d, "flight_") else None
     if not held or (band is not None and band.filtered and d.input_hold_ != "zoh"):
         return None  # a log with nothing near its Nyquist frequency cannot say how its sticks were held
     said = "set" if d.input_hold_ == "zoh" else \

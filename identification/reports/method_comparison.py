@@ -1,4 +1,5 @@
-"""``comparison.md``: Tables 3, 4 and 5 of the paper, as measured by :func:`~identification.bench.method_comparison.compare_methods`.
+"""``comparison.md``: Tables 3, 4 and 5 of the paper, as measured by
+:func:`~identification.bench.method_comparison.compare_methods`.
 
 :func:`comparison_markdown` writes a :class:`~identification.bench.method_comparison.MethodComparison`
 in the paper's layout: Table 3 (integral method and NLR), Table 4 (the EKF's

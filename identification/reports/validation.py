@@ -269,7 +269,8 @@ def plot_attitude_fit(result: ValidationResult, path):
     Parameters
     ----------
     result : ValidationResult
-        Must carry ``measured_attitude`` (as built by :func:`~identification.validation.forward_simulation.validate_models`).
+        Must carry ``measured_attitude`` (as built by
+        :func:`~identification.validation.forward_simulation.validate_models`).
     path : str or Path
         Destination PNG, written atomically.
 

@@ -102,7 +102,8 @@ def fit_warnings(flights, r2: Mapping | None = None, r2_label: str = "fit", *, m
     r2_label : str
         What ``r2`` is, for the warning ("fit", :data:`AHEAD_LABEL`).
     min_r2, min_duration_s, min_stick_std, min_rate_std : float
-        Thresholds (defaults :data:`MIN_R2`, :data:`MIN_DURATION_S`, :data:`~identification.excitation.MIN_STICK_STD` [stick],
+        Thresholds (defaults :data:`MIN_R2`, :data:`MIN_DURATION_S`, :data:`~identification.excitation.MIN_STICK_STD`
+        [stick],
         :data:`MIN_RATE_STD` [rad/s]).
 
     Returns

@@ -2,10 +2,10 @@
 
 As MATLAB's ``compare``: the model is simulated from each other flight's sticks alone, from the flight's
 measured first state (eqs. 18, 21, 31 and the kinematics 25-26, by
-:func:`identification.validation.forward_simulation.validate_models`, the same simulation as the fitted flight's validation),
-and the simulated rates are scored per axis by the normalised root-mean-square fit and R²
-(:func:`identification.validation.forward_simulation.rate_fit_stats`). A flight in gusts holds rate the sticks cannot explain,
-so a correct model in strong wind scores low there; the maximum-likelihood model's prediction 0.5 s ahead from
+:func:`identification.validation.forward_simulation.validate_models`, the same simulation as the fitted flight's
+validation), and the simulated rates are scored per axis by the normalised root-mean-square fit and R²
+(:func:`identification.validation.forward_simulation.rate_fit_stats`). A flight in gusts holds rate the sticks cannot
+explain, so a correct model in strong wind scores low there; the maximum-likelihood model's prediction 0.5 s ahead from
 its Kalman-filtered state (:func:`identification.likelihood.ahead_prediction.flight_ahead_r2`) says whether it predicts
 the rate when the wind is estimated from the past, as the project's other held-out scores do; and CIFER's
 frequency-response cost over the flight's coherent band

@@ -207,8 +207,8 @@ class IdentifyOptions:
         Their files' paths, recorded in ``model.json`` so that ``heli refresh`` validates on them again.
     carried_validation : sequence of FlightValidation
         Results on flights that could not be validated on again, carried over from an earlier model with their
-        ``computed_on`` (``heli refresh``, :mod:`identification.workflows.refresh_validation`): shown after the new ones,
-        marked.
+        ``computed_on`` (``heli refresh``, :mod:`identification.workflows.refresh_validation`): shown after the new
+        ones, marked.
     """
 
     coupled: bool = False

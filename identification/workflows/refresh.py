@@ -5,8 +5,8 @@ directory written by ``heli identify``:
 
 1. **Refuse duplicates.** A new flight whose file SHA-256 is already among the
    model's sources or the disturbance library's traces (or given twice) raises
-   :class:`~identification.workflows.refresh_sources.DuplicateFlightError` before anything is written: its intervals would
-   be counted twice and its wind replayed twice as often.
+   :class:`~identification.workflows.refresh_sources.DuplicateFlightError` before anything is written: its intervals
+   would be counted twice and its wind replayed twice as often.
 2. **Identify the new flights alone** with the model's own structure and settings
    (``model.json`` ``"structure"``, ``"identification"``, ``"filter"``,
    ``"added_terms"``), so that the comparison with the current model involves two
@@ -356,7 +356,8 @@ class _Refresh:
 
     def stage(self, result: RefreshResult, fit_flights, digests, flights, new_ident) -> None:
         """Step 6: keep the files a refresh replaces in ``history/``, identify and report the refreshed model
-        with the new flights' winds as a library version (:func:`identification.workflows.identify.identify_and_report`),
+        with the new flights' winds as a library version
+        (:func:`identification.workflows.identify.identify_and_report`),
         and write ``refresh.json`` and ``refresh.md``; all is committed when the transaction ends. Sets
         ``result.run``, ``result.library_version`` and ``result.paths``."""
         from .identify import identify_and_report, source_entry

@@ -16,7 +16,8 @@ from model_store.errors import LibraryError, ModelFileError
 
 
 class RefreshError(ModelFileError):
-    """A model directory cannot be refreshed as asked (unknown structure, previous flights missing for pooling, bad option)."""
+    """A model directory cannot be refreshed as asked (unknown structure, previous flights missing for pooling, bad
+    option)."""
 
 
 class DuplicateFlightError(LibraryError):
