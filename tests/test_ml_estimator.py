@@ -208,7 +208,7 @@ def test_a_small_servo_delay_is_found_when_the_profile_prefers_none():
     from dataclasses import replace
 
     from heli_core.params import ModelParams
-    from identification.bench import BENCH_CELLS
+    from identification.bench.cells import BENCH_CELLS
 
     agile = ModelParams(k2=12.0, k3=9.0, kd1=0.3, k6=-10.0, k7=9.5, kd2=0.1, k10=40.0, k11=6.0, k12=-1.5,
                         kd3=0.3, tau_roll=0.03, tau_pitch=0.03, tau_yaw=0.02)
