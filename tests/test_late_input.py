@@ -129,7 +129,7 @@ def test_diagnose_on_the_trex_hover_names_one_late_input_and_nothing_absurd(tmp_
     assert all(-0.33 < s < -0.25 for s in shifts)
     assert "gain_scheduling" not in text and "collective_torque" not in text
     # yaw's pedal explains 2 % of its rate: a quadratic damping there (LR 39) lost 0.044 of the base's held-out
-    # R² of 0.058, three quarters of what the model predicted (identification.ml_diagnosis.AHEAD_R2_SHARE)
+    # R² of 0.058, three quarters of what the model predicted (identification.diagnosis.axis_scores.AHEAD_R2_SHARE)
     assert "nonlinear_damping" not in text
     assert "e+" not in text and "diverged" in text
     assert np.isfinite(shifts).all()
