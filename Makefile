@@ -34,12 +34,14 @@ $(VENV)/.installed-blackbox: pyproject.toml | $(VENV)/.installed-$(subst $(comma
 logs: setup
 
 # The suite without the tests marked slow (each over ~5 s and covered at smaller size by a fast one);
-# test-slow runs only those.
+# test-slow runs only those. One pytest worker per core (pytest-xdist), each test file in one worker so
+# that its module fixtures are built once; `make test PYTEST_WORKERS=0` runs in this process alone.
+PYTEST_WORKERS ?= auto
 test: setup
-	$(BIN)/python -m pytest -q -m "not slow"
+	$(BIN)/python -m pytest -q -m "not slow" -n $(PYTEST_WORKERS) --dist loadfile
 
 test-slow: setup
-	$(BIN)/python -m pytest -q -m slow
+	$(BIN)/python -m pytest -q -m slow -n $(PYTEST_WORKERS) --dist loadfile
 
 demo: setup
 	$(BIN)/python scripts/demo.py --out demo-out

@@ -78,22 +78,28 @@ def bench_identification(repeats: int) -> dict:
     out["target (<= 10 ms, decoupled with prefilter)"] = (
         "met" if out["decoupled, 3 axes, with FIR prefilter [ms]"] <= 10.0 else "NOT met")
     from identification.diagnosis.likelihood_diagnoser import LikelihoodDiagnoser
+    from identification.likelihood.axis_pool import workers_available
     from identification.likelihood.estimator import MaximumLikelihoodIdentifier
 
     few = max(3, repeats // 20)
-    ml = _median_time(lambda: MaximumLikelihoodIdentifier().fit(flight), few)
-    ml_linear = _median_time(lambda: MaximumLikelihoodIdentifier(input_hold="linear").fit(flight), few)
+    one = {"workers": 1}  # one core: the axes one after another (identification.likelihood.axis_pool)
+    ml = _median_time(lambda: MaximumLikelihoodIdentifier(**one).fit(flight), few)
+    ml_linear = _median_time(lambda: MaximumLikelihoodIdentifier(input_hold="linear", **one).fit(flight), few)
+    ml_pool = _median_time(lambda: MaximumLikelihoodIdentifier().fit(flight), few)
     delayed = simulate_flight(300, seed=2, effects=("servo_delay",)).flight
-    ml_delay = _median_time(lambda: MaximumLikelihoodIdentifier(delay="auto").fit(delayed), few)
+    ml_delay = _median_time(lambda: MaximumLikelihoodIdentifier(delay="auto", **one).fit(delayed), few)
+    diag_one = _median_time(lambda: LikelihoodDiagnoser(**one).fit(flight), 1)
     diag = _median_time(lambda: LikelihoodDiagnoser().fit(flight), 1)
-    lagged = _median_time(lambda: MaximumLikelihoodIdentifier(delay="auto", servo_lag="auto").fit(delayed), 1)
+    lagged = _median_time(lambda: MaximumLikelihoodIdentifier(delay="auto", servo_lag="auto", **one).fit(delayed), 1)
     out.update({
         "maximum likelihood, decoupled, 3 axes, one core, hold estimated (default) [s]": ml,
         "the same with the hold fixed linear (the default before) [s]": ml_linear,
         "hold estimated / fixed time ratio": ml / ml_linear,
-        "maximum likelihood with the alignment profiled over -0.6-0.5 s, 3 axes [s]": ml_delay,
-        "the same with the servo lag profiled too (10-200 ms), 3 axes [s]": lagged,
-        "likelihood diagnosis of the 300 s flight, every candidate [s]": diag,
+        f"the default, axes side by side on {workers_available()} cores [s]": ml_pool,
+        "maximum likelihood with the alignment profiled over -0.6-0.5 s, 3 axes, one core [s]": ml_delay,
+        "the same with the servo lag profiled too (10-200 ms), 3 axes, one core [s]": lagged,
+        "likelihood diagnosis of the 300 s flight, every candidate, one core [s]": diag_one,
+        f"likelihood diagnosis, axes side by side on {workers_available()} cores (default) [s]": diag,
         "ML / integral time ratio": ml / (out["decoupled, 3 axes, with FIR prefilter [ms]"] / 1e3),
         "target (ML with the hold estimated <= 1.5 s; delay profile <= 5 s; diagnosis <= 10 s)": ", ".join(
             f"{name} {'met' if v <= lim else 'NOT met'}" for name, v, lim in

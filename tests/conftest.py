@@ -6,10 +6,13 @@ shipped before it (identified from flights with no servo delay, measured exactly
 machinery of the sweep, the evaluator or the training, rather than the realistic world, fly it.
 """
 
+import os
 from pathlib import Path
 
-
 import pytest
+
+if os.environ.get("PYTEST_XDIST_WORKER"):  # one pytest worker per core already: fit the axes one after another
+    os.environ.setdefault("HELI_WORKERS", "1")
 
 from heli_env.model_dir import load_env_model
 

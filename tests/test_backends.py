@@ -383,6 +383,7 @@ def test_ray_sweep_and_flights_equal_the_local_backend(ray_backend, delayed, ref
                                                  simulate=False))
 
 
+@pytest.mark.slow  # 45 s on two cores: make test-slow (the local pool's twin, and Ray's retries, stay fast)
 def test_ray_sweep_survives_a_killed_worker(ray_backend, delayed, reference, tmp_path):
     res = sweep_gains(delayed, **GRID, **SWEEP, backend=_KillingBackend(ray_backend, tmp_path / "k"),
                       chunk_pairs=2)
@@ -406,6 +407,7 @@ def test_ray_stops_submitting_after_a_task_raises(ray_backend, tmp_path):
     assert 1 <= len(list(tmp_path.iterdir())) <= 2 * ray_backend.in_flight
 
 
+@pytest.mark.slow  # 42 s: make test-slow (seeds as tasks stay fast on the local backend)
 def test_ray_seeds_equal_the_local_backend(ray_backend, seeds_local, tmp_path):
     from controllers.rl import train_seeds
 
