@@ -47,3 +47,16 @@ def test_heli_workers_caps_the_processes_and_is_checked(monkeypatch):
         workers_available()
     with pytest.raises(ValueError, match="workers must be None"):
         MaximumLikelihoodIdentifier(workers=0).fit(simulate_flight(90, seed=5).flight)
+
+
+def test_by_default_only_the_cores_other_work_leaves_idle(monkeypatch):
+    import os
+
+    monkeypatch.delenv("HELI_WORKERS", raising=False)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    monkeypatch.setattr(os, "getloadavg", lambda: (1.0, 1.0, 1.0))  # this process alone
+    assert workers_available() == 2
+    monkeypatch.setattr(os, "getloadavg", lambda: (2.1, 2.0, 2.0))  # a busy neighbour: forking would cost
+    assert workers_available() == 1
+    monkeypatch.setenv("HELI_WORKERS", "2")  # those who know better
+    assert workers_available() == 2

@@ -155,8 +155,8 @@ class LikelihoodDiagnoser(DiagnosisResult):
         e.g. to show progress; None (default) shows nothing.
     workers : int or None
         Processes the axes are fitted and their candidates scored in, side by side
-        (:mod:`identification.likelihood.axis_pool`; the result is the same bit for bit): None (default) every core this
-        process may use, capped by ``HELI_WORKERS``; 1 one after another.
+        (:mod:`identification.likelihood.axis_pool`; the result is the same bit for bit): None (default) the
+        cores other work leaves idle, or ``HELI_WORKERS``; 1 one after another.
 
     Attributes
     ----------

@@ -141,8 +141,8 @@ class MaximumLikelihoodIdentifier:
         keeps the best lag only where the data support it (:func:`identification.likelihood.servo_lag.profile_lag`).
     workers : int or None
         Processes the axes are fitted in side by side (:mod:`identification.likelihood.axis_pool`; the result is the
-        same bit for bit): None (default) every core this process may use, capped by ``HELI_WORKERS``; 1 one
-        after another.
+        same bit for bit): None (default) the cores other work leaves idle, or ``HELI_WORKERS``; 1 one after
+        another.
 
     Attributes
     ----------
