@@ -70,7 +70,7 @@ from ..integral.method import IntegralIdentifier
 from ..preprocess import shift_inputs
 from ..vibration import remove_common_lines
 from .axis_fit import MLAxisFit
-from .axis_likelihood import AxisData, AxisLikelihood
+from .axis_likelihood import MIN_SERVO_DELAY, AxisData, AxisLikelihood
 from .axis_pool import check_workers, map_axes
 from .axis_search import BURN_IN, MAX_SHIFT, AxisProblem, WindFit
 from .input_hold import check_hold, decide_hold
@@ -409,6 +409,12 @@ class MaximumLikelihoodIdentifier:
                     fits[k] = v
         kind = min(fits, key=lambda k: fits[k][3])
         cost, x, tau, _ = fits[kind]
+        if abs(tau0) <= MIN_SERVO_DELAY and abs(tau) < like.data.dt:
+            # a search from no delay that moved by less than a sample found none: below a sample the timing is
+            # the log's convention, and fitted as a delay of 1-2 ms it biased the damping (effect-free autopilot
+            # flights, 180 s: 5.5 % RMS against 2.6 % with the undelayed fit kept)
+            kind = min(undelayed, key=lambda k: undelayed[k][3])
+            cost, x, tau = undelayed[kind][0], undelayed[kind][1], 0.0
         return WindFit(cost, x, kind, tau), profile
 
     def _finish_axis(self, problem: AxisProblem, found: WindFit, lag, free_tau, profile=(), lag_profile=(),
