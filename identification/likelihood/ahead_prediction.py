@@ -50,8 +50,7 @@ def ahead_r2(like: AxisLikelihood, x, theta, horizon: int) -> float:
     to the known inputs: the gust estimate decays as the wind model says.
     """
     num, den = _ahead_sums(like, x, theta, horizon)
-    r2 = 1.0 - num / (den or 1.0)
-    return math.nan if is_diverged(r2) else r2
+    return _r2(num, den)
 
 
 def _ahead_sums(like: AxisLikelihood, x, theta, horizon: int) -> tuple[float, float]:
@@ -105,6 +104,11 @@ def blocked_ahead_r2(problem, tau: float, x0, kind: str, nfev: int, horizon: int
         theta_held = np.array([np.mean(offsets) if "@" in n else fitted[n] for n in held.names])
         b_num, b_den = _ahead_sums(AxisLikelihood(held), x, theta_held, horizon)
         num, den = num + b_num, den + b_den
+    return _r2(num, den)
+
+
+def _r2(num: float, den: float) -> float:
+    """``1 - num / den`` from :func:`_ahead_sums`' sums, or NaN for a diverged prediction."""
     r2 = 1.0 - num / (den or 1.0)
     return math.nan if is_diverged(r2) else r2
 
