@@ -201,7 +201,7 @@ def _report(args, res, progress, reference=None) -> dict:
 
     meta, comparison, paths = res.metadata, None, []
     if not args.no_compare:
-        progress.stage(f"flying {res.path.name} and the PD on the same held-out gusts")
+        progress.stage(f"flying {res.path.name} and the controller it is compared with on the same held-out gusts")
         reference = {} if reference is None else reference
         if not reference:
             env_model = load_env_model(args.model)
@@ -226,10 +226,11 @@ def _print_report(report: dict, indent: str = "") -> None:
     """The comparison's table (agent vs PD p90 per axis), the warning on stderr, and what was written."""
     comparison = report["comparison"]
     if comparison is not None:
-        print(f"{indent}p90 |attitude error| on the held-out gusts, agent vs PD ({comparison.pd_label}):")
+        kind = comparison.base_kind
+        print(f"{indent}p90 |attitude error| on the held-out gusts, agent vs {kind} ({comparison.pd_label}):")
         for ax, a, p, r in zip(("roll", "pitch", "yaw"), comparison.p90("agent"), comparison.p90("pd"),
                                comparison.ratios):
-            print(f"{indent}  {ax:5s}: agent {a:.4g} deg, PD {p:.4g} deg (x{r:.3g})")
+            print(f"{indent}  {ax:5s}: agent {a:.4g} deg, {kind} {p:.4g} deg (x{r:.3g})")
         if comparison.warning():
             print(f"heli train: {comparison.warning()}", file=sys.stderr)
     for path in report["paths"]:

@@ -103,3 +103,18 @@ def test_the_pd_compared_with_is_named_and_a_bad_one_refused_before_training(tmp
                  str(tmp_path / "bad.json"), "--no-progress"]) == 2
     assert "--compare-pd must be a PD controller JSON" in capsys.readouterr().err
     assert not (tmp_path / "a.zip").exists() and not (tmp_path / "a_training").exists()
+
+
+def test_a_residual_on_an_lqg_base_is_compared_with_the_lqg_by_name(shipped):
+    """A residual trained on ``heli design --lqg``'s controller is compared with an LQG: the table, the warning
+    and the JSON say "LQG", never "PD"."""
+    from controllers.lqg.design import design_lqg
+
+    lqg = design_lqg(shipped).controller()
+    c = compare_with_pd(reference_pd(shipped), lqg, shipped, [TraceSegment(2)], 0, 1.0, pd_label="lqg.json",
+                        episodes_per_trace=1)
+    assert c.base_kind == "LQG" and c.to_dict()["base_kind"] == "LQG"
+    assert "| LQG p90 [°] | agent / LQG |" in c.table() and " PD " not in c.table()
+    if c.warning() is not None:  # the PD flown as the "agent" is worse than the LQG on some axis
+        assert "worse than the LQG (lqg.json)" in c.warning() and "PD" not in c.warning()
+    assert c.worse_axes, "the designed PD should hold attitude worse than the LQG on at least one axis"

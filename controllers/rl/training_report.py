@@ -48,11 +48,15 @@ class PDComparison:
     agent, pd : controllers.evaluate.EvaluationResult
     pd_label : str
         Where the PD came from ("heli design's defaults", a file).
+    base_kind : str
+        What the compared controller is, for the messages: "PD", or "LQG" when a residual's base (or
+        ``--compare-pd``) is an LQG controller (``heli design --lqg``).
     """
 
     agent: object
     pd: object
     pd_label: str
+    base_kind: str = "PD"
 
     def p90(self, which: str) -> list:
         """p90 |attitude error| per axis [deg] of ``"agent"`` or ``"pd"``."""
@@ -81,18 +85,20 @@ class PDComparison:
         if not worse:
             return None
         a, p = dict(zip(AXES, self.p90("agent"))), dict(zip(AXES, self.p90("pd")))
-        axes = ", ".join(f"{ax} p90 {a[ax]:.3g}° against the PD's {p[ax]:.3g}° (x{_ratio(a[ax], p[ax])})"
+        kind = self.base_kind
+        axes = ", ".join(f"{ax} p90 {a[ax]:.3g}° against the {kind}'s {p[ax]:.3g}° (x{_ratio(a[ax], p[ax])})"
                          for ax in worse)
         early = (f"; it ended {self.agent.n_terminated} of {len(self.agent.episodes)} episodes early"
                  if self.agent.n_terminated else "")
-        return (f"WARNING: the agent holds attitude worse than the PD ({self.pd_label}) on the held-out gusts: "
-                f"{axes}{early}. Fly the PD, or train longer / as a residual on it (--residual).")
+        return (f"WARNING: the agent holds attitude worse than the {kind} ({self.pd_label}) on the held-out gusts: "
+                f"{axes}{early}. Fly the {kind}, or train longer / as a residual on it (--residual).")
 
     def table(self) -> str:
         """Markdown: per axis the agent's and the PD's p90 |attitude error|, their ratio and which is better."""
-        lines = ["| axis | agent p90 [°] | PD p90 [°] | agent / PD | better |", "|---|---|---|---|---|"]
+        kind = self.base_kind
+        lines = [f"| axis | agent p90 [°] | {kind} p90 [°] | agent / {kind} | better |", "|---|---|---|---|---|"]
         for ax, a, p, r in zip(AXES, self.p90("agent"), self.p90("pd"), self.ratios):
-            better = "agent" if r < 1.0 else ("PD" if not r <= 1.0 else "equal")
+            better = "agent" if r < 1.0 else (kind if not r <= 1.0 else "equal")
             lines.append(f"| {ax} | {a:.4g} | {p:.4g} | {_ratio(a, p)} | {better} |")
         lines.append(f"| episodes ended early | {self.agent.n_terminated} of {len(self.agent.episodes)} | "
                      f"{self.pd.n_terminated} of {len(self.pd.episodes)} | | |")
@@ -101,7 +107,7 @@ class PDComparison:
     def to_dict(self) -> dict:
         """JSON-ready: the PD, both p90s, ratios, the axes the agent is worse on, the windows' settings."""
         st = self.agent.settings
-        return jsonable({"pd": self.pd_label, "pd_agent": self.pd.settings["agent"],
+        return jsonable({"pd": self.pd_label, "pd_agent": self.pd.settings["agent"], "base_kind": self.base_kind,
                          "agent_p90_deg": dict(zip(AXES, self.p90("agent"))),
                          "pd_p90_deg": dict(zip(AXES, self.p90("pd"))), "ratio": dict(zip(AXES, self.ratios)),
                          "worse_axes": self.worse_axes, "agent_terminated": self.agent.n_terminated,
@@ -148,8 +154,16 @@ def compare_with_pd(agent, pd, env_model, segments, seed: int, episode_seconds: 
 
     config = EvaluationConfig(traces=list(segments), episodes_per_trace=episodes_per_trace,
                               episode_seconds=episode_seconds, seed=seed, task=task)
+    kind = base_kind(pd)
     return PDComparison(evaluate_agent(agent, env_model, config, name="agent"),
-                        evaluate_agent(pd, env_model, config, name="PD"), pd_label)
+                        evaluate_agent(pd, env_model, config, name=kind), pd_label, kind)
+
+
+def base_kind(controller) -> str:
+    """"LQG" for an :class:`~controllers.lqg.controller.LQGController`, else "PD": what the messages call it."""
+    from ..lqg.controller import LQGController
+
+    return "LQG" if isinstance(controller, LQGController) else "PD"
 
 
 def plot_learning_curve(curve: dict, path, comparison: PDComparison | None = None, timesteps: int | None = None,
@@ -196,7 +210,7 @@ def plot_learning_curve(curve: dict, path, comparison: PDComparison | None = Non
         errors += comparison.p90("agent") + comparison.p90("pd")
         for j, (ax_name, a, p) in enumerate(zip(AXES, comparison.p90("agent"), comparison.p90("pd"))):
             ax_e.plot([x], [a], "x", ms=9, mew=2, color=f"C{j}", label=f"{ax_name}: final agent")
-            ax_e.axhline(p, color=f"C{j}", ls="--", lw=1, label=f"{ax_name}: PD {p:.3g}°")
+            ax_e.axhline(p, color=f"C{j}", ls="--", lw=1, label=f"{ax_name}: {comparison.base_kind} {p:.3g}°")
     if not (episodes.size or evals or comparison is not None):
         ax_r.text(0.5, 0.5, "no episode finished and no evaluation ran", transform=ax_r.transAxes, ha="center")
     ax_r.set_ylabel("episode return")
@@ -225,8 +239,9 @@ def training_markdown(result, comparison: PDComparison | None, figure: str | Non
               f"{result.seconds:.1f} s{why}.", ""]
     if comparison is not None:
         c = comparison.to_dict()
-        lines += ["## The agent against the PD", "",
-                  f"The final agent and the PD ({comparison.pd_label}: {c['pd_agent']}) flown by the one evaluator "
+        kind = comparison.base_kind
+        lines += [f"## The agent against the {kind}", "",
+                  f"The final agent and the {kind} ({comparison.pd_label}: {c['pd_agent']}) flown by the one evaluator "
                   f"on the same {c['episodes']} held-out episodes of {c['episode_seconds']:g} s (traces "
                   f"{', '.join(c['trace_ids'])}, seed {c['seed']}), p90 |attitude error|:", "",
                   comparison.table(), ""]
