@@ -78,11 +78,13 @@ def register(sub):
                    "whole number of the model's gust sample periods above it: 0.02 for a model of a 50 Hz log)")
     p.add_argument("--out", default=DEFAULT_OUT, type=output_path, metavar="DIR", help=f"output directory (default ./{DEFAULT_OUT})")
     p.add_argument("--no-plots", action="store_true",
-                   help="do not draw step.png, the Bode figures and servo.png (nor fly the design for the last)")
+                   help="do not draw step.png, the Bode figures and servo.png (nor fly the design for the last); "
+                   "with --lqg, recovery.png and the Bode figures")
     p.add_argument("--lqg", action="store_true",
                    help="design the LQG instead (controllers.lqg: a Kalman filter on the identified wind model and "
                    "sensors, an LQR, >= 6 dB and --phase-margin at the plant input); writes DIR/lqg.json, which "
-                   "heli evaluate flies, and lqg.md")
+                   "heli evaluate flies, lqg.md, recovery.png (from a 2 deg attitude error), bode_<axis>.png (each "
+                   "loop at the plant input) and lqg.html")
     p.set_defaults(func=run, out_kind="dir")
 
 

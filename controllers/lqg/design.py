@@ -188,15 +188,9 @@ def loop_margins(model: AxisModel, K: np.ndarray, M: np.ndarray) -> dict:
     crossing), ``crossover_rad_s`` (the lowest gain crossing, nan if none), and ``stable`` (the closed
     loop's poles inside the unit circle).
     """
-    import control
-
     dt = model.dt
-    Ap, Bp, Cp = model.plant()
-    plant = control.ss(Ap, Bp, Cp, np.zeros((2, 1)), dt)
-    comp = control.ss(*compensator(model, K, M), dt)
-    loop = -control.series(plant, comp)  # u_in -> y -> u_out, negative feedback
     omega = np.geomspace(1e-2, math.pi / dt, N_FREQ)
-    L = _response(loop, np.exp(1j * omega * dt))
+    L = _response(plant_input_loop(model, K, M), np.exp(1j * omega * dt))
     L[-1] = L[-1].real  # z = -1
     mag = np.abs(L)
     i = np.flatnonzero(np.diff(np.sign(mag - 1.0)) != 0)  # gain crossings between i and i + 1
@@ -215,6 +209,35 @@ def loop_margins(model: AxisModel, K: np.ndarray, M: np.ndarray) -> dict:
             "gain_margin_db": float(np.min(np.abs(20.0 * np.log10(at)))) if at.size else math.inf,
             "phase_margin_deg": float(np.min(pm)) if pm.size else math.inf,
             "crossover_rad_s": float(np.min(wc)) if wc.size else math.nan}
+
+
+def plant_input_loop(model: AxisModel, K: np.ndarray, M: np.ndarray):
+    """The sampled loop broken at the plant input, ``L(z) = -C_lqg(z) P(z)`` (a python-control system): the
+    airframe ``P`` (stick to angle and rate) and the compensator joined by ``control.series``, negative
+    feedback folded in (the margins are read against ``L = -1``)."""
+    import control
+
+    Ap, Bp, Cp = model.plant()
+    plant = control.ss(Ap, Bp, Cp, np.zeros((2, 1)), model.dt)
+    comp = control.ss(*compensator(model, K, M), model.dt)
+    return -control.series(plant, comp)  # u_in -> y -> u_out
+
+
+def recovery_response(model: AxisModel, K: np.ndarray, M: np.ndarray, angle0: float, seconds: float):
+    """The loop's noise-free recovery from an attitude error ``angle0`` [rad], the filter starting from its
+    prior (zero) as at an episode's start: ``(t [s], angle [rad], stick)``, the stick unclipped."""
+    Z = _closed_loop(model, K, M)[0]
+    n, steps = model.n, int(round(seconds / model.dt)) + 1
+    s = np.zeros(2 * n)
+    s[model.angle_index] = angle0
+    F = np.eye(n) - M @ model.C
+    angle, stick = np.empty(steps), np.empty(steps)
+    for k in range(steps):
+        x, x_p = s[:n], s[n:]
+        angle[k] = x[model.angle_index]
+        stick[k] = float(-(K @ (F @ x_p + M @ (model.C @ x)))[0])
+        s = Z @ s
+    return np.arange(steps) * model.dt, angle, stick
 
 
 def _response(sys, z: np.ndarray) -> np.ndarray:
