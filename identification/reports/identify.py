@@ -159,7 +159,8 @@ class ReportContent:
     flights : list of Flight
         The flights identified from (pooled).
     identifiers : dict of str to identifier
-        The ``"decoupled"`` and ``"coupled"`` fits.
+        The ``"decoupled"`` and ``"coupled"`` fits (only the chosen one when the workflow was asked not to
+        compare the structures).
     chosen : str
         Which one was written.
     model_path : Path
@@ -267,7 +268,8 @@ def _likelihood_sections(c: ReportContent, ident) -> list[str]:
     """A maximum-likelihood fit's extra lines: the coupled terms it left out, the wind model, the integral
     method's parameters beside it."""
     md = []
-    dropped = [p for f in c.identifiers["coupled"].axes_.values() for p in f.dropped]
+    coupled = c.identifiers.get("coupled")  # absent when only the decoupled model was fitted (heli tune)
+    dropped = [p for f in coupled.axes_.values() for p in f.dropped] if coupled is not None else []
     if dropped:
         md += [f"Coupled model: {', '.join(dropped)} left out (—): the data do not support them "
                "(|value| < 3 standard errors; each dropped in turn, weakest first, and the axis refitted).", ""]

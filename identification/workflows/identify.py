@@ -158,6 +158,10 @@ class IdentifyOptions:
     ----------
     coupled : bool
         Write the coupled model (k1 ... k12) instead of the decoupled one.
+    compare_structures : bool
+        Fit the other structure too, for the report's side-by-side tables and validation (default). False fits
+        only the one written: ``heli tune`` flies the decoupled model and never reads the coupled one, which
+        cost a third of its identification.
     sources : sequence of dict
         Provenance entries (``{"file": ..., "sha256": ...}``).
     identifier_kwargs : dict, optional
@@ -212,6 +216,7 @@ class IdentifyOptions:
     """
 
     coupled: bool = False
+    compare_structures: bool = True
     sources: Sequence = ()
     identifier_kwargs: dict | None = None
     flight_paths: Sequence | None = None
@@ -263,7 +268,7 @@ def identify_and_report(flights, out_dir, options: IdentifyOptions | None = None
     first = ident.flights_[0]  # filtered as identified
     # judged by what the model predicts (ML: 0.5 s ahead), not by what the sticks explain alone (low in strong wind)
     warnings = fit_warnings(flights, *judged_r2(ident, flights))
-    opts.say("validating both models by forward simulation")
+    opts.say(f"validating {'both models' if len(identifiers) > 1 else 'the model'} by forward simulation")
     validation, diverged = _validate(first, identifiers, chosen)
     warnings += diverged
     truth = _truth_of(flights[0], (opts.flight_paths or [None])[0])
@@ -344,15 +349,16 @@ def _options(options: IdentifyOptions | None, settings: dict) -> IdentifyOptions
 
 
 def _fit_models(flights: list, opts: IdentifyOptions) -> dict:
-    """The decoupled and the coupled model fitted by ``opts.method`` (the coupled ML fit selects its terms)."""
+    """The decoupled and the coupled model fitted by ``opts.method`` (the coupled ML fit selects its terms); only
+    the chosen one without ``opts.compare_structures``."""
     kw = dict(opts.identifier_kwargs or {})
     how = "by maximum likelihood" if opts.method == "ml" else "by the integral method"
-    opts.say(f"fitting the decoupled and coupled models {how} ({sum(f.duration for f in flights):.0f} s of flight)")
-    coupled_kw = {**kw, "select_terms": True} if opts.method == "ml" else kw
-    return {
-        "decoupled": make_identifier(opts.method, "decoupled", **kw).fit(flights),
-        "coupled": make_identifier(opts.method, "coupled", **coupled_kw).fit(flights),
-    }
+    chosen = "coupled" if opts.coupled else "decoupled"
+    structures = ("decoupled", "coupled") if opts.compare_structures else (chosen,)
+    what = "the decoupled and coupled models" if len(structures) > 1 else f"the {chosen} model"
+    opts.say(f"fitting {what} {how} ({sum(f.duration for f in flights):.0f} s of flight)")
+    settings = {"decoupled": kw, "coupled": {**kw, "select_terms": True} if opts.method == "ml" else kw}
+    return {name: make_identifier(opts.method, name, **settings[name]).fit(flights) for name in structures}
 
 
 def _write(out: Path, document: dict, profiles: list, opts: IdentifyOptions, content) -> tuple[dict, int | None]:
