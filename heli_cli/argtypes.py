@@ -101,6 +101,22 @@ def seed_list(text):
     return seeds
 
 
+def per_axis(expected: str):
+    """One positive finite number for every axis, or three (roll,pitch,yaw) separated by commas: the float, or
+    a list of three. ``expected`` names them in the message (e.g. "one positive cutoff in Hz or three
+    (roll,pitch,yaw)")."""
+    def parse(text):
+        parts = [v for v in str(text).split(",") if v.strip()]
+        try:
+            values = [float(v) for v in parts]
+        except ValueError:
+            values = []
+        if len(values) not in (1, 3) or not all(v > 0 and math.isfinite(v) for v in values):
+            raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}")
+        return values[0] if len(values) == 1 else values
+    return parse
+
+
 def weights(count: int):
     """``count`` numbers >= 0 separated by commas, e.g. ``1,0.1,0.01``, as a tuple of floats."""
     def parse(text):

@@ -11,11 +11,10 @@ it designs the LQG of :mod:`controllers.lqg` instead (:mod:`heli_cli.design_lqg`
 
 from __future__ import annotations
 
-import argparse
 import math
 from pathlib import Path
 
-from .argtypes import number, output_path
+from .argtypes import number, output_path, per_axis
 from .model_gate import add_accept_option, check_model
 
 DEFAULT_OUT = "pd"
@@ -24,21 +23,9 @@ DEFAULT_DT = 0.01
 AXES = ("roll", "pitch", "yaw")
 
 
-def _per_axis(text, expected: str):
-    """One positive finite number for every axis or three (roll,pitch,yaw); else ``expected`` is said."""
-    parts = [s for s in str(text).split(",") if s.strip()]
-    try:
-        vals = [float(s) for s in parts]
-    except ValueError:
-        vals = []
-    if len(vals) not in (1, 3) or not all(v > 0 and math.isfinite(v) for v in vals):
-        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}")
-    return vals[0] if len(vals) == 1 else vals
-
-
 def _bandwidths(text):
     """One bandwidth for every axis or three (roll,pitch,yaw), each a positive number in rad/s."""
-    return _per_axis(text, "one positive bandwidth in rad/s or three (roll,pitch,yaw)")
+    return per_axis("one positive bandwidth in rad/s or three (roll,pitch,yaw)")(text)
 
 
 def _d_filter(text):
@@ -46,7 +33,7 @@ def _d_filter(text):
     word = str(text).strip().lower()
     if word in ("auto", "off"):
         return "auto" if word == "auto" else None
-    return _per_axis(text, "'auto', 'off', one positive cutoff in Hz or three (roll,pitch,yaw)")
+    return per_axis("'auto', 'off', one positive cutoff in Hz or three (roll,pitch,yaw)")(text)
 
 
 def register(sub):

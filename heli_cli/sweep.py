@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .argtypes import number, output_path, seed, whole
+from .argtypes import number, output_path, per_axis, seed, whole
 from .model_gate import add_accept_option, check_model
 
 DEFAULT_OUT = "sweep"
@@ -19,18 +19,8 @@ def backend_from_args(args):
     return make_backend(args.backend, workers=args.workers)
 
 
-def _cutoffs(text):
-    """One positive cutoff in Hz for every axis or three (roll,pitch,yaw)."""
-    import argparse
-    import math
-
-    try:
-        vals = [float(v) for v in str(text).split(",") if v.strip()]
-    except ValueError:
-        vals = []
-    if len(vals) not in (1, 3) or not all(v > 0 and math.isfinite(v) for v in vals):
-        raise argparse.ArgumentTypeError(f"expected one positive cutoff in Hz or three (roll,pitch,yaw), got {text!r}")
-    return vals[0] if len(vals) == 1 else vals
+_cutoffs = per_axis("one positive cutoff in Hz or three (roll,pitch,yaw)")
+"""``--d-filter-hz``: one cutoff for every axis or three."""
 
 
 def register(sub):

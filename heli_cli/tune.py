@@ -6,7 +6,7 @@ import argparse
 import math
 from pathlib import Path
 
-from .argtypes import number, output_path, seed, whole
+from .argtypes import number, output_path, per_axis, seed, whole
 from .model_gate import add_accept_option, check_model
 
 FIRMWARE_CHOICES = ("ardupilot", "rotorflight")
@@ -15,15 +15,9 @@ OWN_FORMATS = {"ardupilot": ("ardupilot-dataflash", "ardupilot-dataflash-text"),
 
 
 def _scale(text):
-    """``--scale``: one number > 0 for every axis, or three (roll,pitch,yaw)."""
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        values = []
-    if len(values) not in (1, 3) or not all(math.isfinite(v) and v > 0 for v in values):
-        raise argparse.ArgumentTypeError(f"expected one number > 0 or three separated by ',' (roll,pitch,yaw), "
-                                         f"got {text!r}")
-    return values[0] if len(values) == 1 else tuple(values)
+    """``--scale``: one number > 0 for every axis, or three (roll,pitch,yaw) as a tuple."""
+    values = per_axis("one number > 0 or three separated by ',' (roll,pitch,yaw)")(text)
+    return values if isinstance(values, float) else tuple(values)
 
 
 def _delay(text):
