@@ -342,3 +342,22 @@ def test_a_refresh_stopped_before_the_library_write_can_be_run_again(model_dir, 
     monkeypatch.undo()
     r = refresh_model(model_dir, [flights["f3"]], n_replicates=10, plots=False, progress=False)
     assert r.library_version == 2
+
+
+def test_a_refresh_removes_the_figures_only_the_replaced_report_showed(tmp_path):
+    """A figure of the model before (a second flight's wind figure, after a refresh on one flight) does not stay
+    beside the new report as if it were current: it goes to history/, byte for byte; a figure both reports show
+    and a PNG no report linked (the user's) stay."""
+    from identification.workflows.refresh import _drop_stale_figures, _report_figures
+
+    (tmp_path / "report.md").write_text("![rates](rates.png)\n![wind 2](disturbance_2_psd.png)\n")
+    for name in ("rates.png", "disturbance_2_psd.png", "photo.png"):
+        (tmp_path / name).write_bytes(b"\x89PNG" + name.encode())
+    before = _report_figures(tmp_path)
+    assert before == {"rates.png", "disturbance_2_psd.png"}
+    (tmp_path / "report.md").write_text("# refreshed\n![rates](rates.png)\n")
+    gone = _drop_stale_figures(tmp_path, before)
+    assert gone == [tmp_path / "disturbance_2_psd.png"] and not gone[0].exists()
+    assert (tmp_path / "rates.png").exists() and (tmp_path / "photo.png").exists()
+    kept = list((tmp_path / "history").glob("disturbance_2_psd-*.png"))
+    assert len(kept) == 1 and kept[0].read_bytes() == b"\x89PNGdisturbance_2_psd.png"

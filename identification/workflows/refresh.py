@@ -35,7 +35,8 @@ directory written by ``heli identify``:
    the choice. The model is written by
    :func:`identification.workflows.identify.identify_and_report` (the replaced ``model.json``
    is kept under ``history/``, and so are the replaced ``report.md``, figures and
-   previous refresh files), which identifies each *new* flight's wind with the
+   previous refresh files; a figure only the replaced report showed is then removed from beside the new
+   one), which identifies each *new* flight's wind with the
    refreshed model (eqs. 41-47) and appends the traces to the library as one new
    version (earlier versions untouched). The flights the model was validated on
    (``heli identify --validate``) validate the refreshed model again where their
@@ -87,6 +88,30 @@ def _keep_in_history(root: Path) -> list[Path]:
     """Copy the files a refresh replaces to ``history/`` (see :func:`.files.keep_copy`); returns the copies."""
     files = [root / n for n in KEPT_FILES] + sorted(root.glob("*.png"))
     return [keep_copy(path) for path in files if path.is_file()]
+
+
+def _report_figures(root: Path) -> set[str]:
+    """The PNG files ``report.md`` of ``root`` shows (``![...](name.png)`` beside it); empty without a report."""
+    import re
+
+    report = root / "report.md"
+    text = report.read_text(encoding="utf-8", errors="replace") if report.is_file() else ""
+    return {m for m in re.findall(r"!\[[^\]]*\]\(([^)/\\]+\.png)\)", text)}
+
+
+def _drop_stale_figures(root: Path, before: set[str]) -> list[Path]:
+    """Remove the figures the replaced report showed (``before``) that the refreshed one does not — a flight's
+    wind figures when fewer flights are identified, every figure of a run without plots —, each kept in
+    ``history/`` first (:func:`_keep_in_history` copied them; copied again here if not); returns what went.
+    Figures the report never linked are the user's and stay."""
+    gone = []
+    for name in sorted(before - _report_figures(root)):
+        path = root / name
+        if path.is_file():
+            keep_copy(path)
+            path.unlink()
+            gone.append(path)
+    return gone
 
 
 # ------------------------------------------------------------------ the refresh
@@ -198,11 +223,13 @@ def refresh_model(model_dir, new_flights, *, settings: RefreshSettings | None = 
     for p in new_paths:
         if not p.is_file():
             raise FileNotFoundError(f"new flight {str(p)!r} does not exist")
+    shown = _report_figures(root)
     with ModelDir(root).transaction(wait=wait, what="refresh") as tx:
         result = _Refresh(tx, new_paths, settings).run()
     if result.run.figures:
         _say(settings, "drawing the report's figures")
         result.paths.update(result.run.draw_figures())
+    _drop_stale_figures(root, shown)  # a figure of the model before would sit beside the new ones as if current
     return result
 
 
