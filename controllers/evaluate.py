@@ -54,11 +54,15 @@ SCHEMA = "heli-env/agent-evaluation"
 def describe_agent(agent) -> tuple[str, str]:
     """(kind, description) of an agent: ("pd", "PD kp=.. kd=.."), ("ppo", "PPO"),
     ("ppo-residual", "PPO ±0.05 stick on PD kp=.. kd=.."), ("lqg", "LQG (Kalman filter + LQR, 11/11/11
-    states)"), ..."""
+    states)"), ...; an agent that describes itself (a ``describe()`` method returning the pair, e.g. a firmware
+    loop's :class:`~controllers.firmware.loop_rate_env.TickAgent`) is asked."""
     from .lqg.controller import LQGController
     from .pd.controller import PDController
     from .rl.residual_agent import ResidualAgent
 
+    if callable(getattr(agent, "describe", None)):
+        kind, description = agent.describe()
+        return str(kind), str(description)
     if isinstance(agent, PDController):
         kp = ", ".join(f"{v:.3g}" for v in agent.gains.kp)
         kd = ", ".join(f"{v:.3g}" for v in agent.gains.kd)

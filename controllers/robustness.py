@@ -30,7 +30,7 @@ def perturbed(env_model, delay: float = 0.0, gain: float = 1.0):
     return dataclasses.replace(env_model, params=p.with_values(**values))
 
 
-def robustness_check(agent, model=None, cases=None, **evaluate_kwargs) -> dict:
+def robustness_check(agent, model=None, cases=None, evaluate=None, **evaluate_kwargs) -> dict:
     """p90 |attitude error| per case and axis, its ratio to the nominal, and the episodes that ended early.
 
     Parameters
@@ -39,8 +39,12 @@ def robustness_check(agent, model=None, cases=None, **evaluate_kwargs) -> dict:
     model : str, Path, EnvModel or None
     cases : dict of str to dict, optional
         Name → ``perturbed`` arguments (default :data:`CASES`); the first is the reference.
+    evaluate : callable, optional
+        ``evaluate(agent, model, **evaluate_kwargs)`` returning an EvaluationResult (default
+        :func:`controllers.evaluate.evaluate_agent`; :func:`controllers.firmware.loop_rate_env.evaluate_firmware`
+        flies a firmware loop at its own rate).
     **evaluate_kwargs
-        Passed to :func:`controllers.evaluate.evaluate_agent`: ``config=`` an
+        Passed to ``evaluate``: ``config=`` an
         :class:`~controllers.evaluate.EvaluationConfig`, or its fields (traces, episodes_per_trace, seed, ...).
 
     Returns
@@ -52,11 +56,12 @@ def robustness_check(agent, model=None, cases=None, **evaluate_kwargs) -> dict:
 
     from .evaluate import evaluate_agent
 
+    evaluate = evaluate_agent if evaluate is None else evaluate
     env_model = model if isinstance(model, EnvModel) else load_env_model(model)
     cases = CASES if cases is None else cases
     out, reference = {}, None
     for name, change in cases.items():
-        res = evaluate_agent(agent, perturbed(env_model, **change), **evaluate_kwargs)
+        res = evaluate(agent, perturbed(env_model, **change), **evaluate_kwargs)
         p90 = {axis: res.metrics[axis]["att_p90_deg"] for axis in AXES}
         reference = reference or p90
         out[name] = {"p90_deg": p90, "ratio": {a: p90[a] / reference[a] for a in AXES},

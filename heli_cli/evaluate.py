@@ -1,4 +1,5 @@
-"""``heli evaluate``: any agent (PD JSON or PPO/SAC zip) on held-out gusts, with the sweep's metrics."""
+"""``heli evaluate``: any agent (PD or LQG JSON, PPO/SAC zip, or a firmware's gains with ``--firmware``) on
+held-out gusts, with the sweep's metrics."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ from pathlib import Path
 
 from .argtypes import number, output_path, seed, whole
 from .model_gate import add_accept_option, check_model
+from .tune import FIRMWARE_CHOICES, _scale
 
 DEFAULT_OUT = "evaluation"
 DEFAULT_EPISODE_S = 30.0
@@ -27,7 +29,16 @@ def register(sub):
         "of 'heli train'. Writes DIR/evaluation.json, evaluation.md, episode.png (a representative episode) and "
         "servo.png (the stick's stretch and spectrum per axis: how hard the agent works its servos).",
     )
-    p.add_argument("agent", metavar="AGENT", help="PD controller JSON (PDController.save) or PPO/SAC zip")
+    p.add_argument("agent", metavar="AGENT",
+                   help="PD controller JSON (PDController.save), LQG JSON (heli design --lqg) or PPO/SAC zip; with "
+                   "--firmware, the firmware's parameter file (or its log, whose parameters are read)")
+    p.add_argument("--firmware", choices=FIRMWARE_CHOICES, default=None,
+                   help="AGENT holds this firmware's gains (ArduPilot .param NAME,VALUE lines or a .bin log; "
+                   "Rotorflight CLI 'set' lines or a blackbox log): fly the firmware's own attitude loop at its "
+                   "loop rate, as 'heli tune' does (the physics sub-stepped to it)")
+    p.add_argument("--scale", type=_scale, default=None, metavar="S|R,P,Y",
+                   help="with --firmware: model stick per firmware output unit (one number, or roll,pitch,yaw; "
+                   "'heli tune' prints the one it measured from the log and records it in tune.json); default 1")
     p.add_argument("--model", metavar="DIR", default=None,
                    help="model directory written by 'heli identify' (default: the model shipped with heli-env)")
     add_accept_option(p, "Fly an agent on it")
@@ -87,10 +98,51 @@ def _check_control_period(agent, env_model, args) -> None:
                      f"heli design --dt {fits:g}")
 
 
+def _firmware_gains(args):
+    """With ``--firmware``: ``(spec, params, scale, notes)`` of the gains in ``args.agent``, else None; every bad
+    input (``--scale`` alone, a missing or malformed file, the other firmware's file) refused here, before any
+    work."""
+    from controllers.errors import AgentError
+    from controllers.firmware.firmwares import FIRMWARES
+    from controllers.firmware.scale import default_scale, user_scale
+
+    if args.firmware is None:
+        if args.scale is not None:
+            raise AgentError("--scale is the firmware's command scale: give it with --firmware")
+        return None
+    spec = FIRMWARES[args.firmware]
+    if not Path(args.agent).is_file():
+        raise FileNotFoundError(2, "no such parameter file or log", str(args.agent))
+    values, kind = spec.read(args.agent)
+    params, notes = spec.params_from(values, str(args.agent), from_file=(kind == "file"))
+    scale = (user_scale(args.scale) if args.scale is not None
+             else default_scale("no --scale given (heli tune measures it from the firmware's log)"))
+    notes = [f"gains read from {args.agent}: {n}" for n in notes]
+    return spec, params, scale, notes + ([f"command scale: {scale.detail}"] if scale.source == "default" else [])
+
+
+def _agent(args, env_model, firmware):
+    """``(agent, label, metadata, evaluate, notes)``: what ``args.agent`` names (``firmware``: what
+    :func:`_firmware_gains` read), and the function that flies it."""
+    from controllers.evaluate import describe_agent, evaluate_agent
+    from controllers.rl.agent_file import agent_metadata, load_agent
+
+    if firmware is not None:
+        from controllers.firmware.loop_rate_env import evaluate_firmware
+        from controllers.firmware.tune import control_signs
+
+        spec, params, scale, notes = firmware
+        loop = spec.loop_class(params, scale.scale, control_signs(env_model.params))
+        label = f"{Path(args.agent).name} ({args.firmware} loop at {loop.loop_rate_hz:g} Hz)"
+        return loop, label, {}, evaluate_firmware, notes
+    agent = load_agent(args.agent)
+    return (agent, f"{Path(args.agent).name} ({describe_agent(agent)[0]})", agent_metadata(args.agent),
+            evaluate_agent, [])
+
+
 def run(args) -> int:
     from controllers.errors import AgentError
-    from controllers.evaluate import EvaluationConfig, describe_agent, evaluate_agent
-    from controllers.rl.agent_file import agent_metadata, load_agent
+    from controllers.evaluate import EvaluationConfig
     from controllers.trace_split import TraceSplit, split_traces
     from heli_env.model_dir import load_env_model
     from heli_core.files import write_text
@@ -98,11 +150,14 @@ def run(args) -> int:
     from .progress import progress_of
 
     check_model(args, "fly an agent on it")  # an unusable model is refused before any work
+    firmware = _firmware_gains(args)
     progress = progress_of(args)
     progress.stage(f"loading {args.agent} and the model")
     env_model = load_env_model(args.model)
-    agent = load_agent(args.agent)
-    meta = agent_metadata(args.agent)
+    agent, label, meta, evaluate, notes = _agent(args, env_model, firmware)
+    for line in notes:
+        progress.done()
+        print(f"note: {line}")
     if meta and meta.get("split") and meta["split"].get("n_traces") == env_model.n_traces:
         split, origin = TraceSplit.from_dict(meta["split"]), "the agent's training split"
         if args.split_seed is not None and args.split_seed != split.seed:
@@ -118,8 +173,7 @@ def run(args) -> int:
     progress.stage(f"flying {args.traces} traces' episodes")
     episodes = EvaluationConfig(traces=args.traces, episodes_per_trace=args.episodes_per_trace,
                                 episode_seconds=episode_seconds, seed=args.seed, split=split)
-    res = evaluate_agent(agent, env_model, episodes,
-                         name=f"{Path(args.agent).name} ({describe_agent(agent)[0]})")
+    res = evaluate(agent, env_model, episodes, name=label)
     out = Path(args.out)
     progress.stage("writing the report" + ("" if args.no_plots else " and drawing an episode and the sticks"))
     paths = [res.to_json(out / "evaluation.json"), write_text(out / "evaluation.md", res.markdown())]
@@ -140,7 +194,7 @@ def run(args) -> int:
     if args.robustness:
         from controllers.robustness import robustness_check
 
-        check = robustness_check(agent, env_model, config=episodes)  # the evaluation's windows and split
+        check = robustness_check(agent, env_model, evaluate=evaluate, config=episodes)  # the same windows, split
         lines = [f"{case:18s}: p90 " + ", ".join(f"{a} {r['p90_deg'][a]:.3f} deg (x{r['ratio'][a]:.2f})"
                                                  for a in r["p90_deg"]) + f"; ended early {r['ended_early']}"
                  for case, r in check.items()]

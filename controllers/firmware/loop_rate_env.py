@@ -87,6 +87,11 @@ class TickAgent:
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = False):
         return self.loop.predict(observation, state, episode_start, deterministic, control_dt=self.dt)
 
+    def describe(self) -> tuple[str, str]:
+        """(kind, description) for reports (:func:`controllers.evaluate.describe_agent`): the firmware and its
+        loop rate."""
+        return self.loop.firmware, f"{self.loop.firmware} attitude loop at {self.loop.loop_rate_hz:g} Hz"
+
 
 def evaluate_firmware(loop, model=None, config=None, *, name: str | None = None, **settings):
     """Fly a firmware loop through the one evaluator at its own rate (module docstring).
