@@ -80,8 +80,8 @@ def register(sub):
 
 def add_learning_options(p) -> None:
     """The options of how an agent learns (TrainConfig's ``axis_balance``, ``paired_baseline``, ``history``,
-    ``normalize_obs``, ``lr_schedule``, ``reward_weights``, the gust curriculum, ``algo_kwargs``,
-    ``delay_spread``), shared with ``scripts/train_compare.py``; :func:`learning_settings` reads them."""
+    ``normalize_obs``, ``lr_schedule``, ``reward_weights``, ``stick_step_weight``, the gust curriculum,
+    ``algo_kwargs``, ``delay_spread``), shared with ``scripts/train_compare.py``; :func:`learning_settings` reads them."""
     p.add_argument("--no-axis-balance", action="store_true",
                    help="scale a residual's reward and observations by its PD's worst axis on every axis (default: "
                    "each axis by its own error level, so that every axis counts alike in the reward)")
@@ -99,6 +99,10 @@ def add_learning_options(p) -> None:
     p.add_argument("--reward-weights", type=weights(3), default=None, metavar="ATT,RATE,EFFORT",
                    help="weights of the reward's attitude, rate and control-effort terms (default 1,0.01,0.01 with "
                    "--residual, else 1,0.1,0.01); the error figures compared are attitude only")
+    p.add_argument("--stick-step-weight", type=number("a weight >= 0", 0.0, low_open=False), default=0.0,
+                   metavar="W",
+                   help="weight of the squared change of the applied stick from one step to the next in the reward "
+                   "(default 0): charges the chatter a servo feels, which the effort weight charges only by its size")
     p.add_argument("--lr-schedule", choices=("constant", "linear"), default="constant",
                    help="learning rate constant (default) or falling linearly to 0 at --timesteps (with a time "
                    "budget, give --timesteps about what the budget allows)")
@@ -125,7 +129,7 @@ def learning_settings(args) -> dict:
             "history": args.history, "normalize_obs": args.normalize_obs, "curriculum_steps": args.curriculum,
             "curriculum_start": args.curriculum_start, "lr_schedule": args.lr_schedule,
             "reward_weights": args.reward_weights, "algo_kwargs": args.algo_kwargs,
-            "delay_spread": args.delay_spread}
+            "delay_spread": args.delay_spread, "stick_step_weight": args.stick_step_weight}
 
 
 

@@ -243,11 +243,12 @@ class HeliAttitudeEnv(gym.Env):
                   (ped if ped < 1.0 else 1.0) if ped > -1.0 else -1.0)
         self._x = s.dstep(self._x, sticks, (seq[4][k], seq[5][k], seq[6][k]))
         self._k = k + 1
+        before = self._prev
         self._prev = (a0, a1, a2)
         obs, info = self._observe()
         e_att, e_rate = self._errors
         a = self._prev
-        r = reward_of(s.task, e_att, e_rate, a)
+        r = reward_of(s.task, e_att, e_rate, a, before)
         x = self._x
         terminated = not (abs(self._att[0]) <= s.task.max_angle and abs(self._att[1]) <= s.task.max_angle
                           and math.isfinite(x[0]) and math.isfinite(x[1]) and math.isfinite(x[2]))

@@ -156,13 +156,14 @@ CHUNK = BLOCK
 
 _ROWS = ("x0 x1 x2 x3 x4 x5 x6 x7 x8 x9 act0 act1 act2 gust lib0 lib1 lib2 lib3 lib4 lib5 lib6 lib7 lib8 lib9 "
          "trig0 trig1 trig2 trig3 trig4 att0 att1 att2 noise0 noise1 noise2 noise3 noise4 noise5 slow "
-         "line0 line1 line2 refatt0 refatt1 refatt2 refrate0 refrate1 refrate2 in0 in1 in2 "
+         "line0 line1 line2 refatt0 refatt1 refatt2 refrate0 refrate1 refrate2 in0 in1 in2 prev0 prev1 prev2 "
          "ud0 ud1 ud2 degatt0 degatt1 degatt2 degrate0 degrate1 degrate2 reward end").split()
 R = {name: i for i, name in enumerate(_ROWS)}
 """Row of each per-copy quantity in a block: the state (10), the action applied (3), the gust scale, the
 library row of the step (10: trims, collective, gust torque, u_d), the Euler-angle arguments (5) and angles
 (3), the step's sensor normals (6) and which of them need the ziggurat's slow path, the gyro lines (3), the
-references (3 + 3), the incoming action of a delayed env (3), and the step's outputs (u_d scaled, attitude and
+references (3 + 3), the incoming action of a delayed env (3), the action applied the step before (3: read and
+written only with a stick-step weight in the reward), and the step's outputs (u_d scaled, attitude and
 rate errors in degrees, reward, episode end: 0 running, 1 terminated, 2 truncated), kept together last."""
 N_ROWS = len(_ROWS)
 OUT_ROWS = slice(R["ud0"], N_ROWS)
@@ -342,7 +343,8 @@ def _line_loops(line_axes: tuple) -> list[str]:
 
 
 @lru_cache(maxsize=8)
-def observe_kernel(task: str, noisy: bool, axis_weighted: bool = False, line_axes: tuple = ()):
+def observe_kernel(task: str, noisy: bool, axis_weighted: bool = False, line_axes: tuple = (),
+                   stick_step: bool = False):
     """The compiled loop ``observe(S, k, steps, key, noise_std, line_amp, line_table, max_rate, max_angle, coef,
     obs)`` over the blocks of ``S`` (:class:`BlockLayout`), specialised on the task, the noise
     and the axes of the gyro lines. It runs on the calling thread: the step's one parallel region is
@@ -362,7 +364,8 @@ def observe_kernel(task: str, noisy: bool, axis_weighted: bool = False, line_axe
     output rows: ``degatt``/``degrate``, ``reward`` and ``end`` (1: attitude beyond ``max_angle`` or a rate
     not finite; 2: otherwise, at the step limit; 0: running). The same expressions as the single
     environment's ``_observe`` and :func:`heli_env.tasks.reward_of`, written out per axis
-    (``axis_weighted``: with ``coef[3:6]`` weighing each axis' errors).
+    (``axis_weighted``: with ``coef[3:6]`` weighing each axis' errors; ``stick_step``: the squared change of
+    the action from rows ``prev`` at weight ``coef[6]``, then ``prev`` set to the action).
 
     Per block, three loops: the normals by the ziggurat's rectangles, 8 copies an instruction, marking the
     about 1 % of samples that need its slow path; those samples and the gyro lines (table reads), one copy
@@ -383,6 +386,7 @@ def observe_kernel(task: str, noisy: bool, axis_weighted: bool = False, line_axe
         "        cr = coef[1]",
         "        cu = coef[2]",
         *(["        w0 = coef[3]", "        w1 = coef[4]", "        w2 = coef[5]"] if axis_weighted else []),
+        *(["        cs = coef[6]"] if stick_step else []),
         "        kb = k[_i0:_i0 + _m]",
         "        sb = steps[_i0:_i0 + _m]",
         f"        ob = obs[_i0 * {OBS_DIM}:(_i0 + _m) * {OBS_DIM}]",
@@ -442,10 +446,16 @@ def observe_kernel(task: str, noisy: bool, axis_weighted: bool = False, line_axe
         return f"({v}0 * {v}0 + {v}1 * {v}1 + {v}2 * {v}2)"
 
     att2 = "0.0" if task == "rate" else squares("e")
+    effort = "cu * (u0 * u0 + u1 * u1 + u2 * u2)"
+    if stick_step:  # heli_env.tasks.reward_of with a stick_step_weight
+        lines += [f"            d{c} = u{c} - {_at(f'prev{c}')}" for c in range(3)]
+        lines += [f"            {_at(f'prev{c}')} = u{c}" for c in range(3)]
+        effort += " + cs * (d0 * d0 + d1 * d1 + d2 * d2)"
     lines += [
-        f"            {_at('reward')} = -(ca * {att2} + cr * {squares('r')} + cu * (u0 * u0 + u1 * u1 + u2 * u2))",
+        f"            {_at('reward')} = -(ca * {att2} + cr * {squares('r')} + {effort})",
         "            ok = abs(a0) <= max_angle and abs(a1) <= max_angle and isfinite(p) and isfinite(q) and isfinite(r)",
         f"            {_at('end')} = (2.0 if kb[l] >= sb[l] else 0.0) if ok else 1.0",
     ]
-    tag = f"observe {task}{' noisy' if noisy else ''}{' axis-weighted' if axis_weighted else ''}"
+    tag = (f"observe {task}{' noisy' if noisy else ''}{' axis-weighted' if axis_weighted else ''}"
+           f"{' stick-step' if stick_step else ''}")
     return _compile(lines, "observe", tag, parallel=False)

@@ -72,6 +72,10 @@ class TaskConfig:
         Weights of roll, pitch and yaw in the attitude and rate terms (default 1, 1, 1):
         ``(w_roll, w_pitch, w_yaw)`` multiply each axis' squared errors, so an axis
         whose errors are naturally smaller (pitch beside yaw) can count as much.
+    stick_step_weight : float
+        Weight of the squared change of the applied action from the step before, summed over the axes
+        (the first step of an episode from rest): the chatter a servo feels, which the effort term
+        (``a²``) charges only by its size. Default 0: the reward without it, bit for bit.
     max_angle : float
         |roll| or |pitch| beyond this terminates the episode [rad] (default 60°).
     """
@@ -87,6 +91,7 @@ class TaskConfig:
     weights: tuple | None = None
     max_angle: float = math.radians(60.0)
     axis_weights: tuple = (1.0, 1.0, 1.0)
+    stick_step_weight: float = 0.0
 
     def __post_init__(self):
         if self.task not in TASKS:
@@ -100,6 +105,10 @@ class TaskConfig:
             object.__setattr__(self, "weights", (0.0, 1.0, 0.01) if self.task == "rate" else (1.0, 0.1, 0.01))
         object.__setattr__(self, "weights", three_weights(self.weights, "weights", "attitude, rate, effort"))
         object.__setattr__(self, "axis_weights", three_weights(self.axis_weights, "axis_weights", "roll, pitch, yaw"))
+        w = self.stick_step_weight
+        if isinstance(w, bool) or not (is_real(w) and w >= 0):
+            raise ValueError(f"stick_step_weight must be a number >= 0, got {w!r}")
+        object.__setattr__(self, "stick_step_weight", float(w))
 
     @property
     def axis_weighted(self) -> bool:
@@ -111,7 +120,7 @@ class TaskConfig:
         """:func:`reward_coefficients`, computed once (the single env reads them every step)."""
         wa, wr, wu = self.weights
         return (wa / (self.attitude_scale * self.attitude_scale), wr / (self.rate_scale * self.rate_scale), wu,
-                *self.axis_weights)
+                *self.axis_weights, self.stick_step_weight)
 
 
 @dataclass
@@ -212,21 +221,22 @@ def wrap(angle):
 
 def reward_coefficients(cfg: TaskConfig) -> tuple[float, ...]:
     """Weights of the squared attitude error [1/rad^2], rate error [s^2/rad^2] and action in the reward,
-    then the three axis weights (roll, pitch, yaw)."""
+    then the three axis weights (roll, pitch, yaw) and the stick step's weight."""
     return cfg.reward_coefficients
 
 
-def reward_of(cfg: TaskConfig, e_att, e_rate, action):
-    """Reward of one step from the attitude errors [rad], rate errors [rad/s] and action [stick], 3 each.
+def reward_of(cfg: TaskConfig, e_att, e_rate, action, previous=(0.0, 0.0, 0.0)):
+    """Reward of one step from the attitude errors [rad], rate errors [rad/s] and action [stick], 3 each, and
+    the action applied the step before (``previous``; read only with a ``stick_step_weight``).
 
-    ``-(w_att * att2/attitude_scale^2 + w_rate * rate2/rate_scale^2 + w_u * effort2)``
-    with ``att2 = sum(w_axis * e_att^2)``, ``rate2 = sum(w_axis * e_rate^2)`` and
-    ``effort2 = sum(a^2)``; floats or arrays over copies. Without axis weights the sums are
-    unweighted (``e0*e0 + e1*e1 + e2*e2``). The vector environment's loop
-    (:func:`heli_env.kernels.observe_kernel`) evaluates the same expression with
-    :func:`reward_coefficients`.
+    ``-(w_att * att2/attitude_scale^2 + w_rate * rate2/rate_scale^2 + w_u * effort2 [+ w_s * step2])``
+    with ``att2 = sum(w_axis * e_att^2)``, ``rate2 = sum(w_axis * e_rate^2)``,
+    ``effort2 = sum(a^2)`` and, when ``w_s = stick_step_weight > 0``, ``step2 = sum((a - previous)^2)``;
+    floats or arrays over copies. Without axis weights the sums are unweighted (``e0*e0 + e1*e1 + e2*e2``).
+    The vector environment's loop (:func:`heli_env.kernels.observe_kernel`) evaluates the same expression
+    with :func:`reward_coefficients`.
     """
-    ca, cr, cu, w0, w1, w2 = cfg.reward_coefficients
+    ca, cr, cu, w0, w1, w2, cs = cfg.reward_coefficients
     e, r, a = e_att, e_rate, action
     if cfg.axis_weighted:
         att2 = w0 * e[0] * e[0] + w1 * e[1] * e[1] + w2 * e[2] * e[2]
@@ -234,6 +244,10 @@ def reward_of(cfg: TaskConfig, e_att, e_rate, action):
     else:
         att2 = e[0] * e[0] + e[1] * e[1] + e[2] * e[2]
         rate2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+    if cs > 0.0:
+        d0, d1, d2 = a[0] - previous[0], a[1] - previous[1], a[2] - previous[2]
+        return -(ca * att2 + cr * rate2 + cu * (a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+                 + cs * (d0 * d0 + d1 * d1 + d2 * d2))
     return -(ca * att2 + cr * rate2 + cu * (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]))
 
 

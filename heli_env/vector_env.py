@@ -72,7 +72,8 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._advance_pool = (advance_kernel(s.model.params, s.dt, parallel=True)
                               if self._thread_choice.compiled_parallel else None)
         self._euler_arguments = euler_arguments_kernel()
-        self._observe_loop = observe_kernel(s.task.task, s.measured, s.task.axis_weighted, s.line_axis)
+        self._observe_loop = observe_kernel(s.task.task, s.measured, s.task.axis_weighted, s.line_axis,
+                                            s.task.stick_step_weight > 0.0)
         self._coef = np.array(reward_coefficients(s.task))
         self._rngs = [None] * n
         self._k = np.zeros(n, dtype=np.int64)
@@ -179,6 +180,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
         rows.put(R["x3"], s.trim[:, base], which)
         rows.put(R["x6"], quaternion_from_euler(angles[0], angles[1], 0.0), which)  # elementwise as on one copy
         rows.put(R["act0"], np.zeros((3, which.size)), which)
+        rows.put(R["prev0"], np.zeros((3, which.size)), which)  # an episode starts from rest (the stick step)
         rows.put(R["gust"], self._gust[which], which)
         if self._queue is not None:
             self._queue[:, :, which] = 0.0

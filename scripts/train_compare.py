@@ -287,6 +287,7 @@ def _training_notes(args, training: dict, agents: list) -> list[str]:
              + ("; running observation statistics" if args.normalize_obs else "")
              + (f"; learning rate to 0 at {args.timesteps} steps" if args.lr_schedule == "linear" else "")
              + (f"; reward weights {args.reward_weights}" if args.reward_weights else "")
+             + (f"; stick step weight {args.stick_step_weight:g}" if args.stick_step_weight else "")
              + ("; axes weighed by the best swept pair's errors" if args.reward_reference == "best" else "")
              + (f"; gusts from {args.curriculum_start:g}x to full over {args.curriculum} steps"
                 if args.curriculum else "")

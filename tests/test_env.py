@@ -605,6 +605,24 @@ def test_axis_weights_weigh_each_axis_errors_in_the_reward():
     assert run["rew"] != plain["rew"]
 
 
+def test_the_stick_step_weight_charges_the_change_of_the_applied_action():
+    """``stick_step_weight`` adds ``w * sum((a_k - a_(k-1))^2)`` of the applied (clipped) actions, the first step
+    from rest; the flight is unchanged, and a weight of 0 is the reward of before, bit for bit."""
+    actions = _random_actions(200, seed=5)
+    w = 0.7
+    run = _rollout(HeliAttitudeEnv(task=TaskConfig(stick_step_weight=w), episode_seconds=2.0), actions, seed=4)
+    plain = _rollout(HeliAttitudeEnv(episode_seconds=2.0), actions, seed=4)
+    zero = _rollout(HeliAttitudeEnv(task=TaskConfig(stick_step_weight=0.0), episode_seconds=2.0), actions, seed=4)
+    assert np.array_equal(np.array(run["x"]), np.array(plain["x"])) and zero["rew"] == plain["rew"]
+    applied = np.clip(actions[:len(run["rew"])].astype(float), -1.0, 1.0)
+    step = np.diff(np.vstack([np.zeros(3), applied]), axis=0)
+    assert_allclose(np.array(run["rew"]), np.array(plain["rew"]) - w * np.sum(step ** 2, axis=1), rtol=1e-12,
+                    atol=1e-12)
+    for bad in (-0.1, float("nan"), float("inf"), True, "1"):
+        with pytest.raises(ValueError, match="^stick_step_weight must be a number >= 0"):
+            TaskConfig(stick_step_weight=bad)
+
+
 @pytest.mark.parametrize("bad", [(1.0, 2.0), (1.0, -1.0, 1.0), (1.0, float("nan"), 1.0), (1.0, float("inf"), 0.0),
                                  (1.0, True, 1.0), ("1", 1.0, 1.0), "abc", 3.0])
 @pytest.mark.parametrize("name", ["axis_weights", "weights"])

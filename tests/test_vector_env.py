@@ -91,8 +91,9 @@ def test_vector_env_reproduces_single_envs_across_autoresets(task):
         {"task": TaskConfig(task="track", axis_weights=(1.0, 9.0, 0.25)), "obs_noise": (0.01, 0.03)},
         {"task": "hold", "obs_noise": SensorModel((0.01, 0.02, 0.03), (0.003, 0.002, 0.0), (
             GyroLine("roll", 30.0, 0.04), GyroLine("yaw", 40.0, 0.02), GyroLine("roll", 27.0, 0.03)))},
+        {"task": TaskConfig(task="hold", stick_step_weight=0.5), "action_delay": 1, "obs_noise": (0.01, 0.03)},
     ],
-    ids=["noise-delay", "dt-gust-collective", "level", "axis-weights", "identified-sensors"],
+    ids=["noise-delay", "dt-gust-collective", "level", "axis-weights", "identified-sensors", "stick-step"],
 )
 def test_vector_env_reproduces_single_envs_with_other_settings(kwargs):
     counts = _run_side_by_side({**kwargs, "episode_seconds": 2.0}, n=3, n_steps=300, seed=7)

@@ -176,6 +176,10 @@ class TrainConfig:
         (:class:`heli_env.tasks.TaskConfig` ``weights``). Default: :data:`RESIDUAL_REWARD_WEIGHTS`
         with ``residual``, else the task's own ((1, 0.1, 0.01) for "hold"). For a task given as a
         ``TaskConfig``, set its ``weights`` there instead.
+    stick_step_weight : float
+        Weight of the squared change of the applied stick from one step to the next in a named task's reward
+        (:class:`heli_env.tasks.TaskConfig` ``stick_step_weight``): charges the chatter a servo feels, which the
+        effort weight charges only by its size. Default 0 (none).
     lr_schedule : {"constant", "linear"}
         The learning rate: constant (default), or falling linearly from ``learning_rate`` to 0 at
         ``timesteps`` (SB3's ``LinearSchedule``). With a time budget set ``timesteps`` to about what the
@@ -242,6 +246,7 @@ class TrainConfig:
     normalize_obs: bool = False
     lr_schedule: str = "constant"
     reward_weights: tuple | None = None
+    stick_step_weight: float = 0.0
     curriculum_steps: int = 0
     curriculum_start: float = 0.5
     reward_reference: object = None
@@ -266,6 +271,12 @@ class TrainConfig:
             if not isinstance(self.task, str):
                 raise AgentError("reward_weights are for a named task; set the weights of a TaskConfig task in it")
             object.__setattr__(self, "reward_weights", weights)
+        w = self.stick_step_weight
+        if isinstance(w, bool) or not (is_real(w) and w >= 0):
+            raise AgentError(f"stick_step_weight must be a number >= 0, got {w!r}")
+        object.__setattr__(self, "stick_step_weight", float(w))
+        if w and not isinstance(self.task, str):
+            raise AgentError("stick_step_weight is for a named task; set it in the TaskConfig task instead")
         if self.algo_kwargs is not None and not (isinstance(self.algo_kwargs, dict)
                                                  and all(isinstance(k, str) for k in self.algo_kwargs)):
             raise AgentError(f"algo_kwargs must be a dict of SB3 keyword arguments, got {self.algo_kwargs!r}")

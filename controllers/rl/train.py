@@ -309,13 +309,14 @@ than the worst counts ten times, not more: a near-perfect axis would otherwise d
 def _residual_setup(config: TrainConfig, env_model, train_seg):
     """(scales, task): the residual's scales from its base's errors on the training gusts (None without a
     residual), and the task: a named one with its reward scaled by those scales (per axis with
-    ``config.axis_balance``) and weighted by ``config.task_weights``, else ``config.task`` itself."""
+    ``config.axis_balance``) and weighted by ``config.task_weights`` (and ``config.stick_step_weight``), else
+    ``config.task`` itself."""
     setup = None
     if config.residual is not None:
         setup = residual_setup(config.residual, env_model, train_seg, config.seed, axis_balance=config.axis_balance,
                                reference=config.reward_reference)
     task = config.task
-    if isinstance(task, str) and (setup is not None or config.task_weights is not None):
+    if isinstance(task, str) and (setup is not None or config.task_weights is not None or config.stick_step_weight):
         from heli_env.tasks import TaskConfig
 
         fields = {} if setup is None else {"attitude_scale": setup["attitude_scale"],
@@ -323,6 +324,8 @@ def _residual_setup(config: TrainConfig, env_model, train_seg):
                                            "axis_weights": tuple(setup["axis_weights"])}
         if config.task_weights is not None:
             fields["weights"] = config.task_weights
+        if config.stick_step_weight:
+            fields["stick_step_weight"] = config.stick_step_weight
         try:
             task = TaskConfig(task=task, **fields)
         except ValueError as e:
