@@ -97,7 +97,9 @@ class HeliAttitudeEnv(gym.Env):
 
     Per step ``-(w_a·Σ(e_att/10°)² + w_r·Σ(e_rate/30°/s)² + w_u·Σ a²)``, weights
     (1, 0.1, 0.01) for "hold" and "track", (0, 1, 0.01) for "rate"
-    (:class:`heli_env.tasks.TaskConfig`). Holding 10° off on one axis costs 1 per step.
+    (:class:`heli_env.tasks.TaskConfig`). Holding 10° off on one axis costs 1 per step. With a
+    ``TaskConfig(stick_step_weight=w_s)`` the reward also charges ``w_s·Σ(a − a_prev)²``, the change of the
+    applied action from the step before (from rest at an episode's start): the chatter a servo feels.
 
     ## Starting State
 
