@@ -34,7 +34,9 @@ class HeliAttitudeEnv(gym.Env):
     servo delay of eq. 31 when identified), stepped by the package's one
     physics core. The wind is *replayed*: on every reset a disturbance trace
     of the model's library (the equivalent cyclic inputs u_d that the real
-    aircraft met, eqs. 41-47) and a start offset are drawn, and its torque
+    aircraft met, eqs. 41-47; from a maximum-likelihood model, as the shipped
+    one, a draw from the wind smoother's posterior, which has the identified
+    wind's full power) and a start offset are drawn, and its torque
     ``k*u_d`` is applied sample by sample. With no ``model`` argument the
     environment uses the model shipped with the package, which heli-env
     identified itself from synthetic flights of its truth model
