@@ -342,6 +342,56 @@ def _line_loops(line_axes: tuple) -> list[str]:
             *("                " + line for line in sums(lambda c: f"line_table[kl, {c}]"))]
 
 
+def _noise_lines(line_axes: tuple) -> list:
+    """The sensors' part of :func:`observe_kernel`'s block: the step's six normals of each copy by the ziggurat's
+    rectangles (rows ``noise``, and ``slow`` marking the samples that need its slow path), that slow path, and
+    the gyro lines on ``line_axes`` (rows ``line``)."""
+    lines = [*(f"        na{c} = noise_std[{c}]" for c in range(3)),
+             *(f"        nr{c} = noise_std[{3 + c}]" for c in range(3)),
+             "        keyb = key[_i0:_i0 + _m]",
+             "        for l in range(_m):",  # the step's 6 normals: 3 words of the key's stream
+             "            _pair = np.uint64(kb[l]) * np.uint64(3)",
+             "            _key = keyb[l]",
+             "            _slow = 0.0"]
+    for word in range(3):
+        lines.append(f"            _b = stream_bits(_key, _pair + np.uint64({word}))")
+        for half in range(2):
+            c = 2 * word + half
+            lines += [f"            _z, _again = fast_normal({'_b & LOW32' if half == 0 else '_b >> np.uint64(32)'})",
+                      f"            {_at(f'noise{c}')} = _z",
+                      f"            _slow += {float(1 << c)!r} if _again else 0.0"]
+    lines += [f"            {_at('slow')} = _slow"]
+    lines += ["        for l in range(_m):",  # the slow path where the rectangles rejected
+              f"            _slow = {_at('slow')}",
+              "            if _slow != 0.0:",
+              "                _flags = int(_slow)",
+              "                for _c in range(6):",
+              "                    if _flags & (1 << _c):",
+              f"                        Sb[({R['noise0']} + _c) * {ROW} + l] = standard_normal(keyb[l], kb[l] * 6 + _c)"]
+    if line_axes:
+        lines += _line_loops(line_axes)
+    return lines
+
+
+def _reward_lines(task: str, axis_weighted: bool, stick_step: bool) -> list:
+    """The reward of one copy in :func:`observe_kernel`'s loop: :func:`heli_env.tasks.reward_of` written out per
+    axis from the errors ``e``/``r`` and the action ``u`` (and, with ``stick_step``, the step from rows ``prev``,
+    which then take the action)."""
+    def squares(v):
+        if axis_weighted:
+            return f"(w0 * {v}0 * {v}0 + w1 * {v}1 * {v}1 + w2 * {v}2 * {v}2)"
+        return f"({v}0 * {v}0 + {v}1 * {v}1 + {v}2 * {v}2)"
+
+    att2 = "0.0" if task == "rate" else squares("e")
+    effort = "cu * (u0 * u0 + u1 * u1 + u2 * u2)"
+    lines = []
+    if stick_step:
+        lines += [f"            d{c} = u{c} - {_at(f'prev{c}')}" for c in range(3)]
+        lines += [f"            {_at(f'prev{c}')} = u{c}" for c in range(3)]
+        effort += " + cs * (d0 * d0 + d1 * d1 + d2 * d2)"
+    return lines + [f"            {_at('reward')} = -(ca * {att2} + cr * {squares('r')} + {effort})"]
+
+
 @lru_cache(maxsize=8)
 def observe_kernel(task: str, noisy: bool, axis_weighted: bool = False, line_axes: tuple = (),
                    stick_step: bool = False):
@@ -392,30 +442,7 @@ def observe_kernel(task: str, noisy: bool, axis_weighted: bool = False, line_axe
         f"        ob = obs[_i0 * {OBS_DIM}:(_i0 + _m) * {OBS_DIM}]",
     ]
     if noisy:
-        lines += [*(f"        na{c} = noise_std[{c}]" for c in range(3)),
-                  *(f"        nr{c} = noise_std[{3 + c}]" for c in range(3)),
-                  "        keyb = key[_i0:_i0 + _m]",
-                  "        for l in range(_m):",  # the step's 6 normals: 3 words of the key's stream
-                  "            _pair = np.uint64(kb[l]) * np.uint64(3)",
-                  "            _key = keyb[l]",
-                  "            _slow = 0.0"]
-        for word in range(3):
-            lines.append(f"            _b = stream_bits(_key, _pair + np.uint64({word}))")
-            for half in range(2):
-                c = 2 * word + half
-                lines += [f"            _z, _again = fast_normal({'_b & LOW32' if half == 0 else '_b >> np.uint64(32)'})",
-                          f"            {_at(f'noise{c}')} = _z",
-                          f"            _slow += {float(1 << c)!r} if _again else 0.0"]
-        lines += [f"            {_at('slow')} = _slow"]
-        lines += ["        for l in range(_m):",  # the slow path where the rectangles rejected
-                  f"            _slow = {_at('slow')}",
-                  "            if _slow != 0.0:",
-                  "                _flags = int(_slow)",
-                  "                for _c in range(6):",
-                  "                    if _flags & (1 << _c):",
-                  f"                        Sb[({R['noise0']} + _c) * {ROW} + l] = standard_normal(keyb[l], kb[l] * 6 + _c)"]
-        if line_axes:
-            lines += _line_loops(line_axes)
+        lines += _noise_lines(line_axes)
     lines.append("        for l in range(_m):")
     for c, w in enumerate(("p", "q", "r")):
         att = _at(f"att{c}")
@@ -440,19 +467,8 @@ def observe_kernel(task: str, noisy: bool, axis_weighted: bool = False, line_axe
                   f"            ob[l * {OBS_DIM} + {6 + c}] = {bound(rate_err)}",
                   f"            ob[l * {OBS_DIM} + {9 + c}] = u{c}"]
 
-    def squares(v):  # heli_env.tasks.reward_of
-        if axis_weighted:
-            return f"(w0 * {v}0 * {v}0 + w1 * {v}1 * {v}1 + w2 * {v}2 * {v}2)"
-        return f"({v}0 * {v}0 + {v}1 * {v}1 + {v}2 * {v}2)"
-
-    att2 = "0.0" if task == "rate" else squares("e")
-    effort = "cu * (u0 * u0 + u1 * u1 + u2 * u2)"
-    if stick_step:  # heli_env.tasks.reward_of with a stick_step_weight
-        lines += [f"            d{c} = u{c} - {_at(f'prev{c}')}" for c in range(3)]
-        lines += [f"            {_at(f'prev{c}')} = u{c}" for c in range(3)]
-        effort += " + cs * (d0 * d0 + d1 * d1 + d2 * d2)"
+    lines += _reward_lines(task, axis_weighted, stick_step)
     lines += [
-        f"            {_at('reward')} = -(ca * {att2} + cr * {squares('r')} + {effort})",
         "            ok = abs(a0) <= max_angle and abs(a1) <= max_angle and isfinite(p) and isfinite(q) and isfinite(r)",
         f"            {_at('end')} = (2.0 if kb[l] >= sb[l] else 0.0) if ok else 1.0",
     ]
