@@ -45,7 +45,7 @@ from heli_core.linear import hover_linearisation
 from heli_core.terms import AXES
 
 from .errors import SweepError
-from .pd.law import pd_command  # noqa: F401  (the one PD law: it lived here)
+from .pd.law import pd_command
 STABILITY_MARGIN = 1e-9
 """A gain pair is stable when every discrete closed-loop pole has ``|z| < 1 - STABILITY_MARGIN``
 (a pole on the unit circle, e.g. ``kp = 0``, lets the attitude drift and counts as unstable)."""

@@ -41,8 +41,8 @@ from heli_core.config import check, configured, is_real, whole_number
 from heli_core.files import jsonable, write_text
 from heli_core.terms import AXES
 
+from ._deprecated import DEPRECATIONS
 from .errors import AgentError
-from .evaluate_report import comparison_markdown, metrics_table  # noqa: F401  (public names of this module)
 from .evaluate_report import evaluation_markdown, plot_episode
 from .metrics import METRIC_NAMES, error_metrics
 from .servo_activity import stick_activity
@@ -373,3 +373,7 @@ def _fly(agent, env, obs, info) -> dict:
             torch.set_num_threads(threads)
     return {"att_err_deg": att, "rate_err_deg_s": rate, "action": act, "disturbance": dist, "reward": rew,
             "steps": steps, "terminated": terminated}
+
+
+__getattr__ = DEPRECATIONS.module_getattr(__name__)
+"""The report's tables this module re-exported (deprecated: :mod:`controllers._deprecated`)."""

@@ -4,7 +4,7 @@ The gain sweep (:mod:`controllers.sweep`, the identified model replaying the
 library's gusts) and the flight tests (:mod:`controllers.flight_test`, the
 truth model in fresh wind) fly the same loop; this module writes it once.
 
-At every control period ``dt`` the PD law (:func:`controllers.closed_loop.pd_command`)
+At every control period ``dt`` the PD law (:func:`controllers.pd.law.pd_command`)
 computes a stick offset per axis from the attitude and rates the autopilot sees
 (the true state, plus sensor noise where given; reference 0: attitude hold),
 clipped to [-1, 1]; the applied stick is ``clip(trim + offset, -1, 1)``, exactly

@@ -32,7 +32,7 @@ The replay
 ----------
 (:mod:`controllers.replay`; windows from :mod:`controllers.sweep_inputs`, statistics by
 :mod:`controllers.sweep_replay`.) The state starts level at rest, servos settled on the trim. At every control
-period ``dt`` the PD law (:func:`controllers.closed_loop.pd_command`) computes
+period ``dt`` the PD law (:func:`controllers.pd.law.pd_command`) computes
 a stick offset per axis from the true attitude and rates (reference 0:
 attitude hold), clipped to [-1, 1]; the applied stick is ``clip(trim + offset,
 -1, 1)`` with the trim for the recorded collective, exactly as the

@@ -35,8 +35,8 @@ parent killed mid-run (SIGKILL, out of memory) leaves no worker, forkserver or r
 The module sits in :mod:`heli_core`, the base layer, because identification of
 many flights, the gain sweeps and RL training all use it, and
 ``identification`` must not import ``controllers`` (data flows identification →
-heli_env → controllers). :mod:`heli_core.backends` and
-:mod:`controllers.backends` re-export it under the names users import.
+heli_env → controllers). ``identification.backends`` and ``controllers.backends``
+re-exported it (deprecated: :mod:`heli_core.deprecation`).
 
 Ray is imported only when a :class:`RayBackend` is made; without it the error
 names the extra to install (:class:`~heli_core.errors.MissingDependency`).

@@ -13,7 +13,6 @@ from heli_core.quaternion import euler_from_quaternion_scalar, quaternion_from_e
 
 from .errors import ActionError
 from .spec import MAX_RATE, action_space, build_spec, observation_space, real_actions, reset_options
-from .spec import OBS_DIM  # noqa: F401  (it lived here)
 from .sensor_noise import draw_noise_key, noise_block
 from .tasks import TWO_PI, draw_episode, line_phases, reward_of, wrap
 

@@ -18,10 +18,7 @@ The physics core and the term library are :mod:`heli_core`'s, the model folder :
 of the flat layout before issue 34 still import, with a ``DeprecationWarning`` (:mod:`identification._deprecated`).
 """
 
-from . import _deprecated
+from ._deprecated import DEPRECATIONS
 
-_deprecated.install()
-
-
-def __getattr__(name):
-    return _deprecated.old_module(name)
+DEPRECATIONS.install()
+__getattr__ = DEPRECATIONS.old_module

@@ -4,14 +4,15 @@ Until issue 34 :mod:`identification` was one flat room of modules, some of them 
 had moved (``identification.model`` of :mod:`heli_core`, ``identification.files`` of
 :mod:`heli_core.files`, ``identification.model_file`` of :mod:`model_store.model_file`, ...). Each stage now
 has a folder and each name one home. Code written against the old names keeps working until
-:data:`REMOVAL`: this module is the only place that knows them.
+:data:`heli_core.deprecation.REMOVAL`: this module is the only place that knows them, and
+:class:`heli_core.deprecation.Deprecations` (the mechanism every package shares) answers for them.
 
-* An old module that no longer exists (``identification.ml_estimator``) is imported as an alias module made
-  here (:class:`_Finder`, installed by ``identification/__init__.py``); each name read from it is looked up
-  in its new homes (:data:`MOVED_MODULES`) and warns, naming the module to import it from.
+* An old module that no longer exists (``identification.ml_estimator``) is imported as an alias module
+  (installed by ``identification/__init__.py``); each name read from it is looked up in its new homes
+  (:data:`MOVED_MODULES`) and warns, naming the module to import it from.
 * An old module whose name is now a stage's folder (``identification.disturbance``,
   ``identification.validation``, ``identification.bench``) answers its old names from the folder's
-  ``__getattr__``, which asks :func:`moved_name`.
+  ``__getattr__``.
 * A module that stays but lent its name to others' names (``identification.errors`` re-exported the errors
   of :mod:`heli_core.errors` and :mod:`model_store.errors`) does the same for those names only
   (:data:`MOVED_NAMES`).
@@ -22,16 +23,7 @@ fails when it finds one (``tests/test_structure_report.py`` runs it).
 
 from __future__ import annotations
 
-import ast
-import importlib
-import importlib.abc
-import importlib.machinery
-import sys
-import types
-import warnings
-
-REMOVAL = "0.2.0"
-"""The release that removes the old names."""
+from heli_core.deprecation import Deprecations
 
 MOVED_MODULES: dict[str, tuple[str, ...]] = {
     # the shims of earlier moves: the physics core, the term library, files, backends, the model folder
@@ -116,96 +108,5 @@ MOVED_NAMES: dict[str, dict[str, str]] = {
 }
 """Module that stays -> {old name it re-exported: the module that defines it}."""
 
-
-def _warn(old: str, name: str, home: str, stacklevel: int) -> None:
-    warnings.warn(f"{old}.{name} is deprecated: import {name} from {home} (the old name goes in {REMOVAL})",
-                  DeprecationWarning, stacklevel=stacklevel + 1)
-
-
-def _defines(module, name: str) -> bool:
-    """Whether ``module``'s own source assigns or defines ``name`` at its top level (not imports it)."""
-    path = getattr(module, "__file__", None)
-    if path not in _DEFINED:
-        names = set()
-        if path:
-            with open(path, encoding="utf-8") as f:
-                for node in ast.parse(f.read()).body:
-                    targets = (node.targets if isinstance(node, ast.Assign) else
-                               [node.target] if isinstance(node, ast.AnnAssign) else [])
-                    names.update(t.id for t in targets if isinstance(t, ast.Name))
-                    if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
-                        names.add(node.name)
-        _DEFINED[path] = names
-    return name in _DEFINED[path]
-
-
-_DEFINED: dict = {}
-
-
-def moved_name(old: str, name: str, stacklevel: int = 2):
-    """The object old module ``old`` offered as ``name``, from its new home, with a ``DeprecationWarning``.
-
-    Raises
-    ------
-    AttributeError
-        ``old`` had no such public name (as a module's ``__getattr__`` must, so that ``from package import
-        submodule`` still finds a submodule).
-    """
-    if name in MOVED_NAMES.get(old, {}):
-        home = MOVED_NAMES[old][name]
-        _warn(old, name, home, stacklevel + 1)
-        return getattr(importlib.import_module(home), name)
-    if not name.startswith("_"):
-        homes = [importlib.import_module(home) for home in MOVED_MODULES.get(old, ())]
-        holding = [m for m in homes if name in vars(m)]
-        if holding:  # named by the module that defines it: among the homes, else a function's or class's own
-            module = next((m for m in holding if _defines(m, name)), holding[0])
-            obj = vars(module)[name]
-            own = getattr(obj, "__module__", None)
-            home = module.__name__ if _defines(module, name) or not isinstance(own, str) else own
-            _warn(old, name, home, stacklevel + 1)
-            return obj
-    raise AttributeError(f"module {old!r} has no attribute {name!r}")
-
-
-class _OldModule(types.ModuleType):
-    """An old module of :data:`MOVED_MODULES`: every name read from it comes from its new home, with a warning."""
-
-    def __getattr__(self, name):
-        return moved_name(self.__name__, name)
-
-    def __dir__(self):
-        return sorted({n for home in MOVED_MODULES[self.__name__]
-                       for n in vars(importlib.import_module(home)) if not n.startswith("_")})
-
-
-class _Loader(importlib.abc.Loader):
-    def create_module(self, spec):
-        return _OldModule(spec.name, f"Deprecated: the names of {spec.name} now live in "
-                                     f"{', '.join(MOVED_MODULES[spec.name])} (removed in {REMOVAL}).")
-
-    def exec_module(self, module):
-        pass
-
-
-class _Finder(importlib.abc.MetaPathFinder):
-    """Finds the old modules of :data:`MOVED_MODULES` that no longer exist as files."""
-
-    def find_spec(self, fullname, path=None, target=None):
-        if fullname not in MOVED_MODULES or importlib.machinery.PathFinder.find_spec(fullname, path):
-            return None  # not an old name, or a real module or package of that name (a stage's folder)
-        return importlib.machinery.ModuleSpec(fullname, _Loader())
-
-
-def install() -> None:
-    """Let ``import identification.<old module>`` find its alias (once per process), before any other finder
-    (an editable install's finder would otherwise look for the old file in the source tree)."""
-    if not any(isinstance(f, _Finder) for f in sys.meta_path):
-        sys.meta_path.insert(0, _Finder())
-
-
-def old_module(name: str):
-    """``identification.<name>`` for an old module name read as an attribute of :mod:`identification`."""
-    if f"identification.{name}" in MOVED_MODULES:
-        return importlib.import_module(f"identification.{name}")
-    raise AttributeError(f"module 'identification' has no attribute {name!r}")
+DEPRECATIONS = Deprecations("identification", MOVED_MODULES, MOVED_NAMES)
+"""The tables above, answered by the one mechanism of :mod:`heli_core.deprecation`."""

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from heli_core.errors import HeliError
 
+from ._deprecated import DEPRECATIONS
+
 
 class FlightLogError(HeliError, ValueError):
     """A flight log or in-memory flight is malformed (columns, NaNs, time base, units, ranges)."""
@@ -50,8 +52,5 @@ __all__ = ["DisturbanceError", "FlightLogError", "IdentifiabilityError", "NotFit
            "UnitError"]
 
 
-def __getattr__(name):
-    """The errors of other layers this module re-exported (deprecated: :mod:`identification._deprecated`)."""
-    from ._deprecated import moved_name
-
-    return moved_name(__name__, name)
+__getattr__ = DEPRECATIONS.module_getattr(__name__)
+"""The errors of other layers this module re-exported (deprecated: :mod:`identification._deprecated`)."""

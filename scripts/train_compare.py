@@ -10,7 +10,7 @@
    :func:`swept_gains`).
 3. Trains PPO and SAC on the training traces, each for a wall-time budget
    (``--minutes``) or a number of timesteps, whichever ends first, and a PPO
-   residual on a swept PD (:mod:`controllers.residual`: the agent's action is
+   residual on a swept PD (:mod:`controllers.rl.residual_agent`: the agent's action is
    the PD's command plus a learnt correction of at most ``--residual-scale``
    stick; ``--residual-on robust``, the default, takes the best pair that keeps
    6 dB of gain margin and 45° of phase margin), with the same budget. The residual's wall time does not include the sweep that
@@ -48,7 +48,8 @@ from pathlib import Path
 import numpy as np
 
 from controllers.errors import DesignError
-from controllers.evaluate import comparison_markdown, evaluate_agent, plot_episode
+from controllers.evaluate import evaluate_agent, plot_episode
+from controllers.evaluate_report import comparison_markdown
 from controllers.lqg.design import design_lqg
 from controllers.pd import PDController, PDGains, design_gains, loop_analysis
 from controllers.rl import RESIDUAL_HISTORY, RESIDUAL_SCALE, load_agent, split_traces, train_agent

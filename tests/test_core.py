@@ -115,6 +115,17 @@ def test_model_store_source_names_only_the_core():
     ("identification.errors.BackendError", "heli_core.errors.BackendError"),
     ("identification.errors.TaskFailed", "heli_core.errors.TaskFailed"),
     ("identification.errors.require", "heli_core.errors.require"),
+    # controllers' old names, through the same mechanism (heli_core.deprecation)
+    ("controllers.backends.RayBackend", "heli_core.backends.RayBackend"),
+    ("controllers.residual.ResidualAgent", "controllers.rl.residual_agent.ResidualAgent"),
+    ("controllers.residual.residual_setup", "controllers.rl.train.residual_setup"),
+    ("controllers.rl.residual.stack_observations", "controllers.rl.residual_agent.stack_observations"),
+    ("controllers.sb3_vec_env.GymnasiumVecEnv", "controllers.rl.vec_env.GymnasiumVecEnv"),
+    ("controllers.PDController", "controllers.pd.controller.PDController"),
+    ("controllers.design_gains", "controllers.pd.design.design_gains"),
+    ("controllers.plant", "controllers.pd.linearisation.plant"),
+    ("controllers.evaluate.comparison_markdown", "controllers.evaluate_report.comparison_markdown"),
+    ("controllers.pd.linearisation.control_sign", "controllers.pd.law.control_sign"),
 ])
 def test_old_names_warn_and_are_the_new_objects(old, new):
     """An old name of identification's flat layout (or a shim's) is the object of its one home, read through
@@ -153,9 +164,15 @@ def test_an_old_module_imports_as_its_alias():
         assert identification.fleet.identify_each is identify_each
 
 
-def test_controllers_backends_is_the_core_object():
-    """controllers.backends (a shim of its own package, not identification's) re-exports, never copies."""
-    assert importlib.import_module("controllers.backends").RayBackend is heli_core.backends.RayBackend
+def test_every_package_shares_one_deprecation_finder():
+    """identification's and controllers' old modules are found by one finder of heli_core.deprecation, not by a
+    copy per package."""
+    import controllers  # noqa: F401 - installs controllers' table
+    import identification  # noqa: F401 - installs identification's table
+    from heli_core.deprecation import _Finder
+
+    finders = [f for f in sys.meta_path if isinstance(f, _Finder)]
+    assert len(finders) == 1 and {"identification", "controllers"} <= set(finders[0].tables)
 
 
 def _error_classes():

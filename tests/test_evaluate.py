@@ -15,7 +15,8 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from controllers.errors import AgentError
-from controllers.evaluate import EvaluationConfig, comparison_markdown, evaluate_agent, plot_episode
+from controllers.evaluate import EvaluationConfig, evaluate_agent, plot_episode
+from controllers.evaluate_report import comparison_markdown
 from controllers.metrics import METRIC_NAMES, error_metrics, histogram_edges
 from controllers.pd import PDController, PDGains, design_gains
 from controllers.sweep import sweep_pairs

@@ -387,9 +387,9 @@ def residual_run(ideal, tmp_path_factory):
 
 
 def test_residual_agent_is_the_pd_plus_a_bounded_correction(residual_run):
-    from controllers.residual import ResidualAgent
+    from controllers.rl.residual_agent import ResidualAgent
 
-    from controllers.residual import stack_observations
+    from controllers.rl.residual_agent import stack_observations
 
     agent = load_agent(residual_run.path)
     assert isinstance(agent, ResidualAgent) and agent.scale == 0.05
@@ -450,8 +450,8 @@ def test_residual_without_axis_balance_weighs_every_axis_alike(ideal, tmp_path):
 
 
 def test_a_zero_residual_flies_the_pd(shipped):
-    from controllers.residual import residual_env
-    from controllers.sb3_vec_env import GymnasiumVecEnv
+    from controllers.rl.residual_agent import residual_env
+    from controllers.rl.vec_env import GymnasiumVecEnv
     from heli_env.vector_env import HeliAttitudeVectorEnv
 
     def env():
@@ -468,8 +468,8 @@ def test_a_zero_residual_flies_the_pd(shipped):
 def test_a_paired_residual_is_rewarded_for_what_it_gains_over_its_twin(shipped):
     """The twin flies the PD alone on the same gust: a zero residual gains exactly nothing; the paired reward
     is the copy's reward minus its twin's."""
-    from controllers.residual import residual_env
-    from controllers.sb3_vec_env import GymnasiumVecEnv
+    from controllers.rl.residual_agent import residual_env
+    from controllers.rl.vec_env import GymnasiumVecEnv
     from heli_env.vector_env import HeliAttitudeVectorEnv
 
     def env(twins):
@@ -534,8 +534,8 @@ def test_stacked_observations_are_the_ones_training_saw(shipped):
     """ResidualAgent's history equals SB3's VecFrameStack, through episode ends."""
     from stable_baselines3.common.vec_env import VecFrameStack
 
-    from controllers.residual import stack_observations
-    from controllers.sb3_vec_env import GymnasiumVecEnv
+    from controllers.rl.residual_agent import stack_observations
+    from controllers.rl.vec_env import GymnasiumVecEnv
     from heli_env.vector_env import HeliAttitudeVectorEnv
 
     env = VecFrameStack(GymnasiumVecEnv(HeliAttitudeVectorEnv(2, model=shipped, episode_seconds=0.1)), 4)
@@ -553,7 +553,7 @@ def test_stacked_observations_are_the_ones_training_saw(shipped):
 
 def test_a_residual_with_history_trains_and_flies(ideal, tmp_path):
     from controllers.evaluate import evaluate_agent
-    from controllers.residual import ResidualAgent
+    from controllers.rl.residual_agent import ResidualAgent
 
     res = _tiny("ppo", tmp_path / "hist", ideal, residual=BEST_PD, residual_scale=0.05, history=3)
     agent = load_agent(res.path)
@@ -886,8 +886,8 @@ def test_a_residual_on_a_filtered_pd_filters_its_base_as_the_pd_alone_does(shipp
     """A residual whose policy says 0 flies its base exactly, derivative filter included: the filter state rides
     beside the policy's in ``state`` (reset by episode_start), the training wrapper keeps it per copy (reset at
     each copy's episode end), and the base travels in the metadata with its filter."""
-    from controllers.residual import ResidualAgent, residual_env, residual_from_metadata, residual_metadata
-    from controllers.sb3_vec_env import GymnasiumVecEnv
+    from controllers.rl.residual_agent import ResidualAgent, residual_env, residual_from_metadata, residual_metadata
+    from controllers.rl.vec_env import GymnasiumVecEnv
     from heli_env.vector_env import HeliAttitudeVectorEnv
 
     class Zero:
@@ -932,7 +932,7 @@ def test_a_residual_on_the_lqg_baseline_flies_it_and_tells_its_filters_the_stick
     beside the policy's); with one, the filters predict with the stick the aircraft got, so they do not read
     the correction as a gust; the base travels in the agent's file."""
     from controllers.lqg.controller import LQGController
-    from controllers.residual import ResidualAgent, as_base, residual_from_metadata, residual_metadata
+    from controllers.rl.residual_agent import ResidualAgent, as_base, residual_from_metadata, residual_metadata
 
     class Constant:
         def __init__(self, value):
@@ -964,7 +964,7 @@ def test_a_residual_on_the_lqg_baseline_flies_it_and_tells_its_filters_the_stick
 
 def test_a_residual_trains_on_the_lqg_baseline_and_loads_with_it(lqg, shipped, tmp_path):
     from controllers.lqg.controller import LQGController
-    from controllers.residual import ResidualAgent
+    from controllers.rl.residual_agent import ResidualAgent
 
     res = _tiny("ppo", tmp_path / "on_lqg", shipped, residual=lqg)
     setup = agent_metadata(res.path)["residual"]["setup"]

@@ -1,4 +1,4 @@
-"""Tests of the SB3 ``VecEnv`` adapter over the native vector env (:mod:`controllers.sb3_vec_env`).
+"""Tests of the SB3 ``VecEnv`` adapter over the native vector env (:mod:`controllers.rl.vec_env`).
 
 SB3 expects a same-step reset: the step that ends an episode returns ``done``,
 the first observation of the next episode, and the last observation in
@@ -15,7 +15,7 @@ from numpy.testing import assert_array_equal
 
 pytest.importorskip("stable_baselines3")
 
-from controllers.sb3_vec_env import GymnasiumVecEnv  # noqa: E402
+from controllers.rl.vec_env import GymnasiumVecEnv  # noqa: E402
 from controllers.trace_split import TraceSegment, WindowSampler  # noqa: E402
 from heli_env.vector_env import HeliAttitudeVectorEnv  # noqa: E402
 

@@ -1,7 +1,8 @@
 """scripts/structure_report.py as a check: it fails (exit 1) when first-party code imports a deprecated name.
 
 A moved name has one home (issue 34): code of this project imports it from the module that defines it, never
-through an old module of ``identification._deprecated``'s tables.
+through an old module or name of a package's ``_deprecated`` tables (``identification``, ``controllers``,
+``heli_env``), nor through a shim module.
 """
 
 import ast
@@ -26,7 +27,9 @@ def report():
 
 def test_the_tree_imports_no_deprecated_name():
     out = subprocess.run([sys.executable, str(SCRIPT)], capture_output=True, text=True, cwd=ROOT)
-    assert "First-party imports of a deprecated name (identification/_deprecated.py): 0" in out.stdout, out.stdout
+    assert "First-party imports of a deprecated name (identification/_deprecated.py, controllers/_deprecated.py, " \
+           "heli_env/_deprecated.py): 0" in out.stdout, out.stdout
+    assert "Shim modules (imports only, re-exporting other modules' names): 0" in out.stdout
     assert "Upward imports: 0" in out.stdout
     assert out.returncode == 0
 
@@ -44,11 +47,16 @@ def test_each_form_of_a_deprecated_import_is_found(report):
         "from identification.errors import ModelFileError, FlightLogError\n"  # 5: one re-export, one own
         "from identification import fleet, io\n"  # 6: an old module by name; io is a package
         "from identification.likelihood.axis_search import BURN_IN\n"  # 7: the new home: fine
+        "from controllers.residual import ResidualAgent\n"  # 8: controllers' old module
+        "from controllers import PDController\n"  # 9: a name the package re-exported
+        "from controllers.evaluate import evaluate_agent, metrics_table\n"  # 10: one own, one re-export
+        "from controllers.pd import PDController\n"  # 11: a package's facade: fine
     )
     found = report._deprecated_imports(ast.parse(source), "tests.example", False, known, tables)
     assert found == ["1: identification.ml_estimator.MaximumLikelihoodIdentifier", "2: identification.synthetic",
                      "3: identification.validation.validate_models", "5: identification.errors.ModelFileError",
-                     "6: identification.fleet"]
+                     "6: identification.fleet", "8: controllers.residual.ResidualAgent", "9: controllers.PDController",
+                     "10: controllers.evaluate.metrics_table"]
 
 
 def test_a_deprecated_import_fails_the_report(report, monkeypatch, capsys):
@@ -56,3 +64,15 @@ def test_a_deprecated_import_fails_the_report(report, monkeypatch, capsys):
     monkeypatch.setattr(report, "_outside_imports", lambda known, tables: found)
     assert report.main([]) == 1
     assert "tests/example.py:1: identification.model.ModelParams" in capsys.readouterr().out
+
+
+def test_a_first_party_import_of_a_shim_fails_the_report(report, monkeypatch, capsys):
+    """A module of imports only, re-exporting another's names, is a second home: importing it fails the report."""
+    real = report.measure
+
+    def measure():
+        return {**real(), "shims": {"controllers.example": ["tests/example.py"]}}
+
+    monkeypatch.setattr(report, "measure", measure)
+    assert report.main([]) == 1
+    assert "controllers.example  <- tests/example.py" in capsys.readouterr().out

@@ -19,6 +19,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from controllers import closed_loop as cl
 from controllers.errors import SweepError
+from controllers.pd.law import pd_command
 from controllers.flight_test import FlightTestConfig, fit_corner, validate_against_flights
 from controllers.sweep import COLUMNS, TD_COLUMNS, parse_range, sweep_gains, sweep_pairs
 from heli_cli.main import main
@@ -119,7 +120,7 @@ def test_pd_command_is_the_pd_controllers_law(shipped):
     act, _ = ctrl.predict(obs)
     signs = np.sign(shipped.params.control_gains)
     for i in range(3):
-        u = cl.pd_command(gains.kp[i], gains.kd[i], signs[i], obs[:, i].astype(float), obs[:, 6 + i].astype(float))
+        u = pd_command(gains.kp[i], gains.kd[i], signs[i], obs[:, i].astype(float), obs[:, 6 + i].astype(float))
         assert_allclose(np.clip(u, -1, 1), act[:, i], atol=1e-6)
 
 
@@ -138,7 +139,7 @@ def test_replay_equals_the_environment_under_the_same_pd_law(shipped):
         x = env._x  # the true state (the observation is float32)
         q0, q1, q2, q3 = x[6:10]
         ang = cl_euler(q0, q1, q2, q3)
-        a = [cl.pd_command(g[0], g[1], signs[i], -ang[i], -x[i]) for i, g in enumerate(gains)]
+        a = [pd_command(g[0], g[1], signs[i], -ang[i], -x[i]) for i, g in enumerate(gains)]
         obs, _, term, trunc, info = env.step(np.array(a))
         errs.append(info["attitude_error_deg"][0])
     assert_allclose(r.samples[0][0][:500], errs, atol=1e-9)
@@ -618,7 +619,7 @@ def test_gain_matrices_are_the_slopes_of_the_pd_law(shipped):
     x = np.random.default_rng(0).standard_normal(plant.n)
     for g, (kp, kd) in enumerate(((2.0, 0.5), (5.0, 1.5))):
         gains = [tuple(nominal[0]), (kp, kd), tuple(nominal[2])]
-        u = [cl.pd_command(p, d, plant.signs[i], -x[plant.angle_idx[i]], -x[plant.rate_idx[i]])
+        u = [pd_command(p, d, plant.signs[i], -x[plant.angle_idx[i]], -x[plant.rate_idx[i]])
              for i, (p, d) in enumerate(gains)]
         assert_allclose(-K[g] @ x, u, rtol=1e-12, atol=1e-15)
 

@@ -33,7 +33,8 @@ from heli_core.linear import hover_linearisation
 from heli_core.params import ModelParams
 from heli_core.terms import AXES
 
-from .law import _axis_index, control_sign  # noqa: F401  (control_sign is importable from here)
+from .._deprecated import DEPRECATIONS
+from .law import _axis_index
 
 
 def _check_dt(dt) -> float:
@@ -135,3 +136,7 @@ def plant(params: ModelParams, axis, output: str = "angle") -> control.TransferF
     # the angle (last state) does not feed back into the rate: leave it out for a minimal realisation
     return _tf(control.ss(A[:-1, :-1], B[:-1, :1], C[1:, :-1], 0.0))
 
+
+
+__getattr__ = DEPRECATIONS.module_getattr(__name__)
+"""The law's :func:`~controllers.pd.law.control_sign`, once importable from here (deprecated: :mod:`controllers._deprecated`)."""

@@ -9,8 +9,8 @@ One concept per module:
   hyperparameter set) as tasks of a compute backend;
 * :mod:`~controllers.rl.agent_file`: the agent zip and :func:`load_agent`, which
   loads a PD controller JSON or a PPO/SAC zip alike;
-* :mod:`~controllers.rl.residual_agent`: residual RL, a bounded learnt correction on a PD
-  (:mod:`~controllers.rl.residual` re-exports it with :func:`~controllers.rl.train.residual_setup`);
+* :mod:`~controllers.rl.residual_agent`: residual RL, a bounded learnt correction on a PD (the base PD is
+  flown to scale it by :func:`~controllers.rl.train.residual_setup`);
 * :mod:`~controllers.rl.vec_env`: the native vector env seen through SB3's ``VecEnv``.
 
 The stable-baselines3 callbacks and the observation scaler stay in

@@ -2,9 +2,7 @@
 paper's comparison of the integral method with NLR and the EKF (Tables 3-5).
 """
 
+from .._deprecated import DEPRECATIONS
 
-def __getattr__(name):
-    """The names of the module this folder replaced (deprecated: :mod:`identification._deprecated`)."""
-    from .._deprecated import moved_name
-
-    return moved_name(__name__, name)
+__getattr__ = DEPRECATIONS.module_getattr(__name__)
+"""The names of the module this folder replaced (deprecated: :mod:`identification._deprecated`)."""

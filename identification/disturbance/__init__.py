@@ -5,9 +5,7 @@ input, smoothed by :mod:`~identification.disturbance.smoothing`); a maximum-like
 from its smoother's posterior by :mod:`~identification.disturbance.wind_posterior`.
 """
 
+from .._deprecated import DEPRECATIONS
 
-def __getattr__(name):
-    """The names of the module this folder replaced (deprecated: :mod:`identification._deprecated`)."""
-    from .._deprecated import moved_name
-
-    return moved_name(__name__, name)
+__getattr__ = DEPRECATIONS.module_getattr(__name__)
+"""The names of the module this folder replaced (deprecated: :mod:`identification._deprecated`)."""

@@ -5,9 +5,7 @@ the verdict stored in ``model.json``, the warnings of a fit and the drift of a r
 Tables 1-2) into a :class:`~identification.validation.result.ValidationResult`.
 """
 
+from .._deprecated import DEPRECATIONS
 
-def __getattr__(name):
-    """The names of the module this folder replaced (deprecated: :mod:`identification._deprecated`)."""
-    from .._deprecated import moved_name
-
-    return moved_name(__name__, name)
+__getattr__ = DEPRECATIONS.module_getattr(__name__)
+"""The names of the module this folder replaced (deprecated: :mod:`identification._deprecated`)."""
