@@ -255,7 +255,7 @@ def closed_loop_poles(plant: HoverPlant, axis, kp, kd, nominal) -> tuple[np.ndar
 
 
 def replay_segments(env_model, dt: float) -> list:
-    """Each library trace's replayed u_d (:attr:`heli_env.model_dir.EnvModel.replay_ud`) taken every ``dt``
+    """Each library trace's replayed u_d (:attr:`heli_env.env_model.EnvModel.replay_ud`) taken every ``dt``
     (the samples the replay uses), as (3, m) views, in the library's order."""
     ratio = int(round(dt * env_model.sample_rate))
     return [env_model.replay_ud[:, s:s + n:ratio] for s, n in zip(env_model.starts, env_model.lengths)]
@@ -265,7 +265,7 @@ def disturbance_spectrum(env_model, dt: float, nperseg: int = 2048) -> tuple[np.
     """One-sided power spectral density of the library's ``u_d`` per axis (Welch), at the control period.
 
     The u_d is the replayed gust in this model's stick units
-    (:attr:`heli_env.model_dir.EnvModel.replay_ud`). Each trace is taken every
+    (:attr:`heli_env.env_model.EnvModel.replay_ud`). Each trace is taken every
     ``dt`` (the samples the replay uses), its mean removed (u_d is zero-mean by
     definition, eq. 42), its Welch estimate (Hann
     window, ``nperseg`` samples, half overlap, *no* per-segment detrending, which

@@ -260,12 +260,12 @@ def evaluate_agent(agent, model=None, config: EvaluationConfig | None = None, *,
     heli_env.errors.EnvModelError
         Missing or corrupt model directory.
     """
-    from heli_env.model_dir import EnvModel, load_env_model
+    from heli_env.env_model import as_env_model
     from heli_env.vector_env import HeliAttitudeVectorEnv
 
     cfg = configured(EvaluationConfig, config, settings, "evaluation")
     t0 = time.perf_counter()
-    env_model = model if isinstance(model, EnvModel) else load_env_model(model)
+    env_model = as_env_model(model)
     traces = cfg.traces
     label = traces if isinstance(traces, str) else ("held-out" if traces is None else "chosen")
     kind, desc = describe_agent(agent)

@@ -97,7 +97,7 @@ def wind_statistics(env_model, dt: float) -> dict:
     """Level and bandwidth of the library's gusts per axis, and its collective's mean and spread.
 
     ``std`` is the standard deviation of the replayed u_d
-    (:attr:`heli_env.model_dir.EnvModel.replay_ud`; each trace's mean removed,
+    (:attr:`heli_env.env_model.EnvModel.replay_ud`; each trace's mean removed,
     eq. 42) at the control period; ``corner_hz`` the fitted Butterworth corner of its
     Welch spectrum (:func:`fit_corner`).
     """

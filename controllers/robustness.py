@@ -52,12 +52,12 @@ def robustness_check(agent, model=None, cases=None, evaluate=None, **evaluate_kw
     dict
         ``{case: {"p90_deg": {axis: float}, "ratio": {axis: float}, "ended_early": int}}``.
     """
-    from heli_env.model_dir import EnvModel, load_env_model
+    from heli_env.env_model import as_env_model
 
     from .evaluate import evaluate_agent
 
     evaluate = evaluate_agent if evaluate is None else evaluate
-    env_model = model if isinstance(model, EnvModel) else load_env_model(model)
+    env_model = as_env_model(model)
     cases = CASES if cases is None else cases
     out, reference = {}, None
     for name, change in cases.items():

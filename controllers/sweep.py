@@ -69,18 +69,17 @@ from .closed_loop import (
 from .errors import SweepError
 from .metrics import histogram_edges
 from .sweep_extend import EXTENSION_VALUES, MAX_EXTENSIONS, PairBlock, best_index, extend_grid
-from .sweep_inputs import check_gains, check_pairs, load_model, parse_range, prepare
+from .sweep_inputs import check_gains, check_pairs, parse_range, prepare
 from .sweep_interval import BLOCK_SECONDS, LEVEL, interval_summary
 from .sweep_margins import (MARGIN_COLUMNS, ROBUST_GAIN_MARGIN_DB, ROBUST_PHASE_MARGIN_DEG, loop_margins,
                             robust)
-from .sweep_replay import MAX_ANGLE_DEG, TASK_STATES, TD_COLUMNS, check_chunk_pairs, chunks, replay, replay_on
+from .sweep_replay import MAX_ANGLE_DEG, TASK_STATES, TD_COLUMNS, check_chunk_pairs, replay, replay_on
 
 __all__ = ["COLUMNS", "FD_COLUMNS", "MAX_ANGLE_DEG", "MAX_EXTENSIONS", "ROBUST_GAIN_MARGIN_DB",
            "ROBUST_PHASE_MARGIN_DEG", "TASK_STATES", "TD_COLUMNS", "SweepConfig", "SweepResult", "check_gains",
            "parse_range", "sweep_gains", "sweep_pairs"]
 
 _DEG = 180.0 / math.pi
-_prepare, _chunks, _load = prepare, chunks, load_model  # names kept for scripts/bench.py and users' imports
 
 FD_COLUMNS = ("pred_att_rms_deg", "pred_att_p50_deg", "pred_att_p90_deg", "pred_att_p99_deg", "pred_rate_rms_dps",
               "pred_rate_p50_dps", "pred_rate_p90_dps", "pred_rate_p99_dps", "pred_stick_rms")
@@ -349,7 +348,7 @@ def sweep_gains(model, kp_values, kd_values, config: SweepConfig | None = None, 
     ----------
     model : str, Path, EnvModel or None
         Model directory written by ``heli identify`` (``model.json`` + ``disturbances/``),
-        a loaded :class:`heli_env.model_dir.EnvModel`, or None for the shipped model.
+        a loaded :class:`heli_env.env_model.EnvModel`, or None for the shipped model.
     kp_values : sequence of float, shape (n_kp,)
         Proportional gains [stick/rad], >= 0.
     kd_values : sequence of float, shape (n_kd,)

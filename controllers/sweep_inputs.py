@@ -88,14 +88,14 @@ def parse_range(text: str, name: str = "range") -> np.ndarray:
 
 
 def load_model(model):
-    """An :class:`heli_env.model_dir.EnvModel` from a directory, None (the shipped model) or itself.
+    """An :class:`heli_env.env_model.EnvModel` from a directory, None (the shipped model) or itself.
 
     A missing or corrupt model directory is a :class:`SweepError`.
     """
-    from heli_env.model_dir import EnvModel, load_env_model
+    from heli_env.env_model import as_env_model
 
     try:
-        return model if isinstance(model, EnvModel) else load_env_model(model)
+        return as_env_model(model)
     except ValueError as e:  # EnvModelError: missing or corrupt model directory
         raise SweepError(str(e)) from e
 

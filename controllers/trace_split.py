@@ -184,7 +184,7 @@ def draw_windows(env_model, segments, needed: int, rng: np.random.Generator, cou
 
     Parameters
     ----------
-    env_model : heli_env.model_dir.EnvModel
+    env_model : heli_env.env_model.EnvModel
     segments : sequence of TraceSegment
     needed : int
         Library samples one episode replays (``EnvSpec.needed``).

@@ -179,7 +179,7 @@ def run(args) -> int:
     from controllers.pd.controller import PDController
     from controllers.pd.design import design_gains
     from controllers.pd.figures import plot_bode, plot_step_responses
-    from heli_env.model_dir import load_env_model
+    from heli_env.env_model import load_env_model
     from heli_core.files import write_text
 
     from .progress import progress_of

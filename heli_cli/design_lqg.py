@@ -59,7 +59,7 @@ def run_lqg(args) -> int:
     """The ``--lqg`` branch of ``heli design`` (the model was checked by the caller)."""
     from controllers.errors import DesignError
     from controllers.lqg import design_lqg
-    from heli_env.model_dir import load_env_model
+    from heli_env.env_model import load_env_model
     from heli_core.files import write_text
 
     from .design import control_period

@@ -144,7 +144,7 @@ def run(args) -> int:
     from controllers.errors import AgentError
     from controllers.evaluate import EvaluationConfig
     from controllers.trace_split import TraceSplit, split_traces
-    from heli_env.model_dir import load_env_model
+    from heli_env.env_model import load_env_model
     from heli_core.files import write_text
 
     from .progress import progress_of

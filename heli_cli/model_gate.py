@@ -25,7 +25,7 @@ def add_accept_option(parser, use: str) -> None:
 def model_file(model) -> Path:
     """The ``model.json`` of ``--model`` (a folder or the file; None: the model shipped with heli-env)."""
     if model is None:
-        from heli_env.model_dir import default_model_dir
+        from heli_env.env_model import default_model_dir
 
         model = default_model_dir()
     path = Path(model)

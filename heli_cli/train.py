@@ -199,7 +199,7 @@ def _report(args, res, progress, reference=None) -> dict:
     from controllers.rl.training_report import compare_with_pd, plot_learning_curve, training_markdown
     from controllers.trace_split import TraceSegment
     from heli_core.files import write_text
-    from heli_env.model_dir import load_env_model
+    from heli_env.env_model import load_env_model
 
     from .html_report import write_html_report
 

@@ -154,7 +154,7 @@ def _checked_log(args, spec, progress):
 
 def _model(args, spec, current, progress):
     """``(EnvModel, model folder, the input source of LOG's flight or None, segment or None)``."""
-    from heli_env.model_dir import load_env_model
+    from heli_env.env_model import load_env_model
 
     if args.model is not None:
         if not Path(args.model).is_dir():

@@ -16,10 +16,13 @@ and replay the disturbance library that ``heli identify`` writes.
 
 import gymnasium
 
+from ._deprecated import DEPRECATIONS
 from .env import HeliAttitudeEnv
+from .env_model import default_model_dir, load_env_model
 from .errors import ActionError, EnvModelError
-from .model_dir import default_model_dir, load_env_model
 from .tasks import TaskConfig
+
+DEPRECATIONS.install()
 
 ENV_ID = "HeliAttitude-v0"
 

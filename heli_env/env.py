@@ -11,6 +11,7 @@ from gymnasium.error import ResetNeeded
 
 from heli_core.quaternion import euler_from_quaternion_scalar, quaternion_from_euler
 
+from ._deprecated import DEPRECATIONS
 from .errors import ActionError
 from .spec import MAX_RATE, action_space, build_spec, observation_space, real_actions, reset_options
 from .sensor_noise import draw_noise_key, noise_block
@@ -168,7 +169,7 @@ class HeliAttitudeEnv(gym.Env):
     # ----------------------------------------------------------------- API
     @property
     def model(self):
-        """The :class:`heli_env.model_dir.EnvModel` driving the environment."""
+        """The :class:`heli_env.env_model.EnvModel` driving the environment."""
         return self.spec_.model
 
     def reset(self, *, seed=None, options=None):
@@ -346,3 +347,7 @@ class HeliAttitudeEnv(gym.Env):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+
+
+__getattr__ = DEPRECATIONS.module_getattr(__name__)
+"""The spec's OBS_DIM, once importable from here (deprecated: :mod:`heli_env._deprecated`)."""

@@ -3,7 +3,7 @@
 :func:`build_spec` checks the constructor arguments once and precomputes what
 every step needs: the model's discrete-time step (:func:`heli_core.discrete.discrete_step`
 generated for the control period), the gust torque ``k*u_d`` of every library
-sample (:attr:`heli_env.model_dir.EnvModel.torque`), and the trim sticks for
+sample (:attr:`heli_env.env_model.EnvModel.torque`), and the trim sticks for
 every recorded collective.
 """
 
@@ -22,7 +22,7 @@ from heli_core.physics import trim_sticks
 from heli_core.sensors import SensorModel
 
 from .errors import ActionError, OptionError
-from .model_dir import EnvModel, load_env_model
+from .env_model import EnvModel, as_env_model
 from .tasks import TaskConfig
 
 MAX_RATE = 35.0
@@ -177,7 +177,7 @@ def build_spec(model=None, task="hold", reference="mixed", dt: float = 0.01, epi
                collective="trace", gust_scale: float = 1.0, obs_noise="model", action_delay: int = 0,
                init_angle_deg: float = 5.0, init_rate_deg: float = 5.0, library_version=None) -> EnvSpec:
     """Validate the environment arguments (see :class:`heli_env.env.HeliAttitudeEnv`) and precompute."""
-    env_model = model if isinstance(model, EnvModel) else load_env_model(model, library_version)
+    env_model = as_env_model(model, library_version)
     cfg = task if isinstance(task, TaskConfig) else TaskConfig(task=task, reference=reference)
     if not (isinstance(dt, (int, float)) and dt > 0 and math.isfinite(dt)):
         raise ValueError(f"dt must be a positive control period in seconds, got {dt!r}")

@@ -4,7 +4,7 @@ Replaying a handful of recorded gust traces lets a learning controller overfit t
 trace keeps the amplitude of every Fourier component of its u_d and draws new phases, so it has the same
 power spectrum (and variance) on each axis but is a new gust; the three axes share their phases, which
 keeps their cross-spectra too. The collective recorded with the trace is kept as it was (the yaw trim
-needs it). :func:`surrogate_model` returns an :class:`~heli_env.model_dir.EnvModel` whose library holds
+needs it). :func:`surrogate_model` returns an :class:`~heli_env.env_model.EnvModel` whose library holds
 ``copies`` surrogates of every trace, which both environments replay as they replay the recorded one
 (``HeliAttitudeVectorEnv(model=surrogate_model(load_env_model(DIR)))``); evaluation stays on the
 recorded traces. ``scripts/surrogate_gusts.py`` measures how close the error distributions of a PD on
@@ -17,7 +17,7 @@ import dataclasses
 
 import numpy as np
 
-from .model_dir import EnvModel
+from .env_model import EnvModel
 
 
 def phase_randomised(ud: np.ndarray, rng: np.random.Generator) -> np.ndarray:

@@ -113,7 +113,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
 
     @property
     def model(self):
-        """The :class:`heli_env.model_dir.EnvModel` driving the environments."""
+        """The :class:`heli_env.env_model.EnvModel` driving the environments."""
         return self.spec_.model
 
     # ------------------------------------------------------------------ reset

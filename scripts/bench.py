@@ -365,7 +365,8 @@ def bench_backends(repeats: int) -> dict:
     import os
     import pickle
 
-    from controllers.sweep import TASK_STATES, _chunks, sweep_gains
+    from controllers.sweep import sweep_gains
+    from controllers.sweep_replay import TASK_STATES, chunks
     from heli_core.backends import LocalBackend, RayBackend
 
     kp, kd = np.linspace(0.5, 10.0, 20), np.linspace(0.0, 3.0, 20)
@@ -412,10 +413,10 @@ def bench_backends(repeats: int) -> dict:
     med = {k: statistics.median(v) for k, v in totals.items()}
     med_td = {k: statistics.median(v) for k, v in td.items()}
     fd = ref.settings["seconds"]["frequency_domain"]
-    n_tasks = len(_chunks(int(ref.stable.sum()), ref.settings["n_windows"], None))
-    from controllers.sweep import _prepare
+    n_tasks = len(chunks(int(ref.stable.sum()), ref.settings["n_windows"], None))
+    from controllers.sweep_inputs import prepare
 
-    rp = _prepare(None, "roll", 60.0, 0.01, 0, None, 10)
+    rp = prepare(None, "roll", 60.0, 0.01, 0, None, 10)
     import dataclasses
 
     shared_mb = len(pickle.dumps(dataclasses.replace(rp, env_model=None))) / 1e6

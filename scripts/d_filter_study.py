@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from controllers.evaluate import EvaluationConfig, evaluate_agent  # noqa: E402
 from controllers.pd import PDController, PDGains, design_gains, loop_analysis  # noqa: E402
 from heli_core.terms import AXES  # noqa: E402
-from heli_env.model_dir import load_env_model  # noqa: E402
+from heli_env.env_model import load_env_model  # noqa: E402
 
 
 def cases(params, ratios, plain_filter_hz=None):

@@ -98,7 +98,7 @@ def one_job(job) -> list:
 def _one_job(cell: str, seed: int, duration: float, n_flights: int, flight_duration: float) -> list:
     from controllers.pd import design_gains
     from controllers.sweep import sweep_pairs
-    from heli_env.model_dir import load_env_model
+    from heli_env.env_model import load_env_model
     from identification.bench.cells import BENCH_CELLS
     from identification.workflows.identify import identify_and_report
     from identification.bench.synthetic import simulate_flight

@@ -52,7 +52,7 @@ from controllers.robustness import CASES, robustness_check  # noqa: E402
 from controllers.trace_split import split_traces  # noqa: E402
 from heli_core.files import jsonable, write_text  # noqa: E402
 from heli_core.terms import AXES  # noqa: E402
-from heli_env.model_dir import load_env_model  # noqa: E402
+from heli_env.env_model import load_env_model  # noqa: E402
 
 BEST = "PD best swept"
 SCAN_RHO = tuple(10.0 ** np.arange(-3, 3.1, 1.0))

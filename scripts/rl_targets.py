@@ -157,7 +157,7 @@ def refly(run: Path, draws: int, model=None) -> dict:
     from controllers.evaluate import EvaluationConfig, evaluate_agent
     from controllers.rl.agent_file import load_agent
     from controllers.trace_split import TraceSplit
-    from heli_env.model_dir import EnvModel, load_env_model
+    from heli_env.env_model import as_env_model
 
     paths = [run / name for name in ("comparison.json", AGENT_FILE, BEST_FILE)]
     missing = [p.name for p in paths if not p.is_file()]
@@ -168,7 +168,7 @@ def refly(run: Path, draws: int, model=None) -> dict:
     settings = next((r["settings"] for r in report["results"] if r["summary"]["name"] == BEST), None)
     if settings is None:
         raise ValueError(f"{paths[0]}: the run has no {BEST} row; expected a train_compare.py report")
-    env_model = model if isinstance(model, EnvModel) else load_env_model(model)
+    env_model = as_env_model(model)
     if settings["trace_ids_used"] != [env_model.trace_ids[s["trace"]] for s in settings["split"]["held_out"]]:
         raise ValueError(f"{run} was evaluated on traces {settings['trace_ids_used']}; the model's library "
                          f"({env_model.path}) holds {list(env_model.trace_ids)} at those places: pass the run's "
@@ -289,7 +289,7 @@ def main(argv=None) -> int:
         print(f"\nAt most ×{DEGRADE:g} its nominal p90 in every case on every axis: {kept} of {len(checked)} runs "
               "with a robustness check of their agent.")
     if args.refly:
-        from heli_env.model_dir import load_env_model
+        from heli_env.env_model import load_env_model
 
         model = load_env_model(args.model)  # once for every run
         print_refly([refly(run, args.refly, model) for run in args.runs])

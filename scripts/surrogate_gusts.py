@@ -31,7 +31,7 @@ def main(argv=None):
 
     from controllers.evaluate import evaluate_agent
     from controllers.pd import PDController, design_gains
-    from heli_env.model_dir import load_env_model
+    from heli_env.env_model import load_env_model
     from heli_env.surrogates import surrogate_model
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])

@@ -14,7 +14,7 @@ import pytest
 if os.environ.get("PYTEST_XDIST_WORKER"):  # one pytest worker per core already: fit the axes one after another
     os.environ.setdefault("HELI_WORKERS", "1")
 
-from heli_env.model_dir import load_env_model
+from heli_env.env_model import load_env_model
 
 
 @pytest.fixture(scope="session")

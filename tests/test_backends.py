@@ -20,7 +20,8 @@ import pytest
 from numpy.testing import assert_array_equal
 
 from controllers.errors import SweepError
-from controllers.sweep import COLUMNS, TASK_STATES, _chunks, sweep_gains, sweep_pairs
+from controllers.sweep import COLUMNS, TASK_STATES, sweep_gains, sweep_pairs
+from controllers.sweep_replay import chunks
 from heli_cli.main import main
 from heli_core.backends import Backend, LocalBackend, RayBackend, make_backend
 from heli_core.errors import BackendError, MissingDependency, TaskFailed
@@ -208,11 +209,11 @@ def test_cli_backend_ray_without_ray_exits_2(monkeypatch, tmp_path, capsys):
 
 # ------------------------------------------------------------------------------------------- sweeps
 def test_chunks_depend_on_the_grid_not_the_workers():
-    assert _chunks(10, 1, 4) == [(0, 4), (4, 8), (8, 10)]
-    assert _chunks(400, 10, None) == _chunks(400, 10, TASK_STATES // 10)
-    assert len(_chunks(400, 10, None)) == 4
+    assert chunks(10, 1, 4) == [(0, 4), (4, 8), (8, 10)]
+    assert chunks(400, 10, None) == chunks(400, 10, TASK_STATES // 10)
+    assert len(chunks(400, 10, None)) == 4
     with pytest.raises(SweepError, match="chunk_pairs must be a whole number >= 1"):
-        _chunks(10, 1, 0)
+        chunks(10, 1, 0)
 
 
 @pytest.mark.parametrize("workers", [1, 2])

@@ -126,6 +126,10 @@ def test_model_store_source_names_only_the_core():
     ("controllers.plant", "controllers.pd.linearisation.plant"),
     ("controllers.evaluate.comparison_markdown", "controllers.evaluate_report.comparison_markdown"),
     ("controllers.pd.linearisation.control_sign", "controllers.pd.law.control_sign"),
+    # heli_env's: the environment's model module took a name of its own (model_store.model_dir is the folder's)
+    ("heli_env.model_dir.load_env_model", "heli_env.env_model.load_env_model"),
+    ("heli_env.model_dir.EnvModel", "heli_env.env_model.EnvModel"),
+    ("heli_env.env.OBS_DIM", "heli_env.spec.OBS_DIM"),
 ])
 def test_old_names_warn_and_are_the_new_objects(old, new):
     """An old name of identification's flat layout (or a shim's) is the object of its one home, read through
@@ -168,11 +172,12 @@ def test_every_package_shares_one_deprecation_finder():
     """identification's and controllers' old modules are found by one finder of heli_core.deprecation, not by a
     copy per package."""
     import controllers  # noqa: F401 - installs controllers' table
+    import heli_env  # noqa: F401 - installs heli_env's table
     import identification  # noqa: F401 - installs identification's table
     from heli_core.deprecation import _Finder
 
     finders = [f for f in sys.meta_path if isinstance(f, _Finder)]
-    assert len(finders) == 1 and {"identification", "controllers"} <= set(finders[0].tables)
+    assert len(finders) == 1 and {"identification", "controllers", "heli_env"} <= set(finders[0].tables)
 
 
 def _error_classes():

@@ -808,7 +808,7 @@ def _model_with_sensors(tmp_path, sensors):
     import json
     import shutil
 
-    from heli_env.model_dir import default_model_dir
+    from heli_env.env_model import default_model_dir
     from model_store import ModelDir
 
     root = tmp_path / "model"
@@ -846,7 +846,7 @@ def _model_with_servo_lag(tmp_path, lags):
     """A copy of the shipped model directory whose model.json records servo lags ``lags`` (roll, pitch, yaw)."""
     import json
 
-    from heli_env.model_dir import default_model_dir
+    from heli_env.env_model import default_model_dir
     from model_store import ModelDir
 
     root = tmp_path / "lagged"

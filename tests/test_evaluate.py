@@ -267,7 +267,7 @@ def test_heli_evaluate_split_seed_holds_out_another_trace_for_the_evaluation_and
     import json
 
     from controllers.trace_split import split_traces
-    from heli_env.model_dir import load_env_model
+    from heli_env.env_model import load_env_model
 
     agent = pd.save(tmp_path / "pd.json")
     out = tmp_path / "ev"

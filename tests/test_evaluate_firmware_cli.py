@@ -25,7 +25,7 @@ def test_a_parameter_file_is_flown_as_the_firmware_loop_the_library_flies(ap_par
     from controllers.firmware.loop_rate_env import evaluate_firmware
     from controllers.firmware.tune import control_signs
     from controllers.trace_split import split_traces
-    from heli_env.model_dir import load_env_model
+    from heli_env.env_model import load_env_model
 
     out = tmp_path / "ev"
     assert main(["evaluate", str(ap_params), "--firmware", "ardupilot", "--scale", "0.8", "--robustness",

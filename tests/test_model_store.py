@@ -19,7 +19,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from heli_cli.main import main
 from heli_env import load_env_model
-from heli_env.model_dir import default_model_dir
+from heli_env.env_model import default_model_dir
 from identification.bench.synthetic import simulate_flight
 from identification.io import read_flight
 from identification.workflows.identify import identify_and_report

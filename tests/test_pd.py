@@ -41,7 +41,7 @@ from heli_core.params import ModelParams
 from heli_core.physics import initial_state
 from heli_core.quaternion import euler_from_quaternion
 from heli_env.env import HeliAttitudeEnv
-from heli_env.model_dir import load_env_model
+from heli_env.env_model import load_env_model
 
 DT = 0.01
 K2, K3 = 1.5, 2.0  # a simple roll axis [rad/s^2 per stick], [1/s]

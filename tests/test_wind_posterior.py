@@ -189,7 +189,7 @@ def test_the_shipped_library_replays_posterior_draws_with_the_identified_wind_po
     from scipy import signal
 
     from heli_core.terms import AXES
-    from heli_env.model_dir import default_model_dir
+    from heli_env.env_model import default_model_dir
     from identification.disturbance.wind_posterior import METHOD
     from model_store.disturbance_library import DisturbanceLibrary
 

@@ -38,7 +38,7 @@ def held_library(env_model, substeps: int):
 
     Parameters
     ----------
-    env_model : heli_env.model_dir.EnvModel
+    env_model : heli_env.env_model.EnvModel
     substeps : int
         Ticks per library sample period, >= 1 (:meth:`controllers.firmware.loop.FirmwareLoop.substeps`).
 
@@ -114,13 +114,13 @@ def evaluate_firmware(loop, model=None, config=None, *, name: str | None = None,
     EvaluationResult
         Sampled every tick (``settings["dt"]`` is the tick, ``settings["sample_rate"]`` the held library's).
     """
-    from heli_env.model_dir import EnvModel, load_env_model
+    from heli_env.env_model import as_env_model
 
     from ..evaluate import evaluate_agent
 
     if "dt" in settings or (config is not None and config.dt is not None):
         raise FirmwareMappingError(f"a firmware loop is evaluated at its own tick ({loop.dt:g} s); dt cannot be given")
-    env_model = model if isinstance(model, EnvModel) else load_env_model(model)
+    env_model = as_env_model(model)
     m = loop.substeps(1.0 / env_model.sample_rate)
     held = held_library(env_model, m)
     label = name or f"{loop.firmware} loop at {loop.loop_rate_hz:g} Hz"

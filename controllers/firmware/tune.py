@@ -191,7 +191,7 @@ def tune_gains(env_model, spec, current, scale, config: TuneConfig | None = None
 
     Parameters
     ----------
-    env_model : heli_env.model_dir.EnvModel
+    env_model : heli_env.env_model.EnvModel
         The identified model and its disturbance library.
     spec : FirmwareSpec
     current : parameter set

@@ -407,9 +407,9 @@ def design_lqg(model=None, dt: float = 0.01, weights: LQGWeights | None = None, 
     heli_env.errors.EnvModelError
         Missing or corrupt model directory.
     """
-    from heli_env.model_dir import EnvModel, load_env_model
+    from heli_env.env_model import as_env_model
 
-    env_model = model if isinstance(model, EnvModel) else load_env_model(model)
+    env_model = as_env_model(model)
     for name, value in (("gain_margin_db", gain_margin_db), ("phase_margin_deg", phase_margin_deg)):
         if not (is_real(value) and value >= 0):
             raise DesignError(f"{name} must be a number >= 0, got {value!r}")

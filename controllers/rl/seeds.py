@@ -104,9 +104,9 @@ def train_seeds(algo: str | None = None, model=None, timesteps: int | None = Non
     config = make_config(config, algo, timesteps, **{k: v for k, v in train_kwargs.items() if k not in watch})
     for over in (configs or {}).values():  # a bad named config fails here, not in a worker
         make_config(config, **{k: v for k, v in over.items() if k not in WATCH_OPTIONS})
-    from heli_env.model_dir import EnvModel, load_env_model
+    from heli_env.env_model import as_env_model
 
-    env_model = model if isinstance(model, EnvModel) else load_env_model(model)
+    env_model = as_env_model(model)
     if configs is None:
         items = [(int(s), {}) for s in seeds]
     else:

@@ -165,9 +165,9 @@ def train_agent(algo: str | None = None, model=None, timesteps: int | None = Non
         ``exc.checkpoint``). It is a KeyboardInterrupt.
     """
     config = make_config(config, algo, timesteps, **settings)
-    from heli_env.model_dir import EnvModel, load_env_model
+    from heli_env.env_model import as_env_model
 
-    env_model = model if isinstance(model, EnvModel) else load_env_model(model)
+    env_model = as_env_model(model)
     split, segments = _split(config, env_model)
     _check_algo_kwargs(config)
     import torch

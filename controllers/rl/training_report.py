@@ -132,7 +132,7 @@ def compare_with_pd(agent, pd, env_model, segments, seed: int, episode_seconds: 
     agent : object with SB3's ``predict``
         The trained agent as :func:`controllers.rl.load_agent` returns it (a residual with its base).
     pd : controllers.pd.PDController
-    env_model : heli_env.model_dir.EnvModel
+    env_model : heli_env.env_model.EnvModel
     segments : sequence of TraceSegment
         The run's held-out segments.
     seed : int

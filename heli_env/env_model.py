@@ -1,11 +1,14 @@
-"""Load what an environment needs from a model directory written by ``heli identify``.
+"""The environment's model: what an environment needs from a model directory written by ``heli identify``.
 
 A model directory holds ``model.json`` (:mod:`model_store.model_file`) and
 the disturbance library ``disturbances/`` (:mod:`model_store.disturbance_library`);
 :class:`model_store.ModelDir` reads them as one state (a write that was
 interrupted reads as before or after it). :func:`load_env_model` reads and
 checks both once and packs the library's traces into flat arrays the
-environments index without copying.
+environments index without copying; :func:`as_env_model` is what every
+function taking "a model" (a directory, None for the shipped model, or an
+:class:`EnvModel` already loaded) calls. (Until issue 34 this module was
+``heli_env.model_dir``, a name :mod:`model_store.model_dir` holds too.)
 """
 
 from __future__ import annotations
@@ -169,6 +172,25 @@ def load_env_model(path=None, library_version: int | None = None) -> EnvModel:
     model = EnvModel(params, root, doc, ud, gains, col, starts, lengths, float(rates[0]), ids, sources, int(version))
     model.sensors  # a malformed sensors entry is refused here, naming the file, not at the first step
     return model
+
+
+def as_env_model(model=None, library_version: int | None = None) -> EnvModel:
+    """``model`` itself when it is an :class:`EnvModel`, else the model directory it names, loaded
+    (:func:`load_env_model`; None: the model shipped with the package).
+
+    Parameters
+    ----------
+    model : EnvModel, str, Path or None
+        A loaded model, a model directory (or its ``model.json``), or None.
+    library_version : int, optional
+        Library version to replay when ``model`` is loaded here (an :class:`EnvModel` is returned as it is).
+
+    Raises
+    ------
+    EnvModelError
+        As :func:`load_env_model`.
+    """
+    return model if isinstance(model, EnvModel) else load_env_model(model, library_version)
 
 
 def _trace_gains(entry: dict, params: ModelParams, lib_dir: Path) -> np.ndarray:
