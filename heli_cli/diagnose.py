@@ -47,15 +47,16 @@ def register(sub):
 
 def run(args) -> int:
     from identification.io import read_flight
-    from model_store.model_file import load_model
     from identification.workflows.identify import source_entry
+    from model_store.model_dir import ModelDir
 
     from .progress import progress_of
 
     flight = read_flight(args.flight)
     model = document = None
     if args.model is not None:
-        model, document = load_model(_existing_model(args.model))
+        document = ModelDir(_existing_model(args.model)).load(library=False).document
+        model = document.params
     with progress_of(args) as progress:
         if args.method == "ml":
             return _run_ml(args, flight, model, document, source_entry(args.flight), progress)

@@ -42,14 +42,14 @@ def check_model(args, use: str):
     model_store.errors.UnusableModelError
         The model is judged unusable and the option was not given.
     """
-    from model_store.model_file import load_model
+    from model_store.model_dir import ModelDir
     from model_store.verdict import require_usable
 
     path = model_file(getattr(args, "model", None))
     if not path.is_file():
         return None
-    _, document = load_model(path)
-    verdict = require_usable(document, str(path), accept=getattr(args, "accept_unusable_model", False),
+    document = ModelDir(path).load(library=False).document
+    verdict = require_usable(document.verdict, str(path), accept=getattr(args, "accept_unusable_model", False),
                              flag=ACCEPT_FLAG, use=use)
     if verdict.unusable or verdict.doubtful:
         said = f"unusable ({ACCEPT_FLAG} given)" if verdict.unusable else "doubtful"

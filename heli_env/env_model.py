@@ -22,10 +22,10 @@ import numpy as np
 
 from heli_core.params import ModelParams
 from heli_core.sensors import SensorModel
-from model_store.model_dir import ModelDir
 from model_store.disturbance_library import LIBRARY_DIRNAME
 from model_store.errors import LibraryError, ModelFileError
-from model_store.model_file import MODEL_FILENAME, sensors_from_document
+from model_store.model_dir import ModelDir
+from model_store.model_file import MODEL_FILENAME, ModelDocument
 
 from .errors import EnvModelError
 
@@ -50,8 +50,8 @@ class EnvModel:
     params : ModelParams
     path : Path
         The model directory.
-    document : dict
-        The model file's JSON document.
+    document : ModelDocument
+        The model file's document (its verdict, sensors, provenance, fit statistics).
     ud : ndarray, shape (3, total)
         u_d of every trace, concatenated [stick units].
     gains : ndarray, shape (3, n_traces)
@@ -72,7 +72,7 @@ class EnvModel:
 
     params: ModelParams
     path: Path
-    document: dict
+    document: ModelDocument
     ud: np.ndarray
     gains: np.ndarray
     collective: np.ndarray
@@ -87,14 +87,11 @@ class EnvModel:
     def n_traces(self) -> int:
         return int(self.starts.size)
 
-    @cached_property
+    @property
     def sensors(self) -> SensorModel:
         """The gyros' and the attitude estimate's noise and lines identified with the model
-        (``model.json["sensors"]``; silent for a model written without them)."""
-        try:
-            return sensors_from_document(self.document, str(self.path / MODEL_FILENAME))
-        except ModelFileError as e:
-            raise EnvModelError(str(e)) from e
+        (:attr:`ModelDocument.sensors`; silent for a model written without them)."""
+        return self.document.sensors
 
     @cached_property
     def torque(self) -> np.ndarray:
@@ -169,9 +166,7 @@ def load_env_model(path=None, library_version: int | None = None) -> EnvModel:
         a.setflags(write=False)
     ids = tuple(str(t.metadata.get("id", i)) for i, t in enumerate(traces))
     sources = tuple(str((t.metadata.get("source") or {}).get("name", "")) for t in traces)
-    model = EnvModel(params, root, doc, ud, gains, col, starts, lengths, float(rates[0]), ids, sources, int(version))
-    model.sensors  # a malformed sensors entry is refused here, naming the file, not at the first step
-    return model
+    return EnvModel(params, root, doc, ud, gains, col, starts, lengths, float(rates[0]), ids, sources, int(version))
 
 
 def as_env_model(model=None, library_version: int | None = None) -> EnvModel:

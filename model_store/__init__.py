@@ -2,14 +2,14 @@
 
 :class:`ModelDir` reads a directory as one checked state (:meth:`ModelDir.load`) and changes it as one
 transaction (:meth:`ModelDir.transaction`), so that a crash at any instant leaves the old or the new state
-and two writers take turns. :mod:`model_store.model_file` is the ``model.json`` format,
+and two writers take turns. :mod:`model_store.model_file` is the ``model.json`` format (read as one typed :class:`ModelDocument`),
 :mod:`model_store.disturbance_library` the versioned library of wind traces.
 """
 
 from .disturbance_library import DisturbanceLibrary, Trace
 from .model_dir import ModelDir, ModelState, Transaction
-from .model_file import MODEL_FILENAME, load_model, model_document, save_model
+from .model_file import MODEL_FILENAME, ModelDocument, Source, load_model, model_document, save_model
 from .verdict import ModelVerdict, verdict_of
 
-__all__ = ["MODEL_FILENAME", "DisturbanceLibrary", "ModelDir", "ModelState", "ModelVerdict", "Trace", "Transaction",
-           "load_model", "model_document", "save_model", "verdict_of"]
+__all__ = ["MODEL_FILENAME", "DisturbanceLibrary", "ModelDir", "ModelDocument", "ModelState", "ModelVerdict", "Source",
+           "Trace", "Transaction", "load_model", "model_document", "save_model", "verdict_of"]

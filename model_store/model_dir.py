@@ -52,7 +52,7 @@ from heli_core.files import keep_copy, write_bytes, write_text
 
 from .disturbance_library import LIBRARY_DIRNAME, DisturbanceLibrary, Trace
 from .errors import LibraryError, ModelDirBusyError, ModelDirError, ModelFileError
-from .model_file import MODEL_FILENAME, encode_model, model_document, params_from_document
+from .model_file import MODEL_FILENAME, ModelDocument, decode_model, encode_model, model_document, read_model_bytes
 
 LOCK_NAME = ".heli-lock"
 COMMIT_LOCK_NAME = ".heli-commit-lock"
@@ -85,10 +85,8 @@ class ModelState:
     ----------
     root : Path
         The model directory.
-    params : ModelParams or None
-        The model (None when the folder has none yet).
-    document : dict or None
-        ``model.json``'s whole document.
+    document : ModelDocument or None
+        ``model.json``'s whole document, checked (None when the folder has no model yet).
     model_sha256 : str or None
         SHA-256 of ``model.json``'s bytes.
     library_version : int or None
@@ -103,13 +101,17 @@ class ModelState:
     """
 
     root: Path
-    params: object
-    document: dict | None
+    document: ModelDocument | None
     model_sha256: str | None
     library_version: int | None
     traces: tuple = ()
     manifest: dict | None = None
     pending: str | None = None
+
+    @property
+    def params(self):
+        """The model's :class:`~heli_core.params.ModelParams` (None when the folder has none yet)."""
+        return None if self.document is None else self.document.params
 
     @property
     def entries(self) -> list:
@@ -209,13 +211,16 @@ class ModelDir:
                 "'heli check' shows what the folder holds") from e
         return doc
 
-    def load(self, library_version: int | None = None) -> ModelState:
+    def load(self, library_version: int | None = None, *, library: bool = True) -> ModelState:
         """The directory's model and library as one checked state (module docstring).
 
         Parameters
         ----------
         library_version : int, optional
             Library version to read instead of the state's own.
+        library : bool
+            Read the library's traces and manifest (False: the model alone; the state's ``library_version``
+            is still the version it names, its ``traces`` empty).
 
         Raises
         ------
@@ -227,9 +232,9 @@ class ModelDir:
         if not self.root.is_dir():
             raise ModelFileError(f"model directory {str(self.root)!r} does not exist (write one with 'heli identify')")
         with self._flock(COMMIT_LOCK_NAME, exclusive=False):
-            return self._read_state(library_version, strict_model=True)
+            return self._read_state(library_version, strict_model=True, library=library)
 
-    def _read_state(self, library_version=None, strict_model=True) -> ModelState:
+    def _read_state(self, library_version=None, strict_model=True, library=True) -> ModelState:
         journal = self._journal()
         model_file = self.model_path
         want_sha = None
@@ -243,17 +248,17 @@ class ModelDir:
             version = journal["base"]["library_version"]
         if library_version is not None:
             version = int(library_version)
-        params = doc = digest = None
+        doc = digest = None
         try:
-            params, doc, digest = self._read_model(model_file, want_sha)
+            doc, digest = self._read_model(model_file, want_sha)
         except ModelFileError:
             if strict_model:
                 raise
         traces, manifest = (), None
-        if version is not None:
+        if version is not None and library:
             traces = tuple(self.library.load(version))
             manifest = self.library.manifest(version)
-        return ModelState(self.root, params, doc, digest, version, traces, manifest,
+        return ModelState(self.root, doc, digest, version, traces, manifest,
                           journal["state"] if journal else None)
 
     @staticmethod
@@ -269,16 +274,11 @@ class ModelDir:
             if want_sha is not None:
                 raise ModelDirError(f"{path}: the committed model (SHA-256 {want_sha[:12]}…) is missing; "
                                     "'heli check' shows what the folder holds")
-            raise ModelFileError(f"model file {str(path)!r} does not exist (write one with 'heli identify')")
-        try:
-            data = path.read_bytes()
-            doc = json.loads(data.decode("utf-8"))
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-            raise ModelFileError(f"{path}: not a readable JSON model file: {e}") from e
+        data = read_model_bytes(path)
         digest = _sha(data)
         if want_sha is not None and digest != want_sha:
             raise ModelDirError(f"{path}: SHA-256 is {digest}, the committed model's is {want_sha} (file changed)")
-        return params_from_document(doc, str(path)), doc, digest
+        return decode_model(data, str(path)), digest
 
     # ------------------------------------------------------------------ writing
     @contextlib.contextmanager

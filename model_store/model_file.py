@@ -26,13 +26,22 @@ Schema (``schema_version`` 1)::
 
 Parameters keep the paper's names and sign conventions (eq. 18: ``-k3*p``;
 eq. 21: ``-k12*col``). Files are written atomically.
+
+A document is written from :func:`model_document`'s dictionary and read as one frozen
+:class:`ModelDocument` (:meth:`ModelDocument.from_dict`, the one parser of the format: the parameters, the
+verdict, the sensors and the provenance's sources are checked and typed there). Every reader outside this
+package takes a :class:`ModelDocument`, from :meth:`model_store.ModelDir.load` for a model folder.
 """
 
 from __future__ import annotations
 
+import copy
 import datetime as _dt
 import json
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
+from types import MappingProxyType
 
 from .errors import ModelFileError
 from .verdict import ModelVerdict, verdict_of
@@ -111,7 +120,7 @@ def with_verdict(doc: dict, verdict: ModelVerdict) -> dict:
 
 
 def sensors_from_document(doc: dict, where: str = "model") -> SensorModel:
-    """The :class:`~heli_core.sensors.SensorModel` of a model document (silent when it has none).
+    """The :class:`~heli_core.sensors.SensorModel` of a model document's dictionary (silent when it has none).
 
     Raises
     ------
@@ -151,7 +160,11 @@ def _unstorable(obj):
 
 
 def params_from_document(doc: dict, where: str = "model") -> ModelParams:
-    """The :class:`ModelParams` of a model document, checked."""
+    """The :class:`ModelParams` of a model document's dictionary, checked (:meth:`ModelDocument.from_dict`)."""
+    return ModelDocument.from_dict(doc, where).params
+
+
+def _check_schema(doc, where: str) -> None:
     if not isinstance(doc, dict):
         raise ModelFileError(f"{where}: expected a JSON object, got {type(doc).__name__}")
     if doc.get("schema") != SCHEMA:
@@ -161,6 +174,10 @@ def params_from_document(doc: dict, where: str = "model") -> ModelParams:
             f"{where}: schema_version {doc.get('schema_version')!r} is not supported; this heli-env reads "
             f"version {SCHEMA_VERSION}"
         )
+
+
+def _params(doc: dict, where: str) -> ModelParams:
+    """The parameters, added terms, servo delays and lags of a document whose schema is checked."""
     params = doc.get("parameters")
     if not isinstance(params, dict):
         raise ModelFileError(f"{where}: 'parameters' must be an object keyed by the paper's names (k1 ... kd3)")
@@ -200,14 +217,235 @@ def params_from_document(doc: dict, where: str = "model") -> ModelParams:
         raise ModelFileError(f"{where}: invalid parameter value: {e}") from e
 
 
-def load_model(path) -> tuple[ModelParams, dict]:
-    """Read a model file (or the ``model.json`` in a directory).
+@dataclass(frozen=True)
+class Source:
+    """A flight a model was fitted on: an entry of ``provenance.sources``.
+
+    Attributes
+    ----------
+    file : str or None
+        The flight file's name (no folder).
+    sha256 : str or None
+        SHA-256 of its bytes (hex).
+    """
+
+    file: str | None
+    sha256: str | None
+
+    def to_dict(self) -> dict:
+        """The ``provenance.sources`` entry (what :func:`identification.workflows.identify.source_entry` writes)."""
+        return {"file": self.file, "sha256": self.sha256}
+
+
+def _sources(provenance, where: str) -> tuple:
+    """``provenance.sources``, the one place it is parsed."""
+    if provenance is None:
+        return ()
+    if not isinstance(provenance, dict) or not isinstance(provenance.get("sources", []), list):
+        raise ModelFileError(f"{where}: 'provenance' must be an object with a list 'sources', got {provenance!r}")
+    out = []
+    for i, entry in enumerate(provenance.get("sources", [])):
+        if not isinstance(entry, dict) or not all(isinstance(entry.get(k), (str, type(None))) for k in ("file", "sha256")):
+            raise ModelFileError(f"{where}: 'provenance.sources[{i}]' must be an object "
+                                 f"{{\"file\": name, \"sha256\": hex}}, got {entry!r}")
+        out.append(Source(entry.get("file"), entry.get("sha256")))
+    return tuple(out)
+
+
+def _mapping(doc: dict, key: str, where: str, empty: bool = True):
+    """A read-only view of object entry ``key`` (when absent or null: an empty one, else None)."""
+    value = doc.get(key)
+    if value is None:
+        return MappingProxyType({}) if empty else None
+    if not isinstance(value, dict):
+        raise ModelFileError(f"{where}: '{key}' must be an object, got {type(value).__name__}")
+    return MappingProxyType(value)
+
+
+@dataclass(frozen=True, eq=False)
+class ModelDocument:
+    """A model file's document, read and checked once (``model.json``; the module docstring has its schema).
+
+    Built by :meth:`from_dict`; :meth:`to_dict` gives back the dictionary it was read from, so a document read
+    and written again is the same bytes. The entries that are an estimator's own record (``identification``,
+    ``filter``, ``fit_statistics``, ``refresh``) are read-only views of theirs.
+
+    Attributes
+    ----------
+    params : ModelParams
+        The parameters, added terms, servo delays and lags.
+    structure : str or None
+        ``"decoupled"``, ``"coupled"`` or ``"custom"`` (None: not recorded).
+    verdict : ModelVerdict
+        Whether the model can be used (:data:`model_store.verdict.NOT_JUDGED` when the file has none).
+    sensors : SensorModel
+        The gyros' and the attitude estimate's noise and vibration lines (silent when the file has none).
+    sources : tuple of Source
+        The flights the model was fitted on (``provenance.sources``).
+    created : str or None
+        When the file was written (ISO 8601).
+    written_by : str or None
+        The heli-env version that wrote it.
+    sample_rate : float or None
+        The fitted flights' sample rate [Hz].
+    identification : Mapping
+        The estimator and its settings (``method``, ``estimator``, ``interval`` ...).
+    filter_settings : Mapping or None
+        The prefilter's settings (Section 3.1), None without one.
+    fit_statistics : Mapping
+        Per axis (``axes``) R², standard errors, the wind model; the validation on other flights
+        (``validation_flights``).
+    refresh : Mapping or None
+        The record of the refresh that wrote the model (:mod:`identification.workflows.refresh`).
+    """
+
+    params: ModelParams
+    structure: str | None
+    verdict: ModelVerdict
+    sensors: SensorModel
+    sources: tuple
+    created: str | None
+    written_by: str | None
+    sample_rate: float | None
+    identification: Mapping
+    filter_settings: Mapping | None
+    fit_statistics: Mapping
+    refresh: Mapping | None
+    _document: Mapping = field(repr=False)
+
+    @classmethod
+    def from_dict(cls, doc, where: str = "model") -> "ModelDocument":
+        """The typed form of a model document's dictionary (as ``json.load`` gives it), checked.
+
+        Parameters
+        ----------
+        doc : dict
+            The JSON document.
+        where : str
+            What to call the document in a message (its path).
+
+        Raises
+        ------
+        ModelFileError
+            Wrong schema or version, missing, unknown or impossible parameters, or a malformed verdict, sensors
+            entry, provenance or settings entry; the message names the entry.
+        """
+        _check_schema(doc, where)
+        params = _params(doc, where)
+        provenance = doc.get("provenance")
+        rate = doc.get("sample_rate_hz")
+        if rate is not None and (isinstance(rate, bool) or not isinstance(rate, (int, float))):
+            raise ModelFileError(f"{where}: 'sample_rate_hz' must be a number or null, got {rate!r}")
+        doc = copy.deepcopy(doc)  # the views below are of the document's own copy: a caller's edits do not reach it
+        return cls(
+            params=params,
+            structure=doc.get("structure"),
+            verdict=verdict_of(doc, where),
+            sensors=sensors_from_document(doc, where),
+            sources=_sources(provenance, where),
+            created=(provenance or {}).get("created"),
+            written_by=(provenance or {}).get("heli_env"),
+            sample_rate=None if rate is None else float(rate),
+            identification=_mapping(doc, "identification", where),
+            filter_settings=_mapping(doc, "filter", where, empty=False),
+            fit_statistics=_mapping(doc, "fit_statistics", where),
+            refresh=_mapping(doc, "refresh", where, empty=False),
+            _document=MappingProxyType(doc),
+        )
+
+    def to_dict(self) -> dict:
+        """The JSON document (a copy): :func:`encode_model` of it writes the bytes the model was read from."""
+        return copy.deepcopy(dict(self._document))
+
+    def __eq__(self, other):
+        return isinstance(other, ModelDocument) and self.to_dict() == other.to_dict()
+
+    def __reduce__(self):
+        """Pickled as its JSON document (the read-only views cannot be): an :class:`EnvModel
+        <heli_env.env_model.EnvModel>` travels to a backend's workers with it."""
+        return ModelDocument.from_dict, (self.to_dict(),)
+
+    __hash__ = None
+
+    def with_sensors(self, sensors: SensorModel) -> "ModelDocument":
+        """The same document with ``sensors`` stored instead of its own."""
+        return ModelDocument.from_dict({**self.to_dict(), "sensors": sensors.to_dict()})
+
+    @property
+    def method(self) -> str:
+        """The identification method as recorded (``"integral (Fig. 5)"`` when the file names none)."""
+        return str(self.identification.get("method", "integral"))
+
+    @property
+    def estimator(self) -> str | None:
+        """Which estimator identified the model: ``"ml"`` (maximum likelihood), ``"integral"`` (Fig. 5), or None
+        for another method. Models written before the maximum-likelihood estimator existed record only
+        ``method`` ("integral (Fig. 5)"), or nothing: they are integral-method models."""
+        est = self.identification.get("estimator")
+        if est is None:
+            method = self.method
+            est = "ml" if method.startswith("maximum") else ("integral" if method.startswith("integral") else None)
+        return est if est in ("ml", "integral") else None
+
+    def axis_statistics(self, axis: str) -> Mapping:
+        """The fit statistics of ``axis`` (``"roll"``, ``"pitch"``, ``"yaw"``; empty when none are recorded)."""
+        entry = (self.fit_statistics.get("axes") or {}).get(axis)
+        return entry if isinstance(entry, Mapping) else MappingProxyType({})
+
+    def std_errors(self) -> dict:
+        """The standard errors the fit recorded, every axis' together (parameter name -> value)."""
+        out = {}
+        for axis in AXES:
+            out.update(self.axis_statistics(axis).get("std_errors") or {})
+        return out
+
+    def wind(self, axis: str):
+        """The wind model the maximum-likelihood fit stored for ``axis`` (its dictionary), or None."""
+        wind = self.axis_statistics(axis).get("wind")
+        return wind if isinstance(wind, Mapping) else None
+
+    @property
+    def validation_flights(self) -> tuple:
+        """The model's scores on flights it was not fitted on (``fit_statistics.validation_flights`` entries)."""
+        return tuple(self.fit_statistics.get("validation_flights") or ())
+
+
+def decode_model(data: bytes, where: str) -> ModelDocument:
+    """The document of a model file's bytes (``where``: its path, for messages).
+
+    Raises
+    ------
+    ModelFileError
+        Invalid UTF-8 or JSON, or a document :meth:`ModelDocument.from_dict` refuses.
+    """
+    try:
+        doc = json.loads(data.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ModelFileError(f"{where}: not a readable JSON model file: {e}") from e
+    return ModelDocument.from_dict(doc, where)
+
+
+def read_model_bytes(path: Path) -> bytes:
+    """The bytes of the model file at ``path`` (:class:`ModelFileError` when it is missing or unreadable)."""
+    if not path.exists():
+        raise ModelFileError(f"model file {str(path)!r} does not exist (write one with 'heli identify')")
+    try:
+        return path.read_bytes()
+    except OSError as e:
+        raise ModelFileError(f"{path}: not a readable JSON model file: {e}") from e
+
+
+def load_model(path) -> tuple[ModelParams, ModelDocument]:
+    """Read one model file (or the ``model.json`` in a directory), as it is on disk.
+
+    A model folder is read with :meth:`model_store.ModelDir.load`, which also takes the state an interrupted
+    write left; this reads the one file given (a file kept in ``history/``, a test's file).
 
     Returns
     -------
     params : ModelParams
-    document : dict
-        The whole JSON document (provenance, statistics, settings).
+    document : ModelDocument
+        The whole document (provenance, statistics, settings).
 
     Raises
     ------
@@ -218,10 +456,5 @@ def load_model(path) -> tuple[ModelParams, dict]:
     path = Path(path)
     if path.is_dir():
         path = path / MODEL_FILENAME
-    if not path.exists():
-        raise ModelFileError(f"model file {str(path)!r} does not exist (write one with 'heli identify')")
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise ModelFileError(f"{path}: not a readable JSON model file: {e}") from e
-    return params_from_document(doc, str(path)), doc
+    document = decode_model(read_model_bytes(path), str(path))
+    return document.params, document

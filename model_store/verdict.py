@@ -137,14 +137,15 @@ def verdict_of(document, where: str = "model") -> ModelVerdict:
     return ModelVerdict.from_dict((document or {}).get("verdict"), where)
 
 
-def require_usable(document, where: str = "model", *, flag: str, accept: bool = False,
+def require_usable(verdict: ModelVerdict, where: str = "model", *, flag: str, accept: bool = False,
                    use: str = "use it") -> ModelVerdict:
-    """The verdict of ``document``, refusing an unusable model unless ``accept``.
+    """``verdict`` (a model's: :attr:`model_store.model_file.ModelDocument.verdict`), refusing an unusable model
+    unless ``accept``.
 
     Parameters
     ----------
-    document : dict
-        The model document.
+    verdict : ModelVerdict
+        The model's verdict.
     where : str
         What to call the model in the message (its path).
     flag : str
@@ -159,7 +160,6 @@ def require_usable(document, where: str = "model", *, flag: str, accept: bool = 
     UnusableModelError
         The model is judged unusable and ``accept`` is false: one line naming the reasons and ``flag``.
     """
-    verdict = verdict_of(document, where)
     if verdict.unusable and not accept:
         raise UnusableModelError(f"{where} is judged unusable: {'; '.join(verdict.reasons)}. Identify it again "
                                  f"from a flight that shows these axes, or {use} anyway with {flag}")

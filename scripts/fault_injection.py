@@ -178,7 +178,7 @@ def _all_at_once(base: Path, out: Path, commands: list) -> tuple[list, list]:
 
 
 def concurrent_refreshes(base: Path, flights: list[Path], work: Path) -> dict:
-    from model_store import ModelDir
+    from model_store import ModelDir, load_model
 
     out = work / "concurrent-refresh"
     codes, errors = _all_at_once(base, out, [refresh_cmd(out, f) for f in flights])
@@ -186,13 +186,13 @@ def concurrent_refreshes(base: Path, flights: list[Path], work: Path) -> dict:
     traced = {(e.get("source") or {}).get("name") for e in state.entries}
     # walk the chain of refresh records back through history/
     recorded, doc, seen_models = [], state.document, 0
-    while doc.get("refresh"):
-        recorded += [s["file"] for s in doc["refresh"]["new_sources"]]
-        kept = out / doc["refresh"]["previous_model"]["kept_as"]
+    while doc.refresh:
+        recorded += [s["file"] for s in doc.refresh["new_sources"]]
+        kept = out / doc.refresh["previous_model"]["kept_as"]
         if not kept.is_file():
             break
         seen_models += 1
-        doc = json.loads(kept.read_text())
+        doc = load_model(kept)[1]  # a model kept in history/: one file, not a folder
     names = [f.name for f in flights]
     return {"writers": len(flights), "exit 0": codes.count(0), "errors": errors,
             "traces in library": sum(n in traced for n in names),
@@ -203,7 +203,7 @@ def concurrent_refreshes(base: Path, flights: list[Path], work: Path) -> dict:
 
 
 def concurrent_identifies(base: Path, flights: list[Path], work: Path) -> dict:
-    from model_store import ModelDir
+    from model_store import ModelDir, load_model
 
     out = work / "concurrent-identify"
     codes, _ = _all_at_once(base, out, [identify_cmd(f, out) for f in flights])
@@ -211,9 +211,8 @@ def concurrent_identifies(base: Path, flights: list[Path], work: Path) -> dict:
     # each identify's model names its flight; every one but the current must be in history/
     models = {}
     for path in (out / "history").glob("model-*.json"):
-        doc = json.loads(path.read_text())
-        models[doc["provenance"]["sources"][0]["file"]] = path
-    current = state.document["provenance"]["sources"][0]["file"]
+        models[load_model(path)[1].sources[0].file] = path
+    current = state.document.sources[0].file
     names = [f.name for f in flights]
     return {"writers": len(flights), "exit 0": codes.count(0),
             "models kept": sum(n in models or n == current for n in names),

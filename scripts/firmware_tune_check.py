@@ -166,7 +166,7 @@ def run_aircraft(name: str, firmwares, args, work: Path) -> list:
     from identification.bench.cells import BENCH_CELLS
     from identification.io import write_csv_flight
     from identification.bench.synthetic import simulate_flight
-    from model_store.model_file import load_model
+    from model_store.model_dir import ModelDir
 
     cell, truth = _aircraft()[name]
     cfg = replace(BENCH_CELLS[cell], duration=300.0)
@@ -193,7 +193,7 @@ def run_aircraft(name: str, firmwares, args, work: Path) -> list:
             continue
         model_was_none = model is None
         model = model or out / "model"
-        ident, _ = load_model(model / "model.json")
+        ident = ModelDir(model).load(library=False).params
         doc = json.loads((out / "tune.json").read_text())
         spec_file = out / doc["files"]["proposed"]
         values = plain.read_param_file(spec_file) if fw == "ardupilot" else plain.read_cli_file(spec_file)

@@ -167,7 +167,7 @@ def test_cli_writes_diagnosis_and_a_model_the_env_and_pd_accept(tmp_path):
     assert (out / "diagnosis_residuals.png").stat().st_size > 0 and (out / "diagnosis_windows.png").exists()
     params, model_doc = load_model(out)
     assert params.k4 != 0.0 or params.k8 != 0.0
-    assert model_doc["diagnosis"]["added"]
+    assert model_doc.to_dict()["diagnosis"]["added"]
     env = gym.make("HeliAttitude-v0", model=str(out))
     env.reset(seed=0)
     env.step(np.zeros(3, dtype=np.float32))

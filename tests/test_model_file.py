@@ -20,6 +20,9 @@ from model_store.model_file import (
     MODEL_FILENAME,
     SCHEMA,
     SCHEMA_VERSION,
+    ModelDocument,
+    Source,
+    encode_model,
     load_model,
     model_document,
     params_from_document,
@@ -61,8 +64,11 @@ def test_save_and_load_round_trip(tmp_path):
     path = save_model(tmp_path, PARAMS, structure="coupled", sample_rate=100.0, sources=SOURCES,
                       identification={"method": "integral (Fig. 5)", "interval": 1.0})
     assert path == tmp_path / MODEL_FILENAME
-    params, document = load_model(path)
-    assert params == PARAMS  # all 15 parameters, the three delays and the added terms, exactly
+    params, typed = load_model(path)
+    assert params == PARAMS == typed.params  # all 15 parameters, the three delays and the added terms, exactly
+    assert (typed.structure, typed.sample_rate, typed.method) == ("coupled", 100.0, "integral (Fig. 5)")
+    assert typed.sources == (Source("hover.csv", "ab" * 32),) and typed.estimator == "integral"
+    document = typed.to_dict()  # the JSON document as read: what is on disk
     assert list(document["parameters"]) == list(BASE_PARAMS)
     assert document["parameters"] == {k: getattr(PARAMS, k) for k in BASE_PARAMS}
     assert document["added_terms"] == {"gs3": -8.1, "nld1": 2.0}
@@ -205,6 +211,49 @@ def test_params_from_document_names_where_it_came_from(doc):
     doc["schema_version"] = 0
     with pytest.raises(ModelFileError, match="^library/model: schema_version 0"):
         params_from_document(doc, "library/model")
+
+
+@pytest.mark.parametrize("folder", [pathlib.Path(__file__).parent / "data" / "ideal_model",
+                                    pathlib.Path(__file__).parents[1] / "heli_env" / "data" / "default"])
+def test_a_model_folder_reads_into_its_typed_document_and_writes_the_same_bytes(folder):
+    """The typed document is the file's one parser; the format on disk is unchanged: read and written again, a
+    model written by an earlier heli-env is the same bytes."""
+    text = (folder / MODEL_FILENAME).read_text(encoding="utf-8")
+    typed = ModelDocument.from_dict(json.loads(text), str(folder))
+    assert encode_model(typed.to_dict()) == text
+    raw = json.loads(text)
+    assert [s.to_dict() for s in typed.sources] == raw["provenance"]["sources"]
+    assert typed.params == params_from_document(raw) and typed.structure == raw["structure"]
+    assert typed.estimator in ("ml", "integral") and typed.sample_rate == raw["sample_rate_hz"]
+    assert typed == ModelDocument.from_dict(json.loads(text)) and typed.to_dict() is not typed.to_dict()
+
+
+def test_the_typed_document_pickles_as_itself(doc):
+    """An EnvModel, and so its document, is pickled to a backend's worker processes."""
+    import pickle
+
+    typed = ModelDocument.from_dict(doc)
+    again = pickle.loads(pickle.dumps(typed))
+    assert again == typed and again.params == typed.params and again.verdict == typed.verdict
+
+
+def test_the_typed_document_is_its_own_copy(doc):
+    typed = ModelDocument.from_dict(doc)
+    doc["identification"]["method"] = "edited"
+    with pytest.raises(TypeError):
+        typed.identification["method"] = "edited"  # a read-only view
+    assert typed.method != "edited" and typed.to_dict()["identification"] != doc["identification"]
+
+
+@pytest.mark.parametrize("provenance, says", [
+    ([1, 2], "'provenance' must be an object with a list 'sources'"),
+    ({"sources": "flight.csv"}, "'provenance' must be an object with a list 'sources'"),
+    ({"sources": [{"file": 3, "sha256": "ab"}]}, r"'provenance.sources\[0\]' must be an object"),
+])
+def test_malformed_provenance_is_refused_naming_the_entry(tmp_path, doc, provenance, says):
+    doc["provenance"] = provenance
+    with pytest.raises(ModelFileError, match=says):
+        load_model(_write(tmp_path, doc))
 
 
 # ---------------------------------------------------------------------------------------- atomic write

@@ -156,7 +156,7 @@ def test_refresh_killed_at_every_file_event_reads_old_or_new_and_runs_again(base
             assert refresh_model(out, [flights[2]], n_replicates=4, plots=False, progress=False).library_version == 2
         else:
             kinds.append("new")
-            assert state.library_version == 2 and "refresh" in state.document
+            assert state.library_version == 2 and state.document.refresh is not None
             assert state.entries[-1]["model"]["sha256"] == state.model_sha256
             with pytest.raises(DuplicateFlightError):  # done already: the same flight again is a duplicate
                 refresh_model(out, [flights[2]], n_replicates=4, plots=False, progress=False)
@@ -212,7 +212,7 @@ def test_two_concurrent_refreshes_are_both_recorded(folder, flights):
     assert state.library_version == 3
     assert sorted(e["source"]["name"] for e in state.entries) == ["f1.csv", "f2.csv", "f4.csv"]
     # the second refresh started from the first one's model: a chain back to the identified model
-    second = state.document["refresh"]
+    second = state.document.refresh
     first_doc = json.loads((folder / second["previous_model"]["kept_as"]).read_text())
     assert {second["new_sources"][0]["file"], first_doc["refresh"]["new_sources"][0]["file"]} == {"f2.csv", "f4.csv"}
     assert (folder / first_doc["refresh"]["previous_model"]["kept_as"]).is_file()
@@ -221,7 +221,7 @@ def test_two_concurrent_refreshes_are_both_recorded(folder, flights):
 def test_concurrent_writers_take_turns_and_lose_nothing(folder):
     def write(k):
         with ModelDir(folder, notify=lambda m: None).transaction(what=f"writer {k}") as tx:
-            doc = dict(tx.base.document)
+            doc = tx.base.document.to_dict()
             doc["writers"] = list(doc.get("writers", [])) + [k]
             tx.write_model_document(doc)
             tx.add_traces([_trace(100 + k)])
@@ -232,7 +232,7 @@ def test_concurrent_writers_take_turns_and_lose_nothing(folder):
     for t in threads:
         t.join()
     state = ModelDir(folder).load()
-    assert sorted(state.document["writers"]) == list(range(8))
+    assert sorted(state.document.to_dict()["writers"]) == list(range(8))
     assert state.library_version == 9 and len(state.traces) == 9
     models = list((folder / "history").glob("model-*.json"))
     assert len(models) == 8  # every model replaced: the identified one and seven of the eight written

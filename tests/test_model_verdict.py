@@ -105,9 +105,9 @@ def test_the_verdict_is_stored_after_the_structure_and_a_file_without_one_reads_
 def test_require_usable_refuses_in_one_line_naming_the_reasons_and_the_flag():
     doc = {"verdict": {"level": "unusable", "reasons": ["roll: damping k3 = 200 1/s is at the upper bound"]}}
     with pytest.raises(UnusableModelError, match=r"^m\.json is judged unusable: roll: damping k3 = 200 .*--accept"):
-        require_usable(doc, "m.json", flag="--accept")
-    assert require_usable(doc, "m.json", flag="--accept", accept=True).unusable
-    assert require_usable({}, "m.json", flag="--accept").level == NOT_JUDGED
+        require_usable(verdict_of(doc), "m.json", flag="--accept")
+    assert require_usable(verdict_of(doc), "m.json", flag="--accept", accept=True).unusable
+    assert require_usable(verdict_of({}), "m.json", flag="--accept").level == NOT_JUDGED
 
 
 def _judged_copy(src, dst, verdict: dict):

@@ -55,8 +55,7 @@ def test_found_flights_are_validated_again_and_lost_ones_carried_over_marked(fli
         _entry(gone, name="older.csv", computed_on={"model_sha256": "0" * 64, "reason": "carried before"}),
     ]
     gone.unlink()
-    doc = {"fit_statistics": {"validation_flights": entries}}
-    kept = kept_validation(doc, "f" * 64, [flights], candidates=[elsewhere / "renamed_b.csv"],
+    kept = kept_validation(entries, "f" * 64, [flights], candidates=[elsewhere / "renamed_b.csv"],
                            fitted_sha256=[sha256_of(flights / "c.csv")], sample_rate=100.0)
     assert kept.names == ["a.csv", "b.csv"]
     assert kept.paths == [str((flights / "a.csv").resolve()), str((elsewhere / "renamed_b.csv").resolve())]
@@ -85,7 +84,7 @@ def test_a_carried_entry_is_marked_in_the_report_and_draws_no_figure(flights):
 
 
 def test_model_without_validation_flights_keeps_none(flights):
-    assert kept_validation({"fit_statistics": {}}, "f" * 64, [flights]).carried == []
+    assert kept_validation((), "f" * 64, [flights]).carried == []
 
 
 @pytest.mark.slow

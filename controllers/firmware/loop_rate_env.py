@@ -61,7 +61,7 @@ def held_library(env_model, substeps: int):
     collective = np.repeat(env_model.collective, m)
     for a in (ud, collective):
         a.setflags(write=False)
-    return replace(env_model, document={**env_model.document, "sensors": held.to_dict()}, ud=ud,
+    return replace(env_model, document=env_model.document.with_sensors(held), ud=ud,
                    collective=collective, starts=np.asarray(env_model.starts) * m,
                    lengths=np.asarray(env_model.lengths) * m, sample_rate=float(env_model.sample_rate) * m)
 

@@ -102,8 +102,9 @@ class WindModel:
         object.__setattr__(self, "damping_ratio", float(self.damping_ratio))
 
     @classmethod
-    def from_document(cls, document: dict, axis) -> "WindModel":
-        """The wind model the ML identification stored for ``axis`` in a model file's document.
+    def from_document(cls, document, axis) -> "WindModel":
+        """The wind model the ML identification stored for ``axis`` in a model file's document
+        (:meth:`model_store.model_file.ModelDocument.wind`).
 
         Raises
         ------
@@ -113,9 +114,8 @@ class WindModel:
         """
         name = _axis_name(axis)
         where = f"model.json fit_statistics.axes.{name}.wind"
-        entry = (((document or {}).get("fit_statistics") or {}).get("axes") or {}).get(name) or {}
-        wind = entry.get("wind") if isinstance(entry, dict) else None
-        if not isinstance(wind, dict):
+        wind = document.wind(name)
+        if wind is None:
             raise DesignError(f"{where} is missing: the LQG design needs the gust model the maximum-likelihood "
                               "identification fits ('heli identify --method ml', the default); pass "
                               "wind=WindModel(...) to design on a model identified otherwise")

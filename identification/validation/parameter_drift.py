@@ -151,7 +151,7 @@ def previous_std_errors(doc: dict, names, new: BootstrapResult, library_entries,
 
     Parameters
     ----------
-    doc : dict
+    doc : ModelDocument
         The current ``model.json``.
     names : sequence of str
         Parameters compared.
@@ -159,8 +159,8 @@ def previous_std_errors(doc: dict, names, new: BootstrapResult, library_entries,
         The new flights' uncertainty.
     library_entries : sequence of dict
         The disturbance library's manifest entries (their sources' durations).
-    old_sources : sequence of dict
-        ``model.json`` provenance sources ``{"file", "sha256"}``.
+    old_sources : sequence of Source
+        The current model's source flights (:attr:`model_store.model_file.ModelDocument.sources`).
     estimator : {"ml", "integral"}
         How the current model was identified.
 
@@ -172,16 +172,14 @@ def previous_std_errors(doc: dict, names, new: BootstrapResult, library_entries,
     note : str or None
         What a reader should know about them.
     """
-    record = (doc.get("refresh") or {}).get("bootstrap") or {}
+    record = (doc.refresh or {}).get("bootstrap") or {}
     recorded = record.get("std_errors") or {}
     if all(isinstance(recorded.get(k), (int, float)) for k in names):
         label = "recorded Fisher information" if str(record.get("method", "")).startswith("Fisher") else \
             "recorded bootstrap"
         return {k: float(recorded[k]) for k in names}, label, None
     if estimator == "ml":  # the fit's own Fisher errors, recorded by heli identify
-        fisher = {}
-        for axis in ((doc.get("fit_statistics") or {}).get("axes") or {}).values():
-            fisher.update(axis.get("std_errors") or {})
+        fisher = doc.std_errors()
         if all(isinstance(fisher.get(k), (int, float)) for k in names):
             return {k: float(fisher[k]) for k in names}, "Fisher information recorded in model.json", None
     durations = {}
@@ -189,8 +187,8 @@ def previous_std_errors(doc: dict, names, new: BootstrapResult, library_entries,
         sha = (e.get("source") or {}).get("sha256")
         if sha and e.get("duration_s"):
             durations[sha] = float(e["duration_s"])
-    shas = [s.get("sha256") for s in old_sources]
-    interval = float(((doc.get("identification") or {}).get("interval")) or 1.0)
+    shas = [s.sha256 for s in old_sources]
+    interval = float(doc.identification.get("interval") or 1.0)
     if shas and all(s in durations for s in shas):
         n_old = sum(math.floor(durations[s] / interval + 1e-9) for s in shas)
         ratio = math.sqrt(new.n_intervals / max(n_old, 1))

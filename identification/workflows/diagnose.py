@@ -119,7 +119,8 @@ def _likelihood_model(d: LikelihoodDiagnoser, flight: Flight, model_document, so
                 "(identification.preprocess.shift_inputs) before comparing this model with the log.",
         "criterion": likelihood_criterion(d),
     }
-    sources = list((model_document or {}).get("provenance", {}).get("sources", [])) + ([source] if source else [])
+    sources = [s.to_dict() for s in (model_document.sources if model_document is not None else ())] + (
+        [source] if source else [])
     settings = identification_settings(ident)
     settings["method"] += " after heli diagnose"
     aligned = shift_inputs(flight, log_shift) if min(log_shift) < 0 else flight
@@ -185,8 +186,8 @@ def diagnose_and_report(flight: Flight, out_dir, config: DiagnosisConfig | None 
         How it is diagnosed and written (default ``DiagnosisConfig()``), described there.
     model : ModelParams, optional
         The model whose structure is diagnosed (default: the paper's decoupled model).
-    model_document : dict, optional
-        Its ``model.json`` document (provenance carried into the new version).
+    model_document : ModelDocument, optional
+        Its ``model.json`` document (its sources carried into the new version's provenance).
     source : dict, optional
         Provenance of the flight file (``{"file": ..., "sha256": ...}``).
     **settings
@@ -264,7 +265,8 @@ def _heldout_model(d: Diagnoser, flight: Flight, model_document, source):
                 "comparing this model with the log; the aircraft model itself needs no term for it.",
         "criterion": heldout_criterion(d),
     }
-    sources = list((model_document or {}).get("provenance", {}).get("sources", [])) + ([source] if source else [])
+    sources = [s.to_dict() for s in (model_document.sources if model_document is not None else ())] + (
+        [source] if source else [])
     document = new_model_document(
         params, structure="custom", sample_rate=d.flight_.sample_rate,
         filter_settings=d.flight_.metadata.get("prefilter"),

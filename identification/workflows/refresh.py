@@ -61,7 +61,7 @@ import numpy as np
 from heli_core.files import jsonable, keep_copy, sha256_of
 from heli_core.terms import AXES
 from model_store.model_dir import ModelDir
-from model_store.model_file import MODEL_FILENAME, load_model
+from model_store.model_file import MODEL_FILENAME
 
 from ..integral.bootstrap import DEFAULT_REPLICATES, BootstrapResult, interval_bootstrap
 from ..reports.refresh import refresh_markdown
@@ -219,7 +219,7 @@ def refresh_model(model_dir, new_flights, *, settings: RefreshSettings | None = 
     root = Path(model_dir)
     if root.suffix == ".json":
         root = root.parent
-    load_model(root / MODEL_FILENAME)  # a missing or corrupt model is named before anything is locked or made
+    ModelDir(root).load(library=False)  # a missing or corrupt model is named before anything is locked or made
     for p in new_paths:
         if not p.is_file():
             raise FileNotFoundError(f"new flight {str(p)!r} does not exist")
@@ -273,12 +273,12 @@ class _Refresh:
     def __init__(self, tx, new_paths, settings: RefreshSettings):
         self.tx, self.new_paths, self.settings = tx, new_paths, settings
         self.model_path = tx.root / MODEL_FILENAME
-        if tx.base.params is None:
-            load_model(self.model_path)  # raises the reader's error
+        if tx.base.document is None:
+            tx.dir.load(library=False)  # raises the reader's error
         self.doc = tx.base.document
         self.structure, self.kw = identifier_settings(self.doc, str(self.model_path))
         self.estimator = estimator_of(self.doc, str(self.model_path))
-        self.old_sources = list((self.doc.get("provenance") or {}).get("sources") or [])
+        self.old_sources = self.doc.sources
         self.show = (len(new_paths) > 1) if settings.progress is None else settings.progress
         self.seeds = np.random.SeedSequence(settings.seed).spawn(3)
 
@@ -398,7 +398,7 @@ class _Refresh:
         record = {
             "created": created,
             "previous_model": {"sha256": old_digest, "kept_as": f"history/model-{old_digest[:12]}.json",
-                               "sources": self.old_sources},
+                               "sources": [s.to_dict() for s in self.old_sources]},
             "new_sources": new_sources,
             "fit": result.fit, "reason": result.reason, "flagged": result.flagged,
             "drift_file": "refresh.json",
@@ -411,7 +411,7 @@ class _Refresh:
         result.notes += checked.notes
         run = identify_and_report(
             fit_flights, tx.root, coupled=self.structure == "coupled",
-            sources=new_sources + (self.old_sources if pooled else []), identifier_kwargs=self.kw,
+            sources=new_sources + ([s.to_dict() for s in self.old_sources] if pooled else []), identifier_kwargs=self.kw,
             flight_paths=fit_paths, plots=s.plots, disturbances=True, progress=self.show,
             wind_flights=range(len(flights)), model_extra={"refresh": record}, backend=s.backend,
             method=self.estimator, transaction=tx, draw_figures=False,
@@ -434,7 +434,7 @@ class _Refresh:
         from .refresh_validation import kept_validation
 
         search = [self.tx.root, *dict.fromkeys(Path(p).resolve().parent for p in self.new_paths), Path.cwd()]
-        return kept_validation(self.doc, self.tx.base.model_sha256, search, self.settings.previous_flights or (),
+        return kept_validation(self.doc.validation_flights, self.tx.base.model_sha256, search, self.settings.previous_flights or (),
                                fitted_sha256, sample_rate)
 
     def document(self, result: RefreshResult, record: dict, flights, new_ident, kept) -> dict:

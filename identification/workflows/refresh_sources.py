@@ -13,6 +13,7 @@ from pathlib import Path
 
 from heli_core.files import sha256_of
 from model_store.errors import LibraryError, ModelFileError
+from model_store.model_file import ModelDocument
 
 
 class RefreshError(ModelFileError):
@@ -24,24 +25,16 @@ class DuplicateFlightError(LibraryError):
     """A new flight is already part of the model or of its disturbance library (same SHA-256)."""
 
 
-def estimator_of(doc: dict, where: str = "model.json") -> str:
-    """Which estimator identified a model: ``"ml"`` (maximum likelihood) or ``"integral"`` (Fig. 5).
-
-    Models written before the maximum-likelihood estimator existed record only ``method``
-    ("integral (Fig. 5)"), or nothing: they are integral-method models.
-    """
-    ident = doc.get("identification") or {}
-    est = ident.get("estimator")
-    method = str(ident.get("method", "integral"))
-    if est is None:
-        est = "ml" if method.startswith("maximum") else ("integral" if method.startswith("integral") else None)
-    if est not in ("ml", "integral"):
-        raise RefreshError(f"{where}: identified by {method!r}; refresh re-identifies with the maximum-likelihood "
-                           "or the integral method only")
-    return est
+def estimator_of(doc: ModelDocument, where: str = "model.json") -> str:
+    """Which estimator identified a model: ``"ml"`` (maximum likelihood) or ``"integral"`` (Fig. 5)
+    (:attr:`~model_store.model_file.ModelDocument.estimator`), refused for another method."""
+    if doc.estimator is None:
+        raise RefreshError(f"{where}: identified by {doc.method!r}; refresh re-identifies with the "
+                           "maximum-likelihood or the integral method only")
+    return doc.estimator
 
 
-def identifier_settings(doc: dict, where: str = "model.json") -> tuple[str, dict]:
+def identifier_settings(doc: ModelDocument, where: str = "model.json") -> tuple[str, dict]:
     """Structure and identifier keyword arguments the model was identified with (see :func:`estimator_of`).
 
     Raises
@@ -49,13 +42,13 @@ def identifier_settings(doc: dict, where: str = "model.json") -> tuple[str, dict
     RefreshError
         A structure ``heli identify`` does not write (``"custom"``), or an unknown method.
     """
-    structure = doc.get("structure")
+    structure = doc.structure
     if structure not in ("decoupled", "coupled"):
         raise RefreshError(
             f"{where}: structure {structure!r} cannot be refreshed; expected 'decoupled' or 'coupled' "
             "(a model written by 'heli identify')"
         )
-    ident = doc.get("identification") or {}
+    ident = doc.identification
     estimator = estimator_of(doc, where)
     keys = (("input_hold", "wind_model", "remove_vibration", "vibration_min_hz", "max_nfev", "select_terms")
             if estimator == "ml"
@@ -63,11 +56,11 @@ def identifier_settings(doc: dict, where: str = "model.json") -> tuple[str, dict
     kw = {k: ident[k] for k in keys if ident.get(k) is not None}
     if "delay" in ident:
         kw["delay"] = ident["delay"]
-    filt = doc.get("filter") or {}
+    filt = doc.filter_settings or {}
     for k in ("pass_hz", "stop_hz"):
         if filt.get(k) is not None and estimator == "integral":
             kw[k] = float(filt[k])
-    extra = tuple((doc.get("added_terms") or {}).keys())
+    extra = tuple(name for name, _ in doc.params.extra)
     if extra:
         kw["extra_terms"] = extra
     return structure, kw
@@ -78,8 +71,8 @@ def find_source_flights(sources, search_dirs=(), candidates=()) -> tuple[list, l
 
     Parameters
     ----------
-    sources : sequence of dict
-        ``model.json`` provenance entries ``{"file": name, "sha256": hex}``.
+    sources : sequence of Source
+        The model's source flights (:attr:`model_store.model_file.ModelDocument.sources`).
     search_dirs : sequence of path
         Folders where a file of the source's name is looked for.
     candidates : sequence of path
@@ -100,7 +93,7 @@ def find_source_flights(sources, search_dirs=(), candidates=()) -> tuple[list, l
         by_sha.setdefault(sha256_of(c), c)
     found, missing = [], []
     for src in sources:
-        name, sha = src.get("file"), src.get("sha256")
+        name, sha = src.file, src.sha256
         path = by_sha.get(sha)
         note = None
         if path is None and name:
@@ -122,7 +115,7 @@ def check_new_flights(paths, digests, model_sources, library_entries) -> None:
     """Raise :class:`DuplicateFlightError` for a new flight already in the model or library, or given twice."""
     problems = []
     seen = {}
-    in_model = {s.get("sha256"): s.get("file") for s in model_sources}
+    in_model = {s.sha256: s.file for s in model_sources}
     in_library = {}
     for e in library_entries:
         src = e.get("source") or {}

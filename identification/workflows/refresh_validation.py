@@ -64,14 +64,14 @@ def _locate(entry: dict, search_dirs, by_sha: dict) -> Path | None:
     return None
 
 
-def kept_validation(document: dict, model_sha256: str, search_dirs, candidates=(), fitted_sha256=(),
+def kept_validation(entries, model_sha256: str, search_dirs, candidates=(), fitted_sha256=(),
                     sample_rate: float | None = None) -> KeptValidation:
     """Sort the earlier model's validation flights into those validated again and those carried over.
 
     Parameters
     ----------
-    document : dict
-        The earlier ``model.json``.
+    entries : sequence of dict
+        The earlier model's validation flights (:attr:`model_store.model_file.ModelDocument.validation_flights`).
     model_sha256 : str
         Its SHA-256 (what a carried-over entry was computed on, unless it says an older one).
     search_dirs : sequence of path
@@ -91,7 +91,6 @@ def kept_validation(document: dict, model_sha256: str, search_dirs, candidates=(
     """
     from ..io import read_flight
 
-    entries = ((document.get("fit_statistics") or {}).get("validation_flights")) or []
     by_sha = {}
     for c in candidates:
         if Path(c).is_file():
