@@ -5,7 +5,7 @@ PDController``); the PD names this package re-exported, and modules that only re
 deprecated (:mod:`controllers._deprecated`).
 """
 
-from ._deprecated import DEPRECATIONS
+from heli_core.deprecation import install, module_getattr
 
-DEPRECATIONS.install()
-__getattr__ = DEPRECATIONS.module_getattr(__name__)
+install(__name__)
+__getattr__ = module_getattr(__name__)

@@ -14,8 +14,6 @@ fails when it finds one.
 
 from __future__ import annotations
 
-from heli_core.deprecation import Deprecations
-
 MOVED_MODULES: dict[str, tuple[str, ...]] = {
     "controllers.backends": ("heli_core.backends",),
     "controllers.residual": ("controllers.rl.residual_agent", "controllers.rl.train"),
@@ -36,6 +34,3 @@ MOVED_NAMES: dict[str, dict[str, str]] = {
     "controllers.pd.linearisation": {"control_sign": "controllers.pd.law"},
 }
 """Module that stays -> {old name it re-exported: the module that defines it}."""
-
-DEPRECATIONS = Deprecations("controllers", MOVED_MODULES, MOVED_NAMES)
-"""The tables above, answered by the one mechanism of :mod:`heli_core.deprecation`."""

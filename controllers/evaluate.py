@@ -38,10 +38,10 @@ from pathlib import Path
 import numpy as np
 
 from heli_core.config import check, configured, is_real, whole_number
+from heli_core.deprecation import module_getattr
 from heli_core.files import jsonable, write_text
 from heli_core.terms import AXES
 
-from ._deprecated import DEPRECATIONS
 from .errors import AgentError
 from .evaluate_report import evaluation_markdown, plot_episode
 from .metrics import METRIC_NAMES, error_metrics
@@ -375,5 +375,5 @@ def _fly(agent, env, obs, info) -> dict:
             "steps": steps, "terminated": terminated}
 
 
-__getattr__ = DEPRECATIONS.module_getattr(__name__)
+__getattr__ = module_getattr(__name__)
 """The report's tables this module re-exported (deprecated: :mod:`controllers._deprecated`)."""

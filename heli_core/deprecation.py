@@ -1,8 +1,10 @@
 """Old homes of moved names, kept for one release with a ``DeprecationWarning``: the one mechanism every package
 uses (issue 34).
 
-A package whose names moved keeps two tables in its ``_deprecated`` module (``identification/_deprecated.py``,
-``controllers/_deprecated.py``, ``heli_env/_deprecated.py``) and hands them to one :class:`Deprecations`:
+A package whose names moved keeps two tables, and nothing else, in its ``_deprecated`` module
+(``identification/_deprecated.py``, ``controllers/_deprecated.py``, ``heli_env/_deprecated.py``); this module
+reads them by that name (:func:`deprecations`) into one :class:`Deprecations`, so that the tables import
+nothing and a module answering for old names imports only this one:
 
 * ``MOVED_MODULES``, old module -> the modules its public names live in now, searched in order. An old module
   that no longer exists as a file (``identification.ml_estimator``, ``controllers.residual``) is imported as an
@@ -12,7 +14,11 @@ A package whose names moved keeps two tables in its ``_deprecated`` module (``id
   :meth:`Deprecations.moved_name`.
 * ``MOVED_NAMES``, module that stays -> {old name it re-exported: the module that defines it}
   (``identification.errors`` re-exported :mod:`heli_core.errors`' classes; ``controllers.evaluate`` its report's
-  tables): the module's ``__getattr__`` asks :meth:`Deprecations.moved_name` for those names only.
+  tables): the module's ``__getattr__`` (:func:`module_getattr`) asks :meth:`Deprecations.moved_name` for those
+  names only.
+
+A package installs its table (``install(__name__)`` in its ``__init__``) and takes ``module_getattr(__name__)``
+as its own ``__getattr__``, which also answers an old module read as an attribute (``identification.fleet``).
 
 First-party code never imports an old name: ``scripts/structure_report.py`` reads the tables (without importing
 them) and fails when it finds one.
@@ -103,26 +109,43 @@ class Deprecations:
                 return obj
         raise AttributeError(f"module {old!r} has no attribute {name!r}")
 
-    def module_getattr(self, old: str):
-        """A ``__getattr__`` for module ``old`` (a module that stays, or a folder that took an old module's
-        name): its old names through :meth:`moved_name`."""
-        def __getattr__(name):
-            return self.moved_name(old, name)
+    def attribute(self, module: str, name: str):
+        """What ``module.name`` was before the move: an old module of the package (``identification.fleet``)
+        or a moved name (:meth:`moved_name`)."""
+        if f"{module}.{name}" in self.moved_modules:
+            return importlib.import_module(f"{module}.{name}")
+        return self.moved_name(module, name, stacklevel=3)
 
-        return __getattr__
 
-    def old_module(self, name: str):
-        """``<package>.<name>`` for an old module name read as an attribute of the package."""
-        if f"{self.package}.{name}" in self.moved_modules:
-            return importlib.import_module(f"{self.package}.{name}")
-        raise AttributeError(f"module {self.package!r} has no attribute {name!r}")
+_TABLES: dict[str, Deprecations] = {}
 
-    def install(self) -> None:
-        """Let ``import <package>.<old module>`` find its alias, before any other finder (an editable install's
-        finder would otherwise look for the old file in the source tree). Once per package and process."""
-        _FINDER.tables[self.package] = self
-        if _FINDER not in sys.meta_path:
-            sys.meta_path.insert(0, _FINDER)
+
+def deprecations(package: str) -> Deprecations:
+    """The old names of ``package``, read from the tables of ``<package>._deprecated`` (once per process)."""
+    if package not in _TABLES:
+        tables = importlib.import_module(f"{package}._deprecated")
+        _TABLES[package] = Deprecations(package, tables.MOVED_MODULES, tables.MOVED_NAMES,
+                                        getattr(tables, "REMOVAL", REMOVAL))
+    return _TABLES[package]
+
+
+def module_getattr(module: str):
+    """A ``__getattr__`` for ``module`` (a package, a module that stays, or a folder that took an old module's
+    name): its old names and old submodules (:meth:`Deprecations.attribute`)."""
+    table = deprecations(module.split(".")[0])
+
+    def __getattr__(name):
+        return table.attribute(module, name)
+
+    return __getattr__
+
+
+def install(package: str) -> None:
+    """Let ``import <package>.<old module>`` find its alias, before any other finder (an editable install's
+    finder would otherwise look for the old file in the source tree). Once per package and process."""
+    _FINDER.tables[package] = deprecations(package)
+    if _FINDER not in sys.meta_path:
+        sys.meta_path.insert(0, _FINDER)
 
 
 class _OldModule(types.ModuleType):

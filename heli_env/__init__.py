@@ -16,13 +16,14 @@ and replay the disturbance library that ``heli identify`` writes.
 
 import gymnasium
 
-from ._deprecated import DEPRECATIONS
+from heli_core.deprecation import install
+
 from .env import HeliAttitudeEnv
 from .env_model import default_model_dir, load_env_model
 from .errors import ActionError, EnvModelError
 from .tasks import TaskConfig
 
-DEPRECATIONS.install()
+install(__name__)
 
 ENV_ID = "HeliAttitude-v0"
 

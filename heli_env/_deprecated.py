@@ -11,8 +11,6 @@ fails when it finds one.
 
 from __future__ import annotations
 
-from heli_core.deprecation import Deprecations
-
 MOVED_MODULES: dict[str, tuple[str, ...]] = {
     "heli_env.model_dir": ("heli_env.env_model",),
 }
@@ -22,6 +20,3 @@ MOVED_NAMES: dict[str, dict[str, str]] = {
     "heli_env.env": {"OBS_DIM": "heli_env.spec"},
 }
 """Module that stays -> {old name it re-exported: the module that defines it}."""
-
-DEPRECATIONS = Deprecations("heli_env", MOVED_MODULES, MOVED_NAMES)
-"""The tables above, answered by the one mechanism of :mod:`heli_core.deprecation`."""

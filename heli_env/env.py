@@ -9,9 +9,9 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.error import ResetNeeded
 
+from heli_core.deprecation import module_getattr
 from heli_core.quaternion import euler_from_quaternion_scalar, quaternion_from_euler
 
-from ._deprecated import DEPRECATIONS
 from .errors import ActionError
 from .spec import MAX_RATE, action_space, build_spec, observation_space, real_actions, reset_options
 from .sensor_noise import draw_noise_key, noise_block
@@ -349,5 +349,5 @@ class HeliAttitudeEnv(gym.Env):
             self._renderer = None
 
 
-__getattr__ = DEPRECATIONS.module_getattr(__name__)
+__getattr__ = module_getattr(__name__)
 """The spec's OBS_DIM, once importable from here (deprecated: :mod:`heli_env._deprecated`)."""

@@ -47,7 +47,8 @@ from heli_core.files import write_text
 from heli_core.params import ModelParams
 from heli_core.quaternion import EULER_ARGUMENTS
 
-from . import sensor_noise
+import heli_env.sensor_noise as sensor_noise
+
 from .sensor_noise import LOW32, fast_normal, standard_normal, stream_bits
 from .spec import OBS_DIM
 from .tasks import TWO_PI

@@ -18,7 +18,7 @@ The physics core and the term library are :mod:`heli_core`'s, the model folder :
 of the flat layout before issue 34 still import, with a ``DeprecationWarning`` (:mod:`identification._deprecated`).
 """
 
-from ._deprecated import DEPRECATIONS
+from heli_core.deprecation import install, module_getattr
 
-DEPRECATIONS.install()
-__getattr__ = DEPRECATIONS.old_module
+install(__name__)
+__getattr__ = module_getattr(__name__)

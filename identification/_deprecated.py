@@ -23,8 +23,6 @@ fails when it finds one (``tests/test_structure_report.py`` runs it).
 
 from __future__ import annotations
 
-from heli_core.deprecation import Deprecations
-
 MOVED_MODULES: dict[str, tuple[str, ...]] = {
     # the shims of earlier moves: the physics core, the term library, files, backends, the model folder
     "identification.model": ("heli_core.params", "heli_core.physics", "heli_core.discrete", "heli_core.servo",
@@ -107,6 +105,3 @@ MOVED_NAMES: dict[str, dict[str, str]] = {
     },
 }
 """Module that stays -> {old name it re-exported: the module that defines it}."""
-
-DEPRECATIONS = Deprecations("identification", MOVED_MODULES, MOVED_NAMES)
-"""The tables above, answered by the one mechanism of :mod:`heli_core.deprecation`."""

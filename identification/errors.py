@@ -11,9 +11,9 @@ the model folder (:mod:`model_store.errors`) are imported from there; their old 
 
 from __future__ import annotations
 
+from heli_core.deprecation import module_getattr
 from heli_core.errors import HeliError
 
-from ._deprecated import DEPRECATIONS
 
 
 class FlightLogError(HeliError, ValueError):
@@ -52,5 +52,5 @@ __all__ = ["DisturbanceError", "FlightLogError", "IdentifiabilityError", "NotFit
            "UnitError"]
 
 
-__getattr__ = DEPRECATIONS.module_getattr(__name__)
+__getattr__ = module_getattr(__name__)
 """The errors of other layers this module re-exported (deprecated: :mod:`identification._deprecated`)."""

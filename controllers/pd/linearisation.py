@@ -29,11 +29,11 @@ import warnings
 import control
 import numpy as np
 
+from heli_core.deprecation import module_getattr
 from heli_core.linear import hover_linearisation
 from heli_core.params import ModelParams
 from heli_core.terms import AXES
 
-from .._deprecated import DEPRECATIONS
 from .law import _axis_index
 
 
@@ -138,5 +138,5 @@ def plant(params: ModelParams, axis, output: str = "angle") -> control.TransferF
 
 
 
-__getattr__ = DEPRECATIONS.module_getattr(__name__)
+__getattr__ = module_getattr(__name__)
 """The law's :func:`~controllers.pd.law.control_sign`, once importable from here (deprecated: :mod:`controllers._deprecated`)."""

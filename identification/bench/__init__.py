@@ -2,7 +2,7 @@
 paper's comparison of the integral method with NLR and the EKF (Tables 3-5).
 """
 
-from .._deprecated import DEPRECATIONS
+from heli_core.deprecation import module_getattr
 
-__getattr__ = DEPRECATIONS.module_getattr(__name__)
+__getattr__ = module_getattr(__name__)
 """The names of the module this folder replaced (deprecated: :mod:`identification._deprecated`)."""

@@ -5,7 +5,7 @@ input, smoothed by :mod:`~identification.disturbance.smoothing`); a maximum-like
 from its smoother's posterior by :mod:`~identification.disturbance.wind_posterior`.
 """
 
-from .._deprecated import DEPRECATIONS
+from heli_core.deprecation import module_getattr
 
-__getattr__ = DEPRECATIONS.module_getattr(__name__)
+__getattr__ = module_getattr(__name__)
 """The names of the module this folder replaced (deprecated: :mod:`identification._deprecated`)."""

@@ -5,7 +5,7 @@ the verdict stored in ``model.json``, the warnings of a fit and the drift of a r
 Tables 1-2) into a :class:`~identification.validation.result.ValidationResult`.
 """
 
-from .._deprecated import DEPRECATIONS
+from heli_core.deprecation import module_getattr
 
-__getattr__ = DEPRECATIONS.module_getattr(__name__)
+__getattr__ = module_getattr(__name__)
 """The names of the module this folder replaced (deprecated: :mod:`identification._deprecated`)."""
