@@ -516,10 +516,10 @@ def bench_rl_seeds(repeats: int) -> dict:
 RL_TARGET_STEPS = 2_000_000
 """Environment steps of the residual runs that met issue #33's RL target (docs/rl-experiments.md, seventh
 session, runs t0-t2): ``bench_rl`` turns its steps/s into minutes to that target."""
-RL_TARGET_SETTINGS = {"n_envs": 32, "delay_spread": 0.02,
+RL_TARGET_SETTINGS = {"n_envs": 32, "delay_spread": 0.02, "stick_step_weight": 0.5,
                       "algo_kwargs": {"n_steps": 128, "batch_size": 1024, "learning_rate": 1e-4}}
 """The settings of those runs besides the residual's defaults (``train_compare.py --n-envs 32 --delay-spread 0.02
---algo-kwargs ...``)."""
+--stick-step-weight 0.5 --algo-kwargs ...``; the stick-step term since the ninth session's runs w0-w2)."""
 
 
 def bench_rl(repeats: int) -> dict:
