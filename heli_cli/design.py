@@ -11,15 +11,13 @@ it designs the LQG of :mod:`controllers.lqg` instead (:mod:`heli_cli.design_lqg`
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 from .argtypes import number, output_path, per_axis
+from .control_period import DEFAULT_DT, control_period
 from .model_gate import add_accept_option, check_model
 
 DEFAULT_OUT = "pd"
-DEFAULT_DT = 0.01
-"""Control period designed for unless told [s]: the environment's."""
 AXES = ("roll", "pitch", "yaw")
 
 
@@ -158,19 +156,6 @@ def _filter_notes(analyses, dt: float) -> list[str]:
     cuts = ", ".join(f"{an.axis} {an.d_filter_hz:.4g} Hz" for an in high)
     return [f"note: D filter above the loop's Nyquist frequency ({nyquist:g} Hz at --dt {dt:g} s): {cuts}; it "
             "filters nothing there (pass --d-filter-hz below it, or off)"]
-
-
-def control_period(sample_rate: float) -> tuple[float, str | None]:
-    """The default control period [s] for a model whose gust traces are sampled at ``sample_rate`` [Hz]:
-    :data:`DEFAULT_DT`, or the shortest whole number of sample periods above it (the environment steps whole
-    samples of a trace: a PD designed for 0.01 s could not be flown on a 50 Hz log's model), and a note then."""
-    periods = max(1, math.ceil(DEFAULT_DT * sample_rate - 1e-6))
-    dt = round(periods / sample_rate, 9)  # a measured 50.000000001 Hz still designs for 0.02 s
-    if abs(dt - DEFAULT_DT) <= 1e-9:
-        return DEFAULT_DT, None
-    what = "the sample period" if periods == 1 else f"{periods} sample periods"
-    return dt, (f"note: control period {dt:.4g} s, {what} of the model's {sample_rate:g} Hz gust traces (the "
-                f"default {DEFAULT_DT:g} s is not a whole number of them); pass --dt to choose")
 
 
 def run(args) -> int:

@@ -62,7 +62,7 @@ def run_lqg(args) -> int:
     from heli_env.env_model import load_env_model
     from heli_core.files import write_text
 
-    from .design import control_period
+    from .control_period import control_period
     from .progress import progress_of
 
     if args.bandwidth is not None:

@@ -83,7 +83,7 @@ def _check_control_period(agent, env_model, args) -> None:
     from controllers.errors import AgentError
     from controllers.pd.controller import PDController
 
-    from .design import control_period
+    from .control_period import control_period
 
     if not isinstance(agent, PDController):
         return

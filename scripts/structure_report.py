@@ -25,6 +25,9 @@ The figures of the redesign (issue 14) are measured here, not counted by hand:
   (:data:`DEPRECATION_TABLES`: ``MOVED_MODULES``, old module -> its new homes, and ``MOVED_NAMES``, module ->
   names it re-exported), e.g. ``from identification.ml_estimator import ...`` or ``from identification.errors
   import ModelFileError``. A moved name has one home, and first-party code imports it from there;
+* import circles between files: the groups of modules that import each other, directly or through others
+  (strongly connected components of the module imports counted as above). Issue 34 asks for none: inside a
+  package the direction holds too (algorithm -> result (plain data) <- report, the workflow or CLI on top);
 * shim modules still in the tree (a module of imports only, re-exporting another module's names) and the
   first-party modules importing them, listed for a package that has no deprecation table yet.
 
@@ -32,8 +35,8 @@ Usage::
 
     python scripts/structure_report.py [--max-lines 600] [--max-function 80] [--max-args 8]
 
-Exit status 1 when an upward import, a first-party import of a deprecated name or a first-party import of a
-shim module exists (so a script, CI and ``tests/test_structure_report.py`` can rely on it), 0 otherwise.
+Exit status 1 when an upward import, an import circle, a first-party import of a deprecated name or a first-party
+import of a shim module exists (so a script, CI and ``tests/test_structure_report.py`` can rely on it), 0 otherwise.
 """
 
 from __future__ import annotations
@@ -169,6 +172,45 @@ def _is_shim(tree: ast.AST) -> bool:
     return bool(first_party) and not rest
 
 
+def _circles(edges: dict) -> list[list[str]]:
+    """The import circles of ``edges`` (module -> modules it imports): each group of two or more modules that
+    reach one another, sorted, the groups in order (Tarjan's strongly connected components, iteratively)."""
+    index, low, on_stack, stack, groups = {}, {}, set(), [], []
+    for root in sorted(edges):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(edges.get(root, ()))))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(edges.get(child, ())))))
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                group = []
+                while True:
+                    m = stack.pop()
+                    on_stack.discard(m)
+                    group.append(m)
+                    if m == node:
+                        break
+                if len(group) > 1:
+                    groups.append(sorted(group))
+    return sorted(groups)
+
+
 def measure():
     """Everything the report prints, as data (for tests and for the printout)."""
     sizes, functions, edges, by_convention = {}, [], defaultdict(set), set()
@@ -243,7 +285,7 @@ def measure():
             "edges": {k: sorted(v) for k, v in edges.items()},
             "upward": upward, "depth": {p: depth(p) for p in LAYERS}, "fan_in": fan_in,
             "module_depth": depths[deepest], "deepest_module": deepest, "deepest_chain": chains[deepest],
-            "deprecated": deprecated, "shims": shim_users}
+            "deprecated": deprecated, "shims": shim_users, "circles": _circles(module_edges)}
 
 
 def _outside_files():
@@ -305,6 +347,8 @@ def main(argv=None) -> int:
     print(f"\nModule import depth: {m['module_depth']} levels (the longest chain of first-party imports, below "
           f"{m['deepest_module']}):\n  " + " -> ".join(m["deepest_chain"]))
     print(f"\nUpward imports: {len(m['upward'])}" + "".join(f"\n  {a} -> {b}" for a, b in m["upward"]))
+    print(f"\nImport circles between files: {len(m['circles'])}" + "".join(
+        f"\n  {' <-> '.join(group)}" for group in m["circles"]))
     print("\nMost imported modules from other packages:")
     for mod, n in m["fan_in"].most_common(10):
         print(f"  {n:4d}  {mod}")
@@ -317,7 +361,7 @@ def main(argv=None) -> int:
     for shim, users in m["shims"].items():
         print(f"  {shim}" + (f"  <- {', '.join(users)}" if users else ""))
     used = {shim: users for shim, users in m["shims"].items() if users}
-    return 1 if m["upward"] or m["deprecated"] or used else 0
+    return 1 if m["upward"] or m["circles"] or m["deprecated"] or used else 0
 
 
 if __name__ == "__main__":

@@ -31,6 +31,7 @@ def test_the_tree_imports_no_deprecated_name():
            "heli_env/_deprecated.py): 0" in out.stdout, out.stdout
     assert "Shim modules (imports only, re-exporting other modules' names): 0" in out.stdout
     assert "Upward imports: 0" in out.stdout
+    assert "Import circles between files: 0" in out.stdout
     assert out.returncode == 0
 
 
@@ -76,3 +77,20 @@ def test_a_first_party_import_of_a_shim_fails_the_report(report, monkeypatch, ca
     monkeypatch.setattr(report, "measure", measure)
     assert report.main([]) == 1
     assert "controllers.example  <- tests/example.py" in capsys.readouterr().out
+
+
+def test_import_circles_are_the_groups_of_modules_that_reach_one_another(report):
+    """A result importing its report that imports the result back is a circle, so is a longer loop; a module
+    that only imports into a circle, or two that import a third, are not."""
+    edges = {"evaluate": {"evaluate_report", "metrics"}, "evaluate_report": {"evaluate"},
+             "sweep": {"sweep_report"}, "sweep_report": {"flight_test"}, "flight_test": {"sweep", "metrics"},
+             "cli": {"evaluate", "sweep"}, "metrics": set(), "a": {"c"}, "b": {"c"}}
+    assert report._circles(edges) == [["evaluate", "evaluate_report"], ["flight_test", "sweep", "sweep_report"]]
+    assert report._circles({"a": {"b"}, "b": {"c"}}) == []
+
+
+def test_an_import_circle_fails_the_report(report, monkeypatch, capsys):
+    real = report.measure
+    monkeypatch.setattr(report, "measure", lambda: {**real(), "circles": [["controllers.a", "controllers.b"]]})
+    assert report.main([]) == 1
+    assert "Import circles between files: 1\n  controllers.a <-> controllers.b" in capsys.readouterr().out
