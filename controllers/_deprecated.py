@@ -4,7 +4,8 @@ Moves of the RL and PD code left modules and names that only re-exported others:
 ``controllers.rl.residual`` (the residual agent of :mod:`controllers.rl.residual_agent` and
 :func:`controllers.rl.train.residual_setup`), ``controllers.sb3_vec_env`` (:mod:`controllers.rl.vec_env`),
 ``controllers.backends`` (:mod:`heli_core.backends`), the PD names of the package itself and the report's tables
-``controllers.evaluate`` lent its name to. Each name now has one home; the old names keep working until
+``controllers.evaluate`` lent its name to (and its result's ``markdown()`` and ``plot_episode()``, which the
+report renders now: :func:`heli_core.deprecation.moved_method`). Each name now has one home; the old names keep working until
 :data:`heli_core.deprecation.REMOVAL`, answered by the mechanism every package shares
 (:class:`heli_core.deprecation.Deprecations`; ``controllers/__init__.py`` installs it).
 
@@ -30,6 +31,7 @@ MOVED_NAMES: dict[str, dict[str, str]] = {
     },
     "controllers.evaluate": {
         "comparison_markdown": "controllers.evaluate_report", "metrics_table": "controllers.evaluate_report",
+        "evaluation_markdown": "controllers.evaluate_report", "plot_episode": "controllers.evaluate_report",
     },
     "controllers.pd.linearisation": {"control_sign": "controllers.pd.law"},
 }

@@ -38,12 +38,11 @@ from pathlib import Path
 import numpy as np
 
 from heli_core.config import check, configured, is_real, whole_number
-from heli_core.deprecation import module_getattr
+from heli_core.deprecation import module_getattr, moved_method
 from heli_core.files import jsonable, write_text
 from heli_core.terms import AXES
 
 from .errors import AgentError
-from .evaluate_report import evaluation_markdown, plot_episode
 from .metrics import METRIC_NAMES, error_metrics
 from .servo_activity import stick_activity
 from .trace_split import TraceSplit, as_segments, draw_windows, split_traces
@@ -148,13 +147,13 @@ class EvaluationResult:
         return write_text(path, json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n")
 
     def markdown(self) -> str:
-        """A report of this agent: settings, per-axis metrics, episodes
-        (:func:`controllers.evaluate_report.evaluation_markdown`)."""
-        return evaluation_markdown(self)
+        """Deprecated: :func:`controllers.evaluate_report.evaluation_markdown` renders the report."""
+        return moved_method("EvaluationResult.markdown", "controllers.evaluate_report", "evaluation_markdown", self)
 
     def plot_episode(self, path, episode: int | None = None, others=()) -> Path:
-        """PNG of one episode: attitude and reference, gust u_d and stick per axis (see :func:`plot_episode`)."""
-        return plot_episode([self, *others], path, episode)
+        """Deprecated: :func:`controllers.evaluate_report.plot_episode` draws the episode."""
+        return moved_method("EvaluationResult.plot_episode", "controllers.evaluate_report", "plot_episode",
+                            [self, *others], path, episode)
 
     def plot_servo_activity(self, path, episode: int | None = None, others=()) -> Path:
         """PNG of the stick's stretch and spectrum per axis

@@ -143,6 +143,7 @@ def _agent(args, env_model, firmware):
 def run(args) -> int:
     from controllers.errors import AgentError
     from controllers.evaluate import EvaluationConfig
+    from controllers.evaluate_report import evaluation_markdown, plot_episode
     from controllers.trace_split import TraceSplit, split_traces
     from heli_env.env_model import load_env_model
     from heli_core.files import write_text
@@ -176,9 +177,9 @@ def run(args) -> int:
     res = evaluate(agent, env_model, episodes, name=label)
     out = Path(args.out)
     progress.stage("writing the report" + ("" if args.no_plots else " and drawing an episode and the sticks"))
-    paths = [res.to_json(out / "evaluation.json"), write_text(out / "evaluation.md", res.markdown())]
+    paths = [res.to_json(out / "evaluation.json"), write_text(out / "evaluation.md", evaluation_markdown(res))]
     if not args.no_plots:
-        paths.append(res.plot_episode(out / "episode.png"))
+        paths.append(plot_episode(res, out / "episode.png"))
         paths.append(res.plot_servo_activity(out / "servo.png"))
     progress.done()
     st = res.settings

@@ -20,6 +20,9 @@ nothing and a module answering for old names imports only this one:
 A package installs its table (``install(__name__)`` in its ``__init__``) and takes ``module_getattr(__name__)``
 as its own ``__getattr__``, which also answers an old module read as an attribute (``identification.fleet``).
 
+A method of a result whose work moved to its report (a result never imports its report: issue 34) answers for
+one release through :func:`moved_method`, which warns and calls the report's function.
+
 First-party code never imports an old name: ``scripts/structure_report.py`` reads the tables (without importing
 them) and fails when it finds one.
 """
@@ -41,6 +44,19 @@ REMOVAL = "0.2.0"
 def _warn(old: str, name: str, home: str, removal: str, stacklevel: int) -> None:
     warnings.warn(f"{old}.{name} is deprecated: import {name} from {home} (the old name goes in {removal})",
                   DeprecationWarning, stacklevel=stacklevel + 1)
+
+
+def moved_method(old: str, home: str, function: str, *args, removal: str = REMOVAL, **kwargs):
+    """What a deprecated method ``old`` (``"EvaluationResult.markdown"``) did: ``home.function(*args,
+    **kwargs)``, with a ``DeprecationWarning`` naming the function to call.
+
+    A result class keeps no import of its report (issue 34: algorithm -> result <- report); the method it had
+    to render itself calls this for one release, and the report module is imported here, by name, as the
+    moved names of the tables are.
+    """
+    warnings.warn(f"{old}() is deprecated: call {home}.{function}() (the method goes in {removal})",
+                  DeprecationWarning, stacklevel=2)
+    return getattr(importlib.import_module(home), function)(*args, **kwargs)
 
 
 _DEFINED: dict = {}

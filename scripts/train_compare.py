@@ -48,7 +48,8 @@ from pathlib import Path
 import numpy as np
 
 from controllers.errors import DesignError
-from controllers.evaluate import evaluate_agent, plot_episode
+from controllers.evaluate import evaluate_agent
+from controllers.evaluate_report import plot_episode
 from controllers.evaluate_report import comparison_markdown
 from controllers.lqg.design import design_lqg
 from controllers.pd import PDController, PDGains, design_gains, loop_analysis
@@ -193,7 +194,7 @@ def main(argv=None) -> int:
     ep = results[1].representative_episode()
     paths = [plot_episode(results, out / "episode.png", ep)]
     for r in results:
-        paths.append(r.plot_episode(out / f"episode_{r.name.lower().replace(' ', '_')}.png", ep))
+        paths.append(plot_episode(r, out / f"episode_{r.name.lower().replace(' ', '_')}.png", ep))
 
     notes = _training_notes(args, training, agents) + _goal_notes(results) + _sweep_notes(sweep_rows, swept, robust)
     notes += ["", f"Representative episode (median RMS error of the best swept PD): {ep}; `episode.png`."]

@@ -125,6 +125,7 @@ def test_model_store_source_names_only_the_core():
     ("controllers.design_gains", "controllers.pd.design.design_gains"),
     ("controllers.plant", "controllers.pd.linearisation.plant"),
     ("controllers.evaluate.comparison_markdown", "controllers.evaluate_report.comparison_markdown"),
+    ("controllers.evaluate.plot_episode", "controllers.evaluate_report.plot_episode"),
     ("controllers.pd.linearisation.control_sign", "controllers.pd.law.control_sign"),
     # heli_env's: the environment's model module took a name of its own (model_store.model_dir is the folder's)
     ("heli_env.model_dir.load_env_model", "heli_env.env_model.load_env_model"),

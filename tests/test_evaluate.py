@@ -15,7 +15,8 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from controllers.errors import AgentError
-from controllers.evaluate import EvaluationConfig, evaluate_agent, plot_episode
+from controllers.evaluate import EvaluationConfig, evaluate_agent
+from controllers.evaluate_report import evaluation_markdown, plot_episode
 from controllers.evaluate_report import comparison_markdown
 from controllers.metrics import METRIC_NAMES, error_metrics, histogram_edges
 from controllers.pd import PDController, PDGains, design_gains
@@ -220,9 +221,9 @@ def test_outputs(pd_result, pd, shipped, tmp_path):
     doc = json.loads(pd_result.to_json(tmp_path / "e.json").read_text())
     assert doc["summary"]["axes"]["roll"]["att_p90_deg"] == pytest.approx(pd_result.metrics["roll"]["att_p90_deg"])
     assert len(doc["histograms"]["pitch"]["counts"]) == len(doc["histograms"]["pitch"]["edges"]) - 1
-    md = pd_result.markdown()
+    md = evaluation_markdown(pd_result)
     assert "| roll |" in md and "ended early" in md
-    assert pd_result.plot_episode(tmp_path / "ep.png").stat().st_size > 10_000
+    assert plot_episode(pd_result, tmp_path / "ep.png").stat().st_size > 10_000
     other = PDController(PDGains(1.0, 0.3), pd.signs)
     r2 = evaluate_agent(other, shipped, episodes_per_trace=3, episode_seconds=10.0, seed=5, name="soft PD")
     assert "soft PD" in comparison_markdown([pd_result, r2])
@@ -230,6 +231,15 @@ def test_outputs(pd_result, pd, shipped, tmp_path):
     r3 = evaluate_agent(other, shipped, episodes_per_trace=3, episode_seconds=10.0, seed=4)
     with pytest.raises(ValueError, match="other gust windows"):
         plot_episode([pd_result, r3], tmp_path / "bad.png")
+
+
+def test_the_results_old_report_methods_warn_and_call_the_report(pd_result, tmp_path):
+    """A result no longer imports its report (issue 34); its ``markdown()`` and ``plot_episode()`` answer for one
+    release through :func:`heli_core.deprecation.moved_method`, naming the report's function."""
+    with pytest.warns(DeprecationWarning, match="evaluate_report.evaluation_markdown.*0.2.0"):
+        assert pd_result.markdown() == evaluation_markdown(pd_result)
+    with pytest.warns(DeprecationWarning, match="evaluate_report.plot_episode"):
+        assert pd_result.plot_episode(tmp_path / "ep.png", others=[pd_result]).exists()
 
 
 # ------------------------------------------------------------------------------------------------ CLI

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from controllers.evaluate_report import evaluation_markdown
 from controllers.servo_activity import ACTIVITY_NAMES, activity_table, plot_servo_activity, stick_activity, \
     stick_spectrum
 
@@ -60,7 +61,7 @@ def test_evaluation_reports_and_draws_the_servo_activity(tmp_path):
                            episode_seconds=3.0, name=name)
             for name, g in (("plain", gains), ("filtered", PDGains(gains.kp, gains.kd, 5.0)))]
     assert runs[1].activity["pitch"]["stick_step_rms"] < 0.6 * runs[0].activity["pitch"]["stick_step_rms"]
-    assert "RMS stick step per period" in runs[0].markdown()
+    assert "RMS stick step per period" in evaluation_markdown(runs[0])
     assert runs[0].summary()["servo_activity"]["roll"]["stick_step_rms"] > 0
     assert "| filtered | yaw |" in activity_table(runs)
     path = plot_servo_activity(runs, tmp_path / "servo.png")
