@@ -34,5 +34,14 @@ MOVED_NAMES: dict[str, dict[str, str]] = {
         "evaluation_markdown": "controllers.evaluate_report", "plot_episode": "controllers.evaluate_report",
     },
     "controllers.pd.linearisation": {"control_sign": "controllers.pd.law"},
+    "controllers.sweep": {
+        "COLUMNS": "controllers.sweep_result", "FD_COLUMNS": "controllers.sweep_result",
+        "SweepResult": "controllers.sweep_result", "MAX_ANGLE_DEG": "controllers.sweep_replay",
+        "TASK_STATES": "controllers.sweep_replay", "TD_COLUMNS": "controllers.sweep_replay",
+        "MAX_EXTENSIONS": "controllers.sweep_extend", "ROBUST_GAIN_MARGIN_DB": "controllers.sweep_margins",
+        "ROBUST_PHASE_MARGIN_DEG": "controllers.sweep_margins", "check_gains": "controllers.sweep_inputs",
+        "parse_range": "controllers.sweep_inputs",
+    },
+    "controllers.sweep_report": {"write_csv": "controllers.sweep_result", "write_json": "controllers.sweep_result"},
 }
 """Module that stays -> {old name it re-exported: the module that defines it}."""

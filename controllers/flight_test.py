@@ -50,6 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from heli_core.config import check, configured, is_flag, is_real, whole_number
+from heli_core.deprecation import moved_method
 from heli_core.files import jsonable, write_text
 from heli_core.params import ModelParams
 from heli_core.physics import trim_sticks
@@ -244,10 +245,8 @@ class FlightTestResult:
         return out
 
     def to_markdown(self) -> str:
-        """The report section (:func:`controllers.sweep_report.flight_test_markdown`)."""
-        from .sweep_report import flight_test_markdown
-
-        return flight_test_markdown(self)
+        """Deprecated: :func:`controllers.sweep_report.flight_test_markdown` renders the report section."""
+        return moved_method("FlightTestResult.to_markdown", "controllers.sweep_report", "flight_test_markdown", self)
 
     def to_json(self, path):
         import json
@@ -261,7 +260,7 @@ class FlightTestResult:
 def _prediction_rows(prediction, axis: str, dt: float, kp, kd) -> list:
     """Row of ``prediction`` for each pair ``(kp[g], kd[g])``, checked to be a sweep of ``axis`` at ``dt``.
 
-    :meth:`~controllers.sweep.SweepResult.index` finds the *nearest* row, so without these checks a
+    :meth:`~controllers.sweep_result.SweepResult.index` finds the *nearest* row, so without these checks a
     sweep of another axis, control period or gains would be compared with the flights without a word.
     :class:`SweepError` unless the axis and dt are the flight test's and every pair is a row.
     """

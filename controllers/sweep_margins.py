@@ -35,7 +35,7 @@ ROBUST_GAIN_MARGIN_DB = 6.0
 ROBUST_PHASE_MARGIN_DEG = 45.0
 """Phase margin [deg] a *robust* pair keeps."""
 MARGIN_COLUMNS = ("gain_margin_db", "phase_margin_deg")
-"""Columns the margins fill in a sweep's table (see :data:`controllers.sweep.COLUMNS`)."""
+"""Columns the margins fill in a sweep's table (see :data:`controllers.sweep_result.COLUMNS`)."""
 
 _N_FREQ = 2048
 _BISECTIONS = 48

@@ -30,7 +30,7 @@ MAX_ANGLE_DEG = 60.0
 TD_COLUMNS = ("att_rms_deg", "att_p50_deg", "att_p90_deg", "att_p99_deg", "rate_rms_dps", "rate_p50_dps",
               "rate_p90_dps", "rate_p99_dps", "stick_rms", "stick_p99", "saturation",
               "other_axes_max_deg") + INTERVAL_COLUMNS
-"""Time-domain columns of a sweep's table (see :data:`controllers.sweep.COLUMNS`); the last four are the
+"""Time-domain columns of a sweep's table (see :data:`controllers.sweep_result.COLUMNS`); the last four are the
 90 % intervals of the two p90s (:mod:`controllers.sweep_interval`)."""
 
 TASK_STATES = 1024

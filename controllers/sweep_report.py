@@ -1,60 +1,20 @@
-"""Outputs of a gain sweep: CSV, JSON, Markdown report, heat map and histograms (all written atomically)."""
+"""Reports of a gain sweep (:mod:`controllers.sweep_result`) and of its flight tests (:mod:`controllers.flight_test`):
+the Markdown report, the heat map and the histograms (figures written atomically).
+
+Presentation only: the CSV and JSON files are the result's own (:meth:`~controllers.sweep_result.SweepResult.to_csv`,
+:meth:`~controllers.sweep_result.SweepResult.to_json`).
+"""
 
 from __future__ import annotations
 
-import csv
-import io
-import json
 import math
 
 import numpy as np
 
-from heli_core.files import jsonable, save_figure, write_text
+from heli_core.deprecation import module_getattr
+from heli_core.files import save_figure
 
 from .closed_loop import GAUSS_ABS_FACTOR
-
-
-def write_csv(result, path):
-    from .sweep import COLUMNS
-
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(COLUMNS)
-    for row in result.rows():
-        w.writerow([_csv_cell(row[c]) for c in COLUMNS])
-    return write_text(path, buf.getvalue())
-
-
-def _csv_cell(v):
-    """Floats to 6 digits; NaN (not computed) empty, an infinite margin or settling time ``inf``."""
-    if not isinstance(v, float):
-        return v
-    if math.isnan(v):
-        return ""
-    return f"{v:.6g}"  # 'inf', '-inf'
-
-
-def write_json(result, path):
-    from .sweep import COLUMNS
-
-    doc = {
-        "schema": "heli-env/gain-sweep",
-        # 2: margins, extension_round and settings["extension"]; the grid may have grown
-        # 3: the p90s' 90 % intervals (*_p90_lo_*, *_p90_hi_*) and settings["p90_interval"]
-        "schema_version": 3,
-        "settings": result.settings,
-        "kp_values": result.kp_values.tolist(),
-        "kd_values": result.kd_values.tolist(),
-        "columns": list(COLUMNS),
-        "rows": result.rows(),
-        "histogram": {"quantity": "|attitude error| [deg]", "edges": result.hist_edges.tolist(),
-                      "counts": result.hist_counts.tolist(), "overflow": result.hist_overflow.tolist()},
-        "windows": [list(w) for w in result.windows],
-        "disturbance_spectrum": {"freq_hz": result.psd_freq.tolist(),
-                                 "psd_stick2_per_hz": {a: p.tolist() for a, p in
-                                                       zip(("roll", "pitch", "yaw"), result.psd)}},
-    }
-    return write_text(path, json.dumps(jsonable(doc), indent=1, allow_nan=False) + "\n")
 
 
 def _fmt(v, spec=".3f"):
@@ -455,3 +415,6 @@ def _filter_sentence(cutoffs) -> str:
     cut = ", ".join(f"{a} {'none' if c is None else f'{c:.3g} Hz'}" for a, c in zip(("roll", "pitch", "yaw"), cutoffs))
     return (f" The D term is low-passed as `heli design`'s controller does it (cutoff {cut}); both predictions and "
             "the margins include the filter.")
+
+
+__getattr__ = module_getattr(__name__)

@@ -90,8 +90,10 @@ def register(sub):
 
 def run(args) -> int:
     from controllers.errors import SweepError
-    from controllers.sweep import parse_range, sweep_gains
-    from controllers.sweep_report import default_pairs, pair_summary
+    from controllers.sweep import sweep_gains
+    from controllers.sweep_inputs import parse_range
+    from controllers.sweep_report import default_pairs, flight_test_markdown, markdown, pair_summary, plot_heatmap, \
+        plot_histograms
 
     check_model(args, "sweep gains on it")  # an unusable model is refused before any work
     kp = parse_range(args.kp, "--kp")
@@ -114,9 +116,9 @@ def run(args) -> int:
     paths = {"csv": result.to_csv(out / "sweep.csv"), "json": result.to_json(out / "sweep.json")}
     if not args.no_plots:
         progress.stage("drawing the heatmap and the histograms")
-        paths["heatmap"] = result.plot_heatmap(out / "heatmap.png")
-        paths["histograms"] = result.plot_histograms(out / "histograms.png")
-    report = result.to_markdown()
+        paths["heatmap"] = plot_heatmap(result, out / "heatmap.png")
+        paths["histograms"] = plot_histograms(result, out / "histograms.png")
+    report = markdown(result)
     flights = None
     if args.flights:
         from controllers.flight_test import validate_against_flights
@@ -133,7 +135,7 @@ def run(args) -> int:
                                                gusts=args.flight_gusts, progress=not args.quiet,
                                                d_filter_hz=args.d_filter_hz)
             paths["flights"] = flights.to_json(out / "flight_tests.json")
-            report += "\n" + flights.to_markdown()
+            report += "\n" + flight_test_markdown(flights)
     from heli_core.files import write_text
 
     paths["report"] = write_text(out / "sweep.md", report)

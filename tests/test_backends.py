@@ -20,8 +20,9 @@ import pytest
 from numpy.testing import assert_array_equal
 
 from controllers.errors import SweepError
-from controllers.sweep import COLUMNS, TASK_STATES, sweep_gains, sweep_pairs
-from controllers.sweep_replay import chunks
+from controllers.sweep import sweep_gains, sweep_pairs
+from controllers.sweep_replay import TASK_STATES, chunks
+from controllers.sweep_result import COLUMNS
 from heli_cli.main import main
 from heli_core.backends import Backend, LocalBackend, RayBackend, make_backend
 from heli_core.errors import BackendError, MissingDependency, TaskFailed

@@ -126,6 +126,9 @@ def test_model_store_source_names_only_the_core():
     ("controllers.plant", "controllers.pd.linearisation.plant"),
     ("controllers.evaluate.comparison_markdown", "controllers.evaluate_report.comparison_markdown"),
     ("controllers.evaluate.plot_episode", "controllers.evaluate_report.plot_episode"),
+    ("controllers.sweep.parse_range", "controllers.sweep_inputs.parse_range"),
+    ("controllers.sweep.MAX_ANGLE_DEG", "controllers.sweep_replay.MAX_ANGLE_DEG"),
+    ("controllers.sweep_report.write_json", "controllers.sweep_result.write_json"),
     ("controllers.pd.linearisation.control_sign", "controllers.pd.law.control_sign"),
     # heli_env's: the environment's model module took a name of its own (model_store.model_dir is the folder's)
     ("heli_env.model_dir.load_env_model", "heli_env.env_model.load_env_model"),

@@ -21,7 +21,11 @@ from controllers import closed_loop as cl
 from controllers.errors import SweepError
 from controllers.pd.law import pd_command
 from controllers.flight_test import FlightTestConfig, fit_corner, validate_against_flights
-from controllers.sweep import COLUMNS, TD_COLUMNS, parse_range, sweep_gains, sweep_pairs
+from controllers.sweep import sweep_gains, sweep_pairs
+from controllers.sweep_inputs import parse_range
+from controllers.sweep_replay import TD_COLUMNS
+from controllers.sweep_report import flight_test_markdown, markdown, plot_heatmap, plot_histograms
+from controllers.sweep_result import COLUMNS
 from heli_cli.main import main
 from heli_env import HeliAttitudeEnv
 
@@ -232,7 +236,7 @@ def test_saturation_is_counted_and_flagged(ideal):
     r = sweep_pairs(strong, [(10.0, 1.0)], duration=30.0, windows=3, progress=False)
     assert r.table["saturation"][0] > 0.1
     assert r.table["disagree"][0] and r.table["att_p90_rel_diff"][0] > 0.2
-    assert "saturated" in r.to_markdown()
+    assert "saturated" in markdown(r)
     # twice as strong again: the stick cannot hold the aircraft; reported as diverged, statistics left empty
     wild = sweep_pairs(dataclasses.replace(ideal, ud=ideal.ud * 30.0), [(3.0, 1.0)], duration=30.0, windows=3,
                        progress=False)
@@ -344,7 +348,7 @@ def test_a_backend_made_from_a_name_is_closed_after_the_sweep(shipped, monkeypat
 # --------------------------------------------------------------------- outputs
 def test_outputs_are_written(small_sweep, tmp_path):
     paths = [small_sweep.to_csv(tmp_path / "s.csv"), small_sweep.to_json(tmp_path / "s.json"),
-             small_sweep.plot_heatmap(tmp_path / "h.png"), small_sweep.plot_histograms(tmp_path / "g.png")]
+             plot_heatmap(small_sweep, tmp_path / "h.png"), plot_histograms(small_sweep, tmp_path / "g.png")]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["g.png", "h.png", "s.csv", "s.json"]  # no temp files
     rows = list(csv.DictReader((tmp_path / "s.csv").open()))
     assert tuple(rows[0]) == COLUMNS and len(rows) == small_sweep.n_pairs
@@ -355,8 +359,19 @@ def test_outputs_are_written(small_sweep, tmp_path):
     assert np.array(doc["histogram"]["counts"]).shape == small_sweep.hist_counts.shape
     for p in paths[2:]:
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    md = small_sweep.to_markdown()
+    md = markdown(small_sweep)
     assert "unstable (max pole" in md and "best pair" in md
+
+
+def test_the_results_old_report_methods_warn_and_call_the_report(small_sweep, tmp_path):
+    """A sweep's result no longer imports its report (issue 34); its ``to_markdown()`` and ``plot_*()`` answer
+    for one release through :func:`heli_core.deprecation.moved_method`, naming the report's function."""
+    with pytest.warns(DeprecationWarning, match="sweep_report.markdown.*0.2.0"):
+        assert small_sweep.to_markdown() == markdown(small_sweep)
+    with pytest.warns(DeprecationWarning, match="sweep_report.plot_heatmap"):
+        assert small_sweep.plot_heatmap(tmp_path / "h.png").exists()
+    with pytest.warns(DeprecationWarning, match="sweep_report.plot_histograms"):
+        assert small_sweep.plot_histograms(tmp_path / "g.png").exists()
 
 
 def test_histograms_count_every_sample(small_sweep):
@@ -374,7 +389,7 @@ def test_flight_tests_match_the_prediction(ideal):
     assert 0.0 < res.table["ks_att"][0] < 0.15
     assert 0.0 < res.table["ks_rate"][0] < 0.15
     assert abs(res.table["att_p90_err_td"][0]) < 0.15
-    assert "Prediction checked against flight tests" in res.to_markdown()
+    assert "Prediction checked against flight tests" in flight_test_markdown(res)
 
 
 @pytest.mark.slow
@@ -649,7 +664,7 @@ def test_a_grid_whose_best_pair_is_on_an_edge_grows_until_it_is_interior(small_s
     rounds = small_sweep.grid("extension_round")
     assert (rounds[:4, :3] == 0).all() and (rounds[:4, 3:] == 1).all() and (rounds[4:] == 2).all()
     assert [r["pairs_added"] for r in ext["rounds"]] == [12, 18] and small_sweep.n_pairs == 42
-    assert "grew 2 times" in small_sweep.to_markdown() and "added by extension 2" in small_sweep.to_markdown()
+    assert "grew 2 times" in markdown(small_sweep) and "added by extension 2" in markdown(small_sweep)
 
 
 def test_the_grown_grid_equals_a_sweep_of_the_final_grid(delayed, small_sweep):
@@ -726,7 +741,7 @@ def test_the_best_robust_pair_keeps_the_margins(small_sweep, tmp_path):
     keeps = small_sweep.stable & (t["gain_margin_db"] >= 6.0) & (t["phase_margin_deg"] >= 45.0)
     assert rob["att_p90_deg"] == np.nanmin(t["att_p90_deg"][keeps])
     assert small_sweep.best_robust(min_gain_margin_db=40.0) is None
-    md = small_sweep.to_markdown()
+    md = markdown(small_sweep)
     assert "best robust pair (gain margin ≥ 6 dB and phase margin ≥ 45°): **Kp = 5, Kd = 3**" in md
     rows = list(csv.DictReader(open(small_sweep.to_csv(tmp_path / "s.csv"))))
     zero = rows[small_sweep.index(0.0, 0.0)]  # no loop at all: margins infinite
@@ -832,7 +847,7 @@ def test_a_filtered_sweep_flies_what_the_filtered_pd_controller_flies(shipped):
     kp, kd, f_c = 20.0, 3.0, 8.0
     r = sweep_pairs(shipped, [(kp, kd)], duration=5.0, traces=[(1, 1234)], keep_samples=True, progress=False,
                     sensors=False, d_filter_hz=f_c)
-    assert r.settings["d_filter_hz"] == [f_c] * 3 and "low-passed" in r.to_markdown()
+    assert r.settings["d_filter_hz"] == [f_c] * 3 and "low-passed" in markdown(r)
     nominal = np.array(r.settings["nominal_gains"])
     gains = PDGains((kp, nominal[1][0], nominal[2][0]), (kd, nominal[1][1], nominal[2][1]), f_c)
     pol = PDController.from_model(shipped.params, gains)
