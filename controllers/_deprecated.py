@@ -34,6 +34,7 @@ MOVED_NAMES: dict[str, dict[str, str]] = {
         "evaluation_markdown": "controllers.evaluate_report", "plot_episode": "controllers.evaluate_report",
     },
     "controllers.pd.linearisation": {"control_sign": "controllers.pd.law"},
+    "controllers.robustness": {"perturbed": "heli_env.env_model"},
     "controllers.sweep": {
         "COLUMNS": "controllers.sweep_result", "FD_COLUMNS": "controllers.sweep_result",
         "SweepResult": "controllers.sweep_result", "MAX_ANGLE_DEG": "controllers.sweep_replay",

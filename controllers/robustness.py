@@ -9,25 +9,14 @@ ratio to the nominal one. An episode that ends early (|roll| or |pitch| beyond 6
 
 from __future__ import annotations
 
-import dataclasses
-
+from heli_core.deprecation import module_getattr
 from heli_core.terms import AXES
+from heli_env.env_model import as_env_model, perturbed
 
 CASES = {"nominal": {}, "+20 ms servo delay": {"delay": 0.02}, "gain -20 %": {"gain": 0.8},
          "gain +20 %": {"gain": 1.2}}
-"""The perturbations flown: extra servo delay [s] added to every axis, control-gain factor."""
-
-
-def perturbed(env_model, delay: float = 0.0, gain: float = 1.0):
-    """``env_model`` with ``delay`` seconds more servo delay on every axis (a negative ``delay`` shortens it,
-    never below 0) and its control gains times ``gain``.
-
-    The library's gust torque stays the aircraft's (each trace keeps the gains it was identified with).
-    """
-    p = env_model.params
-    values = {f"tau_{axis}": max(tau + delay, 0.0) for axis, tau in zip(AXES, p.taus)}
-    values.update({name: gain * getattr(p, name) for name in ("k2", "k6", "k10")})
-    return dataclasses.replace(env_model, params=p.with_values(**values))
+"""The perturbations flown: extra servo delay [s] added to every axis, control-gain factor
+(:func:`heli_env.env_model.perturbed`'s arguments)."""
 
 
 def robustness_check(agent, model=None, cases=None, evaluate=None, **evaluate_kwargs) -> dict:
@@ -52,8 +41,6 @@ def robustness_check(agent, model=None, cases=None, evaluate=None, **evaluate_kw
     dict
         ``{case: {"p90_deg": {axis: float}, "ratio": {axis: float}, "ended_early": int}}``.
     """
-    from heli_env.env_model import as_env_model
-
     from .evaluate import evaluate_agent
 
     evaluate = evaluate_agent if evaluate is None else evaluate
@@ -67,3 +54,6 @@ def robustness_check(agent, model=None, cases=None, evaluate=None, **evaluate_kw
         out[name] = {"p90_deg": p90, "ratio": {a: p90[a] / reference[a] for a in AXES},
                      "ended_early": res.n_terminated}
     return out
+
+
+__getattr__ = module_getattr(__name__)

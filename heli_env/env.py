@@ -13,7 +13,8 @@ from heli_core.deprecation import module_getattr
 from heli_core.quaternion import euler_from_quaternion_scalar, quaternion_from_euler
 
 from .errors import ActionError
-from .spec import MAX_RATE, action_space, build_spec, observation_space, real_actions, reset_options
+from .observation import MAX_RATE, action_space, observation_space
+from .spec import build_spec, real_actions, reset_options
 from .sensor_noise import draw_noise_key, noise_block
 from .tasks import TWO_PI, draw_episode, line_phases, reward_of, wrap
 
@@ -350,4 +351,4 @@ class HeliAttitudeEnv(gym.Env):
 
 
 __getattr__ = module_getattr(__name__)
-"""The spec's OBS_DIM, once importable from here (deprecated: :mod:`heli_env._deprecated`)."""
+"""OBS_DIM (:mod:`heli_env.observation`), once importable from here (deprecated: :mod:`heli_env._deprecated`)."""

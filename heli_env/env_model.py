@@ -13,6 +13,7 @@ function taking "a model" (a directory, None for the shipped model, or an
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from functools import cached_property
 from importlib import resources
@@ -22,6 +23,7 @@ import numpy as np
 
 from heli_core.params import ModelParams
 from heli_core.sensors import SensorModel
+from heli_core.terms import AXES
 from model_store.disturbance_library import LIBRARY_DIRNAME
 from model_store.errors import LibraryError, ModelFileError
 from model_store.model_dir import ModelDir
@@ -186,6 +188,19 @@ def as_env_model(model=None, library_version: int | None = None) -> EnvModel:
         As :func:`load_env_model`.
     """
     return model if isinstance(model, EnvModel) else load_env_model(model, library_version)
+
+
+def perturbed(env_model: EnvModel, delay: float = 0.0, gain: float = 1.0) -> EnvModel:
+    """``env_model`` with ``delay`` seconds more servo delay on every axis (a negative ``delay`` shortens it,
+    never below 0) and its control gains times ``gain``: an aircraft that is not quite the model, as the
+    robustness check (:mod:`controllers.robustness`) and a training over several servo delays fly it.
+
+    The library's gust torque stays the aircraft's (each trace keeps the gains it was identified with).
+    """
+    p = env_model.params
+    values = {f"tau_{axis}": max(tau + delay, 0.0) for axis, tau in zip(AXES, p.taus)}
+    values.update({name: gain * getattr(p, name) for name in ("k2", "k6", "k10")})
+    return dataclasses.replace(env_model, params=p.with_values(**values))
 
 
 def _trace_gains(entry: dict, params: ModelParams, lib_dir: Path) -> np.ndarray:

@@ -50,7 +50,7 @@ from heli_core.quaternion import EULER_ARGUMENTS
 import heli_env.sensor_noise as sensor_noise
 
 from .sensor_noise import LOW32, fast_normal, standard_normal, stream_bits
-from .spec import OBS_DIM
+from .observation import OBS_DIM
 from .tasks import TWO_PI
 
 

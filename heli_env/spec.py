@@ -14,9 +14,9 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-from gymnasium import spaces
 
 from heli_core.config import is_real
+from heli_core.deprecation import module_getattr
 from heli_core.discrete import discrete_kernel
 from heli_core.physics import trim_sticks
 from heli_core.sensors import SensorModel
@@ -24,23 +24,6 @@ from heli_core.sensors import SensorModel
 from .errors import ActionError, OptionError
 from .env_model import EnvModel, as_env_model
 from .tasks import TaskConfig
-
-MAX_RATE = 35.0
-"""Observation bound of body rates and rate errors [rad/s]."""
-OBS_DIM = 12
-"""Length of an observation: attitude errors, rates, rate errors, previous action."""
-
-
-def observation_space() -> spaces.Box:
-    """The observation space (see :class:`heli_env.env.HeliAttitudeEnv`)."""
-    high = np.array([math.pi] * 3 + [MAX_RATE] * 6 + [1.0] * 3, dtype=np.float32)
-    return spaces.Box(-high, high, dtype=np.float32)
-
-
-def action_space() -> spaces.Box:
-    """lat, lon, ped offsets from trim in stick units."""
-    return spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
-
 
 @dataclass(frozen=True, eq=False)
 class EnvSpec:
@@ -224,3 +207,6 @@ def build_spec(model=None, task="hold", reference="mixed", dt: float = 0.01, epi
         init_angle=math.radians(init_angle_deg), init_rate=math.radians(init_rate_deg),
         dstep=discrete_kernel(params, float(dt))[0], torque=torque, trim=trim, col=col,
     )
+
+
+__getattr__ = module_getattr(__name__)

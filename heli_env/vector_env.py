@@ -13,7 +13,8 @@ from heli_core.quaternion import quaternion_from_euler
 
 from .errors import ActionError
 from .kernels import N_ROWS, OUT_ROWS, R, BlockLayout, advance_kernel, euler_arguments_kernel, load_actions, observe_kernel
-from .spec import MAX_RATE, OBS_DIM, action_space, build_spec, observation_space, real_actions, reset_options
+from .observation import MAX_RATE, OBS_DIM, action_space, observation_space
+from .spec import build_spec, real_actions, reset_options
 from .sensor_noise import draw_noise_key
 from .tasks import N_SINES, draw_episode, line_phases, reward_coefficients
 from .threads import ThreadChoice

@@ -133,7 +133,8 @@ def test_model_store_source_names_only_the_core():
     # heli_env's: the environment's model module took a name of its own (model_store.model_dir is the folder's)
     ("heli_env.model_dir.load_env_model", "heli_env.env_model.load_env_model"),
     ("heli_env.model_dir.EnvModel", "heli_env.env_model.EnvModel"),
-    ("heli_env.env.OBS_DIM", "heli_env.spec.OBS_DIM"),
+    ("heli_env.env.OBS_DIM", "heli_env.observation.OBS_DIM"),
+    ("heli_env.spec.observation_space", "heli_env.observation.observation_space"),
 ])
 def test_old_names_warn_and_are_the_new_objects(old, new):
     """An old name of identification's flat layout (or a shim's) is the object of its one home, read through

@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 
 from controllers.pd import PDController, design_gains
-from controllers.robustness import CASES, perturbed, robustness_check
+from controllers.robustness import CASES, robustness_check
+from heli_env.env_model import perturbed
 
 
 def test_perturbed_model_and_the_degradation_of_a_pd(shipped):

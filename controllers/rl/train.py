@@ -342,9 +342,9 @@ def _environments(config: TrainConfig, env_model, task, segments, gamma: float):
     """
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
+    from heli_env.env_model import perturbed
     from heli_env.vector_env import HeliAttitudeVectorEnv
 
-    from ..robustness import perturbed
     from .vec_env import ConcatVecEnv, GymnasiumVecEnv
 
     init = config.init_ranges
