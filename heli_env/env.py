@@ -12,6 +12,7 @@ from gymnasium.error import ResetNeeded
 from heli_core.deprecation import module_getattr
 from heli_core.quaternion import euler_from_quaternion_scalar, quaternion_from_euler
 
+from .env_model import as_env_model
 from .errors import ActionError
 from .observation import MAX_RATE, action_space, observation_space
 from .spec import build_spec, real_actions, reset_options
@@ -155,8 +156,8 @@ class HeliAttitudeEnv(gym.Env):
                  collective="trace", gust_scale: float = 1.0, obs_noise="model", action_delay: int = 0,
                  init_angle_deg: float = 5.0, init_rate_deg: float = 5.0, library_version=None,
                  render_mode: str | None = None):
-        self.spec_ = build_spec(model, task, reference, dt, episode_seconds, collective, gust_scale, obs_noise,
-                                action_delay, init_angle_deg, init_rate_deg, library_version)
+        self.spec_ = build_spec(as_env_model(model, library_version), task, reference, dt, episode_seconds,
+                                collective, gust_scale, obs_noise, action_delay, init_angle_deg, init_rate_deg)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         self.render_mode = render_mode

@@ -22,7 +22,6 @@ from heli_core.physics import trim_sticks
 from heli_core.sensors import SensorModel
 
 from .errors import ActionError, OptionError
-from .env_model import EnvModel, as_env_model
 from .tasks import TaskConfig
 
 @dataclass(frozen=True, eq=False)
@@ -156,11 +155,14 @@ def measurement_model(obs_noise, model: EnvModel) -> SensorModel:
     return SensorModel(gyro_noise=(noise[1],) * 3, attitude_noise=(noise[0],) * 3)
 
 
-def build_spec(model=None, task="hold", reference="mixed", dt: float = 0.01, episode_seconds: float = 30.0,
-               collective="trace", gust_scale: float = 1.0, obs_noise="model", action_delay: int = 0,
-               init_angle_deg: float = 5.0, init_rate_deg: float = 5.0, library_version=None) -> EnvSpec:
-    """Validate the environment arguments (see :class:`heli_env.env.HeliAttitudeEnv`) and precompute."""
-    env_model = as_env_model(model, library_version)
+def build_spec(env_model: EnvModel, task="hold", reference="mixed", dt: float = 0.01,
+               episode_seconds: float = 30.0, collective="trace", gust_scale: float = 1.0, obs_noise="model",
+               action_delay: int = 0, init_angle_deg: float = 5.0, init_rate_deg: float = 5.0) -> EnvSpec:
+    """Validate the environment arguments (see :class:`heli_env.env.HeliAttitudeEnv`) and precompute.
+
+    ``env_model`` is the loaded model (:class:`heli_env.env_model.EnvModel`): the environments load it
+    (:func:`heli_env.env_model.as_env_model`), so that the spec is a function of a model, not of a folder.
+    """
     cfg = task if isinstance(task, TaskConfig) else TaskConfig(task=task, reference=reference)
     if not (isinstance(dt, (int, float)) and dt > 0 and math.isfinite(dt)):
         raise ValueError(f"dt must be a positive control period in seconds, got {dt!r}")

@@ -11,6 +11,7 @@ from gymnasium.vector.utils import batch_space
 from heli_core.physics import N_STATE
 from heli_core.quaternion import quaternion_from_euler
 
+from .env_model import as_env_model
 from .errors import ActionError
 from .kernels import N_ROWS, OUT_ROWS, R, BlockLayout, advance_kernel, euler_arguments_kernel, load_actions, observe_kernel
 from .observation import MAX_RATE, OBS_DIM, action_space, observation_space
@@ -57,8 +58,8 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._thread_choice = ThreadChoice(int(num_envs), threads)
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be 'rgb_array' or None for the vector env, got {render_mode!r}")
-        self.spec_ = s = build_spec(model, task, reference, dt, episode_seconds, collective, gust_scale, obs_noise,
-                                    action_delay, init_angle_deg, init_rate_deg, library_version)
+        self.spec_ = s = build_spec(as_env_model(model, library_version), task, reference, dt, episode_seconds,
+                                    collective, gust_scale, obs_noise, action_delay, init_angle_deg, init_rate_deg)
         self.num_envs = n = int(num_envs)
         self.render_mode = render_mode
         self.single_observation_space = observation_space()
