@@ -17,16 +17,14 @@ in ``_`` and ``predict(flight)`` forward-simulates the identified model through
 from ..errors import NotFittedError
 from .ekf import (
     P0_EQ74,
-    TABLE4_M0,
-    TABLE4_Q,
-    TABLE5_LENGTHS,
     EKFHistory,
     ParameterEKF,
     SampleLengthResult,
     ekf_sample_length_study,
     estimate_noise_variance,
 )
-from .nlr import TABLE3_STARTS, NLRHistory, NonlinearRegression
+from .nlr import NLRHistory, NonlinearRegression
+from .paper_tables import TABLE3_STARTS, TABLE4_M0, TABLE4_Q, TABLE5_LENGTHS
 from .single_axis import AXIS_PARAMS, RATE_CAP, RateErrors, parameter_names, rate_errors, simulate_rate
 
 __all__ = [

@@ -30,9 +30,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from heli_core.deprecation import module_getattr
 from heli_core.terms import STICK_ROW, TERMS, evaluate_features
 
 from ..flight import Flight
+from .paper_tables import TABLE4_M0, TABLE5_LENGTHS
 from .single_axis import (
     RateErrors,
     SingleAxisEstimator,
@@ -44,17 +46,8 @@ from .single_axis import (
     simulate_rate,
 )
 
-TABLE4_M0 = {"a": (0.0, 0.1, 10.0, 0.1), "b": (0.0, 2.0, 3.0, 0.0)}
-"""Initial states ``m_o = [p0, k_damp, k_gain, kd]`` of Table 4, cases (a) and (b)."""
-
-TABLE4_Q = {1: 1.0, 2: 1e-8, 3: 1e-2}
-"""Process-noise variances ``Q`` [(rad/s)^2] of Table 4, cases 1-3."""
-
 P0_EQ74 = (1e-2, 1.0, 1.0, 1.0)
 """Diagonal of the initial covariance of eq. (74)."""
-
-TABLE5_LENGTHS = (4.84, 11.0, 22.0)
-"""Identification-window lengths of Table 5 [s]."""
 
 R_FLOOR = 1e-10
 """(rad/s)^2. Lower bound of the automatic measurement-noise variance."""
@@ -128,7 +121,7 @@ class ParameterEKF(SingleAxisEstimator):
         yaw ``(k11, k10, kd3)``.
     q : float
         Process-noise variance ``Q`` on the rate per sample [(rad/s)^2], eq. (60).
-        Table 4 uses 1, 1e-8 and 1e-2 (:data:`TABLE4_Q`).
+        Table 4 uses 1, 1e-8 and 1e-2 (:data:`~identification.baselines.paper_tables.TABLE4_Q`).
     r : float or "auto"
         Measurement-noise variance ``R`` [(rad/s)^2], eq. (62). ``"auto"``
         estimates the variance of the noise left on the (filtered) measured rate
@@ -139,7 +132,7 @@ class ParameterEKF(SingleAxisEstimator):
         rate [rad/s], damping [1/s], gain [rad/s^2 per unit stick], offset
         [rad/s^2]. For roll these are ``[p0, k3, k2, kd1]`` (the paper's
         ``k1, k2, kd``). With ``collective=True`` a fifth value starts ``k12``.
-        Default: case (a) of Table 4; case (b) is ``(0, 2, 3, 0)`` (:data:`TABLE4_M0`).
+        Default: case (a) of Table 4; case (b) is ``(0, 2, 3, 0)`` (:data:`~identification.baselines.paper_tables.TABLE4_M0`).
     p0 : sequence of float, shape (n_state,), or ndarray, shape (n_state, n_state)
         Initial covariance, as its diagonal or in full. Default eq. (74),
         ``diag(1e-2, 1, 1, 1)``.
@@ -364,3 +357,6 @@ def ekf_sample_length_study(flight: Flight, lengths=TABLE5_LENGTHS, **ekf_params
         errors = rate_errors(sim, flight.rates[axis_index(ekf.axis)])
         out.append(SampleLengthResult(length, ekf.params_, errors, ekf.cpu_time_, ekf.diverged_))
     return out
+
+
+__getattr__ = module_getattr(__name__)

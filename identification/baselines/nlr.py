@@ -23,6 +23,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..flight import Flight
+from .paper_tables import TABLE3_STARTS
 from .single_axis import (
     RATE_CAP,
     SingleAxisEstimator,
@@ -32,9 +33,6 @@ from .single_axis import (
     parameter_names,
     simulate_rate,
 )
-
-TABLE3_STARTS: tuple[tuple[float, float, float], ...] = ((5.0, 5.0, 5.0), (50.0, 50.0, 50.0), (100.0, 100.0, 100.0))
-"""Start points of eq. (73) and Table 3, each ``(k_damp, k_gain, kd)``."""
 
 
 @dataclass(frozen=True)
@@ -68,7 +66,7 @@ class NonlinearRegression(SingleAxisEstimator):
         Start point in the paper's order ``(k_damp, k_gain, kd)``: for roll the
         paper's ``(k1, k2, kd)`` of eq. (73) are our ``(k3, k2, kd1)``. Units
         [1/s, rad/s^2 per unit stick, rad/s^2]. Eq. (73) is ``(5, 5, 5)``; Table 3
-        adds ``(50, 50, 50)`` and ``(100, 100, 100)`` (:data:`TABLE3_STARTS`). With
+        adds ``(50, 50, 50)`` and ``(100, 100, 100)`` (:data:`~identification.baselines.paper_tables.TABLE3_STARTS`). With
         ``collective=True`` a fourth value starts ``k12``.
     collective : bool
         Yaw only: include the ``-k12*col`` term of eq. (21) (as in eq. 70).

@@ -36,7 +36,7 @@ from heli_core.terms import AXES, STICK_ROW
 
 from ..errors import NotFittedError
 from ..flight import Flight
-from ..validation.forward_simulation import PERCENTILE_METHOD
+from ..percentile import PERCENTILE_METHOD
 
 AXIS_PARAMS: dict[str, tuple[str, str, str]] = {
     "roll": ("k3", "k2", "kd1"),
@@ -162,7 +162,7 @@ class RateErrors:
         Mean absolute error [deg/s].
     p90 : float
         90th percentile of the absolute error [deg/s], interpolated as Matlab's
-        ``prctile`` (:data:`identification.validation.forward_simulation.PERCENTILE_METHOD`).
+        ``prctile`` (:data:`identification.percentile.PERCENTILE_METHOD`).
     """
 
     mae: float

@@ -9,8 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..baselines.ekf import TABLE4_M0, TABLE4_Q, TABLE5_LENGTHS
-from ..baselines.nlr import TABLE3_STARTS
+from ..baselines.paper_tables import TABLE3_STARTS, TABLE4_M0, TABLE4_Q, TABLE5_LENGTHS
 from ..preprocess import DEFAULT_PASS_HZ, DEFAULT_STOP_HZ
 
 TABLE4_CASES: tuple[tuple[str, float, tuple[float, ...]], ...] = tuple(

@@ -21,8 +21,9 @@ from dataclasses import dataclass
 
 from heli_core.files import jsonable
 
-from ..baselines.ekf import TABLE4_M0, TABLE4_Q, ParameterEKF
+from ..baselines.ekf import ParameterEKF
 from ..baselines.nlr import NonlinearRegression
+from ..baselines.paper_tables import TABLE4_M0, TABLE4_Q
 from ..baselines.single_axis import axis_index, make_params, rate_errors, simulate_rate
 from ..flight import Flight
 from ..integral.method import IntegralIdentifier

@@ -35,10 +35,8 @@ from heli_core.terms import AXES, STICK_ROW
 from ..attitude import DETREND_PERIOD, detrended_angles
 from ..errors import SimulationDivergedError
 from ..flight import Flight
+from ..percentile import PERCENTILE_METHOD
 from .result import ValidationResult
-
-PERCENTILE_METHOD = "hazen"
-"""``numpy.percentile`` method matching Matlab's ``prctile`` (sample k sits at (k - 0.5)/n)."""
 
 # ---------------------------------------------------------------------- checks
 def _as_histories(name: str, values, n: int | None = None) -> np.ndarray:
@@ -84,7 +82,7 @@ def rate_error_stats(measured, modelled) -> dict[str, dict[str, float]]:
             Mean absolute error [deg/s].
         ``p90_deg_s``
             90th percentile of the absolute error [deg/s], interpolated as
-            Matlab's ``prctile`` (:data:`PERCENTILE_METHOD`).
+            Matlab's ``prctile`` (:data:`identification.percentile.PERCENTILE_METHOD`).
         ``rel_max_pct``
             Mean absolute error relative to the largest absolute measured rate
             [%] (Table 1, "error relative to maximum"); NaN when the measured
