@@ -1,8 +1,8 @@
 """The model's verdict at the door of the commands that build on a model (design, sweep, evaluate, train).
 
 ``heli identify`` and ``heli diagnose`` store a verdict in ``model.json`` (:mod:`model_store.verdict`).
-Before any work, :func:`check_model` refuses an unusable model in one line (exit 2) naming its reasons and
-:data:`ACCEPT_FLAG`, and prints the doubts of a doubtful one. A model file without a
+Before any work, :func:`check_model` refuses an unusable model (:func:`model_store.model_file.require_usable`)
+in one line (exit 2) naming its reasons and :data:`ACCEPT_FLAG`, and prints the doubts of a doubtful one. A model file without a
 verdict (written before verdicts existed, or the shipped model) passes as before. Building the parser imports
 nothing numeric (:mod:`heli_cli.main`): the model is read when the command runs.
 """
@@ -43,7 +43,7 @@ def check_model(args, use: str):
         The model is judged unusable and the option was not given.
     """
     from model_store.model_dir import ModelDir
-    from model_store.verdict import require_usable
+    from model_store.model_file import require_usable
 
     path = model_file(getattr(args, "model", None))
     if not path.is_file():

@@ -8,8 +8,8 @@ and two writers take turns. :mod:`model_store.model_file` is the ``model.json`` 
 
 from .disturbance_library import DisturbanceLibrary, Trace
 from .model_dir import ModelDir, ModelState, Transaction
-from .model_file import MODEL_FILENAME, ModelDocument, Source, load_model, model_document, save_model
-from .verdict import ModelVerdict, verdict_of
+from .model_file import MODEL_FILENAME, ModelDocument, Source, load_model, model_document, save_model, verdict_of
+from .verdict import ModelVerdict
 
 __all__ = ["MODEL_FILENAME", "DisturbanceLibrary", "ModelDir", "ModelDocument", "ModelState", "ModelVerdict", "Source",
            "Trace", "Transaction", "load_model", "model_document", "save_model", "verdict_of"]

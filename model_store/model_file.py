@@ -43,8 +43,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
 
-from .errors import ModelFileError
-from .verdict import ModelVerdict, verdict_of
+from .errors import ModelFileError, UnusableModelError
+from .verdict import ModelVerdict
 from heli_core.files import jsonable, keep_copy, write_text
 from heli_core.params import ModelParams
 from heli_core.sensors import SensorModel
@@ -117,6 +117,49 @@ def with_verdict(doc: dict, verdict: ModelVerdict) -> dict:
             out["verdict"] = verdict.to_dict()
     out.setdefault("verdict", verdict.to_dict())
     return out
+
+
+def verdict_of(document, where: str = "model") -> ModelVerdict:
+    """The verdict stored in a model document (:data:`model_store.verdict.NOT_JUDGED` when it has none).
+
+    Raises
+    ------
+    ModelFileError
+        A malformed ``"verdict"`` entry.
+    """
+    try:
+        return ModelVerdict.from_dict((document or {}).get("verdict"))
+    except ValueError as e:
+        raise ModelFileError(f"{where}: {e}") from None
+
+
+def require_usable(verdict: ModelVerdict, where: str = "model", *, flag: str, accept: bool = False,
+                   use: str = "use it") -> ModelVerdict:
+    """``verdict`` (a model's: :attr:`ModelDocument.verdict`), refusing an unusable model
+    unless ``accept``.
+
+    Parameters
+    ----------
+    verdict : ModelVerdict
+        The model's verdict.
+    where : str
+        What to call the model in the message (its path).
+    flag : str
+        The option that sets ``accept`` (the CLI's ``--accept-unusable-model``), named in the message.
+    accept : bool
+        Use an unusable model anyway (``flag`` was given).
+    use : str
+        What the command would do with the model (``"design a controller on it"``), for the message.
+
+    Raises
+    ------
+    UnusableModelError
+        The model is judged unusable and ``accept`` is false: one line naming the reasons and ``flag``.
+    """
+    if verdict.unusable and not accept:
+        raise UnusableModelError(f"{where} is judged unusable: {'; '.join(verdict.reasons)}. Identify it again "
+                                 f"from a flight that shows these axes, or {use} anyway with {flag}")
+    return verdict
 
 
 def sensors_from_document(doc: dict, where: str = "model") -> SensorModel:

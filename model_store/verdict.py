@@ -8,9 +8,9 @@ parameters::
                 "reasons": ["roll: the damping k3 = 200 1/s sits at the estimator's search bound (200 1/s) ..."]}
 
 Every report shows it first, and the commands that build on a model (``heli design``, ``sweep``,
-``evaluate``, ``train``) refuse an unusable one unless told otherwise (:func:`require_usable`) and print the
-doubts of a doubtful one. A model file written before verdicts existed, or by hand, has none: it reads as
-:data:`NOT_JUDGED` and is used as before.
+``evaluate``, ``train``) refuse an unusable one unless told otherwise
+(:func:`model_store.model_file.require_usable`) and print the doubts of a doubtful one. A model file written
+before verdicts existed, or by hand, has none: it reads as :data:`NOT_JUDGED` and is used as before.
 
 The levels, from best to worst:
 
@@ -23,6 +23,10 @@ The levels, from best to worst:
     The numbers cannot describe an aircraft (a parameter at the search's bound, a gain whose sign the other
     estimator contradicts, a damping that is not positive, a simulation that diverges); a controller designed
     on it is designed on nothing.
+
+This module is the verdict as plain data, with no import of the store: reading it from a file (and naming the
+file when it is malformed) is the file format's (:func:`model_store.model_file.verdict_of`), and refusing an
+unusable model is the commands' gate (:func:`model_store.model_file.require_usable`).
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from .errors import ModelFileError, UnusableModelError
+from heli_core.deprecation import module_getattr
 
 USABLE, DOUBTFUL, UNUSABLE = "usable", "doubtful", "unusable"
 LEVELS = (USABLE, DOUBTFUL, UNUSABLE)
@@ -88,23 +92,20 @@ class ModelVerdict:
                                                                        if self.doubts else {})
 
     @classmethod
-    def from_dict(cls, entry, where: str = "model") -> ModelVerdict:
+    def from_dict(cls, entry) -> ModelVerdict:
         """The verdict of a ``"verdict"`` entry; None reads as :data:`NOT_JUDGED`.
 
         Raises
         ------
-        ModelFileError
-            An entry that is not ``{"level": ..., "reasons": [...]}`` with a known level.
+        ValueError
+            An entry that is not ``{"level": ..., "reasons": [...]}`` with a known level. Read from a model file
+            (:func:`model_store.model_file.verdict_of`), it is a ``ModelFileError`` naming the file.
         """
         if entry is None:
             return cls(NOT_JUDGED)
         if not isinstance(entry, Mapping) or not all(isinstance(entry.get(k, []), list) for k in ("reasons", "doubts")):
-            raise ModelFileError(f"{where}: 'verdict' must be an object {{\"level\": ..., \"reasons\": [...]}}, "
-                                 f"got {entry!r}")
-        try:
-            return cls(str(entry.get("level")), tuple(entry.get("reasons", [])), tuple(entry.get("doubts", [])))
-        except ValueError as e:
-            raise ModelFileError(f"{where}: {e}") from None
+            raise ValueError(f"'verdict' must be an object {{\"level\": ..., \"reasons\": [...]}}, got {entry!r}")
+        return cls(str(entry.get("level")), tuple(entry.get("reasons", [])), tuple(entry.get("doubts", [])))
 
     def sentence(self) -> str:
         """The verdict in one line: ``"unusable: reason; reason"`` (``"usable"`` alone without reasons)."""
@@ -126,41 +127,4 @@ class ModelVerdict:
             [f"- {r}" for r in self.lines()] + [""]
 
 
-def verdict_of(document, where: str = "model") -> ModelVerdict:
-    """The verdict stored in a model document (:data:`NOT_JUDGED` when it has none).
-
-    Raises
-    ------
-    ModelFileError
-        A malformed ``"verdict"`` entry.
-    """
-    return ModelVerdict.from_dict((document or {}).get("verdict"), where)
-
-
-def require_usable(verdict: ModelVerdict, where: str = "model", *, flag: str, accept: bool = False,
-                   use: str = "use it") -> ModelVerdict:
-    """``verdict`` (a model's: :attr:`model_store.model_file.ModelDocument.verdict`), refusing an unusable model
-    unless ``accept``.
-
-    Parameters
-    ----------
-    verdict : ModelVerdict
-        The model's verdict.
-    where : str
-        What to call the model in the message (its path).
-    flag : str
-        The option that sets ``accept`` (the CLI's ``--accept-unusable-model``), named in the message.
-    accept : bool
-        Use an unusable model anyway (``flag`` was given).
-    use : str
-        What the command would do with the model (``"design a controller on it"``), for the message.
-
-    Raises
-    ------
-    UnusableModelError
-        The model is judged unusable and ``accept`` is false: one line naming the reasons and ``flag``.
-    """
-    if verdict.unusable and not accept:
-        raise UnusableModelError(f"{where} is judged unusable: {'; '.join(verdict.reasons)}. Identify it again "
-                                 f"from a flight that shows these axes, or {use} anyway with {flag}")
-    return verdict
+__getattr__ = module_getattr(__name__)

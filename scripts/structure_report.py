@@ -52,7 +52,8 @@ LAYERS = ("heli_core", "model_store", "identification", "heli_env", "controllers
 """The packages in the order data flows through them; each may import only those before it."""
 ALLOWED = {"heli_env": {"heli_core", "model_store"}}
 """Packages that may import fewer than all those before them."""
-DEPRECATION_TABLES = ("identification/_deprecated.py", "controllers/_deprecated.py", "heli_env/_deprecated.py")
+DEPRECATION_TABLES = ("identification/_deprecated.py", "controllers/_deprecated.py", "heli_env/_deprecated.py",
+                      "model_store/_deprecated.py")
 """Modules holding a package's old names (``MOVED_MODULES`` and ``MOVED_NAMES`` dictionaries)."""
 
 

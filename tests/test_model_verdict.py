@@ -12,8 +12,8 @@ import pytest
 from heli_cli.main import main
 from identification.validation.model_verdict import ML_DAMPING_BOUNDS, judge_fit
 from model_store.errors import ModelFileError, UnusableModelError
-from model_store.model_file import load_model, model_document, params_from_document
-from model_store.verdict import NOT_JUDGED, ModelVerdict, require_usable, verdict_of
+from model_store.model_file import load_model, model_document, params_from_document, require_usable, verdict_of
+from model_store.verdict import NOT_JUDGED, ModelVerdict
 
 
 def _axis(params: dict, se: dict | None = None, r2: float = 0.8) -> dict:

@@ -20,8 +20,8 @@ from heli_core.files import write_text
 from heli_core.params import ModelParams
 from heli_core.terms import AXES
 from model_store.model_dir import ModelDir
-from model_store.model_file import model_document as new_model_document
-from model_store.verdict import ModelVerdict, verdict_of
+from model_store.model_file import model_document as new_model_document, verdict_of
+from model_store.verdict import ModelVerdict
 
 from ..diagnosis.effects import alignment_parts
 from ..diagnosis.heldout_diagnoser import Diagnoser, heldout_stats
