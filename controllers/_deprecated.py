@@ -33,6 +33,7 @@ MOVED_NAMES: dict[str, dict[str, str]] = {
         "comparison_markdown": "controllers.evaluate_report", "metrics_table": "controllers.evaluate_report",
         "evaluation_markdown": "controllers.evaluate_report", "plot_episode": "controllers.evaluate_report",
     },
+    "controllers.flight_test": {"KS_TARGET": "controllers.flight_test_result"},
     "controllers.pd.linearisation": {"control_sign": "controllers.pd.law"},
     "controllers.robustness": {"perturbed": "heli_env.env_model"},
     "controllers.sweep": {

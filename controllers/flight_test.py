@@ -50,8 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from heli_core.config import check, configured, is_flag, is_real, whole_number
-from heli_core.deprecation import moved_method
-from heli_core.files import jsonable, write_text
+from heli_core.deprecation import module_getattr
 from heli_core.params import ModelParams
 from heli_core.physics import trim_sticks
 from heli_core.terms import AXES
@@ -60,12 +59,12 @@ from identification.bench.synthetic import coloured_noise, sensor_errors
 
 from .closed_loop import axis_index, d_cutoffs, d_poles_of, disturbance_spectrum, replay_segments
 from .errors import SweepError
+from .flight_test_result import FlightTestResult
 from .metrics import QUANTILES
 from .replay import Autopilot, LoopInputs, fly, rk4_step
 from .sweep_inputs import check_pairs, load_model
 
 _DEG = 180.0 / math.pi
-KS_TARGET = 0.1
 GUSTS = ("spectrum", "corner")
 """Fresh gusts of the flight tests (:attr:`FlightTestConfig.gusts`)."""
 TRUTHS = ("model", "paper")
@@ -194,67 +193,6 @@ class FlightTestConfig:
     def steps(self) -> int:
         """Autopilot periods per flight."""
         return int(round(self.duration / self.dt))
-
-
-@dataclass(eq=False)
-class FlightTestResult:
-    """Measured against predicted error distributions, per gain pair.
-
-    Attributes
-    ----------
-    axis : str
-    table : dict of str -> ndarray (n_pairs,)
-        ``kp``, ``kd``, ``status`` ("flown" or "unstable"), ``ks_att``/``ks_rate`` (two-sample KS
-        against the time-domain prediction), ``ks_att_gauss``/``ks_rate_gauss`` (against the
-        frequency-domain half-normal), measured ``att_p{50,90,99}_deg``, ``rate_p{...}_dps``,
-        predicted ``pred_td_*`` and ``pred_fd_*``, ``saturation``.
-    settings : dict
-        Truth, wind statistics, flights, duration, seed, sensors.
-    samples : dict of int -> (att_err_deg, rate_err_deg_s)
-        Measured signed errors per flown pair, all flights concatenated.
-    """
-
-    axis: str
-    table: dict
-    settings: dict
-    samples: dict
-
-    @property
-    def flown(self) -> np.ndarray:
-        return self.table["status"] == "flown"
-
-    @property
-    def max_ks(self) -> float:
-        """Largest KS statistic (|attitude error|, time-domain prediction) over the flown pairs."""
-        v = np.asarray(self.table["ks_att"], dtype=float)[self.flown]
-        return float(v.max()) if v.size else float("nan")
-
-    @property
-    def target_met(self) -> bool:
-        return bool(self.max_ks <= KS_TARGET)
-
-    def rows(self) -> list:
-        keys = list(self.table)
-        out = []
-        for i in range(self.table["kp"].size):
-            row = {}
-            for k in keys:
-                v = self.table[k][i]
-                row[k] = v.item() if hasattr(v, "item") else v
-            out.append(row)
-        return out
-
-    def to_markdown(self) -> str:
-        """Deprecated: :func:`controllers.sweep_report.flight_test_markdown` renders the report section."""
-        return moved_method("FlightTestResult.to_markdown", "controllers.sweep_report", "flight_test_markdown", self)
-
-    def to_json(self, path):
-        import json
-
-        doc = {"schema": "heli-env/flight-test", "schema_version": 1, "axis": self.axis,
-               "settings": self.settings, "ks_target": KS_TARGET, "target_met": self.target_met,
-               "rows": self.rows()}
-        return write_text(path, json.dumps(jsonable(doc), indent=1, allow_nan=False) + "\n")
 
 
 def _prediction_rows(prediction, axis: str, dt: float, kp, kd) -> list:
@@ -490,3 +428,6 @@ def _compare(kp_all, kd_all, predicted: _Prediction, flights: _Flights):
         table["att_p90_err_td"][gi] = row["att_p90_deg"] / pm_a[1] - 1.0
         table["att_p90_err_fd"][gi] = row["pred_att_p90_deg"] / pm_a[1] - 1.0
     return table, samples
+
+
+__getattr__ = module_getattr(__name__)

@@ -1,5 +1,5 @@
-"""Reports of a gain sweep (:mod:`controllers.sweep_result`) and of its flight tests (:mod:`controllers.flight_test`):
-the Markdown report, the heat map and the histograms (figures written atomically).
+"""Reports of a gain sweep (:mod:`controllers.sweep_result`) and of its flight tests
+(:mod:`controllers.flight_test_result`): the Markdown report, the heat map and the histograms (figures written atomically).
 
 Presentation only: the CSV and JSON files are the result's own (:meth:`~controllers.sweep_result.SweepResult.to_csv`,
 :meth:`~controllers.sweep_result.SweepResult.to_json`).
@@ -346,8 +346,8 @@ def plot_histograms(result, path, pairs=None):
 
 def flight_test_markdown(result) -> str:
     """The flight tests' report section: settings, target, one row per pair, and for every pair that misses
-    the target the likely reason (a :class:`controllers.flight_test.FlightTestResult`)."""
-    from .flight_test import KS_TARGET
+    the target the likely reason (a :class:`controllers.flight_test_result.FlightTestResult`)."""
+    from .flight_test_result import KS_TARGET
 
     s = result.settings
     w = s["wind"]

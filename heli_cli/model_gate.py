@@ -2,8 +2,8 @@
 
 ``heli identify`` and ``heli diagnose`` store a verdict in ``model.json`` (:mod:`model_store.verdict`).
 Before any work, :func:`check_model` refuses an unusable model (:func:`model_store.model_file.require_usable`)
-in one line (exit 2) naming its reasons and :data:`ACCEPT_FLAG`, and prints the doubts of a doubtful one. A model file without a
-verdict (written before verdicts existed, or the shipped model) passes as before. Building the parser imports
+in one line (exit 2) naming its reasons and :data:`ACCEPT_FLAG`, and prints the doubts of a doubtful one. A model
+file without a verdict (written before verdicts existed, or the shipped model) passes as before. Building the parser imports
 nothing numeric (:mod:`heli_cli.main`): the model is read when the command runs.
 """
 

@@ -175,7 +175,7 @@ def run(args) -> int:
 
 def _print_flights(flights, args, n_pairs: int) -> None:
     """The flight tests' verdict, and each pair that misses the KS target with its likely reason."""
-    from controllers.flight_test import KS_TARGET
+    from controllers.flight_test_result import KS_TARGET
     from controllers.sweep_report import miss_reason
 
     print(f"flight tests ({args.flights} x {args.duration:g} s per pair, {n_pairs} pairs, truth "

@@ -132,7 +132,8 @@ class ParameterEKF(SingleAxisEstimator):
         rate [rad/s], damping [1/s], gain [rad/s^2 per unit stick], offset
         [rad/s^2]. For roll these are ``[p0, k3, k2, kd1]`` (the paper's
         ``k1, k2, kd``). With ``collective=True`` a fifth value starts ``k12``.
-        Default: case (a) of Table 4; case (b) is ``(0, 2, 3, 0)`` (:data:`~identification.baselines.paper_tables.TABLE4_M0`).
+        Default: case (a) of Table 4; case (b) is ``(0, 2, 3, 0)``
+        (:data:`~identification.baselines.paper_tables.TABLE4_M0`).
     p0 : sequence of float, shape (n_state,), or ndarray, shape (n_state, n_state)
         Initial covariance, as its diagonal or in full. Default eq. (74),
         ``diag(1e-2, 1, 1, 1)``.

@@ -66,8 +66,8 @@ class NonlinearRegression(SingleAxisEstimator):
         Start point in the paper's order ``(k_damp, k_gain, kd)``: for roll the
         paper's ``(k1, k2, kd)`` of eq. (73) are our ``(k3, k2, kd1)``. Units
         [1/s, rad/s^2 per unit stick, rad/s^2]. Eq. (73) is ``(5, 5, 5)``; Table 3
-        adds ``(50, 50, 50)`` and ``(100, 100, 100)`` (:data:`~identification.baselines.paper_tables.TABLE3_STARTS`). With
-        ``collective=True`` a fourth value starts ``k12``.
+        adds ``(50, 50, 50)`` and ``(100, 100, 100)``
+        (:data:`~identification.baselines.paper_tables.TABLE3_STARTS`). With ``collective=True`` a fourth value starts ``k12``.
     collective : bool
         Yaw only: include the ``-k12*col`` term of eq. (21) (as in eq. 70).
     bounds : (lower, upper) or None
