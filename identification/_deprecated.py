@@ -109,6 +109,7 @@ MOVED_NAMES: dict[str, dict[str, str]] = {
         "TABLE5_LENGTHS": "identification.baselines.paper_tables",
     },
     "identification.baselines.nlr": {"TABLE3_STARTS": "identification.baselines.paper_tables"},
+    "identification.io.ardupilot": {"vehicle_of": "identification.io.ardupilot_vehicle"},
     "identification.validation.forward_simulation": {"PERCENTILE_METHOD": "identification.percentile"},
 }
 """Module that stays -> {old name it re-exported: the module that defines it}."""

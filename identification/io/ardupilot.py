@@ -45,6 +45,7 @@ import numpy as np
 
 from heli_core.errors import require
 
+from .ardupilot_vehicle import vehicle_of
 from .clock import continue_clock, describe
 from .container import DF_HEAD, PAD, locate, span_file
 from .errors import LogFormatError, MissingStreamError
@@ -243,16 +244,6 @@ def _parse(path: Path, allow_damaged: bool):
         tolerated.append(describe(clock))
         meta_end["clock"] = clock
     return cols, params, texts, tolerated, damage, meta_end
-
-
-def vehicle_of(texts: list, params: dict) -> tuple[str, str, bool]:
-    """(firmware string, vehicle, whether a helicopter) from the log's texts and parameters."""
-    firmware = next((t for t in texts if "Copter" in t or "Plane" in t or "Rover" in t), "ArduPilot")
-    heli = ("heli" in firmware.lower() or any(k.startswith(("H_SW", "H_SV", "H_COL")) for k in params)
-            or params.get("FRAME_CLASS") == 6)
-    vehicle = ("helicopter" if heli else "fixed-wing" if "Plane" in firmware
-               else "ground vehicle" if "Rover" in firmware else "multirotor")
-    return firmware, vehicle, heli
 
 
 def _sticks(rcin, params: dict, inputs: dict, notes: dict, unavailable: dict) -> None:

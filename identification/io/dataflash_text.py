@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .ardupilot import vehicle_of
+from .ardupilot_vehicle import vehicle_of
 from .errors import InsufficientLogError
 from .resample import GAP_FACTOR, MIN_GAP_S
 
