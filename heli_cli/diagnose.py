@@ -149,7 +149,7 @@ def _run_ml(args, flight, model, document, source, progress) -> int:
     run_ = diagnose_by_likelihood(flight, args.out, model=model, model_document=document, source=source,
                                   plots=not args.no_plots, diagnoser=diagnoser, wait=not args.no_wait)
     progress.done()
-    from identification.likelihood.ahead_prediction import format_r2
+    from identification.likelihood.ahead_score import format_r2
     from identification.reports.likelihood_diagnosis import heldout_change
 
     _print_run(run_, lambda s: (

@@ -208,7 +208,7 @@ def _print_flight_checks(checks) -> None:
     frequency-response cost J)."""
     if not checks:
         return
-    from identification.likelihood.ahead_prediction import format_r2
+    from identification.likelihood.ahead_score import format_r2
 
     width = max(6, *(len(c.name) for c in checks))
     print(f"validation on {len(checks)} flight(s) not used for the fit ({checks[0].model} model simulated from "

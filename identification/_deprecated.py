@@ -110,6 +110,11 @@ MOVED_NAMES: dict[str, dict[str, str]] = {
     },
     "identification.baselines.nlr": {"TABLE3_STARTS": "identification.baselines.paper_tables"},
     "identification.io.ardupilot": {"vehicle_of": "identification.io.ardupilot_vehicle"},
+    "identification.likelihood.ahead_prediction": {
+        "AHEAD_S": "identification.likelihood.ahead_score", "DIVERGED": "identification.likelihood.ahead_score",
+        "DIVERGED_R2": "identification.likelihood.ahead_score", "is_diverged": "identification.likelihood.ahead_score",
+        "format_r2": "identification.likelihood.ahead_score",
+    },
     "identification.validation.forward_simulation": {"PERCENTILE_METHOD": "identification.percentile"},
 }
 """Module that stays -> {old name it re-exported: the module that defines it}."""

@@ -29,7 +29,8 @@ HORIZONS = (0.1, 0.2, 0.5)
 
 
 def main(argv=None):
-    from identification.likelihood.ahead_prediction import format_r2, heldout_ahead_r2
+    from identification.likelihood.ahead_prediction import heldout_ahead_r2
+    from identification.likelihood.ahead_score import format_r2
     from identification.io import read_log
     from identification.log_band import log_band
     from identification.likelihood.estimator import MaximumLikelihoodIdentifier

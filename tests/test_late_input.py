@@ -12,7 +12,8 @@ from test_import_logs import _logs_dir
 from identification.bench.cells import BENCH_CELLS
 from identification.bench.synthetic import simulate_flight
 from identification.excitation import static_collective
-from identification.likelihood.ahead_prediction import DIVERGED, format_r2, heldout_ahead_r2
+from identification.likelihood.ahead_prediction import heldout_ahead_r2
+from identification.likelihood.ahead_score import DIVERGED, format_r2
 from identification.likelihood.estimator import MaximumLikelihoodIdentifier
 from identification.log_band import log_band
 

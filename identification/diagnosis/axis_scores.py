@@ -17,7 +17,8 @@ import numpy as np
 from heli_core.terms import TERMS
 
 from ..flight import Flight
-from ..likelihood.ahead_prediction import AHEAD_S, ahead_r2, blocked_ahead_r2
+from ..likelihood.ahead_prediction import ahead_r2, blocked_ahead_r2
+from ..likelihood.ahead_score import AHEAD_S
 from ..likelihood.axis_likelihood import AxisLikelihood
 from ..likelihood.axis_search import MAX_DELAY, MAX_SHIFT, AxisProblem
 from ..likelihood.estimator import MIN_PROFILE_DAMPING, NOMINAL_DAMPING, MaximumLikelihoodIdentifier

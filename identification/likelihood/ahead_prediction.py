@@ -14,8 +14,8 @@ predicts the held-out block from its own filter, the model's mean offset in plac
 the block's.
 
 A prediction whose error grows without bound (a model with negative damping, an
-unstable filter) has no R²: it is reported as *diverged* (:data:`DIVERGED`), never as a
-number like -10^42.
+unstable filter) has no R²: it is reported as *diverged*, never as a number like -10^42
+(:mod:`identification.likelihood.ahead_score`: the horizon and the score as the reports give them).
 """
 
 from __future__ import annotations
@@ -25,26 +25,20 @@ import math
 
 import numpy as np
 
+from heli_core.deprecation import module_getattr
 from heli_core.terms import AXES
 
 from ..flight import Flight
+from .ahead_score import AHEAD_S, is_diverged
 from .axis_likelihood import AxisLikelihood
 from .axis_search import BURN_IN
 from .state_space import kalman, lti_apply
 
-AHEAD_S = 0.5
-"""Horizon of the multi-step prediction the reports give [s]."""
-
-DIVERGED = "diverged"
-"""What a prediction whose error grows without bound reports instead of an R²."""
-
-DIVERGED_R2 = -1e3
-"""An R² below this (an error a thousand times the signal's variance) is a diverged prediction."""
 
 
 def ahead_r2(like: AxisLikelihood, x, theta, horizon: int) -> float:
     """R² of the model's prediction ``horizon`` samples ahead from the Kalman-filtered state (every flight of
-    ``like``), or NaN when the prediction diverged (:func:`is_diverged`).
+    ``like``), or NaN when the prediction diverged (:func:`~.ahead_score.is_diverged`).
 
     ``x_{k+h|k} = Ad^h (x_{k|k} - F_k) + F_{k+h}`` with ``F`` the response from rest
     to the known inputs: the gust estimate decays as the wind model says.
@@ -113,16 +107,6 @@ def _r2(num: float, den: float) -> float:
     return math.nan if is_diverged(r2) else r2
 
 
-def is_diverged(r2) -> bool:
-    """True for an R² that is not a finite number above :data:`DIVERGED_R2`."""
-    return r2 is None or not np.isfinite(r2) or r2 < DIVERGED_R2
-
-
-def format_r2(r2, digits: int = 3) -> str:
-    """An R² as text, :data:`DIVERGED` when the prediction diverged."""
-    return DIVERGED if is_diverged(r2) else f"{r2:.{digits}f}"
-
-
 def heldout_ahead_r2(identifier, flight: Flight, folds: int = 4, horizon_s: float = AHEAD_S) -> dict:
     """Per axis, the ``horizon_s``-ahead prediction R² on each of ``folds`` contiguous blocks of ``flight``,
     each predicted by the model fitted on the other blocks.
@@ -141,7 +125,7 @@ def heldout_ahead_r2(identifier, flight: Flight, folds: int = 4, horizon_s: floa
     Returns
     -------
     dict
-        ``{axis: [r2 of block 1, ...]}`` with NaN for a diverged prediction (:func:`format_r2`).
+        ``{axis: [r2 of block 1, ...]}`` with NaN for a diverged prediction (:func:`~.ahead_score.format_r2`).
 
     Raises
     ------
@@ -203,7 +187,7 @@ def fitted_ahead_r2(identifier, flights, horizon_s: float = AHEAD_S) -> dict:
     Returns
     -------
     dict
-        ``{axis: r2}``, NaN for a diverged prediction (:func:`format_r2`).
+        ``{axis: r2}``, NaN for a diverged prediction (:func:`~.ahead_score.format_r2`).
     """
     flights = [flights] if isinstance(flights, Flight) else list(flights)
     horizon, burn = _samples(horizon_s, flights[0].sample_rate)
@@ -231,7 +215,10 @@ def flight_ahead_r2(identifier, flight: Flight, horizon_s: float = AHEAD_S) -> d
     Returns
     -------
     dict
-        ``{axis: r2}``, NaN for a diverged prediction (:func:`format_r2`).
+        ``{axis: r2}``, NaN for a diverged prediction (:func:`~.ahead_score.format_r2`).
     """
     horizon, burn = _samples(horizon_s, flight.sample_rate)
     return {axis: _axis_r2(identifier, axis, fit, [flight], burn, horizon) for axis, fit in identifier.axes_.items()}
+
+
+__getattr__ = module_getattr(__name__)

@@ -32,7 +32,7 @@ from model_store.verdict import ModelVerdict
 
 from ..diagnosis.effects import CATALOGUE, describe
 from ..diagnosis.likelihood_diagnoser import LikelihoodDiagnoser
-from ..likelihood.ahead_prediction import AHEAD_S, format_r2
+from ..likelihood.ahead_score import AHEAD_S, format_r2
 from ..log_band import log_band
 from .figures import pyplot
 

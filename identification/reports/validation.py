@@ -74,7 +74,7 @@ def flight_validation_markdown(checks, figures: bool = True) -> list[str]:
     """The lines of ``report.md``'s section on flights the model was not fitted on
     (:class:`~identification.validation.other_flights.FlightValidation` each): one table row per flight and axis,
     a sentence per diverged simulation, and with ``figures`` a link to each flight's ``validation_N.png``."""
-    from ..likelihood.ahead_prediction import format_r2
+    from ..likelihood.ahead_score import format_r2
 
     rows, notes = [], []
     for c in checks:
