@@ -109,6 +109,7 @@ MOVED_NAMES: dict[str, dict[str, str]] = {
         "TABLE5_LENGTHS": "identification.baselines.paper_tables",
     },
     "identification.baselines.nlr": {"TABLE3_STARTS": "identification.baselines.paper_tables"},
+    "identification.diagnosis.alignment_check": {"STABILISED_NOTE": "identification.reports.identify"},
     "identification.io.ardupilot": {"vehicle_of": "identification.io.ardupilot_vehicle"},
     "identification.likelihood.ahead_prediction": {
         "AHEAD_S": "identification.likelihood.ahead_score", "DIVERGED": "identification.likelihood.ahead_score",

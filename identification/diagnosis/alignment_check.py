@@ -19,20 +19,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from heli_core.deprecation import module_getattr
 from heli_core.errors import HeliError
 from heli_core.terms import AXES
 
 from ..likelihood.estimator import MaximumLikelihoodIdentifier
-
-STABILISED_NOTE = (
-    "Where the aircraft is flybarless (or flown through any stabilising controller), its sticks are commands to "
-    "that controller, not swash angles: the model identified is then stick -> rate of the stabilised aircraft "
-    "(k2/k6/k10 over k3/k7/k11 the steady rate per unit stick the controller holds, the damping its rate loop's "
-    "bandwidth, the wind what the controller left). The env then flies that stabilised aircraft: a PD or an RL "
-    "agent designed on it is an outer loop around the aircraft's own controller, and a sweep's errors are those "
-    "of the pair; gains of the firmware's own loop are tuned with heli tune, not here. A stick logged later than "
-    "the response is typical of such a log: the receiver's channel written after the controller acted on it.")
-"""What the model means when the sticks command a stabilising controller (reports and docs)."""
 
 DAMPING = {"roll": "k3", "pitch": "k7", "yaw": "k11"}
 """Each axis' damping parameter (eqs. 18, 21)."""
@@ -143,3 +134,6 @@ def check_alignment(flights, identifier_kwargs: dict | None = None) -> Alignment
 def unphysical_axes(params) -> list:
     """Axes whose damping is not positive in ``params``."""
     return [a for a in AXES if not params.get(DAMPING[a]) > 0.0]
+
+
+__getattr__ = module_getattr(__name__)

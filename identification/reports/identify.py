@@ -21,6 +21,17 @@ from ..validation.result import ValidationResult
 from .disturbance import figure_names, profile_markdown, save_figures
 from .validation import flight_validation_markdown, plot_attitude_fit, plot_rate_fit, validation_markdown
 
+STABILISED_NOTE = (
+    "Where the aircraft is flybarless (or flown through any stabilising controller), its sticks are commands to "
+    "that controller, not swash angles: the model identified is then stick -> rate of the stabilised aircraft "
+    "(k2/k6/k10 over k3/k7/k11 the steady rate per unit stick the controller holds, the damping its rate loop's "
+    "bandwidth, the wind what the controller left). The env then flies that stabilised aircraft: a PD or an RL "
+    "agent designed on it is an outer loop around the aircraft's own controller, and a sweep's errors are those "
+    "of the pair; gains of the firmware's own loop are tuned with heli tune, not here. A stick logged later than "
+    "the response is typical of such a log: the receiver's channel written after the controller acted on it.")
+"""What the model means when the sticks command a stabilising controller: the report's words after a late input
+(:func:`identification.diagnosis.alignment_check.check_alignment` tests for one)."""
+
 
 def parameter_table(identifiers: dict, truth: ModelParams | None) -> str:
     """Markdown table of identified parameters (decoupled and coupled, ± standard error, truth)."""
@@ -77,8 +88,6 @@ def fit_table(identifiers: dict) -> str:
 
 def _shift_sentence(ident) -> str:
     """What an input found late means, when ``delay="auto"`` found one (else empty)."""
-    from ..diagnosis.alignment_check import STABILISED_NOTE
-
     late = {a: v for a, v in (getattr(ident, "input_shifts_", None) or {}).items() if v < 0.0}
     if not late:
         return ""
