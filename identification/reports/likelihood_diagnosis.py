@@ -18,6 +18,10 @@ atomically:
   simulation from the flight's sticks), also in ``diagnosis.json`` (``model_verdict``) and first in
   ``diagnosis.md``: where ``heli identify`` refuses a flight as diverging, the diagnosis does not write a
   model of it that reads as sound.
+
+Presentation only: it reads the fitted diagnoser's attributes and imports none of the diagnosis by likelihood
+(the annotations name :class:`~identification.diagnosis.likelihood_diagnoser.LikelihoodDiagnoser`; with postponed
+annotations the name needs no import).
 """
 
 from __future__ import annotations
@@ -31,7 +35,6 @@ from heli_core.terms import AXES
 from model_store.verdict import ModelVerdict
 
 from ..diagnosis.effects import CATALOGUE, describe
-from ..diagnosis.likelihood_diagnoser import LikelihoodDiagnoser
 from ..likelihood.ahead_score import AHEAD_S, format_r2
 from ..log_band import log_band
 from .figures import pyplot
