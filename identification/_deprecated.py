@@ -111,6 +111,9 @@ MOVED_NAMES: dict[str, dict[str, str]] = {
     "identification.baselines.nlr": {"TABLE3_STARTS": "identification.baselines.paper_tables"},
     "identification.diagnosis.alignment_check": {"STABILISED_NOTE": "identification.reports.identify"},
     "identification.io.ardupilot": {"vehicle_of": "identification.io.ardupilot_vehicle"},
+    "identification.validation.fit_warnings": {
+        "AHEAD_LABEL": "identification.validation.judged_fit", "judged_r2": "identification.validation.judged_fit",
+    },
     "identification.likelihood.ahead_prediction": {
         "AHEAD_S": "identification.likelihood.ahead_score", "DIVERGED": "identification.likelihood.ahead_score",
         "DIVERGED_R2": "identification.likelihood.ahead_score", "is_diverged": "identification.likelihood.ahead_score",

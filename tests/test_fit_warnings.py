@@ -104,7 +104,7 @@ def windy_yaw():
 
 
 def test_a_correct_model_in_strong_wind_gets_no_weak_fit_warning(windy_yaw):
-    from identification.validation.fit_warnings import AHEAD_LABEL, judged_r2
+    from identification.validation.judged_fit import AHEAD_LABEL, judged_r2
 
     sim, ident = windy_yaw
     yaw = ident.axes_["yaw"]
@@ -118,7 +118,7 @@ def test_a_correct_model_in_strong_wind_gets_no_weak_fit_warning(windy_yaw):
 
 def test_a_model_of_sticks_that_are_not_the_inputs_is_warned_about(windy_yaw):
     """The same flight with its pedal replaced by another flight's: what identify must still call weak."""
-    from identification.validation.fit_warnings import judged_r2
+    from identification.validation.judged_fit import judged_r2
     from identification.likelihood.estimator import MaximumLikelihoodIdentifier
     from identification.bench.synthetic import simulate_flight
 

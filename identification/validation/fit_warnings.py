@@ -8,7 +8,7 @@ quality and returns one line per concern, for the terminal and the report:
   variance (R², the share of variance explained). A real ArduCopter log fitted at
   2 % is a model of noise: the input source (``heli import --inputs``), the segment
   or the logging rate is usually the cause. The R² that judges a maximum-likelihood
-  model is its 0.5 s-ahead prediction's (:func:`judged_r2`), not the share the sticks
+  model is its 0.5 s-ahead prediction's (:func:`identification.validation.judged_fit.judged_r2`), not the share the sticks
   explain alone: that one is low for a correct model when the wind dominates the axis
   (on the project's own 300 s synthetic flight, yaw 0.24 with every yaw parameter within
   2 % of the truth; 0.5 s ahead 0.66), and the one-step prediction's is near 1 for any
@@ -22,7 +22,8 @@ quality and returns one line per concern, for the terminal and the report:
   :data:`MIN_RATE_STD` (half a degree per second): the control gain and damping of
   that axis are then not identifiable from the data, whatever R² says.
 
-The function is pure: it reads the flights and the figures and returns strings.
+The function is pure: it reads the flights and the figures and returns strings (the figures that judge a
+fitted model come from :mod:`identification.validation.judged_fit`).
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from collections.abc import Iterable, Mapping
 
 import numpy as np
 
+from heli_core.deprecation import module_getattr
 from heli_core.terms import AXES
 
 from ..excitation import AXIS_STICK, MIN_STICK_STD, from_a_log, static_collective
@@ -52,39 +54,6 @@ def _name(flight, k: int, n: int) -> str:
     return f"flight {label}".strip()
 
 
-AHEAD_LABEL = "0.5 s-ahead prediction"
-"""How :func:`judged_r2` names the R² of a maximum-likelihood model in the warning."""
-
-
-def judged_r2(identifier, flights) -> tuple[dict, str]:
-    """The R² per axis that says whether a fitted model describes the axis, and its name for the warning.
-
-    Parameters
-    ----------
-    identifier : MaximumLikelihoodIdentifier or IntegralIdentifier
-        Fitted on ``flights``.
-    flights : sequence of Flight
-        The flights as given to ``fit``.
-
-    Returns
-    -------
-    r2 : dict
-        ``{axis: r2}``: for maximum likelihood the 0.5 s-ahead prediction's on the fitted flights
-        (:func:`identification.likelihood.ahead_prediction.fitted_ahead_r2`; ``-inf`` where it diverged); for the
-        integral method its regression R² of the rate derivative.
-    label : str
-        :data:`AHEAD_LABEL` or ``"fit"``.
-    """
-    from ..likelihood.estimator import MaximumLikelihoodIdentifier
-
-    if not isinstance(identifier, MaximumLikelihoodIdentifier):
-        return {a: f.r2 for a, f in identifier.axes_.items()}, "fit"
-    from ..likelihood.ahead_prediction import fitted_ahead_r2
-
-    ahead = fitted_ahead_r2(identifier, flights)
-    return {a: (-math.inf if not np.isfinite(v) else v) for a, v in ahead.items()}, AHEAD_LABEL
-
-
 def fit_warnings(flights, r2: Mapping | None = None, r2_label: str = "fit", *, min_r2: float = MIN_R2,
                  min_duration_s: float = MIN_DURATION_S, min_stick_std: float = MIN_STICK_STD,
                  min_rate_std: float = MIN_RATE_STD) -> list[str]:
@@ -97,10 +66,10 @@ def fit_warnings(flights, r2: Mapping | None = None, r2_label: str = "fit", *, m
         ``metadata``).
     r2 : mapping of str to float, optional
         Share of variance the model explains per axis (``"roll"``, ``"pitch"``, ``"yaw"``), as
-        :func:`judged_r2` gives it; None or NaN for an axis that was not fitted, ``-inf`` for a prediction
+        :func:`~identification.validation.judged_fit.judged_r2` gives it; None or NaN for an axis that was not fitted, ``-inf`` for a prediction
         that diverged. Without it only the data are checked.
     r2_label : str
-        What ``r2`` is, for the warning ("fit", :data:`AHEAD_LABEL`).
+        What ``r2`` is, for the warning ("fit", :data:`~identification.validation.judged_fit.AHEAD_LABEL`).
     min_r2, min_duration_s, min_stick_std, min_rate_std : float
         Thresholds (defaults :data:`MIN_R2`, :data:`MIN_DURATION_S`, :data:`~identification.excitation.MIN_STICK_STD`
         [stick],
@@ -153,3 +122,6 @@ def fit_warnings(flights, r2: Mapping | None = None, r2_label: str = "fit", *, m
                        + ("the input source (heli import --inputs), " if imported else "") + "the segment and the "
                        "logging rate")
     return out
+
+
+__getattr__ = module_getattr(__name__)

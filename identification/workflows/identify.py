@@ -32,7 +32,8 @@ from ..integral.method import IntegralIdentifier
 from ..reports.figures import PendingFigures
 from ..reports.identify import ReportContent, comparison_figures, fit_figures, report_markdown, wind_figures, wind_section
 from ..sensors import identify_sensors
-from ..validation.fit_warnings import fit_warnings, judged_r2
+from ..validation.fit_warnings import fit_warnings
+from ..validation.judged_fit import judged_r2
 from ..validation.forward_simulation import validate_models
 from ..validation.model_verdict import judge_identifier
 from ..validation.other_flights import check_validation_flights, validate_on_flights
