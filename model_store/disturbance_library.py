@@ -7,68 +7,16 @@ pitch and yaw (zero-mean, stick units) and the collective the yaw model needs
 to one library; the environment replays its traces through the physics core
 as the disturbance torque ``k*u_d`` (the offsets ``kd`` belong to the model).
 
-Layout (``DIR`` is the output folder of ``heli identify``)::
+The format on disk — the folder's layout, the trace files, the manifest's fields and what reading checks — is
+specified in ``docs/file-formats.md`` ("The disturbance library"). Guarantees: every file is written through
+:func:`heli_core.files.atomic_path` (temporary file, fsync, atomic rename), trace files first and the new manifest
+last, so a crash leaves every earlier version readable; appending never rewrites a manifest (the next version is
+written beside, under an advisory lock); reading checks everything and raises
+:class:`~model_store.errors.LibraryError` naming the file, what was expected and what came.
 
-    DIR/disturbances/
-        manifest-v0001.json          the library as of version 1
-        manifest-v0002.json          ... version 2 = version 1 + the traces appended next
-        traces/<sha256>.npy          one file per trace, named by the SHA-256 of its bytes
-        .lock                        advisory lock held while appending (POSIX)
-
-Trace file: a NumPy ``.npy`` (format 1.0, no pickles) holding one float64
-array of shape ``(5, n)``, rows ``time`` [s], ``ud_roll``, ``ud_pitch``,
-``ud_yaw`` [stick units, -1..1 scale] and ``collective`` [-1, 1]. The bytes
-are deterministic, so the same trace always has the same name.
-
-Manifest (``schema_version`` 1)::
-
-    {
-      "schema": "heli-env/disturbance-library",
-      "schema_version": 1,
-      "version": 2,                                   # equals the number in the file name
-      "created": "2025-01-01T12:00:00+00:00",
-      "heli_env": "0.1.0",
-      "previous": {"file": "manifest-v0001.json", "sha256": "..."},   # null for version 1
-      "columns": ["time", "ud_roll", "ud_pitch", "ud_yaw", "collective"],
-      "units": {"time": "s", "ud_roll": "stick (lateral cyclic)", ...},
-      "traces": [                                     # every trace of this version, oldest first
-        {
-          "id": "3f2a...",                            # first 16 hex digits of sha256
-          "file": "traces/3f2a....npy",
-          "sha256": "3f2a...",                        # of the trace file's bytes
-          "n_samples": 30001, "sample_rate_hz": 100.0, "duration_s": 300.0,
-          "added_in_version": 1,
-          "source": {"name": "flight1.csv", "sha256": "...", "sha256_of": "file"},
-          "interval_s": 0.02, "samples_per_interval": 2,
-          "smoothing": {"mode": "fixed", "window": 10, "passes": {"roll": 5, "pitch": 5, "yaw": 5}},
-          "statistics": {"roll": {"mean": 0.0, "std": 0.05, "interval90": [-0.085, 0.086]}, ...},
-          "kd": {"roll": 0.0402, ...},                # eq. (47) offsets found with the trace [rad/s^2]
-          "control_gains": {"roll": 1.349, ...},      # k2, k6, k10 [rad/s^2 per unit stick]
-          "model": {"sha256": "..." | null, "parameters": {...}, "added_terms": {...},
-                    "servo_delay_s": {...}},
-          "axes": ["roll", "pitch", "yaw"],
-          "trace_source": "posterior draw",           # or "smoother" (its mean), "eq46"; absent before
-          "trace_draw": {"method": "...", "seed": 123, "draw": 0, "n_draws": 1},  # posterior draws only
-          "mean_std": {"roll": 0.046, ...},           # std of the smoother's mean (posterior draws only)
-          "identification": {"roll": {"ks_statistic": ..., "ks_pvalue": ..., "auto_passes": ...,
-                                      "stick_interval90": [...]}, ...},
-          "metadata": {...}                           # anything the caller added
-        }
-      ]
-    }
-
-Guarantees. Every file is written through :func:`heli_core.files.atomic_path`
-(temporary file, fsync, atomic rename): trace files first, the new manifest
-last, so a crash at any point leaves every earlier version readable (at worst
-an unreferenced trace file or a hidden ``.tmp`` file remains, see
-:meth:`DisturbanceLibrary.orphans`). Appending never rewrites a manifest: it
-writes the next version beside the previous ones, under an advisory lock so
-that two writers cannot claim the same version. Reading checks everything:
-a manifest that is not valid JSON, of another schema or version, or whose
-``version`` disagrees with its name; a trace file that is missing, unreadable,
-of the wrong shape, or whose length, sample rate or SHA-256 disagrees with the
-manifest — each raises :class:`~identification.errors.LibraryError` naming the
-file, what was expected and what came.
+One concept, the library and the trace it keeps (:class:`Trace`, its checks and its file's bytes): the trace is
+kept here rather than in a module of its own because a trace module would sit between the library and the
+store's errors and lengthen every import chain through the model folder by one (``scripts/structure_report.py``).
 """
 
 from __future__ import annotations
