@@ -42,39 +42,13 @@ from heli_core.deprecation import module_getattr, moved_method
 from heli_core.files import jsonable, write_text
 from heli_core.terms import AXES
 
+from .agent_description import describe_agent
 from .errors import AgentError
 from .metrics import METRIC_NAMES, error_metrics
 from .servo_activity import stick_activity
 from .trace_split import TraceSplit, as_segments, draw_windows, split_traces
 
 SCHEMA = "heli-env/agent-evaluation"
-
-
-def describe_agent(agent) -> tuple[str, str]:
-    """(kind, description) of an agent: ("pd", "PD kp=.. kd=.."), ("ppo", "PPO"),
-    ("ppo-residual", "PPO ±0.05 stick on PD kp=.. kd=.."), ("lqg", "LQG (Kalman filter + LQR, 11/11/11
-    states)"), ...; an agent that describes itself (a ``describe()`` method returning the pair, e.g. a firmware
-    loop's :class:`~controllers.firmware.loop_rate_env.TickAgent`) is asked."""
-    from .lqg.controller import LQGController
-    from .pd.controller import PDController
-    from .rl.residual_agent import ResidualAgent
-
-    if callable(getattr(agent, "describe", None)):
-        kind, description = agent.describe()
-        return str(kind), str(description)
-    if isinstance(agent, PDController):
-        kp = ", ".join(f"{v:.3g}" for v in agent.gains.kp)
-        kd = ", ".join(f"{v:.3g}" for v in agent.gains.kd)
-        cut = ", ".join("none" if v is None else f"{v:.3g}" for v in agent.gains.d_filter_hz)
-        return "pd", f"PD kp=({kp}) kd=({kd})" + (f" D-filter=({cut}) Hz" if agent.filtered else "")
-    if isinstance(agent, ResidualAgent):
-        kind, desc = describe_agent(agent.policy)
-        return f"{kind}-residual", f"{desc} ±{agent.scale:g} stick on {describe_agent(agent.base)[1]}"
-    if isinstance(agent, LQGController):
-        states = "/".join(str(len(a["states"])) for a in agent.axes)
-        return "lqg", f"LQG (Kalman filter + LQR, {states} states)"
-    kind = type(agent).__name__.lower()
-    return kind, type(agent).__name__
 
 
 @dataclass(eq=False)

@@ -124,7 +124,8 @@ def _firmware_gains(args):
 def _agent(args, env_model, firmware):
     """``(agent, label, metadata, evaluate, notes)``: what ``args.agent`` names (``firmware``: what
     :func:`_firmware_gains` read), and the function that flies it."""
-    from controllers.evaluate import describe_agent, evaluate_agent
+    from controllers.agent_description import describe_agent
+    from controllers.evaluate import evaluate_agent
     from controllers.rl.agent_file import agent_metadata, load_agent
 
     if firmware is not None:

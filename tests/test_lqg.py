@@ -161,7 +161,8 @@ def test_batched_deterministic_and_episode_start_resets(design):
 
 def test_flown_by_the_evaluator_deterministically(design, shipped):
     """The one evaluator flies it (memory through state/episode_start); twice with one seed, the same result."""
-    from controllers.evaluate import describe_agent, evaluate_agent
+    from controllers.agent_description import describe_agent
+    from controllers.evaluate import evaluate_agent
 
     ctrl = design.controller()
     settings = dict(episodes_per_trace=1, episode_seconds=2.0, seed=3)

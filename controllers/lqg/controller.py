@@ -91,6 +91,11 @@ class LQGController:
     def __repr__(self):
         return f"LQGController(states={[len(a['states']) for a in self.axes]}, dt={self.dt:g})"
 
+    def describe(self) -> tuple[str, str]:
+        """(kind, description) for reports (:func:`controllers.evaluate.describe_agent`): "lqg" and its states."""
+        states = "/".join(str(len(a["states"])) for a in self.axes)
+        return "lqg", f"LQG (Kalman filter + LQR, {states} states)"
+
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = False):
         """Actions for one observation ``(12,)`` or a batch ``(n, 12)``, and the filters' next state.
 

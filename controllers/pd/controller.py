@@ -142,6 +142,13 @@ class PDController:
         cut = f", d_filter_hz={self.gains.d_filter_hz}, dt={self.dt:g}" if self.filtered else ""
         return f"PDController(kp={self.gains.kp}, kd={self.gains.kd}, signs={self.signs}{cut})"
 
+    def describe(self) -> tuple[str, str]:
+        """(kind, description) for reports (:func:`controllers.evaluate.describe_agent`): "pd" and the gains."""
+        kp = ", ".join(f"{v:.3g}" for v in self.gains.kp)
+        kd = ", ".join(f"{v:.3g}" for v in self.gains.kd)
+        cut = ", ".join("none" if v is None else f"{v:.3g}" for v in self.gains.d_filter_hz)
+        return "pd", f"PD kp=({kp}) kd=({kd})" + (f" D-filter=({cut}) Hz" if self.filtered else "")
+
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = False):
         """Actions for one observation ``(12,)`` or a batch ``(n, 12)``.
 

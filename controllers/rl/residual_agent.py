@@ -185,6 +185,14 @@ class ResidualAgent:
         seen = f", {self.history} observations" if self.history > 1 else ""
         return f"ResidualAgent({type(self.policy).__name__} ±{self.scale:g} stick on {self.base!r}{seen})"
 
+    def describe(self) -> tuple[str, str]:
+        """(kind, description) for reports (:func:`controllers.evaluate.describe_agent`): the policy's kind with
+        "-residual", and the correction's bound on the base's description."""
+        from ..agent_description import describe_agent
+
+        kind, desc = describe_agent(self.policy)
+        return f"{kind}-residual", f"{desc} ±{self.scale:g} stick on {describe_agent(self.base)[1]}"
+
     def predict(self, observation, state=None, episode_start=None, deterministic: bool = False):
         """Actions for one observation ``(12,)`` or a batch ``(n, 12)``: the PD's command plus the
         scaled residual, clipped to [-1, 1]. ``state`` and ``episode_start`` go to the policy, or with
