@@ -151,3 +151,13 @@ def test_design_builds_on_an_unusable_model_when_told_to(ideal_model_dir, tmp_pa
                  "--accept-unusable-model"]) == 0
     assert "judged unusable (--accept-unusable-model given)" in capsys.readouterr().out
     assert (tmp_path / "pd" / "pd.json").exists()
+
+
+def test_the_ml_estimator_says_where_it_searched_the_dampings():
+    """judge_identifier asks the estimator for its damping bounds; the documented ML_DAMPING_BOUNDS are the ones
+    its search uses (so a change of the search moves the verdict's bound with it)."""
+    from identification.integral.method import IntegralIdentifier
+    from identification.likelihood.estimator import MaximumLikelihoodIdentifier
+
+    assert MaximumLikelihoodIdentifier.damping_bounds == ML_DAMPING_BOUNDS
+    assert getattr(IntegralIdentifier(), "damping_bounds", None) is None

@@ -48,6 +48,10 @@ XTOL, FTOL = 1e-6, 1e-8
 """Stopping tolerances of the likelihood search: a relative cost change of 1e-8 is a change of the
 log-likelihood of about 1e-4 on a 300 s flight, far below any difference a test looks at."""
 
+DAMPING_BOUNDS = (-2.0, 200.0)
+"""The interval each damping is searched in [1/s]: a damping at a bound was not placed by the data
+(:func:`identification.validation.model_verdict.judge_identifier` asks the estimator for it)."""
+
 TIME_CONSTANT_BOUNDS = ((0.8, 120.0), (0.02, 0.8))
 """Bounds of the slow and the fast gust time constants [s]."""
 
@@ -171,9 +175,9 @@ class AxisProblem:
         ``like.free_tau``) from ``x0``, the model part of a search vector (of either wind model) and ``tau0``.
         The damping stays at 0 unless :attr:`searches_damping`; the hold at :attr:`hold` unless "auto".
         Returns scipy's result, its ``x`` the whole search vector."""
-        lo = np.array([-2.0, np.log(TIME_CONSTANT_BOUNDS[0][0]), np.log(TIME_CONSTANT_BOUNDS[1][0]),
+        lo = np.array([DAMPING_BOUNDS[0], np.log(TIME_CONSTANT_BOUNDS[0][0]), np.log(TIME_CONSTANT_BOUNDS[1][0]),
                        np.log(1e-4), np.log(1e-4), 0.0, np.log(ZETA_BOUNDS[0])])
-        hi = np.array([200.0, np.log(TIME_CONSTANT_BOUNDS[0][1]), np.log(TIME_CONSTANT_BOUNDS[1][1]),
+        hi = np.array([DAMPING_BOUNDS[1], np.log(TIME_CONSTANT_BOUNDS[0][1]), np.log(TIME_CONSTANT_BOUNDS[1][1]),
                        np.log(1e9), np.log(1e9), 1.0, np.log(ZETA_BOUNDS[1])])
         x0 = np.asarray(x0, dtype=float)
         start = list(x0[:HOLD_INDEX]) + [x0[HOLD_INDEX] if x0.size > HOLD_INDEX else self.hold_start()]

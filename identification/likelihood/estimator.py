@@ -72,7 +72,7 @@ from ..vibration import remove_common_lines
 from .axis_fit import MLAxisFit
 from .axis_likelihood import MIN_SERVO_DELAY, AxisData, AxisLikelihood
 from .axis_pool import check_workers, map_axes
-from .axis_search import BURN_IN, MAX_SHIFT, AxisProblem, WindFit
+from .axis_search import BURN_IN, DAMPING_BOUNDS, MAX_SHIFT, AxisProblem, WindFit
 from .input_hold import check_hold, decide_hold
 from .servo_lag import profile_lag
 from .state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll, rts_smooth, wind_block
@@ -165,6 +165,8 @@ class MaximumLikelihoodIdentifier:
     """
 
     method = "maximum likelihood (filter error, Gauss-Markov wind)"
+    damping_bounds = DAMPING_BOUNDS
+    """The interval each damping is searched in [1/s] (a damping at a bound was not placed by the data)."""
 
     def __init__(self, structure="decoupled", extra_terms=(), input_hold="auto", delay=None,
                  delay_grid=None, wind_model: str = "auto", remove_vibration: bool = True,

@@ -99,9 +99,7 @@ def _shift_sentence(ident) -> str:
 
 def method_sentence(ident) -> str:
     """One sentence of the report saying how the model was identified."""
-    from ..likelihood.estimator import MaximumLikelihoodIdentifier
-
-    if isinstance(ident, MaximumLikelihoodIdentifier):
+    if getattr(ident, "method", "").startswith("maximum likelihood"):  # what the identifier says it is
         winds = ", ".join(f"{a} {f.wind['model']}" for a, f in ident.axes_.items())
         holds = ", ".join(f"{a} {f.input_hold:.2f}" for a, f in ident.axes_.items())
         decision = getattr(ident, "hold_decision_", None) or {}

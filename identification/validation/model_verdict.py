@@ -41,8 +41,8 @@ from model_store.verdict import DOUBTFUL, UNUSABLE, USABLE, ModelVerdict
 from .fit_warnings import MIN_R2
 
 ML_DAMPING_BOUNDS = (-2.0, 200.0)
-"""1/s: the interval the maximum-likelihood estimator searches each damping in
-(:meth:`identification.likelihood.estimator.MaximumLikelihoodIdentifier._search`, its ``lo[0]``, ``hi[0]``)."""
+"""1/s: the interval the maximum-likelihood estimator searches each damping in, as it says itself
+(:attr:`identification.likelihood.estimator.MaximumLikelihoodIdentifier.damping_bounds`; a test holds them equal)."""
 BOUND_TOLERANCE = 1e-3
 """A damping closer to a bound than this share of the bounds' span sits at the bound."""
 SIGN_Z = 2.0
@@ -182,9 +182,7 @@ def judge_identifier(ident, reference=None, diverged: str | None = None) -> Mode
     and ``reference`` another fitted identifier on the same flights (or None), compared on the axes where both
     used the same alignment (a stick advanced or delayed by one fit only changes the other's gains, even
     their sign: the T-REX hover's sticks, 0.29 s late, give the unaligned integral fit k2 = -10.5)."""
-    from ..likelihood.estimator import MaximumLikelihoodIdentifier
-
-    bounds = ML_DAMPING_BOUNDS if isinstance(ident, MaximumLikelihoodIdentifier) else None
+    bounds = getattr(ident, "damping_bounds", None)  # the estimator says where it searched (the integral: nowhere)
     summary = ident.summary()
     ref = reference.summary() if reference is not None else None
     if ref is not None:  # compare only axes both fitted on the same alignment of sticks and response
