@@ -146,9 +146,7 @@ def shipped(model_dir: str, duration: float) -> None:
     print(f"\nShipped library {model_dir}: {len(SEEDS)} flights x 3 axes of {duration:g} s; each stored trace is the "
           f"draw recomputed here to {worst_diff:.1e} of its std. Power ratio per band, mean over flights and axes "
           f"(range). Command: python scripts/posterior_gusts.py --shipped\n")
-    bands = " | ".join(f"{lo:g}-{hi:g} Hz" for lo, hi in BANDS)
-    print(f"| ratio | {bands} | std |")
-    print("|---|" + "---|" * (len(BANDS) + 1))
+    _print_header(("ratio",))
     for name, rs in rows.items():
         if not rs:
             continue
@@ -158,6 +156,13 @@ def shipped(model_dir: str, duration: float) -> None:
                  "draw/model": "stored draw / identified wind model (model.json)"}[name]
         print(f"| {label} | " + " | ".join(f"{r[:, b].mean():.2f} ({r[:, b].min():.2f}-{r[:, b].max():.2f})"
                                            for b in range(r.shape[1])) + " |")
+
+
+def _print_header(first: tuple) -> None:
+    """A band table's header: the ``first`` columns, one per band of :data:`BANDS`, and the std ratio."""
+    bands = " | ".join(f"{lo:g}-{hi:g} Hz" for lo, hi in BANDS)
+    print("| " + " | ".join(first) + f" | {bands} | std |")
+    print("|" + "---|" * (len(first) + len(BANDS) + 1))
 
 
 def main(argv=None):
@@ -185,9 +190,7 @@ def main(argv=None):
     print(f"\nReplayed gust power / true wind power, per band, over {args.seeds} seeds x 3 axes of {args.duration:g} s "
           f"flights: mean (worst flight-axis). Command: python scripts/posterior_gusts.py --seeds {args.seeds} "
           f"--duration {args.duration:g} --cells {' '.join(args.cells)}\n")
-    bands = " | ".join(f"{lo:g}-{hi:g} Hz" for lo, hi in BANDS)
-    print(f"| cell | trace | {bands} | std |")
-    print("|---|---|" + "---|" * (len(BANDS) + 1))
+    _print_header(("cell", "trace"))
     worst_cell = {}
     for c in list(args.cells) + ["all"]:
         rs = [r for r in rows if c == "all" or r["cell"] == c]
