@@ -6,9 +6,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from .argtypes import number, output_path, seed, whole
+from .argtypes import number, output_path, per_axis, seed, whole
 from .model_gate import add_accept_option, check_model
-from .tune import FIRMWARE_CHOICES, _scale
+from .tune import FIRMWARE_CHOICES
 
 DEFAULT_OUT = "evaluation"
 DEFAULT_EPISODE_S = 30.0
@@ -36,7 +36,8 @@ def register(sub):
                    help="AGENT holds this firmware's gains (ArduPilot .param NAME,VALUE lines or a .bin log; "
                    "Rotorflight CLI 'set' lines or a blackbox log): fly the firmware's own attitude loop at its "
                    "loop rate, as 'heli tune' does (the physics sub-stepped to it)")
-    p.add_argument("--scale", type=_scale, default=None, metavar="S|R,P,Y",
+    p.add_argument("--scale", type=per_axis("one number > 0 or three separated by ',' (roll,pitch,yaw)"),
+                   default=None, metavar="S|R,P,Y",
                    help="with --firmware: model stick per firmware output unit (one number, or roll,pitch,yaw; "
                    "'heli tune' prints the one it measured from the log and records it in tune.json); default 1")
     p.add_argument("--model", metavar="DIR", default=None,

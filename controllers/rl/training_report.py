@@ -160,10 +160,11 @@ def compare_with_pd(agent, pd, env_model, segments, seed: int, episode_seconds: 
 
 
 def base_kind(controller) -> str:
-    """"LQG" for an :class:`~controllers.lqg.controller.LQGController`, else "PD": what the messages call it."""
-    from ..lqg.controller import LQGController
+    """What the messages call the compared controller, asked of it (:func:`controllers.agent_description.
+    describe_agent`): "PD", "LQG", ..."""
+    from ..agent_description import describe_agent
 
-    return "LQG" if isinstance(controller, LQGController) else "PD"
+    return describe_agent(controller)[0].upper()
 
 
 def plot_learning_curve(curve: dict, path, comparison: PDComparison | None = None, timesteps: int | None = None,
