@@ -107,10 +107,11 @@ def shipped(model_dir: str, duration: float) -> None:
     from identification.io import read_csv_flight
     from identification.likelihood.estimator import MaximumLikelihoodIdentifier
 
-    manifest = json.loads(sorted((Path(model_dir) / "disturbances").glob("manifest-v*.json"))[-1].read_text())
-    winds = {a: w["wind"] for a, w in json.loads((Path(model_dir) / "model.json").read_text())
-             ["fit_statistics"]["axes"].items()}
-    by_name = {t["source"]["name"]: t for t in manifest["traces"]}
+    from model_store import ModelDir
+
+    state = ModelDir(model_dir).load()  # the model document and the library's latest version, checked
+    winds = {axis: state.document.wind(axis) for axis in AXES}
+    by_name = {t.metadata["source"]["name"]: t for t in state.traces}
     truth = PAPER_PARAMS.with_values(**SERVO_DELAY)
     with tempfile.TemporaryDirectory() as tmp:
         sims, flights = [], []
@@ -122,15 +123,15 @@ def shipped(model_dir: str, duration: float) -> None:
         ident = MaximumLikelihoodIdentifier(structure="decoupled", delay="auto").fit(flights)
     rows, worst_diff = {"draw/mean": [], "mean/true": [], "draw/true": [], "draw/model": []}, 0.0
     for i, (seed, sim) in enumerate(zip(SEEDS, sims)):
-        entry = by_name[f"synthetic-seed{seed}.csv"]
+        trace = by_name[f"synthetic-seed{seed}.csv"]
+        entry = trace.metadata
         if entry.get("trace_source") != "posterior draw":
             raise SystemExit(f"{model_dir}: trace {entry['id']} is a {entry.get('trace_source')!r}, "
                              "not a posterior draw")
-        stored = np.load(Path(model_dir) / "disturbances" / entry["file"])
         post = wind_posterior(ident, i, seed=entry["trace_draw"]["seed"])
         fs = sims[i].flight.sample_rate
         for a, axis in enumerate(AXES):
-            draw = stored[1 + a] * entry["control_gains"][axis]  # the stored u_d as torque [rad/s^2]
+            draw = trace.ud[a] * entry["control_gains"][axis]  # the stored u_d as torque [rad/s^2]
             gap = (draw - draw.mean()) - (post.draw[a] - post.draw[a].mean())  # the trace is stored zero-mean
             worst_diff = max(worst_diff, float(np.abs(gap).max() / post.draw[a].std()))
             mean, true = band_powers(post.mean[a], fs), band_powers(sim.wind_torque[a], fs)
