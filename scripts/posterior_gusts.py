@@ -92,7 +92,6 @@ def _worst(ratios: np.ndarray) -> float:
 
 def shipped(model_dir: str, duration: float) -> None:
     """The ``--shipped`` report (module docstring): stored draws against the smoother's mean and the true wind."""
-    import json
     import sys
     import tempfile
 
