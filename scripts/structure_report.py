@@ -71,6 +71,16 @@ def _dotted(path: Path) -> str:
     return ".".join(parts)
 
 
+def _from_module(node: ast.ImportFrom, module: str, is_package: bool) -> str:
+    """The absolute module a ``from ... import`` in ``module`` (a package's ``__init__`` when ``is_package``)
+    reads from, its relative dots resolved."""
+    if not node.level:
+        return node.module or ""
+    base = module.split(".")
+    base = base[: len(base) - node.level + (1 if is_package else 0)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
 def _imports(tree: ast.AST, module: str, is_package: bool) -> set[str]:
     """Absolute names of the modules ``tree`` imports (relative imports resolved)."""
     out = set()
@@ -78,12 +88,7 @@ def _imports(tree: ast.AST, module: str, is_package: bool) -> set[str]:
         if isinstance(node, ast.Import):
             out.update(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = module.split(".")
-                base = base[: len(base) - node.level + (1 if is_package else 0)]
-                name = ".".join(base + ([node.module] if node.module else []))
-            else:
-                name = node.module or ""
+            name = _from_module(node, module, is_package)
             out.add(name)
             out.update(f"{name}.{alias.name}" for alias in node.names)  # a submodule imported by name
     return out
@@ -145,12 +150,7 @@ def _deprecated_imports(tree: ast.AST, module: str, is_package: bool, known: set
             found += [f"{node.lineno}: {a.name}" for a in node.names
                       if a.name in moved_modules and a.name not in known]
         elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = module.split(".")
-                base = base[: len(base) - node.level + (1 if is_package else 0)]
-                src = ".".join(base + ([node.module] if node.module else []))
-            else:
-                src = node.module or ""
+            src = _from_module(node, module, is_package)
             for alias in node.names:
                 sub = f"{src}.{alias.name}"
                 old_module = src in moved_modules and src not in known  # an old module of no file
