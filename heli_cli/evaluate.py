@@ -114,8 +114,7 @@ def _firmware_gains(args):
     spec = FIRMWARES[args.firmware]
     if not Path(args.agent).is_file():
         raise FileNotFoundError(2, "no such parameter file or log", str(args.agent))
-    values, kind = spec.read(args.agent)
-    params, notes = spec.params_from(values, str(args.agent), from_file=(kind == "file"))
+    params, notes = spec.gains(args.agent)
     scale = (user_scale(args.scale) if args.scale is not None
              else default_scale("no --scale given (heli tune measures it from the firmware's log)"))
     notes = [f"gains read from {args.agent}: {n}" for n in notes]

@@ -88,16 +88,14 @@ def _flown_gains(args, spec):
         path = Path(args.params)
         if not path.is_file():
             raise FileNotFoundError(2, "no such parameter file", str(path))
-        values, kind = spec.read(path)
-        params, notes = spec.params_from(values, str(path), from_file=(kind == "file"))
+        params, notes = spec.gains(path)
         return params, notes, str(path)
     fmt = detect_format(args.log)
     if fmt not in OWN_FORMATS[spec.name]:
         kind = "a CSV flight holds no parameters" if fmt == "csv" else f"{args.log} is a {fmt} log, not {spec.name}'s"
         raise FirmwareParamError(f"{kind}: give the gains the aircraft flew with --params FILE "
                                  f"({'NAME,VALUE lines' if spec.name == 'ardupilot' else 'CLI set lines'})")
-    values, _ = spec.read(args.log)
-    params, notes = spec.params_from(values, str(args.log), from_file=False)
+    params, notes = spec.gains(args.log)
     return params, notes, str(args.log)
 
 

@@ -75,6 +75,12 @@ class FirmwareSpec:
         fn = ap_io.ardupilot_params if self.name == "ardupilot" else rf_io.rotorflight_params
         return fn(values, source, from_file)
 
+    def gains(self, path):
+        """``(parameters, notes)`` of the gains in ``path``: the firmware's parameter file, or its log (whose
+        parameters are read); refused with :class:`~controllers.firmware.errors.FirmwareParamError` saying why."""
+        values, kind = self.read(path)
+        return self.params_from(values, str(path), from_file=(kind == "file"))
+
     def names(self, params) -> dict:
         return (ap_io.ardupilot_names if self.name == "ardupilot" else rf_io.rotorflight_names)(params)
 
