@@ -244,11 +244,11 @@ def reward_of(cfg: TaskConfig, e_att, e_rate, action, previous=(0.0, 0.0, 0.0)):
     else:
         att2 = e[0] * e[0] + e[1] * e[1] + e[2] * e[2]
         rate2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
-    if cs > 0.0:
+    cost = ca * att2 + cr * rate2 + cu * (a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+    if cs > 0.0:  # added last, as the vector env's loop adds it: the same rounding
         d0, d1, d2 = a[0] - previous[0], a[1] - previous[1], a[2] - previous[2]
-        return -(ca * att2 + cr * rate2 + cu * (a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
-                 + cs * (d0 * d0 + d1 * d1 + d2 * d2))
-    return -(ca * att2 + cr * rate2 + cu * (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]))
+        cost = cost + cs * (d0 * d0 + d1 * d1 + d2 * d2)
+    return -cost
 
 
 def line_phases(rng: np.random.Generator, n_lines: int) -> list:
