@@ -10,24 +10,27 @@ from pathlib import Path
 from .argtypes import INPUT_HOLD_HELP, input_hold, number, output_path, whole
 
 
-def _seconds_or_auto(what: str, upper: float):
-    """An argparse type: 'auto' or ``what`` in seconds within [0, ``upper``] (the range ModelParams accepts)."""
+def _seconds_or_auto(what: str, upper: float, words: tuple = ("auto",)):
+    """An argparse type: one of ``words`` or ``what`` in seconds within [0, ``upper``] (the range ModelParams
+    accepts)."""
+    expected = " or ".join(repr(w) for w in words)
 
     def parse(text):
-        if text is None or text == "auto":
+        if text is None or text in words:
             return text
         try:
             v = float(text)
         except ValueError:
             v = math.nan
         if not 0.0 <= v <= upper:  # NaN fails too
-            raise argparse.ArgumentTypeError(f"expected 'auto' or a {what} in seconds in [0, {upper:g}], got {text!r}")
+            raise argparse.ArgumentTypeError(f"expected {expected} or a {what} in seconds in [0, {upper:g}], "
+                                             f"got {text!r}")
         return v
 
     return parse
 
 
-_delay = _seconds_or_auto("delay", 2.0)
+_delay = _seconds_or_auto("delay", 2.0, ("detect", "auto", "none"))
 _lag = _seconds_or_auto("servo lag", 1.0)
 
 
@@ -67,8 +70,10 @@ def register(sub):
                    help="estimator: 'ml' maximum likelihood with a stochastic wind state (default), 'integral' the "
                    "integral method of Fig. 5")
     p.add_argument("--delay", type=_delay, default=None,
-                   help="servo delay: 'auto' (the likelihood, or the integral fit, profiled over 0-0.5 s; eq. 31) "
-                   "or seconds (default: none)")
+                   help="servo delay (eq. 31): 'detect' (ml's default: a delay searched from the undelayed fit, "
+                   "profiled and kept only on the axes whose likelihood supports one), 'auto' (the likelihood, or "
+                   "the integral fit, profiled over -0.6-0.5 s on every axis), 'none', or seconds (the integral "
+                   "method's default: none)")
     p.add_argument("--servo-lag", type=_lag, default=None,
                    help="ml: the servos' first-order lag: 'auto' (the likelihood profiled over 10-200 ms, kept only "
                    "where the data support it; eq. 31's d1) or seconds (default: none)")
@@ -109,16 +114,18 @@ def run(args) -> int:
             for warning in flight.metadata.get("import_warnings") or ():
                 progress.done()
                 print(f"warning: {path}: {warning}")
+        delay = None if args.delay == "none" else args.delay
         if args.method == "ml":
-            kwargs = {"delay": args.delay, "input_hold": args.input_hold, "wind_model": args.wind_model,
-                      "servo_lag": args.servo_lag}
+            kwargs = {"delay": "detect" if args.delay is None else delay, "input_hold": args.input_hold,
+                      "wind_model": args.wind_model, "servo_lag": args.servo_lag}
         else:
-            if args.servo_lag is not None:
-                progress.done()
-                print("heli identify: error: --servo-lag needs the maximum-likelihood estimator (--method ml), "
-                      "got --method integral", file=sys.stderr)
-                return 2
-            kwargs = {"interval": args.interval, "delay": args.delay, "prefilter": not args.no_filter,
+            for option, given in (("--servo-lag", args.servo_lag is not None), ("--delay detect", delay == "detect")):
+                if given:
+                    progress.done()
+                    print(f"heli identify: error: {option} needs the maximum-likelihood estimator (--method ml), "
+                          "got --method integral", file=sys.stderr)
+                    return 2
+            kwargs = {"interval": args.interval, "delay": delay, "prefilter": not args.no_filter,
                       "input_hold": "linear" if args.input_hold == "auto" else args.input_hold}
         backend = flight_backend(args)
         try:

@@ -26,31 +26,32 @@ from functools import lru_cache
 import numpy as np
 
 
-def per_axis(name: str, setting, upper: float) -> list:
+def per_axis(name: str, setting, upper: float, words: tuple = ("auto",)) -> list:
     """An identifier's servo setting (``delay``, ``servo_lag``) per axis (roll, pitch, yaw): seconds in
-    [0, ``upper``], or ``"auto"`` (profiled). None means 0 on every axis, one value every axis the same.
+    [0, ``upper``], or one of ``words`` (``"auto"``: profiled; the ML estimator's delay also takes
+    ``"detect"``). None means 0 on every axis, one value every axis the same.
 
     Raises
     ------
     ValueError
         Anything else, naming the setting, what it takes and what came.
     """
+    takes = "None, " + ", ".join(repr(w) for w in words) + ", seconds or 3 values in seconds"
     if setting is None:
         return [0.0, 0.0, 0.0]
     if isinstance(setting, str):
-        if setting != "auto":
-            raise ValueError(f"{name} must be None, 'auto', seconds or 3 values in seconds, got {setting!r}")
-        return ["auto"] * 3
+        if setting not in words:
+            raise ValueError(f"{name} must be {takes}, got {setting!r}")
+        return [setting] * 3
     try:
         values = np.asarray(setting, dtype=float)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be None, 'auto', seconds or 3 values in seconds, got {setting!r}") from None
+        raise ValueError(f"{name} must be {takes}, got {setting!r}") from None
     values = np.full(3, float(values)) if values.ndim == 0 else values
     if values.shape != (3,):
         raise ValueError(f"{name} needs one value per axis (roll, pitch, yaw) or one for all, got {setting!r}")
     if not np.all((values >= 0) & (values <= upper)):
-        raise ValueError(f"{name} must be None, 'auto', seconds or 3 values in seconds in [0, {upper:g}], "
-                         f"got {setting!r}")
+        raise ValueError(f"{name} must be {takes} in [0, {upper:g}], got {setting!r}")
     return [float(v) for v in values]
 
 

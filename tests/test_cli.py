@@ -411,3 +411,15 @@ def test_identify_servo_lag_option(flight_csv, tmp_path, capsys):
         main(["identify", str(flight_csv), "--out", str(tmp_path / "B"), "--servo-lag", "2"])
     assert "servo lag in seconds in [0, 1]" in capsys.readouterr().err
     assert not (tmp_path / "A" / "model.json").exists() and not (tmp_path / "B").exists()
+
+
+def test_identify_delay_option(flight_csv, tmp_path, capsys):
+    # 'detect' (the likelihood's default) is the likelihood's: refused with the integral method, naming both;
+    # a word the option does not take is refused by the parser, listing the ones it does; nothing is written
+    assert main(["identify", str(flight_csv), "--out", str(tmp_path / "A"), "--method", "integral",
+                 "--delay", "detect"]) == 2
+    assert "--delay detect needs the maximum-likelihood estimator" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["identify", str(flight_csv), "--out", str(tmp_path / "B"), "--delay", "sometimes"])
+    assert "expected 'detect' or 'auto' or 'none' or a delay in seconds" in capsys.readouterr().err
+    assert not (tmp_path / "A" / "model.json").exists() and not (tmp_path / "B").exists()

@@ -89,6 +89,51 @@ def test_servo_delay_is_found_by_the_likelihood_profile():
     assert 0 < fit.std_errors["tau_roll"] < 0.01  # the delay's own standard error (searched with the rest)
 
 
+def test_detect_leaves_an_undelayed_fit_alone_bit_for_bit(fitted, flight180):
+    # heli identify's default on a flight without a servo delay: the short search finds none the data support,
+    # and the fit is the undelayed one, every parameter equal
+    detect = MaximumLikelihoodIdentifier(delay="detect").fit(flight180.flight)
+    assert detect.params_.values() == fitted.params_.values()
+    assert all(f.delay == 0.0 and not f.delay_profile for f in detect.axes_.values())
+
+
+def test_detect_finds_a_servo_delay_and_profiles_every_axis():
+    # an unmodelled 40 ms servo delay biases the damping low by more than half (docs/method.md); the default
+    # test finds it, profiles the axes as delay="auto" would, and the damping comes back
+    sf = simulate_flight(150, seed=2, effects=("servo_delay",), effect_scale=0.5)
+    plain = MaximumLikelihoodIdentifier(axes=("roll", "pitch")).fit(sf.flight)
+    assert _rel(plain, sf.truth, "k3") < -0.3
+    ident = MaximumLikelihoodIdentifier(delay="detect", axes=("roll", "pitch")).fit(sf.flight)
+    for axis, name in (("roll", "k3"), ("pitch", "k7")):
+        fit = ident.axes_[axis]
+        assert fit.delay_profile and abs(fit.delay - getattr(sf.truth, f"tau_{axis}")) <= 0.006, axis
+        assert abs(_rel(ident, sf.truth, name)) < 0.08, name
+    assert ident.summary()["roll"]["std_errors"]["tau_roll"] > 0  # searched with the rest, as with "auto"
+
+
+def test_auto_keeps_no_delay_the_likelihood_does_not_support(flight180):
+    # delay="auto" on a flight without one: whatever few ms the joint search drifts to, a likelihood-ratio
+    # statistic below MIN_LR_DELAY keeps the undelayed fit (a 3 ms drift once cost a damping 5 %)
+    from identification.likelihood.estimator import MIN_LR_DELAY
+
+    plain = MaximumLikelihoodIdentifier(axes=("pitch",)).fit(flight180.flight)
+    auto = MaximumLikelihoodIdentifier(delay="auto", axes=("pitch",), delay_grid=np.arange(0.0, 0.1001, 0.02)).fit(
+        flight180.flight)
+    fit = auto.axes_["pitch"]
+    assert fit.delay == 0.0 and fit.delay_profile
+    assert 2.0 * (plain.axes_["pitch"].nll - fit.nll) < MIN_LR_DELAY
+    assert auto.params_.k7 == plain.params_.k7
+
+
+def test_detect_is_refused_where_it_does_not_apply():
+    from identification.integral.method import IntegralIdentifier
+
+    with pytest.raises(ValueError, match="delay must be None, 'auto', 'detect'"):
+        MaximumLikelihoodIdentifier(delay="sometimes").fit(simulate_flight(60, seed=1).flight)
+    with pytest.raises(ValueError, match="delay must be None, 'auto', seconds"):
+        IntegralIdentifier(delay="detect").fit(simulate_flight(60, seed=1).flight)
+
+
 @pytest.mark.slow
 def test_a_servo_lag_is_kept_where_the_flight_has_one_and_only_there():
     lagged = simulate_flight(90, seed=2, effects=("servo_lag",))

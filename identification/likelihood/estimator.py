@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import time as _time
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -70,7 +71,7 @@ from ..integral.method import IntegralIdentifier
 from ..preprocess import shift_inputs
 from ..vibration import remove_common_lines
 from .axis_fit import MLAxisFit
-from .axis_likelihood import MIN_SERVO_DELAY, AxisData, AxisLikelihood
+from .axis_likelihood import AxisData, AxisLikelihood
 from .axis_pool import check_workers, map_axes
 from .axis_search import BURN_IN, DAMPING_BOUNDS, MAX_SHIFT, AxisProblem, WindFit
 from .input_hold import check_hold, decide_hold
@@ -88,6 +89,20 @@ MIN_PROFILE_DAMPING = 0.05
 NOMINAL_DAMPING = 1.0
 """The damping [1/s] the alignment profile holds instead (a 1 s time constant, the order of a small
 helicopter's rate response) when the undelayed fit's is not positive and the integral method's start is not."""
+
+MIN_LR_DELAY = 20.0
+"""Smallest likelihood-ratio statistic ``2 (NLL_undelayed - NLL_aligned)`` at which ``delay="auto"`` keeps the
+alignment it searched (else the undelayed fit). Timing is where a model is misspecified in small ways the
+chi-square law does not know (a hold between samples, a digital controller's sample of lag): on effect-free
+bench flights the statistic reached 12.2; a servo delay of one sample (10 ms) scores 50-200 on 300 s flights
+(docs/method.md). The likelihood diagnosis' alignment floor is the same number
+(:data:`identification.diagnosis.likelihood_diagnoser.MIN_LR_ALIGNMENT`)."""
+
+DETECT_NFEV = 3
+"""Likelihood evaluations (iterations) of ``delay="detect"``'s search of a delay from the undelayed fit: it
+only has to tell whether the data support one (the full profile then places it). Three reach 97-100 % of the
+converged search's likelihood ratio on flights with a one-sample servo delay (LR 58-345) and cost 0.02-0.07 s
+an axis; effect-free axes score 0-4."""
 
 SUPPORT_Z = 3.0
 """With ``select_terms``: a term beyond the decoupled model is kept when ``|value| >= SUPPORT_Z * se``
@@ -112,12 +127,17 @@ class MaximumLikelihoodIdentifier:
         (a digital radio link, a flight controller). ``"auto"`` (default) estimates ``a`` per axis with every
         other parameter, as MATLAB's ``greyest`` would with a free ``InterSample``: a log rarely says which,
         and assuming the wrong one biases the damping by 15-19 % (docs/method.md).
-    delay : None, float, sequence of 3 float, or "auto"
+    delay : None, float, sequence of 3 float, "auto" or "detect"
         Servo delay per axis [s] (Padé, eq. 31); "auto" profiles the likelihood
         over ``delay_grid`` (damping and wind held at the undelayed fit), then searches the delay jointly
-        with every other parameter from the best; its standard error is reported as ``tau_<axis>``. A
+        with every other parameter from the best, and keeps it where the likelihood ratio against no delay
+        reaches :data:`MIN_LR_DELAY`; its standard error is reported as ``tau_<axis>``. A
         negative alignment found by "auto" is no servo delay but a log whose input column lags the
         response: the axis' stick is advanced by it (:attr:`input_shifts_`) and the model's delay is 0.
+        "detect" (``heli identify``'s default) fits without a delay, searches the alignment a few steps from
+        there, and profiles as "auto" only the axes where that finds one the data support: an unmodelled
+        servo delay of 10 ms biased the damping by 14-28 %, of 80 ms by 70-90 % (docs/method.md), and testing
+        for one costs a short search per axis.
     delay_grid : sequence of float, optional
         Candidate alignments for ``delay="auto"`` [s] (default -0.6 to 0.5 s in 10 ms).
     wind_model : {"auto", "gm2", "gm_so"}
@@ -191,7 +211,7 @@ class MaximumLikelihoodIdentifier:
         return IntegralIdentifier(structure=self.structure, extra_terms=self.extra_terms)._param_names()
 
     def _delays(self) -> list:
-        return per_axis("delay", self.delay, 2.0)  # the delays ModelParams accepts
+        return per_axis("delay", self.delay, 2.0, ("auto", "detect"))  # the delays ModelParams accepts
 
     def _lags(self) -> list:
         return per_axis("servo_lag", self.servo_lag, 1.0)  # the lags ModelParams accepts
@@ -266,10 +286,10 @@ class MaximumLikelihoodIdentifier:
         delays, lags = self._delays(), self._lags()
         values = {}
 
-        def one_axis(axis_name):
+        def one_axis(axis_name, delay=None):
             a = AXES.index(axis_name)
             problem = self.axis_problem(a, names[a], flights, burn)
-            fit = self._fit_axis(problem, start.params_, delays[a], lags[a])
+            fit = self._fit_axis(problem, start.params_, delays[a] if delay is None else delay, lags[a])
             whole = round(fit.delay * fs) / fs
             if fit.delay < -0.5 / fs and abs(whole - fit.delay) > 1e-9:
                 # a late input column is late by whole samples of the log's clock: the fraction of a sample
@@ -283,6 +303,12 @@ class MaximumLikelihoodIdentifier:
 
         fitted = [axis for axis in self.axes if names.get(AXES.index(axis))]
         fits = dict(zip(fitted, map_axes(one_axis, fitted, self.workers)))
+        detected = [a for a in fitted if delays[AXES.index(a)] == "detect"]
+        if any(fits[a].delay_profile for a in detected):
+            # the log's timing is shared by its channels: where one axis' timing was questioned, every axis is
+            # profiled (the T-REX hover's yaw, whose pedal barely moves it, is late as its sticks are)
+            rest = [a for a in detected if not fits[a].delay_profile]
+            fits.update(zip(rest, map_axes(partial(one_axis, delay="auto"), rest, self.workers)))
         self.hold_decision_ = self._decide_log_hold(fits, names, flights, burn)
         flights = self._apply_shifts(fits, flights)
         for axis_name, fit in fits.items():
@@ -375,20 +401,38 @@ class MaximumLikelihoodIdentifier:
         profile = []
         if delay == "auto":
             found, profile = self._profile_delay(problem, x0, models, fixed_lag)
+        elif delay == "detect":
+            found, profile = self._detect_delay(problem, x0, models, fixed_lag)
         else:
             found = problem.best(float(delay), x0, models, lag=fixed_lag)
-        free_tau = delay == "auto"
+        free_tau = delay == "auto" or (delay == "detect" and found.tau != 0.0)
         lag_profile, lag_lr = (), None
         if lag == "auto" and first.servo_row is not None:  # an axis without its stick has no servo
             fixed_lag, found, lag_profile, lag_lr = profile_lag(problem, found, models, free_tau)
         return self._finish_axis(problem, found, fixed_lag, free_tau, profile, lag_profile, lag_lr)
 
-    def _profile_delay(self, problem: AxisProblem, x0, models, lag: float) -> tuple[WindFit, list]:
+    def _detect_delay(self, problem: AxisProblem, x0, models, lag: float) -> tuple[WindFit, list]:
+        """``delay="detect"``: the undelayed fit (the same searches as ``delay=None``), then a short search of
+        the alignment with every other parameter from it, in its gust model; only where that moves the
+        likelihood ratio past :data:`MIN_LR_DELAY` (a servo delay, or an input logged late) is the axis profiled
+        as with ``"auto"``. Otherwise the undelayed fit, unchanged. Returns the optimum and the profile (empty
+        when not profiled)."""
+        undelayed = problem.per_kind(0.0, x0, models, lag=lag)
+        kind = min(undelayed, key=lambda k: undelayed[k][3])
+        cost, x, _, aic = undelayed[kind]
+        aic_free = problem.per_kind(0.0, {kind: x}, (kind,), DETECT_NFEV, free_tau=True, lag=lag)[kind][3]
+        if 2.0 * (aic - aic_free) < MIN_LR_DELAY:
+            return WindFit(cost, x, kind, 0.0), []
+        return self._profile_delay(problem, x0, models, lag, undelayed)
+
+    def _profile_delay(self, problem: AxisProblem, x0, models, lag: float,
+                       undelayed: dict | None = None) -> tuple[WindFit, list]:
         """``delay="auto"``: the likelihood over a grid of delays with the damping and wind of the undelayed fit
         held (the linear parameters solved at each), then every parameter and the delay searched from the best.
-        Returns the optimum and the profile ``[(delay, cost)]``."""
+        ``undelayed``: :meth:`AxisProblem.per_kind` at no delay, when already searched. Returns the optimum and
+        the profile ``[(delay, cost)]``."""
         grid = np.asarray(self.delay_grid if self.delay_grid is not None else DEFAULT_DELAY_GRID, dtype=float)
-        undelayed = problem.per_kind(0.0, x0, models, lag=lag)
+        undelayed = undelayed or problem.per_kind(0.0, x0, models, lag=lag)
         kind = min(undelayed, key=lambda k: undelayed[k][3])
         xb = np.array(undelayed[kind][1], dtype=float)
         if problem.searches_damping and xb[0] < MIN_PROFILE_DAMPING:
@@ -410,13 +454,14 @@ class MaximumLikelihoodIdentifier:
                 if k not in fits or v[3] < fits[k][3]:
                     fits[k] = v
         kind = min(fits, key=lambda k: fits[k][3])
-        cost, x, tau, _ = fits[kind]
-        if abs(tau0) <= MIN_SERVO_DELAY and abs(tau) < like.data.dt:
-            # a search from no delay that moved by less than a sample found none: below a sample the timing is
-            # the log's convention, and fitted as a delay of 1-2 ms it biased the damping (effect-free autopilot
-            # flights, 180 s: 5.5 % RMS against 2.6 % with the undelayed fit kept)
-            kind = min(undelayed, key=lambda k: undelayed[k][3])
-            cost, x, tau = undelayed[kind][0], undelayed[kind][1], 0.0
+        cost, x, tau, aic = fits[kind]
+        base = min(undelayed, key=lambda k: undelayed[k][3])
+        if 2.0 * (undelayed[base][3] - aic) < MIN_LR_DELAY:
+            # the data do not support an alignment (twice the Akaike difference is the likelihood ratio: the
+            # gust models have as many parameters): a delay of a few ms fitted to the timing conventions of
+            # a log biased the damping (effect-free autopilot flights, 180 s: 5.5 % RMS against 2.6 %)
+            kind = base
+            cost, x, tau = undelayed[base][0], undelayed[base][1], 0.0
         return WindFit(cost, x, kind, tau), profile
 
     def _finish_axis(self, problem: AxisProblem, found: WindFit, lag, free_tau, profile=(), lag_profile=(),
@@ -433,13 +478,14 @@ class MaximumLikelihoodIdentifier:
 
     def _refit(self, problem: AxisProblem, fit: MLAxisFit, tau: float | None = None) -> MLAxisFit:
         """The axis searched again from its optimum ``fit``: at the hold of ``problem`` (the log's, once
-        decided) and at delay ``tau`` when given (else its own, searched again when profiled), its gust model
-        and lag kept. The few steps from a nearby optimum, not a new fit."""
+        decided) and at delay ``tau`` when given (else its own, searched again when profiled and the data
+        supported one: a delay the profile rejected stays 0), its gust model and lag kept. The few steps from a
+        nearby optimum, not a new fit."""
         x0 = np.array(fit.state, dtype=float)
         fixed = problem.fixed()
         if HOLD_INDEX in fixed:
             x0[HOLD_INDEX] = fixed[HOLD_INDEX]
-        free_tau = tau is None and self._delays()[problem.axis] == "auto"
+        free_tau = tau is None and self._delays()[problem.axis] in ("auto", "detect") and fit.delay != 0.0
         kind = fit.wind["model"]
         found = problem.per_kind(fit.delay if tau is None else tau, x0, (kind,), free_tau=free_tau, lag=fit.lag)
         _, x, tau, _ = found[kind]

@@ -87,14 +87,14 @@ def fit_table(identifiers: dict) -> str:
 
 
 def _shift_sentence(ident) -> str:
-    """What an input found late means, when ``delay="auto"`` found one (else empty)."""
+    """What an input found late means, when ``delay="auto"`` or ``"detect"`` found one (else empty)."""
     late = {a: v for a, v in (getattr(ident, "input_shifts_", None) or {}).items() if v < 0.0}
     if not late:
         return ""
     return (" The sticks of this log lag the response: they were advanced by "
             + ", ".join(f"{a} {-v:.3f} s" for a, v in late.items())
-            + " before the fit (the alignment searched by --delay auto; a log's timing, so the model has no servo "
-            "delay for it). " + STABILISED_NOTE)
+            + f" before the fit (the alignment searched by --delay {ident.delay}; a log's timing, so the model has "
+            "no servo delay for it). " + STABILISED_NOTE)
 
 
 def method_sentence(ident) -> str:
