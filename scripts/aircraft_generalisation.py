@@ -1,0 +1,169 @@
+"""Other aircraft than the bench's: does the default identification hold on helicopters it was not tuned on?
+
+Every bench cell flies the paper's aircraft (eqs. 68-70). This study flies the same cells with other truth
+parameters (:data:`AIRCRAFT`: a small agile helicopter, a large sluggish one, one whose roll is much faster
+than its pitch, and one whose sticks are mapped the other way round, negative roll and yaw gains and a
+positive pitch gain) and log rates, and per flight runs what a user runs with no flags:
+
+* the maximum-likelihood identifier as ``heli identify`` (:class:`MaximumLikelihoodIdentifier`, hold
+  estimated): relative error of the gains (k2, k6, k10) and dampings (k3, k7, k11);
+* with ``--diagnose``, the likelihood diagnosis as ``heli diagnose`` on the same flight: effect-free, any
+  effect it names is wrong; with ``--effect NAME`` (one of
+  :data:`identification.bench.flight_config.EFFECTS`, hidden in the truth at its catalogue size), what it names
+  beside the hidden effect is wrong, and the hidden effect should be named.
+
+Prints per aircraft and cell the RMS [worst] relative error of each parameter over the seeds, the hold
+fractions, and the wrong diagnoses.
+
+Usage::
+
+    python scripts/aircraft_generalisation.py [--seeds 3] [--duration 300] [--workers 2] [--diagnose]
+        [--aircraft agile ...] [--cells independent ...] [--rates 100 ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
+
+import numpy as np
+
+from heli_core.params import ModelParams
+
+GAINS = ("k2", "k6", "k10")
+DAMPINGS = ("k3", "k7", "k11")
+PARAMS = GAINS + DAMPINGS
+
+AIRCRAFT: dict[str, ModelParams] = {
+    # a 450-class flybarless helicopter: three times the control power, more than twice the damping
+    "agile": ModelParams(k2=4.0, k3=6.0, kd1=0.10, k6=-2.7, k7=6.5, kd2=0.05, k10=35.0, k11=7.0, k12=-1.0, kd3=0.20),
+    # a large scale helicopter: half the control power and damping of the paper's
+    "sluggish": ModelParams(k2=0.7, k3=1.2, kd1=0.02, k6=-0.5, k7=1.1, kd2=0.01, k10=6.0, k11=1.6, k12=-0.3,
+                            kd3=0.05),
+    # roll three times as fast as pitch, a stiff tail
+    "asymmetric": ModelParams(k2=2.5, k3=7.5, kd1=0.05, k6=-0.6, k7=1.3, kd2=0.01, k10=20.0, k11=8.0, k12=-0.8,
+                              kd3=0.1),
+    # the sticks mapped the other way round (a log whose channels' signs differ from the paper's)
+    "mirrored": ModelParams(k2=-1.1, k3=2.0, kd1=0.03, k6=1.2, k7=3.0, kd2=-0.02, k10=-10.0, k11=4.0, k12=0.4,
+                            kd3=-0.05),
+}
+"""Truth parameters of the aircraft flown besides the paper's (``"paper"``)."""
+
+
+def _aircraft(name: str) -> ModelParams:
+    from identification.bench.flight_config import PAPER_PARAMS
+
+    return PAPER_PARAMS if name == "paper" else AIRCRAFT[name]
+
+
+def _one(job):
+    """Fly one (aircraft, cell, rate, seed) and identify (and diagnose) it as the CLI does by default."""
+    from threadpoolctl import threadpool_limits
+
+    from identification.bench.cells import BENCH_CELLS
+    from identification.bench.synthetic import simulate_flight
+    from identification.likelihood.estimator import MaximumLikelihoodIdentifier
+
+    aircraft, cell, rate, seed, duration, diagnose, effect = job
+    with threadpool_limits(limits=1, user_api="blas"):
+        config = replace(BENCH_CELLS[cell], duration=duration, sample_rate=float(rate))
+        sim = simulate_flight(duration, seed=seed, config=config, truth=_aircraft(aircraft),
+                              effects=(effect,) if effect else ())
+        truth = sim.truth.values()
+        out = {"aircraft": aircraft, "cell": cell, "rate": rate, "seed": seed}
+        t0 = time.perf_counter()
+        try:
+            ml = MaximumLikelihoodIdentifier().fit(sim.flight)
+        except Exception as exc:  # a refusal is a finding of this study, not its end
+            out["error"] = f"{type(exc).__name__}: {exc}"
+            return out
+        out["ml_time_s"] = time.perf_counter() - t0
+        v = ml.params_.values()
+        out["ml"] = {k: 100.0 * (v[k] - truth[k]) / truth[k] for k in PARAMS}
+        out["hold"] = [f.input_hold for f in ml.axes_.values()]
+        if diagnose:
+            from identification.diagnosis.likelihood_diagnoser import LikelihoodDiagnoser
+
+            t0 = time.perf_counter()
+            d = LikelihoodDiagnoser().fit(sim.flight)
+            out["diagnosis_s"] = time.perf_counter() - t0
+            out["named"] = [(s.axis, s.effect, round(float(s.lr), 1)) for s in d.steps_]
+            out["effect"] = effect
+    return out
+
+
+def _table(rows, diagnose: bool, effect: str | None) -> None:
+    keys = sorted({(r["aircraft"], r["cell"], r["rate"]) for r in rows}, key=str)
+    print("\n| aircraft | cell | log rate | " + " | ".join(PARAMS) + " | hold fractions |"
+          + (" wrong diagnoses |" if diagnose else "") + (" hidden effect named |" if effect else ""))
+    print("|---|---|---|" + "---|" * (len(PARAMS) + 1) + ("---|" if diagnose else "") + ("---|" if effect else ""))
+    worst = {"gains": 0.0, "dampings": 0.0}
+    for key in keys:
+        rs = [r for r in rows if (r["aircraft"], r["cell"], r["rate"]) == key]
+        ok = [r for r in rs if "ml" in r]
+        failed = [r["error"] for r in rs if "error" in r]
+        if ok:
+            e = np.array([[r["ml"][k] for k in PARAMS] for r in ok])
+            rms, top = np.sqrt(np.mean(e ** 2, axis=0)), np.abs(e).max(axis=0)
+            worst["gains"] = max(worst["gains"], float(rms[:3].max()))
+            worst["dampings"] = max(worst["dampings"], float(rms[3:].max()))
+            cells = [f"{a:.1f} [{b:.1f}]" for a, b in zip(rms, top)]
+            holds = np.array([r["hold"] for r in ok])
+            hold = f"{holds.min():.2f}-{holds.max():.2f}"
+        else:
+            cells, hold = ["-"] * len(PARAMS), "-"
+        text = f"| {key[0]} | {key[1]} | {key[2]:g} Hz | " + " | ".join(cells) + f" | {hold} |"
+        if failed:
+            text += f" refused {len(failed)}/{len(rs)}: {failed[0][:80]}"
+        if diagnose:
+            wrong = [r for r in ok if any(e != r["effect"] for _, e, _ in r["named"])]
+            what = "; ".join(f"{a} {e} {lr}" for r in wrong for a, e, lr in r["named"] if e != r["effect"])
+            text += f" {len(wrong)}/{len(ok)} {what} |"
+            if any(r["effect"] for r in ok):
+                hit = [r for r in ok if any(e == r["effect"] for _, e, _ in r["named"])]
+                text += f" {len(hit)}/{len(ok)} |"
+        print(text)
+    print(f"\nWorst cell: gains {worst['gains']:.2f} % RMS, dampings {worst['dampings']:.2f} % RMS")
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--aircraft", nargs="+", default=list(AIRCRAFT), choices=["paper", *AIRCRAFT])
+    ap.add_argument("--cells", nargs="+", default=["independent", "held-sticks-pd"])
+    ap.add_argument("--rates", nargs="+", type=float, default=[100.0], help="log rates [Hz]")
+    ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--first-seed", type=int, default=1)
+    ap.add_argument("--duration", type=float, default=300.0)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--diagnose", action="store_true", help="also run the likelihood diagnosis (about 10 s a flight)")
+    ap.add_argument("--effect", default=None, help="hide this effect of the catalogue in every truth")
+    args = ap.parse_args(argv)
+    from identification.bench.cells import BENCH_CELLS
+    from identification.bench.flight_config import EFFECTS
+
+    unknown = [c for c in args.cells if c not in BENCH_CELLS]
+    if unknown:
+        raise SystemExit(f"unknown cells {unknown}; known: {', '.join(BENCH_CELLS)}")
+    if args.effect is not None and args.effect not in EFFECTS:
+        raise SystemExit(f"unknown effect {args.effect!r}; known: {', '.join(EFFECTS)}")
+    jobs = [(a, c, r, s, args.duration, args.diagnose, args.effect) for a in args.aircraft for c in args.cells for r in args.rates
+            for s in range(args.first_seed, args.first_seed + args.seeds)]
+    from tqdm import tqdm
+
+    if args.workers > 1:
+        with ProcessPoolExecutor(args.workers) as pool:
+            rows = list(tqdm(pool.map(_one, jobs), total=len(jobs), desc="flights", unit="flight"))
+    else:
+        rows = [_one(j) for j in tqdm(jobs, desc="flights", unit="flight")]
+    print(f"\nRelative error (%) against the truth, RMS over {args.seeds} seeds [worst |error|], "
+          f"{args.duration:g} s flights, defaults of heli identify. Command: python scripts/aircraft_generalisation.py "
+          f"--seeds {args.seeds} --duration {args.duration:g} --aircraft {' '.join(args.aircraft)} "
+          f"--cells {' '.join(args.cells)} --rates {' '.join(f'{r:g}' for r in args.rates)}"
+          + (" --diagnose" if args.diagnose else "") + (f" --effect {args.effect}" if args.effect else ""))
+    _table(rows, args.diagnose, args.effect)
+
+
+if __name__ == "__main__":
+    main()
