@@ -86,8 +86,11 @@ def bench_identification(repeats: int) -> dict:
     ml = _median_time(lambda: MaximumLikelihoodIdentifier(**one).fit(flight), few)
     ml_linear = _median_time(lambda: MaximumLikelihoodIdentifier(input_hold="linear", **one).fit(flight), few)
     ml_pool = _median_time(lambda: MaximumLikelihoodIdentifier().fit(flight), few)
+    ml_detect = _median_time(lambda: MaximumLikelihoodIdentifier(delay="detect", **one).fit(flight), few)
+    ml_detect_pool = _median_time(lambda: MaximumLikelihoodIdentifier(delay="detect").fit(flight), few)
     delayed = simulate_flight(300, seed=2, effects=("servo_delay",)).flight
     ml_delay = _median_time(lambda: MaximumLikelihoodIdentifier(delay="auto", **one).fit(delayed), few)
+    ml_delay_pool = _median_time(lambda: MaximumLikelihoodIdentifier(delay="auto").fit(delayed), few)
     diag_one = _median_time(lambda: LikelihoodDiagnoser(**one).fit(flight), 1)
     diag = _median_time(lambda: LikelihoodDiagnoser().fit(flight), 1)
     lagged = _median_time(lambda: MaximumLikelihoodIdentifier(delay="auto", servo_lag="auto", **one).fit(delayed), 1)
@@ -96,14 +99,20 @@ def bench_identification(repeats: int) -> dict:
         "the same with the hold fixed linear (the default before) [s]": ml_linear,
         "hold estimated / fixed time ratio": ml / ml_linear,
         f"the default, axes side by side on {workers_available()} cores [s]": ml_pool,
+        "heli identify's default: the same with a servo delay tested (delay='detect', none found), one core [s]":
+            ml_detect,
+        "servo-delay test / no test time ratio": ml_detect / ml,
+        f"heli identify's default, axes side by side on {workers_available()} cores [s]": ml_detect_pool,
         "maximum likelihood with the alignment profiled over -0.6-0.5 s, 3 axes, one core [s]": ml_delay,
+        f"the same, axes side by side on {workers_available()} cores (default) [s]": ml_delay_pool,
         "the same with the servo lag profiled too (10-200 ms), 3 axes, one core [s]": lagged,
         "likelihood diagnosis of the 300 s flight, every candidate, one core [s]": diag_one,
         f"likelihood diagnosis, axes side by side on {workers_available()} cores (default) [s]": diag,
         "ML / integral time ratio": ml / (out["decoupled, 3 axes, with FIR prefilter [ms]"] / 1e3),
-        "target (ML with the hold estimated <= 1.5 s; delay profile <= 5 s; diagnosis <= 10 s)": ", ".join(
+        "target (ML with the hold estimated <= 1.5 s on one core; delay profile <= 5 s and diagnosis <= 10 s, "
+        "both by default)": ", ".join(
             f"{name} {'met' if v <= lim else 'NOT met'}" for name, v, lim in
-            (("ML", ml, 1.5), ("delay", ml_delay, 5.0), ("diagnosis", diag, 10.0))),
+            (("ML", ml, 1.5), ("delay", ml_delay_pool, 5.0), ("diagnosis", diag, 10.0))),
     })
     return out
 
