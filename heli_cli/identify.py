@@ -31,7 +31,7 @@ def _seconds_or_auto(what: str, upper: float, words: tuple = ("auto",)):
 
 
 _delay = _seconds_or_auto("delay", 2.0, ("detect", "auto", "none"))
-_lag = _seconds_or_auto("servo lag", 1.0)
+_lag = _seconds_or_auto("servo lag", 1.0, ("detect", "auto", "none"))
 
 
 def add_flight_backend_options(p):
@@ -75,8 +75,9 @@ def register(sub):
                    "the integral fit, profiled over -0.6-0.5 s on every axis), 'none', or seconds (the integral "
                    "method's default: none)")
     p.add_argument("--servo-lag", type=_lag, default=None,
-                   help="ml: the servos' first-order lag: 'auto' (the likelihood profiled over 10-200 ms, kept only "
-                   "where the data support it; eq. 31's d1) or seconds (default: none)")
+                   help="ml: the servos' first-order lag (eq. 31's d1): 'detect' (default: profiled like 'auto' on "
+                   "the axes where the delay's search found a servo delay), 'auto' (the likelihood profiled over "
+                   "10-200 ms on every axis, kept only where the data support it), 'none', or seconds")
     p.add_argument("--input-hold", type=input_hold, default="auto",
                    help=INPUT_HOLD_HELP + "; integral: 'auto' is 'linear'")
     p.add_argument("--wind-model", choices=("auto", "gm2", "gm_so"), default="auto",
@@ -115,9 +116,10 @@ def run(args) -> int:
                 progress.done()
                 print(f"warning: {path}: {warning}")
         delay = None if args.delay == "none" else args.delay
+        lag = None if args.servo_lag == "none" else args.servo_lag
         if args.method == "ml":
             kwargs = {"delay": "detect" if args.delay is None else delay, "input_hold": args.input_hold,
-                      "wind_model": args.wind_model, "servo_lag": args.servo_lag}
+                      "wind_model": args.wind_model, "servo_lag": "detect" if args.servo_lag is None else lag}
         else:
             for option, given in (("--servo-lag", args.servo_lag is not None), ("--delay detect", delay == "detect")):
                 if given:

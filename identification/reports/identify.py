@@ -97,6 +97,20 @@ def _shift_sentence(ident) -> str:
             "no servo delay for it). " + STABILISED_NOTE)
 
 
+def _timing_sentence(ident) -> str:
+    """How the servo's timing was found, when it was searched (``delay="detect"`` or ``"auto"``; else empty)."""
+    delay = getattr(ident, "delay", None)
+    if not isinstance(delay, str):
+        return ""
+    how = ("a servo delay searched a few steps from the undelayed fit and profiled where its likelihood ratio "
+           "reached 20 (--delay detect)" if delay == "detect" else "the alignment profiled over -0.6-0.5 s on "
+           "every axis (--delay auto)")
+    found = ", ".join(f"{a} {1e3 * f.delay:.0f} ms" for a, f in ident.axes_.items() if f.delay > 0)
+    lags = ", ".join(f"{a} {1e3 * f.lag:.0f} ms" for a, f in ident.axes_.items() if f.lag > 0)
+    return (f" Servo timing: {how}: delay {found or 'none the data support'}"
+            + (f"; first-order servo lag {lags}" if lags else "") + ".")
+
+
 def method_sentence(ident) -> str:
     """One sentence of the report saying how the model was identified."""
     if getattr(ident, "method", "").startswith("maximum likelihood"):  # what the identifier says it is
@@ -115,7 +129,7 @@ def method_sentence(ident) -> str:
                 f"linear parameters projected out; gust models chosen by likelihood ({winds}); standard errors "
                 "from the Fisher information; no prefilter (vibration lines removed by regression on their "
                 "sinusoids). The integral method of Fig. 5 is its starting point and is shown for comparison."
-                + _shift_sentence(ident))
+                + _timing_sentence(ident) + _shift_sentence(ident))
     return ("Method: integral-based identification (paper Section 2.5.2, Fig. 5) with "
             f"{ident.interval:g} s intervals, per-interval initial values (eq. 34), "
             + ("a per-interval polynomial disturbance of degree "
