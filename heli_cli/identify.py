@@ -121,7 +121,7 @@ def run(args) -> int:
             kwargs = {"delay": "detect" if args.delay is None else delay, "input_hold": args.input_hold,
                       "wind_model": args.wind_model, "servo_lag": "detect" if args.servo_lag is None else lag}
         else:
-            for option, given in (("--servo-lag", args.servo_lag is not None), ("--delay detect", delay == "detect")):
+            for option, given in (("--servo-lag", lag is not None), ("--delay detect", delay == "detect")):
                 if given:
                     progress.done()
                     print(f"heli identify: error: {option} needs the maximum-likelihood estimator (--method ml), "

@@ -114,7 +114,7 @@ def test_detect_finds_a_servo_delay_and_profiles_every_axis():
 def test_detect_looks_for_a_servo_lag_where_it_found_a_delay():
     # a 40 ms first-order servo lag looks like a delay at low frequency: the delay test finds one, and the lag's
     # profile (servo_lag="detect") then keeps the lag; the damping comes back (docs/method.md: 56-74 % low
-    # with neither, 10-13 % with the delay alone)
+    # with neither, 10-14 % with the delay alone)
     sf = simulate_flight(150, seed=3, effects=("servo_lag",))
     plain = MaximumLikelihoodIdentifier(axes=("roll",)).fit(sf.flight)
     assert _rel(plain, sf.truth, "k3") < -0.4

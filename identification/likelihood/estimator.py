@@ -94,14 +94,14 @@ MIN_LR_DELAY = 20.0
 """Smallest likelihood-ratio statistic ``2 (NLL_undelayed - NLL_aligned)`` at which ``delay="auto"`` keeps the
 alignment it searched (else the undelayed fit). Timing is where a model is misspecified in small ways the
 chi-square law does not know (a hold between samples, a digital controller's sample of lag): on effect-free
-bench flights the statistic reached 12.2; a servo delay of one sample (10 ms) scores 50-200 on 300 s flights
-(docs/method.md). The likelihood diagnosis' alignment floor is the same number
+bench flights this search scored 0-4 and the diagnosis' alignment candidate up to 12.2; a servo delay of one
+sample (10 ms) scored 46-370 on 300 s flights (docs/method.md). The likelihood diagnosis' alignment floor is the same number
 (:data:`identification.diagnosis.likelihood_diagnoser.MIN_LR_ALIGNMENT`)."""
 
 DETECT_NFEV = 3
 """Likelihood evaluations (iterations) of ``delay="detect"``'s search of a delay from the undelayed fit: it
-only has to tell whether the data support one (the full profile then places it). Three reach 97-100 % of the
-converged search's likelihood ratio on flights with a one-sample servo delay (LR 58-345) and cost 0.02-0.07 s
+only has to tell whether the data support one (the full profile then places it). Three reach 96-100 % of the
+converged search's likelihood ratio on flights with a one-sample servo delay (LR 58-356) and cost 0.02-0.09 s
 an axis; effect-free axes score 0-4."""
 
 SUPPORT_Z = 3.0
@@ -136,8 +136,8 @@ class MaximumLikelihoodIdentifier:
         response: the axis' stick is advanced by it (:attr:`input_shifts_`) and the model's delay is 0.
         "detect" (``heli identify``'s default) fits without a delay, searches the alignment a few steps from
         there, and profiles as "auto" only the axes where that finds one the data support: an unmodelled
-        servo delay of 10 ms biased the damping by 14-28 %, of 80 ms by 70-90 % (docs/method.md), and testing
-        for one costs a short search per axis.
+        servo delay of 10 ms biased the dampings by 8-35 % (RMS per bench cell), of 80 ms by 76-135 %
+        (docs/method.md), and testing for one costs a short search per axis.
     delay_grid : sequence of float, optional
         Candidate alignments for ``delay="auto"`` [s] (default -0.6 to 0.5 s in 10 ms).
     wind_model : {"auto", "gm2", "gm_so"}
@@ -160,7 +160,7 @@ class MaximumLikelihoodIdentifier:
         :data:`identification.likelihood.servo_lag.LAG_GRID` (the delay searched with it when ``delay="auto"``) and
         keeps the best lag only where the data support it (:func:`identification.likelihood.servo_lag.profile_lag`).
         "detect" (``heli identify``'s default) does so only on the axes where the delay's search
-        (``delay="auto"`` or ``"detect"``) found a servo delay: an unmodelled 40 ms lag left the dampings 10-13 %
+        (``delay="auto"`` or ``"detect"``) found a servo delay: an unmodelled 40 ms lag left the dampings 10-14 %
         low with the delay alone (56-74 % with neither); elsewhere the fit is unchanged.
     workers : int or None
         Processes the axes are fitted in side by side (:mod:`identification.likelihood.axis_pool`; the result is the
