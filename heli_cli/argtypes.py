@@ -41,6 +41,19 @@ def number(what: str, low: float | None = None, high: float | None = None, *, lo
     return parse
 
 
+def seconds_or(words: tuple, what: str, upper: float):
+    """One of ``words`` (``"auto"``, ``"none"``, ...) or ``what`` in seconds within [0, ``upper``] (a servo
+    delay or lag: the range :class:`heli_core.params.ModelParams` accepts)."""
+    expected = " or ".join(repr(w) for w in words)
+    seconds = number(f"{expected} or a {what} in seconds in [0, {upper:g}]", 0.0, upper, low_open=False,
+                     high_open=False)
+
+    def parse(text):
+        return text if text in words else seconds(text)
+
+    return parse
+
+
 def whole(minimum: int, maximum: int | None = None):
     """A whole number >= ``minimum`` (and <= ``maximum`` when given)."""
 

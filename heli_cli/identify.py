@@ -2,36 +2,15 @@
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from pathlib import Path
 
-from .argtypes import INPUT_HOLD_HELP, input_hold, number, output_path, whole
+from .argtypes import INPUT_HOLD_HELP, input_hold, number, output_path, seconds_or, whole
 
 
-def _seconds_or_auto(what: str, upper: float, words: tuple = ("auto",)):
-    """An argparse type: one of ``words`` or ``what`` in seconds within [0, ``upper``] (the range ModelParams
-    accepts)."""
-    expected = " or ".join(repr(w) for w in words)
-
-    def parse(text):
-        if text is None or text in words:
-            return text
-        try:
-            v = float(text)
-        except ValueError:
-            v = math.nan
-        if not 0.0 <= v <= upper:  # NaN fails too
-            raise argparse.ArgumentTypeError(f"expected {expected} or a {what} in seconds in [0, {upper:g}], "
-                                             f"got {text!r}")
-        return v
-
-    return parse
-
-
-_delay = _seconds_or_auto("delay", 2.0, ("detect", "auto", "none"))
-_lag = _seconds_or_auto("servo lag", 1.0, ("detect", "auto", "none"))
+_delay = seconds_or(("detect", "auto", "none"), "delay", 2.0)
+_lag = seconds_or(("detect", "auto", "none"), "servo lag", 1.0)
 
 
 def add_flight_backend_options(p):

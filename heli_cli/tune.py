@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import argparse
-import math
 from pathlib import Path
 
-from .argtypes import number, output_path, per_axis, seed, whole
+from .argtypes import number, output_path, per_axis, seconds_or, seed, whole
 from .model_gate import add_accept_option, check_model
 
 FIRMWARE_CHOICES = ("ardupilot", "rotorflight")
@@ -20,16 +18,7 @@ def _scale(text):
     return values if isinstance(values, float) else tuple(values)
 
 
-def _delay(text):
-    if text in ("auto", "none"):
-        return text
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not 0.0 <= v <= 2.0:
-        raise argparse.ArgumentTypeError(f"expected 'auto', 'none' or seconds in [0, 2], got {text!r}")
-    return v
+_delay = seconds_or(("auto", "none"), "delay", 2.0)
 
 
 def register(sub):

@@ -7,7 +7,7 @@ import re
 
 import pytest
 
-from heli_cli.argtypes import number, whole
+from heli_cli.argtypes import number, seconds_or, whole
 from heli_cli.main import main
 
 
@@ -20,6 +20,17 @@ def test_number_accepts_values_inside_open_bounds(text, value):
 def test_number_rejects_bounds_non_finite_and_text(text):
     with pytest.raises(argparse.ArgumentTypeError, match=rf"expected a fraction, got {text!r}"):
         number("a fraction", 0.0, 1.0)(text)
+
+
+def test_seconds_or_takes_its_words_and_seconds_within_closed_bounds():
+    # --delay and --servo-lag of heli identify and heli tune
+    parse = seconds_or(("detect", "none"), "delay", 2.0)
+    assert parse("detect") == "detect" and parse("none") == "none"
+    assert parse("0") == 0.0 and parse("2") == 2.0 and parse("0.08") == 0.08
+    for text in ("auto", "-0.01", "2.5", "nan", "inf", ""):
+        with pytest.raises(argparse.ArgumentTypeError,
+                           match=re.escape(f"expected 'detect' or 'none' or a delay in seconds in [0, 2], got {text!r}")):
+            parse(text)
 
 
 def test_closed_lower_bound():
