@@ -32,16 +32,13 @@ DEFAULT_CELLS = ("independent", "held-sticks-pd", "broadband-autopilot", "dryden
                  "broadband-pd-noisy-gyro")
 
 
-def _aircraft(name: str):
-    from identification.bench.flight_config import PAPER_PARAMS
-
-    if name == "paper":
-        return PAPER_PARAMS
+def _aircraft_study():
+    """``scripts/aircraft_generalisation.py``, whose table of aircraft this study flies."""
     path = Path(__file__).with_name("aircraft_generalisation.py")
     spec = importlib.util.spec_from_file_location("aircraft_generalisation", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    return module.AIRCRAFT[name]
+    return module
 
 
 def _one(job):
@@ -54,7 +51,7 @@ def _one(job):
     cell, scale, aircraft, seed, duration, effects = job
     with threadpool_limits(limits=1, user_api="blas"):
         config = replace(BENCH_CELLS[cell], duration=duration)
-        sim = simulate_flight(duration, seed=seed, config=config, truth=_aircraft(aircraft),
+        sim = simulate_flight(duration, seed=seed, config=config, truth=_aircraft_study()._aircraft(aircraft),
                               effects=tuple(effects) if scale else (), effect_scale=scale or 1.0)
         truth = sim.truth
         fits, seconds = {}, {}
@@ -124,6 +121,9 @@ def main(argv=None) -> None:
     unknown = [c for c in args.cells if c not in BENCH_CELLS]
     if unknown:
         raise SystemExit(f"unknown cells {unknown}; known: {', '.join(BENCH_CELLS)}")
+    known = ["paper", *_aircraft_study().AIRCRAFT]
+    if any(a not in known for a in args.aircraft):
+        raise SystemExit(f"unknown aircraft {[a for a in args.aircraft if a not in known]}; known: {', '.join(known)}")
     jobs = [(c, s, a, seed, args.duration, tuple(args.effects)) for a in args.aircraft for c in args.cells for s in args.scales
             for seed in range(args.first_seed, args.first_seed + args.seeds)]
     from tqdm import tqdm
