@@ -107,7 +107,9 @@ def _timing_sentence(ident) -> str:
            "every axis (--delay auto)")
     found = ", ".join(f"{a} {1e3 * f.delay:.0f} ms" for a, f in ident.axes_.items() if f.delay > 0)
     lags = ", ".join(f"{a} {1e3 * f.lag:.0f} ms" for a, f in ident.axes_.items() if f.lag > 0)
-    return (f" Servo timing: {how}: delay {found or 'none the data support'}"
+    late = min((getattr(ident, "input_shifts_", None) or {}).values(), default=0.0) < 0.0
+    none = "none (the timing found is the log's input column, below)" if late else "none the data support"
+    return (f" Servo timing: {how}: servo delay {found or none}"
             + (f"; first-order servo lag {lags}" if lags else "") + ".")
 
 
