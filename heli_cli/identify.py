@@ -97,8 +97,11 @@ def run(args) -> int:
         delay = None if args.delay == "none" else args.delay
         lag = None if args.servo_lag == "none" else args.servo_lag
         if args.method == "ml":
-            kwargs = {"delay": "detect" if args.delay is None else delay, "input_hold": args.input_hold,
-                      "wind_model": args.wind_model, "servo_lag": "detect" if args.servo_lag is None else lag}
+            from identification.likelihood.estimator import CLI_TIMING
+
+            kwargs = {"delay": CLI_TIMING["delay"] if args.delay is None else delay, "input_hold": args.input_hold,
+                      "wind_model": args.wind_model,
+                      "servo_lag": CLI_TIMING["servo_lag"] if args.servo_lag is None else lag}
         else:
             for option, given in (("--servo-lag", lag is not None), ("--delay detect", delay == "detect")):
                 if given:

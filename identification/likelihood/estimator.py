@@ -104,6 +104,10 @@ only has to tell whether the data support one (the full profile then places it).
 converged search's likelihood ratio on flights with a one-sample servo delay (LR 58-356) and cost 0.02-0.09 s
 an axis; effect-free axes score 0-4."""
 
+CLI_TIMING = {"delay": "detect", "servo_lag": "detect"}
+"""The timing settings ``heli identify`` fits with by default (this class' own default is ``delay=None``,
+``servo_lag=None``): the studies that judge "the defaults" fit with these, so that they judge what a user gets."""
+
 SUPPORT_Z = 3.0
 """With ``select_terms``: a term beyond the decoupled model is kept when ``|value| >= SUPPORT_Z * se``
 (two-sided 0.3 % level, about Bonferroni 1 % over the coupled model's five extra terms)."""
