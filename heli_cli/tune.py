@@ -19,6 +19,7 @@ def _scale(text):
 
 
 _delay = seconds_or(("auto", "none"), "delay", 2.0)
+_lag = seconds_or(("detect", "auto", "none"), "servo lag", 1.0)
 
 
 def register(sub):
@@ -53,6 +54,9 @@ def register(sub):
     p.add_argument("--delay", type=_delay, default="auto",
                    help="servo delay when identifying from LOG: 'auto' (default: the likelihood profiled over "
                    "0-0.5 s), 'none' or seconds")
+    p.add_argument("--servo-lag", type=_lag, default="detect",
+                   help="the servos' first-order lag when identifying from LOG, as heli identify's: 'detect' "
+                   "(default: profiled where a servo delay is found), 'auto', 'none' or seconds")
     p.add_argument("--window", type=number("a window length in seconds > 0", 0.0), default=20.0,
                    help="length of the gust windows flown in the time domain (default 20 s; they tile the library)")
     p.add_argument("--candidates", type=whole(1, 10), default=3,
@@ -161,9 +165,10 @@ def _model(args, spec, current, progress):
     _check_mapping(spec, current, flight.sample_rate)
     folder = Path(args.out) / "model"
     delay = None if args.delay == "none" else args.delay
+    lag = None if args.servo_lag == "none" else args.servo_lag
     # the decoupled model alone: the firmware loops fly it, and the coupled one cost a third of this step
     identify_and_report([flight], folder, sources=[source_entry(args.log)], flight_paths=[args.log], plots=False,
-                        identifier_kwargs={"delay": delay}, stage=progress.stage, progress=False,
+                        identifier_kwargs={"delay": delay, "servo_lag": lag}, stage=progress.stage, progress=False,
                         compare_structures=False)
     args.model = str(folder)
     check_model(args, "tune firmware gains on it")

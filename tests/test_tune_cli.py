@@ -111,6 +111,16 @@ def test_a_missing_model_and_a_bad_scale_are_refused(tmp_path, capsys, flight_cs
     assert e.value.code == 2
 
 
+def test_the_servo_lag_option_takes_identifys_words_or_seconds(tmp_path, capsys, flight_csv, ap_params):
+    from heli_cli.tune import _lag
+
+    assert [_lag(w) for w in ("detect", "auto", "none", "0.03")] == ["detect", "auto", "none", 0.03]
+    with pytest.raises(SystemExit) as e:
+        main(["tune", str(flight_csv), "--firmware", "ardupilot", "--params", str(ap_params), "--out",
+              str(tmp_path / "out"), "--servo-lag", "2"])
+    assert e.value.code == 2 and "servo lag" in capsys.readouterr().err and not (tmp_path / "out").exists()
+
+
 def test_a_loop_rate_the_gusts_cannot_hold_is_refused(tmp_path, capsys, flight_csv, ideal_model_dir):
     params = tmp_path / "p.param"
     params.write_text("SCHED_LOOP_RATE,250\n")
