@@ -22,6 +22,7 @@ from ..likelihood.ahead_score import AHEAD_S
 from ..likelihood.axis_likelihood import AxisLikelihood
 from ..likelihood.axis_search import MAX_DELAY, MAX_SHIFT, AxisProblem
 from ..likelihood.estimator import MIN_PROFILE_DAMPING, NOMINAL_DAMPING, MaximumLikelihoodIdentifier
+from ..likelihood.servo_lag import LAG_GRID, refined_minimum
 from ..likelihood.state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll
 from ..preprocess import shift_inputs
 from .effects import MAX_ALIGNMENT, implausible
@@ -58,6 +59,13 @@ or interpolated (half a sample), and a flight controller's sample of computation
 into a likelihood: on effect-free flights of the autopilot bench cell the alignment found was 10-14 ms at
 100 Hz with a statistic of 30-135, against 50-80 ms for the servo delays of the study."""
 
+LAG_SPAN = 2.0
+"""The servo-lag candidate profiles lags up to this many times the axis' delay (plus 10 ms): a lag of ``T``
+alone was found as a delay of about 0.75 ``T`` (a 40 ms lag, 31 ms)."""
+
+LAG_SCAN_NFEV = 6
+"""Likelihood evaluations of each of the servo-lag candidate's profile points (warm-started from the base)."""
+
 NFEV = 12
 """Likelihood searches' evaluation budget per candidate (warm-started from the axis' current fit; each
 Jacobian costs one evaluation per nonlinear parameter more)."""
@@ -82,6 +90,7 @@ class AxisScore:
     kind: str
     params: dict = field(default_factory=dict)
     r2: dict = field(default_factory=dict)
+    lag: float = 0.0
 
 
 def fresh_start(x) -> np.ndarray:
@@ -131,10 +140,10 @@ class FlightScorer:
         """Axis ``a``'s likelihood with the terms ``names`` over ``flights``, its damping searched."""
         return self.ident.axis_problem(a, names, flights, self.burn, free_damping=True)
 
-    def data(self, a, names, alignment, kind):
+    def data(self, a, names, alignment, kind, lag=0.0):
         flight = self.shifted(a, alignment)
         tau = max(alignment, 0.0)
-        return self.problem(a, names, [flight]).data(tau, kind)
+        return self.problem(a, names, [flight]).data(tau, kind, lag)
 
     def shifted(self, a, alignment) -> Flight:
         if alignment >= 0:
@@ -146,27 +155,27 @@ class FlightScorer:
             self._shift_cache[key] = shift_inputs(self.flight, shifts)
         return self._shift_cache[key]
 
-    def score(self, a, names, alignment, x0, kinds, nfev, free_tau=False) -> AxisScore:
-        """The likelihood of a structure and alignment: searched from ``x0`` (``nfev`` evaluations; with
-        ``free_tau`` a positive alignment, the servo delay, is searched too), or at ``x0`` itself with only
-        the linear parameters solved when ``nfev`` is 0."""
+    def score(self, a, names, alignment, x0, kinds, nfev, free_tau=False, lag=0.0) -> AxisScore:
+        """The likelihood of a structure, alignment and servo ``lag``: searched from ``x0`` (``nfev``
+        evaluations; with ``free_tau`` a positive alignment, the servo delay, is searched too), or at ``x0``
+        itself with only the linear parameters solved when ``nfev`` is 0."""
         flight = self.flight if free_tau else self.shifted(a, alignment)
         n = flight.n - self.burn
         if nfev == 0:
-            like = AxisLikelihood(self.data(a, names, alignment, kinds[0]))
+            like = AxisLikelihood(self.data(a, names, alignment, kinds[0], lag))
             e = like.residual(np.asarray(x0))
             cost, x, kind = 0.5 * float(e @ e), np.asarray(x0), kinds[0]
         else:
             start = alignment if free_tau else max(alignment, 0.0)
-            cost, x, kind, tau = self.problem(a, names, [flight]).best(start, x0, kinds, nfev, free_tau)
+            cost, x, kind, tau = self.problem(a, names, [flight]).best(start, x0, kinds, nfev, free_tau, lag)
             if free_tau:
                 alignment = tau
         nll = concentrated_nll(cost, n)
-        return AxisScore(tuple(names), float(alignment), float(nll), np.asarray(x), kind)
+        return AxisScore(tuple(names), float(alignment), float(nll), np.asarray(x), kind, lag=float(lag))
 
     def describe(self, a, score: AxisScore) -> AxisScore:
         """Parameters and R² (one step, 0.5 s ahead, sticks-only simulation) of a score."""
-        data = self.data(a, score.names, score.alignment, score.kind)
+        data = self.data(a, score.names, score.alignment, score.kind, score.lag)
         like = AxisLikelihood(data)
         e, theta, S = like.solve_linear(score.x)
         problem = self.problem(a, score.names, [self.shifted(a, score.alignment)])
@@ -192,7 +201,7 @@ class FlightScorer:
         with np.errstate(all="ignore"):
             score.r2["heldout_0.5s"] = blocked_ahead_r2(
                 self.problem(a, score.names, blocks), max(score.alignment, 0.0), score.x, score.kind, NFEV,
-                int(round(AHEAD_S * self.fs)))
+                int(round(AHEAD_S * self.fs)), score.lag)
 
     def alignment_candidate(self, a, base: AxisScore) -> AxisScore:
         """The best alignment: a scan with the wind and damping held (linear parameters solved), then a
@@ -201,7 +210,7 @@ class FlightScorer:
         held = np.array(base.x, dtype=float)
         if held[0] < MIN_PROFILE_DAMPING:  # as the identifier's profile: an unstable base ranks nothing
             held[0] = NOMINAL_DAMPING
-        scan = [self.score(a, base.names, float(s), held, kinds, 0) for s in ALIGNMENT_GRID
+        scan = [self.score(a, base.names, float(s), held, kinds, 0, lag=base.lag) for s in ALIGNMENT_GRID
                 if abs(s - base.alignment) > 1e-9]
         best = min(scan, key=lambda sc: sc.nll)
         # the scan held the undelayed fit's damping and wind, which a large alignment makes wrong: the
@@ -210,20 +219,51 @@ class FlightScorer:
         # gust model, the best by Akaike as in the identifier: a delay changes which one fits (held at the
         # undelayed choice, a 50 ms yaw delay came out 46 ms, 76 in NLL short, and a quadratic damping
         # made up the difference). The base of each round gets the same choice.
-        tries = [self.score(a, base.names, best.alignment, start, WIND_MODELS, 3 * NFEV, free_tau=True)
+        tries = [self.score(a, base.names, best.alignment, start, WIND_MODELS, 3 * NFEV, True, base.lag)
                  for start in (base.x, fresh_start(base.x))]
         return min(tries, key=lambda sc: sc.nll)
 
-    def implausible(self, a, base: AxisScore, sc: AxisScore) -> str | None:
-        """Why a candidate's fitted added terms cannot be physical
+    def lag_candidate(self, a, base: AxisScore) -> AxisScore:
+        """The best servo lag behind the axis' servo delay (the candidate is the base itself where no delay was
+        found: at low frequency a lag of ``T`` is a delay of about ``T``, so a lag shows first as a delay, and an
+        input column that lags the log has no servo). The lags of
+        :data:`~identification.likelihood.servo_lag.LAG_GRID` up to :data:`LAG_SPAN` times the delay are
+        profiled by short searches (:data:`LAG_SCAN_NFEV` evaluations, the delay searched with the lag from the
+        delay found, as :func:`~identification.likelihood.servo_lag.profile_lag` does: a scan with the damping
+        held ranked a 40 ms lag below 15 ms, and a delay started at 0 stuck there), the best refined between its
+        neighbours and searched with every gust model from the base fit and from a fresh start."""
+        delay = base.alignment
+        if delay <= 0.0:
+            return base
+        grid = [lag for lag in LAG_GRID if lag <= LAG_SPAN * delay + 0.01] or [LAG_GRID[0]]
+        scan = [(0.0, base.nll)] + [
+            (lag, self.score(a, base.names, delay, base.x, (base.kind,), LAG_SCAN_NFEV, True, lag).nll)
+            for lag in grid]
+        lag = refined_minimum(scan)
+        if lag <= 0.0:
+            return base
+        tries = [self.score(a, base.names, delay, x0, WIND_MODELS, 3 * NFEV, True, lag)
+                 for x0 in (base.x, fresh_start(base.x))]
+        return min(tries, key=lambda sc: sc.nll)
+
+    def below_resolution(self, base: AxisScore, sc: AxisScore) -> bool:
+        """Whether ``sc`` moves the timing of ``base`` by less than :data:`RESOLUTION_SAMPLES`."""
+        return abs(sc.alignment - base.alignment) < RESOLUTION_SAMPLES / self.fs
+
+    def implausible(self, a, base: AxisScore, sc: AxisScore, servo_lag: bool = False,
+                    behind: AxisScore | None = None, min_lr: float = 0.0) -> str | None:
+        """Why a candidate's fitted added terms (its lag with ``servo_lag``, tried ``behind`` a delay below the
+        timing resolution with ``min_lr`` the floor of its statistic over that delay) cannot be physical
         (:func:`identification.diagnosis.effects.implausible`)."""
+        if servo_lag:
+            return self._lag_implausible(base, sc, behind, min_lr)
         added = [p for p in sc.names if p not in base.names]
         if not added:  # the alignment candidate: a value pinned at the edge of the search was not found
             edge = MAX_DELAY if sc.alignment > 0 else -MAX_SHIFT
             if abs(sc.alignment - edge) < EDGE_S:
                 return (f"alignment {sc.alignment:+.3f} s at the edge of the searched range "
                         f"[{-MAX_SHIFT:g}, {MAX_DELAY:g}] s: no delay or input shift within it explains the data")
-            if abs(sc.alignment - base.alignment) < RESOLUTION_SAMPLES / self.fs:
+            if self.below_resolution(base, sc):
                 return (f"alignment {sc.alignment:+.4f} s moves the timing by less than {RESOLUTION_SAMPLES} samples "
                         f"({1e3 * RESOLUTION_SAMPLES / self.fs:.0f} ms), below a log's timing resolution (a stick "
                         "stamped at the start or the end of its sample, held or interpolated, a flight controller's "
@@ -234,6 +274,26 @@ class FlightScorer:
         values = {nm: float(v) for nm, v in zip(data.names, theta)}
         return implausible({nm: v for nm, v in values.items() if nm in added}) or \
             self._scheduled_gain_implausible(values, added)
+
+    def _lag_implausible(self, base: AxisScore, sc: AxisScore, behind: AxisScore | None,
+                         min_lr: float) -> str | None:
+        """Why a servo-lag candidate was not found: none beyond the base's, a lag at the top of the grid, a fit
+        that moved the input earlier, or, ``behind`` a delay shorter than the timing resolution, a lag that adds
+        less than ``min_lr`` to it (that delay is then the log's convention, :data:`RESOLUTION_SAMPLES`, which a
+        lag must not dress up; a lag is not such a convention, so a supported one stands behind it)."""
+        if sc.lag <= base.lag:
+            return "no servo lag improves the fit"
+        over = 2.0 * (behind.nll - sc.nll) if behind is not None else np.inf
+        if over < min_lr:
+            return (f"it adds LR {over:.1f} (needs {min_lr:g}) to the {1e3 * behind.alignment:.1f} ms delay below the "
+                    "log's timing resolution it stands behind: that timing is the log's convention, not a servo")
+        if sc.alignment < 0.0:
+            return (f"its fit moved the input {-sc.alignment:.3f} s earlier, where the log's input column lags: no "
+                    "servo is left to lag")
+        if sc.lag >= LAG_GRID[-1] - 1e-9:
+            return (f"servo lag {sc.lag:.3f} s at the top of the searched range (up to {LAG_GRID[-1]:g} s): no "
+                    "first-order servo within it explains the data")
+        return None
 
     def _scheduled_gain_implausible(self, values: dict, added) -> str | None:
         """Why a fitted gain scheduling cannot be physical: the control gain it gives changes sign, or by more

@@ -2,7 +2,9 @@
 
 An *effect* is a named family of model terms from :mod:`heli_core.terms`
 (every term carries an ``effect`` tag), or, for ``servo_delay``, the alignment
-in time between the command and the response. The catalogue only *describes*:
+in time between the command and the response, or, for ``servo_lag``, the servo's
+first-order lag (eq. 31 with the lag added to ``d1``; only the likelihood
+diagnosis fits it, behind a servo delay found). The catalogue only *describes*:
 it says which terms (or which delay) a candidate adds on an axis; the fitter
 (:class:`identification.integral.method.IntegralIdentifier`) receives them as
 ordinary ``structure`` / ``delay`` arguments and knows nothing of effects. So
@@ -33,11 +35,15 @@ NONE = "none"
 UNDECIDED = "undecided"
 """The verdict when the flight is too short or too poorly excited to decide."""
 SERVO_DELAY = "servo_delay"
+SERVO_LAG = "servo_lag"
 
 DESCRIPTIONS: dict[str, str] = {
     SERVO_DELAY: "transport delay between command and response: the servo response time, first-order Padé "
                  "approximation of eq. (31) (Section 2.5.1); a negative value is a log whose input column lags "
                  "the response (time misalignment), corrected by advancing the input",
+    SERVO_LAG: "the servo lags its command by a first-order time constant (eq. 31 with the lag added to d1, "
+               "Section 2.5.1): at low frequency a delay of the same length, above 1/(2 pi T) a loss of gain "
+               "a transport delay does not have",
     "cross_coupling": "another axis' rate drives this one: the flybar term C3 of eq. (13), k4·q in roll "
                       "(eq. 18-19) and -k8·p in pitch (eq. 21-22)",
     "gyroscopic": "rigid-body gyroscopic coupling, the product of the other two rates times an inertia ratio "
@@ -112,7 +118,7 @@ class Effect:
         One line of physics (:data:`DESCRIPTIONS`).
     terms : tuple of str
         The terms of :data:`heli_core.terms.TERMS` tagged with this
-        effect, on every axis (empty for ``servo_delay``).
+        effect, on every axis (empty for ``servo_delay`` and ``servo_lag``).
     """
 
     name: str
@@ -124,13 +130,19 @@ class Effect:
         """True for ``servo_delay``: the candidate is a time alignment, not a term."""
         return self.name == SERVO_DELAY
 
+    @property
+    def is_servo_lag(self) -> bool:
+        """True for ``servo_lag``: the candidate is the servo's first-order lag, not a term (the likelihood
+        diagnosis fits it; the held-out one has no servo filter)."""
+        return self.name == SERVO_LAG
+
     def terms_on(self, axis: int) -> tuple:
         """The effect's terms acting on ``axis`` (0 roll, 1 pitch, 2 yaw)."""
         return tuple(p for p in self.terms if TERMS[p].axis == axis)
 
     def acts_on(self, axis: int) -> bool:
         """Whether the effect can be added on ``axis``."""
-        return self.is_alignment or bool(self.terms_on(axis))
+        return self.is_alignment or self.is_servo_lag or bool(self.terms_on(axis))
 
 
 def _catalogue() -> dict[str, Effect]:
@@ -158,5 +170,7 @@ def describe(name: str, axis: int | None = None) -> str:
     eff = CATALOGUE[name]
     if eff.is_alignment:
         return f"{name} ({AXES[axis]} command/response alignment)" if axis is not None else name
+    if eff.is_servo_lag:
+        return f"{name} (lag_{AXES[axis]})" if axis is not None else name
     terms = eff.terms_on(axis) if axis is not None else eff.terms
     return f"{name} ({', '.join(terms)})"

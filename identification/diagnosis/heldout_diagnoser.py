@@ -184,7 +184,8 @@ class Diagnoser(DiagnosisResult):
     max_rounds : int
         Rounds of add-and-rescore.
     effects : sequence of str, optional
-        Catalogue effects to consider (default: all of :data:`identification.diagnosis.effects.CATALOGUE`).
+        Catalogue effects to consider (default: all of :data:`identification.diagnosis.effects.CATALOGUE` but
+        ``servo_lag``, which the integral method cannot fit: it has no servo filter).
     prefilter : bool
         Zero-phase FIR low-pass of Section 3.1 before everything.
     min_duration, min_windows, min_r2 : float, int, float
@@ -248,10 +249,15 @@ class Diagnoser(DiagnosisResult):
         for name, ok in checks.items():
             if not ok:
                 raise ValueError(f"Diagnoser.{name} out of range: {getattr(self, name)!r}")
-        names = list(CATALOGUE) if self.effects is None else list(self.effects)
+        fittable = [n for n, e in CATALOGUE.items() if not e.is_servo_lag]
+        names = fittable if self.effects is None else list(self.effects)
         unknown = [n for n in names if n not in CATALOGUE]
         if unknown:
             raise ValueError(f"unknown effect(s) {unknown}; the catalogue holds {', '.join(CATALOGUE)}")
+        lagged = [n for n in names if CATALOGUE[n].is_servo_lag]
+        if lagged:
+            raise ValueError(f"the held-out diagnosis cannot test {lagged[0]!r}: the integral method has no servo "
+                             "filter; the likelihood diagnosis (LikelihoodDiagnoser, heli diagnose's default) tests it")
         return names
 
     # ------------------------------------------------------------ candidates

@@ -8,12 +8,14 @@ candidate of the catalogue (:mod:`identification.diagnosis.effects`) on that axi
 added (cross-coupling k4·q, gyroscopic k1·q·r, collective torque, quadratic damping
 p|p|, gain scheduling u·δo) or, for ``servo_delay``, the command/response alignment
 profiled from ``-MAX_ALIGNMENT`` to +0.5 s (a positive value is the Padé servo delay
-of eq. 31, a negative one a log whose input column lags the response). Each candidate
+of eq. 31, a negative one a log whose input column lags the response), and, behind a servo
+delay found, ``servo_lag``, the servo's first-order lag (eq. 31 with the lag in ``d1``; a lag
+shows first as a delay, which the lag then shortens). Each candidate
 is scored by the likelihood-ratio statistic ``LR = 2 (NLL_base - NLL_candidate)``
 and accepted when ``LR`` exceeds the chi-square quantile of its number of added
 parameters at ``1 - alpha/m`` (Bonferroni over the ``m`` candidates tried on the axis)
 **and** when ``LR`` per added parameter is at least ``min_lr_per_parameter`` (terms) or
-``min_lr_alignment`` (the alignment, where the model is misspecified in small timing
+``min_lr_alignment`` (the alignment and the servo lag, where the model is misspecified in small timing
 ways the chi-square law does not know; both floors calibrated on flights without a
 missing effect), **and** when the fitted terms are physical (:data:`identification.diagnosis.effects.PHYSICAL_BOUNDS`:
 an inertia ratio within [-1, 1], a positive quadratic damping; an alignment not pinned
@@ -48,12 +50,12 @@ from ..excitation import on_static_input, static_collective
 from ..flight import Flight
 from ..likelihood.axis_pool import check_workers, in_worker, map_axes
 from ..likelihood.axis_search import BURN_IN
-from ..likelihood.estimator import MaximumLikelihoodIdentifier
+from ..likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
 from ..likelihood.input_hold import check_hold
 from ..likelihood.state_space import WIND_MODELS
 from ..preprocess import shift_inputs
 from .axis_scores import NFEV, AxisScore, FlightScorer, fresh_start, predicts_worse
-from .effects import CATALOGUE, NONE, SERVO_DELAY, UNDECIDED, DiagnosisResult
+from .effects import CATALOGUE, NONE, SERVO_DELAY, SERVO_LAG, UNDECIDED, DiagnosisResult
 
 ALPHA = 0.01
 """Family-wise level of the likelihood-ratio test per axis and round (Bonferroni over the candidates)."""
@@ -116,16 +118,16 @@ def closed_loop_share(flight: Flight, axis: int, lags=(0.1, 0.2, 0.3, 0.5)) -> f
     return float(1.0 - np.var(resid) / var) if var > 0 else 0.0
 
 
-def _starting_structure(model: ModelParams | None) -> tuple[dict, list]:
+def _starting_structure(model: ModelParams | None) -> tuple[dict, list, list]:
     """Per axis the terms the diagnosis starts from (the paper's decoupled model, or ``model``'s nonzero
-    terms), and the alignments (``model``'s servo delays)."""
+    terms), the alignments (``model``'s servo delays) and the servo lags (``model``'s)."""
     structure = {a: tuple(DECOUPLED[a]) for a in range(3)}
     if model is None:
-        return structure, [0.0, 0.0, 0.0]
+        return structure, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
     values = model.values()
     for a in range(3):
         structure[a] = tuple(p for p, v in values.items() if TERMS[p].axis == a and (v != 0.0 or p in DECOUPLED[a]))
-    return structure, list(model.taus)
+    return structure, list(model.taus), list(model.lags)
 
 
 class LikelihoodDiagnoser(DiagnosisResult):
@@ -240,7 +242,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
         self.flight_ = cleaned
         fs = flight.sample_rate
         self._scores = FlightScorer(ident, cleaned, int(round(BURN_IN * fs)), fs)
-        structure, alignment = _starting_structure(model)
+        structure, alignment, lags = _starting_structure(model)
         collective = static_collective(cleaned)
         self._static = collective is not None
         self.untestable_ = {}
@@ -256,13 +258,13 @@ class LikelihoodDiagnoser(DiagnosisResult):
             self.evidence_ = {"reason": f"flight of {flight.duration:.1f} s is shorter than {self.min_duration:g} s"}
             self.baseline_ = self.final_ = {}
             self.params_ = model or ModelParams()
-            self.alignment_ = tuple(alignment)
+            self.alignment_, self.lags_ = tuple(alignment), tuple(lags)
             return
         if self.input_hold == "auto":
             self._say("deciding how the sticks move between samples, every candidate term in")
-            self._decide_hold(cleaned, structure, alignment)
+            self._decide_hold(cleaned, structure, alignment, lags)
         self._say(f"fitting the starting structure on {', '.join(self.axes)}")
-        current = self._baseline(cleaned, structure, alignment)
+        current = self._baseline(cleaned, structure, alignment, lags)
         self.baseline_ = dict(current)
         todo = list(self.axes)
         for rnd in range(1, self.max_rounds + 1):
@@ -273,42 +275,55 @@ class LikelihoodDiagnoser(DiagnosisResult):
                 break
         self.final_ = current
         self.alignment_ = tuple(current[a].alignment if a in current else alignment[i] for i, a in enumerate(AXES))
+        self.lags_ = tuple(current[a].lag if a in current else lags[i] for i, a in enumerate(AXES))
         self._say("fitting the final structure")
         self._final_fit(cleaned, current)
         self.verdict_ = "found" if self.steps_ else NONE
 
-    def _fit_structure(self, cleaned: Flight, structure: dict, alignment, axes, hold) -> MaximumLikelihoodIdentifier:
+    def _fit_structure(self, cleaned: Flight, structure: dict, alignment, lags, axes,
+                       hold) -> MaximumLikelihoodIdentifier:
         """``structure`` fitted in full by maximum likelihood on the cleaned flight at ``alignment`` (positive:
-        servo delays; negative: the sticks advanced), the input's ``hold`` as given."""
+        servo delays; negative: the sticks advanced) and servo ``lags``, the input's ``hold`` as given."""
         est = MaximumLikelihoodIdentifier(structure=structure, delay=[max(v, 0.0) for v in alignment], axes=axes,
                                           input_hold=hold, remove_vibration=False,  # cleaned already
-                                          workers=self.workers)
+                                          servo_lag=list(lags), workers=self.workers)
         shifts = [min(v, 0.0) for v in alignment]
         est._fit([shift_inputs(cleaned, shifts) if min(shifts) < 0 else cleaned])
         return est
 
-    def _decide_hold(self, cleaned: Flight, structure: dict, alignment: list) -> None:
+    def _decide_hold(self, cleaned: Flight, structure: dict, alignment: list, lags: list) -> None:
         """The log's hold decided once (:func:`identification.likelihood.input_hold.decide_hold`) on the structure with
         every testable candidate term added, then held for the base and every candidate alike. Estimated on
         the base alone, a missing effect moved it (a hidden quadratic damping drew a pilot's interpolated
         sticks to fractions 0.33-0.45, and its pitch statistic below the floor); with the effect's terms in,
-        nothing is missing for it to stand in for."""
+        nothing is missing for it to stand in for. The timing likewise: a servo's delay or lag left out drew the
+        hold to the held stick (half a sample later), on a 40 ms lag flight to 0 where the sticks were
+        interpolated, and a quadratic damping or gain scheduling then took up what the lag and hold left; so
+        where the starting model has no servo timing, the log's is detected as ``heli identify`` does
+        (:data:`~identification.likelihood.estimator.CLI_TIMING`; only the hold is kept: the timing is the
+        candidates' to name; the delay detected without its lag left the hold at 0 on that flight)."""
         full = {a: tuple(dict.fromkeys(structure[a] + tuple(
                     p for name, effect in CATALOGUE.items() if name not in self.untestable_
                     for p in effect.terms_on(a)))) for a in range(3)}
-        est = self._fit_structure(cleaned, full, alignment, self.axes, "auto")
+        if any(alignment) or any(lags):
+            est = self._fit_structure(cleaned, full, alignment, lags, self.axes, "auto")
+        else:
+            est = MaximumLikelihoodIdentifier(structure=full, axes=self.axes, input_hold="auto",
+                                              remove_vibration=False, workers=self.workers, **CLI_TIMING)
+            est._fit([cleaned])
         self.input_hold_ = float(est.hold_decision_["fraction"])
         self.hold_decision_ = est.hold_decision_
         self._scores.ident = MaximumLikelihoodIdentifier(input_hold=self.input_hold_, workers=self.workers)
 
-    def _baseline(self, cleaned: Flight, structure: dict, alignment: list) -> dict:
+    def _baseline(self, cleaned: Flight, structure: dict, alignment: list, lags: list) -> dict:
         """Each diagnosed axis' starting structure fitted in full, scored by the candidates' likelihood."""
-        start = self._fit_structure(cleaned, structure, alignment, self.axes, self.input_hold_)
+        start = self._fit_structure(cleaned, structure, alignment, lags, self.axes, self.input_hold_)
         current = {}
         for axis in self.axes:
             a = AXES.index(axis)
             fit = start.axes_[axis]  # the same likelihood as the candidates': evaluated here, on the same data
-            current[axis] = self._scores.score(a, structure[a], alignment[a], fit.state, (fit.wind["model"],), 0)
+            current[axis] = self._scores.score(a, structure[a], alignment[a], fit.state, (fit.wind["model"],), 0,
+                                               lag=lags[a])
         return current
 
     def _round(self, rnd: int, todo: list, current: dict, rows: list) -> list:
@@ -351,21 +366,24 @@ class LikelihoodDiagnoser(DiagnosisResult):
         # a servo delay found earlier is searched again with the rest (and with every candidate)
         # and from the fresh start the alignment candidate also gets (else that start alone could
         # win it a likelihood ratio), with every gust model (switching models alone cannot win LR)
-        free_tau = (SERVO_DELAY, axis) in self.effects_found_
+        free_tau = any((e, axis) in self.effects_found_ for e in (SERVO_DELAY, SERVO_LAG))
         self._say(f"round {rnd}, {axis}: refitting the base")
-        tries = [base] + [self._scores.score(a, base.names, base.alignment, start, WIND_MODELS, 3 * NFEV, free_tau)
-                          for start in (base.x, fresh_start(base.x))]
+        tries = [base] + [self._scores.score(a, base.names, base.alignment, start, WIND_MODELS, 3 * NFEV, free_tau,
+                                             base.lag) for start in (base.x, fresh_start(base.x))]
         base = current[axis] = self._scores.describe(a, min(tries, key=lambda sc: sc.nll))
         cands = self._candidates(a, axis, base, free_tau, rnd)
         m = max(len(cands), 1)
         scored = []
+        delay = next((sc for name, _, sc, _ in cands if name == SERVO_DELAY), None)
         for name, k, sc, lr in cands:
-            thr = self.threshold(m, k, alignment=CATALOGUE[name].is_alignment)
-            why = self._scores.implausible(a, base, sc)
+            lagged = CATALOGUE[name].is_servo_lag
+            thr = self.threshold(m, k, alignment=CATALOGUE[name].is_alignment or lagged)
+            behind = delay if lagged and base.alignment <= 0.0 else None  # a lag behind a sub-resolution delay
+            why = self._scores.implausible(a, base, sc, lagged, behind, self.min_lr_alignment)
             if why is None:  # an unphysical fit is reported, never accepted nor runner-up
                 scored.append((lr / thr, name, k, sc, lr, thr))
             rows.append({"round": rnd, "axis": axis, "effect": name, "lr": float(lr), "threshold": thr,
-                         "n_parameters": k, "alignment_s": sc.alignment,
+                         "n_parameters": k, "alignment_s": sc.alignment, "lag_s": sc.lag,
                          "accepted": bool(lr > thr and why is None), "implausible": why})
         scored.sort(key=lambda r: -r[0])
         after = None
@@ -393,6 +411,8 @@ class LikelihoodDiagnoser(DiagnosisResult):
         added = {p: v for p, v in after.params.items() if p not in base.names}
         if name == SERVO_DELAY:
             added = {"alignment_s": after.alignment}
+        elif name == SERVO_LAG:
+            added = {"lag_s": after.lag, "alignment_s": after.alignment}
         self.steps_.append(LikelihoodStep(rnd, axis, name, added, float(lr), thr, runner[1] if runner else None,
                                           float(runner[4]) if runner else None, dict(base.r2), dict(after.r2)))
         self.effects_found_.append((name, axis))
@@ -401,20 +421,31 @@ class LikelihoodDiagnoser(DiagnosisResult):
 
     def _candidates(self, a: int, axis: str, base: AxisScore, free_tau: bool, rnd: int = 0) -> list:
         """``(effect, added parameters, score, LR)`` of every catalogue candidate on an axis."""
-        cands = []
+        cands, delay = [], None
         for name, effect in CATALOGUE.items():
-            if effect.is_alignment:
+            if effect.is_alignment or effect.is_servo_lag:
                 if (name, axis) in self.effects_found_:
                     continue  # found in an earlier round: refined in the final fit, not added twice
+                start = base
+                if effect.is_servo_lag and base.alignment <= 0.0:
+                    # a lag shows first as a delay: tried behind this round's delay where that one is positive
+                    # but shorter than the timing resolution (a 30 ms lag on a fast yaw, sticks held: 15 ms)
+                    ok = delay is not None and delay.alignment > 0.0 and self._scores.below_resolution(base, delay)
+                    if not ok:
+                        continue
+                    start = delay
                 self._say(f"round {rnd}, {axis}: trying {name}")
-                sc = self._scores.alignment_candidate(a, base)
-                k = 1
+                sc = (self._scores.alignment_candidate(a, base) if effect.is_alignment
+                      else self._scores.lag_candidate(a, start))
+                delay = sc if effect.is_alignment else delay
+                k = 1 if start is base else 2  # behind a delay not yet added: the delay and the lag
             else:
                 add = tuple(p for p in effect.terms_on(a) if p not in base.names)
                 if not add or name in self.untestable_:
                     continue
                 self._say(f"round {rnd}, {axis}: trying {name}")
-                sc = self._scores.score(a, base.names + add, base.alignment, base.x, (base.kind,), NFEV, free_tau)
+                sc = self._scores.score(a, base.names + add, base.alignment, base.x, (base.kind,), NFEV, free_tau,
+                                        base.lag)
                 k = len(add)
             cands.append((name, k, sc, 2.0 * (base.nll - sc.nll)))
         return cands
@@ -423,7 +454,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
         """The final structure fitted in full (every search to convergence) on the aligned flight; a delay
         found stays as found (searching it again would change the structure's meaning)."""
         final = self._fit_structure(cleaned, {AXES.index(a): sc.names for a, sc in current.items()},
-                                    self.alignment_, tuple(current), self.input_hold_)
+                                    self.alignment_, self.lags_, tuple(current), self.input_hold_)
         self.identifier_ = final
         self.params_ = final.params_
         self.hold_fractions_ = {axis: fit.input_hold for axis, fit in final.axes_.items()}
@@ -444,6 +475,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
             "hold_decision": self.hold_decision_,
             "untestable": getattr(self, "untestable_", {}),
             "alignment_s": dict(zip(AXES, self.alignment_)),
+            "servo_lag_s": dict(zip(AXES, self.lags_)),
             "r2_before": {a: s.r2 for a, s in self.baseline_.items()},
             "r2_after": {a: s.r2 for a, s in self.final_.items()},
             "evidence": self.evidence_,

@@ -74,27 +74,27 @@ def _ahead_sums(like: AxisLikelihood, x, theta, horizon: int) -> tuple[float, fl
     return num, den
 
 
-def blocked_ahead_r2(problem, tau: float, x0, kind: str, nfev: int, horizon: int) -> float:
+def blocked_ahead_r2(problem, tau: float, x0, kind: str, nfev: int, horizon: int, lag: float = 0.0) -> float:
     """The ``horizon``-ahead prediction R² of one axis' structure on data the fit did not see: each of the
     flights of ``problem`` (an :class:`~identification.likelihood.axis_search.AxisProblem` over contiguous
     blocks of one flight, sticks already aligned) predicted by the structure fitted on the others, the errors
     pooled over the blocks; NaN when a prediction diverged.
 
     Each fit is searched from ``x0`` (the structure's fit on the whole flight) with ``nfev`` evaluations, the
-    wind model ``kind``, servo delay ``tau`` and the problem's input hold held; the held-out block's offset
-    is the mean of the fitted blocks' (it was not fitted on it), as in :func:`heldout_ahead_r2`.
+    wind model ``kind``, servo delay ``tau``, servo lag ``lag`` and the problem's input hold held; the held-out
+    block's offset is the mean of the fitted blocks' (it was not fitted on it), as in :func:`heldout_ahead_r2`.
     """
     blocks = list(problem.flights)
     num = den = 0.0
     for i, block in enumerate(blocks):
         train = problem.on([b for j, b in enumerate(blocks) if j != i])
-        _, x, kind_i, _ = train.best(tau, x0, (kind,), nfev)
-        data = train.data(tau, kind_i)
+        _, x, kind_i, _ = train.best(tau, x0, (kind,), nfev, lag=lag)
+        data = train.data(tau, kind_i, lag)
         like = AxisLikelihood(data)
         _, theta, _ = like.solve_linear(x)
         fitted = dict(zip(data.names, theta))
         offsets = [v for n, v in fitted.items() if "@" in n]
-        held = problem.on([block]).data(tau, kind_i)
+        held = problem.on([block]).data(tau, kind_i, lag)
         theta_held = np.array([np.mean(offsets) if "@" in n else fitted[n] for n in held.names])
         b_num, b_den = _ahead_sums(AxisLikelihood(held), x, theta_held, horizon)
         num, den = num + b_num, den + b_den

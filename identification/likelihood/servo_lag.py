@@ -36,8 +36,9 @@ def threshold() -> float:
     return max(float(stats.chi2.ppf(1.0 - ALPHA, 1)), MIN_LR_LAG)
 
 
-def _refined(profile: list) -> float:
-    """The lag at the vertex of the parabola through the best grid point and its neighbours."""
+def refined_minimum(profile: list) -> float:
+    """The lag at the vertex of the parabola through the best point of ``profile`` ((lag, nll) in increasing
+    lag) and its neighbours."""
     lags = [p[0] for p in profile]
     i = int(np.argmin([p[1] for p in profile]))
     if i in (0, len(profile) - 1):
@@ -71,7 +72,7 @@ def profile_lag(problem, base: WindFit, models, free_tau: bool) -> tuple:
     for lag in LAG_GRID:
         cost, _, _, _ = problem.best(tau0, x0, (kind0,), NFEV, free_tau, lag)
         profile.append((float(lag), concentrated_nll(cost, n)))
-    best = _refined(profile)
+    best = refined_minimum(profile)
     if best <= 0.0:
         return 0.0, base, tuple(profile), 0.0
     fit = problem.best(tau0, x0, models, None, free_tau, best)

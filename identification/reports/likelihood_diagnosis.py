@@ -50,8 +50,8 @@ def criterion_text(d: LikelihoodDiagnoser) -> str:
         "white gyro noise), then with each candidate effect added. A candidate is accepted when the "
         "likelihood-ratio statistic LR = 2 (NLL before - NLL after) exceeds both the chi-square quantile of its k "
         f"added parameters at 1 - {d.alpha:g}/m (m candidates on the axis, Bonferroni) and "
-        f"{d.min_lr_per_parameter:g}·k ({d.min_lr_alignment:g} for the alignment; floors calibrated on flights "
-        "without a missing effect). The best "
+        f"{d.min_lr_per_parameter:g}·k ({d.min_lr_alignment:g} for the alignment and the servo lag, which is "
+        "tried behind a servo delay found; floors calibrated on flights without a missing effect). The best "
         "accepted candidate per axis (largest LR over its threshold) is added and the search repeats on the axes "
         f"that changed (at most {d.max_rounds} rounds). A candidate whose fitted terms break a physical bound "
         "(an inertia ratio outside [-1, 1], a negative quadratic damping) is not accepted, whatever its LR: it fits "
@@ -146,14 +146,24 @@ def diagnosis_markdown(d: LikelihoodDiagnoser, figure: Path | None, verdict: Mod
                        for s in d.steps_]), ""]
     for i, rows in enumerate(d.rounds_, start=1):
         md += [f"## Candidates, round {i}", "",
-               _table(["Axis", "Effect", "k", "LR", "threshold", "alignment (s)", "accepted"],
+               _table(["Axis", "Effect", "k", "LR", "threshold", "timing (s)", "accepted"],
                       [[r["axis"], r["effect"], r["n_parameters"], f"{r['lr']:.1f}", f"{r['threshold']:.1f}",
-                        f"{r['alignment_s']:+.3f}" if r["effect"] == "servo_delay" else "—",
+                        _timing(r),
                         "**yes**" if r["accepted"] else ("no: " + r["implausible"] if r.get("implausible") else "no")]
                        for r in rows]), ""]
     if figure is not None:
         md += [f"![Likelihood-ratio statistics]({figure.name})", ""]
     return "\n".join(md)
+
+
+def _timing(row: dict) -> str:
+    """A candidate row's timing: the alignment of ``servo_delay``, the lag (and the delay beside it) of
+    ``servo_lag``, nothing for a term."""
+    if row["effect"] == "servo_delay":
+        return f"{row['alignment_s']:+.3f}"
+    if row["effect"] == "servo_lag":
+        return f"lag {row.get('lag_s', 0.0):.3f}, delay {row['alignment_s']:+.3f}"
+    return "—"
 
 
 def plot_statistics(d: LikelihoodDiagnoser, path) -> Path | None:
