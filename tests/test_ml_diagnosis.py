@@ -68,8 +68,9 @@ def test_a_servo_lag_is_named_behind_the_delay_it_first_shows_as():
 
 @pytest.mark.slow
 def test_a_lag_whose_delay_is_below_the_timing_resolution_is_named_as_the_lag():
-    # a fast tail (a 450-class helicopter's yaw) behind a 30 ms servo, sticks held: as a delay alone it is 15 ms,
-    # below two samples (the log's convention), and gain scheduling took its place; the lag behind it is named
+    # a fast tail (a 450-class helicopter's yaw) behind a 30 ms servo, sticks held (and said so): as a delay alone
+    # it is 15 ms, below two samples (the log's convention), and gain scheduling took its place; the lag behind it
+    # is named
     from dataclasses import replace
 
     from heli_core.params import ModelParams
@@ -77,7 +78,7 @@ def test_a_lag_whose_delay_is_below_the_timing_resolution_is_named_as_the_lag():
 
     truth = ModelParams(k2=4.0, k3=6.0, k6=-2.7, k7=6.5, k10=35.0, k11=7.0, k12=-1.0, kd3=0.20, lag_yaw=0.03)
     sf = simulate_flight(300, seed=0, config=replace(BENCH_CELLS["held-sticks-pd"], duration=300.0), truth=truth)
-    d = LikelihoodDiagnoser(axes=("yaw",)).fit(sf.flight)
+    d = LikelihoodDiagnoser(axes=("yaw",), input_hold="zoh").fit(sf.flight)
     assert d.effects_found_ == [("servo_lag", "yaw")], d.effects_found_
     step = d.steps_[0]
     assert step.threshold == 40.0 and 0.015 < step.parameters["lag_s"] < 0.045  # the delay and the lag: k = 2

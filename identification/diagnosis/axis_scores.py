@@ -19,10 +19,10 @@ from heli_core.terms import TERMS
 from ..flight import Flight
 from ..likelihood.ahead_prediction import ahead_r2, blocked_ahead_r2
 from ..likelihood.ahead_score import AHEAD_S
-from ..likelihood.axis_likelihood import AxisLikelihood
+from ..likelihood.axis_likelihood import MIN_SERVO_DELAY, AxisLikelihood
 from ..likelihood.axis_search import MAX_DELAY, MAX_SHIFT, AxisProblem
 from ..likelihood.estimator import MIN_PROFILE_DAMPING, NOMINAL_DAMPING, MaximumLikelihoodIdentifier
-from ..likelihood.servo_lag import LAG_GRID, refined_minimum
+from ..likelihood.servo_lag import LAG_GRID, bracketed_minimum
 from ..likelihood.state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll
 from ..preprocess import shift_inputs
 from .effects import MAX_ALIGNMENT, implausible
@@ -168,8 +168,8 @@ class FlightScorer:
         else:
             start = alignment if free_tau else max(alignment, 0.0)
             cost, x, kind, tau = self.problem(a, names, [flight]).best(start, x0, kinds, nfev, free_tau, lag)
-            if free_tau:
-                alignment = tau
+            if free_tau:  # within the band where no delay is modelled (0.1 ms) the alignment is none: not a
+                alignment = 0.0 if abs(tau) <= MIN_SERVO_DELAY else tau  # shift of the log's input, nor a delay
         nll = concentrated_nll(cost, n)
         return AxisScore(tuple(names), float(alignment), float(nll), np.asarray(x), kind, lag=float(lag))
 
@@ -231,15 +231,16 @@ class FlightScorer:
         profiled by short searches (:data:`LAG_SCAN_NFEV` evaluations, the delay searched with the lag from the
         delay found, as :func:`~identification.likelihood.servo_lag.profile_lag` does: a scan with the damping
         held ranked a 40 ms lag below 15 ms, and a delay started at 0 stuck there), the best refined between its
-        neighbours and searched with every gust model from the base fit and from a fresh start."""
+        neighbours (:func:`~identification.likelihood.servo_lag.bracketed_minimum`) and searched with every gust
+        model from the base fit and from a fresh start."""
         delay = base.alignment
         if delay <= 0.0:
             return base
         grid = [lag for lag in LAG_GRID if lag <= LAG_SPAN * delay + 0.01] or [LAG_GRID[0]]
-        scan = [(0.0, base.nll)] + [
-            (lag, self.score(a, base.names, delay, base.x, (base.kind,), LAG_SCAN_NFEV, True, lag).nll)
-            for lag in grid]
-        lag = refined_minimum(scan)
+        def nll(lag):
+            return self.score(a, base.names, delay, base.x, (base.kind,), LAG_SCAN_NFEV, True, float(lag)).nll
+
+        lag, _ = bracketed_minimum(nll, [(0.0, base.nll)] + [(lag, nll(lag)) for lag in grid])
         if lag <= 0.0:
             return base
         tries = [self.score(a, base.names, delay, x0, WIND_MODELS, 3 * NFEV, True, lag)

@@ -7,7 +7,7 @@ the delay alone explains the timing; what only a lag explains is the gain it tak
 ``1/(2 pi T)``, which sweeps up to 2-3 Hz reach for servos of 30 ms and more.
 
 :func:`profile_lag` fits the axis at every lag of :data:`LAG_GRID` (the delay searched with it when
-the identifier profiles the delay, else held), refines the best by a parabola through its neighbours,
+the identifier profiles the delay, else held), refines the best by a bounded search between its neighbours,
 fits there with every gust model, and keeps the lag when the likelihood-ratio statistic against no lag
 exceeds ``max(chi2_1(1 - ALPHA), MIN_LR_LAG)`` and the lag is not at the top of the grid. It is how
 :class:`~identification.likelihood.estimator.MaximumLikelihoodIdentifier` runs ``servo_lag="auto"``.
@@ -16,7 +16,7 @@ exceeds ``max(chi2_1(1 - ALPHA), MIN_LR_LAG)`` and the lag is not at the top of 
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
+from scipy import optimize, stats
 
 from .axis_search import WindFit
 from .state_space import concentrated_nll
@@ -29,6 +29,10 @@ MIN_LR_LAG = 10.0
 """Smallest likelihood-ratio statistic of a lag kept (calibrated on flights whose servo has none)."""
 NFEV = 30
 """Likelihood evaluations per grid point (each warm-started from the fit without a lag)."""
+REFINE_XATOL = 0.001
+"""The lag's refinement between the best grid point's neighbours stops within this [s]."""
+REFINE_ITER = 8
+"""At most this many fits of the refinement (each as a grid point's)."""
 
 
 def threshold() -> float:
@@ -46,6 +50,30 @@ def refined_minimum(profile: list) -> float:
     (x0, y0), (x1, y1), (x2, y2) = profile[i - 1:i + 2]
     c = np.polyfit([x0, x1, x2], [y0, y1, y2], 2)
     return float(np.clip(-c[1] / (2 * c[0]), x0, x2)) if c[0] > 0 else x1
+
+
+def bracketed_minimum(nll, profile: list) -> tuple[float, list]:
+    """The lag of least ``nll(lag)`` between the neighbours of ``profile``'s best point ((lag, nll), increasing
+    lag), by a bounded scalar search (:func:`scipy.optimize.minimize_scalar`, :data:`REFINE_XATOL`, at most
+    :data:`REFINE_ITER` evaluations), and the profile with the points it evaluated. A parabola through the three
+    points missed the minimum where the delay searched with the lag reaches zero between them (the profile has a
+    kink there): a 40 ms lag came out 31.5 ms beside a 6.5 ms delay, 2.8 in NLL short of the truth's fit, and
+    the gains 2-4 % low."""
+    lags = [p[0] for p in profile]
+    i = int(np.argmin([p[1] for p in profile]))
+    if i in (0, len(profile) - 1):  # no lag, or the top of the grid (refused by the caller)
+        return lags[i], profile
+    seen = {}
+
+    def recorded(lag):
+        seen[float(lag)] = nll(lag)
+        return seen[float(lag)]
+
+    optimize.minimize_scalar(recorded, bounds=(lags[i - 1], lags[i + 1]), method="bounded",
+                             options={"xatol": REFINE_XATOL, "maxiter": REFINE_ITER})
+    profile = sorted(profile + [(lag, v) for lag, v in seen.items() if lag not in lags])
+    best = min(profile, key=lambda p: p[1])[0]
+    return best, profile
 
 
 def profile_lag(problem, base: WindFit, models, free_tau: bool) -> tuple:
@@ -68,11 +96,11 @@ def profile_lag(problem, base: WindFit, models, free_tau: bool) -> tuple:
     """
     cost0, x0, kind0, tau0 = base
     n = int(sum(f.n - problem.burn for f in problem.flights))
-    profile = [(0.0, concentrated_nll(cost0, n))]
-    for lag in LAG_GRID:
-        cost, _, _, _ = problem.best(tau0, x0, (kind0,), NFEV, free_tau, lag)
-        profile.append((float(lag), concentrated_nll(cost, n)))
-    best = refined_minimum(profile)
+    def nll(lag):
+        return concentrated_nll(problem.best(tau0, x0, (kind0,), NFEV, free_tau, float(lag))[0], n)
+
+    profile = [(0.0, concentrated_nll(cost0, n))] + [(float(lag), nll(lag)) for lag in LAG_GRID]
+    best, profile = bracketed_minimum(nll, profile)
     if best <= 0.0:
         return 0.0, base, tuple(profile), 0.0
     fit = problem.best(tau0, x0, models, None, free_tau, best)
