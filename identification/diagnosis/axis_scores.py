@@ -237,6 +237,7 @@ class FlightScorer:
         if delay <= 0.0:
             return base
         grid = [lag for lag in LAG_GRID if lag <= LAG_SPAN * delay + 0.01] or [LAG_GRID[0]]
+
         def nll(lag):
             return self.score(a, base.names, delay, base.x, (base.kind,), LAG_SCAN_NFEV, True, float(lag)).nll
 
