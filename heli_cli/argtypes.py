@@ -54,6 +54,11 @@ def seconds_or(words: tuple, what: str, upper: float):
     return parse
 
 
+servo_lag = seconds_or(("detect", "auto", "none"), "servo lag", 1.0)
+"""``--servo-lag`` of the commands that identify (``heli identify``, ``heli tune``): the likelihood's words or a
+lag in seconds."""
+
+
 def whole(minimum: int, maximum: int | None = None):
     """A whole number >= ``minimum`` (and <= ``maximum`` when given)."""
 

@@ -6,11 +6,10 @@ import math
 import sys
 from pathlib import Path
 
-from .argtypes import INPUT_HOLD_HELP, input_hold, number, output_path, seconds_or, whole
+from .argtypes import INPUT_HOLD_HELP, input_hold, number, output_path, seconds_or, servo_lag, whole
 
 
 _delay = seconds_or(("detect", "auto", "none"), "delay", 2.0)
-_lag = seconds_or(("detect", "auto", "none"), "servo lag", 1.0)
 
 
 def add_flight_backend_options(p):
@@ -53,7 +52,7 @@ def register(sub):
                    "profiled and kept only on the axes whose likelihood supports one), 'auto' (the likelihood, or "
                    "the integral fit, profiled over -0.6-0.5 s on every axis), 'none', or seconds (the integral "
                    "method's default: none)")
-    p.add_argument("--servo-lag", type=_lag, default=None,
+    p.add_argument("--servo-lag", type=servo_lag, default=None,
                    help="ml: the servos' first-order lag (eq. 31's d1): 'detect' (default: profiled like 'auto' on "
                    "the axes where the delay's search found a servo delay), 'auto' (the likelihood profiled over "
                    "10-200 ms on every axis, kept only where the data support it), 'none', or seconds")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .argtypes import number, output_path, per_axis, seconds_or, seed, whole
+from .argtypes import number, output_path, per_axis, seconds_or, servo_lag, seed, whole
 from .model_gate import add_accept_option, check_model
 
 FIRMWARE_CHOICES = ("ardupilot", "rotorflight")
@@ -19,7 +19,6 @@ def _scale(text):
 
 
 _delay = seconds_or(("auto", "none"), "delay", 2.0)
-_lag = seconds_or(("detect", "auto", "none"), "servo lag", 1.0)
 
 
 def register(sub):
@@ -54,7 +53,7 @@ def register(sub):
     p.add_argument("--delay", type=_delay, default="auto",
                    help="servo delay when identifying from LOG: 'auto' (default: the likelihood profiled over "
                    "0-0.5 s), 'none' or seconds")
-    p.add_argument("--servo-lag", type=_lag, default="detect",
+    p.add_argument("--servo-lag", type=servo_lag, default="detect",
                    help="the servos' first-order lag when identifying from LOG, as heli identify's: 'detect' "
                    "(default: profiled where a servo delay is found), 'auto', 'none' or seconds")
     p.add_argument("--window", type=number("a window length in seconds > 0", 0.0), default=20.0,

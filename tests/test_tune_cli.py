@@ -112,9 +112,9 @@ def test_a_missing_model_and_a_bad_scale_are_refused(tmp_path, capsys, flight_cs
 
 
 def test_the_servo_lag_option_takes_identifys_words_or_seconds(tmp_path, capsys, flight_csv, ap_params):
-    from heli_cli.tune import _lag
+    from heli_cli.argtypes import servo_lag
 
-    assert [_lag(w) for w in ("detect", "auto", "none", "0.03")] == ["detect", "auto", "none", 0.03]
+    assert [servo_lag(w) for w in ("detect", "auto", "none", "0.03")] == ["detect", "auto", "none", 0.03]
     with pytest.raises(SystemExit) as e:
         main(["tune", str(flight_csv), "--firmware", "ardupilot", "--params", str(ap_params), "--out",
               str(tmp_path / "out"), "--servo-lag", "2"])
