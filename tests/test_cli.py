@@ -401,25 +401,19 @@ def test_simulate_flight_lists_the_bench_cells_and_effects_the_library_has():
     assert cli.EFFECT_NAMES == tuple(EFFECTS) and cli.EFFECT_ALIAS_NAMES == tuple(EFFECT_ALIASES)
 
 
-def test_identify_servo_lag_option(flight_csv, tmp_path, capsys):
-    # --servo-lag is a setting of the likelihood: refused, naming both, with the integral method; a bad value
-    # is refused by the parser; nothing is written either way
+@pytest.mark.parametrize("option, likelihood_only, refusal, bad, parser_says", [
+    ("--servo-lag", "auto", "--servo-lag needs", "2", "servo lag in seconds in [0, 1]"),
+    ("--delay", "detect", "--delay detect needs", "sometimes",
+     "expected 'detect' or 'auto' or 'none' or a delay in seconds"),
+])
+def test_identify_timing_options(flight_csv, tmp_path, capsys, option, likelihood_only, refusal, bad, parser_says):
+    # --servo-lag and --delay detect (the likelihood's defaults) are the likelihood's: refused with the integral
+    # method, naming both; a value the option does not take is refused by the parser, saying what it takes;
+    # nothing is written either way
     assert main(["identify", str(flight_csv), "--out", str(tmp_path / "A"), "--method", "integral",
-                 "--servo-lag", "auto"]) == 2
-    assert "--servo-lag needs the maximum-likelihood estimator" in capsys.readouterr().err
+                 option, likelihood_only]) == 2
+    assert f"{refusal} the maximum-likelihood estimator" in capsys.readouterr().err
     with pytest.raises(SystemExit):
-        main(["identify", str(flight_csv), "--out", str(tmp_path / "B"), "--servo-lag", "2"])
-    assert "servo lag in seconds in [0, 1]" in capsys.readouterr().err
-    assert not (tmp_path / "A" / "model.json").exists() and not (tmp_path / "B").exists()
-
-
-def test_identify_delay_option(flight_csv, tmp_path, capsys):
-    # 'detect' (the likelihood's default) is the likelihood's: refused with the integral method, naming both;
-    # a word the option does not take is refused by the parser, listing the ones it does; nothing is written
-    assert main(["identify", str(flight_csv), "--out", str(tmp_path / "A"), "--method", "integral",
-                 "--delay", "detect"]) == 2
-    assert "--delay detect needs the maximum-likelihood estimator" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        main(["identify", str(flight_csv), "--out", str(tmp_path / "B"), "--delay", "sometimes"])
-    assert "expected 'detect' or 'auto' or 'none' or a delay in seconds" in capsys.readouterr().err
+        main(["identify", str(flight_csv), "--out", str(tmp_path / "B"), option, bad])
+    assert parser_says in capsys.readouterr().err
     assert not (tmp_path / "A" / "model.json").exists() and not (tmp_path / "B").exists()
