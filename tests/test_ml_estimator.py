@@ -151,13 +151,15 @@ def test_the_lag_is_refined_where_its_profile_has_a_kink():
     # searched with a free delay, the profile in the lag bends sharply where that delay reaches 0 (beyond it only
     # the lag can carry the phase): a parabola through the best grid point and its neighbours put a 40 ms lag at
     # 31.5 ms beside a 6.5 ms delay; the bounded search between the neighbours lands within its tolerance
-    from identification.likelihood.servo_lag import LAG_GRID, REFINE_XATOL, bracketed_minimum, refined_minimum
+    from identification.likelihood.servo_lag import LAG_GRID, REFINE_XATOL, bracketed_minimum
 
     def nll(lag):
         return 100.0 * (lag - 0.04) ** 2 if lag < 0.04 else 4000.0 * (lag - 0.04) ** 2
 
     profile = [(0.0, nll(0.0))] + [(g, nll(g)) for g in LAG_GRID]
-    assert abs(refined_minimum(profile) - 0.04) > 0.005
+    best = int(np.argmin([v for _, v in profile]))
+    c = np.polyfit(*zip(*profile[best - 1:best + 2]), 2)  # the parabola the profile was refined by before
+    assert abs(-c[1] / (2 * c[0]) - 0.04) > 0.005
     best, refined = bracketed_minimum(nll, profile)
     assert abs(best - 0.04) < 2 * REFINE_XATOL
     assert [g for g, _ in refined] == sorted(g for g, _ in refined) and len(refined) > len(profile)

@@ -40,18 +40,6 @@ def threshold() -> float:
     return max(float(stats.chi2.ppf(1.0 - ALPHA, 1)), MIN_LR_LAG)
 
 
-def refined_minimum(profile: list) -> float:
-    """The lag at the vertex of the parabola through the best point of ``profile`` ((lag, nll) in increasing
-    lag) and its neighbours."""
-    lags = [p[0] for p in profile]
-    i = int(np.argmin([p[1] for p in profile]))
-    if i in (0, len(profile) - 1):
-        return lags[i]
-    (x0, y0), (x1, y1), (x2, y2) = profile[i - 1:i + 2]
-    c = np.polyfit([x0, x1, x2], [y0, y1, y2], 2)
-    return float(np.clip(-c[1] / (2 * c[0]), x0, x2)) if c[0] > 0 else x1
-
-
 def bracketed_minimum(nll, profile: list) -> tuple[float, list]:
     """The lag of least ``nll(lag)`` between the neighbours of ``profile``'s best point ((lag, nll), increasing
     lag), by a bounded scalar search (:func:`scipy.optimize.minimize_scalar`, :data:`REFINE_XATOL`, at most
