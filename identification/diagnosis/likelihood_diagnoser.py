@@ -280,13 +280,15 @@ class LikelihoodDiagnoser(DiagnosisResult):
         self._final_fit(cleaned, current)
         self.verdict_ = "found" if self.steps_ else NONE
 
-    def _fit_structure(self, cleaned: Flight, structure: dict, alignment, lags, axes,
-                       hold) -> MaximumLikelihoodIdentifier:
+    def _fit_structure(self, cleaned: Flight, structure: dict, alignment, lags, axes, hold,
+                       timing: dict | None = None) -> MaximumLikelihoodIdentifier:
         """``structure`` fitted in full by maximum likelihood on the cleaned flight at ``alignment`` (positive:
-        servo delays; negative: the sticks advanced) and servo ``lags``, the input's ``hold`` as given."""
-        est = MaximumLikelihoodIdentifier(structure=structure, delay=[max(v, 0.0) for v in alignment], axes=axes,
-                                          input_hold=hold, remove_vibration=False,  # cleaned already
-                                          servo_lag=list(lags), workers=self.workers)
+        servo delays; negative: the sticks advanced) and servo ``lags``, the input's ``hold`` as given; or, with
+        ``timing`` (the estimator's ``delay`` and ``servo_lag`` settings), at the timing they find."""
+        timing = timing or {"delay": [max(v, 0.0) for v in alignment], "servo_lag": list(lags)}
+        est = MaximumLikelihoodIdentifier(structure=structure, axes=axes, input_hold=hold,
+                                          remove_vibration=False,  # cleaned already
+                                          workers=self.workers, **timing)
         shifts = [min(v, 0.0) for v in alignment]
         est._fit([shift_inputs(cleaned, shifts) if min(shifts) < 0 else cleaned])
         return est
@@ -305,12 +307,8 @@ class LikelihoodDiagnoser(DiagnosisResult):
         full = {a: tuple(dict.fromkeys(structure[a] + tuple(
                     p for name, effect in CATALOGUE.items() if name not in self.untestable_
                     for p in effect.terms_on(a)))) for a in range(3)}
-        if any(alignment) or any(lags):
-            est = self._fit_structure(cleaned, full, alignment, lags, self.axes, "auto")
-        else:
-            est = MaximumLikelihoodIdentifier(structure=full, axes=self.axes, input_hold="auto",
-                                              remove_vibration=False, workers=self.workers, **CLI_TIMING)
-            est._fit([cleaned])
+        timing = None if any(alignment) or any(lags) else CLI_TIMING
+        est = self._fit_structure(cleaned, full, alignment, lags, self.axes, "auto", timing)
         self.input_hold_ = float(est.hold_decision_["fraction"])
         self.hold_decision_ = est.hold_decision_
         self._scores.ident = MaximumLikelihoodIdentifier(input_hold=self.input_hold_, workers=self.workers)
