@@ -13,7 +13,7 @@ from heli_core.quaternion import quaternion_from_euler
 
 from .env_model import as_env_model
 from .errors import ActionError
-from .kernels import N_ROWS, OUT_ROWS, R, BlockLayout, advance_kernel, euler_arguments_kernel, load_actions, observe_kernel
+from .kernels import N_ROWS, OUT, R, BlockLayout, first_non_finite, observe_kernel, step_kernel
 from .observation import MAX_RATE, OBS_DIM, action_space, observation_space
 from .spec import build_spec, real_actions, reset_options
 from .sensor_noise import draw_noise_key
@@ -70,12 +70,11 @@ class HeliAttitudeVectorEnv(VectorEnv):
         # contiguous memory: trims (3), collective, gust torque (3), u_d (3).
         self._table = np.ascontiguousarray(np.vstack([s.trim, s.col[None, :], s.torque, s.model.ud]).T)
         self._rows = None  # BlockLayout: the state and every per-copy row the step loops share, once reset
-        self._advance = advance_kernel(s.model.params, s.dt, parallel=False)
-        self._advance_pool = (advance_kernel(s.model.params, s.dt, parallel=True)
-                              if self._thread_choice.compiled_parallel else None)
-        self._euler_arguments = euler_arguments_kernel()
-        self._observe_loop = observe_kernel(s.task.task, s.measured, s.task.axis_weighted, s.line_axis,
-                                            s.task.stick_step_weight > 0.0)
+        variant = (s.task.task, s.measured, s.task.axis_weighted, s.line_axis, s.task.stick_step_weight > 0.0)
+        self._step_loop = step_kernel(s.model.params, s.dt, *variant, parallel=False)
+        self._step_pool = (step_kernel(s.model.params, s.dt, *variant, parallel=True)
+                           if self._thread_choice.compiled_parallel else None)
+        self._observe_loop = observe_kernel(*variant)
         self._coef = np.array(reward_coefficients(s.task))
         self._rngs = [None] * n
         self._k = np.zeros(n, dtype=np.int64)
@@ -85,7 +84,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._gust = np.zeros(n)
         self._trace = np.zeros(n, dtype=np.int64)
         self._done = np.zeros(n, dtype=bool)
-        self._queue = np.zeros((s.action_delay, 3, n)) if s.action_delay else None
+        self._queue = np.zeros((s.action_delay, n, 3)) if s.action_delay else None  # actions not yet applied
         n_seg = int(s.episode_steps * s.dt // s.task.step_period) + 1
         self._smooth = np.zeros(n, dtype=bool)
         self._steps = np.zeros((3, n_seg, n))
@@ -99,6 +98,9 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._key = np.zeros(n, dtype=np.uint64)  # each copy's episode noise key (heli_env.sensor_noise)
         self._noise_std = np.array([*s.obs_noise[0], *s.obs_noise[1]], dtype=float)
         self._ones = np.ones(n, dtype=bool)
+        self._all = np.arange(n)
+        self._observe_arguments = (self._k, self._nsteps, self._key, self._noise_std, self._line_amp,
+                                   self._line_table, MAX_RATE, s.task.max_angle, self._coef)  # arrays kept in place
         self._out = None  # the last step's output rows (u_d, errors, reward, end): a fresh array each step
         self._renderer = None
         self._history = []
@@ -143,13 +145,14 @@ class HeliAttitudeVectorEnv(VectorEnv):
             self._rows = BlockLayout(n, extra_rows=2 * len(s.line_axis))  # the lines' phases after R's rows
         which = np.flatnonzero(mask)
         self._reset_envs(which, options)
-        rows = self._rows
-        self._euler_arguments(rows.S, which)
+        obs, out = self._fresh_outputs()
         j = self._base + np.minimum(self._k, self._last) * s.ratio
-        rows.put(R["ud0"], self._table[j, 7:10].T * self._gust)  # the gust about to act
+        self._rows.put(R["ud0"], self._table[j, 7:10].T * self._gust)  # the gust about to act
         # a copy not reset is observed again as it was last: its observation is a function of its state, step
         # and noise key, all unchanged
-        obs, info, _, _, _ = self._observe()
+        self._put_references()
+        self._observe_loop(self._rows.S, self._all, *self._observe_arguments, obs.reshape(-1), out)
+        obs, info, _, _, _ = self._results(obs, out)
         return obs, info
 
     def _reset_envs(self, which, options):
@@ -185,7 +188,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
         rows.put(R["prev0"], np.zeros((3, which.size)), which)  # an episode starts from rest (the stick step)
         rows.put(R["gust"], self._gust[which], which)
         if self._queue is not None:
-            self._queue[:, :, which] = 0.0
+            self._queue[:, which] = 0.0
         self._smooth[which] = [ep.smooth for ep in eps]
         self._steps[:, :, which] = np.stack([ep.steps for ep in eps], axis=-1)
         self._amp[:, :, which] = np.stack([ep.amp for ep in eps], axis=-1)
@@ -203,24 +206,27 @@ class HeliAttitudeVectorEnv(VectorEnv):
         a = actions if native else real_actions(actions, "actions")  # the loop reads float32 or float64
         if a.shape != (n, 3):
             raise ActionError(f"actions must have shape ({n}, 3) (lat, lon, ped per copy), got {a.shape}")
-        rows = self._rows
-        delayed = self._queue is not None
-        bad = load_actions(a, rows.S, R["in0"] if delayed else R["act0"])
+        bad = first_non_finite(a)
         if bad >= 0:  # nothing has changed yet
             raise ActionError(f"actions must be finite; copy {bad} got {a[bad].tolist()}")
         restart = self._done.copy()
-        if delayed:  # the action that acts in this step, observed after it
-            rows.put(R["act0"], self._queue[0])
+        if self._queue is not None:  # the action that acts in this step, observed after it
+            incoming = a
+            a = self._queue[0].copy()
             self._queue[:-1] = self._queue[1:]
-            self._queue[-1] = rows.get(R["in0"], R["in0"] + 3)
-        self._thread_choice.run(self._advance, self._advance_pool, rows.S, self._table, self._base, self._k,
-                                self._last, s.ratio)
-        if restart.any():
+            self._queue[-1] = incoming
+        self._put_references(1)
+        obs, out = self._fresh_outputs()
+        rows = self._rows
+        self._thread_choice.run(self._step_loop, self._step_pool, rows.S, a, self._table, self._base, self._last,
+                                s.ratio, *self._observe_arguments, obs.reshape(-1), out)
+        if restart.any():  # these copies start their next episode instead
             which = np.flatnonzero(restart)
             self._reset_envs(which, {})
-            self._euler_arguments(rows.S, which)
             rows.put(R["ud0"], self._table[self._base[which], 7:10].T * self._gust[which], which)
-        obs, info, rew, terminated, truncated = self._observe()
+            self._put_references()
+            self._observe_loop(rows.S, which, *self._observe_arguments, obs.reshape(-1), out)
+        obs, info, rew, terminated, truncated = self._results(obs, out)
         if restart.any():
             rew[restart] = 0.0
             terminated &= ~restart
@@ -245,46 +251,49 @@ class HeliAttitudeVectorEnv(VectorEnv):
             return None, val
         return val, der
 
-    def _observe(self):
-        s = self.spec_
-        n = self.num_envs
-        rows = self._rows
-        view = rows.view
-        np.arctan2(view(R["trig0"]), view(R["trig1"]), out=view(R["att0"]))
-        np.arcsin(view(R["trig2"]), out=view(R["att1"]))
-        np.arctan2(view(R["trig3"]), view(R["trig4"]), out=view(R["att2"]))
-        t = self._k * s.dt
-        ref_att, ref_rate = self._reference(t)
+    def _put_references(self, ahead: int = 0):
+        """Rows ``refatt``/``refrate`` at each copy's step ``k + ahead`` (the step loop observes at ``k + 1``)."""
+        if self.spec_.task.task == "hold":
+            return
+        ref_att, ref_rate = self._reference((self._k + ahead) * self.spec_.dt)
         if ref_att is not None:
-            rows.put(R["refatt0"], ref_att)
+            self._rows.put(R["refatt0"], ref_att)
         if ref_rate is not None:
-            rows.put(R["refrate0"], ref_rate)
-        # Reward, termination and info score the true state; only the observation is measured (in the loop:
-        # each copy's noise from its key and step, its gyro lines at its phase).
-        obs = np.empty((n, OBS_DIM), dtype=np.float32)
-        self._observe_loop(rows.S, self._k, self._nsteps, self._key, self._noise_std, self._line_amp,
-                           self._line_table, MAX_RATE, s.task.max_angle, self._coef, obs.reshape(-1))
-        self._out = out = rows.get(OUT_ROWS.start, OUT_ROWS.stop)  # fresh: what is returned may be kept
-        first = OUT_ROWS.start
-        ud = out[R["ud0"] - first:R["ud0"] - first + 3]
-        reward = out[R["reward"] - first]
-        end = out[R["end"] - first]
-        terminated = end == 1.0
-        truncated = end == 2.0
+            self._rows.put(R["refrate0"], ref_rate)
+
+    def _fresh_outputs(self):
+        """Arrays the loops write a step's observations (n, 12) and outputs (:data:`heli_env.kernels.OUT`, n)
+        into: fresh each step, since what is returned may be kept."""
+        return np.empty((self.num_envs, OBS_DIM), dtype=np.float32), np.empty((len(OUT), self.num_envs))
+
+    def _results(self, obs, out):
+        """The observations ``obs`` and the infos, rewards and episode ends of the outputs ``out`` just written."""
+        t = self._k * self.spec_.dt
+        self._out = out
+        ud = out[OUT["ud0"]:OUT["ud0"] + 3]
+        terminated = out[OUT["end"]] == 1.0
+        truncated = out[OUT["end"]] == 2.0
         m = self._ones
         info = {"time": t, "_time": m, "disturbance": ud.T, "_disturbance": m,
-                "attitude_error_deg": out[R["degatt0"] - first:R["degatt0"] - first + 3].T, "_attitude_error_deg": m,
-                "rate_error_deg_s": out[R["degrate0"] - first:R["degrate0"] - first + 3].T, "_rate_error_deg_s": m,
+                "attitude_error_deg": out[OUT["degatt0"]:OUT["degatt0"] + 3].T, "_attitude_error_deg": m,
+                "rate_error_deg_s": out[OUT["degrate0"]:OUT["degrate0"] + 3].T, "_rate_error_deg_s": m,
                 "trace": self._trace.copy(), "_trace": m}
+        reward = out[OUT["reward"]]
         if self.render_mode is not None:
-            x = self._x
-            a = self._prev
-            ra = (0.0, 0.0, 0.0) if ref_att is None else tuple(float(v[0]) for v in ref_att)
-            rr = (0.0, 0.0, 0.0) if ref_rate is None else tuple(float(v[0]) for v in ref_rate)
-            self._history.append((float(t[0]), tuple(float(view(R[f"att{c}"])[0, 0]) for c in range(3)), ra, rr,
-                                  tuple(x[0:3, 0].tolist()), tuple(ud[:, 0].tolist()), tuple(a[:, 0].tolist())))
-            self._history = self._history[-2000:]
+            self._remember_frame(t, ud)
         return obs, info, reward, terminated, truncated
+
+    def _remember_frame(self, t, ud):
+        """Copy 0's state, references, gust and action for :meth:`render`."""
+        view = self._rows.view
+        x = self._x
+        a = self._prev
+        ref_att, ref_rate = self._reference(t)
+        ra = (0.0, 0.0, 0.0) if ref_att is None else tuple(float(v[0]) for v in ref_att)
+        rr = (0.0, 0.0, 0.0) if ref_rate is None else tuple(float(v[0]) for v in ref_rate)
+        self._history.append((float(t[0]), tuple(float(view(R[f"att{c}"])[0, 0]) for c in range(3)), ra, rr,
+                              tuple(x[0:3, 0].tolist()), tuple(ud[:, 0].tolist()), tuple(a[:, 0].tolist())))
+        self._history = self._history[-2000:]
 
     def render(self):
         """An RGB frame of copy 0 (``render_mode="rgb_array"``)."""

@@ -394,14 +394,14 @@ def test_default_thread_count_follows_the_batch_size(monkeypatch):
 
     monkeypatch.delenv("HELI_NUM_THREADS", raising=False)
     small = HeliAttitudeVectorEnv(8)
-    assert small._thread_choice.threads == 1 and small._advance_pool is None
+    assert small._thread_choice.threads == 1 and small._step_pool is None
     most = numba.config.NUMBA_NUM_THREADS
     big = HeliAttitudeVectorEnv(THREADED_FROM)
     assert big._thread_choice.measured == (most > 1)
     fixed = HeliAttitudeVectorEnv(8, threads=most)
     assert fixed._thread_choice.threads == most and not fixed._thread_choice.measured
     monkeypatch.setenv("HELI_NUM_THREADS", "1")
-    assert HeliAttitudeVectorEnv(THREADED_FROM)._advance_pool is None
+    assert HeliAttitudeVectorEnv(THREADED_FROM)._step_pool is None
 
 
 def test_a_masked_reset_leaves_the_other_copies_alone():
