@@ -233,7 +233,7 @@ def reward_of(cfg: TaskConfig, e_att, e_rate, action, previous=(0.0, 0.0, 0.0)):
     with ``att2 = sum(w_axis * e_att^2)``, ``rate2 = sum(w_axis * e_rate^2)``,
     ``effort2 = sum(a^2)`` and, when ``w_s = stick_step_weight > 0``, ``step2 = sum((a - previous)^2)``;
     floats or arrays over copies. Without axis weights the sums are unweighted (``e0*e0 + e1*e1 + e2*e2``).
-    The vector environment's loop (:func:`heli_env.kernels.observe_kernel`) evaluates the same expression
+    The vector environment's loop (:func:`heli_env.kernels.env_kernels`) evaluates the same expression
     with :func:`reward_coefficients`.
     """
     ca, cr, cu, w0, w1, w2, cs = cfg.reward_coefficients

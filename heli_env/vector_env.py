@@ -13,7 +13,7 @@ from heli_core.quaternion import quaternion_from_euler
 
 from .env_model import as_env_model
 from .errors import ActionError
-from .kernels import N_ROWS, OUT, R, BlockLayout, first_non_finite, observe_kernel, step_kernel
+from .kernels import N_ROWS, OUT, R, BlockLayout, env_kernels, first_non_finite
 from .observation import MAX_RATE, OBS_DIM, action_space, observation_space
 from .spec import build_spec, real_actions, reset_options
 from .sensor_noise import draw_noise_key
@@ -71,10 +71,10 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._table = np.ascontiguousarray(np.vstack([s.trim, s.col[None, :], s.torque, s.model.ud]).T)
         self._rows = None  # BlockLayout: the state and every per-copy row the step loops share, once reset
         variant = (s.task.task, s.measured, s.task.axis_weighted, s.line_axis, s.task.stick_step_weight > 0.0)
-        self._step_loop = step_kernel(s.model.params, s.dt, *variant, parallel=False)
-        self._step_pool = (step_kernel(s.model.params, s.dt, *variant, parallel=True)
-                           if self._thread_choice.compiled_parallel else None)
-        self._observe_loop = observe_kernel(*variant)
+        kernels = env_kernels(s.model.params, s.dt, *variant)
+        self._step_loop = kernels.step
+        self._step_pool = kernels.step_pool if self._thread_choice.compiled_parallel else None
+        self._observe_loop = kernels.observe
         self._coef = np.array(reward_coefficients(s.task))
         self._rngs = [None] * n
         self._k = np.zeros(n, dtype=np.int64)
@@ -219,7 +219,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
         obs, out = self._fresh_outputs()
         rows = self._rows
         self._thread_choice.run(self._step_loop, self._step_pool, rows.S, a, self._table, self._base, self._last,
-                                s.ratio, *self._observe_arguments, obs.reshape(-1), out)
+                                s.ratio, *self._observe_arguments, obs.reshape(-1), out, 0, rows.blocks)
         if restart.any():  # these copies start their next episode instead
             which = np.flatnonzero(restart)
             self._reset_envs(which, {})
