@@ -189,10 +189,10 @@ R = {name: i for i, name in enumerate(_ROWS + _OUTPUTS)}
 """Row of each per-copy quantity in a block: the state (10), the action applied (3), the gust scale, the
 Euler angles (3), the references (3 + 3), the action applied the step before (3: kept only with a
 stick-step weight in the reward), and the step's outputs, together last (:data:`OUT`)."""
-OUT = {name: i for i, name in enumerate(_OUTPUTS)}
+OUT = {name: i for i, name in enumerate(_OUTPUTS + ["time"])}
 """Row of each output in the step's fresh ``out`` array (len(OUT), n), copied there from the block's rows at the
 end of each block: u_d scaled, attitude and rate errors in degrees, reward, episode end (0 running,
-1 terminated, 2 truncated). Written straight into ``out``, the loops ran at half speed: numba cannot tell that
+1 terminated, 2 truncated); and each copy's time ``k dt`` [s]. Written straight into ``out``, the loops ran at half speed: numba cannot tell that
 ``out`` and ``S`` do not overlap."""
 _SCRATCH_ROWS = ("lib0 lib1 lib2 lib3 lib4 lib5 lib6 lib7 lib8 lib9 noise0 noise1 noise2 noise3 noise4 noise5 slow "
                  "line0 line1 line2").split()
@@ -259,12 +259,20 @@ _SCRATCH = f"Wb = np.empty({len(_SCRATCH_ROWS) * ROW})"
 """A block's scratch (the rows of :data:`W`), in generated source."""
 
 
-def _output_lines() -> list[str]:
-    """Copy the block's output rows (:data:`OUT`) into ``out``: a loop per row, on rows still in cache."""
-    return [f"        for _r in range({len(OUT)}):",
+def _output_lines(dt: float) -> list[str]:
+    """Copy the block's output rows into ``out`` (:data:`OUT`), a loop per row on rows still in cache; then each
+    copy's time ``k dt`` (as numpy's ``k * dt``) and ``ends`` (2, n: terminated, truncated), counting in
+    ``_ended`` the copies whose episode ended."""
+    return [f"        for _r in range({len(_OUTPUTS)}):",
             f"            _src = ({R['ud0']} + _r) * {ROW}",
             "            for l in range(_m):",
-            "                out[_r, _i0 + l] = Sb[_src + l]"]
+            "                out[_r, _i0 + l] = Sb[_src + l]",
+            "        for l in range(_m):",
+            f"            out[{OUT['time']}, _i0 + l] = float(k[_i0 + l]) * {float(dt)!r}",
+            f"            _end = {_at('end')}",
+            "            ends[0, _i0 + l] = _end == 1.0",
+            "            ends[1, _i0 + l] = _end == 2.0",
+            "            _ended += 0 if _end == 0.0 else 1"]
 
 
 def _advance_lines(params: ModelParams, dt: float, stick_step: bool) -> list[str]:
@@ -488,7 +496,7 @@ def _observe_lines(task: str, noisy: bool, axis_weighted: bool = False, line_axe
     return lines
 
 
-_OBSERVE_ARGUMENTS = "k, steps, key, noise_std, line_amp, line_table, max_rate, max_angle, coef, obs, out"
+_OBSERVE_ARGUMENTS = "k, steps, key, noise_std, line_amp, line_table, max_rate, max_angle, coef, obs, out, ends"
 
 
 def _tag(task: str, noisy: bool, axis_weighted: bool, stick_step: bool) -> str:
@@ -501,7 +509,8 @@ class Kernels(NamedTuple):
 
     step: object
     """``step(S, actions, table, base, last, ratio, k, steps, key, noise_std, line_amp, line_table, max_rate,
-    max_angle, coef, obs, out, first, stop)``: blocks ``first .. stop - 1`` on the calling thread."""
+    max_angle, coef, obs, out, ends, first, stop)``: blocks ``first .. stop - 1`` on the calling thread;
+    returns how many copies' episodes ended."""
     step_pool: object
     """The same, the blocks on numba's pool (a ``prange``: the step's only parallel region)."""
     observe: object
@@ -527,6 +536,7 @@ def env_kernels(params: ModelParams, dt: float, task: str, noisy: bool, axis_wei
     arguments = f"S, actions, table, base, last, ratio, {_OBSERVE_ARGUMENTS}, first, stop"
     step = [f"def step({arguments}):",
             "    _copies = k.shape[0]",
+            "    _ended = 0",
             "    for _block in range(stop):",  # from 0: the compiler then knows every index below is not negative
             "        if _block < first:",  # (with range(first, stop) the step took 10 % longer)
             "            continue",
@@ -536,11 +546,15 @@ def env_kernels(params: ModelParams, dt: float, task: str, noisy: bool, axis_wei
             f"        _m = min({BLOCK}, _copies - _i0)",
             *_advance_lines(params, dt, stick_step),
             *_observe_lines(task, noisy, axis_weighted, line_axes, stick_step),
-            *_output_lines()]
+            *_output_lines(dt),
+            "    return _ended"]
     step_pool = [f"def step_pool({arguments}):",
+                 "    _ended = 0",
                  "    for _block in prange(first, stop):",
-                 f"        step({arguments.replace('first, stop', '_block, _block + 1')})"]
+                 f"        _ended += step({arguments.replace('first, stop', '_block, _block + 1')})",
+                 "    return _ended"]
     observe = [f"def observe(S, which, {_OBSERVE_ARGUMENTS}):",
+               "    _ended = 0",
                "    for _w in range(which.shape[0]):",
                "        _i0 = which[_w]",
                f"        Sb = S[_i0 // {BLOCK}][_i0 % {BLOCK}:]  # the copy's lane as lane 0: the block's code, one copy",
@@ -550,7 +564,8 @@ def env_kernels(params: ModelParams, dt: float, task: str, noisy: bool, axis_wei
                *(f"            b{c} = {_at(f'x{6 + c}')}" for c in range(4)),
                *("            " + line for line in _angle_lines()),
                *_observe_lines(task, noisy, axis_weighted, line_axes, stick_step),
-               *_output_lines()]
+               *_output_lines(dt),
+               "    return _ended"]
     module = _compile_module({"step": (step, False), "step_pool": (step_pool, True), "observe": (observe, False)},
                              "env " + _tag(task, noisy, axis_weighted, stick_step))
     return Kernels(module.step, module.step_pool, module.observe)

@@ -83,7 +83,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._nsteps = np.zeros(n, dtype=np.int64)
         self._gust = np.zeros(n)
         self._trace = np.zeros(n, dtype=np.int64)
-        self._done = np.zeros(n, dtype=bool)
+        self._restart = None  # the copies whose episode ended in the last step (indices), None if none did
         self._queue = np.zeros((s.action_delay, n, 3)) if s.action_delay else None  # actions not yet applied
         n_seg = int(s.episode_steps * s.dt // s.task.step_period) + 1
         self._smooth = np.zeros(n, dtype=bool)
@@ -145,15 +145,14 @@ class HeliAttitudeVectorEnv(VectorEnv):
             self._rows = BlockLayout(n, extra_rows=2 * len(s.line_axis))  # the lines' phases after R's rows
         which = np.flatnonzero(mask)
         self._reset_envs(which, options)
-        obs, out = self._fresh_outputs()
+        obs, out, ends = self._fresh_outputs()
         j = self._base + np.minimum(self._k, self._last) * s.ratio
         self._rows.put(R["ud0"], self._table[j, 7:10].T * self._gust)  # the gust about to act
         # a copy not reset is observed again as it was last: its observation is a function of its state, step
         # and noise key, all unchanged
         self._put_references()
-        self._observe_loop(self._rows.S, self._all, *self._observe_arguments, obs.reshape(-1), out)
-        obs, info, _, _, _ = self._results(obs, out)
-        return obs, info
+        self._observe_loop(self._rows.S, self._all, *self._observe_arguments, obs.reshape(-1), out, ends)
+        return obs, self._info(out)
 
     def _reset_envs(self, which, options):
         s = self.spec_
@@ -194,7 +193,9 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._amp[:, :, which] = np.stack([ep.amp for ep in eps], axis=-1)
         self._freq[:, :, which] = np.stack([ep.freq for ep in eps], axis=-1)
         self._phase[:, :, which] = np.stack([ep.phase for ep in eps], axis=-1)
-        self._done[which] = False
+        if self._restart is not None:  # reset now: they do not restart at the next step
+            left = np.setdiff1d(self._restart, which)
+            self._restart = left if left.size else None
 
     # ------------------------------------------------------------------- step
     def step(self, actions):
@@ -209,30 +210,28 @@ class HeliAttitudeVectorEnv(VectorEnv):
         bad = first_non_finite(a)
         if bad >= 0:  # nothing has changed yet
             raise ActionError(f"actions must be finite; copy {bad} got {a[bad].tolist()}")
-        restart = self._done.copy()
         if self._queue is not None:  # the action that acts in this step, observed after it
             incoming = a
             a = self._queue[0].copy()
             self._queue[:-1] = self._queue[1:]
             self._queue[-1] = incoming
         self._put_references(1)
-        obs, out = self._fresh_outputs()
+        obs, out, ends = self._fresh_outputs()
         rows = self._rows
-        self._thread_choice.run(self._step_loop, self._step_pool, rows.S, a, self._table, self._base, self._last,
-                                s.ratio, *self._observe_arguments, obs.reshape(-1), out, 0, rows.blocks)
-        if restart.any():  # these copies start their next episode instead
-            which = np.flatnonzero(restart)
+        ended = self._thread_choice.run(self._step_loop, self._step_pool, rows.S, a, self._table, self._base,
+                                        self._last, s.ratio, *self._observe_arguments, obs.reshape(-1), out, ends,
+                                        0, rows.blocks)
+        if self._restart is not None:  # these copies start their next episode instead: reward 0, not ended
+            which = self._restart
             self._reset_envs(which, {})
             rows.put(R["ud0"], self._table[self._base[which], 7:10].T * self._gust[which], which)
             self._put_references()
-            self._observe_loop(rows.S, which, *self._observe_arguments, obs.reshape(-1), out)
-        obs, info, rew, terminated, truncated = self._results(obs, out)
-        if restart.any():
-            rew[restart] = 0.0
-            terminated &= ~restart
-            truncated &= ~restart
-        self._done = terminated | truncated
-        return obs, rew, terminated, truncated, info
+            self._observe_loop(rows.S, which, *self._observe_arguments, obs.reshape(-1), out, ends)
+            out[OUT["reward"], which] = 0.0
+            ends[:, which] = False
+            ended = np.count_nonzero(ends)
+        self._restart = np.flatnonzero(ends[0] | ends[1]) if ended else None
+        return obs, out[OUT["reward"]], ends[0], ends[1], self._info(out)
 
     # -------------------------------------------------------------- internals
     def _reference(self, t):
@@ -262,26 +261,24 @@ class HeliAttitudeVectorEnv(VectorEnv):
             self._rows.put(R["refrate0"], ref_rate)
 
     def _fresh_outputs(self):
-        """Arrays the loops write a step's observations (n, 12) and outputs (:data:`heli_env.kernels.OUT`, n)
-        into: fresh each step, since what is returned may be kept."""
-        return np.empty((self.num_envs, OBS_DIM), dtype=np.float32), np.empty((len(OUT), self.num_envs))
+        """Arrays the loops write a step's observations (n, 12), outputs (:data:`heli_env.kernels.OUT`, n) and
+        episode ends (2, n: terminated, truncated) into: fresh each step, since what is returned may be kept."""
+        n = self.num_envs
+        return np.empty((n, OBS_DIM), dtype=np.float32), np.empty((len(OUT), n)), np.empty((2, n), dtype=bool)
 
-    def _results(self, obs, out):
-        """The observations ``obs`` and the infos, rewards and episode ends of the outputs ``out`` just written."""
-        t = self._k * self.spec_.dt
+    def _info(self, out):
+        """The info dict of the outputs ``out`` just written: views of it (it is fresh each step)."""
         self._out = out
+        t = out[OUT["time"]]
         ud = out[OUT["ud0"]:OUT["ud0"] + 3]
-        terminated = out[OUT["end"]] == 1.0
-        truncated = out[OUT["end"]] == 2.0
         m = self._ones
         info = {"time": t, "_time": m, "disturbance": ud.T, "_disturbance": m,
                 "attitude_error_deg": out[OUT["degatt0"]:OUT["degatt0"] + 3].T, "_attitude_error_deg": m,
                 "rate_error_deg_s": out[OUT["degrate0"]:OUT["degrate0"] + 3].T, "_rate_error_deg_s": m,
                 "trace": self._trace.copy(), "_trace": m}
-        reward = out[OUT["reward"]]
         if self.render_mode is not None:
             self._remember_frame(t, ud)
-        return obs, info, reward, terminated, truncated
+        return info
 
     def _remember_frame(self, t, ud):
         """Copy 0's state, references, gust and action for :meth:`render`."""
