@@ -259,7 +259,7 @@ _SCRATCH = f"Wb = np.empty({len(_SCRATCH_ROWS) * ROW})"
 """A block's scratch (the rows of :data:`W`), in generated source."""
 
 
-def _output_lines(dt: float) -> list[str]:
+def _output_lines() -> list[str]:
     """Copy the block's output rows into ``out`` (:data:`OUT`), a loop per row on rows still in cache; then each
     copy's time ``k dt`` (as numpy's ``k * dt``) and ``ends`` (2, n: terminated, truncated), counting in
     ``_ended`` the copies whose episode ended."""
@@ -268,31 +268,54 @@ def _output_lines(dt: float) -> list[str]:
             "            for l in range(_m):",
             "                out[_r, _i0 + l] = Sb[_src + l]",
             "        for l in range(_m):",
-            f"            out[{OUT['time']}, _i0 + l] = float(k[_i0 + l]) * {float(dt)!r}",
+            f"            out[{OUT['time']}, _i0 + l] = float(k[_i0 + l]) * _dt",
             f"            _end = {_at('end')}",
             "            ends[0, _i0 + l] = _end == 1.0",
             "            ends[1, _i0 + l] = _end == 2.0",
             "            _ended += 0 if _end == 0.0 else 1"]
 
 
-def _advance_lines(params: ModelParams, dt: float, stick_step: bool) -> list[str]:
+_LITERAL = re.compile(r"(?<![\w.])(?<!\*\*)(?:\d+\.\d*(?:e[-+]?\d+)?|\d+e[-+]?\d+)(?![\w.])")
+"""A float literal of :func:`heli_core.physics._fmt` (unsigned: a sign stays an exact unary minus), not an
+exponent (``**0.5`` is a square root to the compiler, a ``pow`` call as a variable)."""
+
+
+def model_constants(params: ModelParams, dt: float) -> tuple[tuple[str, ...], np.ndarray]:
+    """The physics core's statements (:func:`heli_core.discrete.discrete_step_statements`) with each distinct
+    float literal read from a local ``_mc<i>`` instead, and the values, in order, of ``_mc0, _mc1, ...``.
+
+    The statements' shape depends on the model's structure only (which terms are zero, which axes have a
+    servo delay); the values are the model's. The generated step reads the values from an argument, so that
+    models of one structure (a sweep's gains scaled by 0.8 and 1.2, a refreshed fit) share one compiled
+    loop: each took 6-11 s to compile. The arithmetic is the same IEEE arithmetic on the same values: a
+    literal and a variable holding it give the same bits."""
+    values: dict[str, int] = {}
+
+    def local(match: re.Match) -> str:
+        return f"_mc{values.setdefault(match.group(0), len(values))}"
+
+    statements = tuple(_LITERAL.sub(local, line) for line in discrete_step_statements(params, float(dt)))
+    return statements, np.array([float(text) for text in values], dtype=float)
+
+
+def _advance_lines(statements: tuple[str, ...], stick_step: bool) -> list[str]:
     """One control period of a block's copies (eqs. 18, 21, 25-26, 31), in :func:`env_kernels`' step.
 
     For each copy ``i``: reads library row ``j = base[i] + min(k[i], last[i]) * ratio`` of ``table`` (trim
     lat/lon/ped, collective, gust torque roll/pitch/yaw, u_d roll/pitch/yaw), increments ``k[i]`` and takes
     its action ``clip(actions[i], -1, 1)`` into rows ``act`` (with ``stick_step``, the action before into rows
     ``prev``). Steps the state rows in place with the sticks ``clip(trim + act)`` and the torque
-    ``gust * torque``, writes the reported gust ``gust * u_d`` and the Euler angles of the new attitude.
+    ``gust * torque`` and writes the reported gust ``gust * u_d``.
 
     The library rows and actions are gathered first in a short loop, which also prefetches each copy's row of
     the next step (:func:`heli_env.prefetch.prefetch_row`): copies start at random places in a library of
     megabytes, so a row's cache line was last read by another copy many steps ago and comes from main
     memory; asked for a step ahead, it arrives while the step computes (measured: 19 ns of a 69 ns
     copy-step without it). Then the physics runs over the block's rows, 8 copies an instruction: the physics
-    core's own statements (:func:`heli_core.discrete.discrete_step_statements`, the
-    text the single environment's step is compiled from). numba compiles IEEE arithmetic in the order written
-    and does not contract multiply-adds (``fastmath`` is off), so every copy's state equals the single
-    environment's bit for bit.
+    core's ``statements`` (:func:`model_constants`: the text the single environment's step is compiled from,
+    its constants read from locals). numba compiles IEEE arithmetic in the order written and does not
+    contract multiply-adds (``fastmath`` is off), so every copy's state equals the single environment's bit
+    for bit.
     """
     return [
         "        for l in range(_m):",
@@ -318,13 +341,18 @@ def _advance_lines(params: ModelParams, dt: float, stick_step: bool) -> list[str
         f"            d1 = g * {_at('lib5')}",
         f"            d2 = g * {_at('lib6')}",
         *(f"            {name} = {_at(f'x{row}')}" for row, name in enumerate(DISCRETE_INPUTS[:10])),
-        *("            " + line for line in discrete_step_statements(params, float(dt))),
+        *("            " + line for line in statements),
         *(f"            {_at(f'x{row}')} = {name}" for row, name in enumerate(DISCRETE_OUTPUTS)),
         *(f"            {_at(f'ud{c}')} = g * {_at(f'lib{7 + c}')}" for c in range(3)),
-        "        for l in range(_m):",  # apart: in the physics loop the inverse functions cost twice as much
-        *(f"            b{c} = {_at(f'x{6 + c}')}" for c in range(4)),
-        *("            " + line for line in _angle_lines()),
     ]
+
+
+def _state_angle_lines() -> list[str]:
+    """The Euler angles of each copy's attitude, from its state rows (a loop of its own: in the physics loop
+    the inverse functions cost twice as much)."""
+    return ["        for l in range(_m):",
+            *(f"            b{c} = {_at(f'x{6 + c}')}" for c in range(4)),
+            *("            " + line for line in _angle_lines())]
 
 
 @numba.njit(error_model="numpy", cache=True)
@@ -507,14 +535,15 @@ def _tag(task: str, noisy: bool, axis_weighted: bool, stick_step: bool) -> str:
 class Kernels(NamedTuple):
     """The compiled loops of one env configuration (:func:`env_kernels`)."""
 
+    constants: np.ndarray
+    """What the loops read as their argument ``P``: the model's values (:func:`model_constants`), then the
+    control period ``dt``."""
     step: object
-    """``step(S, actions, table, base, last, ratio, k, steps, key, noise_std, line_amp, line_table, max_rate,
-    max_angle, coef, obs, out, ends, first, stop)``: blocks ``first .. stop - 1`` on the calling thread;
-    returns how many copies' episodes ended."""
+    """``step(S, actions, table, base, last, ratio, P, k, steps, key, noise_std, line_amp, line_table, max_rate,
+    max_angle, coef, obs, out, ends, first, stop, advance)``: blocks ``first .. stop - 1`` on the calling
+    thread; returns how many copies' episodes ended."""
     step_pool: object
     """The same, the blocks on numba's pool (a ``prange``: the step's only parallel region)."""
-    observe: object
-    """``observe(S, which, k, steps, ...)``: the observation of copies ``which`` after a reset."""
 
 
 @lru_cache(maxsize=16)
@@ -526,15 +555,20 @@ def env_kernels(params: ModelParams, dt: float, task: str, noisy: bool, axis_wei
     :func:`first_non_finite`) and then the observation of the new state (:func:`_observe_lines`) and the copy
     of the block's outputs into ``out`` (:func:`_output_lines`), while the block's rows are in the core's
     cache: one function, whose compiler sees the block's scratch allocated and overlapping nothing (split
-    into functions per part, the step took 5-10 % longer). ``step_pool`` calls ``step`` on one block per
-    task of a ``prange``: a thin parallel loop that compiles in two seconds, where the whole step compiled as
-    one parallel function took fifteen. ``observe`` computes the Euler angles of the state's quaternion and
-    observes copies ``which`` (int64 indices), one copy at a time (the block's code on the copy's lane):
-    after a reset. An observation is a pure function of the state rows, the step and the noise key, so
-    observing a copy again gives what it gave.
+    into functions per part, the step took 5-10 % longer). With ``advance`` False it only observes: the
+    Euler angles of the state's quaternion, then the observation (after a reset; ``actions`` unread). An
+    observation is a pure function of the state rows, the step and the noise key, so observing a copy again
+    gives what it gave. ``step_pool`` calls ``step`` on one block per task of a ``prange``: a thin parallel
+    loop that compiles in two seconds, where the whole step compiled as one parallel function took fifteen.
+    The model's values and ``dt`` are an argument (:attr:`Kernels.constants`), the model's structure the
+    source: envs of models of one structure share the module. ``actions`` are float64 (a C array): one
+    compiled signature (each took 5 s to compile).
     """
-    arguments = f"S, actions, table, base, last, ratio, {_OBSERVE_ARGUMENTS}, first, stop"
+    statements, constants = model_constants(params, dt)
+    arguments = f"S, actions, table, base, last, ratio, P, {_OBSERVE_ARGUMENTS}, first, stop, advance"
     step = [f"def step({arguments}):",
+            *(f"    _mc{i} = P[{i}]" for i in range(constants.size)),
+            f"    _dt = P[{constants.size}]",
             "    _copies = k.shape[0]",
             "    _ended = 0",
             "    for _block in range(stop):",  # from 0: the compiler then knows every index below is not negative
@@ -544,28 +578,17 @@ def env_kernels(params: ModelParams, dt: float, task: str, noisy: bool, axis_wei
             "        " + _SCRATCH,
             f"        _i0 = _block * {BLOCK}",
             f"        _m = min({BLOCK}, _copies - _i0)",
-            *_advance_lines(params, dt, stick_step),
+            "        if advance:",
+            *("    " + line for line in _advance_lines(statements, stick_step)),
+            *_state_angle_lines(),
             *_observe_lines(task, noisy, axis_weighted, line_axes, stick_step),
-            *_output_lines(dt),
+            *_output_lines(),
             "    return _ended"]
     step_pool = [f"def step_pool({arguments}):",
                  "    _ended = 0",
                  "    for _block in prange(first, stop):",
                  f"        _ended += step({arguments.replace('first, stop', '_block, _block + 1')})",
                  "    return _ended"]
-    observe = [f"def observe(S, which, {_OBSERVE_ARGUMENTS}):",
-               "    _ended = 0",
-               "    for _w in range(which.shape[0]):",
-               "        _i0 = which[_w]",
-               f"        Sb = S[_i0 // {BLOCK}][_i0 % {BLOCK}:]  # the copy's lane as lane 0: the block's code, one copy",
-               "        " + _SCRATCH,
-               "        _m = 1",
-               "        for l in range(_m):",
-               *(f"            b{c} = {_at(f'x{6 + c}')}" for c in range(4)),
-               *("            " + line for line in _angle_lines()),
-               *_observe_lines(task, noisy, axis_weighted, line_axes, stick_step),
-               *_output_lines(dt),
-               "    return _ended"]
-    module = _compile_module({"step": (step, False), "step_pool": (step_pool, True), "observe": (observe, False)},
+    module = _compile_module({"step": (step, False), "step_pool": (step_pool, True)},
                              "env " + _tag(task, noisy, axis_weighted, stick_step))
-    return Kernels(module.step, module.step_pool, module.observe)
+    return Kernels(np.append(constants, float(dt)), module.step, module.step_pool)

@@ -13,7 +13,7 @@ from heli_core.quaternion import quaternion_from_euler
 
 from .env_model import as_env_model
 from .errors import ActionError
-from .kernels import N_ROWS, OUT, R, BlockLayout, env_kernels, first_non_finite
+from .kernels import BLOCK, N_ROWS, OUT, R, BlockLayout, env_kernels, first_non_finite
 from .observation import MAX_RATE, OBS_DIM, action_space, observation_space
 from .spec import build_spec, real_actions, reset_options
 from .sensor_noise import draw_noise_key
@@ -74,7 +74,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
         kernels = env_kernels(s.model.params, s.dt, *variant)
         self._step_loop = kernels.step
         self._step_pool = kernels.step_pool if self._thread_choice.compiled_parallel else None
-        self._observe_loop = kernels.observe
+        self._constants = kernels.constants  # the model's values, read by the loops
         self._coef = np.array(reward_coefficients(s.task))
         self._rngs = [None] * n
         self._k = np.zeros(n, dtype=np.int64)
@@ -98,7 +98,8 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._key = np.zeros(n, dtype=np.uint64)  # each copy's episode noise key (heli_env.sensor_noise)
         self._noise_std = np.array([*s.obs_noise[0], *s.obs_noise[1]], dtype=float)
         self._ones = np.ones(n, dtype=bool)
-        self._all = np.arange(n)
+        self._no_actions = np.zeros((n, 3))  # what the loop is given when it only observes
+        self._actions = np.empty((n, 3))  # float32 actions as the loop reads them
         self._observe_arguments = (self._k, self._nsteps, self._key, self._noise_std, self._line_amp,
                                    self._line_table, MAX_RATE, s.task.max_angle, self._coef)  # arrays kept in place
         self._out = None  # the last step's output rows (u_d, errors, reward, end): a fresh array each step
@@ -151,7 +152,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
         # a copy not reset is observed again as it was last: its observation is a function of its state, step
         # and noise key, all unchanged
         self._put_references()
-        self._observe_loop(self._rows.S, self._all, *self._observe_arguments, obs.reshape(-1), out, ends)
+        self._observe(obs, out, ends, 0, self._rows.blocks)
         return obs, self._info(out)
 
     def _reset_envs(self, which, options):
@@ -204,12 +205,15 @@ class HeliAttitudeVectorEnv(VectorEnv):
         s = self.spec_
         n = self.num_envs
         native = isinstance(actions, np.ndarray) and actions.dtype in (np.float32, np.float64)
-        a = actions if native else real_actions(actions, "actions")  # the loop reads float32 or float64
+        a = actions if native else real_actions(actions, "actions")
         if a.shape != (n, 3):
             raise ActionError(f"actions must have shape ({n}, 3) (lat, lon, ped per copy), got {a.shape}")
         bad = first_non_finite(a)
         if bad >= 0:  # nothing has changed yet
             raise ActionError(f"actions must be finite; copy {bad} got {a[bad].tolist()}")
+        if a.dtype != np.float64 or not a.flags.c_contiguous:  # the loop is compiled for this layout only
+            np.copyto(self._actions, a)
+            a = self._actions
         if self._queue is not None:  # the action that acts in this step, observed after it
             incoming = a
             a = self._queue[0].copy()
@@ -219,14 +223,15 @@ class HeliAttitudeVectorEnv(VectorEnv):
         obs, out, ends = self._fresh_outputs()
         rows = self._rows
         ended = self._thread_choice.run(self._step_loop, self._step_pool, rows.S, a, self._table, self._base,
-                                        self._last, s.ratio, *self._observe_arguments, obs.reshape(-1), out, ends,
-                                        0, rows.blocks)
+                                        self._last, s.ratio, self._constants, *self._observe_arguments,
+                                        obs.reshape(-1), out, ends, 0, rows.blocks, True)
         if self._restart is not None:  # these copies start their next episode instead: reward 0, not ended
             which = self._restart
             self._reset_envs(which, {})
             rows.put(R["ud0"], self._table[self._base[which], 7:10].T * self._gust[which], which)
             self._put_references()
-            self._observe_loop(rows.S, which, *self._observe_arguments, obs.reshape(-1), out, ends)
+            for block in np.unique(which // BLOCK).tolist():  # observed again: the others as they were
+                self._observe(obs, out, ends, block, block + 1)
             out[OUT["reward"], which] = 0.0
             ends[:, which] = False
             ended = np.count_nonzero(ends)
@@ -259,6 +264,11 @@ class HeliAttitudeVectorEnv(VectorEnv):
             self._rows.put(R["refatt0"], ref_att)
         if ref_rate is not None:
             self._rows.put(R["refrate0"], ref_rate)
+
+    def _observe(self, obs, out, ends, first, stop):
+        """Observe the copies of blocks ``first .. stop - 1`` as they are, into ``obs``, ``out`` and ``ends``."""
+        self._step_loop(self._rows.S, self._no_actions, self._table, self._base, self._last, self.spec_.ratio,
+                        self._constants, *self._observe_arguments, obs.reshape(-1), out, ends, first, stop, False)
 
     def _fresh_outputs(self):
         """Arrays the loops write a step's observations (n, 12), outputs (:data:`heli_env.kernels.OUT`, n) and

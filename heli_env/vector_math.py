@@ -36,7 +36,7 @@ _MOREBITS = 6.123233995736765886130e-17
 loses nothing."""
 
 
-@numba.njit(inline="always")
+@numba.njit(error_model="numpy")
 def atan2v(y, x):
     """``atan2(y, x)`` [rad] in (-pi, pi], branch-free (module docstring)."""
     ax = abs(x)
@@ -56,7 +56,7 @@ def atan2v(y, x):
     return math.copysign(r, y)
 
 
-@numba.njit(inline="always")
+@numba.njit(error_model="numpy")
 def asinv(s):
     """``asin(s)`` [rad] for ``s`` in [-1, 1], as ``atan2(s, sqrt((1 - s)(1 + s)))`` (exact factors near ±1)."""
     return atan2v(s, math.sqrt((1.0 - s) * (1.0 + s)))

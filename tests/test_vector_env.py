@@ -8,6 +8,7 @@ bit and the same observations, rewards and infos.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 
 import gymnasium
@@ -20,9 +21,11 @@ from numpy.testing import assert_allclose
 
 import heli_env  # noqa: F401  (registers HeliAttitude-v0)
 from heli_core.sensors import GyroLine, SensorModel
-from heli_env import ActionError, HeliAttitudeEnv
+from heli_env import ActionError, HeliAttitudeEnv, default_model_dir, load_env_model
+from heli_env.kernels import BLOCK
 from heli_env.tasks import TaskConfig
 from heli_env.vector_env import HeliAttitudeVectorEnv
+from identification.bench.flight_config import EFFECTS
 
 ENV_ID = "HeliAttitude-v0"
 INFO_KEYS = ("time", "disturbance", "attitude_error_deg", "rate_error_deg_s", "trace")
@@ -36,19 +39,21 @@ def _actions(n_steps, n, seed=0):
     return a
 
 
-def _run_side_by_side(kwargs, n=4, n_steps=600, seed=100, options=None):
-    """Step a vector env and n single envs with the same actions; check they agree; return event counts."""
+def _run_side_by_side(kwargs, n=4, n_steps=600, seed=100, options=None, watch=None):
+    """Step a vector env of n copies and a single env for each copy of ``watch`` (all by default) with the same
+    actions; check they agree; return event counts."""
     venv = HeliAttitudeVectorEnv(n, **kwargs)
-    envs = [HeliAttitudeEnv(**kwargs) for _ in range(n)]
+    watch = list(range(n)) if watch is None else list(watch)
+    envs = {i: HeliAttitudeEnv(**kwargs) for i in watch}
     vobs, vinfo = venv.reset(seed=seed, options=options)
-    singles = [env.reset(seed=seed + i, options=options) for i, env in enumerate(envs)]
+    singles = [env.reset(seed=seed + i, options=options) for i, env in envs.items()]
     _check_same(venv, envs, vobs, vinfo, [o for o, _ in singles], [i for _, i in singles])
-    done = [False] * n
+    done = dict.fromkeys(watch, False)
     counts = {"terminated": 0, "truncated": 0, "autoreset": 0}
     for actions in _actions(n_steps, n):
         vobs, vrew, vterm, vtrunc, vinfo = venv.step(actions)
         obs, infos = [], []
-        for i, env in enumerate(envs):
+        for i, env in envs.items():
             if done[i]:  # NEXT_STEP autoreset: this step resets the copy, reward 0, not done
                 o, info = env.reset()
                 r, te, tr = 0.0, False, False
@@ -68,11 +73,11 @@ def _run_side_by_side(kwargs, n=4, n_steps=600, seed=100, options=None):
 
 def _check_same(venv, envs, vobs, vinfo, obs, infos):
     x = np.array(venv._x)
-    for i, env in enumerate(envs):
+    for (i, env), o, info in zip(envs.items(), obs, infos):
         assert np.array_equal(np.array(env._x), x[:, i]), f"state of copy {i}"
-        assert_allclose(vobs[i], obs[i], rtol=1e-12, atol=1e-12)
+        assert_allclose(vobs[i], o, rtol=1e-12, atol=1e-12)
         for key in INFO_KEYS:
-            assert_allclose(vinfo[key][i], infos[i][key], rtol=1e-12, atol=1e-12, err_msg=key)
+            assert_allclose(vinfo[key][i], info[key], rtol=1e-12, atol=1e-12, err_msg=key)
             assert vinfo[f"_{key}"][i]
 
 
@@ -100,6 +105,20 @@ def test_vector_env_reproduces_single_envs_across_autoresets(task):
 def test_vector_env_reproduces_single_envs_with_other_settings(kwargs):
     counts = _run_side_by_side({**kwargs, "episode_seconds": 2.0}, n=3, n_steps=300, seed=7)
     assert counts["autoreset"] >= 1
+
+
+@pytest.mark.parametrize("effects", [(), tuple(EFFECTS)], ids=["shipped", "every-effect"])
+def test_copies_in_every_block_reproduce_single_envs(effects):
+    """The step loop runs a block of copies at a time: copies at the edges of the blocks and in a last,
+    partial block step and observe as their single envs do (the shipped model's sensors and gyro lines; a
+    model whose every constant is used: the loop reads them from an argument)."""
+    shipped = load_env_model(default_model_dir())
+    model = dataclasses.replace(shipped, params=shipped.params.with_values(
+        **{k: v for e in effects for k, v in EFFECTS[e].items()}))
+    n = 2 * BLOCK + 3
+    counts = _run_side_by_side({"model": model, "episode_seconds": 1.0}, n=n, n_steps=160, seed=3,
+                               watch=[0, 2, BLOCK - 1, BLOCK, 2 * BLOCK - 1, 2 * BLOCK, n - 1])
+    assert counts["autoreset"] >= 7
 
 
 def test_vector_env_reproduces_pinned_traces_running_out():
