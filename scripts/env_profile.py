@@ -80,8 +80,8 @@ VARIANTS = {"no slow path": _without_slow_path, "no normals": _without_normals,
             "library row fixed": _library_row_fixed, "no prefetch": _without_prefetch}
 
 
-def _compiled_variants(env, names):
-    """The env's step and its variants, each compiled from the env's generated source."""
+def step_lines(env) -> list[str]:
+    """The source lines of the env's generated step function (:func:`heli_env.kernels.env_kernels`)."""
     captured = {}
     compile_module = kernels._compile_module
 
@@ -97,10 +97,15 @@ def _compiled_variants(env, names):
                             s.task.stick_step_weight > 0.0)
     finally:
         kernels._compile_module = compile_module
-    lines, _ = captured["step"]
+    return captured["step"][0]
+
+
+def _compiled_variants(env, names):
+    """The env's step and its variants, each compiled from the env's generated source."""
+    lines = step_lines(env)
     steps = {"full step": env._step_loop}
     for name in names:
-        steps[name] = compile_module({"step": (VARIANTS[name](lines), False)}, f"profile {name}").step
+        steps[name] = kernels._compile_module({"step": (VARIANTS[name](lines), False)}, f"profile {name}").step
     return steps
 
 

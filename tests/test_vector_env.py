@@ -465,3 +465,21 @@ def test_same_seed_same_episode_as_before_the_fused_step(task, expected):
     arctan2, separate loops) gave them: a faster step must not change an episode. A change of the shipped
     model or library changes these digests too."""
     assert _episode_digest(task) == expected
+
+
+def test_every_profile_variant_changes_the_step_it_is_timed_against():
+    """scripts/env_profile.py attributes a step's time to its parts by removing one at a time: each variant
+    must change the generated step (a pattern that no longer matches would time the full step under another
+    name) and stay a function Python can compile. Nothing is compiled by numba here."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "env_profile.py"
+    spec = importlib.util.spec_from_file_location("env_profile", path)
+    profile = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(profile)
+    lines = profile.step_lines(HeliAttitudeVectorEnv(4))
+    for name, variant in profile.VARIANTS.items():
+        changed = variant(lines)
+        assert changed != lines, name
+        compile("\n".join(changed) + "\n", name, "exec")
