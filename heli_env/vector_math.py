@@ -1,11 +1,14 @@
-"""Branch-free ``atan2`` and ``asin`` that a numba loop over copies runs 8 at a time.
+"""Branch-free ``atan2`` and ``asin`` that a numba loop over copies runs 4 or 8 at a time (AVX2 / AVX-512).
 
 The vector environment turns each copy's quaternion into Euler angles (eqs. 27-29) every step. A call
 of the C library's ``atan2`` inside a compiled loop keeps the loop scalar (tens of nanoseconds per copy),
 and numpy's SIMD ``arctan2`` needs a pass of its own over memory outside the loop. The functions here are
 Cephes' ``atan`` (S. L. Moshier, *Methods and Programs for Mathematical Functions*, 1989: a rational
 approximation on ``|t| <= tan(pi/8)`` after reducing by ``pi/4`` or ``pi/2``) written with selects
-instead of branches, so that LLVM vectorises them inside the step's loop. Error against the C library's
+instead of branches, so that LLVM vectorises them inside the step's loop. numba compiles them apart
+(``error_model="numpy"``: a division by zero is IEEE's, not an exception to check) and LLVM inlines them
+into the loop; numba's own inlining (``inline="always"``) gave the same machine code and made the step
+compile a second longer. Error against the C library's
 correctly rounded-ish ``math.atan2`` / ``math.asin``: at most 1 ulp for ``atan2`` and 2 ulp for ``asin``
 over unit quaternions of every size (``tests/test_vector_math.py``), numpy's ``arctan2`` / ``arcsin``
 being within 1 ulp there too.
