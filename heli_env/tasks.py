@@ -1,6 +1,6 @@
 """Tasks of the attitude environments: references, observation, reward, termination.
 
-Every draw an episode makes happens in :func:`draw_episode`, in one fixed order
+Every draw an episode makes happens in :func:`draw_episodes`, in one fixed order
 from the environment's ``np_random``, so the single and the vector environment
 draw the same episode from the same seed. The reward and observation are
 written once, with arithmetic that serves floats (single env) and arrays
@@ -138,13 +138,46 @@ class Episode:
     phase: np.ndarray  # (3, N_SINES)
 
 
-def draw_episode(rng: np.random.Generator, spec, options=None) -> Episode:
-    """Draw everything random about an episode, in a fixed order.
+@dataclass
+class Episodes:
+    """The draws of several episodes, one per generator (see :func:`draw_episodes`): :class:`Episode`'s fields
+    with the episodes along the first axis."""
+
+    trace: np.ndarray  # (m,) int64
+    offset: np.ndarray  # (m,) int64
+    angles: np.ndarray  # (m, 2)
+    rates: np.ndarray  # (m, 3)
+    smooth: np.ndarray  # (m,) bool
+    steps: np.ndarray  # (m, 3, n_segments)
+    amp: np.ndarray  # (m, 3, N_SINES)
+    freq: np.ndarray  # (m, 3, N_SINES)
+    phase: np.ndarray  # (m, 3, N_SINES)
+
+    def __getitem__(self, i: int) -> Episode:
+        return Episode(int(self.trace[i]), int(self.offset[i]), self.angles[i], self.rates[i], bool(self.smooth[i]),
+                       self.steps[i], self.amp[i], self.freq[i], self.phase[i])
+
+
+def _uniform(u: np.ndarray, low: float, high: float) -> np.ndarray:
+    """``rng.uniform(low, high)`` of the standard uniforms ``u`` the same generator gave: numpy computes each
+    as ``low + (high - low) * u`` from one 53-bit double, as ``rng.random`` draws them."""
+    return low + (high - low) * u
+
+
+def draw_episodes(rngs, spec, options=None) -> Episodes:
+    """Draw everything random about an episode from each generator of ``rngs``, in a fixed order.
+
+    Per generator: the trace and the window's offset (two ``integers``), then one ``random`` call for every
+    other draw: the initial roll and pitch (2) and rates (3), whether the reference is smooth (1, with
+    ``reference="mixed"``), the staircase (3 per segment) and the sinusoids' amplitudes, frequencies and
+    phases (3 x :data:`N_SINES` each), each turned into its range as ``rng.uniform`` does. The generator
+    draws the same numbers as one ``uniform`` call per quantity and the episode is the same bit for bit;
+    across generators the arithmetic is one numpy operation (a vector env resets thousands of copies).
 
     Parameters
     ----------
-    rng : numpy Generator
-        The environment's ``np_random``.
+    rngs : sequence of numpy Generator
+        The environments' ``np_random`` (one per episode).
     spec : heli_env.spec.EnvSpec
         The environment's settings: its task, the library's traces (``spec.model.n_traces``,
         ``spec.model.lengths`` [samples]), the trace samples an episode of full length uses
@@ -155,29 +188,46 @@ def draw_episode(rng: np.random.Generator, spec, options=None) -> Episode:
     """
     cfg, lengths, n_traces = spec.task, spec.model.lengths, spec.model.n_traces
     options = options or {}
-    trace = int(rng.integers(n_traces))
-    if options.get("trace") is not None:
-        trace = int(options["trace"])
-        if not 0 <= trace < n_traces:
-            raise ValueError(f"options['trace'] must be a trace index in [0, {n_traces}), got {trace}")
-    offset = draw_offset(rng, max(window_count(lengths[trace], spec.needed), 1))  # a short trace ends the episode early
-    if options.get("offset") is not None:
-        offset = int(options["offset"])
-        if not 0 <= offset < int(lengths[trace]) - 1:
-            raise ValueError(
-                f"options['offset'] must be a sample in [0, {int(lengths[trace]) - 1}) of trace {trace}, got {offset}")
-    angles = rng.uniform(-spec.init_angle, spec.init_angle, 2)
-    rates = rng.uniform(-spec.init_rate, spec.init_rate, 3)
-    smooth = bool(rng.random() < 0.5) if cfg.reference == "mixed" else cfg.reference == "smooth"
+    mixed = cfg.reference == "mixed"
     n_seg = int(spec.episode_steps * spec.dt // cfg.step_period) + 1
-    unit_steps = rng.uniform(-1.0, 1.0, (3, n_seg))
-    unit_amp = rng.uniform(0.2, 1.0, (3, N_SINES))
-    freq = TWO_PI * rng.uniform(0.05, 0.4, (3, N_SINES))
-    phase = rng.uniform(0.0, TWO_PI, (3, N_SINES))
+    widths = (2, 3, int(mixed), 3 * n_seg, 3 * N_SINES, 3 * N_SINES, 3 * N_SINES)
+    traces, offsets, uniforms = [], [], np.empty((len(rngs), sum(widths)))
+    for i, rng in enumerate(rngs):
+        trace = int(rng.integers(n_traces))
+        if options.get("trace") is not None:
+            trace = int(options["trace"])
+            if not 0 <= trace < n_traces:
+                raise ValueError(f"options['trace'] must be a trace index in [0, {n_traces}), got {trace}")
+        offset = draw_offset(rng, max(window_count(lengths[trace], spec.needed), 1))  # a short trace ends early
+        if options.get("offset") is not None:
+            offset = int(options["offset"])
+            if not 0 <= offset < int(lengths[trace]) - 1:
+                raise ValueError(
+                    f"options['offset'] must be a sample in [0, {int(lengths[trace]) - 1}) of trace {trace}, "
+                    f"got {offset}")
+        traces.append(trace)
+        offsets.append(offset)
+        rng.random(out=uniforms[i])
+    edges = np.cumsum((0,) + widths).tolist()
+    u_angles, u_rates, u_smooth, u_steps, u_amp, u_freq, u_phase = (uniforms[:, a:b] for a, b in zip(edges, edges[1:]))
+    m = len(rngs)
+    smooth = u_smooth[:, 0] < 0.5 if mixed else np.full(m, cfg.reference == "smooth")
+    unit_steps = _uniform(u_steps.reshape(m, 3, n_seg), -1.0, 1.0)
+    unit_amp = _uniform(u_amp.reshape(m, 3, N_SINES), 0.2, 1.0)
     bound = reference_bounds(cfg)[:, None]
-    unit_steps[:, 0] = 0.0  # start from the current hold point, then step
-    amp = unit_amp / unit_amp.sum(axis=1, keepdims=True) * bound
-    return Episode(trace, offset, angles, rates, smooth, unit_steps * bound, amp, freq, phase)
+    unit_steps[:, :, 0] = 0.0  # start from the current hold point, then step
+    return Episodes(np.array(traces, dtype=np.int64), np.array(offsets, dtype=np.int64),
+                    _uniform(u_angles, -spec.init_angle, spec.init_angle),
+                    _uniform(u_rates, -spec.init_rate, spec.init_rate), smooth, unit_steps * bound,
+                    unit_amp / unit_amp.sum(axis=2, keepdims=True) * bound,
+                    TWO_PI * _uniform(u_freq.reshape(m, 3, N_SINES), 0.05, 0.4),
+                    _uniform(u_phase.reshape(m, 3, N_SINES), 0.0, TWO_PI))
+
+
+def draw_episode(rng: np.random.Generator, spec, options=None) -> Episode:
+    """Draw everything random about an episode from the environment's ``np_random`` ``rng``: the
+    :func:`draw_episodes` of one generator."""
+    return draw_episodes([rng], spec, options)[0]
 
 
 def window_count(length: int, needed: int) -> int:
@@ -251,13 +301,19 @@ def reward_of(cfg: TaskConfig, e_att, e_rate, action, previous=(0.0, 0.0, 0.0)):
     return -cost
 
 
-def line_phases(rng: np.random.Generator, n_lines: int) -> list:
-    """A uniform random phase per gyro vibration line, as its (cos, sin) pair, drawn from ``rng``.
+def draw_line_phases(rngs, n_lines: int) -> np.ndarray:
+    """A uniform random phase per gyro vibration line from each generator of ``rngs``, as its (cos, sin) pair:
+    (len(rngs), n_lines, 2).
 
     Drawn as a normalised Gaussian pair, so that a line reads ``sin(w t) cos + cos(w t) sin`` with only
     products and sums: the single and the vector environment compute it bit for bit alike.
     """
-    g = rng.normal(0.0, 1.0, (n_lines, 2))
-    norm = np.sqrt(g[:, 0] * g[:, 0] + g[:, 1] * g[:, 1])
-    return (g / norm[:, None]).tolist()
+    g = np.array([rng.normal(0.0, 1.0, (n_lines, 2)) for rng in rngs]).reshape(len(rngs), n_lines, 2)
+    norm = np.sqrt(g[..., 0] * g[..., 0] + g[..., 1] * g[..., 1])
+    return g / norm[..., None]
+
+
+def line_phases(rng: np.random.Generator, n_lines: int) -> list:
+    """:func:`draw_line_phases` of the one generator ``rng``, as a list of (cos, sin) pairs."""
+    return draw_line_phases([rng], n_lines)[0].tolist()
 

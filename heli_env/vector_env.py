@@ -17,7 +17,7 @@ from .kernels import BLOCK, N_ROWS, OUT, R, BlockLayout, env_kernels, first_non_
 from .observation import MAX_RATE, OBS_DIM, action_space, observation_space
 from .spec import build_spec, real_actions, reset_options
 from .sensor_noise import draw_noise_key
-from .tasks import N_SINES, draw_episode, line_phases, reward_coefficients
+from .tasks import N_SINES, draw_episodes, draw_line_phases, reward_coefficients
 from .threads import ThreadChoice
 
 class HeliAttitudeVectorEnv(VectorEnv):
@@ -160,16 +160,17 @@ class HeliAttitudeVectorEnv(VectorEnv):
         options, gust_default = reset_options(options, s.gust_scale)
         # Every copy draws its episode from its own generator (as a single env seeded seed + i would);
         # the state is then written for all of them at once, and only once every draw has succeeded.
-        eps = [draw_episode(self._rngs[i], s, options) for i in which.tolist()]
-        if not eps:
+        if which.size == 0:
             return
+        rngs = [self._rngs[i] for i in which.tolist()]
+        eps = draw_episodes(rngs, s, options)
         if s.line_axis:  # drawn after the episode, from the copy's generator, as the single env does
-            phases = np.array([line_phases(self._rngs[i], len(s.line_axis)) for i in which.tolist()])
+            phases = draw_line_phases(rngs, len(s.line_axis))
             self._rows.put(N_ROWS, phases.reshape(len(which), -1).T, which)  # (cos, sin) of each line
         if s.measured:  # then the episode's noise key
-            self._key[which] = [draw_noise_key(self._rngs[i]) for i in which.tolist()]
-        traces = np.array([ep.trace for ep in eps], dtype=np.int64)
-        base = s.model.starts[traces] + np.array([ep.offset for ep in eps], dtype=np.int64)
+            self._key[which] = [draw_noise_key(rng) for rng in rngs]
+        traces = eps.trace
+        base = s.model.starts[traces] + eps.offset
         stop = np.minimum(s.model.starts[traces] + s.model.lengths[traces], base + s.needed)
         last = (stop - base + s.ratio - 1) // s.ratio - 1  # len(range(base, stop, ratio)) - 1
         self._base[which] = base
@@ -179,9 +180,9 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._k[which] = 0
         self._trace[which] = traces
         self._gust[which] = gust_default
-        angles = np.array([ep.angles for ep in eps]).T
+        angles = eps.angles.T
         rows = self._rows
-        rows.put(R["x0"], np.array([ep.rates for ep in eps]).T, which)
+        rows.put(R["x0"], eps.rates.T, which)
         rows.put(R["x3"], s.trim[:, base], which)
         rows.put(R["x6"], quaternion_from_euler(angles[0], angles[1], 0.0), which)  # elementwise as on one copy
         rows.put(R["act0"], np.zeros((3, which.size)), which)
@@ -189,11 +190,11 @@ class HeliAttitudeVectorEnv(VectorEnv):
         rows.put(R["gust"], self._gust[which], which)
         if self._queue is not None:
             self._queue[:, which] = 0.0
-        self._smooth[which] = [ep.smooth for ep in eps]
-        self._steps[:, :, which] = np.stack([ep.steps for ep in eps], axis=-1)
-        self._amp[:, :, which] = np.stack([ep.amp for ep in eps], axis=-1)
-        self._freq[:, :, which] = np.stack([ep.freq for ep in eps], axis=-1)
-        self._phase[:, :, which] = np.stack([ep.phase for ep in eps], axis=-1)
+        self._smooth[which] = eps.smooth
+        self._steps[:, :, which] = eps.steps.transpose(1, 2, 0)
+        self._amp[:, :, which] = eps.amp.transpose(1, 2, 0)
+        self._freq[:, :, which] = eps.freq.transpose(1, 2, 0)
+        self._phase[:, :, which] = eps.phase.transpose(1, 2, 0)
         if self._restart is not None:  # reset now: they do not restart at the next step
             left = np.setdiff1d(self._restart, which)
             self._restart = left if left.size else None

@@ -15,7 +15,9 @@ Sections (``--only NAME`` runs one):
   choice) against Gymnasium's ``CartPoleVectorEnv(4096)`` (target >= 1.0) and
   against its own ``threads=1`` figure (target >= 0.9), and ``HeliAttitude-v0``
   through ``gym.make`` against ``Pendulum-v1`` (target >= 1.0); the envs of
-  each comparison are timed in turn.
+  each comparison are timed in turn. Then a reset of all the vector env's
+  copies, per copy and spread over an episode (the steps above end no
+  episode; CartPole's own resets are in its figure).
 * ``env-threads`` — the vector env with numba's whole pool fixed against one
   thread, quiet and busy, under the threading layer in use (run it once per
   ``NUMBA_THREADING_LAYER``).
@@ -239,6 +241,11 @@ def bench_env(repeats: int) -> dict:
             rates = _interleaved({"vector": (counted, a_v, n), "vector threads=1": (vec1, a_v, n),
                                   "CartPoleVectorEnv": (cart, a_c, n)}, 40, blocks)
             pooled = counted.share()
+            resets = []
+            for _ in range(blocks):  # a reset of every copy: what the autoresets of an episode's end cost
+                t0 = time.perf_counter()
+                vec1.reset()
+                resets.append(time.perf_counter() - t0)
             rates.update(_interleaved({"single": (heli, a_h, 1), "Pendulum-v1": (pend, a_p, 1)}, 2000, blocks))
             after = _load()
         finally:
@@ -253,6 +260,10 @@ def bench_env(repeats: int) -> dict:
         out[f"{c}: vector env-steps/s, CartPoleVectorEnv x {n}"] = rates["CartPoleVectorEnv"]
         out[f"{c}: ratio vector / CartPoleVectorEnv (target >= 1.0)"] = rates["vector"] / rates["CartPoleVectorEnv"]
         out[f"{c}: ratio vector / its threads=1 figure (target >= 0.9)"] = rates["vector"] / rates["vector threads=1"]
+        reset_us = statistics.median(resets) / n * 1e6
+        episode = vec1.unwrapped.spec_.episode_steps
+        out[f"{c}: vector env reset of all {n} copies [us per copy]"] = reset_us
+        out[f"{c}:   the same spread over an episode of {episode} steps [ns per copy-step]"] = reset_us * 1e3 / episode
         out[f"{c}: single env steps/s, HeliAttitude-v0 via gym.make (sensors on)"] = rates["single"]
         out[f"{c}: single env steps/s, Pendulum-v1 via gym.make"] = rates["Pendulum-v1"]
         out[f"{c}: ratio single / Pendulum-v1 (target >= 1.0)"] = rates["single"] / rates["Pendulum-v1"]

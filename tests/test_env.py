@@ -24,7 +24,9 @@ from heli_cli.main import main
 from heli_core.physics import step, trim_sticks
 from heli_core.quaternion import euler_from_quaternion
 from heli_env import ActionError, EnvModelError, HeliAttitudeEnv, default_model_dir, load_env_model
-from heli_env.tasks import TaskConfig
+from heli_env.env_model import as_env_model
+from heli_env.spec import build_spec
+from heli_env.tasks import N_SINES, TWO_PI, TaskConfig, draw_episodes, reference_bounds
 from heli_env.vector_env import HeliAttitudeVectorEnv
 from identification.bench.flight_config import EFFECTS
 from model_store.disturbance_library import DisturbanceLibrary
@@ -564,6 +566,45 @@ def test_mixed_references_draw_both_kinds():
         env.reset(seed=seed)
         kinds.add(env._episode.smooth)
     assert kinds == {True, False}
+
+
+def _episode_drawn_one_quantity_a_call(rng, spec, options):
+    """An episode as draw_episode drew it before its draws were batched: one ``uniform`` call per quantity."""
+    cfg, lengths = spec.task, spec.model.lengths
+    trace = int(rng.integers(spec.model.n_traces))
+    trace = trace if options.get("trace") is None else options["trace"]
+    offset = int(rng.integers(max(int(lengths[trace]) - spec.needed + 1, 1)))
+    angles = rng.uniform(-spec.init_angle, spec.init_angle, 2)
+    rates = rng.uniform(-spec.init_rate, spec.init_rate, 3)
+    smooth = bool(rng.random() < 0.5) if cfg.reference == "mixed" else cfg.reference == "smooth"
+    unit_steps = rng.uniform(-1.0, 1.0, (3, int(spec.episode_steps * spec.dt // cfg.step_period) + 1))
+    unit_amp = rng.uniform(0.2, 1.0, (3, N_SINES))
+    freq = TWO_PI * rng.uniform(0.05, 0.4, (3, N_SINES))
+    phase = rng.uniform(0.0, TWO_PI, (3, N_SINES))
+    bound = reference_bounds(cfg)[:, None]
+    unit_steps[:, 0] = 0.0
+    return (trace, offset, angles, rates, smooth, unit_steps * bound,
+            unit_amp / unit_amp.sum(axis=1, keepdims=True) * bound, freq, phase)
+
+
+@pytest.mark.parametrize("task, reference", [("track", "mixed"), ("track", "smooth"), ("rate", "steps"),
+                                             ("hold", "mixed")])
+def test_batched_episode_draws_equal_one_uniform_call_per_quantity(task, reference):
+    """draw_episodes takes one ``random`` call per generator for what was a ``uniform`` call per quantity: the
+    same numbers bit for bit, and the generators left in the same state."""
+    spec = build_spec(as_env_model(None), task, reference, episode_seconds=7.0, init_angle_deg=12.0)
+    for options in ({}, {"trace": 1}):
+        rngs = [np.random.default_rng(seed) for seed in range(40)]
+        batch = draw_episodes(rngs, spec, options)
+        for i, seed in enumerate(range(40)):
+            again = np.random.default_rng(seed)
+            expected = _episode_drawn_one_quantity_a_call(again, spec, options)
+            ep = batch[i]
+            got = (ep.trace, ep.offset, ep.angles, ep.rates, ep.smooth, ep.steps, ep.amp, ep.freq, ep.phase)
+            for name, a, b in zip(("trace", "offset", "angles", "rates", "smooth", "steps", "amp", "freq", "phase"),
+                                  got, expected):
+                assert np.array_equal(a, b), (name, seed)
+            assert rngs[i].integers(2**62) == again.integers(2**62)  # the same state after the draws
 
 
 def test_rate_reward_ignores_the_attitude():
