@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import json
 
+import numpy as np
 import pytest
 
 from identification.bench.synthetic import simulate_flight
@@ -106,6 +107,24 @@ def test_the_lag_candidate_waits_for_a_delay_and_the_starting_model_keeps_its_la
     assert CATALOGUE["servo_lag"].acts_on(2) and describe("servo_lag", 1) == "servo_lag (lag_pitch)"
     with pytest.raises(ValueError, match="integral method has no servo filter"):
         Diagnoser(effects=("servo_lag",)).fit(simulate_flight(40, seed=1).flight)
+
+
+def test_the_lag_profile_goes_on_where_its_best_lag_is_the_top_of_its_span():
+    """The lag candidate profiles lags up to twice the delay found (plus 10 ms); a best lag at that span's top
+    is profiled on up the grid and refined, not returned as the top of the span."""
+    from identification.diagnosis.axis_scores import AxisScore, FlightScorer
+
+    scorer = FlightScorer(None, None, 0, 100.0)
+    profiled = []
+
+    def score(a, names, alignment, x0, kinds, nfev, free_tau=False, lag=0.0):
+        profiled.append(lag)
+        return AxisScore(tuple(names), alignment, 1e4 * (lag - 0.07) ** 2, np.zeros(6), kinds[0], lag=lag)
+
+    scorer.score = score
+    base = AxisScore(("k2", "k3"), 0.01, 1e4 * 0.07 ** 2, np.zeros(6), "ar2")  # a 10 ms delay: span 30 ms
+    found = scorer.lag_candidate(0, base)
+    assert abs(found.lag - 0.07) < 0.002 and max(profiled) <= 0.12
 
 
 def test_physical_bounds_of_candidate_terms():

@@ -232,7 +232,9 @@ class FlightScorer:
         delay found, as :func:`~identification.likelihood.servo_lag.profile_lag` does: a scan with the damping
         held ranked a 40 ms lag below 15 ms, and a delay started at 0 stuck there), the best refined between its
         neighbours (:func:`~identification.likelihood.servo_lag.bracketed_minimum`) and searched with every gust
-        model from the base fit and from a fresh start."""
+        model from the base fit and from a fresh start. Where the best is the last lag profiled, the profile
+        goes on up :data:`~identification.likelihood.servo_lag.LAG_GRID` until it is not (or the grid ends,
+        where the lag is refused as at the edge): a lag never stops at the span's own top."""
         delay = base.alignment
         if delay <= 0.0:
             return base
@@ -241,7 +243,10 @@ class FlightScorer:
         def nll(lag):
             return self.score(a, base.names, delay, base.x, (base.kind,), LAG_SCAN_NFEV, True, float(lag)).nll
 
-        lag, _ = bracketed_minimum(nll, [(0.0, base.nll)] + [(lag, nll(lag)) for lag in grid])
+        profile = [(0.0, base.nll)] + [(lag, nll(lag)) for lag in grid]
+        while min(profile, key=lambda p: p[1]) is profile[-1] and len(profile) <= len(LAG_GRID):
+            profile.append((LAG_GRID[len(profile) - 1], nll(LAG_GRID[len(profile) - 1])))  # best at the top: on
+        lag, _ = bracketed_minimum(nll, profile)
         if lag <= 0.0:
             return base
         tries = [self.score(a, base.names, delay, x0, WIND_MODELS, 3 * NFEV, True, lag)
