@@ -21,6 +21,7 @@ References (``task``):
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from functools import cached_property
@@ -208,7 +209,7 @@ def draw_episodes(rngs, spec, options=None) -> Episodes:
         traces.append(trace)
         offsets.append(offset)
         rng.random(out=uniforms[i])
-    edges = np.cumsum((0,) + widths).tolist()
+    edges = [0, *itertools.accumulate(widths)]
     u_angles, u_rates, u_smooth, u_steps, u_amp, u_freq, u_phase = (uniforms[:, a:b] for a, b in zip(edges, edges[1:]))
     m = len(rngs)
     smooth = u_smooth[:, 0] < 0.5 if mixed else np.full(m, cfg.reference == "smooth")

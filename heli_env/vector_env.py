@@ -20,6 +20,10 @@ from .sensor_noise import draw_noise_key
 from .tasks import N_SINES, draw_episodes, draw_line_phases, reward_coefficients
 from .threads import ThreadChoice
 
+_START_ROWS = R["gust"] - R["x0"] + 1
+"""Rows a reset writes in one put: the state (10), the action (3) and the gust scale, consecutive in :data:`R`."""
+
+
 class HeliAttitudeVectorEnv(VectorEnv):
     """``num_envs`` copies of :class:`heli_env.env.HeliAttitudeEnv`, batched in numpy.
 
@@ -181,13 +185,14 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._trace[which] = traces
         self._gust[which] = gust_default
         angles = eps.angles.T
+        start = np.zeros((_START_ROWS, which.size))  # the state, the action and the gust scale (rows x0 .. gust)
+        start[0:3] = eps.rates.T
+        start[3:6] = s.trim[:, base]
+        start[6:10] = quaternion_from_euler(angles[0], angles[1], 0.0)  # elementwise as on one copy
+        start[R["gust"] - R["x0"]] = self._gust[which]  # the action rows stay 0
         rows = self._rows
-        rows.put(R["x0"], eps.rates.T, which)
-        rows.put(R["x3"], s.trim[:, base], which)
-        rows.put(R["x6"], quaternion_from_euler(angles[0], angles[1], 0.0), which)  # elementwise as on one copy
-        rows.put(R["act0"], np.zeros((3, which.size)), which)
+        rows.put(R["x0"], start, which)
         rows.put(R["prev0"], np.zeros((3, which.size)), which)  # an episode starts from rest (the stick step)
-        rows.put(R["gust"], self._gust[which], which)
         if self._queue is not None:
             self._queue[:, which] = 0.0
         self._smooth[which] = eps.smooth
@@ -195,8 +200,8 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._amp[:, :, which] = eps.amp.transpose(1, 2, 0)
         self._freq[:, :, which] = eps.freq.transpose(1, 2, 0)
         self._phase[:, :, which] = eps.phase.transpose(1, 2, 0)
-        if self._restart is not None:  # reset now: they do not restart at the next step
-            left = np.setdiff1d(self._restart, which)
+        if self._restart is not None:  # reset now (a masked reset): they do not restart at the next step
+            left = self._restart[~np.isin(self._restart, which, assume_unique=True)]
             self._restart = left if left.size else None
 
     # ------------------------------------------------------------------- step
@@ -227,7 +232,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
                                         self._last, s.ratio, self._constants, *self._observe_arguments,
                                         obs.reshape(-1), out, ends, 0, rows.blocks, True)
         if self._restart is not None:  # these copies start their next episode instead: reward 0, not ended
-            which = self._restart
+            which, self._restart = self._restart, None  # all of them now
             self._reset_envs(which, {})
             rows.put(R["ud0"], self._table[self._base[which], 7:10].T * self._gust[which], which)
             self._put_references()

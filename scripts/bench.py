@@ -17,7 +17,9 @@ Sections (``--only NAME`` runs one):
   through ``gym.make`` against ``Pendulum-v1`` (target >= 1.0); the envs of
   each comparison are timed in turn. Then a reset of all the vector env's
   copies, per copy and spread over an episode (the steps above end no
-  episode; CartPole's own resets are in its figure).
+  episode; CartPole's own resets are in its figure), and the vector env
+  against CartPole again once its copies' episodes end on different steps,
+  as in a long run (two a step at 4096 copies and 30 s episodes).
 * ``env-threads`` — the vector env with numba's whole pool fixed against one
   thread, quiet and busy, under the threading layer in use (run it once per
   ``NUMBA_THREADING_LAYER``).
@@ -163,6 +165,19 @@ def _interleaved(runs: dict, steps: int, blocks: int) -> dict:
     return {name: statistics.median(r) for name, r in rates.items()}
 
 
+def _spread_episode_ends(vec, action) -> None:
+    """Restart copy ``i`` of ``vec`` at step ``i % episode_steps`` of one episode's length, so that from then on
+    some copies' episodes end on every step, as in a long run (a fresh vector env's copies all end together)."""
+    vec.reset(seed=0)
+    steps = vec.unwrapped.spec_.episode_steps
+    group = np.arange(vec.num_envs) % steps
+    for k in range(steps):
+        mask = group == k
+        if mask.any():
+            vec.reset(options={"reset_mask": mask})
+        vec.step(action)
+
+
 def _neighbour():
     """Start a CPU-bound process (a Python busy loop, one core) beside the benchmark; the caller stops it."""
     import subprocess
@@ -219,11 +234,13 @@ def bench_env(repeats: int) -> dict:
     n = ENV_COPIES
     vec = gym.make_vec("HeliAttitude-v0", num_envs=n, vectorization_mode="vector_entry_point")
     vec1 = gym.make_vec("HeliAttitude-v0", num_envs=n, vectorization_mode="vector_entry_point", threads=1)
+    spread = gym.make_vec("HeliAttitude-v0", num_envs=n, vectorization_mode="vector_entry_point")
     cart = CartPoleVectorEnv(num_envs=n)
     heli = gym.make("HeliAttitude-v0")
     pend = gym.make("Pendulum-v1")
     for env in (vec, vec1, cart, heli, pend):
         env.reset(seed=0)
+    _spread_episode_ends(spread, np.zeros((n, 3), dtype=np.float32))
     a_v, a_c = np.zeros((n, 3), dtype=np.float32), np.zeros(n, dtype=np.int64)
     a_h, a_p = np.zeros(3, dtype=np.float32), np.zeros(1, dtype=np.float32)
     choice = vec.unwrapped._thread_choice
@@ -241,6 +258,8 @@ def bench_env(repeats: int) -> dict:
             rates = _interleaved({"vector": (counted, a_v, n), "vector threads=1": (vec1, a_v, n),
                                   "CartPoleVectorEnv": (cart, a_c, n)}, 40, blocks)
             pooled = counted.share()
+            rates.update(_interleaved({"spread": (spread, a_v, n), "CartPoleVectorEnv again": (cart, a_c, n)}, 40,
+                                      blocks))
             resets = []
             for _ in range(blocks):  # a reset of every copy: what the autoresets of an episode's end cost
                 t0 = time.perf_counter()
@@ -260,6 +279,8 @@ def bench_env(repeats: int) -> dict:
         out[f"{c}: vector env-steps/s, CartPoleVectorEnv x {n}"] = rates["CartPoleVectorEnv"]
         out[f"{c}: ratio vector / CartPoleVectorEnv (target >= 1.0)"] = rates["vector"] / rates["CartPoleVectorEnv"]
         out[f"{c}: ratio vector / its threads=1 figure (target >= 0.9)"] = rates["vector"] / rates["vector threads=1"]
+        out[f"{c}: vector env-steps/s, episodes ending on every step (a long run's state)"] = rates["spread"]
+        out[f"{c}: ratio of that / CartPoleVectorEnv"] = rates["spread"] / rates["CartPoleVectorEnv again"]
         reset_us = statistics.median(resets) / n * 1e6
         episode = vec1.unwrapped.spec_.episode_steps
         out[f"{c}: vector env reset of all {n} copies [us per copy]"] = reset_us

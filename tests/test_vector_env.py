@@ -173,6 +173,23 @@ def test_reset_mask_resets_only_the_masked_copies():
     assert np.array_equal(np.array(single._x), x_after[:, 2])
 
 
+def test_a_masked_reset_of_an_ended_copy_replaces_its_autoreset():
+    """Copies 0 and 1 end their episodes on one step; a masked reset of copy 0 starts its next episode now, so
+    the next step steps it (time dt, a reward) while copy 1 is autoreset there (time 0, reward 0)."""
+    venv = HeliAttitudeVectorEnv(3, episode_seconds=0.5)
+    venv.reset(seed=0)
+    for _ in range(50):  # a 0.5 s episode: all three end on the 50th step
+        _, _, terminated, truncated, _ = venv.step(np.zeros((3, 3), np.float32))
+    assert np.all(terminated | truncated)
+    venv.reset(options={"reset_mask": np.array([True, False, False])})
+    _, reward, terminated, truncated, info = venv.step(np.zeros((3, 3), np.float32))
+    assert_allclose(info["time"], [0.01, 0.0, 0.0])
+    assert reward[0] != 0.0 and reward[1] == 0.0 and reward[2] == 0.0
+    assert not np.any(terminated | truncated)
+    _, reward, _, _, info = venv.step(np.zeros((3, 3), np.float32))
+    assert_allclose(info["time"], [0.02, 0.01, 0.01])
+
+
 def test_reset_mask_errors():
     venv = HeliAttitudeVectorEnv(3)
     with pytest.raises(ResetNeeded, match="first reset must reset every copy"):
@@ -465,6 +482,16 @@ def test_same_seed_same_episode_as_before_the_fused_step(task, expected):
     arctan2, separate loops) gave them: a faster step must not change an episode. A change of the shipped
     model or library changes these digests too."""
     assert _episode_digest(task) == expected
+
+
+def test_a_reset_writes_the_state_action_and_gust_rows_in_one_block():
+    """The reset writes rows x0 .. gust of the block layout at once: they must be the state, the action and the
+    gust scale, in that order and with nothing between them."""
+    from heli_env.kernels import R
+    from heli_env.vector_env import _START_ROWS
+
+    names = [f"x{i}" for i in range(10)] + [f"act{i}" for i in range(3)] + ["gust"]
+    assert [R[name] for name in names] == list(range(R["x0"], R["x0"] + _START_ROWS))
 
 
 def test_every_profile_variant_changes_the_step_it_is_timed_against():
