@@ -24,7 +24,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 
 import numpy as np
 
@@ -159,10 +159,18 @@ class Episodes:
                        self.steps[i], self.amp[i], self.freq[i], self.phase[i])
 
 
-def _uniform(u: np.ndarray, low: float, high: float) -> np.ndarray:
-    """``rng.uniform(low, high)`` of the standard uniforms ``u`` the same generator gave: numpy computes each
-    as ``low + (high - low) * u`` from one 53-bit double, as ``rng.random`` draws them."""
-    return low + (high - low) * u
+@lru_cache(maxsize=32)
+def _uniform_ranges(init_angle: float, init_rate: float, mixed: bool, n_seg: int) -> tuple:
+    """The columns of one episode's standard uniforms (:func:`draw_episodes`): their ``low`` and ``high - low``
+    (as ``rng.uniform(low, high)`` turns a standard uniform ``u`` into ``low + (high - low) * u``; 0 and 1 leave
+    ``u`` as it is, bit for bit), and the slices of the quantities in them."""
+    parts = [("angles", 2, -init_angle, init_angle), ("rates", 3, -init_rate, init_rate),
+             ("smooth", int(mixed), 0.0, 1.0), ("steps", 3 * n_seg, -1.0, 1.0), ("amp", 3 * N_SINES, 0.2, 1.0),
+             ("freq", 3 * N_SINES, 0.05, 0.4), ("phase", 3 * N_SINES, 0.0, TWO_PI)]
+    low = np.concatenate([np.full(width, lo) for _, width, lo, _ in parts])
+    span = np.concatenate([np.full(width, hi - lo) for _, width, lo, hi in parts])
+    edges = [0, *itertools.accumulate(width for _, width, _, _ in parts)]
+    return low, span, {name: slice(a, b) for (name, *_), a, b in zip(parts, edges, edges[1:])}
 
 
 def draw_episodes(rngs, spec, options=None) -> Episodes:
@@ -171,9 +179,10 @@ def draw_episodes(rngs, spec, options=None) -> Episodes:
     Per generator: the trace and the window's offset (two ``integers``), then one ``random`` call for every
     other draw: the initial roll and pitch (2) and rates (3), whether the reference is smooth (1, with
     ``reference="mixed"``), the staircase (3 per segment) and the sinusoids' amplitudes, frequencies and
-    phases (3 x :data:`N_SINES` each), each turned into its range as ``rng.uniform`` does. The generator
-    draws the same numbers as one ``uniform`` call per quantity and the episode is the same bit for bit;
-    across generators the arithmetic is one numpy operation (a vector env resets thousands of copies).
+    phases (3 x :data:`N_SINES` each), each turned into its range as ``rng.uniform`` does
+    (:func:`_uniform_ranges`). The generator draws the same numbers as one ``uniform`` call per quantity and
+    the episode is the same bit for bit; across generators the arithmetic is one numpy operation (a vector
+    env resets thousands of copies, or a few on every step of a long run).
 
     Parameters
     ----------
@@ -189,10 +198,10 @@ def draw_episodes(rngs, spec, options=None) -> Episodes:
     """
     cfg, lengths, n_traces = spec.task, spec.model.lengths, spec.model.n_traces
     options = options or {}
-    mixed = cfg.reference == "mixed"
     n_seg = int(spec.episode_steps * spec.dt // cfg.step_period) + 1
-    widths = (2, 3, int(mixed), 3 * n_seg, 3 * N_SINES, 3 * N_SINES, 3 * N_SINES)
-    traces, offsets, uniforms = [], [], np.empty((len(rngs), sum(widths)))
+    low, span, at = _uniform_ranges(float(spec.init_angle), float(spec.init_rate), cfg.reference == "mixed", n_seg)
+    m = len(rngs)
+    traces, offsets, uniforms = [], [], np.empty((m, low.size))
     for i, rng in enumerate(rngs):
         trace = int(rng.integers(n_traces))
         if options.get("trace") is not None:
@@ -209,20 +218,15 @@ def draw_episodes(rngs, spec, options=None) -> Episodes:
         traces.append(trace)
         offsets.append(offset)
         rng.random(out=uniforms[i])
-    edges = [0, *itertools.accumulate(widths)]
-    u_angles, u_rates, u_smooth, u_steps, u_amp, u_freq, u_phase = (uniforms[:, a:b] for a, b in zip(edges, edges[1:]))
-    m = len(rngs)
-    smooth = u_smooth[:, 0] < 0.5 if mixed else np.full(m, cfg.reference == "smooth")
-    unit_steps = _uniform(u_steps.reshape(m, 3, n_seg), -1.0, 1.0)
-    unit_amp = _uniform(u_amp.reshape(m, 3, N_SINES), 0.2, 1.0)
+    v = low + span * uniforms
+    smooth = v[:, at["smooth"].start] < 0.5 if cfg.reference == "mixed" else np.full(m, cfg.reference == "smooth")
     bound = reference_bounds(cfg)[:, None]
+    unit_steps = v[:, at["steps"]].reshape(m, 3, n_seg)
     unit_steps[:, :, 0] = 0.0  # start from the current hold point, then step
-    return Episodes(np.array(traces, dtype=np.int64), np.array(offsets, dtype=np.int64),
-                    _uniform(u_angles, -spec.init_angle, spec.init_angle),
-                    _uniform(u_rates, -spec.init_rate, spec.init_rate), smooth, unit_steps * bound,
-                    unit_amp / unit_amp.sum(axis=2, keepdims=True) * bound,
-                    TWO_PI * _uniform(u_freq.reshape(m, 3, N_SINES), 0.05, 0.4),
-                    _uniform(u_phase.reshape(m, 3, N_SINES), 0.0, TWO_PI))
+    unit_amp = v[:, at["amp"]].reshape(m, 3, N_SINES)
+    return Episodes(np.array(traces, dtype=np.int64), np.array(offsets, dtype=np.int64), v[:, at["angles"]],
+                    v[:, at["rates"]], smooth, unit_steps * bound, unit_amp / unit_amp.sum(axis=2, keepdims=True) * bound,
+                    TWO_PI * v[:, at["freq"]].reshape(m, 3, N_SINES), v[:, at["phase"]].reshape(m, 3, N_SINES))
 
 
 def draw_episode(rng: np.random.Generator, spec, options=None) -> Episode:
