@@ -243,9 +243,10 @@ class FlightScorer:
         def nll(lag):
             return self.score(a, base.names, delay, base.x, (base.kind,), LAG_SCAN_NFEV, True, float(lag)).nll
 
-        profile = [(0.0, base.nll)] + [(lag, nll(lag)) for lag in grid]
+        profile = [(0.0, base.nll)] + [(lag, nll(lag)) for lag in grid]  # grid: LAG_GRID's first points
         while min(profile, key=lambda p: p[1]) is profile[-1] and len(profile) <= len(LAG_GRID):
-            profile.append((LAG_GRID[len(profile) - 1], nll(LAG_GRID[len(profile) - 1])))  # best at the top: on
+            lag = LAG_GRID[len(profile) - 1]  # the best is the last profiled: the next lag up the grid
+            profile.append((lag, nll(lag)))
         lag, _ = bracketed_minimum(nll, profile)
         if lag <= 0.0:
             return base
