@@ -21,7 +21,8 @@ in the core's cache:
 
 Every row of a block lies a compile-time constant (:data:`ROW`) from the next, so
 the compiler can prove that a loop's rows do not overlap and runs the arithmetic
-8 copies an AVX-512 instruction (4 with AVX2); the same values come out as one
+several copies an instruction (8 where LLVM uses 512-bit vectors, as on Zen 4; 4 with
+AVX2 and on the AVX-512 Xeons it tunes for 256 bits); the same values come out as one
 copy at a time, since vector lanes round as scalars do. The blocks of the step
 loop are a ``numba.prange`` when numba's pool is used (:mod:`heli_env.threads`).
 Copies are independent, so the results are the same for any number of threads.
@@ -311,7 +312,8 @@ def _advance_lines(statements: tuple[str, ...], stick_step: bool) -> list[str]:
     the next step (:func:`heli_env.prefetch.prefetch_row`): copies start at random places in a library of
     megabytes, so a row's cache line was last read by another copy many steps ago and comes from main
     memory; asked for a step ahead, it arrives while the step computes (measured: 19 ns of a 69 ns
-    copy-step without it). Then the physics runs over the block's rows, 8 copies an instruction: the physics
+    copy-step without it). Then the physics runs over the block's rows, 4 or 8 copies an instruction (as the
+    compiler tunes for the CPU: 4 on an AVX-512 Xeon, 8 on Zen 4): the physics
     core's ``statements`` (:func:`model_constants`: the text the single environment's step is compiled from,
     its constants read from locals). numba compiles IEEE arithmetic in the order written and does not
     contract multiply-adds (``fastmath`` is off), so every copy's state equals the single environment's bit
