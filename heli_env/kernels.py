@@ -47,6 +47,7 @@ import numpy as np
 from heli_core.discrete import DISCRETE_INPUTS, DISCRETE_OUTPUTS, discrete_step_statements
 from heli_core.files import write_text
 from heli_core.params import ModelParams
+from heli_core.physics import N_STATE
 from heli_core.quaternion import EULER_ARGUMENTS
 
 import heli_env.sensor_noise as sensor_noise
@@ -323,9 +324,14 @@ def _advance_lines(statements: tuple[str, ...], stick_step: bool) -> list[str]:
         "        for l in range(_m):",
         "            i = _i0 + l",
         "            j = np.uint64(base[i] + min(k[i], last[i]) * ratio)",  # unsigned: no negative-index branch
+        *(f"            {_at(f'lib{c}')} = table[j, {c}]" for c in range(10)),
+        "            if restart[i]:",  # its next episode's first observation: kept as reset (docstring)
+        "                _lanes[_nr] = l",
+        *(f"                _kept[_nr * {N_STATE} + {row}] = {_at(f'x{row}')}" for row in range(N_STATE)),
+        "                _nr += 1",
+        "                continue",
         "            k[i] += 1",
         "            prefetch_row(table, base[i] + min(k[i], last[i]) * ratio)",  # the next step's row (docstring)
-        *(f"            {_at(f'lib{c}')} = table[j, {c}]" for c in range(10)),
         *(f"            {_at(f'prev{c}')} = {_at(f'act{c}')}" for c in range(3) if stick_step),
         *(line for c in range(3) for line in (f"            _u = float(actions[i, {c}])",
                                               "            " + _clip_line("_u"),
@@ -346,6 +352,9 @@ def _advance_lines(statements: tuple[str, ...], stick_step: bool) -> list[str]:
         *("            " + line for line in statements),
         *(f"            {_at(f'x{row}')} = {name}" for row, name in enumerate(DISCRETE_OUTPUTS)),
         *(f"            {_at(f'ud{c}')} = g * {_at(f'lib{7 + c}')}" for c in range(3)),
+        "        for _q in range(_nr):",
+        "            l = _lanes[_q]",
+        *(f"            {_at(f'x{row}')} = _kept[_q * {N_STATE} + {row}]" for row in range(N_STATE)),
     ]
 
 
@@ -567,12 +576,14 @@ def env_kernels(params: ModelParams, dt: float, task: str, noisy: bool, axis_wei
     compiled signature (each took 5 s to compile).
     """
     statements, constants = model_constants(params, dt)
-    arguments = f"S, actions, table, base, last, ratio, P, {_OBSERVE_ARGUMENTS}, first, stop, advance"
+    arguments = f"S, actions, table, base, last, ratio, P, restart, {_OBSERVE_ARGUMENTS}, first, stop, advance"
     step = [f"def step({arguments}):",
             *(f"    _mc{i} = P[{i}]" for i in range(constants.size)),
             f"    _dt = P[{constants.size}]",
             "    _copies = k.shape[0]",
             "    _ended = 0",
+            f"    _lanes = np.empty({BLOCK}, dtype=np.int64)",  # a block's copies starting their next episode
+            f"    _kept = np.empty({N_STATE * BLOCK})",  # and their reset states, kept through the physics
             "    for _block in range(stop):",  # from 0: the compiler then knows every index below is not negative
             "        if _block < first:",  # (with range(first, stop) the step took 10 % longer)
             "            continue",
@@ -580,10 +591,15 @@ def env_kernels(params: ModelParams, dt: float, task: str, noisy: bool, axis_wei
             "        " + _SCRATCH,
             f"        _i0 = _block * {BLOCK}",
             f"        _m = min({BLOCK}, _copies - _i0)",
+            "        _nr = 0",
             "        if advance:",
             *("    " + line for line in _advance_lines(statements, stick_step)),
             *_state_angle_lines(),
             *_observe_lines(task, noisy, axis_weighted, line_axes, stick_step),
+            "        for _q in range(_nr):",  # a first observation: reward 0, not ended (as after reset())
+            "            l = _lanes[_q]",
+            f"            {_at('reward')} = 0.0",
+            f"            {_at('end')} = 0.0",
             *_output_lines(),
             "    return _ended"]
     step_pool = [f"def step_pool({arguments}):",

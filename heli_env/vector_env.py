@@ -13,10 +13,11 @@ from heli_core.quaternion import quaternion_from_euler
 
 from .env_model import as_env_model
 from .errors import ActionError
-from .kernels import BLOCK, N_ROWS, OUT, R, BlockLayout, env_kernels, first_non_finite
+from .kernels import N_ROWS, OUT, R, BlockLayout, env_kernels, first_non_finite
 from .observation import MAX_RATE, OBS_DIM, action_space, observation_space
 from .spec import build_spec, real_actions, reset_options
 from .sensor_noise import draw_noise_key
+from .restarts import INTS, KEY, EpisodesAhead, Starts
 from .tasks import N_SINES, draw_episodes, draw_line_phases, reward_coefficients
 from .threads import ThreadChoice
 
@@ -81,25 +82,21 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._constants = kernels.constants  # the model's values, read by the loops
         self._coef = np.array(reward_coefficients(s.task))
         self._rngs = [None] * n
-        self._k = np.zeros(n, dtype=np.int64)
-        self._base = np.zeros(n, dtype=np.int64)
-        self._last = np.zeros(n, dtype=np.int64)
-        self._nsteps = np.zeros(n, dtype=np.int64)
+        self._ahead = EpisodesAhead(self._rngs, self._draw)  # each copy's next episode, drawn ahead
+        self._ints = np.zeros((len(INTS), n), dtype=np.int64)  # restarts.INTS: rows written by a reset at once
+        self._k, self._base, self._last, self._nsteps, self._trace = self._ints[:KEY]
+        self._key = self._ints[KEY].view(np.uint64)  # each copy's episode noise key (heli_env.sensor_noise)
         self._gust = np.zeros(n)
-        self._trace = np.zeros(n, dtype=np.int64)
         self._restart = None  # the copies whose episode ended in the last step (indices), None if none did
+        self._restarting = np.zeros(n, dtype=np.uint8)  # 1: the copy starts its next episode in this step
         self._queue = np.zeros((s.action_delay, n, 3)) if s.action_delay else None  # actions not yet applied
         n_seg = int(s.episode_steps * s.dt // s.task.step_period) + 1
-        self._smooth = np.zeros(n, dtype=bool)
-        self._steps = np.zeros((3, n_seg, n))
-        self._amp = np.zeros((3, N_SINES, n))
-        self._freq = np.zeros((3, N_SINES, n))
-        self._phase = np.zeros((3, N_SINES, n))
+        self._references = (np.zeros(n, dtype=bool), np.zeros((3, n_seg, n)), *np.zeros((3, 3, N_SINES, n)))
+        self._smooth, self._steps, self._amp, self._freq, self._phase = self._references
         n_lines = len(s.line_axis)  # the gyro lines: sin, cos of each at every step; each copy's phases
         self._line_amp = np.array(s.line_amp, dtype=float)
         self._line_table = np.ascontiguousarray(np.stack([s.line_sin, s.line_cos], axis=-1).transpose(1, 0, 2)
                                                 .reshape(s.line_sin.shape[1], 2 * n_lines))
-        self._key = np.zeros(n, dtype=np.uint64)  # each copy's episode noise key (heli_env.sensor_noise)
         self._noise_std = np.array([*s.obs_noise[0], *s.obs_noise[1]], dtype=float)
         self._ones = np.ones(n, dtype=bool)
         self._no_actions = np.zeros((n, 3))  # what the loop is given when it only observes
@@ -138,9 +135,10 @@ class HeliAttitudeVectorEnv(VectorEnv):
             seeds = [seed + i for i in range(n)] if isinstance(seed, int) else list(seed)
             if len(seeds) != n:
                 raise ValueError(f"seed must be an int or {n} seeds, got {len(seeds)}")
-            for i in range(n):
-                if mask[i] or self._rngs[i] is None:
-                    self._rngs[i] = seeding.np_random(seeds[i])[0]
+            renewed = [i for i in range(n) if mask[i] or self._rngs[i] is None]
+            self._ahead.forget(np.array(renewed, dtype=np.int64), restore=False)
+            for i in renewed:
+                self._rngs[i] = seeding.np_random(seeds[i])[0]
         for i in range(n):
             if self._rngs[i] is None:
                 self._rngs[i] = seeding.np_random(None)[0]
@@ -160,49 +158,69 @@ class HeliAttitudeVectorEnv(VectorEnv):
         return obs, self._info(out)
 
     def _reset_envs(self, which, options):
-        s = self.spec_
-        options, gust_default = reset_options(options, s.gust_scale)
-        # Every copy draws its episode from its own generator (as a single env seeded seed + i would);
-        # the state is then written for all of them at once, and only once every draw has succeeded.
+        """Start the next episodes of copies ``which``: each drawn ahead where it has one and the options are
+        the defaults (:mod:`heli_env.restarts`), drawn now otherwise, all from the copy's own generator (as
+        a single env seeded ``seed + i`` would draw them)."""
+        options, gust = reset_options(options, self.spec_.gust_scale)
         if which.size == 0:
             return
+        if options:  # what is drawn depends on them: from the generator's state before any draw ahead
+            self._ahead.forget(which, restore=True)
+            self._start(which, self._draw(which, options, gust))
+        else:
+            ready = self._ahead.ready[which]
+            drawn = which[ready]
+            if drawn.size:
+                self._start(drawn, self._ahead.starts, drawn)
+                self._ahead.take(drawn)
+            if drawn.size < which.size:
+                self._start(which[~ready], self._draw(which[~ready]))
+        if self._restart is not None:  # reset now (a masked reset): they do not restart at the next step
+            left = self._restart[~np.isin(self._restart, which, assume_unique=True)]
+            self._restart = left if left.size else None
+
+    def _draw(self, which, options=None, gust=None) -> Starts:
+        """The episodes of copies ``which`` from their generators: the episode, then the gyro lines' phases, then
+        the noise key (the single env's order), as what their resets write."""
+        s = self.spec_
         rngs = [self._rngs[i] for i in which.tolist()]
         eps = draw_episodes(rngs, s, options)
-        if s.line_axis:  # drawn after the episode, from the copy's generator, as the single env does
-            phases = draw_line_phases(rngs, len(s.line_axis))
-            self._rows.put(N_ROWS, phases.reshape(len(which), -1).T, which)  # (cos, sin) of each line
-        if s.measured:  # then the episode's noise key
-            self._key[which] = [draw_noise_key(rng) for rng in rngs]
+        m = which.size
+        rows = np.zeros((_START_ROWS + 2 * len(s.line_axis), m))  # the action rows stay 0
+        if s.line_axis:
+            rows[_START_ROWS:] = draw_line_phases(rngs, len(s.line_axis)).reshape(m, -1).T  # (cos, sin) of each
+        ints = np.zeros((len(INTS), m), dtype=np.int64)
+        if s.measured:
+            ints[KEY] = np.array([draw_noise_key(rng) for rng in rngs], dtype=np.uint64).view(np.int64)
         traces = eps.trace
         base = s.model.starts[traces] + eps.offset
         stop = np.minimum(s.model.starts[traces] + s.model.lengths[traces], base + s.needed)
         last = (stop - base + s.ratio - 1) // s.ratio - 1  # len(range(base, stop, ratio)) - 1
-        self._base[which] = base
-        self._last[which] = last
         # as the single env: the time limit, or until the replay reaches the trace's last sample
-        self._nsteps[which] = np.minimum(s.episode_steps, np.maximum(last, 1))
-        self._k[which] = 0
-        self._trace[which] = traces
-        self._gust[which] = gust_default
+        ints[1:KEY] = base, last, np.minimum(s.episode_steps, np.maximum(last, 1)), traces
         angles = eps.angles.T
-        start = np.zeros((_START_ROWS, which.size))  # the state, the action and the gust scale (rows x0 .. gust)
-        start[0:3] = eps.rates.T
-        start[3:6] = s.trim[:, base]
-        start[6:10] = quaternion_from_euler(angles[0], angles[1], 0.0)  # elementwise as on one copy
-        start[R["gust"] - R["x0"]] = self._gust[which]  # the action rows stay 0
-        rows = self._rows
-        rows.put(R["x0"], start, which)
-        rows.put(R["prev0"], np.zeros((3, which.size)), which)  # an episode starts from rest (the stick step)
+        rows[0:3] = eps.rates.T
+        rows[3:6] = s.trim[:, base]
+        rows[6:10] = quaternion_from_euler(angles[0], angles[1], 0.0)  # elementwise as on one copy
+        rows[R["gust"] - R["x0"]] = s.gust_scale if gust is None else gust
+        refs = None if s.task.task == "hold" else (
+            eps.smooth, *(v.transpose(1, 2, 0) for v in (eps.steps, eps.amp, eps.freq, eps.phase)))
+        return Starts(ints, rows, refs)
+
+    def _start(self, which, starts: Starts, cols=slice(None)):
+        """Write columns ``cols`` of ``starts`` as copies ``which``'s state, step, replay and reference."""
+        self._ints[:, which] = starts.ints[:, cols]
+        rows = starts.rows[:, cols]
+        self._gust[which] = rows[R["gust"] - R["x0"]]
+        self._rows.put(R["x0"], rows[:_START_ROWS], which)
+        if rows.shape[0] > _START_ROWS:
+            self._rows.put(N_ROWS, rows[_START_ROWS:], which)
+        self._rows.put(R["prev0"], np.zeros((3, len(which))), which)  # an episode starts from rest (the stick step)
         if self._queue is not None:
             self._queue[:, which] = 0.0
-        self._smooth[which] = eps.smooth
-        self._steps[:, :, which] = eps.steps.transpose(1, 2, 0)
-        self._amp[:, :, which] = eps.amp.transpose(1, 2, 0)
-        self._freq[:, :, which] = eps.freq.transpose(1, 2, 0)
-        self._phase[:, :, which] = eps.phase.transpose(1, 2, 0)
-        if self._restart is not None:  # reset now (a masked reset): they do not restart at the next step
-            left = self._restart[~np.isin(self._restart, which, assume_unique=True)]
-            self._restart = left if left.size else None
+        if starts.references is not None:
+            for mine, drawn in zip(self._references, starts.references):
+                mine[..., which] = drawn[..., cols]
 
     # ------------------------------------------------------------------- step
     def step(self, actions):
@@ -225,23 +243,21 @@ class HeliAttitudeVectorEnv(VectorEnv):
             a = self._queue[0].copy()
             self._queue[:-1] = self._queue[1:]
             self._queue[-1] = incoming
+        which, self._restart = self._restart, None
+        if which is not None:  # these copies start their next episode instead: observed as reset, reward 0
+            self._reset_envs(which, {})  # (their queued actions too: the one given now is dropped)
+            self._restarting[which] = 1  # the loop keeps their reset state and step (heli_env.kernels)
         self._put_references(1)
         obs, out, ends = self._fresh_outputs()
         rows = self._rows
         ended = self._thread_choice.run(self._step_loop, self._step_pool, rows.S, a, self._table, self._base,
-                                        self._last, s.ratio, self._constants, *self._observe_arguments,
-                                        obs.reshape(-1), out, ends, 0, rows.blocks, True)
-        if self._restart is not None:  # these copies start their next episode instead: reward 0, not ended
-            which, self._restart = self._restart, None  # all of them now
-            self._reset_envs(which, {})
-            rows.put(R["ud0"], self._table[self._base[which], 7:10].T * self._gust[which], which)
-            self._put_references()
-            for block in np.unique(which // BLOCK).tolist():  # observed again: the others as they were
-                self._observe(obs, out, ends, block, block + 1)
-            out[OUT["reward"], which] = 0.0
-            ends[:, which] = False
-            ended = np.count_nonzero(ends)
+                                        self._last, s.ratio, self._constants, self._restarting,
+                                        *self._observe_arguments, obs.reshape(-1), out, ends, 0, rows.blocks, True)
+        if which is not None:
+            self._restarting[which] = 0
         self._restart = np.flatnonzero(ends[0] | ends[1]) if ended else None
+        if self._ahead.due():
+            self._ahead.fill()
         return obs, out[OUT["reward"]], ends[0], ends[1], self._info(out)
 
     # -------------------------------------------------------------- internals
@@ -262,10 +278,11 @@ class HeliAttitudeVectorEnv(VectorEnv):
         return val, der
 
     def _put_references(self, ahead: int = 0):
-        """Rows ``refatt``/``refrate`` at each copy's step ``k + ahead`` (the step loop observes at ``k + 1``)."""
+        """Rows ``refatt``/``refrate`` at each copy's step ``k + ahead`` (the step loop observes at ``k + 1``),
+        at ``k`` for a copy starting its next episode in the step."""
         if self.spec_.task.task == "hold":
             return
-        ref_att, ref_rate = self._reference((self._k + ahead) * self.spec_.dt)
+        ref_att, ref_rate = self._reference((self._k + ahead - self._restarting) * self.spec_.dt)
         if ref_att is not None:
             self._rows.put(R["refatt0"], ref_att)
         if ref_rate is not None:
@@ -274,7 +291,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
     def _observe(self, obs, out, ends, first, stop):
         """Observe the copies of blocks ``first .. stop - 1`` as they are, into ``obs``, ``out`` and ``ends``."""
         self._step_loop(self._rows.S, self._no_actions, self._table, self._base, self._last, self.spec_.ratio,
-                        self._constants, *self._observe_arguments, obs.reshape(-1), out, ends, first, stop, False)
+                        self._constants, self._restarting, *self._observe_arguments, obs.reshape(-1), out, ends, first, stop, False)
 
     def _fresh_outputs(self):
         """Arrays the loops write a step's observations (n, 12), outputs (:data:`heli_env.kernels.OUT`, n) and

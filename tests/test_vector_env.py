@@ -510,3 +510,37 @@ def test_every_profile_variant_changes_the_step_it_is_timed_against():
         changed = variant(lines)
         assert changed != lines, name
         compile("\n".join(changed) + "\n", name, "exec")
+
+
+@pytest.mark.parametrize("options, seed", [({}, None), ({"trace": 1, "offset": 17}, None), ({"gust_scale": 0.5}, None),
+                                           ({}, 40)], ids=["plain", "pinned-trace", "gust-scale", "new-seed"])
+def test_a_reset_after_episodes_were_drawn_ahead_is_the_reset_of_a_single_env(options, seed):
+    """A step draws each copy's next episode ahead (heli_env.restarts). A masked reset afterwards starts the
+    episode a single env's reset would: the one drawn ahead when its options are the defaults, one drawn from
+    the generator's state before that draw when they are not (the options change the draws), one from the new
+    generator with a new seed; and the copies' later episodes follow on."""
+    kwargs = {"episode_seconds": 0.3, "obs_noise": SensorModel((0.01, 0.02, 0.03), (0.003, 0.002, 0.001), (
+        GyroLine("roll", 30.0, 0.04),))}
+    venv = HeliAttitudeVectorEnv(3, **kwargs)
+    venv.reset(seed=10)
+    single = HeliAttitudeEnv(**kwargs)
+    single.reset(seed=11)
+    zero = np.zeros(3, np.float32)
+    for _ in range(5):
+        venv.step(np.zeros((3, 3), np.float32))
+        single.step(zero)
+    assert venv._ahead.ready.all()  # every copy's next episode is drawn
+    obs, _ = venv.reset(seed=None if seed is None else [0, seed + 1, 0],
+                        options={**options, "reset_mask": np.array([False, True, False])})
+    s_obs, _ = single.reset(seed=None if seed is None else seed + 1, options=options)
+    assert np.array_equal(obs[1], s_obs) and np.array_equal(np.array(venv._x)[:, 1], np.array(single._x))
+    done = False
+    for _ in range(70):  # two more episodes, autoreset from draws ahead
+        obs, reward, *_ = venv.step(np.zeros((3, 3), np.float32))
+        if done:  # the vector env's next step starts the next episode (NEXT_STEP autoreset)
+            (s_obs, _), s_reward, done = single.reset(), 0.0, False
+        else:
+            s_obs, s_reward, terminated, truncated, _ = single.step(zero)
+            done = terminated or truncated
+        assert np.array_equal(obs[1], s_obs)
+        assert_allclose(reward[1], s_reward, rtol=1e-12, atol=1e-12)  # (the rewards' sums are compiled apart)
