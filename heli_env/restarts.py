@@ -15,7 +15,10 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numba
 import numpy as np
+
+from .kernels import BLOCK, N_ROWS, ROW, R
 
 INTS = ("k", "base", "last", "steps", "trace", "key")
 """Rows of :attr:`Starts.ints`: the step (0 at a start), the episode's first library sample, its last step's
@@ -53,6 +56,34 @@ class Starts(NamedTuple):
         if self.references is not None:
             for mine, theirs in zip(self.references, other.references):
                 mine[..., cols] = theirs
+
+
+START_ROWS = R["gust"] - R["x0"] + 1
+"""Rows ``x0 .. gust`` of :data:`heli_env.kernels.R`, consecutive: the state (10), the action (3), the gust
+scale; :attr:`Starts.rows` holds them first."""
+_X0, _PREV0, _GUST = R["x0"], R["prev0"], R["gust"] - R["x0"]  # (numba reads globals as constants, not dicts)
+
+
+@numba.njit(cache=True)
+def write_starts(S, ints, gust, which, starts_ints, starts_rows, cols):
+    """Copies ``which``'s reset: columns ``cols`` of a :class:`Starts` (``starts_ints``, ``starts_rows``)
+    into the env's ``ints`` (len(:data:`INTS`), n), ``gust`` (n) and block rows ``S``
+    (:class:`heli_env.kernels.BlockLayout`): rows ``x0 .. gust``, the gyro lines' phases after :data:`R`'s
+    rows, and rows ``prev`` 0 (an episode starts from rest). One call for what were a dozen numpy
+    operations of a few microseconds each, paid on every step of a long run."""
+    for q in range(which.size):
+        i = which[q]
+        c = cols[q]
+        block = i // BLOCK
+        lane = i % BLOCK
+        for r in range(starts_ints.shape[0]):
+            ints[r, i] = starts_ints[r, c]
+        for r in range(starts_rows.shape[0]):
+            row = _X0 + r if r < START_ROWS else N_ROWS + r - START_ROWS
+            S[block, row * ROW + lane] = starts_rows[r, c]
+        for r in range(3):
+            S[block, (_PREV0 + r) * ROW + lane] = 0.0
+        gust[i] = starts_rows[_GUST, c]
 
 
 class EpisodesAhead:

@@ -17,12 +17,10 @@ from .kernels import N_ROWS, OUT, R, BlockLayout, env_kernels, first_non_finite
 from .observation import MAX_RATE, OBS_DIM, action_space, observation_space
 from .spec import build_spec, real_actions, reset_options
 from .sensor_noise import draw_noise_key
-from .restarts import INTS, KEY, EpisodesAhead, Starts
+from .restarts import INTS, KEY, START_ROWS, EpisodesAhead, Starts, write_starts
 from .tasks import N_SINES, draw_episodes, draw_line_phases, reward_coefficients
 from .threads import ThreadChoice
 
-_START_ROWS = R["gust"] - R["x0"] + 1
-"""Rows a reset writes in one put: the state (10), the action (3) and the gust scale, consecutive in :data:`R`."""
 
 
 class HeliAttitudeVectorEnv(VectorEnv):
@@ -186,9 +184,9 @@ class HeliAttitudeVectorEnv(VectorEnv):
         rngs = [self._rngs[i] for i in which.tolist()]
         eps = draw_episodes(rngs, s, options)
         m = which.size
-        rows = np.zeros((_START_ROWS + 2 * len(s.line_axis), m))  # the action rows stay 0
+        rows = np.zeros((START_ROWS + 2 * len(s.line_axis), m))  # the action rows stay 0
         if s.line_axis:
-            rows[_START_ROWS:] = draw_line_phases(rngs, len(s.line_axis)).reshape(m, -1).T  # (cos, sin) of each
+            rows[START_ROWS:] = draw_line_phases(rngs, len(s.line_axis)).reshape(m, -1).T  # (cos, sin) of each
         ints = np.zeros((len(INTS), m), dtype=np.int64)
         if s.measured:
             ints[KEY] = np.array([draw_noise_key(rng) for rng in rngs], dtype=np.uint64).view(np.int64)
@@ -207,15 +205,11 @@ class HeliAttitudeVectorEnv(VectorEnv):
             eps.smooth, *(v.transpose(1, 2, 0) for v in (eps.steps, eps.amp, eps.freq, eps.phase)))
         return Starts(ints, rows, refs)
 
-    def _start(self, which, starts: Starts, cols=slice(None)):
-        """Write columns ``cols`` of ``starts`` as copies ``which``'s state, step, replay and reference."""
-        self._ints[:, which] = starts.ints[:, cols]
-        rows = starts.rows[:, cols]
-        self._gust[which] = rows[R["gust"] - R["x0"]]
-        self._rows.put(R["x0"], rows[:_START_ROWS], which)
-        if rows.shape[0] > _START_ROWS:
-            self._rows.put(N_ROWS, rows[_START_ROWS:], which)
-        self._rows.put(R["prev0"], np.zeros((3, len(which))), which)  # an episode starts from rest (the stick step)
+    def _start(self, which, starts: Starts, cols=None):
+        """Write columns ``cols`` (all by default) of ``starts`` as copies ``which``'s state, step, replay and
+        reference."""
+        cols = np.arange(which.size) if cols is None else cols
+        write_starts(self._rows.S, self._ints, self._gust, which, starts.ints, starts.rows, cols)
         if self._queue is not None:
             self._queue[:, which] = 0.0
         if starts.references is not None:

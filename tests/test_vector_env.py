@@ -485,13 +485,13 @@ def test_same_seed_same_episode_as_before_the_fused_step(task, expected):
 
 
 def test_a_reset_writes_the_state_action_and_gust_rows_in_one_block():
-    """The reset writes rows x0 .. gust of the block layout at once: they must be the state, the action and the
-    gust scale, in that order and with nothing between them."""
+    """A reset writes rows x0 .. gust of the block layout as one run of rows (heli_env.restarts.Starts): they
+    must be the state, the action and the gust scale, in that order and with nothing between them."""
     from heli_env.kernels import R
-    from heli_env.vector_env import _START_ROWS
+    from heli_env.restarts import START_ROWS
 
     names = [f"x{i}" for i in range(10)] + [f"act{i}" for i in range(3)] + ["gust"]
-    assert [R[name] for name in names] == list(range(R["x0"], R["x0"] + _START_ROWS))
+    assert [R[name] for name in names] == list(range(R["x0"], R["x0"] + START_ROWS))
 
 
 def test_every_profile_variant_changes_the_step_it_is_timed_against():
