@@ -364,9 +364,9 @@ def test_returned_arrays_are_not_overwritten_by_the_next_step():
 
 
 def _tiny_loop(marker: float):
-    from heli_env.kernels import _compile
+    from heli_env.kernel_modules import compile_function
 
-    return _compile(["def tiny(x):", "    for i in prange(x.shape[0]):", f"        x[i] = x[i] * {marker!r}"],
+    return compile_function(["def tiny(x):", "    for i in prange(x.shape[0]):", f"        x[i] = x[i] * {marker!r}"],
                     "tiny", "test")
 
 
