@@ -3,8 +3,8 @@
 A copy's episode is drawn from its own generator (:func:`heli_env.tasks.draw_episodes`, then the gyro lines'
 phases and the noise key) and turned into the values its reset writes: a :class:`Starts`, one column per copy.
 Drawn for a few copies at a time, as autoresets come in a long run (a copy or two on every step of 4096
-copies), its thirty numpy operations cost about 150 us of fixed Python a step, against 3-4 us a copy drawn
-in a batch. :class:`EpisodesAhead` therefore draws each copy's *next* episode ahead, for many copies at once,
+copies), its thirty numpy operations cost about 150 us of fixed Python a step, against about 7 us a copy
+drawn in a batch. :class:`EpisodesAhead` therefore draws each copy's *next* episode ahead, for many copies at once,
 right after its episode started: the generator gives the same numbers whenever they are drawn, so an
 episode drawn ahead is the episode a reset would have drawn, bit for bit. What would have drawn otherwise
 puts it back: a reset with options restores the generator's state from before the draw ahead (the options

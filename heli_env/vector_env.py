@@ -285,7 +285,8 @@ class HeliAttitudeVectorEnv(VectorEnv):
     def _observe(self, obs, out, ends, first, stop):
         """Observe the copies of blocks ``first .. stop - 1`` as they are, into ``obs``, ``out`` and ``ends``."""
         self._step_loop(self._rows.S, self._no_actions, self._table, self._base, self._last, self.spec_.ratio,
-                        self._constants, self._restarting, *self._observe_arguments, obs.reshape(-1), out, ends, first, stop, False)
+                        self._constants, self._restarting, *self._observe_arguments, obs.reshape(-1), out, ends,
+                        first, stop, False)
 
     def _fresh_outputs(self):
         """Arrays the loops write a step's observations (n, 12), outputs (:data:`heli_env.kernels.OUT`, n) and
