@@ -91,7 +91,8 @@ class EpisodesAhead:
 
     ``draw(which)`` draws the episodes of copies ``which`` (an index array) from their generators with the
     default options, as a :class:`Starts`; ``rngs`` are the copies' generators (the env's list, read when
-    drawing and restoring)."""
+    drawing and restoring). A copy whose last reset came with options (as an SB3 adapter's pinned gust
+    windows do) is not drawn ahead until a reset without them: its draw would be put back unused."""
 
     def __init__(self, rngs: list, draw):
         self._rngs = rngs
@@ -99,17 +100,19 @@ class EpisodesAhead:
         self.starts = None  # Starts of every copy, once drawn
         n = len(rngs)
         self.ready = np.zeros(n, dtype=bool)
+        self._wanted = np.ones(n, dtype=bool)  # False: the copy's last reset had options
         self._states = [None] * n  # each generator's state before its draw ahead
         self._batch = min(n, BATCH)
-        self._missing = n
+        self._missing = n  # copies wanted and not ready
 
     def due(self) -> bool:
         """Whether enough copies have used their episode drawn ahead to draw the next batch."""
         return self._missing >= self._batch
 
     def fill(self) -> None:
-        """Draw the next episode of every copy that has none."""
-        which = np.flatnonzero(~self.ready)
+        """Draw the next episode of every copy that has none (and whose resets come without options)."""
+        which = np.flatnonzero(self._wanted & ~self.ready)
+        self._missing = 0
         if which.size == 0:
             return
         for i in which.tolist():
@@ -119,7 +122,6 @@ class EpisodesAhead:
             self.starts = Starts.zeros(drawn, self.ready.size)
         self.starts.store(which, drawn)
         self.ready[which] = True
-        self._missing = 0
 
     def take(self, which: np.ndarray) -> None:
         """Copies ``which`` (all ready) start their episodes drawn ahead: columns ``which`` of :attr:`starts`,
@@ -127,13 +129,20 @@ class EpisodesAhead:
         self.ready[which] = False
         self._missing += which.size
 
+    def drawn_now(self, which: np.ndarray) -> None:
+        """Copies ``which`` (none ready) were reset without options and drew their episodes then: draw their
+        next ones ahead again."""
+        self._wanted[which] = True
+        self._missing = int(np.count_nonzero(self._wanted & ~self.ready))
+
     def forget(self, which: np.ndarray, restore: bool) -> None:
-        """Copies ``which`` will not use their episodes drawn ahead: with ``restore`` their generators go back
-        to the state before the draw (a reset with options draws from there), without it (new generators) the
-        draws are dropped."""
+        """Copies ``which`` will not use their episodes drawn ahead. With ``restore`` (a reset with options) their
+        generators go back to the state before the draw, as the options draw from there, and they are not
+        drawn ahead until a reset without options; without it (new generators) the draws are dropped."""
         drop = which[self.ready[which]]
         if restore:
             for i in drop.tolist():
                 self._rngs[i].bit_generator.state = self._states[i]
+            self._wanted[which] = False
         self.ready[drop] = False
-        self._missing += drop.size
+        self._missing = int(np.count_nonzero(self._wanted & ~self.ready))

@@ -173,6 +173,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
                 self._ahead.take(drawn)
             if drawn.size < which.size:
                 self._start(which[~ready], self._draw(which[~ready]))
+                self._ahead.drawn_now(which[~ready])
         if self._restart is not None:  # reset now (a masked reset): they do not restart at the next step
             left = self._restart[~np.isin(self._restart, which, assume_unique=True)]
             self._restart = left if left.size else None

@@ -534,9 +534,11 @@ def test_a_reset_after_episodes_were_drawn_ahead_is_the_reset_of_a_single_env(op
                         options={**options, "reset_mask": np.array([False, True, False])})
     s_obs, _ = single.reset(seed=None if seed is None else seed + 1, options=options)
     assert np.array_equal(obs[1], s_obs) and np.array_equal(np.array(venv._x)[:, 1], np.array(single._x))
-    done = False
+    venv.reset(options={"reset_mask": np.array([True, False, True])})  # the others use theirs: a batch is due
+    done, ready = False, []
     for _ in range(70):  # two more episodes, autoreset from draws ahead
         obs, reward, *_ = venv.step(np.zeros((3, 3), np.float32))
+        ready.append(venv._ahead.ready.copy())
         if done:  # the vector env's next step starts the next episode (NEXT_STEP autoreset)
             (s_obs, _), s_reward, done = single.reset(), 0.0, False
         else:
@@ -544,3 +546,6 @@ def test_a_reset_after_episodes_were_drawn_ahead_is_the_reset_of_a_single_env(op
             done = terminated or truncated
         assert np.array_equal(obs[1], s_obs)
         assert_allclose(reward[1], s_reward, rtol=1e-12, atol=1e-12)  # (the rewards' sums are compiled apart)
+    ready = np.array(ready)
+    if options:  # a copy reset with options is not drawn ahead (its draw would be put back) until a plain reset
+        assert not ready[:25, 1].any() and ready[30:, 1].any()
