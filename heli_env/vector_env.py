@@ -43,7 +43,10 @@ class HeliAttitudeVectorEnv(VectorEnv):
     Autoreset is ``NEXT_STEP`` (Gymnasium's default): after a copy's episode
     ends, its next ``step`` resets it and returns the first observation of the
     new episode with reward 0. ``reset(options={"reset_mask": mask})`` resets
-    only the copies where ``mask`` is True.
+    only the copies where ``mask`` is True. Each copy's next episode is drawn
+    ahead, many copies at once (:mod:`heli_env.restarts`): the same draws from
+    the same generator, so nothing a user sees changes, and a long run's
+    autoresets cost little.
 
     Infos are dicts of arrays over copies (``time``, ``disturbance`` (n, 3),
     ``attitude_error_deg`` (n, 3), ``rate_error_deg_s`` (n, 3), ``trace``), each
