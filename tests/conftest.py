@@ -4,8 +4,10 @@
 from realistic flights (servo delay, sensor noise and vibration lines). ``ideal_model_dir`` is the model that
 shipped before it (identified from flights with no servo delay, measured exactly): tests whose subject is the
 machinery of the sweep, the evaluator or the training, rather than the realistic world, fly it.
+``load_script`` loads one of ``scripts/`` (not a package) as a module.
 """
 
+import importlib.util
 import os
 from pathlib import Path
 
@@ -15,6 +17,19 @@ if os.environ.get("PYTEST_XDIST_WORKER"):  # one pytest worker per core already:
     os.environ.setdefault("HELI_WORKERS", "1")
 
 from heli_env.env_model import load_env_model
+
+
+@pytest.fixture(scope="session")
+def load_script():
+    """``load_script(name)``: ``scripts/<name>.py`` executed as a module, returned."""
+    def load(name: str):
+        path = Path(__file__).resolve().parents[1] / "scripts" / f"{name}.py"
+        spec = importlib.util.spec_from_file_location(name, path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+
+    return load
 
 
 @pytest.fixture(scope="session")

@@ -3,30 +3,19 @@ likelihood of the flight (best near the truth), and it refuses flights whose sti
 
 from __future__ import annotations
 
-import importlib.util
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "attitude_output_study.py"
-
-
-def _study():
-    spec = importlib.util.spec_from_file_location("attitude_output_study", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
 
 @pytest.mark.parametrize("with_attitude", [False, True], ids=["rate", "rate+attitude"])
-def test_the_likelihood_prefers_the_true_damping_and_gain(with_attitude):
+def test_the_likelihood_prefers_the_true_damping_and_gain(with_attitude, load_script):
     from identification.bench.cells import BENCH_CELLS
     from identification.bench.flight_config import PAPER_PARAMS
     from identification.bench.synthetic import simulate_flight
 
-    study = _study()
+    study = load_script("attitude_output_study")
     config = replace(BENCH_CELLS["held-sticks-pd"], duration=60.0, vibration_lines=(), vibration=0.0)
     flight = simulate_flight(60.0, seed=5, config=config).flight
     y, u = study.flight_signals(flight, 0)
@@ -41,6 +30,6 @@ def test_the_likelihood_prefers_the_true_damping_and_gain(with_attitude):
     assert study.nll(np.r_[-1.0, truth[1:]], y, u, flight.dt, with_attitude) == 1e12  # no negative damping
 
 
-def test_a_cell_whose_sticks_are_interpolated_is_refused(capsys):
+def test_a_cell_whose_sticks_are_interpolated_is_refused(load_script):
     with pytest.raises(SystemExit, match="must hold its sticks over the sample"):
-        _study().main(["--cell", "independent", "--seeds", "1"])
+        load_script("attitude_output_study").main(["--cell", "independent", "--seeds", "1"])

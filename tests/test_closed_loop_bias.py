@@ -2,23 +2,11 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "closed_loop_bias.py"
 
-
-def _study():
-    spec = importlib.util.spec_from_file_location("closed_loop_bias", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_the_study_reports_each_damping_over_its_flights(capsys):
-    study = _study()
+def test_the_study_reports_each_damping_over_its_flights(capsys, load_script):
+    study = load_script("closed_loop_bias")
     assert study.main(["--seeds", "2", "--duration", "60", "--workers", "1", "--gyro", "0.01",
                        "--set", "pilot_bandwidth=1.5"]) == 0
     out = capsys.readouterr().out
@@ -28,7 +16,7 @@ def test_the_study_reports_each_damping_over_its_flights(capsys):
         assert abs(float(line.split("mean error ")[1].split(" %")[0])) < 30.0  # a fit, not a failure
 
 
-def test_a_setting_that_is_not_field_equals_value_is_refused(capsys):
+def test_a_setting_that_is_not_field_equals_value_is_refused(capsys, load_script):
     with pytest.raises(SystemExit):
-        _study().main(["--set", "pilot_bandwidth"])
+        load_script("closed_loop_bias").main(["--set", "pilot_bandwidth"])
     assert "expected FIELD=VALUE" in capsys.readouterr().err
