@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
@@ -118,19 +119,36 @@ def nll(theta, y, u, dt: float, with_attitude: bool) -> float:
 
 
 def fit_axis(y, u, dt: float, with_attitude: bool, theta0) -> np.ndarray:
-    """Maximum-likelihood parameters from ``theta0``."""
-    res = optimize.minimize(nll, theta0, args=(y, u, dt, with_attitude), method="Nelder-Mead",
-                            options={"maxiter": 6000, "maxfev": 6000, "xatol": 1e-5, "fatol": 1e-4})
-    res = optimize.minimize(nll, res.x, args=(y, u, dt, with_attitude), method="Powell",
-                            options={"maxiter": 20000, "xtol": 1e-6, "ftol": 1e-8})
+    """Maximum-likelihood parameters from ``theta0`` (the searches' trial points far from a model that fits
+    overflow quietly: :func:`nll` rates them 1e12)."""
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        res = optimize.minimize(nll, theta0, args=(y, u, dt, with_attitude), method="Nelder-Mead",
+                                options={"maxiter": 6000, "maxfev": 6000, "xatol": 1e-5, "fatol": 1e-4})
+        res = optimize.minimize(nll, res.x, args=(y, u, dt, with_attitude), method="Powell",
+                                options={"maxiter": 20000, "xtol": 1e-6, "ftol": 1e-8})
     return res.x
 
 
-def flight_signals(flight, axis: int):
-    """One axis' outputs (rate, attitude) and inputs (stick, 1) of a flight."""
+def estimated_attitude(gyro_rate, true_angle, dt: float, tau: float, tilt_noise: float, rng) -> np.ndarray:
+    """The angle a flight controller's estimator reports: a complementary filter that integrates the logged gyro
+    and pulls, with time constant ``tau`` [s], towards an accelerometer's tilt (the true angle plus white noise
+    of ``tilt_noise`` [rad]). Its errors are the gyro's noise integrated and the tilt's, low-passed: neither
+    white nor independent of the gyro's."""
+    from scipy import signal
+
+    a = np.exp(-dt / tau)
+    tilt = true_angle + tilt_noise * rng.standard_normal(true_angle.size)
+    drive = a * gyro_rate * dt + (1.0 - a) * tilt  # angle[k] = a (angle[k-1] + gyro[k] dt) + (1 - a) tilt[k]
+    return signal.lfilter([1.0], [1.0, -a], drive, zi=[a * true_angle[0]])[0]
+
+
+def flight_signals(flight, axis: int, attitude=None):
+    """One axis' outputs (rate, attitude: the log's, or ``attitude``) and inputs (stick, 1) of a flight."""
     from heli_core.terms import STICK_ROW
 
-    y = np.vstack([flight.rates[axis], flight.attitude[axis]]).astype(float)
+    angle = flight.attitude[axis] if attitude is None else attitude
+    y = np.vstack([flight.rates[axis], angle]).astype(float)
     u = np.vstack([flight.sticks[STICK_ROW[axis]], np.ones(flight.n)]).astype(float)
     return y, u
 
@@ -146,7 +164,7 @@ def _one(job) -> dict:
     from identification.bench.synthetic import simulate_flight
     from identification.likelihood.estimator import MaximumLikelihoodIdentifier
 
-    aircraft, cell, gyro, axis_name, duration, seed = job
+    aircraft, cell, gyro, axis_name, duration, seed, estimator = job
     axis = list(AXES).index(axis_name)
     damping, gain = AXES[axis_name]
     with threadpool_limits(limits=1, user_api="blas"):
@@ -154,9 +172,15 @@ def _one(job) -> dict:
         sim = simulate_flight(duration, seed=seed, config=config, truth=_aircraft(aircraft))
         truth = sim.truth.values()
         package = MaximumLikelihoodIdentifier(input_hold=0.0).fit(sim.flight).params_.values()
-        y, u = flight_signals(sim.flight, axis)
+        attitude, attitude_noise = None, config.attitude_noise
+        if estimator is not None:  # (tau, tilt noise): the angle as a flight controller's estimator reports it
+            tau, tilt_noise = estimator
+            attitude = estimated_attitude(sim.flight.rates[axis], sim.flight.attitude[axis], sim.flight.dt, tau,
+                                          tilt_noise, np.random.default_rng([seed, 7]))
+            attitude_noise = tilt_noise
+        y, u = flight_signals(sim.flight, axis, attitude)
         theta0 = np.array([truth[damping], truth[gain], 0.0, np.log(4.0), np.log(0.35), np.log(1e-3), np.log(1e-2),
-                           np.log(gyro ** 2), np.log(config.attitude_noise ** 2)])
+                           np.log(gyro ** 2), np.log(attitude_noise ** 2)])
         out = {"package": (package[damping], package[gain])}
         for label, with_attitude in (("rate", False), ("rate + attitude", True)):
             theta = fit_axis(y, u, sim.flight.dt, with_attitude, theta0)
@@ -173,6 +197,9 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=12)
     ap.add_argument("--first-seed", type=int, default=301)
     ap.add_argument("--duration", type=float, default=300.0)
+    ap.add_argument("--estimated-attitude", type=float, nargs=2, metavar=("TAU", "TILT_NOISE"), default=None,
+                    help="fit the angle a complementary filter of the logged gyro reports (time constant TAU s, "
+                         "towards a tilt of white noise TILT_NOISE rad) instead of an independent sensor's")
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args(argv)
     from identification.bench.cells import BENCH_CELLS
@@ -181,7 +208,8 @@ def main(argv=None) -> int:
     if cell is None or not (cell.held_sticks or cell.pilot == "autopilot"):
         held = [name for name, c in BENCH_CELLS.items() if c.held_sticks or c.pilot == "autopilot"]
         raise SystemExit(f"--cell must hold its sticks over the sample (one of {', '.join(held)}), got {args.cell!r}")
-    jobs = [(args.aircraft, args.cell, args.gyro, args.axis, args.duration, s)
+    estimator = None if args.estimated_attitude is None else tuple(args.estimated_attitude)
+    jobs = [(args.aircraft, args.cell, args.gyro, args.axis, args.duration, s, estimator)
             for s in range(args.first_seed, args.first_seed + args.seeds)]
     if args.workers == 1:
         rows = [_one(job) for job in jobs]
@@ -189,8 +217,10 @@ def main(argv=None) -> int:
         with ProcessPoolExecutor(args.workers) as pool:
             rows = list(pool.map(_one, jobs))
     damping, gain = AXES[args.axis]
-    print(f"{args.aircraft}, cell {args.cell}, gyro {args.gyro:g} rad/s, {args.axis}; {len(rows)} flights of "
-          f"{args.duration:g} s: relative error, mean (standard error) [RMS]")
+    source = ("the log's attitude" if estimator is None else
+              f"an estimated attitude (complementary filter, {estimator[0]:g} s, tilt noise {estimator[1]:g} rad)")
+    print(f"{args.aircraft}, cell {args.cell}, gyro {args.gyro:g} rad/s, {args.axis}, {source}; {len(rows)} flights "
+          f"of {args.duration:g} s: relative error, mean (standard error) [RMS]")
     for label in rows[0]:
         e = np.array([r[label] for r in rows])
         mean, se = e.mean(axis=0), e.std(axis=0, ddof=1) / np.sqrt(len(e)) if len(e) > 1 else np.zeros(2)

@@ -33,3 +33,19 @@ def test_the_likelihood_prefers_the_true_damping_and_gain(with_attitude, load_sc
 def test_a_cell_whose_sticks_are_interpolated_is_refused(load_script):
     with pytest.raises(SystemExit, match="must hold its sticks over the sample"):
         load_script("attitude_output_study").main(["--cell", "independent", "--seeds", "1"])
+
+
+def test_the_estimated_attitude_follows_the_angle_and_carries_the_gyros_noise(load_script):
+    """A flight controller's angle (a complementary filter of the gyro and a tilt): exact inputs give the angle
+    back (to the integration's step), a noisy gyro and tilt give errors that are low-passed, not white."""
+    study = load_script("attitude_output_study")
+    dt = 0.01
+    t = np.arange(6000) * dt
+    angle, rate = 0.1 * np.sin(0.5 * t), 0.05 * np.cos(0.5 * t)
+    exact = study.estimated_attitude(rate, angle, dt, 1.0, 0.0, np.random.default_rng(0))
+    assert np.abs(exact - angle).max() < 1e-3
+    noisy = study.estimated_attitude(rate + 0.03 * np.random.default_rng(1).standard_normal(t.size), angle, dt, 1.0,
+                                     0.02, np.random.default_rng(2))
+    error = noisy - angle
+    assert 0.001 < error.std() < 0.01
+    assert np.corrcoef(error[1:], error[:-1])[0, 1] > 0.9  # correlated from sample to sample
