@@ -22,7 +22,6 @@ from .tasks import N_SINES, draw_episodes, draw_line_phases, reward_coefficients
 from .threads import ThreadChoice
 
 
-
 class HeliAttitudeVectorEnv(VectorEnv):
     """``num_envs`` copies of :class:`heli_env.env.HeliAttitudeEnv`, batched in numpy.
 
@@ -170,13 +169,13 @@ class HeliAttitudeVectorEnv(VectorEnv):
             self._start(which, self._draw(which, options, gust))
         else:
             ready = self._ahead.ready[which]
-            drawn = which[ready]
-            if drawn.size:
-                self._start(drawn, self._ahead.starts, drawn)
-                self._ahead.take(drawn)
-            if drawn.size < which.size:
-                self._start(which[~ready], self._draw(which[~ready]))
-                self._ahead.drawn_now(which[~ready])
+            ahead, now = which[ready], which[~ready]
+            if ahead.size:
+                self._start(ahead, self._ahead.starts, ahead)
+                self._ahead.take(ahead)
+            if now.size:
+                self._start(now, self._draw(now))
+                self._ahead.drawn_now(now)
         if self._restart is not None:  # reset now (a masked reset): they do not restart at the next step
             left = self._restart[~np.isin(self._restart, which, assume_unique=True)]
             self._restart = left if left.size else None
