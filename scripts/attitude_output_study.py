@@ -34,6 +34,9 @@ import numba
 import numpy as np
 from scipy import linalg, optimize
 
+sys.path.insert(0, str(Path(__file__).parent))  # the study's aircraft are aircraft_generalisation's
+from aircraft_generalisation import AIRCRAFT, _aircraft  # noqa: E402
+
 AXES = {"roll": ("k3", "k2"), "pitch": ("k7", "k6")}
 BURN = 200
 """Samples left out of the likelihood while the filter settles."""
@@ -157,9 +160,6 @@ def _one(job) -> dict:
     """Relative errors [%] of one flight's damping and gain by the package and the two fits."""
     from threadpoolctl import threadpool_limits
 
-    sys.path.insert(0, str(Path(__file__).parent))
-    from aircraft_generalisation import _aircraft
-
     from identification.bench.cells import BENCH_CELLS
     from identification.bench.synthetic import simulate_flight
     from identification.likelihood.estimator import MaximumLikelihoodIdentifier
@@ -190,7 +190,7 @@ def _one(job) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--aircraft", default="sluggish", help="paper, or one of aircraft_generalisation.AIRCRAFT")
+    ap.add_argument("--aircraft", default="sluggish", choices=["paper", *AIRCRAFT])
     ap.add_argument("--cell", default="held-sticks-pd", help="a bench cell whose sticks are held over the sample")
     ap.add_argument("--gyro", type=float, default=0.03, help="gyro noise [rad/s] (default 0.03)")
     ap.add_argument("--axis", choices=list(AXES), default="roll")
@@ -207,7 +207,7 @@ def main(argv=None) -> int:
     cell = BENCH_CELLS.get(args.cell)
     if cell is None or not (cell.held_sticks or cell.pilot == "autopilot"):
         held = [name for name, c in BENCH_CELLS.items() if c.held_sticks or c.pilot == "autopilot"]
-        raise SystemExit(f"--cell must hold its sticks over the sample (one of {', '.join(held)}), got {args.cell!r}")
+        ap.error(f"--cell must hold its sticks over the sample (one of {', '.join(held)}), got {args.cell!r}")
     estimator = None if args.estimated_attitude is None else tuple(args.estimated_attitude)
     jobs = [(args.aircraft, args.cell, args.gyro, args.axis, args.duration, s, estimator)
             for s in range(args.first_seed, args.first_seed + args.seeds)]

@@ -24,6 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).parent))  # the study's aircraft are aircraft_generalisation's
+from aircraft_generalisation import AIRCRAFT, _aircraft  # noqa: E402
+
 DAMPINGS = ("k3", "k7", "k11")
 NO_WIND = (1e-4, 1e-4, 1e-4)
 """A wind too weak to matter (the bench's flights need a positive level)."""
@@ -32,9 +35,6 @@ NO_WIND = (1e-4, 1e-4, 1e-4)
 def _one(job) -> list:
     """Relative errors [%] of the dampings of one flight."""
     from threadpoolctl import threadpool_limits
-
-    sys.path.insert(0, str(Path(__file__).parent))
-    from aircraft_generalisation import _aircraft
 
     from identification.bench.cells import BENCH_CELLS
     from identification.bench.synthetic import simulate_flight
@@ -50,15 +50,27 @@ def _one(job) -> list:
 
 
 def _field(text: str) -> tuple:
+    """``FIELD=VALUE`` of a :class:`~identification.bench.flight_config.FlightConfig` field, the value a Python
+    literal."""
+    from dataclasses import fields
+
+    from identification.bench.flight_config import FlightConfig
+
     name, _, value = text.partition("=")
+    known = [f.name for f in fields(FlightConfig)]
     if not name or not value:
         raise argparse.ArgumentTypeError(f"expected FIELD=VALUE (a FlightConfig field), got {text!r}")
-    return name, ast.literal_eval(value)
+    if name not in known:
+        raise argparse.ArgumentTypeError(f"expected a FlightConfig field ({', '.join(known)}), got {name!r}")
+    try:
+        return name, ast.literal_eval(value)
+    except (ValueError, SyntaxError):
+        raise argparse.ArgumentTypeError(f"expected a Python literal after {name}=, got {value!r}") from None
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--aircraft", default="paper", help="paper, or one of aircraft_generalisation.AIRCRAFT")
+    ap.add_argument("--aircraft", default="paper", choices=["paper", *AIRCRAFT])
     ap.add_argument("--cell", default="independent")
     ap.add_argument("--gyro", type=float, default=0.03, help="gyro noise [rad/s] (default 0.03)")
     ap.add_argument("--no-wind", action="store_true", help="fly without gusts")
@@ -72,8 +84,10 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     from identification.bench.cells import BENCH_CELLS
 
+    if args.seeds < 2:
+        ap.error(f"--seeds must be at least 2 (a mean and its standard error), got {args.seeds}")
     if args.cell not in BENCH_CELLS:
-        raise SystemExit(f"unknown cell {args.cell!r}; known: {', '.join(BENCH_CELLS)}")
+        ap.error(f"--cell must be a bench cell ({', '.join(BENCH_CELLS)}), got {args.cell!r}")
     base = BENCH_CELLS[args.cell]
     fields = {"gyro_noise": args.gyro, "vibration_lines": (), "vibration": 0.0, **dict(args.set)}
     if args.no_wind:

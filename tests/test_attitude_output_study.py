@@ -30,9 +30,11 @@ def test_the_likelihood_prefers_the_true_damping_and_gain(with_attitude, load_sc
     assert study.nll(np.r_[-1.0, truth[1:]], y, u, flight.dt, with_attitude) == 1e12  # no negative damping
 
 
-def test_a_cell_whose_sticks_are_interpolated_is_refused(load_script):
-    with pytest.raises(SystemExit, match="must hold its sticks over the sample"):
+def test_a_cell_whose_sticks_are_interpolated_is_refused(load_script, capsys):
+    with pytest.raises(SystemExit) as refused:
         load_script("attitude_output_study").main(["--cell", "independent", "--seeds", "1"])
+    assert refused.value.code == 2
+    assert "must hold its sticks over the sample" in capsys.readouterr().err
 
 
 def test_the_estimated_attitude_follows_the_angle_and_carries_the_gyros_noise(load_script):
