@@ -491,8 +491,9 @@ def env_kernels(params: ModelParams, dt: float, task: str, noisy: bool, axis_wei
     gives what it gave. A copy whose ``restart`` (n, uint8) is set starts its next episode in the step (the
     env has just written its reset state): it is not advanced (its state rows are kept through the physics,
     its step and action rows not touched) but observed as a reset observes it, with reward 0 and no end:
-    Gymnasium's next-step autoreset without a second pass over its block. ``step_pool`` calls ``step`` on one block per task of a ``prange``: a thin parallel
-    loop that compiles in two seconds, where the whole step compiled as one parallel function took fifteen.
+    Gymnasium's next-step autoreset without a second pass over its block. ``step_pool`` calls ``step`` on one
+    block per task of a ``prange``: a thin parallel loop that compiles in two seconds, where the whole step
+    compiled as one parallel function took fifteen.
     The model's values and ``dt`` are an argument (:attr:`Kernels.constants`), the model's structure the
     source: envs of models of one structure share the module. ``actions`` are float64 (a C array): one
     compiled signature (each took 5 s to compile).
