@@ -100,6 +100,12 @@ class FlightConfig:
         Main-rotor rotation frequency [Hz].
     attitude_noise : float
         Attitude-sensor noise standard deviation [rad].
+    attitude_filter_tau : float
+        0 (default): the logged attitude, and the autopilot's, is an attitude sensor's: the truth plus
+        ``attitude_noise``, independent of the gyro. > 0: a flight controller's estimator, as real logs
+        carry: the logged gyro (noise and vibration included) integrated through the Euler kinematics and
+        pulled towards a tilt reading (truth plus ``attitude_noise``) with this time constant [s]; the log
+        and the autopilot get that estimate, whose errors are the gyro's own, integrated.
     substeps : int
         RK4 sub-steps of the truth simulation per sample.
     wind_model : {"lowpass", "gauss_markov", "dryden"}
@@ -154,6 +160,7 @@ class FlightConfig:
     vibration: float = 0.04
     rotor_hz: float = 30.0
     attitude_noise: float = 0.003
+    attitude_filter_tau: float = 0.0
     substeps: int = 4
     wind_model: str = "lowpass"
     wind_fast_tau: float = 0.35
@@ -185,7 +192,8 @@ class FlightConfig:
             "input_shift": abs(self.input_shift) < self.duration / 2,
             "autopilot_dterm_hz": 0 < self.autopilot_dterm_hz < math.inf,
         }
-        for name in ("stick_noise", "collective_wander", "gyro_noise", "vibration", "attitude_noise", "command_noise"):
+        for name in ("stick_noise", "collective_wander", "gyro_noise", "vibration", "attitude_noise", "command_noise",
+                     "attitude_filter_tau"):
             checks[name] = getattr(self, name) >= 0
         expected = {"wind_model": f"one of {WIND_MODELS}", "pilot": f"one of {PILOTS}",
                     "wind_slow_fraction": "a fraction in [0, 1]", "input_shift": "|shift| < half the duration",

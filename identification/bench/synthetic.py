@@ -237,9 +237,9 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
     errors = sensor_errors(rng, cfg, time)
     if cfg.command_noise > 0:  # drawn last, so that flights without it keep their draws
         jitter = jitter + rng.normal(0.0, cfg.command_noise, jitter.shape)
-    states, sticks = _fly(params, cfg, sweep_schedule(time, cfg), jitter, col, torque, errors)
+    states, sticks, estimated = _fly(params, cfg, sweep_schedule(time, cfg), jitter, col, torque, errors)
     true_rates = states[:, :3].T
-    rates, att = _sensors(errors, true_rates, euler_from_quaternion(states[:, 6:10].T))
+    rates, att = _sensors(errors, true_rates, euler_from_quaternion(states[:, 6:10].T), estimated)
     flight = _logged_flight(cfg, seed, effects, time, rates, att, sticks)
     return SyntheticFlight(flight, params, wind, torque, true_rates, cfg, int(seed), tuple(effects), float(effect_scale))
 
@@ -252,14 +252,16 @@ def _wind(rng: np.random.Generator, n: int, cfg: FlightConfig) -> np.ndarray:
     return np.array([gust_trace(rng, n, cfg.sample_rate, cfg, lv / 1.6449) for lv in level])
 
 
-def _fly(params: ModelParams, cfg: FlightConfig, sweeps, jitter, col, torque, errors) -> tuple[np.ndarray, np.ndarray]:
-    """Fly the truth model with the pilot in the loop: states (n, 10) and the sticks he logged (n, 4).
+def _fly(params: ModelParams, cfg: FlightConfig, sweeps, jitter, col, torque, errors) -> tuple:
+    """Fly the truth model with the pilot in the loop: states (n, 10), the sticks he logged (n, 4) and the
+    flight controller's attitude estimate (3, n; None unless ``cfg.attitude_filter_tau`` > 0).
 
     The pilot (module docstring) holds the attitude with a PID on the angle (``"pid"``) or a PD on angle and
     rate (``"pd"``, ``"autopilot"``) seen ``delay`` samples ago, scaled by the control gain he has learnt,
     and adds the ``sweeps`` and his ``jitter`` (3, n); ``col`` (n,) is the collective and ``torque`` (3, n)
     the wind [rad/s^2]. A human sees the aircraft; the autopilot reads its sensors, the true state plus
-    ``errors`` (:func:`sensor_errors`), the gyro through its D-term low-pass (``cfg.autopilot_dterm_hz``).
+    ``errors`` (:func:`sensor_errors`), the gyro through its D-term low-pass (``cfg.autopilot_dterm_hz``), the
+    attitude its estimator's where ``cfg.attitude_filter_tau`` > 0 (:class:`_AttitudeEstimator`).
     """
     n = col.size
     fs = cfg.sample_rate
@@ -273,7 +275,8 @@ def _fly(params: ModelParams, cfg: FlightConfig, sweeps, jitter, col, torque, er
     trim = [-(params.kd1) / gains[0], -(params.kd2) / gains[1],
             -(params.kd3 - params.k12 * cfg.collective_trim) / gains[2]]
     delay = 1 if cfg.pilot == "autopilot" else max(1, int(round(cfg.reaction_delay * fs)))
-    sensed = _AutopilotSensing(cfg, errors, fs) if cfg.pilot == "autopilot" else None
+    estimator = _AttitudeEstimator(cfg, errors, n) if cfg.attitude_filter_tau > 0 else None
+    sensed = _AutopilotSensing(cfg, errors, fs, estimator) if cfg.pilot == "autopilot" else None
 
     rk4 = kernel(params)[0]["rk4"]
     x = tuple(float(v) for v in initial_state(sticks=trim))
@@ -307,6 +310,8 @@ def _fly(params: ModelParams, cfg: FlightConfig, sweeps, jitter, col, torque, er
     u_next = None
     hold = cfg.pilot == "autopilot" or cfg.held_sticks  # a flight controller or a digital link holds the sample
     for k in range(n):
+        if estimator is not None:
+            estimator.update(k, euler_from_quaternion_scalar(x[6], x[7], x[8], x[9]), x[0:3])
         if sensed is None:
             hist_ang.append(euler_from_quaternion_scalar(x[6], x[7], x[8], x[9]))
             hist_rate.append(x[0:3])
@@ -325,7 +330,7 @@ def _fly(params: ModelParams, cfg: FlightConfig, sweeps, jitter, col, torque, er
             x = rk4(x, uj, torque_l[k], h)
         if len(hist_ang) > 4 * (delay + 2):
             del hist_ang[: -(delay + 2)], hist_rate[: -(delay + 2)]
-    return states, sticks
+    return states, sticks, None if estimator is None else estimator.estimates
 
 
 class _AutopilotSensing:
@@ -335,14 +340,17 @@ class _AutopilotSensing:
     has, which no model of the measured rates can use (an idealised loop; on the bench cell it made a
     sub-sample input delay and a gain scheduling look likely, statistic 10-77)."""
 
-    def __init__(self, cfg: FlightConfig, errors: tuple, fs: float):
+    def __init__(self, cfg: FlightConfig, errors: tuple, fs: float, estimator: "_AttitudeEstimator | None" = None):
         gyro, att = errors
         self._gyro = sum(gyro[1:], gyro[0]).T.tolist()
         self._att = att.T.tolist()
         self._a = float(np.exp(-2.0 * np.pi * cfg.autopilot_dterm_hz / fs))
         self._state = None
+        self._estimator = estimator
 
     def attitude(self, k: int, true_att) -> list:
+        if self._estimator is not None:  # updated at sample k already
+            return self._estimator.estimates[:, k].tolist()
         return [t + e for t, e in zip(true_att, self._att[k])]
 
     def rate(self, k: int, true_rate) -> list:
@@ -352,6 +360,40 @@ class _AutopilotSensing:
         else:
             self._state = [self._a * s + (1.0 - self._a) * r for s, r in zip(self._state, raw)]
         return list(self._state)
+
+
+class _AttitudeEstimator:
+    """A flight controller's attitude estimate (``cfg.attitude_filter_tau`` > 0): a complementary filter that
+    integrates the gyro as logged (truth plus noise and vibration) through the Euler kinematics and pulls the
+    result towards a tilt reading (the truth plus the attitude noise) with the time constant ``tau``. Its
+    errors are the gyro's, integrated, plus the tilt noise's low-passed: not white, and not independent of
+    the gyro the log carries (what separates a log's attitude from an independent attitude sensor)."""
+
+    def __init__(self, cfg: FlightConfig, errors: tuple, n: int):
+        gyro, att = errors
+        self._gyro = sum(gyro[1:], gyro[0]).T.tolist()
+        self._att = att.T.tolist()
+        self._dt = 1.0 / cfg.sample_rate
+        self._pull = 1.0 - float(np.exp(-self._dt / cfg.attitude_filter_tau))
+        self.estimates = np.empty((3, n))
+
+    def update(self, k: int, true_att, true_rate) -> None:
+        """The estimate at sample ``k`` from the one before, the gyro read at ``k - 1`` and the tilt at ``k``."""
+        tilt = [t + e for t, e in zip(true_att, self._att[k])]
+        if k == 0:
+            self.estimates[:, 0] = tilt
+            self._last_rate = [r + e for r, e in zip(true_rate, self._gyro[0])]
+            return
+        phi, theta, psi = self.estimates[:, k - 1]
+        p, q, r = self._last_rate
+        s, c = np.sin(phi), np.cos(phi)
+        ahead = [phi + self._dt * (p + (q * s + r * c) * np.tan(theta)),
+                 theta + self._dt * (q * c - r * s),
+                 psi + self._dt * (q * s + r * c) / np.cos(theta)]
+        gap = [t - a for t, a in zip(tilt, ahead)]
+        gap[2] = float(np.angle(np.exp(1j * gap[2])))  # heading: the short way round
+        self.estimates[:, k] = [a + self._pull * g for a, g in zip(ahead, gap)]
+        self._last_rate = [r + e for r, e in zip(true_rate, self._gyro[k])]
 
 
 def sensor_errors(rng: np.random.Generator, cfg: FlightConfig, time) -> tuple[list, np.ndarray]:
@@ -372,14 +414,15 @@ def sensor_errors(rng: np.random.Generator, cfg: FlightConfig, time) -> tuple[li
     return gyro, att
 
 
-def _sensors(errors: tuple, true_rates, true_att):
-    """What the gyro and the attitude sensor log: the truth plus :func:`sensor_errors`, yaw wrapped to
-    (-pi, pi]. Returns (rates, attitude), each (3, n)."""
+def _sensors(errors: tuple, true_rates, true_att, estimated=None):
+    """What the gyro and the attitude sensor log: the truth plus :func:`sensor_errors` (the attitude the
+    flight controller's ``estimated`` one where given), yaw wrapped to (-pi, pi]. Returns (rates, attitude),
+    each (3, n)."""
     gyro, att_noise = errors
     rates = true_rates
     for term in gyro:
         rates = rates + term
-    att = true_att + att_noise
+    att = true_att + att_noise if estimated is None else estimated.copy()
     att[2] = np.angle(np.exp(1j * att[2]))
     return rates, att
 
