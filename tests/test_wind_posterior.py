@@ -16,12 +16,11 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from identification.disturbance.wind_posterior import (
     WindPosterior,
-    _root,
     axis_posterior_noise,
     flight_seed,
     wind_posterior,
 )
-from identification.likelihood.state_space import discrete_model, lti_apply, rts_smooth, wind_block
+from identification.likelihood.state_space import covariance_root, discrete_model, lti_apply, rts_smooth, wind_block
 
 MODEL = (2.4, 0.6, 0.08, 300.0, 600.0, 1.0)
 """(damping, T_slow, T_fast, var_slow/R, var_fast/R, zeta): quick gusts, many independent stretches."""
@@ -33,8 +32,8 @@ def _flight_of_the_model(rng, n):
     Ad, _, _, Qd = discrete_model(*MODEL, DT, "linear", "gm2")
     m = Ad.shape[0]
     kicks = np.zeros((m, n + 1))
-    kicks[:, 0] = _root(discrete_stationary(Ad, Qd)) @ rng.standard_normal(m)
-    kicks[:, 1:n] = _root(Qd) @ rng.standard_normal((m, n - 1))
+    kicks[:, 0] = covariance_root(discrete_stationary(Ad, Qd)) @ rng.standard_normal(m)
+    kicks[:, 1:n] = covariance_root(Qd) @ rng.standard_normal((m, n - 1))
     x = R_STD * lti_apply(Ad, np.eye(m), np.eye(m), np.zeros((m, m)), kicks)[:, 1:]
     _, cw, _ = wind_block("gm2", 1.0, 1.0)
     return cw @ x[1:], x[0] + R_STD * rng.standard_normal(n)

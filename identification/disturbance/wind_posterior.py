@@ -46,7 +46,7 @@ import numpy as np
 
 from heli_core.terms import AXES
 
-from ..likelihood.state_space import discrete_model, kalman, lti_apply, rts_smooth, wind_block
+from ..likelihood.state_space import covariance_root, discrete_model, kalman, lti_apply, rts_smooth, wind_block
 
 METHOD = "simulation smoother (Durbin & Koopman 2002) of the maximum-likelihood model's RTS smoother"
 """What a draw is, in the words the library's manifest records."""
@@ -107,8 +107,8 @@ def axis_posterior_noise(model: tuple, dt: float, hold, wind_model: str, noise_s
     P, _, _ = kalman(Ad, Qd)
     m = Ad.shape[0]
     _, cw, _ = wind_block(wind_model, 1.0, 1.0)  # the sum of the gust states, the same for every T, zeta
-    noise_root = _root(Qd)
-    start_root = _root(P)
+    noise_root = covariance_root(Qd)
+    start_root = covariance_root(P)
     eye = np.eye(m)
     out = np.empty((n_draws, n))
     for d in range(n_draws):
@@ -120,12 +120,6 @@ def axis_posterior_noise(model: tuple, dt: float, hold, wind_model: str, noise_s
         smoothed = rts_smooth(y, np.zeros(n), *model, dt, hold, wind_model)
         out[d] = cw @ (x[1:] - smoothed[1:])
     return noise_std * out
-
-
-def _root(C: np.ndarray) -> np.ndarray:
-    """A square root ``L`` with ``L L' = C`` of a symmetric positive semi-definite matrix (eigenvalues < 0 cut)."""
-    w, V = np.linalg.eigh(0.5 * (C + C.T))
-    return V * np.sqrt(np.clip(w, 0.0, None))
 
 
 @dataclass(frozen=True, eq=False)

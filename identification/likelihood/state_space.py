@@ -115,6 +115,13 @@ def kalman(Ad, Qd, R: float = 1.0):
     return P, L, S
 
 
+def covariance_root(C: np.ndarray) -> np.ndarray:
+    """A square root ``L`` with ``L L' = C`` of a symmetric positive semi-definite matrix (eigenvalues < 0 cut):
+    ``L @ standard normals`` draws with covariance ``C`` (a process noise's ``Qd`` may be singular)."""
+    w, V = np.linalg.eigh(0.5 * (C + C.T))
+    return V * np.sqrt(np.clip(w, 0.0, None))
+
+
 def strictly_proper_tf(A, b, den=None):
     """Numerator and denominator (in z^-1) of ``e0' (zI - A)^-1 b``: the rate's response to input ``b``.
 
