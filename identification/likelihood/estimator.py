@@ -74,6 +74,7 @@ from .axis_fit import MLAxisFit
 from .axis_likelihood import AxisData, AxisLikelihood
 from .axis_pool import check_workers, map_axes
 from .axis_search import BURN_IN, DAMPING_BOUNDS, MAX_SHIFT, AxisProblem, WindFit
+from .closed_loop import CLOSED_LOOP_MODES, N_FLIGHTS, ClosedLoopCheck, apply_check, check_closed_loop
 from .input_hold import check_hold, decide_hold
 from .servo_lag import profile_lag
 from .state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll, rts_smooth, wind_block
@@ -166,6 +167,14 @@ class MaximumLikelihoodIdentifier:
         "detect" (``heli identify``'s default) does so only on the axes where the delay's search
         (``delay="auto"`` or ``"detect"``) found a servo delay: an unmodelled 40 ms lag left the dampings 10-14 %
         low with the delay alone (56-74 % with neither); elsewhere the fit is unchanged.
+    closed_loop : None, "auto" or "report"
+        The closed-loop check (:mod:`identification.likelihood.closed_loop`): ``closed_loop_flights`` flights
+        of the fitted model flown under the pilot fitted to the sticks and fitted again, where that pilot sees
+        the aircraft rather than the gyro; "auto" removes a gain's or damping's bias where it is significant
+        (:attr:`closed_loop_`), "report" only measures it, None (default here; ``heli identify`` checks)
+        skips it. A pilot who sees the aircraft behind a noisy gyro biased slow axes' dampings 7-32 % high.
+    closed_loop_flights : int
+        Flights flown by the check (each costs about one fit of the axis).
     workers : int or None
         Processes the axes are fitted in side by side (:mod:`identification.likelihood.axis_pool`; the result is the
         same bit for bit): None (default) the cores other work leaves idle, or ``HELI_WORKERS``; 1 one after
@@ -189,6 +198,8 @@ class MaximumLikelihoodIdentifier:
         Wall time of ``fit`` [s].
     vibration_lines_ : list of list of dict
         Lines removed, per flight (axis, frequency [Hz], amplitude [rad/s]).
+    closed_loop_ : ClosedLoopCheck or None
+        What the closed-loop check found (the values before it in its ``fitted``), or None when not run.
     """
 
     method = "maximum likelihood (filter error, Gauss-Markov wind)"
@@ -198,7 +209,7 @@ class MaximumLikelihoodIdentifier:
     def __init__(self, structure="decoupled", extra_terms=(), input_hold="auto", delay=None,
                  delay_grid=None, wind_model: str = "auto", remove_vibration: bool = True,
                  vibration_min_hz: float = 8.0, axes=AXES, max_nfev: int = 100, select_terms: bool = False,
-                 servo_lag=None, workers=None):
+                 servo_lag=None, closed_loop=None, closed_loop_flights: int = N_FLIGHTS, workers=None):
         self.structure = structure
         self.extra_terms = extra_terms
         self.input_hold = input_hold
@@ -211,6 +222,8 @@ class MaximumLikelihoodIdentifier:
         self.max_nfev = max_nfev
         self.select_terms = select_terms
         self.servo_lag = servo_lag
+        self.closed_loop = closed_loop
+        self.closed_loop_flights = closed_loop_flights
         self.workers = workers
 
     # ----------------------------------------------------------------- set-up
@@ -233,6 +246,10 @@ class MaximumLikelihoodIdentifier:
             raise ValueError(f"max_nfev must be a whole number >= 5, got {self.max_nfev!r}")
         if not self.vibration_min_hz > 0:
             raise ValueError(f"vibration_min_hz must be > 0 Hz, got {self.vibration_min_hz!r}")
+        if self.closed_loop not in (None,) + CLOSED_LOOP_MODES:
+            raise ValueError(f"closed_loop must be None or one of {CLOSED_LOOP_MODES}, got {self.closed_loop!r}")
+        if not (isinstance(self.closed_loop_flights, (int, np.integer)) and self.closed_loop_flights >= 2):
+            raise ValueError(f"closed_loop_flights must be a whole number >= 2, got {self.closed_loop_flights!r}")
 
     def _clean(self, flight: Flight) -> tuple[Flight, list]:
         if not self.remove_vibration:
@@ -326,6 +343,28 @@ class MaximumLikelihoodIdentifier:
         self.params_ = ModelParams().with_values(**values)
         self.flights_ = flights
         self.vibration_lines_ = [c[1] for c in cleaned]
+        self.closed_loop_ = None
+        if self.closed_loop is not None:
+            self.closed_loop_check(self.closed_loop)
+
+    def closed_loop_check(self, mode: str = "auto") -> ClosedLoopCheck:
+        """Run the closed-loop check on the fitted model (:mod:`identification.likelihood.closed_loop`): in mode
+        "auto" the significant biases are removed from :attr:`params_` and :attr:`axes_`; the result is kept in
+        :attr:`closed_loop_` and ``closed_loop`` records the mode (as a fit with ``closed_loop=mode`` does).
+
+        Raises
+        ------
+        NotFittedError
+            Before :meth:`fit`.
+        ValueError
+            ``mode`` not in :data:`~identification.likelihood.closed_loop.CLOSED_LOOP_MODES`.
+        """
+        self._check_fitted()
+        with threadpool_limits(limits=1, user_api="blas"):
+            check = check_closed_loop(self, self.closed_loop_flights, mode=mode, workers=self.workers)
+        apply_check(self, check)
+        self.closed_loop, self.closed_loop_ = mode, check
+        return check
 
     def _decide_log_hold(self, fits: dict, names: dict, flights, burn) -> dict | None:
         """With ``input_hold="auto"``: one hold for the log from every axis' estimate (:func:`decide_hold`, a

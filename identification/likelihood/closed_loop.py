@@ -1,0 +1,437 @@
+"""The closed-loop check: fly the identified model again with the flight's own loop, fit it, and see what
+the estimator returns where the truth is known.
+
+A pilot who sees the aircraft puts into his sticks what the gyro did not measure: he reacts to the gusts
+themselves, noise-free. The likelihood of the gyro alone, conditioned on the sticks, cannot use that, and
+the damping bends to use it: on slow axes behind a noisy gyro the dampings came out 7-32 % high
+(docs/method.md, "Where it does not hold"). The bias depends on the aircraft, the wind, the gyro and the
+pilot together, so it is measured on the flight's own conditions, by a parametric bootstrap (Efron &
+Tibshirani 1993, ch. 10; in system identification, a Monte Carlo check of the estimator on the identified
+model):
+
+1. per axis and flight, the pilot is fitted to the logged sticks (:mod:`identification.likelihood.pilot_model`);
+   an axis whose sticks follow the logged gyro (a flight controller's loop: its commands are a function of
+   what the log measured, and the likelihood conditioned on them is the right one) is not checked;
+2. ``n_flights`` flights are flown by the identified axis model (eqs. 18/21 with the fitted gust model of
+   eqs. 41-42, exactly discretised at the fitted input hold; gyro noise as fitted) under that pilot, who sees
+   the simulated aircraft ``delay`` samples late, his sweeps and jitter (the fit's residual) replayed;
+3. each is fitted as the flight was (same terms, hold, gust model), and the mean relative error of the
+   gain and the damping is the estimator's bias there.
+
+A bias larger than ``SIGNIFICANCE`` standard errors of its mean is removed from the fitted value (one step
+of bootstrap bias correction, ``value * (1 - bias)``: the bias at the estimate stands for the bias at the
+truth); a smaller one is reported and left. So is every bias of an axis whose biases do not point the loop's
+way. That way has one direction: a pilot who opposes the motion puts into his sticks, with the opposite sign,
+motion the gyro did not see, and the likelihood reads it as more damping and less control power (the
+damping up, the gain's magnitude down: on every aircraft, pilot, gyro and wind measured). A bias the other
+way is the simulated world's own (an agile aircraft's yaw in 2 Hz Dryden gusts, its gust fitted at 7 Hz, gave
++40 % on the damping with the gain +11 % where the flight's fit was within 2.4 %), not the loop's.
+
+Axes with a servo delay or lag, or with terms driven by other axes' rates, are not flown (the one-axis loop
+does not carry them), nor axes whose gyro shows next to no noise (a log filtered before it was written); each
+says why.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from types import MappingProxyType
+
+import numpy as np
+
+from heli_core.terms import AXES, STICK_ROW
+
+from ..flight import Flight
+from .axis_likelihood import AxisLikelihood
+from .axis_pool import map_axes
+from .pilot_model import AxisSignals, PilotModel, fit_pilot, reaction_delay
+from .state_space import covariance_root, discrete_model, rts_smooth, wind_block
+
+CLOSED_LOOP_MODES = ("auto", "report")
+"""``"auto"``: check and remove a significant bias; ``"report"``: check and leave the fit as it is."""
+
+N_FLIGHTS = 8
+"""Flights flown per check (each is one more fit of the flight's length)."""
+
+SIGNIFICANCE = 2.0
+"""A bias is removed when its mean exceeds this many standard errors of the mean over the flights flown."""
+
+CONCLUSIVE = (1.0, 3.0)
+"""A bias within these many standard errors of zero is inconclusive: more flights are flown (up to the
+check's ``max_flights``). At the paper's wind 8 flights decide; at twice the wind a +5 % damping bias took 16-24."""
+
+DAMPINGS = ("k3", "k7", "k11")
+"""The dampings of eqs. 18/21: the parameters whose bias decides whether more flights are flown."""
+
+SETTLE = 3000
+"""Samples the simulated loop flies before the record starts (the gusts and the pilot settle)."""
+
+MIN_NOISE_SHARE = 0.02
+"""An axis whose fitted gyro noise is below this share of the rate's standard deviation is not checked: the
+bias needs a noisy gyro (none measured without one, docs/method.md), and a log filtered before it was written
+has no noise for the pilot fit to tell a pilot's sticks from a controller's by."""
+
+MAX_RATE_RATIO = 2.0
+"""A simulated loop whose rate's standard deviation is further than this factor from the logged one's is not
+the flight's loop (the pilot's fit failed); the axis is then not checked."""
+
+
+@dataclass(frozen=True, eq=False)
+class AxisCheck:
+    """The closed-loop check of one axis.
+
+    Attributes
+    ----------
+    axis : str
+    checked : bool
+        Flown and fitted; when False, ``reason`` says why not.
+    reason : str
+    pilots : tuple of dict
+        Per flight, the fitted pilot (:meth:`PilotModel.describe`).
+    fitted : dict
+        The estimate before the check: gain and damping.
+    bias : dict
+        Mean relative error of each over the flights flown (fitted value less the model's, over the model's).
+    bias_se : dict
+        Its standard error.
+    corrected : dict
+        The values after the check: the fitted ones less the significant biases.
+    loops_direction : bool
+        The biases point the loop's way (damping up, gain's magnitude down); only then is one removed.
+    """
+
+    axis: str
+    checked: bool
+    reason: str = ""
+    pilots: tuple = ()
+    fitted: dict = field(default_factory=dict)
+    bias: dict = field(default_factory=dict)
+    bias_se: dict = field(default_factory=dict)
+    corrected: dict = field(default_factory=dict)
+    loops_direction: bool = True
+
+    @property
+    def removed(self) -> tuple:
+        """Parameters whose bias was significant (their value corrected)."""
+        return tuple(k for k in self.bias if self.corrected.get(k) != self.fitted.get(k))
+
+    def describe(self) -> dict:
+        """JSON-ready."""
+        return {"axis": self.axis, "checked": self.checked, "reason": self.reason, "pilots": list(self.pilots),
+                "fitted": self.fitted, "bias": self.bias, "bias_se": self.bias_se, "corrected": self.corrected,
+                "loops_direction": self.loops_direction, "removed": list(self.removed)}
+
+
+@dataclass(frozen=True)
+class ClosedLoopCheck:
+    """What the closed-loop check found, per axis (:class:`AxisCheck`), with its settings."""
+
+    axes: dict
+    n_flights: int
+    seed: int
+    mode: str
+    time: float
+
+    def describe(self) -> dict:
+        return {"method": "parametric bootstrap in the flight's closed loop", "mode": self.mode,
+                "n_flights": self.n_flights, "seed": self.seed, "significance": SIGNIFICANCE,
+                "time_s": self.time, "axes": {a: c.describe() for a, c in self.axes.items()}}
+
+    def lines(self) -> list[str]:
+        """One line per axis, for a report or the terminal."""
+        out = []
+        for axis, c in self.axes.items():
+            if not c.checked:
+                out.append(f"{axis}: not checked: {c.reason}")
+                continue
+            parts = []
+            for k, b in c.bias.items():
+                verdict = "removed" if k in c.removed else "left"
+                parts.append(f"{k} {100 * b:+.1f} ± {100 * c.bias_se[k]:.1f} % ({verdict})")
+            delays = ", ".join(f"{p['reaction_delay_s']:.2f}" for p in c.pilots)
+            other = "" if c.loops_direction else " (not the loop's direction, damping up and gain down: left)"
+            out.append(f"{axis}: pilot sees the aircraft (reaction {delays} s); bias " + "; ".join(parts) + other)
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class _AxisLoop:
+    """One axis of one flight as the simulated loop flies it."""
+
+    Ad: np.ndarray
+    g0: np.ndarray
+    g1: np.ndarray
+    noise_root: np.ndarray  # a root of the process noise's covariance
+    noise_std: float
+    gain: float  # torque per stick unit
+    other: np.ndarray  # the rest of the known torque (offset, collective terms) per sample
+    pilot: PilotModel
+    angle0: float
+    dt: float
+
+
+def _names(ident, a: int, fit) -> tuple[str, str, tuple]:
+    """(gain name, damping name, the terms fitted) of axis ``a`` as ``fit`` was fitted."""
+    kept = tuple(p for p in ident._param_names()[a] if p not in fit.dropped)
+    data = ident._fitted_data(a, fit, ident.flights_[:1], 0)
+    own = [n for n in data.names if "@" not in n]
+    damping = next(k for k in fit.params if k not in own and not k.startswith("kd"))
+    return own[data.servo_row], damping, kept
+
+
+def _skip_reason(ident, a: int, fit) -> str:
+    data = ident._fitted_data(a, fit, ident.flights_[:1], 0)
+    share = fit.noise_std / max(float(np.std(np.concatenate(data.y))), 1e-300)
+    if share < MIN_NOISE_SHARE:
+        return (f"the gyro shows next to no white noise ({100 * share:.2g} % of the rate's std; a log filtered before "
+                "it was written): there is nothing in the rate a pilot could see better than it")
+    if fit.delay != 0 or fit.lag != 0:
+        return "servo delay or lag fitted; the one-axis loop carries neither"
+    if data.causal_rows:
+        return "the axis' model reads other axes' rates; the one-axis loop does not fly them"
+    if data.servo_row is None:
+        return "no stick term"
+    return ""
+
+
+def _signals(ident, a: int, fit) -> tuple[list, list]:
+    """Per fitted flight, axis ``a``'s :class:`AxisSignals` and its loop's pieces ``(Ad, g0, g1, noise root,
+    gain, other torque)``."""
+    data = ident._fitted_data(a, fit, ident.flights_, 0)
+    own = [n for n in data.names if "@" not in n]
+    theta = np.array([fit.params[n] for n in own])
+    model = AxisLikelihood(data).unpack(fit.state)
+    Ad, g0, g1, Qd = discrete_model(*model, data.dt, fit.input_hold, fit.wind["model"])
+    root = covariance_root(Qd) * fit.noise_std
+    row = data.servo_row
+    _, cw, _ = wind_block(fit.wind["model"], 1.0, 1.0)  # the gust states' sum, the same for every T, zeta
+    signals, pieces = [], []
+    for i, flight in enumerate(ident.flights_):
+        regs = data.regressors[i][:len(own)]
+        drive = theta @ regs + fit.flight_offsets[i]
+        stick = flight.sticks[STICK_ROW[a]]
+        gain = (float(np.sign(regs[row] @ stick)) or 1.0) * theta[row]
+        states = rts_smooth(data.y[i], drive, *model, data.dt, fit.input_hold, fit.wind["model"])
+        signals.append(AxisSignals(stick, np.unwrap(flight.attitude[a]), states[0], data.y[i], cw @ states[1:],
+                                   data.dt))
+        pieces.append((Ad, g0, g1, root, gain, drive - gain * stick))
+    return signals, pieces
+
+
+def _loops(ident, axes: list) -> tuple[dict, dict]:
+    """The loop of each of ``axes`` in every fitted flight, its pilot's delay shared by the flight's axes, and
+    the logged :class:`AxisSignals` it was fitted to: two dicts of lists (one item per flight)."""
+    built = {axis: _signals(ident, AXES.index(axis), ident.axes_[axis]) for axis in axes}
+    loops = {axis: [] for axis in axes}
+    if not axes:
+        return loops, {}
+    for i in range(len(ident.flights_)):
+        d = reaction_delay([built[axis][0][i] for axis in axes])
+        for axis in axes:
+            sig = built[axis][0][i]
+            Ad, g0, g1, root, gain, other = built[axis][1][i]
+            loops[axis].append(_AxisLoop(Ad, g0, g1, root, ident.axes_[axis].noise_std, gain, other,
+                                         fit_pilot(sig, d), float(sig.angle[0]), sig.dt))
+    return loops, {axis: built[axis][0] for axis in axes}
+
+
+_COMPILED = {}
+
+
+def _compiled_fly():
+    """:func:`_fly` compiled by numba, once per process (numba imported only when a check runs)."""
+    if "fly" not in _COMPILED:
+        import numba
+
+        _COMPILED["fly"] = numba.njit(cache=True)(_fly)
+    return _COMPILED["fly"]
+
+
+def _fly(Ad, g0, g1, kicks, noise, gain, other, delay, coef, angle_mean, rest, dt, angle0):  # pragma: no cover
+    """The loop over samples: returns the gyro, the angle and the sticks (each (n,)).
+
+    ``kicks`` (m, n) are the process noise, ``noise`` (n,) the gyro's; ``other`` and ``rest`` are padded with
+    their first value and zeros over the settling samples. The pilot's stick at k reads the angle (about
+    ``angle_mean``), the rate, the gyro's noise and the angle's integral ``delay`` samples before, plus
+    ``rest[k]``, clipped to the stick's range (:class:`~identification.likelihood.pilot_model.PilotModel`)."""
+    m, n = Ad.shape[0], rest.size
+    rate = np.zeros(n)
+    angle = np.zeros(n)
+    integral = np.zeros(n)
+    u = np.zeros(n)
+    x = np.zeros(m)
+    angle[0] = angle0
+    trim = -other[0] / gain
+    u[0] = trim
+    for k in range(n):
+        rate[k] = x[0]
+        if k > 0:
+            integral[k] = integral[k - 1] + dt * (angle[k] - angle_mean)
+        if k + 1 == n:
+            break
+        j = k + 1
+        if j >= delay:
+            i = j - delay
+            v = (coef[0] + coef[1] * (angle[i] - angle_mean) + coef[2] * rate[i] + coef[3] * noise[i]
+                 + coef[4] * integral[i] + rest[j])
+        else:
+            v = trim
+        u[j] = min(1.0, max(-1.0, v))
+        now, nxt = gain * u[k] + other[k], gain * u[j] + other[j]
+        y = np.empty(m)
+        for r in range(m):
+            s = g0[r] * now + g1[r] * nxt + kicks[r, k]
+            for c in range(m):
+                s += Ad[r, c] * x[c]
+            y[r] = s
+        angle[j] = angle[k] + 0.5 * dt * (x[0] + y[0])
+        x = y
+    return rate + noise, angle, u
+
+
+def _fly_loop(loop: _AxisLoop, rng: np.random.Generator) -> tuple:
+    """One simulated flight of ``loop``: gyro, angle and stick, each (n,)."""
+    n = loop.pilot.rest.size + SETTLE
+    m = loop.Ad.shape[0]
+    kicks = loop.noise_root @ rng.standard_normal((m, n))
+    noise = loop.noise_std * rng.standard_normal(n)
+    rest = np.concatenate([np.zeros(SETTLE), loop.pilot.rest])
+    other = np.concatenate([np.full(SETTLE, loop.other[0]), loop.other])
+    p = loop.pilot
+    gyro, angle, u = _compiled_fly()(loop.Ad, loop.g0, loop.g1, kicks, noise, loop.gain, other, p.delay,
+                                     p.coefficients, p.angle_mean, rest, loop.dt, loop.angle0)
+    return gyro[SETTLE:], angle[SETTLE:], u[SETTLE:]
+
+
+def _implausible(loop: _AxisLoop, logged: AxisSignals) -> str:
+    """Why the simulated loop is not the flight's (empty when it is): a pilot fitted to the sticks that does
+    not hold the identified model drives the simulated rates far from the logged ones or the sticks to their
+    stops."""
+    gyro, _, u = _fly_loop(loop, np.random.default_rng(0))
+    ratio = float(np.std(gyro) / max(np.std(logged.gyro), 1e-12))
+    stops = float(np.mean(np.abs(u) >= 1.0))
+    logged_stops = float(np.mean(np.abs(logged.stick) >= 1.0))
+    if not np.isfinite(ratio) or not 1.0 / MAX_RATE_RATIO <= ratio <= MAX_RATE_RATIO or stops > logged_stops + 0.02:
+        return (f"the pilot fitted to the sticks does not fly the identified model as the flight went (simulated "
+                f"rate std x{ratio:.2f} the logged, sticks at their stops {100 * stops:.0f} % of the time)")
+    return ""
+
+
+def _replicate(ident, loops: dict, checked: dict, seed: int, b: int) -> dict:
+    """Fly replicate ``b`` of every checked axis and fit it as the flight was: ``{axis: {name: value}}``."""
+    from .estimator import MaximumLikelihoodIdentifier
+
+    rng = np.random.default_rng([seed, b])
+    out = {}
+    for axis, (gain_name, damping_name, kept) in checked.items():
+        a = AXES.index(axis)
+        fit = ident.axes_[axis]
+        flights = []
+        for flight, loop in zip(ident.flights_, loops[axis]):
+            gyro, angle, u = _fly_loop(loop, rng)
+            rates, attitude, sticks = flight.rates.copy(), flight.attitude.copy(), flight.sticks.copy()
+            rates[a], attitude[a], sticks[STICK_ROW[a]] = gyro, np.angle(np.exp(1j * angle)), u
+            meta = {k: v for k, v in flight.metadata.items() if k not in ("units_check", "vibration_lines")}
+            flights.append(Flight(flight.time, rates, attitude, sticks, MappingProxyType(meta), flight.extra))
+        again = MaximumLikelihoodIdentifier(structure={a: kept}, input_hold=fit.input_hold, delay=None,
+                                            wind_model=fit.wind["model"], remove_vibration=False, axes=(axis,),
+                                            max_nfev=ident.max_nfev, workers=1).fit(flights)
+        values = again.axes_[axis].params
+        out[axis] = {gain_name: values[gain_name], damping_name: values[damping_name]}
+    return out
+
+
+def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: str = "auto",
+                      workers=None, max_flights: int | None = None) -> ClosedLoopCheck:
+    """Check a fitted :class:`~identification.likelihood.estimator.MaximumLikelihoodIdentifier` in its flights'
+    closed loop (module docstring). Does not change ``ident``; :func:`apply_check` does.
+
+    The flights are flown in batches of ``n_flights``, up to ``max_flights`` (default three batches), another
+    batch while a bias is neither clearly there nor clearly not (:data:`CONCLUSIVE`).
+
+    Raises
+    ------
+    ValueError
+        ``n_flights`` below 2 or ``mode`` not in :data:`CLOSED_LOOP_MODES`.
+    """
+    import time
+
+    if mode not in CLOSED_LOOP_MODES:
+        raise ValueError(f"closed_loop must be one of {CLOSED_LOOP_MODES} or None, got {mode!r}")
+    if not (isinstance(n_flights, (int, np.integer)) and n_flights >= 2):
+        raise ValueError(f"the closed-loop check needs at least 2 flights (a mean and its error), got {n_flights!r}")
+    t0 = time.perf_counter()
+    max_flights = 3 * n_flights if max_flights is None else max(int(max_flights), n_flights)
+    results, checked = {}, {}
+    reasons = {axis: _skip_reason(ident, AXES.index(axis), fit) for axis, fit in ident.axes_.items()}
+    loops, signals = _loops(ident, [axis for axis, why in reasons.items() if not why])
+    for axis, fit in ident.axes_.items():
+        if reasons[axis]:
+            results[axis] = AxisCheck(axis, False, reasons[axis])
+            continue
+        pilots = tuple(loop.pilot.describe(loop.dt) for loop in loops[axis])
+        if any(loop.pilot.flies_on == "sensors" for loop in loops[axis]):
+            why = ("its sticks follow the logged gyro's noise (a loop closed on the logged sensors, as a flight "
+                   "controller's): the likelihood conditioned on them is the right one")
+        else:
+            why = next(filter(None, (_implausible(lp, sig) for lp, sig in zip(loops[axis], signals[axis]))), "")
+        results[axis] = AxisCheck(axis, not why, why, pilots)
+        if not why:
+            checked[axis] = _names(ident, AXES.index(axis), fit)
+    runs = []
+    while checked and len(runs) < max_flights:
+        start = len(runs)
+        batch = range(start, min(start + n_flights, max_flights))
+        runs += map_axes(lambda b: _replicate(ident, loops, checked, seed, b), batch, workers)
+        if not _inconclusive(_biases(ident, checked, runs)):
+            break
+    for axis, (fitted, rel) in _biases(ident, checked, runs).items():
+        bias = {k: float(r.mean()) for k, r in rel.items()}
+        se = {k: float(r.std(ddof=1) / np.sqrt(r.size)) for k, r in rel.items()}
+        gain, damping = checked[axis][:2]
+        loops_bias = bias[damping] > 0.0 and bias[gain] < 0.0  # the direction of the loop's bias (docstring)
+        corrected = {k: (v * (1.0 - bias[k]) if mode == "auto" and loops_bias and abs(bias[k]) > SIGNIFICANCE * se[k]
+                         else v) for k, v in fitted.items()}
+        results[axis] = replace(results[axis], fitted=fitted, bias=bias, bias_se=se, corrected=corrected,
+                                loops_direction=loops_bias)
+    return ClosedLoopCheck(results, len(runs), int(seed), mode, time.perf_counter() - t0)
+
+
+def _biases(ident, checked: dict, runs: list) -> dict:
+    """Per checked axis, its fitted gain and damping and their relative errors over ``runs``."""
+    out = {}
+    for axis, names in checked.items():
+        fitted = {k: float(ident.axes_[axis].params[k]) for k in names[:2]}
+        out[axis] = fitted, {k: np.array([run[axis][k] / v - 1.0 for run in runs]) for k, v in fitted.items()}
+    return out
+
+
+def _inconclusive(biases: dict) -> bool:
+    """True while some damping's bias points the loop's way (up) by between :data:`CONCLUSIVE` standard errors
+    of its mean: the next batch of flights is flown (a damping biased down is not removed whatever its size;
+    the gains' biases are a few tenths of a per cent: they do not decide it)."""
+    for _, rel in biases.values():
+        for name, r in rel.items():
+            if name not in DAMPINGS:
+                continue
+            z = r.mean() / max(r.std(ddof=1) / np.sqrt(r.size), 1e-300)
+            if CONCLUSIVE[0] < z < CONCLUSIVE[1]:
+                return True
+    return False
+
+
+def apply_check(ident, check: ClosedLoopCheck) -> None:
+    """Set ``ident``'s corrected values (:attr:`AxisCheck.corrected`): the axis fits' parameters, the damping in
+    their search vectors (the smoother and the wind draws use it) and ``params_``. The fitted values stay in
+    ``check``."""
+    values = {}
+    for axis, c in check.axes.items():
+        if not c.removed:
+            continue
+        fit = ident.axes_[axis]
+        params = {**fit.params, **c.corrected}
+        state = np.array(fit.state, dtype=float, copy=True)
+        state[0] = params[_names(ident, AXES.index(axis), fit)[1]]  # the search vector starts with the damping
+        ident.axes_[axis] = replace(fit, params=params, state=state)
+        values.update(c.corrected)
+    ident.params_ = ident.params_.with_values(**values)

@@ -1,0 +1,124 @@
+"""The closed-loop check (identification.likelihood.closed_loop): a pilot who sees the aircraft behind a noisy
+gyro biases the damping; the check finds the bias by flying the model under the pilot fitted to the sticks,
+removes it, and leaves alone the loops it does not concern."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from heli_core.params import ModelParams
+from identification.bench.cells import BENCH_CELLS
+from identification.bench.synthetic import simulate_flight
+from identification.likelihood.estimator import MaximumLikelihoodIdentifier
+
+SLUGGISH = ModelParams(k2=0.7, k3=1.2, kd1=0.02, k6=-0.5, k7=1.1, kd2=0.01, k10=6.0, k11=1.6, k12=-0.3, kd3=0.05)
+"""scripts/aircraft_generalisation.py's large, slow helicopter: the aircraft the bias was found on."""
+
+
+def _flight(cell: str, seed: int, duration: float, truth=None, **fields):
+    config = replace(BENCH_CELLS[cell], vibration_lines=(), vibration=0.0, **fields)
+    return simulate_flight(duration, seed=seed, config=config, truth=truth)
+
+
+@pytest.fixture(scope="module")
+def sluggish_pitch():
+    """A pilot who sees the aircraft, the sluggish aircraft's pitch behind a 0.03 rad/s gyro (300 s), fitted at
+    the true hold with the check reporting: (flight, fit)."""
+    sim = _flight("independent", 301, 300.0, SLUGGISH, gyro_noise=0.03)
+    ml = MaximumLikelihoodIdentifier(input_hold=1.0, axes=("pitch",), closed_loop="report").fit(sim.flight)
+    return sim, ml
+
+
+def test_a_pilot_who_sees_the_aircraft_is_found_and_the_dampings_bias_measured(sluggish_pitch):
+    sim, ml = sluggish_pitch
+    check = ml.closed_loop_.axes["pitch"]
+    assert check.checked, check.reason
+    (pilot,) = check.pilots
+    assert pilot["flies_on"] == "aircraft" and pilot["sensor_share"] < 0.1
+    assert 0.12 <= pilot["reaction_delay_s"] <= 0.22  # the bench pilot reacts 0.18 s late
+    # the fit is high (+12.8 % on this flight); the check finds a positive bias well beyond its error
+    fitted_error = check.fitted["k7"] / sim.truth.k7 - 1.0
+    assert fitted_error > 0.05
+    assert check.bias["k7"] > max(0.05, 2.0 * check.bias_se["k7"])
+    # "report" measures and leaves the fit alone
+    assert ml.params_.k7 == check.fitted["k7"] and check.corrected == check.fitted
+
+
+def test_auto_removes_the_significant_bias_from_the_fit_and_keeps_what_was_fitted(sluggish_pitch):
+    sim, ml = sluggish_pitch
+    reported = ml.closed_loop_.axes["pitch"]
+    again = MaximumLikelihoodIdentifier(input_hold=1.0, axes=("pitch",)).fit(sim.flight)
+    assert again.closed_loop_ is None and again.params_.k7 == reported.fitted["k7"]
+    check = again.closed_loop_check("auto").axes["pitch"]
+    assert again.closed_loop == "auto" and "k7" in check.removed
+    assert check.bias == reported.bias  # the same flight, the same check
+    assert again.params_.k7 == pytest.approx(check.fitted["k7"] * (1.0 - check.bias["k7"]))
+    assert again.axes_["pitch"].params["k7"] == again.params_.k7
+    assert again.axes_["pitch"].state[0] == again.params_.k7  # the smoother flies the corrected damping
+    assert abs(again.params_.k7 / sim.truth.k7 - 1.0) < abs(check.fitted["k7"] / sim.truth.k7 - 1.0)
+
+
+def test_an_autopilots_loop_closes_on_the_gyro_and_is_left_alone():
+    sim = _flight("broadband-autopilot", 3, 120.0, gyro_noise=0.03)
+    ml = MaximumLikelihoodIdentifier(input_hold=0.0, axes=("roll",), closed_loop="auto").fit(sim.flight)
+    check = ml.closed_loop_.axes["roll"]
+    assert not check.checked and "follow the logged gyro" in check.reason
+    assert check.pilots[0]["flies_on"] == "sensors" and check.pilots[0]["reaction_delay_s"] <= 0.03
+    plain = MaximumLikelihoodIdentifier(input_hold=0.0, axes=("roll",)).fit(sim.flight)
+    assert ml.params_ == plain.params_ and ml.closed_loop_.n_flights == 0
+
+
+def test_axes_the_one_axis_loop_cannot_fly_say_why():
+    sim = _flight("independent", 4, 60.0)
+    ml = MaximumLikelihoodIdentifier(input_hold=1.0, axes=("roll",), delay=0.05, closed_loop="report").fit(sim.flight)
+    assert "servo delay" in ml.closed_loop_.axes["roll"].reason
+    quiet = make_quiet(sim.flight)
+    ml = MaximumLikelihoodIdentifier(input_hold=1.0, axes=("roll",), closed_loop="report").fit(quiet)
+    assert "no white noise" in ml.closed_loop_.axes["roll"].reason
+    assert any("not checked" in line for line in ml.closed_loop_.lines())
+
+
+def make_quiet(flight):
+    """The flight with its gyro low-passed at 2 Hz before it was written (as the T-REX log's authors did)."""
+    from scipy import signal
+
+    from identification.flight import Flight
+
+    b, a = signal.butter(4, 2.0, fs=flight.sample_rate)
+    return Flight(flight.time, signal.filtfilt(b, a, flight.rates, axis=1), flight.attitude, flight.sticks,
+                  flight.metadata, flight.extra)
+
+
+@pytest.mark.parametrize("settings, message", [
+    ({"closed_loop": "yes"}, "closed_loop must be None or one of"),
+    ({"closed_loop": "auto", "closed_loop_flights": 1}, "closed_loop_flights must be a whole number >= 2"),
+])
+def test_bad_closed_loop_settings_are_named(settings, message):
+    sim = _flight("independent", 4, 60.0)
+    with pytest.raises(ValueError, match=message):
+        MaximumLikelihoodIdentifier(axes=("roll",), **settings).fit(sim.flight)
+
+
+def test_the_check_before_a_fit_is_refused():
+    from identification.errors import NotFittedError
+
+    with pytest.raises(NotFittedError):
+        MaximumLikelihoodIdentifier().closed_loop_check()
+
+
+def test_the_bench_autopilot_can_fly_on_a_flight_controllers_attitude_estimate():
+    human = _flight("independent", 5, 60.0, gyro_noise=0.03, attitude_noise=0.0)  # the log's attitude: the truth
+    fc = _flight("independent", 5, 60.0, gyro_noise=0.03, attitude_noise=0.05, attitude_filter_tau=1.0)
+    np.testing.assert_array_equal(fc.flight.rates, human.flight.rates)  # a human does not fly on the estimate
+    error = fc.flight.attitude[:2] - human.flight.attitude[:2]
+    assert 0.001 < np.std(error) < 0.01  # the 0.05 rad tilt noise, filtered; the gyro's noise, integrated
+    # its increments carry the gyro's noise, integrated: what an independent attitude sensor's do not
+    gyro_noise = (fc.flight.rates - fc.true_rates)[:2, :-1] / fc.flight.sample_rate
+    steps = np.diff(error, axis=1)
+    assert min(np.corrcoef(steps[i], gyro_noise[i])[0, 1] for i in range(2)) > 0.3  # an independent sensor: 0
+    flown = _flight("broadband-autopilot", 5, 60.0, gyro_noise=0.03, attitude_noise=0.05, attitude_filter_tau=1.0)
+    assert not np.array_equal(flown.flight.sticks, _flight("broadband-autopilot", 5, 60.0, gyro_noise=0.03,
+                                                           attitude_noise=0.05).flight.sticks)
