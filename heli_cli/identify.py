@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -58,6 +59,12 @@ def register(sub):
                    "10-200 ms on every axis, kept only where the data support it), 'none', or seconds")
     p.add_argument("--input-hold", type=input_hold, default="auto",
                    help=INPUT_HOLD_HELP + "; integral: 'auto' is 'linear'")
+    p.add_argument("--closed-loop", choices=CLOSED_LOOP_CHOICES, default=None,
+                   help="ml: the closed-loop check: where the sticks follow the aircraft rather than the gyro (a "
+                   "pilot who sees it), fly the identified model again under the pilot fitted to them, fit those "
+                   "flights, and remove a gain's or damping's bias where it is significant ('auto', the default, "
+                   f"or ${CLOSED_LOOP_ENV} when set), only report it ('report'), or skip the check ('off'); it "
+                   "costs about 8 fits of the flight")
     p.add_argument("--wind-model", choices=("auto", "gm2", "gm_so"), default="auto",
                    help="ml: gust model per axis, 'gm2' two first-order Gauss-Markov processes, 'gm_so' a slow "
                    "first-order and a fast second-order one, 'auto' the more likely (default)")
@@ -78,6 +85,27 @@ def register(sub):
     p.set_defaults(func=run, out_kind="dir")
 
 
+CLOSED_LOOP_CHOICES = ("auto", "report", "off")
+CLOSED_LOOP_ENV = "HELI_CLOSED_LOOP"
+"""Environment variable giving ``--closed-loop``'s default (one of :data:`CLOSED_LOOP_CHOICES`; unset: auto)."""
+
+
+def closed_loop_mode(args) -> str:
+    """``--closed-loop`` as given, else ``$HELI_CLOSED_LOOP``, else "auto".
+
+    Raises
+    ------
+    ValueError
+        ``HELI_CLOSED_LOOP`` set to something else than the choices.
+    """
+    if args.closed_loop is not None:
+        return args.closed_loop
+    text = os.environ.get(CLOSED_LOOP_ENV, "").strip() or "auto"
+    if text not in CLOSED_LOOP_CHOICES:
+        raise ValueError(f"{CLOSED_LOOP_ENV} must be one of {', '.join(CLOSED_LOOP_CHOICES)}; got {text!r}")
+    return text
+
+
 def run(args) -> int:
     from identification.io import read_flight
     from identification.workflows.identify import identify_and_report, source_entry
@@ -93,6 +121,12 @@ def run(args) -> int:
             for warning in flight.metadata.get("import_warnings") or ():
                 progress.done()
                 print(f"warning: {path}: {warning}")
+        try:
+            closed_loop = closed_loop_mode(args)
+        except ValueError as exc:
+            progress.done()
+            print(f"heli identify: error: {exc}", file=sys.stderr)
+            return 2
         delay = None if args.delay == "none" else args.delay
         lag = None if args.servo_lag == "none" else args.servo_lag
         if args.method == "ml":
@@ -100,9 +134,11 @@ def run(args) -> int:
 
             kwargs = {"delay": CLI_TIMING["delay"] if args.delay is None else delay, "input_hold": args.input_hold,
                       "wind_model": args.wind_model,
-                      "servo_lag": CLI_TIMING["servo_lag"] if args.servo_lag is None else lag}
+                      "servo_lag": CLI_TIMING["servo_lag"] if args.servo_lag is None else lag,
+                      "closed_loop": None if closed_loop == "off" else closed_loop}
         else:
-            for option, given in (("--servo-lag", lag is not None), ("--delay detect", delay == "detect")):
+            for option, given in (("--servo-lag", lag is not None), ("--delay detect", delay == "detect"),
+                                  (f"--closed-loop {closed_loop}", args.closed_loop == "report")):
                 if given:
                     progress.done()
                     print(f"heli identify: error: {option} needs the maximum-likelihood estimator (--method ml), "
@@ -238,6 +274,11 @@ def _print_run(run, n_flights: int, method: str) -> None:
             delay += (f", servo lag {fit.lag:.3f} s (LR {fit.lag_lr:.1f})" if fit.lag
                       else f", no servo lag supported (LR {fit.lag_lr:.1f})")
         print(f"  {axis:5s}: {vals}  (R² {fit.r2:.3f}{delay})")
+    check = getattr(run.identifiers[run.chosen], "closed_loop_", None)
+    if check is not None:
+        print(f"closed-loop check ({check.n_flights} flights of the model under the pilot fitted to the sticks):")
+        for line in check.lines():
+            print(f"  {line}")
     stats = run.validation.rate_stats[run.chosen]
     print("forward-simulation MAE (deg/s): " + ", ".join(f"{a} {stats[a]['mae_deg_s']:.3f}" for a in stats))
     for profile in run.disturbances:

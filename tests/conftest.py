@@ -15,6 +15,10 @@ import pytest
 
 if os.environ.get("PYTEST_XDIST_WORKER"):  # one pytest worker per core already: fit the axes one after another
     os.environ.setdefault("HELI_WORKERS", "1")
+# ``heli identify``'s closed-loop check costs about 8 fits of the flight, and the CLI tests identify 40-s
+# flights some forty times for other reasons: they run without it. The check is the subject of
+# tests/test_closed_loop.py, and test_cli.py's test of the default unsets this for its run.
+os.environ.setdefault("HELI_CLOSED_LOOP", "off")
 
 from heli_env.env_model import load_env_model
 

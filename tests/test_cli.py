@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -23,10 +24,33 @@ from model_store.model_file import load_model
 
 @pytest.fixture(scope="session")
 def identified(flight_csv, tmp_path_factory):
-    """``heli identify X.csv --out DIR`` with the defaults (decoupled model, figures)."""
+    """``heli identify X.csv --out DIR`` with the defaults (decoupled model, figures, the closed-loop check)."""
     out = tmp_path_factory.mktemp("ident") / "DIR"
-    assert main(["identify", str(flight_csv), "--out", str(out)]) == 0
+    saved = os.environ.pop("HELI_CLOSED_LOOP", None)  # conftest turns the check off for the other CLI tests
+    try:
+        assert main(["identify", str(flight_csv), "--out", str(out)]) == 0
+    finally:
+        if saved is not None:
+            os.environ["HELI_CLOSED_LOOP"] = saved
     return out
+
+
+def test_identify_runs_the_closed_loop_check_by_default_and_records_it(identified):
+    model = _model(identified)
+    assert model["identification"]["closed_loop"] == "auto"
+    check = model["fit_statistics"]["closed_loop"]
+    assert check["n_flights"] >= 8 and set(check["axes"]) == {"roll", "pitch", "yaw"}
+    for axis, found in check["axes"].items():  # the bench's pilot sees the aircraft: every axis flown
+        assert found["checked"] and found["pilots"][0]["flies_on"] == "aircraft", axis
+        for name, value in found["corrected"].items():
+            assert model["parameters"][name] == pytest.approx(value)
+    assert "Closed-loop check (" in (identified / "report.md").read_text()
+
+
+def test_a_bad_closed_loop_default_in_the_environment_is_named(flight_csv, tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("HELI_CLOSED_LOOP", "sometimes")
+    assert main(["identify", str(flight_csv), "--out", str(tmp_path / "m"), "--no-plots"]) == 2
+    assert "HELI_CLOSED_LOOP must be one of auto, report, off; got 'sometimes'" in capsys.readouterr().err
 
 
 @pytest.fixture(scope="session")

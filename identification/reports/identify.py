@@ -113,6 +113,17 @@ def _timing_sentence(ident) -> str:
             + (f"; first-order servo lag {lags}" if lags else "") + ".")
 
 
+def _closed_loop_sentence(ident) -> str:
+    """What the closed-loop check found (:mod:`identification.likelihood.closed_loop`), when it ran; else empty."""
+    check = getattr(ident, "closed_loop_", None)
+    if check is None:
+        return ""
+    what = ("removed where significant (the values above are after it)" if check.mode == "auto"
+            else "reported only (the values above are as fitted)")
+    return (f" Closed-loop check ({check.n_flights} flights of the model flown under the pilot fitted to the sticks "
+            f"and fitted again; a bias {what}): " + "; ".join(check.lines()) + ".")
+
+
 def method_sentence(ident) -> str:
     """One sentence of the report saying how the model was identified."""
     if getattr(ident, "method", "").startswith("maximum likelihood"):  # what the identifier says it is
@@ -131,7 +142,7 @@ def method_sentence(ident) -> str:
                 f"linear parameters projected out; gust models chosen by likelihood ({winds}); standard errors "
                 "from the Fisher information; no prefilter (vibration lines removed by regression on their "
                 "sinusoids). The integral method of Fig. 5 is its starting point and is shown for comparison."
-                + _timing_sentence(ident) + _shift_sentence(ident))
+                + _timing_sentence(ident) + _shift_sentence(ident) + _closed_loop_sentence(ident))
     return ("Method: integral-based identification (paper Section 2.5.2, Fig. 5) with "
             f"{ident.interval:g} s intervals, per-interval initial values (eq. 34), "
             + ("a per-interval polynomial disturbance of degree "

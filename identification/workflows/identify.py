@@ -142,7 +142,7 @@ def identification_settings(ident) -> dict:
         settings = {"method": ident.method, "estimator": "ml"}
         settings.update({k: getattr(ident, k) for k in ("input_hold", "wind_model", "remove_vibration",
                                                          "vibration_min_hz", "max_nfev", "select_terms",
-                                                         "servo_lag")})
+                                                         "servo_lag", "closed_loop")})
     else:
         settings = {"method": "integral (Fig. 5)", "estimator": "integral"}
         settings.update({k: getattr(ident, k) for k in ("interval", "offsets", "disturbance_order", "input_hold",
@@ -280,6 +280,8 @@ def identify_and_report(flights, out_dir, options: IdentifyOptions | None = None
         fit_statistics={"axes": ident.summary(), "validation": validation.to_dict(),
                         "fit_time_s": ident.fit_time_,
                         **({"input_hold": ident.hold_decision_} if getattr(ident, "hold_decision_", None) else {}),
+                        **({"closed_loop": ident.closed_loop_.describe()}
+                           if getattr(ident, "closed_loop_", None) is not None else {}),
                         **({"input_shifts_s": ident.input_shifts_}
                            if min(getattr(ident, "input_shifts_", {}).values(), default=0.0) < 0.0 else {}),
                         **({"frequency_response": frequency.to_dict()} if not isinstance(frequency, str) else {}),
@@ -358,8 +360,13 @@ def _fit_models(flights: list, opts: IdentifyOptions) -> dict:
     structures = ("decoupled", "coupled") if opts.compare_structures else (chosen,)
     what = "the decoupled and coupled models" if len(structures) > 1 else f"the {chosen} model"
     opts.say(f"fitting {what} {how} ({sum(f.duration for f in flights):.0f} s of flight)")
+    closed_loop = kw.pop("closed_loop", None)  # checked on the model written, after both are fitted
     settings = {"decoupled": kw, "coupled": {**kw, "select_terms": True} if opts.method == "ml" else kw}
-    return {name: make_identifier(opts.method, name, **settings[name]).fit(flights) for name in structures}
+    fitted = {name: make_identifier(opts.method, name, **settings[name]).fit(flights) for name in structures}
+    if closed_loop is not None and opts.method == "ml":
+        opts.say(f"closed-loop check of the {chosen} model: flying it under the pilot fitted to the sticks")
+        fitted[chosen].closed_loop_check(closed_loop)
+    return fitted
 
 
 def _write(out: Path, document: dict, profiles: list, opts: IdentifyOptions, content) -> tuple[dict, int | None]:

@@ -51,7 +51,7 @@ def identifier_settings(doc: ModelDocument, where: str = "model.json") -> tuple[
     ident = doc.identification
     estimator = estimator_of(doc, where)
     keys = (("input_hold", "wind_model", "remove_vibration", "vibration_min_hz", "max_nfev", "select_terms",
-             "servo_lag")
+             "servo_lag", "closed_loop")
             if estimator == "ml"
             else ("interval", "offsets", "disturbance_order", "input_hold", "prefilter", "max_iter", "tol"))
     kw = {k: ident[k] for k in keys if ident.get(k) is not None}
