@@ -6,8 +6,8 @@ than its pitch, and one whose sticks are mapped the other way round, negative ro
 positive pitch gain) and log rates, and per flight runs what a user runs with no flags:
 
 * the maximum-likelihood identifier as ``heli identify`` (:class:`MaximumLikelihoodIdentifier` with
-  ``CLI_TIMING``: the log's timing detected, the hold estimated): relative error of the gains (k2, k6, k10)
-  and dampings (k3, k7, k11);
+  ``CLI_TIMING``: the log's timing detected, the hold estimated; the closed-loop check removing significant
+  biases, ``--closed-loop off`` without it): relative error of the gains (k2, k6, k10) and dampings (k3, k7, k11);
 * with ``--diagnose``, the likelihood diagnosis as ``heli diagnose`` on the same flight: effect-free, any
   effect it names is wrong; with ``--effect NAME`` (one of
   :data:`identification.bench.flight_config.EFFECTS`, hidden in the truth at its catalogue size), what it names
@@ -69,7 +69,7 @@ def _one(job):
     from identification.bench.synthetic import simulate_flight
     from identification.likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
 
-    aircraft, cell, rate, seed, duration, diagnose, effect = job
+    aircraft, cell, rate, seed, duration, diagnose, effect, closed_loop = job
     with threadpool_limits(limits=1, user_api="blas"):
         config = replace(BENCH_CELLS[cell], duration=duration, sample_rate=float(rate))
         sim = simulate_flight(duration, seed=seed, config=config, truth=_aircraft(aircraft),
@@ -78,7 +78,7 @@ def _one(job):
         out = {"aircraft": aircraft, "cell": cell, "rate": rate, "seed": seed}
         t0 = time.perf_counter()
         try:
-            ml = MaximumLikelihoodIdentifier(**CLI_TIMING).fit(sim.flight)
+            ml = MaximumLikelihoodIdentifier(**CLI_TIMING, closed_loop=closed_loop).fit(sim.flight)
         except Exception as exc:  # a refusal is a finding of this study, not its end
             out["error"] = f"{type(exc).__name__}: {exc}"
             return out
@@ -149,6 +149,8 @@ def main(argv=None) -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--diagnose", action="store_true", help="also run the likelihood diagnosis (about 10 s a flight)")
     ap.add_argument("--effect", default=None, help="hide this effect of the catalogue in every truth")
+    ap.add_argument("--closed-loop", choices=("auto", "off"), default="auto",
+                    help="the closed-loop check as heli identify runs it ('auto', default) or none ('off')")
     args = ap.parse_args(argv)
     from identification.bench.cells import BENCH_CELLS
     from identification.bench.flight_config import EFFECTS
@@ -158,7 +160,8 @@ def main(argv=None) -> None:
         raise SystemExit(f"unknown cells {unknown}; known: {', '.join(BENCH_CELLS)}")
     if args.effect is not None and args.effect not in EFFECTS:
         raise SystemExit(f"unknown effect {args.effect!r}; known: {', '.join(EFFECTS)}")
-    jobs = [(a, c, r, s, args.duration, args.diagnose, args.effect) for a in args.aircraft for c in args.cells for r in args.rates
+    check = None if args.closed_loop == "off" else args.closed_loop
+    jobs = [(a, c, r, s, args.duration, args.diagnose, args.effect, check) for a in args.aircraft for c in args.cells for r in args.rates
             for s in range(args.first_seed, args.first_seed + args.seeds)]
     from tqdm import tqdm
 

@@ -28,6 +28,8 @@ sys.path.insert(0, str(Path(__file__).parent))  # the study's aircraft are aircr
 from aircraft_generalisation import AIRCRAFT, _aircraft  # noqa: E402
 
 DAMPINGS = ("k3", "k7", "k11")
+GAINS = ("k2", "k6", "k10")
+PARAMS = DAMPINGS + GAINS
 NO_WIND = (1e-4, 1e-4, 1e-4)
 """A wind too weak to matter (the bench's flights need a positive level)."""
 
@@ -40,13 +42,23 @@ def _one(job) -> list:
     from identification.bench.synthetic import simulate_flight
     from identification.likelihood.estimator import MaximumLikelihoodIdentifier
 
-    aircraft, cell, fields, hold, duration, seed = job
+    aircraft, cell, fields, hold, duration, seed, check = job
     with threadpool_limits(limits=1, user_api="blas"):
         config = replace(BENCH_CELLS[cell], duration=duration, **fields)
         sim = simulate_flight(duration, seed=seed, config=config, truth=_aircraft(aircraft))
         truth = sim.truth.values()
-        fitted = MaximumLikelihoodIdentifier(input_hold=hold).fit(sim.flight).params_.values()
-    return [100.0 * (fitted[k] - truth[k]) / truth[k] for k in DAMPINGS]
+        ml = MaximumLikelihoodIdentifier(input_hold=hold, workers=1).fit(sim.flight)
+        fitted = ml.params_.values()
+        errors = [100.0 * (fitted[k] - truth[k]) / truth[k] for k in PARAMS]
+        if check:
+            from identification.likelihood.closed_loop import check_closed_loop
+
+            found = check_closed_loop(ml, workers=1)
+            corrected = dict(fitted)
+            for axis in found.axes.values():
+                corrected.update(axis.corrected)
+            errors += [100.0 * (corrected[k] - truth[k]) / truth[k] for k in PARAMS]
+    return errors
 
 
 def _field(text: str) -> tuple:
@@ -81,6 +93,9 @@ def main(argv=None) -> int:
     ap.add_argument("--set", type=_field, nargs="*", default=[], metavar="FIELD=VALUE",
                     help="other FlightConfig fields, e.g. pilot_bandwidth=0.7 sample_rate=400.0")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--check", action="store_true",
+                    help="also run the closed-loop check (identification.likelihood.closed_loop) and print the "
+                         "errors after it")
     args = ap.parse_args(argv)
     from identification.bench.cells import BENCH_CELLS
 
@@ -93,20 +108,28 @@ def main(argv=None) -> int:
     if args.no_wind:
         fields["wind_level"] = NO_WIND
     hold = args.hold if args.hold is not None else (0.0 if base.pilot == "autopilot" or base.held_sticks else 1.0)
-    jobs = [(args.aircraft, args.cell, fields, hold, args.duration, s)
+    jobs = [(args.aircraft, args.cell, fields, hold, args.duration, s, args.check)
             for s in range(args.first_seed, args.first_seed + args.seeds)]
     if args.workers == 1:  # in this process
         errors = np.array([_one(job) for job in jobs])
     else:
         with ProcessPoolExecutor(args.workers) as pool:
             errors = np.array(list(pool.map(_one, jobs)))
-    mean, se = errors.mean(axis=0), errors.std(axis=0, ddof=1) / np.sqrt(len(errors))
-    rms = np.sqrt((errors ** 2).mean(axis=0))
     print(f"{args.aircraft}, cell {args.cell}, gyro {args.gyro:g} rad/s, {'no wind' if args.no_wind else 'wind'}, "
           f"hold {hold:g}, {dict(args.set) or 'no other change'}; {len(errors)} flights of {args.duration:g} s")
-    for k, m, e, r in zip(DAMPINGS, mean, se, rms):
-        print(f"- {k}: mean error {m:+.1f} % (standard error {e:.1f}), RMS {r:.1f} %")
+    _print(errors[:, :len(PARAMS)], "as fitted")
+    if args.check:
+        _print(errors[:, len(PARAMS):], "after the closed-loop check")
     return 0
+
+
+def _print(errors: np.ndarray, title: str) -> None:
+    """Mean error, its standard error and the RMS of each parameter over the flights."""
+    mean, se = errors.mean(axis=0), errors.std(axis=0, ddof=1) / np.sqrt(len(errors))
+    rms = np.sqrt((errors ** 2).mean(axis=0))
+    print(f"{title}:")
+    for k, m, e, r in zip(PARAMS, mean, se, rms):
+        print(f"- {k}: mean error {m:+.1f} % (standard error {e:.1f}), RMS {r:.1f} %")
 
 
 if __name__ == "__main__":
