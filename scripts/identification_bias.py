@@ -43,16 +43,17 @@ def _one(job):
     from identification.integral.method import IntegralIdentifier
     from identification.likelihood.estimator import MaximumLikelihoodIdentifier
 
-    cell, seed, duration, ml_hold = job
+    cell, seed, duration, ml_hold, closed_loop = job
     with threadpool_limits(limits=1, user_api="blas"):
         sim = bench_flight(cell, seed, duration)
         truth = sim.truth.values()
-        # the ML estimator as `heli identify` runs it (the hold estimated), unless --hold names one; the
-        # integral method, which cannot estimate it, is told the truth
+        # the ML estimator as `heli identify` runs it (the hold estimated, the closed-loop check), unless --hold
+        # names one or --closed-loop off; the integral method, which cannot estimate the hold, is told the truth
         hold = "zoh" if sim.config.pilot == "autopilot" or sim.config.held_sticks else "linear"
         out = {"cell": cell, "seed": seed}
         t0 = time.perf_counter()
-        ml = MaximumLikelihoodIdentifier(input_hold=hold if ml_hold == "truth" else ml_hold).fit(sim.flight)
+        ml = MaximumLikelihoodIdentifier(input_hold=hold if ml_hold == "truth" else ml_hold,
+                                         closed_loop=closed_loop).fit(sim.flight)
         out["ml_time_s"] = time.perf_counter() - t0
         wind = ml.wind_torque(0)
         out["wind_corr"] = [float(np.corrcoef(wind[i], sim.wind_torque[i])[0, 1]) for i in range(3)]
@@ -78,7 +79,8 @@ def grid(args):
     if unknown:
         raise SystemExit(f"unknown cells {unknown}; known: {', '.join(BENCH_CELLS)}")
     hold = args.hold if args.hold in ("auto", "linear", "zoh", "truth") else float(args.hold)
-    jobs = [(c, s, args.duration, hold) for c in cells for s in range(1, args.seeds + 1)]
+    check = None if args.closed_loop == "off" else args.closed_loop
+    jobs = [(c, s, args.duration, hold, check) for c in cells for s in range(1, args.seeds + 1)]
     from tqdm import tqdm
 
     if args.workers > 1:
@@ -89,7 +91,7 @@ def grid(args):
     by_cell = {c: [r for r in rows if r["cell"] == c] for c in cells}
     print(f"\nRelative error (%) against the truth: RMS over {args.seeds} seeds [worst |error|], "
           f"{args.duration:g} s flights at 100 Hz. Command: python scripts/identification_bias.py "
-          f"--seeds {args.seeds} --duration {args.duration:g} --hold {args.hold}")
+          f"--seeds {args.seeds} --duration {args.duration:g} --hold {args.hold} --closed-loop {args.closed_loop}")
     print("\n| cell | estimator | " + " | ".join(PARAMS) + " | smoother wind corr. (worst) | hold fraction (range) |")
     print("|---|---|" + "---|" * (len(PARAMS) + 2))
     for c in cells:
@@ -161,6 +163,8 @@ def main(argv=None):
     ap.add_argument("--hold", default="auto",
                     help="the ML estimator's input hold: 'auto' (default, as heli identify), 'linear', 'zoh', a "
                          "fraction, or 'truth' (the cell's own, as this script did before the hold was estimated)")
+    ap.add_argument("--closed-loop", choices=("auto", "off"), default="auto",
+                    help="the ML fit's closed-loop check as heli identify runs it ('auto', default) or none ('off')")
     ap.add_argument("--integral-variants", action="store_true",
                     help="the earlier study of the integral method's offset variants over wind levels")
     ap.add_argument("--winds", type=float, nargs="+", default=[0.0, 0.045, 0.09, 0.18],
