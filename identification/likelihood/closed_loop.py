@@ -319,8 +319,6 @@ def _implausible(loop: _AxisLoop, logged: AxisSignals) -> str:
 
 def _replicate(ident, loops: dict, checked: dict, seed: int, b: int) -> dict:
     """Fly replicate ``b`` of every checked axis and fit it as the flight was: ``{axis: {name: value}}``."""
-    from .estimator import MaximumLikelihoodIdentifier
-
     rng = np.random.default_rng([seed, b])
     out = {}
     for axis, (gain_name, damping_name, kept) in checked.items():
@@ -333,9 +331,8 @@ def _replicate(ident, loops: dict, checked: dict, seed: int, b: int) -> dict:
             rates[a], attitude[a], sticks[STICK_ROW[a]] = gyro, np.angle(np.exp(1j * angle)), u
             meta = {k: v for k, v in flight.metadata.items() if k not in ("units_check", "vibration_lines")}
             flights.append(Flight(flight.time, rates, attitude, sticks, MappingProxyType(meta), flight.extra))
-        again = MaximumLikelihoodIdentifier(structure={a: kept}, input_hold=fit.input_hold, delay=None,
-                                            wind_model=fit.wind["model"], remove_vibration=False, axes=(axis,),
-                                            max_nfev=ident.max_nfev, workers=1).fit(flights)
+        again = type(ident)(structure={a: kept}, input_hold=fit.input_hold, delay=None, wind_model=fit.wind["model"],
+                            remove_vibration=False, axes=(axis,), max_nfev=ident.max_nfev, workers=1).fit(flights)
         values = again.axes_[axis].params
         out[axis] = {gain_name: values[gain_name], damping_name: values[damping_name]}
     return out
