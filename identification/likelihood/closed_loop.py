@@ -417,18 +417,19 @@ def _inconclusive(biases: dict) -> bool:
     return False
 
 
-def apply_check(ident, check: ClosedLoopCheck) -> None:
-    """Set ``ident``'s corrected values (:attr:`AxisCheck.corrected`): the axis fits' parameters, the damping in
-    their search vectors (the smoother and the wind draws use it) and ``params_``. The fitted values stay in
-    ``check``."""
+def apply_check(ident, check: ClosedLoopCheck, which: str = "corrected") -> None:
+    """Set ``ident``'s values after the check (:attr:`AxisCheck.corrected`; ``which="fitted"``: back to those
+    before it): the axis fits' parameters, the damping in their search vectors (the smoother and the wind draws
+    use it) and ``params_``. The fitted values stay in ``check``."""
     values = {}
     for axis, c in check.axes.items():
         if not c.removed:
             continue
         fit = ident.axes_[axis]
-        params = {**fit.params, **c.corrected}
+        chosen = getattr(c, which)
+        params = {**fit.params, **chosen}
         state = np.array(fit.state, dtype=float, copy=True)
         state[0] = params[_names(ident, AXES.index(axis), fit)[1]]  # the search vector starts with the damping
         ident.axes_[axis] = replace(fit, params=params, state=state)
-        values.update(c.corrected)
+        values.update(chosen)
     ident.params_ = ident.params_.with_values(**values)

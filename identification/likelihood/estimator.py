@@ -360,6 +360,9 @@ class MaximumLikelihoodIdentifier:
             ``mode`` not in :data:`~identification.likelihood.closed_loop.CLOSED_LOOP_MODES`.
         """
         self._check_fitted()
+        if getattr(self, "closed_loop_", None) is not None:  # checked before: from the values as fitted again
+            apply_check(self, self.closed_loop_, "fitted")
+            self.closed_loop_ = None
         with threadpool_limits(limits=1, user_api="blas"):
             check = check_closed_loop(self, self.closed_loop_flights, mode=mode, workers=self.workers)
         apply_check(self, check)
