@@ -125,3 +125,19 @@ def test_the_bench_autopilot_can_fly_on_a_flight_controllers_attitude_estimate()
     flown = _flight("broadband-autopilot", 5, 60.0, gyro_noise=0.03, attitude_noise=0.05, attitude_filter_tau=1.0)
     assert not np.array_equal(flown.flight.sticks, _flight("broadband-autopilot", 5, 60.0, gyro_noise=0.03,
                                                            attitude_noise=0.05).flight.sticks)
+
+
+def test_a_flight_the_check_cannot_fit_leaves_the_axis_unchecked_not_the_identification_failed(monkeypatch):
+    from identification.likelihood import closed_loop
+
+    sim = _flight("independent", 4, 60.0)
+    logged = sim.flight.rates[0]
+
+    def still_stick(loop, rng):  # a loop whose pilot never moves the stick: nothing to fit
+        return logged + 0.01 * rng.standard_normal(logged.size), sim.flight.attitude[0], np.zeros(logged.size)
+
+    monkeypatch.setattr(closed_loop, "_fly_loop", still_stick)
+    ml = MaximumLikelihoodIdentifier(input_hold=1.0, axes=("roll",), closed_loop="auto").fit(sim.flight)
+    check = ml.closed_loop_.axes["roll"]
+    assert not check.checked and "could not be fitted" in check.reason and "constant" in check.reason
+    assert ml.params_ == MaximumLikelihoodIdentifier(input_hold=1.0, axes=("roll",)).fit(sim.flight).params_

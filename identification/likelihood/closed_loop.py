@@ -41,6 +41,7 @@ import numpy as np
 
 from heli_core.terms import AXES, STICK_ROW
 
+from ..errors import IdentifiabilityError
 from ..flight import Flight
 from .axis_likelihood import AxisLikelihood
 from .axis_pool import map_axes
@@ -133,6 +134,7 @@ class ClosedLoopCheck:
     time: float
 
     def describe(self) -> dict:
+        """JSON-ready (``model.json``'s ``fit_statistics.closed_loop``)."""
         return {"method": "parametric bootstrap in the flight's closed loop", "mode": self.mode,
                 "n_flights": self.n_flights, "seed": self.seed, "significance": SIGNIFICANCE,
                 "time_s": self.time, "axes": {a: c.describe() for a, c in self.axes.items()}}
@@ -331,8 +333,13 @@ def _replicate(ident, loops: dict, checked: dict, seed: int, b: int) -> dict:
             rates[a], attitude[a], sticks[STICK_ROW[a]] = gyro, np.angle(np.exp(1j * angle)), u
             meta = {k: v for k, v in flight.metadata.items() if k not in ("units_check", "vibration_lines")}
             flights.append(Flight(flight.time, rates, attitude, sticks, MappingProxyType(meta), flight.extra))
-        again = type(ident)(structure={a: kept}, input_hold=fit.input_hold, delay=None, wind_model=fit.wind["model"],
-                            remove_vibration=False, axes=(axis,), max_nfev=ident.max_nfev, workers=1).fit(flights)
+        try:
+            again = type(ident)(structure={a: kept}, input_hold=fit.input_hold, delay=None,
+                                wind_model=fit.wind["model"], remove_vibration=False, axes=(axis,),
+                                max_nfev=ident.max_nfev, workers=1).fit(flights)
+        except IdentifiabilityError as exc:  # the simulated loop left the stick still, or the fit refused it
+            out[axis] = str(exc)
+            continue
         values = again.axes_[axis].params
         out[axis] = {gain_name: values[gain_name], damping_name: values[damping_name]}
     return out
@@ -380,6 +387,12 @@ def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: st
         start = len(runs)
         batch = range(start, min(start + n_flights, max_flights))
         runs += map_axes(lambda b: _replicate(ident, loops, checked, seed, b), batch, workers)
+        for axis in list(checked):
+            failed = next((run[axis] for run in runs if isinstance(run[axis], str)), None)
+            if failed is not None:
+                results[axis] = replace(results[axis], checked=False,
+                                        reason=f"a flight flown by the check could not be fitted ({failed})")
+                del checked[axis]
         if not _inconclusive(_biases(ident, checked, runs)):
             break
     for axis, (fitted, rel) in _biases(ident, checked, runs).items():
