@@ -2,14 +2,16 @@
 
 The closed-loop check (:mod:`identification.likelihood.closed_loop`) flies the identified model again with
 the loop the flight had. Its pilot is the simplest law that reproduces what the sticks did with the
-aircraft's state: per axis and flight, by least squares over the reaction delay ``d``::
+aircraft's state: per axis and flight, at a reaction delay ``d``::
 
-    u[k] = c0 + c_angle * angle[k - d] + c_rate * rate[k - d] + c_noise * noise[k - d] + c_int * integral[k - d] + r[k]
+    u[k] = c0 + c_angle * angle[k-d] + c_rate * rate[k-d] + c_noise * noise[k-d] + c_int * integral[k-d] + r[k]
 
 ``rate`` is the smoother's estimate of the body rate, ``noise`` the gyro's reading less it (its white
 noise, as far as the smoother can tell), ``angle`` the log's attitude, ``integral`` its running integral (a
 pilot who trims by feel, a PID) and ``r`` the rest (the pilot's sweeps and jitter: replayed as they were).
-One reaction delay serves every axis of a flight (one pilot), chosen by least squares over them together. Which of the two rate columns the sticks follow tells who flew:
+The coefficients are two-stage least squares with the smoother's gusts as instruments (:func:`fit_pilot`);
+one reaction delay serves every axis of a flight (one pilot, :func:`reaction_delay`). Which of the two rate
+columns the sticks follow tells who flew:
 a human sees the aircraft, not the gyro, so his sticks carry none of the gyro's noise (``c_noise`` about 0),
 while a flight controller's rate loop reads the gyro, noise and all (``c_noise`` about ``c_rate``). Only a
 pilot who sees the aircraft puts into the sticks what the gyro did not measure (docs/method.md, "Where it
