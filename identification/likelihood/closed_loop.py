@@ -61,9 +61,6 @@ CONCLUSIVE = (1.0, 3.0)
 """A bias within these many standard errors of zero is inconclusive: more flights are flown (up to the
 check's ``max_flights``). At the paper's wind 8 flights decide; at twice the wind a +5 % damping bias took 16-24."""
 
-DAMPINGS = ("k3", "k7", "k11")
-"""The dampings of eqs. 18/21: the parameters whose bias decides whether more flights are flown."""
-
 SETTLE = 3000
 """Samples the simulated loop flies before the record starts (the gusts and the pilot settle)."""
 
@@ -172,17 +169,16 @@ class _AxisLoop:
     dt: float
 
 
-def _names(ident, a: int, fit) -> tuple[str, str, tuple]:
-    """(gain name, damping name, the terms fitted) of axis ``a`` as ``fit`` was fitted."""
+def _names(ident, a: int, fit, data) -> tuple[str, str, tuple]:
+    """(gain name, damping name, the terms fitted) of axis ``a`` as ``fit`` was fitted (``data`` its
+    likelihood's :class:`~identification.likelihood.axis_likelihood.AxisData`)."""
     kept = tuple(p for p in ident._param_names()[a] if p not in fit.dropped)
-    data = ident._fitted_data(a, fit, ident.flights_[:1], 0)
     own = [n for n in data.names if "@" not in n]
-    damping = next(k for k in fit.params if k not in own and not k.startswith("kd"))
-    return own[data.servo_row], damping, kept
+    return own[data.servo_row], ident.axis_problem(a, kept, ident.flights_, 0).damping_name, kept
 
 
-def _skip_reason(ident, a: int, fit) -> str:
-    data = ident._fitted_data(a, fit, ident.flights_[:1], 0)
+def _skip_reason(fit, data) -> str:
+    """Why axis ``fit`` (its likelihood's ``data``) is not flown, or empty."""
     share = fit.noise_std / max(float(np.std(np.concatenate(data.y))), 1e-300)
     if share < MIN_NOISE_SHARE:
         return (f"the gyro shows next to no white noise ({100 * share:.2g} % of the rate's std; a log filtered before "
@@ -196,10 +192,9 @@ def _skip_reason(ident, a: int, fit) -> str:
     return ""
 
 
-def _signals(ident, a: int, fit) -> tuple[list, list]:
+def _signals(ident, a: int, fit, data) -> tuple[list, list]:
     """Per fitted flight, axis ``a``'s :class:`AxisSignals` and its loop's pieces ``(Ad, g0, g1, noise root,
-    gain, other torque)``."""
-    data = ident._fitted_data(a, fit, ident.flights_, 0)
+    gain, other torque)``, from its likelihood's ``data``."""
     own = [n for n in data.names if "@" not in n]
     theta = np.array([fit.params[n] for n in own])
     model = AxisLikelihood(data).unpack(fit.state)
@@ -220,10 +215,12 @@ def _signals(ident, a: int, fit) -> tuple[list, list]:
     return signals, pieces
 
 
-def _loops(ident, axes: list) -> tuple[dict, dict]:
-    """The loop of each of ``axes`` in every fitted flight, its pilot's delay shared by the flight's axes, and
-    the logged :class:`AxisSignals` it was fitted to: two dicts of lists (one item per flight)."""
-    built = {axis: _signals(ident, AXES.index(axis), ident.axes_[axis]) for axis in axes}
+def _loops(ident, data: dict) -> tuple[dict, dict]:
+    """The loop of each axis of ``data`` (axis -> its likelihood's data) in every fitted flight, its pilot's delay
+    shared by the flight's axes, and the logged :class:`AxisSignals` it was fitted to: two dicts of lists (one
+    item per flight)."""
+    axes = list(data)
+    built = {axis: _signals(ident, AXES.index(axis), ident.axes_[axis], data[axis]) for axis in axes}
     loops = {axis: [] for axis in axes}
     if not axes:
         return loops, {}
@@ -345,6 +342,15 @@ def _replicate(ident, loops: dict, checked: dict, seed: int, b: int) -> dict:
     return out
 
 
+def check_settings(mode, n_flights) -> None:
+    """Raise ``ValueError`` unless ``mode`` is None or one of :data:`CLOSED_LOOP_MODES` and ``n_flights`` a whole
+    number >= 2 (a mean and its error): an estimator's ``closed_loop`` and ``closed_loop_flights``."""
+    if mode not in (None,) + CLOSED_LOOP_MODES:
+        raise ValueError(f"closed_loop must be None or one of {CLOSED_LOOP_MODES}, got {mode!r}")
+    if not (isinstance(n_flights, (int, np.integer)) and not isinstance(n_flights, bool) and n_flights >= 2):
+        raise ValueError(f"closed_loop_flights must be a whole number >= 2, got {n_flights!r}")
+
+
 def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: str = "auto",
                       workers=None, max_flights: int | None = None) -> ClosedLoopCheck:
     """Check a fitted :class:`~identification.likelihood.estimator.MaximumLikelihoodIdentifier` in its flights'
@@ -360,15 +366,15 @@ def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: st
     """
     import time
 
-    if mode not in CLOSED_LOOP_MODES:
-        raise ValueError(f"closed_loop must be one of {CLOSED_LOOP_MODES} or None, got {mode!r}")
-    if not (isinstance(n_flights, (int, np.integer)) and n_flights >= 2):
-        raise ValueError(f"the closed-loop check needs at least 2 flights (a mean and its error), got {n_flights!r}")
+    if mode is None:
+        raise ValueError(f"closed_loop must be one of {CLOSED_LOOP_MODES} to run the check, got None")
+    check_settings(mode, n_flights)
     t0 = time.perf_counter()
     max_flights = 3 * n_flights if max_flights is None else max(int(max_flights), n_flights)
     results, checked = {}, {}
-    reasons = {axis: _skip_reason(ident, AXES.index(axis), fit) for axis, fit in ident.axes_.items()}
-    loops, signals = _loops(ident, [axis for axis, why in reasons.items() if not why])
+    data = {axis: ident._fitted_data(AXES.index(axis), fit, ident.flights_, 0) for axis, fit in ident.axes_.items()}
+    reasons = {axis: _skip_reason(fit, data[axis]) for axis, fit in ident.axes_.items()}
+    loops, signals = _loops(ident, {axis: data[axis] for axis, why in reasons.items() if not why})
     for axis, fit in ident.axes_.items():
         if reasons[axis]:
             results[axis] = AxisCheck(axis, False, reasons[axis])
@@ -381,7 +387,7 @@ def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: st
             why = next(filter(None, (_implausible(lp, sig) for lp, sig in zip(loops[axis], signals[axis]))), "")
         results[axis] = AxisCheck(axis, not why, why, pilots)
         if not why:
-            checked[axis] = _names(ident, AXES.index(axis), fit)
+            checked[axis] = _names(ident, AXES.index(axis), fit, data[axis])
     runs = []
     while checked and len(runs) < max_flights:
         start = len(runs)
@@ -408,7 +414,7 @@ def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: st
 
 
 def _biases(ident, checked: dict, runs: list) -> dict:
-    """Per checked axis, its fitted gain and damping and their relative errors over ``runs``."""
+    """Per checked axis, its fitted gain and damping (in that order) and their relative errors over ``runs``."""
     out = {}
     for axis, names in checked.items():
         fitted = {k: float(ident.axes_[axis].params[k]) for k in names[:2]}
@@ -421,12 +427,10 @@ def _inconclusive(biases: dict) -> bool:
     of its mean: the next batch of flights is flown (a damping biased down is not removed whatever its size;
     the gains' biases are a few tenths of a per cent: they do not decide it)."""
     for _, rel in biases.values():
-        for name, r in rel.items():
-            if name not in DAMPINGS:
-                continue
-            z = r.mean() / max(r.std(ddof=1) / np.sqrt(r.size), 1e-300)
-            if CONCLUSIVE[0] < z < CONCLUSIVE[1]:
-                return True
+        r = list(rel.values())[1]  # the damping (_biases)
+        z = r.mean() / max(r.std(ddof=1) / np.sqrt(r.size), 1e-300)
+        if CONCLUSIVE[0] < z < CONCLUSIVE[1]:
+            return True
     return False
 
 
@@ -442,7 +446,7 @@ def apply_check(ident, check: ClosedLoopCheck, which: str = "corrected") -> None
         chosen = getattr(c, which)
         params = {**fit.params, **chosen}
         state = np.array(fit.state, dtype=float, copy=True)
-        state[0] = params[_names(ident, AXES.index(axis), fit)[1]]  # the search vector starts with the damping
+        state[0] = list(chosen.values())[1]  # the damping (gain first: _biases); the search vector starts with it
         ident.axes_[axis] = replace(fit, params=params, state=state)
         values.update(chosen)
     ident.params_ = ident.params_.with_values(**values)

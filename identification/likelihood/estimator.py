@@ -74,7 +74,8 @@ from .axis_fit import MLAxisFit
 from .axis_likelihood import AxisData, AxisLikelihood
 from .axis_pool import check_workers, map_axes
 from .axis_search import BURN_IN, DAMPING_BOUNDS, MAX_SHIFT, AxisProblem, WindFit
-from .closed_loop import CLOSED_LOOP_MODES, N_FLIGHTS, ClosedLoopCheck, apply_check, check_closed_loop
+from .closed_loop import N_FLIGHTS, ClosedLoopCheck, apply_check, check_closed_loop
+from .closed_loop import check_settings as check_closed_loop_settings
 from .input_hold import check_hold, decide_hold
 from .servo_lag import profile_lag
 from .state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll, rts_smooth, wind_block
@@ -246,10 +247,7 @@ class MaximumLikelihoodIdentifier:
             raise ValueError(f"max_nfev must be a whole number >= 5, got {self.max_nfev!r}")
         if not self.vibration_min_hz > 0:
             raise ValueError(f"vibration_min_hz must be > 0 Hz, got {self.vibration_min_hz!r}")
-        if self.closed_loop not in (None,) + CLOSED_LOOP_MODES:
-            raise ValueError(f"closed_loop must be None or one of {CLOSED_LOOP_MODES}, got {self.closed_loop!r}")
-        if not (isinstance(self.closed_loop_flights, (int, np.integer)) and self.closed_loop_flights >= 2):
-            raise ValueError(f"closed_loop_flights must be a whole number >= 2, got {self.closed_loop_flights!r}")
+        check_closed_loop_settings(self.closed_loop, self.closed_loop_flights)
 
     def _clean(self, flight: Flight) -> tuple[Flight, list]:
         if not self.remove_vibration:
