@@ -113,3 +113,11 @@ def euler_from_quaternion_scalar(q0: float, q1: float, q2: float, q3: float) -> 
     """
     a0, a1, a2, a3, a4 = euler_arguments(q0, q1, q2, q3)
     return (math.atan2(a0, a1), math.asin(max(-1.0, min(1.0, a2))), math.atan2(a3, a4))
+
+
+def euler_rates(phi, theta, p, q, r) -> np.ndarray:
+    """The rates of the ZYX Euler angles (roll, pitch, yaw) at attitude ``phi``, ``theta`` for body rates
+    ``p``, ``q``, ``r`` [rad/s]: the kinematics the angles of eqs. (27)-(29) follow. Arrays or floats; returns
+    shape (3,) + their shape. Infinite at ``theta`` = +-90 deg (gimbal lock), where the angles are undefined."""
+    s, c = np.sin(phi), np.cos(phi)
+    return np.array([p + (q * s + r * c) * np.tan(theta), q * c - r * s, (q * s + r * c) / np.cos(theta)])

@@ -37,6 +37,8 @@ from types import MappingProxyType
 
 import numpy as np
 
+from heli_core.quaternion import euler_rates
+
 from .errors import FlightLogError, UnitError
 
 RATE_COLUMNS = ("p", "q", "r")
@@ -281,14 +283,10 @@ def rate_attitude_ratio(time: np.ndarray, rates: np.ndarray, attitude: np.ndarra
     phi, theta, psi = np.unwrap(attitude, axis=1)
     p, q, r = rates
     with np.errstate(all="ignore"):
-        euler_rates = np.array([
-            p + (q * np.sin(phi) + r * np.cos(phi)) * np.tan(theta),
-            q * np.cos(phi) - r * np.sin(phi),
-            (q * np.sin(phi) + r * np.cos(phi)) / np.cos(theta),
-        ])
-    if not np.isfinite(euler_rates).all():
+        angle_rates = euler_rates(phi, theta, p, q, r)
+    if not np.isfinite(angle_rates).all():
         return None
-    steps = 0.5 * (euler_rates[:, 1:] + euler_rates[:, :-1]) * np.diff(time)
+    steps = 0.5 * (angle_rates[:, 1:] + angle_rates[:, :-1]) * np.diff(time)
     integrated = np.concatenate([np.zeros((3, 1)), np.cumsum(steps, axis=1)], axis=1)
     sos = signal.butter(2, [low, high], btype="band", fs=fs, output="sos")
     a = signal.sosfiltfilt(sos, np.array([phi, theta, psi]), axis=1)

@@ -37,7 +37,7 @@ import numpy as np
 from heli_core.files import atomic_path, write_text
 from heli_core.params import ModelParams
 from heli_core.physics import initial_state, kernel
-from heli_core.quaternion import euler_from_quaternion, euler_from_quaternion_scalar
+from heli_core.quaternion import euler_from_quaternion, euler_from_quaternion_scalar, euler_rates
 from heli_core.terms import AXES
 
 from ..flight import Flight, make_flight
@@ -341,9 +341,7 @@ class _AutopilotSensing:
     sub-sample input delay and a gain scheduling look likely, statistic 10-77)."""
 
     def __init__(self, cfg: FlightConfig, errors: tuple, fs: float, estimator: "_AttitudeEstimator | None" = None):
-        gyro, att = errors
-        self._gyro = sum(gyro[1:], gyro[0]).T.tolist()
-        self._att = att.T.tolist()
+        self._gyro, self._att = _per_sample(errors)
         self._a = float(np.exp(-2.0 * np.pi * cfg.autopilot_dterm_hz / fs))
         self._state = None
         self._estimator = estimator
@@ -362,6 +360,13 @@ class _AutopilotSensing:
         return list(self._state)
 
 
+def _per_sample(errors: tuple) -> tuple[list, list]:
+    """:func:`sensor_errors`' gyro terms summed and the attitude noise, as per-sample rows of Python floats (what
+    the flight loop's sensors add at each sample)."""
+    gyro, att = errors
+    return sum(gyro[1:], gyro[0]).T.tolist(), att.T.tolist()
+
+
 class _AttitudeEstimator:
     """A flight controller's attitude estimate (``cfg.attitude_filter_tau`` > 0): a complementary filter that
     integrates the gyro as logged (truth plus noise and vibration) through the Euler kinematics and pulls the
@@ -370,9 +375,7 @@ class _AttitudeEstimator:
     the gyro the log carries (what separates a log's attitude from an independent attitude sensor)."""
 
     def __init__(self, cfg: FlightConfig, errors: tuple, n: int):
-        gyro, att = errors
-        self._gyro = sum(gyro[1:], gyro[0]).T.tolist()
-        self._att = att.T.tolist()
+        self._gyro, self._att = _per_sample(errors)
         self._dt = 1.0 / cfg.sample_rate
         self._pull = 1.0 - float(np.exp(-self._dt / cfg.attitude_filter_tau))
         self.estimates = np.empty((3, n))
@@ -384,12 +387,8 @@ class _AttitudeEstimator:
             self.estimates[:, 0] = tilt
             self._last_rate = [r + e for r, e in zip(true_rate, self._gyro[0])]
             return
-        phi, theta, psi = self.estimates[:, k - 1]
-        p, q, r = self._last_rate
-        s, c = np.sin(phi), np.cos(phi)
-        ahead = [phi + self._dt * (p + (q * s + r * c) * np.tan(theta)),
-                 theta + self._dt * (q * c - r * s),
-                 psi + self._dt * (q * s + r * c) / np.cos(theta)]
+        last = self.estimates[:, k - 1]
+        ahead = (last + self._dt * euler_rates(last[0], last[1], *self._last_rate)).tolist()
         gap = [t - a for t, a in zip(tilt, ahead)]
         gap[2] = float(np.angle(np.exp(1j * gap[2])))  # heading: the short way round
         self.estimates[:, k] = [a + self._pull * g for a, g in zip(ahead, gap)]

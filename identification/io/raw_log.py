@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from heli_core.files import sha256_of
+from heli_core.quaternion import euler_rates
 
 from ..flight import STICK_COLUMNS, Flight, make_flight
 from .csv_log import sticks_from_servos
@@ -448,19 +449,15 @@ def rate_attitude_agreement(flight: Flight, cutoff_hz: float = 2.0) -> dict:
 
     t, (p, q, r) = flight.time, flight.rates
     phi, theta, psi = np.unwrap(flight.attitude, axis=1)
-    euler_rates = np.array([
-        p + (q * np.sin(phi) + r * np.cos(phi)) * np.tan(theta),
-        q * np.cos(phi) - r * np.sin(phi),
-        (q * np.sin(phi) + r * np.cos(phi)) / np.cos(theta),
-    ])
+    angle_rates = euler_rates(phi, theta, p, q, r)
     deriv = np.gradient(np.array([phi, theta, psi]), t, axis=1)
     fs = flight.sample_rate
     if cutoff_hz < 0.5 * fs and flight.n > 30:
         sos = signal.butter(2, cutoff_hz, fs=fs, output="sos")
-        euler_rates = signal.sosfiltfilt(sos, euler_rates, axis=1)
+        angle_rates = signal.sosfiltfilt(sos, angle_rates, axis=1)
         deriv = signal.sosfiltfilt(sos, deriv, axis=1)
     out = {}
     for i, axis in enumerate(("roll", "pitch", "yaw")):
-        a, b = deriv[i], euler_rates[i]
+        a, b = deriv[i], angle_rates[i]
         out[axis] = None if np.std(a) < 1e-9 or np.std(b) < 1e-9 else round(float(np.corrcoef(a, b)[0, 1]), 4)
     return out
