@@ -276,7 +276,7 @@ def _print_run(run, n_flights: int, method: str) -> None:
         print(f"  {axis:5s}: {vals}  (R² {fit.r2:.3f}{delay})")
     check = getattr(run.identifiers[run.chosen], "closed_loop_", None)
     if check is not None:
-        print(f"closed-loop check ({check.n_flights} flights of the model under the pilot fitted to the sticks):")
+        print(f"closed-loop check ({check.headline()}):")
         for line in check.lines():
             print(f"  {line}")
     stats = run.validation.rate_stats[run.chosen]

@@ -142,3 +142,18 @@ def test_a_flight_the_check_cannot_fit_leaves_the_axis_unchecked_not_the_identif
     check = ml.closed_loop_.axes["roll"]
     assert not check.checked and "could not be fitted" in check.reason and "constant" in check.reason
     assert ml.params_ == MaximumLikelihoodIdentifier(input_hold=1.0, axes=("roll",)).fit(sim.flight).params_
+
+
+def test_a_damping_at_the_searchs_bound_is_not_flown():
+    from dataclasses import replace as with_fields
+
+    from identification.likelihood.closed_loop import check_closed_loop
+
+    sim = _flight("independent", 4, 60.0)
+    ml = MaximumLikelihoodIdentifier(input_hold=1.0, axes=("roll",)).fit(sim.flight)
+    fit = ml.axes_["roll"]
+    # as a fit whose damping the data did not place
+    ml.axes_["roll"] = with_fields(fit, params={**fit.params, "k3": ml.damping_bounds[1]})
+    found = check_closed_loop(ml, mode="report")
+    assert not found.axes["roll"].checked and "k3 is at the upper bound of the search" in found.axes["roll"].reason
+    assert found.headline() == "no axis flown" and found.n_flights == 0

@@ -43,6 +43,7 @@ from heli_core.terms import AXES, STICK_ROW
 
 from ..errors import IdentifiabilityError
 from ..flight import Flight
+from ..validation.model_verdict import bound_side
 from .axis_likelihood import AxisLikelihood
 from .axis_pool import map_axes
 from .pilot_model import AxisSignals, PilotModel, fit_pilot, reaction_delay
@@ -136,6 +137,12 @@ class ClosedLoopCheck:
                 "n_flights": self.n_flights, "seed": self.seed, "significance": SIGNIFICANCE,
                 "time_s": self.time, "axes": {a: c.describe() for a, c in self.axes.items()}}
 
+    def headline(self) -> str:
+        """What was flown, in a few words (a report's or the terminal's heading of :meth:`lines`)."""
+        if not self.n_flights:
+            return "no axis flown"
+        return f"{self.n_flights} flights of the model flown under the pilot fitted to the sticks and fitted again"
+
     def lines(self) -> list[str]:
         """One line per axis, for a report or the terminal."""
         out = []
@@ -177,8 +184,12 @@ def _names(ident, a: int, fit, data) -> tuple[str, str, tuple]:
     return own[data.servo_row], ident.axis_problem(a, kept, ident.flights_, 0).damping_name, kept
 
 
-def _skip_reason(fit, data) -> str:
-    """Why axis ``fit`` (its likelihood's ``data``) is not flown, or empty."""
+def _skip_reason(ident, a: int, fit, data) -> str:
+    """Why axis ``a`` (``fit``, its likelihood's ``data``) is not flown, or empty."""
+    damping = _names(ident, a, fit, data)[1]
+    side = bound_side(fit.params[damping], ident.damping_bounds) if damping else None
+    if side is not None:  # the model verdict names it; nothing downstream is built on it here
+        return f"its damping {damping} is at the {side} bound of the search (the data did not place it)"
     share = fit.noise_std / max(float(np.std(np.concatenate(data.y))), 1e-300)
     if share < MIN_NOISE_SHARE:
         return (f"the gyro shows next to no white noise ({100 * share:.2g} % of the rate's std; a log filtered before "
@@ -373,7 +384,7 @@ def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: st
     max_flights = 3 * n_flights if max_flights is None else max(int(max_flights), n_flights)
     results, checked = {}, {}
     data = {axis: ident._fitted_data(AXES.index(axis), fit, ident.flights_, 0) for axis, fit in ident.axes_.items()}
-    reasons = {axis: _skip_reason(fit, data[axis]) for axis, fit in ident.axes_.items()}
+    reasons = {axis: _skip_reason(ident, AXES.index(axis), fit, data[axis]) for axis, fit in ident.axes_.items()}
     loops, signals = _loops(ident, {axis: data[axis] for axis, why in reasons.items() if not why})
     for axis, fit in ident.axes_.items():
         if reasons[axis]:

@@ -120,8 +120,7 @@ def _closed_loop_sentence(ident) -> str:
         return ""
     what = ("removed where significant (the values above are after it)" if check.mode == "auto"
             else "reported only (the values above are as fitted)")
-    return (f" Closed-loop check ({check.n_flights} flights of the model flown under the pilot fitted to the sticks "
-            f"and fitted again; a bias {what}): " + "; ".join(check.lines()) + ".")
+    return f" Closed-loop check ({check.headline()}; a bias {what}): " + "; ".join(check.lines()) + "."
 
 
 def method_sentence(ident) -> str:

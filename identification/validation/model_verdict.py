@@ -72,19 +72,26 @@ def _clear_of_zero(value: float, se: float) -> bool:
     return not math.isfinite(se) or abs(value) >= SIGN_Z * se
 
 
+def bound_side(value: float, bounds) -> str | None:
+    """``"upper"`` or ``"lower"`` when ``value`` lies within :data:`BOUND_TOLERANCE` of the interval ``bounds``'
+    end (a value the search did not place), else None (also for ``bounds`` None)."""
+    if bounds is None:
+        return None
+    lo, hi = bounds
+    tol = BOUND_TOLERANCE * (hi - lo)
+    return next((side for bound, side in ((hi, "upper"), (lo, "lower")) if abs(value - bound) <= tol), None)
+
+
 def _damping_findings(axis: str, stats: Mapping, bounds) -> list[str]:
     name = DAMPING[axis]
     got = _value(stats, name)
     if got is None:
         return []
     value, _ = got
-    if bounds is not None:
-        lo, hi = bounds
-        tol = BOUND_TOLERANCE * (hi - lo)
-        for bound, side in ((hi, "upper"), (lo, "lower")):
-            if abs(value - bound) <= tol:
-                return [f"{axis}: damping {name} = {value:.4g} 1/s is at the {side} bound of the estimator's search "
-                        "(the data did not place it)"]
+    side = bound_side(value, bounds)
+    if side is not None:
+        return [f"{axis}: damping {name} = {value:.4g} 1/s is at the {side} bound of the estimator's search "
+                "(the data did not place it)"]
     if not value > 0.0:
         return [f"{axis}: damping {name} = {value:.4g} 1/s is not positive (an axis that does not settle by "
                 "itself: the fit describes something else, a controller's loop or a misread input)"]
