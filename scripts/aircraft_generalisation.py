@@ -61,6 +61,26 @@ def _aircraft(name: str) -> ModelParams:
     return PAPER_PARAMS if name == "paper" else AIRCRAFT[name]
 
 
+def config_field(text: str) -> tuple:
+    """``FIELD=VALUE`` of a command line: a :class:`~identification.bench.flight_config.FlightConfig` field and a
+    Python literal."""
+    import ast
+    from dataclasses import fields
+
+    from identification.bench.flight_config import FlightConfig
+
+    name, _, value = text.partition("=")
+    known = [f.name for f in fields(FlightConfig)]
+    if not name or not value:
+        raise argparse.ArgumentTypeError(f"expected FIELD=VALUE (a FlightConfig field), got {text!r}")
+    if name not in known:
+        raise argparse.ArgumentTypeError(f"expected a FlightConfig field ({', '.join(known)}), got {name!r}")
+    try:
+        return name, ast.literal_eval(value)
+    except (ValueError, SyntaxError):
+        raise argparse.ArgumentTypeError(f"expected a Python literal after {name}=, got {value!r}") from None
+
+
 def _one(job):
     """Fly one (aircraft, cell, rate, seed) and identify (and diagnose) it as the CLI does by default."""
     from threadpoolctl import threadpool_limits
@@ -69,9 +89,9 @@ def _one(job):
     from identification.bench.synthetic import simulate_flight
     from identification.likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
 
-    aircraft, cell, rate, seed, duration, diagnose, effect, closed_loop = job
+    aircraft, cell, rate, seed, duration, diagnose, effect, closed_loop, settings = job
     with threadpool_limits(limits=1, user_api="blas"):
-        config = replace(BENCH_CELLS[cell], duration=duration, sample_rate=float(rate))
+        config = replace(BENCH_CELLS[cell], duration=duration, sample_rate=float(rate), **dict(settings))
         sim = simulate_flight(duration, seed=seed, config=config, truth=_aircraft(aircraft),
                               effects=(effect,) if effect else ())
         truth = sim.truth.values()
@@ -86,6 +106,8 @@ def _one(job):
         v = ml.params_.values()
         out["ml"] = {k: 100.0 * (v[k] - truth[k]) / truth[k] for k in PARAMS}
         out["hold"] = [f.input_hold for f in ml.axes_.values()]
+        hold = getattr(ml.closed_loop_, "hold", None)
+        out["hold_check"] = None if hold is None else hold.describe()
         if diagnose:
             from identification.diagnosis.likelihood_diagnoser import LikelihoodDiagnoser
 
@@ -136,6 +158,11 @@ def _table(rows, diagnose: bool, effect: str | None) -> None:
                 text += f" {len(hit)}/{len(ok)} |"
         print(text)
     print(f"\nWorst cell: gains {worst['gains']:.2f} % RMS, dampings {worst['dampings']:.2f} % RMS")
+    checked = [r["hold_check"] for r in rows if r.get("hold_check")]
+    if checked:
+        moved = [f"{c['decided']} -> {c['chosen']}" for c in checked if c["switched"]]
+        print(f"Hold decided again in the closed loop's world on {len(checked)} of {len(rows)} flights; changed on "
+              f"{len(moved)}" + (f" ({', '.join(sorted(set(moved)))})" if moved else ""))
 
 
 def main(argv=None) -> None:
@@ -149,6 +176,8 @@ def main(argv=None) -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--diagnose", action="store_true", help="also run the likelihood diagnosis (about 10 s a flight)")
     ap.add_argument("--effect", default=None, help="hide this effect of the catalogue in every truth")
+    ap.add_argument("--set", type=config_field, nargs="*", default=[], metavar="FIELD=VALUE",
+                    help="FlightConfig fields changed in every cell, e.g. held_sticks=True command_noise=0.01")
     ap.add_argument("--closed-loop", choices=("auto", "off"), default="auto",
                     help="the closed-loop check as heli identify runs it ('auto', default) or none ('off')")
     args = ap.parse_args(argv)
@@ -161,7 +190,8 @@ def main(argv=None) -> None:
     if args.effect is not None and args.effect not in EFFECTS:
         raise SystemExit(f"unknown effect {args.effect!r}; known: {', '.join(EFFECTS)}")
     check = None if args.closed_loop == "off" else args.closed_loop
-    jobs = [(a, c, r, s, args.duration, args.diagnose, args.effect, check) for a in args.aircraft for c in args.cells for r in args.rates
+    settings = tuple(args.set)
+    jobs = [(a, c, r, s, args.duration, args.diagnose, args.effect, check, settings) for a in args.aircraft for c in args.cells for r in args.rates
             for s in range(args.first_seed, args.first_seed + args.seeds)]
     from tqdm import tqdm
 
@@ -174,7 +204,9 @@ def main(argv=None) -> None:
           f"{args.duration:g} s flights, defaults of heli identify. Command: python scripts/aircraft_generalisation.py "
           f"--seeds {args.seeds} --duration {args.duration:g} --aircraft {' '.join(args.aircraft)} "
           f"--cells {' '.join(args.cells)} --rates {' '.join(f'{r:g}' for r in args.rates)}"
-          + (" --diagnose" if args.diagnose else "") + (f" --effect {args.effect}" if args.effect else ""))
+          + (" --diagnose" if args.diagnose else "") + (f" --effect {args.effect}" if args.effect else "")
+          + (" --set " + " ".join(f"{k}={v!r}" for k, v in settings) if settings else "")
+          + ("" if check else " --closed-loop off"))
     _table(rows, args.diagnose, args.effect)
 
 

@@ -16,7 +16,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import ast
 import sys
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
@@ -25,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))  # the study's aircraft are aircraft_generalisation's
-from aircraft_generalisation import AIRCRAFT, _aircraft  # noqa: E402
+from aircraft_generalisation import AIRCRAFT, _aircraft, config_field  # noqa: E402
 
 DAMPINGS = ("k3", "k7", "k11")
 GAINS = ("k2", "k6", "k10")
@@ -61,25 +60,6 @@ def _one(job) -> list:
     return errors
 
 
-def _field(text: str) -> tuple:
-    """``FIELD=VALUE`` of a :class:`~identification.bench.flight_config.FlightConfig` field, the value a Python
-    literal."""
-    from dataclasses import fields
-
-    from identification.bench.flight_config import FlightConfig
-
-    name, _, value = text.partition("=")
-    known = [f.name for f in fields(FlightConfig)]
-    if not name or not value:
-        raise argparse.ArgumentTypeError(f"expected FIELD=VALUE (a FlightConfig field), got {text!r}")
-    if name not in known:
-        raise argparse.ArgumentTypeError(f"expected a FlightConfig field ({', '.join(known)}), got {name!r}")
-    try:
-        return name, ast.literal_eval(value)
-    except (ValueError, SyntaxError):
-        raise argparse.ArgumentTypeError(f"expected a Python literal after {name}=, got {value!r}") from None
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--aircraft", default="paper", choices=["paper", *AIRCRAFT])
@@ -90,7 +70,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=12)
     ap.add_argument("--first-seed", type=int, default=301)
     ap.add_argument("--duration", type=float, default=300.0)
-    ap.add_argument("--set", type=_field, nargs="*", default=[], metavar="FIELD=VALUE",
+    ap.add_argument("--set", type=config_field, nargs="*", default=[], metavar="FIELD=VALUE",
                     help="other FlightConfig fields, e.g. pilot_bandwidth=0.7 sample_rate=400.0")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--check", action="store_true",

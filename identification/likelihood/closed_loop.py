@@ -130,12 +130,14 @@ class ClosedLoopCheck:
     seed: int
     mode: str
     time: float
+    hold: object = None  # the hold decided in the loop's world (identification.likelihood.hold_check.HoldCheck)
 
     def describe(self) -> dict:
         """JSON-ready (``model.json``'s ``fit_statistics.closed_loop``)."""
         return {"method": "parametric bootstrap in the flight's closed loop", "mode": self.mode,
                 "n_flights": self.n_flights, "seed": self.seed, "significance": SIGNIFICANCE,
-                "time_s": self.time, "axes": {a: c.describe() for a, c in self.axes.items()}}
+                "time_s": self.time, "axes": {a: c.describe() for a, c in self.axes.items()},
+                "hold": None if self.hold is None else self.hold.describe()}
 
     def headline(self) -> str:
         """What was flown, in a few words (a report's or the terminal's heading of :meth:`lines`)."""
@@ -157,6 +159,8 @@ class ClosedLoopCheck:
             delays = ", ".join(f"{p['reaction_delay_s']:.2f}" for p in c.pilots)
             other = "" if c.loops_direction else " (not the loop's direction, damping up and gain down: left)"
             out.append(f"{axis}: pilot sees the aircraft (reaction {delays} s); bias " + "; ".join(parts) + other)
+        if self.hold is not None:
+            out.append(self.hold.line())
         return out
 
 
@@ -327,24 +331,42 @@ def _implausible(loop: _AxisLoop, logged: AxisSignals) -> str:
     return ""
 
 
+def flown_flights(ident, axis: str, loops: list, rng: np.random.Generator) -> list:
+    """``ident``'s flights with axis ``axis``' gyro, attitude and stick replaced by one simulated flight of each
+    of its ``loops`` (one per fitted flight); the other axes as logged."""
+    a = AXES.index(axis)
+    flights = []
+    for flight, loop in zip(ident.flights_, loops):
+        gyro, angle, u = _fly_loop(loop, rng)
+        rates, attitude, sticks = flight.rates.copy(), flight.attitude.copy(), flight.sticks.copy()
+        rates[a], attitude[a], sticks[STICK_ROW[a]] = gyro, np.angle(np.exp(1j * angle)), u
+        meta = {k: v for k, v in flight.metadata.items() if k not in ("units_check", "vibration_lines")}
+        flights.append(Flight(flight.time, rates, attitude, sticks, MappingProxyType(meta), flight.extra))
+    return flights
+
+
+def axis_refit(ident, axis: str, kept: tuple, flights: list, hold):
+    """Axis ``axis`` of ``ident`` fitted again on ``flights`` as the check fits its flights: the terms ``kept``,
+    its gust model, at input hold ``hold``, no delay or lag, no vibration removal. Returns the estimator.
+
+    Raises
+    ------
+    IdentifiabilityError
+        The fit refused the flights (a simulated loop that left the stick still)."""
+    fit = ident.axes_[axis]
+    return type(ident)(structure={AXES.index(axis): kept}, input_hold=hold, delay=None,
+                       wind_model=fit.wind["model"], remove_vibration=False, axes=(axis,),
+                       max_nfev=ident.max_nfev, workers=1).fit(flights)
+
+
 def _replicate(ident, loops: dict, checked: dict, seed: int, b: int) -> dict:
     """Fly replicate ``b`` of every checked axis and fit it as the flight was: ``{axis: {name: value}}``."""
     rng = np.random.default_rng([seed, b])
     out = {}
     for axis, (gain_name, damping_name, kept) in checked.items():
-        a = AXES.index(axis)
-        fit = ident.axes_[axis]
-        flights = []
-        for flight, loop in zip(ident.flights_, loops[axis]):
-            gyro, angle, u = _fly_loop(loop, rng)
-            rates, attitude, sticks = flight.rates.copy(), flight.attitude.copy(), flight.sticks.copy()
-            rates[a], attitude[a], sticks[STICK_ROW[a]] = gyro, np.angle(np.exp(1j * angle)), u
-            meta = {k: v for k, v in flight.metadata.items() if k not in ("units_check", "vibration_lines")}
-            flights.append(Flight(flight.time, rates, attitude, sticks, MappingProxyType(meta), flight.extra))
+        flights = flown_flights(ident, axis, loops[axis], rng)
         try:
-            again = type(ident)(structure={a: kept}, input_hold=fit.input_hold, delay=None,
-                                wind_model=fit.wind["model"], remove_vibration=False, axes=(axis,),
-                                max_nfev=ident.max_nfev, workers=1).fit(flights)
+            again = axis_refit(ident, axis, kept, flights, ident.axes_[axis].input_hold)
         except IdentifiabilityError as exc:  # the simulated loop left the stick still, or the fit refused it
             out[axis] = str(exc)
             continue

@@ -76,6 +76,8 @@ from .axis_pool import check_workers, map_axes
 from .axis_search import BURN_IN, DAMPING_BOUNDS, MAX_SHIFT, AxisProblem, WindFit
 from .closed_loop import N_FLIGHTS, ClosedLoopCheck, apply_check, check_closed_loop
 from .closed_loop import check_settings as check_closed_loop_settings
+from .hold_check import check_hold as check_hold_in_loop
+from .hold_check import needs_hold_check, switch_hold
 from .input_hold import check_hold, decide_hold
 from .servo_lag import profile_lag
 from .state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll, rts_smooth, wind_block
@@ -361,8 +363,15 @@ class MaximumLikelihoodIdentifier:
         if getattr(self, "closed_loop_", None) is not None:  # checked before: from the values as fitted again
             apply_check(self, self.closed_loop_, "fitted")
             self.closed_loop_ = None
+        t0 = _time.perf_counter()
         with threadpool_limits(limits=1, user_api="blas"):
             check = check_closed_loop(self, self.closed_loop_flights, mode=mode, workers=self.workers)
+            if not needs_hold_check(self, check):  # the loop's bias may have reached the hold: decided in its world
+                hold = check_hold_in_loop(self, check, self.closed_loop_flights, workers=self.workers)
+                if hold.switched and mode == "auto":
+                    switch_hold(self, hold)
+                    check = check_closed_loop(self, self.closed_loop_flights, mode=mode, workers=self.workers)
+                check = replace(check, hold=hold, time=_time.perf_counter() - t0)
         apply_check(self, check)
         self.closed_loop, self.closed_loop_ = mode, check
         return check

@@ -1,0 +1,208 @@
+"""The log's input hold decided again in the closed loop's world, where the loop's bias reaches the hold.
+
+:func:`~identification.likelihood.input_hold.decide_hold` reads the hold from the likelihood of the gyro
+conditioned on the sticks. A pilot who sees the aircraft puts into his sticks motion the gyro did not measure
+(:mod:`identification.likelihood.closed_loop`), and on a slow aircraft behind a noisy gyro that leak makes a
+pilot's interpolated sticks look held: the sluggish aircraft's flights in the noisy-gyro cell were decided
+0.00-0.16 for a pilot's hand, and the check then measured its bias in the wrong world (dampings 20-23 % RMS).
+
+The hold's evidence is itself a statistic the closed-loop check can reproduce. Per named hold ``h`` (0 held, 1
+interpolated), the flight is fitted at ``h`` (the checked axes, without delay or lag, as the check fits its
+flights) and that model is flown under the pilot fitted to the sticks; each simulated flight is fitted at both
+holds, and the log-likelihood ratio ``LR = nll(held) - nll(interpolated)``, summed over the checked axes, is
+recorded. Each world gives the LR its own distribution, and the flight's LR is read against both: on the
+sluggish aircraft behind a 0.03 rad/s gyro, a pilot's hand gave -12.4 on the flight, -7.1 +- 3.6 in the
+interpolated world and -26.1 +- 3.7 in the held one; held sticks gave -35.0 against -6.3 +- 4.1 and
+-30.8 +- 4.9 (the world's mean +- the spread of one flight). The hold whose world makes the flight's LR the
+more probable (normal densities) is the log's; when it is not the one decided, the checked axes take their fit
+at it, the other axes are searched again at it, and the closed-loop check runs again there.
+
+It runs only where it can matter: the hold was decided by ``input_hold="auto"`` as a named hold, and the
+closed-loop check found a bias the loop's way beyond its significance (elsewhere the loop does not reach the
+likelihood far enough to move the hold). A flight whose LR neither world reproduces (both beyond
+:data:`MAX_Z` spreads) keeps the hold decided, and says so.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from types import SimpleNamespace
+
+import numpy as np
+
+from heli_core.terms import AXES
+
+from ..errors import IdentifiabilityError
+from .axis_pool import map_axes
+from .axis_search import BURN_IN
+from .closed_loop import (SIGNIFICANCE, _implausible, _loops, _names, _skip_reason, axis_refit,
+                          flown_flights)
+from .input_hold import HOLDS
+
+MAX_Z = 3.0
+"""A flight's hold LR further than this many spreads from both worlds' means is reproduced by neither."""
+
+
+@dataclass(frozen=True)
+class HoldCheck:
+    """The hold decided in the closed loop's world.
+
+    Attributes
+    ----------
+    decided : str
+        The named hold :func:`~identification.likelihood.input_hold.decide_hold` chose ("zoh" or "linear").
+    chosen : str
+        The hold this check found the flight's (the decided one when ``reason`` says why it was kept).
+    axes : tuple of str
+        The axes whose LRs are summed.
+    flight_lr : float or None
+        The flight's ``nll(zoh) - nll(linear)`` over ``axes``.
+    worlds : dict
+        Per hold, the simulated flights' LRs (``lr``), their ``mean``, ``sd`` and the flight's ``z``.
+    reason : str
+        Why the decided hold was kept without a comparison, or why neither world reproduces the flight.
+    """
+
+    decided: str
+    chosen: str
+    axes: tuple = ()
+    flight_lr: float | None = None
+    worlds: dict = field(default_factory=dict)
+    reason: str = ""
+    fits: dict = field(default_factory=dict, repr=False, compare=False)  # the chosen hold's axis fits
+
+    @property
+    def switched(self) -> bool:
+        return self.chosen != self.decided
+
+    def describe(self) -> dict:
+        """JSON-ready."""
+        return {"decided": self.decided, "chosen": self.chosen, "axes": list(self.axes), "flight_lr": self.flight_lr,
+                "worlds": self.worlds, "reason": self.reason, "switched": self.switched}
+
+    def line(self) -> str:
+        """One line for a report or the terminal."""
+        if not self.worlds:
+            return f"hold: {self.decided} kept ({self.reason})"
+        seen = "; ".join(f"{h} world {w['mean']:+.1f} ± {w['sd']:.1f}" for h, w in self.worlds.items())
+        verdict = (f"the {self.chosen} hold's world reproduces it: hold {self.decided} -> {self.chosen}" if self.switched
+                   else f"hold {self.chosen} kept" + (f" ({self.reason})" if self.reason else ""))
+        return (f"hold in the loop's world: the flight's LR (held - interpolated) {self.flight_lr:+.1f} over "
+                f"{', '.join(self.axes)}; {seen}: {verdict}")
+
+
+def needs_hold_check(ident, check) -> str:
+    """Why the hold is not checked (empty when it is): only a hold decided by the estimator as a named hold,
+    and only where the closed-loop check found a bias the loop's way beyond its significance."""
+    decision = getattr(ident, "hold_decision_", None) or {}
+    if ident.input_hold != "auto" or not decision.get("named"):
+        return "the hold was not decided as a named hold by the estimator"
+    for c in check.axes.values():
+        if c.checked and c.loops_direction:
+            damping = list(c.bias)[1]
+            if c.bias[damping] > SIGNIFICANCE * c.bias_se[damping]:
+                return ""
+    return "no bias the loop's way: the loop does not reach the hold"
+
+
+def _world(ident, fits: dict):
+    """``ident`` with the axis fits ``fits`` in place of its own (what the closed-loop check's functions read)."""
+    world = SimpleNamespace(**{k: getattr(ident, k) for k in ("flights_", "max_nfev", "damping_bounds")})
+    world.axes_ = {**ident.axes_, **fits}
+    world._param_names, world.axis_problem = ident._param_names, ident.axis_problem
+    world._fitted_data = ident._fitted_data
+    return world
+
+
+def _lr(ident, world, loops: dict, names: dict, seed: int, tag: int, b: int):
+    """Replicate ``b`` of ``world``: each checked axis flown and fitted at both holds; the summed LR, or the
+    refusal's message."""
+    rng = np.random.default_rng([seed, b, tag])
+    total = 0.0
+    for axis, kept in names.items():
+        flights = flown_flights(world, axis, loops[axis], rng)
+        try:
+            nll = {h: axis_refit(ident, axis, kept, flights, h).axes_[axis].nll for h in HOLDS}
+        except IdentifiabilityError as exc:
+            return str(exc)
+        total += nll["zoh"] - nll["linear"]
+    return total
+
+
+def check_hold(ident, check, n_flights: int, seed: int = 0, workers=None) -> HoldCheck:
+    """Decide the log's hold in the closed loop's world (module docstring). Does not change ``ident``;
+    :func:`switch_hold` does."""
+    decided = ident.hold_decision_["named"]
+    why = needs_hold_check(ident, check)
+    if why:
+        return HoldCheck(decided, decided, reason=why)
+    axes = tuple(a for a, c in check.axes.items() if c.checked)
+    names = {}
+    for axis in axes:
+        data = ident._fitted_data(AXES.index(axis), ident.axes_[axis], ident.flights_, 0)
+        names[axis] = _names(ident, AXES.index(axis), ident.axes_[axis], data)[2]
+    fitted = {h: {axis: axis_refit(ident, axis, kept, ident.flights_, h) for axis, kept in names.items()} for h in HOLDS}
+    flight_lr = float(sum(fitted["zoh"][a].axes_[a].nll - fitted["linear"][a].axes_[a].nll for a in axes))
+    worlds, fits = {}, {}
+    for tag, h in enumerate(HOLDS, start=1):
+        fits[h] = {a: replace(fitted[h][a].axes_[a], dropped=ident.axes_[a].dropped) for a in axes}
+        world = _world(ident, fits[h])
+        data = {a: world._fitted_data(AXES.index(a), world.axes_[a], world.flights_, 0) for a in axes}
+        unfit = next(filter(None, (_skip_reason(world, AXES.index(a), world.axes_[a], data[a]) for a in axes)), "")
+        loops, signals = _loops(world, data)
+        unfit = unfit or next(filter(None, (_implausible(lp, sig) for a in axes
+                                            for lp, sig in zip(loops[a], signals[a]))), "")
+        if unfit:
+            return HoldCheck(decided, decided, axes, flight_lr, reason=f"the {h} hold's world cannot be flown: {unfit}")
+        lrs = map_axes(lambda b: _lr(ident, world, loops, names, seed, tag, b), range(n_flights), workers)
+        refused = next((r for r in lrs if isinstance(r, str)), None)
+        if refused is not None:
+            return HoldCheck(decided, decided, axes, flight_lr,
+                             reason=f"a flight of the {h} hold's world could not be fitted ({refused})")
+        worlds[h] = lrs
+    chosen, worlds, reason = choose_hold(flight_lr, worlds, decided)
+    return HoldCheck(decided, chosen, axes, flight_lr, worlds, reason, fits[chosen])
+
+
+def choose_hold(flight_lr: float, lrs: dict, decided: str) -> tuple[str, dict, str]:
+    """The hold whose world makes the flight's LR the more probable, from each world's simulated LRs ``lrs``
+    (hold -> list): a normal density per world, its mean and spread those of its flights. Returns the hold,
+    the worlds' summaries (``lr``, ``mean``, ``sd``, the flight's ``z``) and a reason when ``decided`` is kept
+    because neither world reproduces the flight (both beyond :data:`MAX_Z` spreads)."""
+    worlds = {}
+    for h, values in lrs.items():
+        values = np.asarray(values, dtype=float)
+        sd = float(max(values.std(ddof=1), 1e-9))
+        worlds[h] = {"lr": [float(v) for v in values], "mean": float(values.mean()), "sd": sd,
+                     "z": float((flight_lr - values.mean()) / sd)}
+    density = {h: -0.5 * w["z"] ** 2 - np.log(w["sd"]) for h, w in worlds.items()}
+    if min(abs(w["z"]) for w in worlds.values()) > MAX_Z:
+        return decided, worlds, f"neither world reproduces the flight's LR (beyond {MAX_Z:g} spreads)"
+    return max(density, key=density.get), worlds, ""
+
+
+def switch_hold(ident, hold: HoldCheck) -> None:
+    """Give ``ident`` the hold ``hold`` chose when it is not the one decided: the checked axes take their fit at
+    it, every other axis is searched again at it from its optimum; ``params_`` and ``hold_decision_`` follow."""
+    if not hold.switched:
+        return
+    fraction = HOLDS[hold.chosen]
+    burn = int(round(BURN_IN * ident.flights_[0].sample_rate))
+    ident._decided_hold = fraction
+    try:
+        for axis, fit in ident.axes_.items():
+            if axis in hold.fits:
+                ident.axes_[axis] = hold.fits[axis]
+                continue
+            a = AXES.index(axis)
+            kept = tuple(p for p in ident._param_names()[a] if p not in fit.dropped)
+            ident.axes_[axis] = replace(ident._refit(ident.axis_problem(a, kept, ident.flights_, burn), fit),
+                                        input_shift=fit.input_shift)
+    finally:
+        ident._decided_hold = None
+    values = {}
+    for axis, fit in ident.axes_.items():
+        values.update(fit.params)
+        values[f"tau_{axis}"], values[f"lag_{axis}"] = fit.delay, fit.lag
+    ident.params_ = ident.params_.with_values(**values)
+    ident.hold_decision_ = {**ident.hold_decision_, "fraction": fraction, "named": hold.chosen}
