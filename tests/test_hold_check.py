@@ -16,6 +16,7 @@ from identification.bench.synthetic import simulate_flight
 from identification.likelihood.closed_loop import AxisCheck, ClosedLoopCheck
 from identification.likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
 from identification.likelihood.hold_check import HoldCheck, choose_hold, needs_hold_check
+from identification.reports.identify import method_sentence
 
 SLUGGISH = ModelParams(k2=0.7, k3=1.2, kd1=0.02, k6=-0.5, k7=1.1, kd2=0.01, k10=6.0, k11=1.6, k12=-0.3, kd3=0.05)
 """scripts/aircraft_generalisation.py's large, slow helicopter: the aircraft the hold's bias was found on."""
@@ -82,6 +83,7 @@ def test_a_pilots_hand_taken_for_held_sticks_is_found_and_the_dampings_mended():
     hold = ml.closed_loop_check("auto").hold
     assert hold.decided == "zoh" and hold.chosen == "linear", hold.line()
     assert ml.hold_decision_["named"] == "linear" and all(f.input_hold == 1.0 for f in ml.axes_.values())
+    assert "linear hold, decided in the closed loop's world" in method_sentence(ml)  # the report says so
     for k in ("k3", "k7", "k11"):  # 4.6 / 1.5 / 3.9 % after; 23 / 26 / 21 % before
         assert abs(getattr(ml.params_, k) / getattr(SLUGGISH, k) - 1.0) < 0.08, k
 
