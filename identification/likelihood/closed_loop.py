@@ -131,13 +131,15 @@ class ClosedLoopCheck:
     mode: str
     time: float
     hold: object = None  # the hold decided in the loop's world (identification.likelihood.hold_check.HoldCheck)
+    delays: dict = field(default_factory=dict)  # servo delays tested (identification.likelihood.delay_check)
 
     def describe(self) -> dict:
         """JSON-ready (``model.json``'s ``fit_statistics.closed_loop``)."""
         return {"method": "parametric bootstrap in the flight's closed loop", "mode": self.mode,
                 "n_flights": self.n_flights, "seed": self.seed, "significance": SIGNIFICANCE,
                 "time_s": self.time, "axes": {a: c.describe() for a, c in self.axes.items()},
-                "hold": None if self.hold is None else self.hold.describe()}
+                "hold": None if self.hold is None else self.hold.describe(),
+                "delays": {a: d.describe() for a, d in self.delays.items()}}
 
     def headline(self) -> str:
         """What was flown, in a few words (a report's or the terminal's heading of :meth:`lines`)."""
@@ -159,6 +161,7 @@ class ClosedLoopCheck:
             delays = ", ".join(f"{p['reaction_delay_s']:.2f}" for p in c.pilots)
             other = "" if c.loops_direction else " (not the loop's direction, damping up and gain down: left)"
             out.append(f"{axis}: pilot sees the aircraft (reaction {delays} s); bias " + "; ".join(parts) + other)
+        out += [d.line() for d in self.delays.values()]
         if self.hold is not None:
             out.append(self.hold.line())
         return out
@@ -345,16 +348,17 @@ def flown_flights(ident, axis: str, loops: list, rng: np.random.Generator) -> li
     return flights
 
 
-def axis_refit(ident, axis: str, kept: tuple, flights: list, hold):
+def axis_refit(ident, axis: str, kept: tuple, flights: list, hold, delay=None):
     """Axis ``axis`` of ``ident`` fitted again on ``flights`` as the check fits its flights: the terms ``kept``,
-    its gust model, at input hold ``hold``, no delay or lag, no vibration removal. Returns the estimator.
+    its gust model, at input hold ``hold``, no lag, no vibration removal, and no delay (``delay="auto"``: the
+    delay profiled). Returns the estimator.
 
     Raises
     ------
     IdentifiabilityError
         The fit refused the flights (a simulated loop that left the stick still)."""
     fit = ident.axes_[axis]
-    return type(ident)(structure={AXES.index(axis): kept}, input_hold=hold, delay=None,
+    return type(ident)(structure={AXES.index(axis): kept}, input_hold=hold, delay=delay,
                        wind_model=fit.wind["model"], remove_vibration=False, axes=(axis,),
                        max_nfev=ident.max_nfev, workers=1).fit(flights)
 

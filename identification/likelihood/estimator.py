@@ -76,6 +76,7 @@ from .axis_pool import check_workers, map_axes
 from .axis_search import BURN_IN, DAMPING_BOUNDS, MAX_SHIFT, AxisProblem, WindFit
 from .closed_loop import N_FLIGHTS, ClosedLoopCheck, apply_check, check_closed_loop
 from .closed_loop import check_settings as check_closed_loop_settings
+from .delay_check import check_delay, delay_candidates, remove_delay
 from .hold_check import check_hold as check_hold_in_loop
 from .hold_check import needs_hold_check, switch_hold
 from .input_hold import check_hold, decide_hold
@@ -365,13 +366,18 @@ class MaximumLikelihoodIdentifier:
             self.closed_loop_ = None
         t0 = _time.perf_counter()
         with threadpool_limits(limits=1, user_api="blas"):
+            delays = {axis: check_delay(self, axis, workers=self.workers) for axis in delay_candidates(self)}
+            for tested in delays.values():  # a servo delay the delay-free loop makes too is the loop's
+                if mode == "auto":
+                    remove_delay(self, tested)
             check = check_closed_loop(self, self.closed_loop_flights, mode=mode, workers=self.workers)
             if not needs_hold_check(self, check):  # the loop's bias may have reached the hold: decided in its world
                 hold = check_hold_in_loop(self, check, self.closed_loop_flights, workers=self.workers)
                 if hold.switched and mode == "auto":
                     switch_hold(self, hold)
                     check = check_closed_loop(self, self.closed_loop_flights, mode=mode, workers=self.workers)
-                check = replace(check, hold=hold, time=_time.perf_counter() - t0)
+                check = replace(check, hold=hold)
+        check = replace(check, delays=delays, time=_time.perf_counter() - t0)
         apply_check(self, check)
         self.closed_loop, self.closed_loop_ = mode, check
         return check

@@ -1,0 +1,166 @@
+"""A servo delay the closed loop's world makes too: tested by flying the delay-free model under the pilot.
+
+``delay="detect"`` keeps a servo delay where the likelihood ratio over the undelayed fit passes
+:data:`~identification.likelihood.estimator.MIN_LR_DELAY` (20; a one-sample servo delay scored 46-370 on 300 s
+bench flights, effect-free ones 0-4). A pilot who sees the aircraft behind a noisy gyro gives the likelihood a
+second optimum: on the sluggish aircraft with held sticks, 2 of 10 effect-free flights put a 11.7 ms delay there
+at LR 23-24, the damping with it +44-53 %, and the closed-loop check could not fly the axis (its loop carries
+no delay). Flown again delay-free under the pilot fitted to the sticks, the same aircraft's world made that
+optimum on 1 of 10 of its flights (LR 23.0 at 11.8 ms): the delay is the loop's, not the servo's.
+
+So, for an axis whose delay was found by the search (not given by the user) and whose sticks a pilot who sees
+the aircraft moved: the axis is fitted delay-free (at the log's hold), flown ``n_flights`` times under the pilot,
+and each flight is fitted without a delay and with the delay profiled. Where the delay-free world reproduces the
+flight's delay — a flight within one sample of it at a likelihood ratio of at least half the flight's — the
+delay is the loop's: the axis takes its delay-free fit, and the closed-loop check flies it. Where it does not,
+the delay stands (a real servo delay of one sample scores two to fifteen times what the artefact does). The
+test can only remove a delay its world reproduces; one it misses stays as ``delay="detect"`` found it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from heli_core.terms import AXES
+
+from ..errors import IdentifiabilityError
+from .axis_likelihood import MIN_SERVO_DELAY
+from .axis_pool import map_axes
+from .closed_loop import (MIN_NOISE_SHARE, _implausible, _loops, _names, axis_refit, flown_flights)
+
+N_DELAY_FLIGHTS = 16
+"""Flights of the delay-free world flown per delay tested (the loop's optimum appeared on 1 of 10)."""
+
+REPRODUCED_SHARE = 0.5
+"""A flight of the delay-free world reproduces the flight's delay when its likelihood ratio reaches this share of
+the flight's, within one sample of its delay."""
+
+
+@dataclass(frozen=True)
+class DelayCheck:
+    """One axis' servo delay tested in the delay-free closed loop.
+
+    Attributes
+    ----------
+    axis : str
+    delay : float
+        The delay the fit had found [s].
+    flight_lr : float or None
+        Its likelihood ratio over the delay-free fit, ``2 (nll_none - nll_delay)``, as the check fits.
+    world : list of (float, float)
+        Per flight of the delay-free world, the delay profiled and its likelihood ratio.
+    loops : bool
+        The world reproduced the delay: it is the loop's, and was removed (mode "auto").
+    reason : str
+        Why it was not tested, when it was not.
+    dt : float
+        The log's sample interval [s] (a delay within one of the flight's is the same delay).
+    """
+
+    axis: str
+    delay: float
+    flight_lr: float | None = None
+    world: list = field(default_factory=list)
+    loops: bool = False
+    reason: str = ""
+    dt: float = 0.01
+    fit: object = field(default=None, repr=False, compare=False)  # the delay-free fit
+
+    def describe(self) -> dict:
+        """JSON-ready."""
+        return {"axis": self.axis, "delay_s": self.delay, "flight_lr": self.flight_lr,
+                "world": [list(w) for w in self.world], "loops": self.loops, "reason": self.reason}
+
+    def line(self) -> str:
+        """One line for a report or the terminal."""
+        what = f"{self.axis}: servo delay {1000 * self.delay:.1f} ms"
+        if self.reason:
+            return f"{what} not tested in the loop's world ({self.reason})"
+        seen = sum(1 for d, lr in self.world if self.reproduces(d, lr))
+        verdict = ("the loop's: the axis is fitted without it" if self.loops
+                   else "not reproduced: it stands")
+        return (f"{what} (LR {self.flight_lr:.1f}) made by {seen} of {len(self.world)} flights of the delay-free "
+                f"loop: {verdict}")
+
+    def reproduces(self, delay: float, lr: float) -> bool:
+        """A world's flight with ``delay`` at likelihood ratio ``lr`` makes the flight's delay: within one sample
+        of it, at :data:`REPRODUCED_SHARE` of its likelihood ratio or more."""
+        return abs(delay - self.delay) <= self.dt * (1.0 + 1e-6) and lr >= REPRODUCED_SHARE * self.flight_lr
+
+
+def delay_candidates(ident) -> list:
+    """The axes whose servo delay the search found (``delay="detect"`` or ``"auto"``), without a lag."""
+    modes = ident._delays()
+    return [axis for axis, fit in ident.axes_.items()
+            if modes[AXES.index(axis)] in ("auto", "detect") and fit.delay > MIN_SERVO_DELAY and fit.lag == 0.0]
+
+
+def _lr(ident, axis: str, kept: tuple, flights: list, hold) -> tuple[float, float]:
+    """(delay profiled, ``2 (nll_none - nll_delay)``) of axis ``axis`` over ``flights``."""
+    none = axis_refit(ident, axis, kept, flights, hold).axes_[axis]
+    free = axis_refit(ident, axis, kept, flights, hold, delay="auto").axes_[axis]
+    return float(free.delay), float(max(2.0 * (none.nll - free.nll), 0.0))
+
+
+def check_delay(ident, axis: str, n_flights: int = N_DELAY_FLIGHTS, seed: int = 0, workers=None) -> DelayCheck:
+    """Test axis ``axis``' servo delay in the delay-free closed loop (module docstring). Does not change ``ident``;
+    :func:`remove_delay` does."""
+    a, fit = AXES.index(axis), ident.axes_[axis]
+    decision = getattr(ident, "hold_decision_", None) or {}
+    hold = decision.get("fraction", fit.input_hold)
+    dt = float(ident.flights_[0].dt)
+    kept = tuple(p for p in ident._param_names()[a] if p not in fit.dropped)
+    try:
+        null = axis_refit(ident, axis, kept, ident.flights_, hold)
+        flight = _lr(ident, axis, kept, ident.flights_, hold)
+    except IdentifiabilityError as exc:
+        return DelayCheck(axis, fit.delay, reason=f"the axis could not be fitted without it ({exc})", dt=dt)
+    from .estimator import MIN_LR_DELAY
+
+    if flight[1] < MIN_LR_DELAY:
+        return DelayCheck(axis, fit.delay, flight[1], reason=f"refitted at the log's hold the flight itself does not "
+                          f"keep it (LR {flight[1]:.1f})", dt=dt)
+    from .hold_check import _world  # the check's view of an estimator with other axis fits
+
+    null_fit = replace(null.axes_[axis], dropped=fit.dropped)
+    world = _world(ident, {axis: null_fit})
+    data = world._fitted_data(a, null_fit, world.flights_, 0)
+    share = null_fit.noise_std / max(float(np.std(np.concatenate(data.y))), 1e-300)
+    if share < MIN_NOISE_SHARE:
+        return DelayCheck(axis, fit.delay, reason="the gyro shows next to no white noise", dt=dt)
+    if data.causal_rows or data.servo_row is None or _names(world, a, null_fit, data)[1] is None:
+        return DelayCheck(axis, fit.delay, reason="the one-axis loop cannot fly the axis' model", dt=dt)
+    loops, signals = _loops(world, {axis: data})
+    if any(loop.pilot.flies_on == "sensors" for loop in loops[axis]):
+        return DelayCheck(axis, fit.delay, reason="its sticks follow the logged gyro (a flight controller's loop)",
+                          dt=dt)
+    why = next(filter(None, (_implausible(lp, sig) for lp, sig in zip(loops[axis], signals[axis]))), "")
+    if why:
+        return DelayCheck(axis, fit.delay, reason=why, dt=dt)
+
+    def one(b):
+        flights = flown_flights(world, axis, loops[axis], np.random.default_rng([seed, b, 7]))
+        try:
+            return _lr(ident, axis, kept, flights, hold)
+        except IdentifiabilityError as exc:
+            return str(exc)
+
+    runs = map_axes(one, range(n_flights), workers)
+    refused = next((r for r in runs if isinstance(r, str)), None)
+    if refused is not None:
+        return DelayCheck(axis, fit.delay, flight[1], reason=f"a flight of the loop could not be fitted ({refused})",
+                          dt=dt)
+    check = DelayCheck(axis, flight[0], flight[1], [tuple(r) for r in runs], dt=dt, fit=null_fit)
+    return replace(check, loops=any(check.reproduces(d, lr) for d, lr in check.world))
+
+
+def remove_delay(ident, check: DelayCheck) -> None:
+    """Give axis ``check.axis`` of ``ident`` its delay-free fit where the delay was the loop's (``params_``
+    follows: its delay 0)."""
+    if not check.loops:
+        return
+    fit = check.fit
+    ident.axes_[check.axis] = fit
+    ident.params_ = ident.params_.with_values(**fit.params, **{f"tau_{check.axis}": 0.0})

@@ -1,0 +1,78 @@
+"""A servo delay tested in the delay-free closed loop (identification.likelihood.delay_check): a pilot who sees
+the aircraft behind a noisy gyro can give the likelihood a servo delay the servo does not have; the delay-free
+model flown under him makes it too, and then the delay is the loop's. A real servo delay is not made there."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from types import SimpleNamespace
+
+import pytest
+
+from heli_core.params import ModelParams
+from identification.bench.cells import BENCH_CELLS
+from identification.bench.synthetic import simulate_flight
+from identification.likelihood.delay_check import DelayCheck, delay_candidates
+from identification.likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
+
+SLUGGISH = ModelParams(k2=0.7, k3=1.2, kd1=0.02, k6=-0.5, k7=1.1, kd2=0.01, k10=6.0, k11=1.6, k12=-0.3, kd3=0.05)
+"""scripts/aircraft_generalisation.py's large, slow helicopter."""
+
+
+def test_a_world_flight_reproduces_the_delay_within_one_sample_at_half_its_lr():
+    check = DelayCheck("pitch", 0.0117, 22.7, dt=0.01)
+    assert check.reproduces(0.0118, 23.0) and check.reproduces(0.0200, 12.0)
+    assert not check.reproduces(0.0, 0.0)  # the world's flight kept no delay
+    assert not check.reproduces(0.0350, 40.0)  # another delay
+    assert not check.reproduces(0.0117, 10.0)  # too weak
+
+
+def test_the_delay_check_is_reported_in_words_and_json():
+    world = [(0.0, 0.0), (0.0118, 23.0), (0.0, 0.0)]
+    loops = DelayCheck("pitch", 0.0117, 22.7, world, loops=True, dt=0.01)
+    assert "made by 1 of 3 flights" in loops.line() and "fitted without it" in loops.line()
+    assert json.loads(json.dumps(loops.describe()))["loops"] is True
+    stands = DelayCheck("pitch", 0.0299, 149.0, [(0.0, 0.0)] * 3, dt=0.01)
+    assert "made by 0 of 3" in stands.line() and "it stands" in stands.line()
+    untested = DelayCheck("roll", 0.02, reason="its sticks follow the logged gyro (a flight controller's loop)")
+    assert "not tested" in untested.line()
+
+
+def test_only_delays_the_search_found_are_tested():
+    fit = SimpleNamespace(delay=0.012, lag=0.0)
+    found = SimpleNamespace(axes_={"pitch": fit, "roll": SimpleNamespace(delay=0.0, lag=0.0)},
+                            _delays=lambda: ["detect", "detect", "detect"])
+    assert delay_candidates(found) == ["pitch"]
+    given = SimpleNamespace(axes_={"pitch": fit}, _delays=lambda: [0.0, 0.012, 0.0])  # the user's delay stands
+    assert delay_candidates(given) == []
+    lagged = SimpleNamespace(axes_={"pitch": SimpleNamespace(delay=0.012, lag=0.03)},
+                             _delays=lambda: ["detect"] * 3)
+    assert delay_candidates(lagged) == []
+
+
+def _held_noisy_gyro(seed: int, truth):
+    config = replace(BENCH_CELLS["broadband-pd-noisy-gyro"], held_sticks=True, command_noise=0.01)
+    return simulate_flight(300.0, seed=seed, config=config, truth=truth)
+
+
+@pytest.mark.slow
+def test_a_delay_the_loop_makes_is_removed_and_the_axis_checked():
+    sim = _held_noisy_gyro(303, SLUGGISH)
+    ml = MaximumLikelihoodIdentifier(**CLI_TIMING).fit(sim.flight)
+    assert ml.axes_["pitch"].delay > 0.005 and ml.params_.k7 > 1.3 * SLUGGISH.k7  # +48 %
+    check = ml.closed_loop_check("auto")
+    assert check.delays["pitch"].loops, check.delays["pitch"].line()
+    assert ml.axes_["pitch"].delay == 0.0 and ml.params_.tau_pitch == 0.0
+    assert check.axes["pitch"].checked
+    assert abs(ml.params_.k7 / SLUGGISH.k7 - 1.0) < 0.08  # +1.9 %
+
+
+@pytest.mark.slow
+def test_a_real_servo_delay_stands():
+    sim = _held_noisy_gyro(304, replace(SLUGGISH, tau_pitch=0.02))
+    ml = MaximumLikelihoodIdentifier(**CLI_TIMING).fit(sim.flight)
+    check = ml.closed_loop_check("auto")
+    tested = check.delays["pitch"]
+    assert not tested.loops and not tested.reason, tested.line()
+    assert ml.axes_["pitch"].delay > 0.01
