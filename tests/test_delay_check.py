@@ -30,8 +30,9 @@ def test_a_world_flight_reproduces_the_delay_within_one_sample_at_half_its_lr():
 
 def test_the_delay_check_is_reported_in_words_and_json():
     world = [(0.0, 0.0), (0.0118, 23.0), (0.0, 0.0)]
-    loops = DelayCheck("pitch", 0.0117, 22.7, world, loops=True, dt=0.01)
+    loops = DelayCheck("pitch", 0.0117, 22.7, world, loops=True, dt=0.01, removed=True)
     assert "made by 1 of 3 flights" in loops.line() and "fitted without it" in loops.line()
+    assert "reported, kept" in replace(loops, removed=False).line()  # the check's mode "report"
     assert json.loads(json.dumps(loops.describe()))["loops"] is True
     stands = DelayCheck("pitch", 0.0299, 149.0, [(0.0, 0.0)] * 3, dt=0.01)
     assert "made by 0 of 3" in stands.line() and "it stands" in stands.line()
@@ -62,7 +63,7 @@ def test_a_delay_the_loop_makes_is_removed_and_the_axis_checked():
     ml = MaximumLikelihoodIdentifier(**CLI_TIMING).fit(sim.flight)
     assert ml.axes_["pitch"].delay > 0.005 and ml.params_.k7 > 1.3 * SLUGGISH.k7  # +48 %
     check = ml.closed_loop_check("auto")
-    assert check.delays["pitch"].loops, check.delays["pitch"].line()
+    assert check.delays["pitch"].loops and check.delays["pitch"].removed, check.delays["pitch"].line()
     assert ml.axes_["pitch"].delay == 0.0 and ml.params_.tau_pitch == 0.0
     assert check.axes["pitch"].checked
     assert abs(ml.params_.k7 / SLUGGISH.k7 - 1.0) < 0.08  # +1.9 %

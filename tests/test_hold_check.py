@@ -61,9 +61,10 @@ def test_the_hold_is_checked_only_where_the_loops_bias_could_have_reached_it():
 
 def test_the_hold_check_is_reported_in_words_and_json():
     _, worlds, _ = choose_hold(-12.4, {"linear": LINEAR_WORLD, "zoh": HELD_WORLD}, decided="zoh")
-    hold = HoldCheck("zoh", "linear", ("roll", "pitch", "yaw"), -12.4, worlds)
+    hold = HoldCheck("zoh", "linear", ("roll", "pitch", "yaw"), -12.4, worlds, applied=True)
     check = replace(_check(0.10), hold=hold)
-    assert hold.switched and "hold zoh -> linear" in check.lines()[-1]
+    assert hold.switched and check.lines()[-1].endswith("hold zoh -> linear")
+    assert "(reported, not applied)" in replace(hold, applied=False).line()  # the check's mode "report"
     assert json.loads(json.dumps(check.describe()))["hold"]["chosen"] == "linear"
     kept = HoldCheck("zoh", "zoh", reason="no bias the loop's way: the loop does not reach the hold")
     assert "zoh kept" in kept.line() and not kept.switched
@@ -81,7 +82,7 @@ def test_a_pilots_hand_taken_for_held_sticks_is_found_and_the_dampings_mended():
     assert ml.hold_decision_["named"] == "zoh"  # the loop's bias drew the hold (dampings 20-26 % high)
     assert ml.params_.k7 > 1.15 * SLUGGISH.k7
     hold = ml.closed_loop_check("auto").hold
-    assert hold.decided == "zoh" and hold.chosen == "linear", hold.line()
+    assert hold.decided == "zoh" and hold.chosen == "linear" and hold.applied, hold.line()
     assert ml.hold_decision_["named"] == "linear" and all(f.input_hold == 1.0 for f in ml.axes_.values())
     assert "linear hold, decided in the closed loop's world" in method_sentence(ml)  # the report says so
     for k in ("k3", "k7", "k11"):  # 4.6 / 1.5 / 3.9 % after; 23 / 26 / 21 % before

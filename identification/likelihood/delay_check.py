@@ -52,7 +52,9 @@ class DelayCheck:
     world : list of (float, float)
         Per flight of the delay-free world, the delay profiled and its likelihood ratio.
     loops : bool
-        The world reproduced the delay: it is the loop's, and was removed (mode "auto").
+        The world reproduced the delay: it is the loop's.
+    removed : bool
+        It was removed from the fit (:func:`remove_delay`, the check's mode "auto").
     reason : str
         Why it was not tested, when it was not.
     dt : float
@@ -66,12 +68,14 @@ class DelayCheck:
     loops: bool = False
     reason: str = ""
     dt: float = 0.01
+    removed: bool = False
     fit: object = field(default=None, repr=False, compare=False)  # the delay-free fit
 
     def describe(self) -> dict:
         """JSON-ready."""
         return {"axis": self.axis, "delay_s": self.delay, "flight_lr": self.flight_lr,
-                "world": [list(w) for w in self.world], "loops": self.loops, "reason": self.reason}
+                "world": [list(w) for w in self.world], "loops": self.loops, "removed": self.removed,
+                "reason": self.reason}
 
     def line(self) -> str:
         """One line for a report or the terminal."""
@@ -79,8 +83,8 @@ class DelayCheck:
         if self.reason:
             return f"{what} not tested in the loop's world ({self.reason})"
         seen = sum(1 for d, lr in self.world if self.reproduces(d, lr))
-        verdict = ("the loop's: the axis is fitted without it" if self.loops
-                   else "not reproduced: it stands")
+        verdict = ("not reproduced: it stands" if not self.loops else
+                   "the loop's: the axis is fitted without it" if self.removed else "the loop's (reported, kept)")
         return (f"{what} (LR {self.flight_lr:.1f}) made by {seen} of {len(self.world)} flights of the delay-free "
                 f"loop: {verdict}")
 
@@ -156,11 +160,12 @@ def check_delay(ident, axis: str, n_flights: int = N_DELAY_FLIGHTS, seed: int = 
     return replace(check, loops=any(check.reproduces(d, lr) for d, lr in check.world))
 
 
-def remove_delay(ident, check: DelayCheck) -> None:
+def remove_delay(ident, check: DelayCheck) -> DelayCheck:
     """Give axis ``check.axis`` of ``ident`` its delay-free fit where the delay was the loop's (``params_``
-    follows: its delay 0)."""
+    follows: its delay 0). Returns ``check``, marked ``removed`` when it was."""
     if not check.loops:
-        return
+        return check
     fit = check.fit
     ident.axes_[check.axis] = fit
     ident.params_ = ident.params_.with_values(**fit.params, **{f"tau_{check.axis}": 0.0})
+    return replace(check, removed=True)

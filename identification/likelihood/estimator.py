@@ -367,14 +367,13 @@ class MaximumLikelihoodIdentifier:
         t0 = _time.perf_counter()
         with threadpool_limits(limits=1, user_api="blas"):
             delays = {axis: check_delay(self, axis, workers=self.workers) for axis in delay_candidates(self)}
-            for tested in delays.values():  # a servo delay the delay-free loop makes too is the loop's
-                if mode == "auto":
-                    remove_delay(self, tested)
+            if mode == "auto":  # a servo delay the delay-free loop makes too is the loop's
+                delays = {axis: remove_delay(self, tested) for axis, tested in delays.items()}
             check = check_closed_loop(self, self.closed_loop_flights, mode=mode, workers=self.workers)
             if not needs_hold_check(self, check):  # the loop's bias may have reached the hold: decided in its world
                 hold = check_hold_in_loop(self, check, self.closed_loop_flights, workers=self.workers)
                 if hold.switched and mode == "auto":
-                    switch_hold(self, hold)
+                    hold = switch_hold(self, hold)
                     check = check_closed_loop(self, self.closed_loop_flights, mode=mode, workers=self.workers)
                 check = replace(check, hold=hold)
         check = replace(check, delays=delays, time=_time.perf_counter() - t0)

@@ -61,6 +61,8 @@ class HoldCheck:
         Per hold, the simulated flights' LRs (``lr``), their ``mean``, ``sd`` and the flight's ``z``.
     reason : str
         Why the decided hold was kept without a comparison, or why neither world reproduces the flight.
+    applied : bool
+        The fit was moved to the chosen hold (:func:`switch_hold`, the check's mode "auto").
     """
 
     decided: str
@@ -69,6 +71,7 @@ class HoldCheck:
     flight_lr: float | None = None
     worlds: dict = field(default_factory=dict)
     reason: str = ""
+    applied: bool = False
     fits: dict = field(default_factory=dict, repr=False, compare=False)  # the chosen hold's axis fits
 
     @property
@@ -78,14 +81,16 @@ class HoldCheck:
     def describe(self) -> dict:
         """JSON-ready."""
         return {"decided": self.decided, "chosen": self.chosen, "axes": list(self.axes), "flight_lr": self.flight_lr,
-                "worlds": self.worlds, "reason": self.reason, "switched": self.switched}
+                "worlds": self.worlds, "reason": self.reason, "switched": self.switched,
+                "applied": self.applied}
 
     def line(self) -> str:
         """One line for a report or the terminal."""
         if not self.worlds:
             return f"hold: {self.decided} kept ({self.reason})"
         seen = "; ".join(f"{h} world {w['mean']:+.1f} ± {w['sd']:.1f}" for h, w in self.worlds.items())
-        verdict = (f"the {self.chosen} hold's world reproduces it: hold {self.decided} -> {self.chosen}" if self.switched
+        verdict = (f"the {self.chosen} hold's world reproduces it: hold {self.decided} -> {self.chosen}"
+                   + ("" if self.applied else " (reported, not applied)") if self.switched
                    else f"hold {self.chosen} kept" + (f" ({self.reason})" if self.reason else ""))
         return (f"hold in the loop's world: the flight's LR (held - interpolated) {self.flight_lr:+.1f} over "
                 f"{', '.join(self.axes)}; {seen}: {verdict}")
@@ -181,11 +186,12 @@ def choose_hold(flight_lr: float, lrs: dict, decided: str) -> tuple[str, dict, s
     return max(density, key=density.get), worlds, ""
 
 
-def switch_hold(ident, hold: HoldCheck) -> None:
+def switch_hold(ident, hold: HoldCheck) -> HoldCheck:
     """Give ``ident`` the hold ``hold`` chose when it is not the one decided: the checked axes take their fit at
-    it, every other axis is searched again at it from its optimum; ``params_`` and ``hold_decision_`` follow."""
+    it, every other axis is searched again at it from its optimum; ``params_`` and ``hold_decision_`` follow.
+    Returns ``hold``, marked ``applied`` when the fit moved."""
     if not hold.switched:
-        return
+        return hold
     fraction = HOLDS[hold.chosen]
     burn = int(round(BURN_IN * ident.flights_[0].sample_rate))
     ident._decided_hold = fraction
@@ -206,3 +212,4 @@ def switch_hold(ident, hold: HoldCheck) -> None:
         values[f"tau_{axis}"], values[f"lag_{axis}"] = fit.delay, fit.lag
     ident.params_ = ident.params_.with_values(**values)
     ident.hold_decision_ = {**ident.hold_decision_, "fraction": fraction, "named": hold.chosen}
+    return replace(hold, applied=True)

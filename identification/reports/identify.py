@@ -132,7 +132,7 @@ def method_sentence(ident) -> str:
         said = (f"the log's {decision['named']} hold, kept as the data do not reject it" if decision.get("named")
                 else "the axes' pooled fraction")
         moved = getattr(getattr(ident, "closed_loop_", None), "hold", None)
-        if moved is not None and moved.switched and ident.closed_loop == "auto":
+        if moved is not None and moved.applied:
             said = (f"the log's {moved.chosen} hold, decided in the closed loop's world where the likelihood "
                     f"alone had read {moved.decided}")
         how = (f"a fraction of linear interpolation (0 held over the sample, 1 interpolated) estimated per axis "
