@@ -10,6 +10,7 @@ from types import SimpleNamespace
 
 import pytest
 
+from heli_core.files import jsonable
 from heli_core.params import ModelParams
 from identification.bench.cells import BENCH_CELLS
 from identification.bench.synthetic import simulate_flight
@@ -94,5 +95,7 @@ def test_held_sticks_behind_the_same_gyro_stay_held():
     sim = _noisy_gyro_flight(302, held=True)
     ml = MaximumLikelihoodIdentifier(**CLI_TIMING).fit(sim.flight)
     hold = ml.closed_loop_check("auto").hold
-    assert hold is not None and hold.chosen == "zoh" and not hold.switched, hold.line()
+    assert hold is not None and hold.chosen == "zoh" and not hold.switched and not hold.applied, hold.line()
     assert ml.hold_decision_["named"] == "zoh"
+    stored = json.loads(json.dumps(jsonable(ml.closed_loop_.describe()), allow_nan=False))  # as model.json stores it
+    assert stored["hold"]["chosen"] == "zoh" and stored["hold"]["applied"] is False

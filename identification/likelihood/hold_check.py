@@ -166,7 +166,7 @@ def check_hold(ident, check, n_flights: int, seed: int = 0, workers=None) -> Hol
                              reason=f"a flight of the {h} hold's world could not be fitted ({refused})")
         worlds[h] = lrs
     chosen, worlds, reason = choose_hold(flight_lr, worlds, decided)
-    return HoldCheck(decided, chosen, axes, flight_lr, worlds, reason, fits[chosen])
+    return HoldCheck(decided, chosen, axes, flight_lr, worlds, reason, fits=fits[chosen])
 
 
 def choose_hold(flight_lr: float, lrs: dict, decided: str) -> tuple[str, dict, str]:
