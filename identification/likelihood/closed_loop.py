@@ -35,7 +35,7 @@ says why.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from types import MappingProxyType
+from types import MappingProxyType, SimpleNamespace
 
 import numpy as np
 
@@ -346,6 +346,17 @@ def flown_flights(ident, axis: str, loops: list, rng: np.random.Generator) -> li
         meta = {k: v for k, v in flight.metadata.items() if k not in ("units_check", "vibration_lines")}
         flights.append(Flight(flight.time, rates, attitude, sticks, MappingProxyType(meta), flight.extra))
     return flights
+
+
+def with_fits(ident, fits: dict):
+    """``ident`` seen with the axis fits ``fits`` in place of its own: what this module's functions read of an
+    estimator (the hold's and the delay's worlds, :mod:`~identification.likelihood.hold_check`,
+    :mod:`~identification.likelihood.delay_check`)."""
+    world = SimpleNamespace(**{k: getattr(ident, k) for k in ("flights_", "max_nfev", "damping_bounds")})
+    world.axes_ = {**ident.axes_, **fits}
+    world._param_names, world.axis_problem, world._fitted_data = ident._param_names, ident.axis_problem, \
+        ident._fitted_data
+    return world
 
 
 def axis_refit(ident, axis: str, kept: tuple, flights: list, hold, delay=None):

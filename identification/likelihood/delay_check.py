@@ -28,7 +28,7 @@ from heli_core.terms import AXES
 from ..errors import IdentifiabilityError
 from .axis_likelihood import MIN_SERVO_DELAY
 from .axis_pool import map_axes
-from .closed_loop import (MIN_NOISE_SHARE, _implausible, _loops, _names, axis_refit, flown_flights)
+from .closed_loop import MIN_NOISE_SHARE, _implausible, _loops, _names, axis_refit, flown_flights, with_fits
 
 N_DELAY_FLIGHTS = 16
 """Flights of the delay-free world flown per delay tested (the loop's optimum appeared on 1 of 10)."""
@@ -108,9 +108,11 @@ def _lr(ident, axis: str, kept: tuple, flights: list, hold) -> tuple[float, floa
     return float(free.delay), float(max(2.0 * (none.nll - free.nll), 0.0))
 
 
-def check_delay(ident, axis: str, n_flights: int = N_DELAY_FLIGHTS, seed: int = 0, workers=None) -> DelayCheck:
-    """Test axis ``axis``' servo delay in the delay-free closed loop (module docstring). Does not change ``ident``;
-    :func:`remove_delay` does."""
+def check_delay(ident, axis: str, min_lr: float, n_flights: int = N_DELAY_FLIGHTS, seed: int = 0,
+                workers=None) -> DelayCheck:
+    """Test axis ``axis``' servo delay in the delay-free closed loop (module docstring); ``min_lr`` is the
+    likelihood ratio at which the estimator keeps a delay (the flight's own refit must keep it too). Does not
+    change ``ident``; :func:`remove_delay` does."""
     a, fit = AXES.index(axis), ident.axes_[axis]
     decision = getattr(ident, "hold_decision_", None) or {}
     hold = decision.get("fraction", fit.input_hold)
@@ -121,15 +123,11 @@ def check_delay(ident, axis: str, n_flights: int = N_DELAY_FLIGHTS, seed: int = 
         flight = _lr(ident, axis, kept, ident.flights_, hold)
     except IdentifiabilityError as exc:
         return DelayCheck(axis, fit.delay, reason=f"the axis could not be fitted without it ({exc})", dt=dt)
-    from .estimator import MIN_LR_DELAY
-
-    if flight[1] < MIN_LR_DELAY:
+    if flight[1] < min_lr:
         return DelayCheck(axis, fit.delay, flight[1], reason=f"refitted at the log's hold the flight itself does not "
                           f"keep it (LR {flight[1]:.1f})", dt=dt)
-    from .hold_check import _world  # the check's view of an estimator with other axis fits
-
     null_fit = replace(null.axes_[axis], dropped=fit.dropped)
-    world = _world(ident, {axis: null_fit})
+    world = with_fits(ident, {axis: null_fit})
     data = world._fitted_data(a, null_fit, world.flights_, 0)
     share = null_fit.noise_std / max(float(np.std(np.concatenate(data.y))), 1e-300)
     if share < MIN_NOISE_SHARE:

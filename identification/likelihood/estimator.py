@@ -74,12 +74,10 @@ from .axis_fit import MLAxisFit
 from .axis_likelihood import AxisData, AxisLikelihood
 from .axis_pool import check_workers, map_axes
 from .axis_search import BURN_IN, DAMPING_BOUNDS, MAX_SHIFT, AxisProblem, WindFit
-from .closed_loop import N_FLIGHTS, ClosedLoopCheck, apply_check, check_closed_loop
+from .closed_loop import N_FLIGHTS, ClosedLoopCheck, apply_check
 from .closed_loop import check_settings as check_closed_loop_settings
-from .delay_check import check_delay, delay_candidates, remove_delay
-from .hold_check import check_hold as check_hold_in_loop
-from .hold_check import needs_hold_check, switch_hold
 from .input_hold import check_hold, decide_hold
+from .loop_checks import run_checks
 from .servo_lag import profile_lag
 from .state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll, rts_smooth, wind_block
 
@@ -349,8 +347,11 @@ class MaximumLikelihoodIdentifier:
             self.closed_loop_check(self.closed_loop)
 
     def closed_loop_check(self, mode: str = "auto") -> ClosedLoopCheck:
-        """Run the closed-loop check on the fitted model (:mod:`identification.likelihood.closed_loop`): in mode
-        "auto" the significant biases are removed from :attr:`params_` and :attr:`axes_`; the result is kept in
+        """Run the closed-loop check on the fitted model (:mod:`identification.likelihood.closed_loop`, with a
+        found servo delay tested and the hold decided again in the loop's world where the loop's bias could reach
+        them: :mod:`identification.likelihood.loop_checks`): in mode "auto" the significant biases are removed
+        from :attr:`params_` and :attr:`axes_` (a delay the loop makes, and a hold its world rejects, too); the
+        result is kept in
         :attr:`closed_loop_` and ``closed_loop`` records the mode (as a fit with ``closed_loop=mode`` does).
 
         Raises
@@ -364,19 +365,8 @@ class MaximumLikelihoodIdentifier:
         if getattr(self, "closed_loop_", None) is not None:  # checked before: from the values as fitted again
             apply_check(self, self.closed_loop_, "fitted")
             self.closed_loop_ = None
-        t0 = _time.perf_counter()
         with threadpool_limits(limits=1, user_api="blas"):
-            delays = {axis: check_delay(self, axis, workers=self.workers) for axis in delay_candidates(self)}
-            if mode == "auto":  # a servo delay the delay-free loop makes too is the loop's
-                delays = {axis: remove_delay(self, tested) for axis, tested in delays.items()}
-            check = check_closed_loop(self, self.closed_loop_flights, mode=mode, workers=self.workers)
-            if not needs_hold_check(self, check):  # the loop's bias may have reached the hold: decided in its world
-                hold = check_hold_in_loop(self, check, self.closed_loop_flights, workers=self.workers)
-                if hold.switched and mode == "auto":
-                    hold = switch_hold(self, hold)
-                    check = check_closed_loop(self, self.closed_loop_flights, mode=mode, workers=self.workers)
-                check = replace(check, hold=hold)
-        check = replace(check, delays=delays, time=_time.perf_counter() - t0)
+            check = run_checks(self, mode, self.closed_loop_flights, MIN_LR_DELAY, workers=self.workers)
         apply_check(self, check)
         self.closed_loop, self.closed_loop_ = mode, check
         return check

@@ -26,7 +26,6 @@ likelihood far enough to move the hold). A flight whose LR neither world reprodu
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -36,7 +35,7 @@ from ..errors import IdentifiabilityError
 from .axis_pool import map_axes
 from .axis_search import BURN_IN
 from .closed_loop import (SIGNIFICANCE, _implausible, _loops, _names, _skip_reason, axis_refit,
-                          flown_flights)
+                          flown_flights, with_fits)
 from .input_hold import HOLDS
 
 MAX_Z = 3.0
@@ -110,15 +109,6 @@ def needs_hold_check(ident, check) -> str:
     return "no bias the loop's way: the loop does not reach the hold"
 
 
-def _world(ident, fits: dict):
-    """``ident`` with the axis fits ``fits`` in place of its own (what the closed-loop check's functions read)."""
-    world = SimpleNamespace(**{k: getattr(ident, k) for k in ("flights_", "max_nfev", "damping_bounds")})
-    world.axes_ = {**ident.axes_, **fits}
-    world._param_names, world.axis_problem = ident._param_names, ident.axis_problem
-    world._fitted_data = ident._fitted_data
-    return world
-
-
 def _lr(ident, world, loops: dict, names: dict, seed: int, tag: int, b: int):
     """Replicate ``b`` of ``world``: each checked axis flown and fitted at both holds; the summed LR, or the
     refusal's message."""
@@ -151,7 +141,7 @@ def check_hold(ident, check, n_flights: int, seed: int = 0, workers=None) -> Hol
     worlds, fits = {}, {}
     for tag, h in enumerate(HOLDS, start=1):
         fits[h] = {a: replace(fitted[h][a].axes_[a], dropped=ident.axes_[a].dropped) for a in axes}
-        world = _world(ident, fits[h])
+        world = with_fits(ident, fits[h])
         data = {a: world._fitted_data(AXES.index(a), world.axes_[a], world.flights_, 0) for a in axes}
         unfit = next(filter(None, (_skip_reason(world, AXES.index(a), world.axes_[a], data[a]) for a in axes)), "")
         loops, signals = _loops(world, data)
