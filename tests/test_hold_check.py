@@ -22,8 +22,9 @@ from identification.reports.identify import method_sentence
 SLUGGISH = ModelParams(k2=0.7, k3=1.2, kd1=0.02, k6=-0.5, k7=1.1, kd2=0.01, k10=6.0, k11=1.6, k12=-0.3, kd3=0.05)
 """scripts/aircraft_generalisation.py's large, slow helicopter: the aircraft the hold's bias was found on."""
 
-# the LRs (held - interpolated, summed over roll, pitch and yaw) of the eight flights of each world that the
-# sluggish aircraft's noisy-gyro flight of seed 301 (a pilot's hand) gave; the flight's own was -12.4
+# the LRs (held - interpolated, summed over roll, pitch and yaw) of the eight flights of each world that an early
+# run of the comparison gave on the sluggish aircraft's noisy-gyro flight of seed 301 (a pilot's hand; its own
+# LR -12.4)
 LINEAR_WORLD = [-7.5, -12.0, -0.9, -9.3, -0.9, -14.4, -4.9, -7.1]
 HELD_WORLD = [-25.6, -31.8, -19.1, -28.1, -20.2, -33.6, -23.7, -26.1]
 

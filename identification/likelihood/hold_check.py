@@ -11,9 +11,9 @@ interpolated), the flight is fitted at ``h`` (the checked axes, without delay or
 flights) and that model is flown under the pilot fitted to the sticks; each simulated flight is fitted at both
 holds, and the log-likelihood ratio ``LR = nll(held) - nll(interpolated)``, summed over the checked axes, is
 recorded. Each world gives the LR its own distribution, and the flight's LR is read against both: on the
-sluggish aircraft behind a 0.03 rad/s gyro, a pilot's hand gave -12.4 on the flight, -7.1 +- 3.6 in the
-interpolated world and -26.1 +- 3.7 in the held one; held sticks gave -35.0 against -6.3 +- 4.1 and
--30.8 +- 4.9 (the world's mean +- the spread of one flight). The hold whose world makes the flight's LR the
+sluggish aircraft behind a 0.03 rad/s gyro, a pilot's hand gave -12.5 on the flight, -2.8 +- 4.3 in the
+interpolated world and -25.4 +- 3.7 in the held one; held sticks gave -35.0 against -5.5 +- 4.0 and
+-32.4 +- 4.1 (the world's mean +- the spread of one flight). The hold whose world makes the flight's LR the
 more probable (normal densities) is the log's; when it is not the one decided, the checked axes take their fit
 at it, the other axes are searched again at it, and the closed-loop check runs again there.
 
