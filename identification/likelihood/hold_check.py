@@ -124,7 +124,7 @@ def _lr(ident, world, loops: dict, names: dict, seed: int, tag: int, b: int):
     return total
 
 
-def check_hold(ident, check, n_flights: int, seed: int = 0, workers=None) -> HoldCheck:
+def decide_hold_in_loop(ident, check, n_flights: int, seed: int = 0, workers=None) -> HoldCheck:
     """Decide the log's hold in the closed loop's world (module docstring). Does not change ``ident``;
     :func:`switch_hold` does."""
     decided = ident.hold_decision_["named"]

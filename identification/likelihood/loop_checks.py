@@ -17,7 +17,7 @@ from dataclasses import replace
 
 from .closed_loop import CLOSED_LOOP_MODES, ClosedLoopCheck, check_closed_loop, check_settings
 from .delay_check import check_delay, delay_candidates, remove_delay
-from .hold_check import check_hold, needs_hold_check, switch_hold
+from .hold_check import decide_hold_in_loop, needs_hold_check, switch_hold
 
 
 def run_checks(ident, mode: str, n_flights: int, min_lr_delay: float, workers=None) -> ClosedLoopCheck:
@@ -40,7 +40,7 @@ def run_checks(ident, mode: str, n_flights: int, min_lr_delay: float, workers=No
         delays = {axis: remove_delay(ident, tested) for axis, tested in delays.items()}
     check = check_closed_loop(ident, n_flights, mode=mode, workers=workers)
     if not needs_hold_check(ident, check):
-        hold = check_hold(ident, check, n_flights, workers=workers)
+        hold = decide_hold_in_loop(ident, check, n_flights, workers=workers)
         if hold.switched and mode == "auto":
             hold = switch_hold(ident, hold)
             check = check_closed_loop(ident, n_flights, mode=mode, workers=workers)
