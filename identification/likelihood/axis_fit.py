@@ -85,3 +85,13 @@ class MLAxisFit:
     input_hold: float = 1.0
     input_hold_se: float | None = None
     input_shift: float = 0.0
+
+
+def model_values(fits: dict) -> dict:
+    """The model's values from axis fits ``{axis: MLAxisFit}``: each fit's parameters with its delay and lag
+    (``tau_<axis>``, ``lag_<axis>``), as :class:`heli_core.params.ModelParams` names them."""
+    values = {}
+    for axis, fit in fits.items():
+        values.update(fit.params)
+        values[f"tau_{axis}"], values[f"lag_{axis}"] = fit.delay, fit.lag
+    return values

@@ -186,7 +186,7 @@ class _AxisLoop:
 def _names(ident, a: int, fit, data) -> tuple[str, str, tuple]:
     """(gain name, damping name, the terms fitted) of axis ``a`` as ``fit`` was fitted (``data`` its
     likelihood's :class:`~identification.likelihood.axis_likelihood.AxisData`)."""
-    kept = tuple(p for p in ident._param_names()[a] if p not in fit.dropped)
+    kept = ident._kept_terms(a, fit)
     own = [n for n in data.names if "@" not in n]
     return own[data.servo_row], ident.axis_problem(a, kept, ident.flights_, 0).damping_name, kept
 
@@ -334,6 +334,16 @@ def _implausible(loop: _AxisLoop, logged: AxisSignals) -> str:
     return ""
 
 
+def unflyable(loops: list, signals: list) -> str:
+    """Why an axis' ``loops`` (one per flight, beside the logged ``signals`` they were fitted to) are not the
+    loop the check models, or empty: sticks that follow the logged gyro, or a pilot who does not fly the model as
+    the flight went (:func:`_implausible`)."""
+    if any(loop.pilot.flies_on == "sensors" for loop in loops):
+        return ("its sticks follow the logged gyro's noise (a loop closed on the logged sensors, as a flight "
+                "controller's): the likelihood conditioned on them is the right one")
+    return next(filter(None, (_implausible(lp, sig) for lp, sig in zip(loops, signals))), "")
+
+
 def flown_flights(ident, axis: str, loops: list, rng: np.random.Generator) -> list:
     """``ident``'s flights with axis ``axis``' gyro, attitude and stick replaced by one simulated flight of each
     of its ``loops`` (one per fitted flight); the other axes as logged."""
@@ -354,8 +364,8 @@ def with_fits(ident, fits: dict):
     :mod:`~identification.likelihood.delay_check`)."""
     world = SimpleNamespace(**{k: getattr(ident, k) for k in ("flights_", "max_nfev", "damping_bounds")})
     world.axes_ = {**ident.axes_, **fits}
-    world._param_names, world.axis_problem, world._fitted_data = ident._param_names, ident.axis_problem, \
-        ident._fitted_data
+    for method in ("_param_names", "_kept_terms", "axis_problem", "_fitted_data"):
+        setattr(world, method, getattr(ident, method))
     return world
 
 
@@ -428,11 +438,7 @@ def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: st
             results[axis] = AxisCheck(axis, False, reasons[axis])
             continue
         pilots = tuple(loop.pilot.describe(loop.dt) for loop in loops[axis])
-        if any(loop.pilot.flies_on == "sensors" for loop in loops[axis]):
-            why = ("its sticks follow the logged gyro's noise (a loop closed on the logged sensors, as a flight "
-                   "controller's): the likelihood conditioned on them is the right one")
-        else:
-            why = next(filter(None, (_implausible(lp, sig) for lp, sig in zip(loops[axis], signals[axis]))), "")
+        why = unflyable(loops[axis], signals[axis])
         results[axis] = AxisCheck(axis, not why, why, pilots)
         if not why:
             checked[axis] = _names(ident, AXES.index(axis), fit, data[axis])

@@ -29,7 +29,7 @@ from heli_core.terms import AXES
 from ..errors import IdentifiabilityError
 from .axis_likelihood import MIN_SERVO_DELAY
 from .axis_pool import map_axes
-from .closed_loop import MIN_NOISE_SHARE, _implausible, _loops, _names, axis_refit, flown_flights, with_fits
+from .closed_loop import _loops, _skip_reason, axis_refit, flown_flights, unflyable, with_fits
 
 N_DELAY_FLIGHTS = 16
 """Flights of the delay-free world flown per delay tested (the loop's optimum appeared on 1 of 10)."""
@@ -102,11 +102,11 @@ def delay_candidates(ident) -> list:
             if modes[AXES.index(axis)] in ("auto", "detect") and fit.delay > MIN_SERVO_DELAY and fit.lag == 0.0]
 
 
-def _lr(ident, axis: str, kept: tuple, flights: list, hold) -> tuple[float, float]:
-    """(delay profiled, ``2 (nll_none - nll_delay)``) of axis ``axis`` over ``flights``."""
+def _lr(ident, axis: str, kept: tuple, flights: list, hold) -> tuple[float, float, object]:
+    """(delay profiled, ``2 (nll_none - nll_delay)``, the delay-free fit) of axis ``axis`` over ``flights``."""
     none = axis_refit(ident, axis, kept, flights, hold).axes_[axis]
     free = axis_refit(ident, axis, kept, flights, hold, delay="auto").axes_[axis]
-    return float(free.delay), float(max(2.0 * (none.nll - free.nll), 0.0))
+    return float(free.delay), float(max(2.0 * (none.nll - free.nll), 0.0)), none
 
 
 def check_delay(ident, axis: str, min_lr: float, n_flights: int = N_DELAY_FLIGHTS, seed: int = 0,
@@ -118,35 +118,28 @@ def check_delay(ident, axis: str, min_lr: float, n_flights: int = N_DELAY_FLIGHT
     decision = getattr(ident, "hold_decision_", None) or {}
     hold = decision.get("fraction", fit.input_hold)
     dt = float(ident.flights_[0].dt)
-    kept = tuple(p for p in ident._param_names()[a] if p not in fit.dropped)
+    kept = ident._kept_terms(a, fit)
     try:
-        null = axis_refit(ident, axis, kept, ident.flights_, hold)
         flight = _lr(ident, axis, kept, ident.flights_, hold)
     except IdentifiabilityError as exc:
         return DelayCheck(axis, fit.delay, reason=f"the axis could not be fitted without it ({exc})", dt=dt)
     if flight[1] < min_lr:
         return DelayCheck(axis, fit.delay, flight[1], reason=f"refitted at the log's hold the flight itself does not "
                           f"keep it (LR {flight[1]:.1f})", dt=dt)
-    null_fit = replace(null.axes_[axis], dropped=fit.dropped)
+    null_fit = replace(flight[2], dropped=fit.dropped)
     world = with_fits(ident, {axis: null_fit})
     data = world._fitted_data(a, null_fit, world.flights_, 0)
-    share = null_fit.noise_std / max(float(np.std(np.concatenate(data.y))), 1e-300)
-    if share < MIN_NOISE_SHARE:
-        return DelayCheck(axis, fit.delay, reason="the gyro shows next to no white noise", dt=dt)
-    if data.causal_rows or data.servo_row is None or _names(world, a, null_fit, data)[1] is None:
-        return DelayCheck(axis, fit.delay, reason="the one-axis loop cannot fly the axis' model", dt=dt)
-    loops, signals = _loops(world, {axis: data})
-    if any(loop.pilot.flies_on == "sensors" for loop in loops[axis]):
-        return DelayCheck(axis, fit.delay, reason="its sticks follow the logged gyro (a flight controller's loop)",
-                          dt=dt)
-    why = next(filter(None, (_implausible(lp, sig) for lp, sig in zip(loops[axis], signals[axis]))), "")
+    why = _skip_reason(world, a, null_fit, data)  # the closed-loop check's own reasons not to fly an axis
+    if not why:
+        loops, signals = _loops(world, {axis: data})
+        why = unflyable(loops[axis], signals[axis])
     if why:
         return DelayCheck(axis, fit.delay, reason=why, dt=dt)
 
     def one(b):
         flights = flown_flights(world, axis, loops[axis], np.random.default_rng([seed, b, 7]))
         try:
-            return _lr(ident, axis, kept, flights, hold)
+            return _lr(ident, axis, kept, flights, hold)[:2]  # the fit stays in its worker
         except IdentifiabilityError as exc:
             return str(exc)
 

@@ -70,7 +70,7 @@ from ..flight import Flight
 from ..integral.method import IntegralIdentifier
 from ..preprocess import shift_inputs
 from ..vibration import remove_common_lines
-from .axis_fit import MLAxisFit
+from .axis_fit import MLAxisFit, model_values
 from .axis_likelihood import AxisData, AxisLikelihood
 from .axis_pool import check_workers, map_axes
 from .axis_search import BURN_IN, DAMPING_BOUNDS, MAX_SHIFT, AxisProblem, WindFit
@@ -307,7 +307,6 @@ class MaximumLikelihoodIdentifier:
         # The integral method (Fig. 5) on the same structure is the starting point.
         start = IntegralIdentifier(structure=names, delay=0.0, axes=self.axes).fit(flights)
         delays, lags = self._delays(), self._lags()
-        values = {}
 
         def one_axis(axis_name, delay=None):
             a = AXES.index(axis_name)
@@ -332,14 +331,10 @@ class MaximumLikelihoodIdentifier:
             # profiled (the T-REX hover's yaw, whose pedal barely moves it, is late as its sticks are)
             rest = [a for a in detected if not fits[a].delay_profile]
             fits.update(zip(rest, map_axes(partial(one_axis, delay="auto"), rest, self.workers)))
-        self.hold_decision_ = self._decide_log_hold(fits, names, flights, burn)
+        self.hold_decision_ = self._decide_log_hold(fits, flights, burn)
         flights = self._apply_shifts(fits, flights)
-        for axis_name, fit in fits.items():
-            values.update(fit.params)
-            values[f"tau_{axis_name}"] = fit.delay
-            values[f"lag_{axis_name}"] = fit.lag
         self.axes_ = fits
-        self.params_ = ModelParams().with_values(**values)
+        self.params_ = ModelParams().with_values(**model_values(fits))
         self.flights_ = flights
         self.vibration_lines_ = [c[1] for c in cleaned]
         self.closed_loop_ = None
@@ -371,7 +366,7 @@ class MaximumLikelihoodIdentifier:
         self.closed_loop, self.closed_loop_ = mode, check
         return check
 
-    def _decide_log_hold(self, fits: dict, names: dict, flights, burn) -> dict | None:
+    def _decide_log_hold(self, fits: dict, flights, burn) -> dict | None:
         """With ``input_hold="auto"``: one hold for the log from every axis' estimate (:func:`decide_hold`, a
         named hold unless the data reject it); an axis whose estimate lies further from it than its standard
         error is searched again at it from its optimum (in ``fits``). Returns the decision, else None."""
@@ -382,16 +377,10 @@ class MaximumLikelihoodIdentifier:
                                sum(f.n_samples for f in fits.values()) / len(fits))
         self._decided_hold = decision["fraction"]
 
-        def again(axis_name):
-            fit, a = fits[axis_name], AXES.index(axis_name)
-            kept = tuple(p for p in names[a] if p not in fit.dropped)
-            # a shift stays whole
-            return self._refit(self.axis_problem(a, kept, flights, burn), fit,
-                               tau=fit.delay if fit.delay < 0.0 else None)
-
         redo = [axis for axis, fit in fits.items()
                 if abs(fit.input_hold - self._decided_hold) > (fit.input_hold_se or 0.0)]
-        fits.update(zip(redo, map_axes(again, redo, self.workers)))
+        fits.update(zip(redo, map_axes(lambda axis: self._refit_at_hold(axis, fits[axis], flights, burn), redo,
+                                       self.workers)))
         self._decided_hold = None
         return decision
 
@@ -413,11 +402,22 @@ class MaximumLikelihoodIdentifier:
         ``names`` hold one."""
         return AxisProblem(a, tuple(names), flights, burn, self._hold(), self.max_nfev, free_damping)
 
+    def _kept_terms(self, a: int, fit: MLAxisFit) -> tuple:
+        """The terms axis ``a``'s ``fit`` kept: the structure's, less those it dropped."""
+        return tuple(p for p in self._param_names()[a] if p not in fit.dropped)
+
     def _fitted_data(self, a: int, fit: MLAxisFit, flights, burn: int) -> AxisData:
         """The likelihood's data of axis ``a`` as ``fit`` was fitted (its terms, delay, gust model and lag) over
         ``flights`` (aligned and cleaned as :attr:`flights_` are)."""
-        kept = tuple(p for p in self._param_names()[a] if p not in fit.dropped)
-        return self.axis_problem(a, kept, flights, burn).data(fit.delay, fit.wind["model"], fit.lag)
+        return self.axis_problem(a, self._kept_terms(a, fit), flights, burn).data(fit.delay, fit.wind["model"],
+                                                                                  fit.lag)
+
+    def _refit_at_hold(self, axis_name: str, fit: MLAxisFit, flights, burn: int) -> MLAxisFit:
+        """Axis ``axis_name`` searched again from its optimum ``fit`` at the hold in force (:meth:`_hold`), its
+        terms kept; a shift (a negative delay) stays whole."""
+        a = AXES.index(axis_name)
+        return self._refit(self.axis_problem(a, self._kept_terms(a, fit), flights, burn), fit,
+                           tau=fit.delay if fit.delay < 0.0 else None)
 
     def _supported(self, problem: AxisProblem, fit: MLAxisFit, start_params) -> MLAxisFit:
         """Drop, one at a time, the terms beyond the decoupled model whose ``|value / se|`` is below

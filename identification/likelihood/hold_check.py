@@ -34,8 +34,8 @@ from heli_core.terms import AXES
 from ..errors import IdentifiabilityError
 from .axis_pool import map_axes
 from .axis_search import BURN_IN
-from .closed_loop import (SIGNIFICANCE, _implausible, _loops, _names, _skip_reason, axis_refit,
-                          flown_flights, with_fits)
+from .axis_fit import model_values
+from .closed_loop import SIGNIFICANCE, _loops, _skip_reason, axis_refit, flown_flights, unflyable, with_fits
 from .input_hold import HOLDS
 
 MAX_Z = 3.0
@@ -132,10 +132,7 @@ def decide_hold_in_loop(ident, check, n_flights: int, seed: int = 0, workers=Non
     if why:
         return HoldCheck(decided, decided, reason=why)
     axes = tuple(a for a, c in check.axes.items() if c.checked)
-    names = {}
-    for axis in axes:
-        data = ident._fitted_data(AXES.index(axis), ident.axes_[axis], ident.flights_, 0)
-        names[axis] = _names(ident, AXES.index(axis), ident.axes_[axis], data)[2]
+    names = {axis: ident._kept_terms(AXES.index(axis), ident.axes_[axis]) for axis in axes}
     fitted = {h: {axis: axis_refit(ident, axis, kept, ident.flights_, h) for axis, kept in names.items()} for h in HOLDS}
     flight_lr = float(sum(fitted["zoh"][a].axes_[a].nll - fitted["linear"][a].axes_[a].nll for a in axes))
     worlds, fits = {}, {}
@@ -145,8 +142,7 @@ def decide_hold_in_loop(ident, check, n_flights: int, seed: int = 0, workers=Non
         data = {a: world._fitted_data(AXES.index(a), world.axes_[a], world.flights_, 0) for a in axes}
         unfit = next(filter(None, (_skip_reason(world, AXES.index(a), world.axes_[a], data[a]) for a in axes)), "")
         loops, signals = _loops(world, data)
-        unfit = unfit or next(filter(None, (_implausible(lp, sig) for a in axes
-                                            for lp, sig in zip(loops[a], signals[a]))), "")
+        unfit = unfit or next(filter(None, (unflyable(loops[a], signals[a]) for a in axes)), "")
         if unfit:
             return HoldCheck(decided, decided, axes, flight_lr, reason=f"the {h} hold's world cannot be flown: {unfit}")
         lrs = map_axes(lambda b: _lr(ident, world, loops, names, seed, tag, b), range(n_flights), workers)
@@ -187,19 +183,10 @@ def switch_hold(ident, hold: HoldCheck) -> HoldCheck:
     ident._decided_hold = fraction
     try:
         for axis, fit in ident.axes_.items():
-            if axis in hold.fits:
-                ident.axes_[axis] = hold.fits[axis]
-                continue
-            a = AXES.index(axis)
-            kept = tuple(p for p in ident._param_names()[a] if p not in fit.dropped)
-            ident.axes_[axis] = replace(ident._refit(ident.axis_problem(a, kept, ident.flights_, burn), fit),
-                                        input_shift=fit.input_shift)
+            ident.axes_[axis] = hold.fits[axis] if axis in hold.fits else replace(
+                ident._refit_at_hold(axis, fit, ident.flights_, burn), input_shift=fit.input_shift)
     finally:
         ident._decided_hold = None
-    values = {}
-    for axis, fit in ident.axes_.items():
-        values.update(fit.params)
-        values[f"tau_{axis}"], values[f"lag_{axis}"] = fit.delay, fit.lag
-    ident.params_ = ident.params_.with_values(**values)
+    ident.params_ = ident.params_.with_values(**model_values(ident.axes_))
     ident.hold_decision_ = {**ident.hold_decision_, "fraction": fraction, "named": hold.chosen}
     return replace(hold, applied=True)
