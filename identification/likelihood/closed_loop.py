@@ -15,19 +15,23 @@ model):
 2. ``n_flights`` flights are flown by the identified axis model (eqs. 18/21 with the fitted gust model of
    eqs. 41-42, exactly discretised at the fitted input hold; gyro noise as fitted) under that pilot, who sees
    the simulated aircraft ``delay`` samples late, his sweeps and jitter (the fit's residual) replayed;
-3. each is fitted as the flight was (same terms, hold, gust model), and the mean relative error of the
-   gain and the damping is the estimator's bias there.
+3. each is fitted as the flight was (same terms, hold, gust model, timing), and the mean relative error of the
+   gain, the damping and a servo delay the search found is the estimator's bias there.
 
 A bias larger than ``SIGNIFICANCE`` standard errors of its mean is removed from the fitted value (one step
 of bootstrap bias correction, ``value * (1 - bias)``: the bias at the estimate stands for the bias at the
 truth); a smaller one is reported and left. So is every bias of an axis whose biases do not point the loop's
 way. That way has one direction: a pilot who opposes the motion puts into his sticks, with the opposite sign,
 motion the gyro did not see, and the likelihood reads it as more damping and less control power (the
-damping up, the gain's magnitude down: on every aircraft, pilot, gyro and wind measured). A bias the other
-way is the simulated world's own (an agile aircraft's yaw in 2 Hz Dryden gusts, its gust fitted at 7 Hz, gave
+damping up, the gain's magnitude down or within its noise: on every aircraft, pilot, gyro and wind measured;
+behind a real 20 ms servo delay the paper aircraft's pitch gain moved +0.2-0.4 +- 0.3-0.6 % beside a damping
++5-7 +- 1-1.6 %). A bias the other way (the gain's magnitude significantly up) is the simulated world's own (an agile aircraft's yaw in 2 Hz Dryden gusts, its gust fitted at 7 Hz, gave
 +40 % on the damping with the gain +11 % where the flight's fit was within 2.4 %), not the loop's.
 
-Axes with a servo delay or lag, or with terms driven by other axes' rates, are not flown (the one-axis loop
+An axis with a servo delay or lag is flown through its servo (eq. 31, Padé, discretised exactly as the likelihood
+does, :func:`~identification.likelihood.state_space.servo_step`) and its flights fitted with the flight's timing
+settings (the delay searched again as it was found, or held at the user's value). Axes whose stick was found to
+be logged late (a negative alignment) or with terms driven by other axes' rates are not flown (the one-axis loop
 does not carry them), nor axes whose gyro shows next to no noise (a log filtered before it was written); each
 says why.
 """
@@ -47,7 +51,8 @@ from ..validation.model_verdict import bound_side
 from .axis_likelihood import AxisLikelihood
 from .axis_pool import map_axes
 from .pilot_model import AxisSignals, PilotModel, fit_pilot, reaction_delay
-from .state_space import covariance_root, discrete_model, rts_smooth, wind_block
+from .axis_likelihood import MIN_SERVO_DELAY
+from .state_space import covariance_root, discrete_model, rts_smooth, servo_increments, servo_step, wind_block
 
 CLOSED_LOOP_MODES = ("auto", "report")
 """``"auto"``: check and remove a significant bias; ``"report"``: check and leave the fit as it is."""
@@ -96,7 +101,8 @@ class AxisCheck:
     corrected : dict
         The values after the check: the fitted ones less the significant biases.
     loops_direction : bool
-        The biases point the loop's way (damping up, gain's magnitude down); only then is one removed.
+        The biases point the loop's way (damping up, the gain's magnitude not significantly up); only then is one
+        removed.
     """
 
     axis: str
@@ -159,7 +165,7 @@ class ClosedLoopCheck:
                 verdict = "removed" if k in c.removed else "left"
                 parts.append(f"{k} {100 * b:+.1f} ± {100 * c.bias_se[k]:.1f} % ({verdict})")
             delays = ", ".join(f"{p['reaction_delay_s']:.2f}" for p in c.pilots)
-            other = "" if c.loops_direction else " (not the loop's direction, damping up and gain down: left)"
+            other = "" if c.loops_direction else " (not the loop's direction, damping up and the gain not significantly up: left)"
             out.append(f"{axis}: pilot sees the aircraft (reaction {delays} s); bias " + "; ".join(parts) + other)
         out += [d.line() for d in self.delays.values()]
         if self.hold is not None:
@@ -181,6 +187,7 @@ class _AxisLoop:
     pilot: PilotModel
     angle0: float
     dt: float
+    servo: np.ndarray  # (e_rz, e_zz, h0 rate, h0 servo, h1 rate, h1 servo): the stick's path (_stick_path)
 
 
 def _names(ident, a: int, fit, data) -> tuple[str, str, tuple]:
@@ -201,8 +208,9 @@ def _skip_reason(ident, a: int, fit, data) -> str:
     if share < MIN_NOISE_SHARE:
         return (f"the gyro shows next to no white noise ({100 * share:.2g} % of the rate's std; a log filtered before "
                 "it was written): there is nothing in the rate a pilot could see better than it")
-    if fit.delay != 0 or fit.lag != 0:
-        return "servo delay or lag fitted; the one-axis loop carries neither"
+    if fit.delay < -MIN_SERVO_DELAY:
+        return ("its stick was found logged late (a negative alignment): the loop flies a servo, not a log's "
+                "timing")
     if data.causal_rows:
         return "the axis' model reads other axes' rates; the one-axis loop does not fly them"
     if data.servo_row is None:
@@ -210,26 +218,48 @@ def _skip_reason(ident, a: int, fit, data) -> str:
     return ""
 
 
+def has_servo(fit) -> bool:
+    """Axis ``fit`` has a servo state: a delay (Padé) or a lag."""
+    return fit.delay > MIN_SERVO_DELAY or fit.lag > 0.0
+
+
+def _stick_path(fit, damping: float, g0, g1, dt: float) -> np.ndarray:
+    """The stick's path into the rate over a sample in the loop (:attr:`_AxisLoop.servo`): through the servo of
+    ``fit`` when it has one (:func:`~identification.likelihood.state_space.servo_step`), else directly
+    (``g0``, ``g1`` of the rate; the gust states take no input)."""
+    if not has_servo(fit):
+        return np.array([0.0, 0.0, g0[0], 0.0, g1[0], 0.0])
+    e_rz, e_zz, h0, h1 = servo_step(damping, max(fit.delay, 0.0), dt, fit.input_hold, fit.lag)
+    return np.array([e_rz, e_zz, h0[0], h0[1], h1[0], h1[1]])
+
+
 def _signals(ident, a: int, fit, data) -> tuple[list, list]:
     """Per fitted flight, axis ``a``'s :class:`AxisSignals` and its loop's pieces ``(Ad, g0, g1, noise root,
-    gain, other torque)``, from its likelihood's ``data``."""
+    gain, other torque, servo)``, from its likelihood's ``data``."""
     own = [n for n in data.names if "@" not in n]
     theta = np.array([fit.params[n] for n in own])
     model = AxisLikelihood(data).unpack(fit.state)
     Ad, g0, g1, Qd = discrete_model(*model, data.dt, fit.input_hold, fit.wind["model"])
     root = covariance_root(Qd) * fit.noise_std
     row = data.servo_row
+    servo = _stick_path(fit, model[0], g0, g1, data.dt)
     _, cw, _ = wind_block(fit.wind["model"], 1.0, 1.0)  # the gust states' sum, the same for every T, zeta
     signals, pieces = [], []
     for i, flight in enumerate(ident.flights_):
         regs = data.regressors[i][:len(own)]
-        drive = theta @ regs + fit.flight_offsets[i]
+        other = theta @ regs + fit.flight_offsets[i] - theta[row] * regs[row]  # all but the stick's torque
         stick = flight.sticks[STICK_ROW[a]]
         gain = (float(np.sign(regs[row] @ stick)) or 1.0) * theta[row]
-        states = rts_smooth(data.y[i], drive, *model, data.dt, fit.input_hold, fit.wind["model"])
+        if has_servo(fit):  # the stick through the servo, exactly as the likelihood has it
+            direct = theta[row] * servo_increments(data.servo_sticks[i], model[0], max(fit.delay, 0.0), data.dt,
+                                                   fit.input_hold, fit.lag)
+            states = rts_smooth(data.y[i], other, *model, data.dt, fit.input_hold, fit.wind["model"], direct)
+        else:
+            states = rts_smooth(data.y[i], other + theta[row] * regs[row], *model, data.dt, fit.input_hold,
+                                fit.wind["model"])
         signals.append(AxisSignals(stick, np.unwrap(flight.attitude[a]), states[0], data.y[i], cw @ states[1:],
                                    data.dt))
-        pieces.append((Ad, g0, g1, root, gain, drive - gain * stick))
+        pieces.append((Ad, g0, g1, root, gain, other, servo))
     return signals, pieces
 
 
@@ -246,9 +276,9 @@ def _loops(ident, data: dict) -> tuple[dict, dict]:
         d = reaction_delay([built[axis][0][i] for axis in axes])
         for axis in axes:
             sig = built[axis][0][i]
-            Ad, g0, g1, root, gain, other = built[axis][1][i]
+            Ad, g0, g1, root, gain, other, servo = built[axis][1][i]
             loops[axis].append(_AxisLoop(Ad, g0, g1, root, ident.axes_[axis].noise_std, gain, other,
-                                         fit_pilot(sig, d), float(sig.angle[0]), sig.dt))
+                                         fit_pilot(sig, d), float(sig.angle[0]), sig.dt, servo))
     return loops, {axis: built[axis][0] for axis in axes}
 
 
@@ -264,10 +294,12 @@ def _compiled_fly():
     return _COMPILED["fly"]
 
 
-def _fly(Ad, g0, g1, kicks, noise, gain, other, delay, coef, angle_mean, rest, dt, angle0):  # pragma: no cover
+def _fly(Ad, g0, g1, kicks, noise, gain, other, delay, coef, angle_mean, rest, dt, angle0, servo):  # pragma: no cover
     """The loop over samples: returns the gyro, the angle and the sticks (each (n,)).
 
-    ``kicks`` (m, n) are the process noise, ``noise`` (n,) the gyro's; ``other`` and ``rest`` are padded with
+    ``kicks`` (m, n) are the process noise, ``noise`` (n,) the gyro's; the stick drives the rate through
+    ``servo`` (:attr:`_AxisLoop.servo`, its state settled on the trim), the other torque through ``g0``, ``g1``;
+    ``other`` and ``rest`` are padded with
     their first value and zeros over the settling samples. The pilot's stick at k reads the angle (about
     ``angle_mean``), the rate, the gyro's noise and the angle's integral ``delay`` samples before, plus
     ``rest[k]``, clipped to the stick's range (:class:`~identification.likelihood.pilot_model.PilotModel`)."""
@@ -280,6 +312,7 @@ def _fly(Ad, g0, g1, kicks, noise, gain, other, delay, coef, angle_mean, rest, d
     angle[0] = angle0
     trim = -other[0] / gain
     u[0] = trim
+    z = trim
     for k in range(n):
         rate[k] = x[0]
         if k > 0:
@@ -294,13 +327,15 @@ def _fly(Ad, g0, g1, kicks, noise, gain, other, delay, coef, angle_mean, rest, d
         else:
             v = trim
         u[j] = min(1.0, max(-1.0, v))
-        now, nxt = gain * u[k] + other[k], gain * u[j] + other[j]
+        now, nxt = other[k], other[j]
         y = np.empty(m)
         for r in range(m):
             s = g0[r] * now + g1[r] * nxt + kicks[r, k]
             for c in range(m):
                 s += Ad[r, c] * x[c]
             y[r] = s
+        y[0] += gain * (servo[0] * z + servo[2] * u[k] + servo[4] * u[j])
+        z = servo[1] * z + servo[3] * u[k] + servo[5] * u[j]
         angle[j] = angle[k] + 0.5 * dt * (x[0] + y[0])
         x = y
     return rate + noise, angle, u
@@ -316,7 +351,7 @@ def _fly_loop(loop: _AxisLoop, rng: np.random.Generator) -> tuple:
     other = np.concatenate([np.full(SETTLE, loop.other[0]), loop.other])
     p = loop.pilot
     gyro, angle, u = _compiled_fly()(loop.Ad, loop.g0, loop.g1, kicks, noise, loop.gain, other, p.delay,
-                                     p.coefficients, p.angle_mean, rest, loop.dt, loop.angle0)
+                                     p.coefficients, p.angle_mean, rest, loop.dt, loop.angle0, loop.servo)
     return gyro[SETTLE:], angle[SETTLE:], u[SETTLE:]
 
 
@@ -364,39 +399,62 @@ def with_fits(ident, fits: dict):
     :mod:`~identification.likelihood.delay_check`)."""
     world = SimpleNamespace(**{k: getattr(ident, k) for k in ("flights_", "max_nfev", "damping_bounds")})
     world.axes_ = {**ident.axes_, **fits}
-    for method in ("_param_names", "_kept_terms", "axis_problem", "_fitted_data"):
+    for method in ("_param_names", "_kept_terms", "axis_problem", "_fitted_data", "_delays", "_lags"):
         setattr(world, method, getattr(ident, method))
     return world
 
 
-def axis_refit(ident, axis: str, kept: tuple, flights: list, hold, delay=None):
+def fitted_timing(ident, axis: str) -> dict:
+    """The timing settings axis ``axis``' flights flown by the check are fitted with (:func:`axis_refit`'s
+    ``delay``, ``servo_lag``): the flight's own (``ident``'s setting for the axis: searched again as it was found, or
+    the user's value) for what its fit has, none for what it has not."""
+    fit, a = ident.axes_[axis], AXES.index(axis)
+    return {"delay": ident._delays()[a] if fit.delay > MIN_SERVO_DELAY else None,
+            "servo_lag": ident._lags()[a] if fit.lag > 0.0 else None}
+
+
+def axis_refit(ident, axis: str, kept: tuple, flights: list, hold, delay=None, servo_lag=None):
     """Axis ``axis`` of ``ident`` fitted again on ``flights`` as the check fits its flights: the terms ``kept``,
-    its gust model, at input hold ``hold``, no lag, no vibration removal, and no delay (``delay="auto"``: the
-    delay profiled). Returns the estimator.
+    its gust model, at input hold ``hold``, no vibration removal, and no delay or lag (``delay``, ``servo_lag``:
+    the estimator's settings for them, e.g. "auto", profiled). Returns the estimator.
 
     Raises
     ------
     IdentifiabilityError
         The fit refused the flights (a simulated loop that left the stick still)."""
     fit = ident.axes_[axis]
-    return type(ident)(structure={AXES.index(axis): kept}, input_hold=hold, delay=delay,
+    return type(ident)(structure={AXES.index(axis): kept}, input_hold=hold, delay=delay, servo_lag=servo_lag,
                        wind_model=fit.wind["model"], remove_vibration=False, axes=(axis,),
                        max_nfev=ident.max_nfev, workers=1).fit(flights)
+
+
+def checked_values(fit, axis: str, names: tuple, searched_delay: bool) -> dict:
+    """The values the check measures the bias of, from axis ``axis``' ``fit``: the gain and the damping (``names``,
+    :func:`_names`), in that order, and the servo delay (``tau_<axis>``) when the flight's fit searched it."""
+    values = {k: float(fit.params[k]) for k in names[:2]}
+    if searched_delay:
+        values[f"tau_{axis}"] = float(fit.delay)
+    return values
+
+
+def _searched_delay(ident, axis: str) -> bool:
+    """Axis ``axis``' servo delay was found by the search (not given by the user): the check measures its bias."""
+    return fitted_timing(ident, axis)["delay"] in ("auto", "detect")
 
 
 def _replicate(ident, loops: dict, checked: dict, seed: int, b: int) -> dict:
     """Fly replicate ``b`` of every checked axis and fit it as the flight was: ``{axis: {name: value}}``."""
     rng = np.random.default_rng([seed, b])
     out = {}
-    for axis, (gain_name, damping_name, kept) in checked.items():
+    for axis, names in checked.items():
         flights = flown_flights(ident, axis, loops[axis], rng)
         try:
-            again = axis_refit(ident, axis, kept, flights, ident.axes_[axis].input_hold)
+            again = axis_refit(ident, axis, names[2], flights, ident.axes_[axis].input_hold,
+                               **fitted_timing(ident, axis))
         except IdentifiabilityError as exc:  # the simulated loop left the stick still, or the fit refused it
             out[axis] = str(exc)
             continue
-        values = again.axes_[axis].params
-        out[axis] = {gain_name: values[gain_name], damping_name: values[damping_name]}
+        out[axis] = checked_values(again.axes_[axis], axis, names, _searched_delay(ident, axis))
     return out
 
 
@@ -459,7 +517,8 @@ def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: st
         bias = {k: float(r.mean()) for k, r in rel.items()}
         se = {k: float(r.std(ddof=1) / np.sqrt(r.size)) for k, r in rel.items()}
         gain, damping = checked[axis][:2]
-        loops_bias = bias[damping] > 0.0 and bias[gain] < 0.0  # the direction of the loop's bias (docstring)
+        # the direction of the loop's bias (docstring): the damping up, the gain's magnitude not significantly up
+        loops_bias = bias[damping] > 0.0 and bias[gain] < SIGNIFICANCE * se[gain]
         corrected = {k: (v * (1.0 - bias[k]) if mode == "auto" and loops_bias and abs(bias[k]) > SIGNIFICANCE * se[k]
                          else v) for k, v in fitted.items()}
         results[axis] = replace(results[axis], fitted=fitted, bias=bias, bias_se=se, corrected=corrected,
@@ -468,10 +527,11 @@ def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: st
 
 
 def _biases(ident, checked: dict, runs: list) -> dict:
-    """Per checked axis, its fitted gain and damping (in that order) and their relative errors over ``runs``."""
+    """Per checked axis, its fitted gain and damping (in that order; the delay after them when searched) and their
+    relative errors over ``runs``."""
     out = {}
     for axis, names in checked.items():
-        fitted = {k: float(ident.axes_[axis].params[k]) for k in names[:2]}
+        fitted = checked_values(ident.axes_[axis], axis, names, _searched_delay(ident, axis))
         out[axis] = fitted, {k: np.array([run[axis][k] / v - 1.0 for run in runs]) for k, v in fitted.items()}
     return out
 
@@ -490,17 +550,18 @@ def _inconclusive(biases: dict) -> bool:
 
 def apply_check(ident, check: ClosedLoopCheck, which: str = "corrected") -> None:
     """Set ``ident``'s values after the check (:attr:`AxisCheck.corrected`; ``which="fitted"``: back to those
-    before it): the axis fits' parameters, the damping in their search vectors (the smoother and the wind draws
-    use it) and ``params_``. The fitted values stay in ``check``."""
+    before it): the axis fits' parameters and servo delay, the damping in their search vectors (the smoother and
+    the wind draws use it) and ``params_``. The fitted values stay in ``check``."""
     values = {}
     for axis, c in check.axes.items():
         if not c.removed:
             continue
         fit = ident.axes_[axis]
-        chosen = getattr(c, which)
+        chosen = dict(getattr(c, which))
+        delay = chosen.pop(f"tau_{axis}", fit.delay)
         params = {**fit.params, **chosen}
         state = np.array(fit.state, dtype=float, copy=True)
         state[0] = list(chosen.values())[1]  # the damping (gain first: _biases); the search vector starts with it
-        ident.axes_[axis] = replace(fit, params=params, state=state)
-        values.update(chosen)
+        ident.axes_[axis] = replace(fit, params=params, state=state, delay=delay)
+        values.update(chosen, **{f"tau_{axis}": delay})
     ident.params_ = ident.params_.with_values(**values)

@@ -159,19 +159,24 @@ def innovation_filters(Ad, g0, g1, L):
     return b_y, b_u, a
 
 
-def servo_increments(sticks, damping: float, tau: float, dt: float, hold: str, lag: float = 0.0) -> np.ndarray:
-    """The command's exact contribution to the rate over each sample, through the servo of eq. (31) (its
-    Padé delay ``tau`` and its first-order ``lag``, :func:`heli_core.servo.servo_coefficients`).
+def servo_step(damping: float, tau: float, dt: float, hold: str, lag: float = 0.0) -> tuple:
+    """One sample of the servo of eq. (31) (its Padé delay ``tau`` and first-order ``lag``,
+    :func:`heli_core.servo.servo_coefficients`) driving a rate of ``damping``, discretised exactly with the stick
+    held, linearly interpolated or a fraction between (``hold``, :func:`hold_fraction`).
 
-    The continuous system ``rate' = -damping*rate + f*u + g*z``, ``z' = (u - z)/d1``
-    (the Padé servo split into feed-through ``f`` and state ``g``, :func:`heli_core.servo.servo_coefficients`)
-    is discretised exactly with the stick held, linearly interpolated or a fraction between (``hold``,
-    :func:`hold_fraction`); returns
-    ``v[k]``, the rate's increment from ``k`` to ``k+1`` due to the command (per unit
-    control gain), so that the rate sees ``k2*v[k]`` as a one-sample input. The
-    servo state starts settled on the first stick.
+    The continuous system ``rate' = -damping*rate + f*u + g*z``, ``z' = (u - z)/d1`` (the Padé servo split into
+    feed-through ``f`` and state ``g``) over one sample, from a rate of zero. Returns ``(e_rz, e_zz, h0, h1)``:
+    the command's increment of the rate from ``k`` to ``k+1`` (per unit control gain) is
+    ``e_rz*z[k] + h0[0]*u[k] + h1[0]*u[k+1]`` and the servo's next state ``e_zz*z[k] + h0[1]*u[k] + h1[1]*u[k+1]``.
+
+    Raises
+    ------
+    ValueError
+        Neither a delay nor a lag (no servo state: the command enters the rate directly).
     """
     d1, n1, n2 = servo_coefficients(tau, lag)
+    if d1 <= 0.0:
+        raise ValueError(f"a servo needs a delay or a lag > 0, got tau={tau!r}, lag={lag!r}")
     f, g = -n2 / d1, n1 + n2 / d1
     M = np.zeros((4, 4))
     M[:2, :2] = np.array([[-damping, g], [0.0, -1.0 / d1]]) * dt
@@ -180,15 +185,23 @@ def servo_increments(sticks, damping: float, tau: float, dt: float, hold: str, l
     E = expm(M)
     ga, gb = E[:2, 2], E[:2, 3]
     frac = hold_fraction(hold)
-    h0, h1 = ga - frac * gb, frac * gb
+    return float(E[0, 1]), float(E[1, 1]), ga - frac * gb, frac * gb
+
+
+def servo_increments(sticks, damping: float, tau: float, dt: float, hold: str, lag: float = 0.0) -> np.ndarray:
+    """The command's exact contribution to the rate over each sample, through the servo of eq. (31)
+    (:func:`servo_step`): ``v[k]``, the rate's increment from ``k`` to ``k+1`` due to the command (per unit
+    control gain), so that the rate sees ``k2*v[k]`` as a one-sample input. The servo state starts settled on the
+    first stick.
+    """
+    e_rz, e_zz, h0, h1 = servo_step(damping, tau, dt, hold, lag)
     u = np.asarray(sticks, dtype=float)
     u_next = np.append(u[1:], u[-1])
     w = h0[1] * u + h1[1] * u_next
     z = np.empty_like(u)
     z[0] = u[0]
-    z[1:] = signal.lfilter([1.0], [1.0, -E[1, 1]], w[:-1], zi=[E[1, 1] * u[0]])[0]
-    return E[0, 1] * z + h0[0] * u + h1[0] * u_next
-
+    z[1:] = signal.lfilter([1.0], [1.0, -e_zz], w[:-1], zi=[e_zz * u[0]])[0]
+    return e_rz * z + h0[0] * u + h1[0] * u_next
 
 
 def lti_apply(A, B, C, D, u) -> np.ndarray:
@@ -201,11 +214,13 @@ def lti_apply(A, B, C, D, u) -> np.ndarray:
 
 
 def rts_smooth(y, drive, damping, t_slow, t_fast, q_slow, q_fast, zeta, dt, hold="linear",
-               wind_model="gm2") -> np.ndarray:
+               wind_model="gm2", direct=None) -> np.ndarray:
     """Steady-state Rauch-Tung-Striebel smoother of one axis: the states (rate, gust states...), shape (m, n).
 
     ``y`` is the measured rate (n,), ``drive`` the known torque from the inputs
-    (the linear terms and the offset, n). Forward: the steady-state Kalman filter
+    (the linear terms and the offset, n); ``direct`` (n,), when given, the rate's increment from ``k`` to ``k+1``
+    due to an input that enters it over the sample on its own (a command through the servo,
+    :func:`servo_increments`). Forward: the steady-state Kalman filter
     started at the first measurement; backward:
     ``x_{k|n} = x_{k|k} + G (x_{k+1|n} - x_{k+1|k})`` with the constant smoother gain
     ``G = P_f Ad' P^-1``. Both passes are linear filters (no loop over samples).
@@ -220,10 +235,13 @@ def rts_smooth(y, drive, damping, t_slow, t_fast, q_slow, q_fast, zeta, dt, hold
     x0 = np.zeros(m)
     x0[0] = y[0]
     # predicted states x_{k|k-1}; the initial state enters as an impulse one step before the record
-    U = np.vstack([np.concatenate([[0.0], y]), np.concatenate([[0.0], drive]), np.concatenate([[0.0], u_next]),
-                   np.concatenate([[1.0], np.zeros(n)])])
-    B = np.column_stack([Ad @ L, g0, g1, x0])
-    pred = lti_apply(Phi, B, I, np.zeros((m, 4)), U)[:, 1:]
+    U = [np.concatenate([[0.0], y]), np.concatenate([[0.0], drive]), np.concatenate([[0.0], u_next]),
+         np.concatenate([[1.0], np.zeros(n)])]
+    B = [Ad @ L, g0, g1, x0]
+    if direct is not None:
+        U.append(np.concatenate([[0.0], np.asarray(direct, dtype=float)]))
+        B.append(I[0])
+    pred = lti_apply(Phi, np.column_stack(B), I, np.zeros((m, len(B))), np.vstack(U))[:, 1:]
     e = y - pred[0]
     filt = pred + np.outer(L, e)
     Pf = P - np.outer(P[:, 0], P[0, :]) / S
