@@ -20,8 +20,12 @@ fractions, and the wrong diagnoses.
 
 Usage::
 
-    python scripts/aircraft_generalisation.py [--seeds 3] [--duration 300] [--workers 2] [--diagnose]
-        [--aircraft agile ...] [--cells independent ...] [--rates 100 ...]
+    python scripts/aircraft_generalisation.py [--seeds 3] [--first-seed 1] [--duration 300] [--workers 2]
+        [--diagnose] [--aircraft agile ...] [--cells independent ...] [--rates 100 ...]
+        [--set FIELD=VALUE ...] [--servo-delay AXIS=SECONDS ...] [--closed-loop auto|off]
+
+With ``--servo-delay`` the truths carry a servo delay (eq. 31) and the fitted delay's range and RMS error are
+printed per axis.
 """
 
 from __future__ import annotations
@@ -81,6 +85,20 @@ def config_field(text: str) -> tuple:
         raise argparse.ArgumentTypeError(f"expected a Python literal after {name}=, got {value!r}") from None
 
 
+def servo_delay(text: str) -> tuple:
+    """``AXIS=SECONDS`` of a command line: a true servo delay (eq. 31) on one axis."""
+    axis, _, value = text.partition("=")
+    if axis not in ("roll", "pitch", "yaw"):
+        raise argparse.ArgumentTypeError(f"expected AXIS=SECONDS with AXIS roll, pitch or yaw, got {text!r}")
+    try:
+        seconds = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds after {axis}=, got {value!r}") from None
+    if not 0.0 <= seconds <= 0.5:
+        raise argparse.ArgumentTypeError(f"expected a delay in [0, 0.5] s, got {seconds!r}")
+    return axis, seconds
+
+
 def _one(job):
     """Fly one (aircraft, cell, rate, seed) and identify (and diagnose) it as the CLI does by default."""
     from threadpoolctl import threadpool_limits
@@ -89,11 +107,11 @@ def _one(job):
     from identification.bench.synthetic import simulate_flight
     from identification.likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
 
-    aircraft, cell, rate, seed, duration, diagnose, effect, closed_loop, settings = job
+    aircraft, cell, rate, seed, duration, diagnose, effect, closed_loop, settings, delays = job
     with threadpool_limits(limits=1, user_api="blas"):
         config = replace(BENCH_CELLS[cell], duration=duration, sample_rate=float(rate), **dict(settings))
-        sim = simulate_flight(duration, seed=seed, config=config, truth=_aircraft(aircraft),
-                              effects=(effect,) if effect else ())
+        truth = replace(_aircraft(aircraft), **{f"tau_{axis}": tau for axis, tau in delays})
+        sim = simulate_flight(duration, seed=seed, config=config, truth=truth, effects=(effect,) if effect else ())
         truth = sim.truth.values()
         out = {"aircraft": aircraft, "cell": cell, "rate": rate, "seed": seed}
         t0 = time.perf_counter()
@@ -106,6 +124,7 @@ def _one(job):
         v = ml.params_.values()
         out["ml"] = {k: 100.0 * (v[k] - truth[k]) / truth[k] for k in PARAMS}
         out["hold"] = [f.input_hold for f in ml.axes_.values()]
+        out["delays"] = {axis: (tau, ml.axes_[axis].delay) for axis, tau in delays}
         hold = getattr(ml.closed_loop_, "hold", None)
         out["hold_check"] = None if hold is None else hold.describe()
         if diagnose:
@@ -158,6 +177,11 @@ def _table(rows, diagnose: bool, effect: str | None) -> None:
                 text += f" {len(hit)}/{len(ok)} |"
         print(text)
     print(f"\nWorst cell: gains {worst['gains']:.2f} % RMS, dampings {worst['dampings']:.2f} % RMS")
+    for axis in sorted({axis for r in rows for axis in r.get("delays", {})}):
+        pairs = np.array([r["delays"][axis] for r in rows if "ml" in r])
+        err = 1000.0 * (pairs[:, 1] - pairs[:, 0])
+        print(f"{axis} servo delay {1000 * pairs[0, 0]:g} ms: fitted {1000 * pairs[:, 1].min():.1f}-"
+              f"{1000 * pairs[:, 1].max():.1f} ms, error RMS {np.sqrt(np.mean(err ** 2)):.1f} ms over {len(pairs)} flights")
     checked = [r["hold_check"] for r in rows if r.get("hold_check")]
     if checked:
         moved = [f"{c['decided']} -> {c['chosen']}" for c in checked if c["switched"]]
@@ -178,6 +202,8 @@ def main(argv=None) -> None:
     ap.add_argument("--effect", default=None, help="hide this effect of the catalogue in every truth")
     ap.add_argument("--set", type=config_field, nargs="*", default=[], metavar="FIELD=VALUE",
                     help="FlightConfig fields changed in every cell, e.g. held_sticks=True command_noise=0.01")
+    ap.add_argument("--servo-delay", type=servo_delay, nargs="*", default=[], metavar="AXIS=SECONDS",
+                    help="a true servo delay in every truth, e.g. pitch=0.01")
     ap.add_argument("--closed-loop", choices=("auto", "off"), default="auto",
                     help="the closed-loop check as heli identify runs it ('auto', default) or none ('off')")
     args = ap.parse_args(argv)
@@ -190,9 +216,9 @@ def main(argv=None) -> None:
     if args.effect is not None and args.effect not in EFFECTS:
         raise SystemExit(f"unknown effect {args.effect!r}; known: {', '.join(EFFECTS)}")
     check = None if args.closed_loop == "off" else args.closed_loop
-    settings = tuple(args.set)
-    jobs = [(a, c, r, s, args.duration, args.diagnose, args.effect, check, settings) for a in args.aircraft for c in args.cells for r in args.rates
-            for s in range(args.first_seed, args.first_seed + args.seeds)]
+    settings, delays = tuple(args.set), tuple(args.servo_delay)
+    jobs = [(a, c, r, s, args.duration, args.diagnose, args.effect, check, settings, delays) for a in args.aircraft
+            for c in args.cells for r in args.rates for s in range(args.first_seed, args.first_seed + args.seeds)]
     from tqdm import tqdm
 
     if args.workers > 1:
@@ -202,10 +228,11 @@ def main(argv=None) -> None:
         rows = [_one(j) for j in tqdm(jobs, desc="flights", unit="flight")]
     print(f"\nRelative error (%) against the truth, RMS over {args.seeds} seeds [worst |error|], "
           f"{args.duration:g} s flights, defaults of heli identify. Command: python scripts/aircraft_generalisation.py "
-          f"--seeds {args.seeds} --duration {args.duration:g} --aircraft {' '.join(args.aircraft)} "
+          f"--seeds {args.seeds} --first-seed {args.first_seed} --duration {args.duration:g} --aircraft {' '.join(args.aircraft)} "
           f"--cells {' '.join(args.cells)} --rates {' '.join(f'{r:g}' for r in args.rates)}"
           + (" --diagnose" if args.diagnose else "") + (f" --effect {args.effect}" if args.effect else "")
           + (" --set " + " ".join(f"{k}={v!r}" for k, v in settings) if settings else "")
+          + (" --servo-delay " + " ".join(f"{a}={t:g}" for a, t in delays) if delays else "")
           + ("" if check else " --closed-loop off"))
     _table(rows, args.diagnose, args.effect)
 
