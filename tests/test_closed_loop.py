@@ -4,11 +4,13 @@ removes it, and leaves alone the loops it does not concern."""
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
+from heli_core.files import jsonable
 from heli_core.params import ModelParams
 from identification.bench.cells import BENCH_CELLS
 from identification.bench.synthetic import simulate_flight
@@ -133,6 +135,8 @@ def test_a_searched_servo_delay_is_flown_and_its_bias_removed_with_the_dampings(
     assert ml.params_.tau_pitch == ml.axes_["pitch"].delay
     assert abs(ml.axes_["pitch"].delay - 0.02) < abs(fitted - 0.02)
     assert abs(ml.params_.k7 / sim.truth.k7 - 1.0) < abs(pitch.fitted["k7"] / sim.truth.k7 - 1.0)
+    stored = json.loads(json.dumps(jsonable(check.describe()), allow_nan=False))  # as model.json stores it
+    assert stored["axes"]["pitch"]["corrected"]["tau_pitch"] == ml.params_.tau_pitch
 
 
 def make_quiet(flight):
