@@ -181,7 +181,8 @@ def _table(rows, diagnose: bool, effect: str | None) -> None:
         pairs = np.array([r["delays"][axis] for r in rows if "ml" in r])
         err = 1000.0 * (pairs[:, 1] - pairs[:, 0])
         print(f"{axis} servo delay {1000 * pairs[0, 0]:g} ms: fitted {1000 * pairs[:, 1].min():.1f}-"
-              f"{1000 * pairs[:, 1].max():.1f} ms, error RMS {np.sqrt(np.mean(err ** 2)):.1f} ms over {len(pairs)} flights")
+              f"{1000 * pairs[:, 1].max():.1f} ms, error RMS {np.sqrt(np.mean(err ** 2)):.1f} ms "
+              f"over {len(pairs)} flights")
     checked = [r["hold_check"] for r in rows if r.get("hold_check")]
     if checked:
         moved = [f"{c['decided']} -> {c['chosen']}" for c in checked if c["switched"]]
@@ -228,7 +229,8 @@ def main(argv=None) -> None:
         rows = [_one(j) for j in tqdm(jobs, desc="flights", unit="flight")]
     print(f"\nRelative error (%) against the truth, RMS over {args.seeds} seeds [worst |error|], "
           f"{args.duration:g} s flights, defaults of heli identify. Command: python scripts/aircraft_generalisation.py "
-          f"--seeds {args.seeds} --first-seed {args.first_seed} --duration {args.duration:g} --aircraft {' '.join(args.aircraft)} "
+          f"--seeds {args.seeds} --first-seed {args.first_seed} --duration {args.duration:g} "
+          f"--aircraft {' '.join(args.aircraft)} "
           f"--cells {' '.join(args.cells)} --rates {' '.join(f'{r:g}' for r in args.rates)}"
           + (" --diagnose" if args.diagnose else "") + (f" --effect {args.effect}" if args.effect else "")
           + (" --set " + " ".join(f"{k}={v!r}" for k, v in settings) if settings else "")

@@ -25,8 +25,9 @@ way. That way has one direction: a pilot who opposes the motion puts into his st
 motion the gyro did not see, and the likelihood reads it as more damping and less control power (the
 damping up, the gain's magnitude down or within its noise: on every aircraft, pilot, gyro and wind measured;
 behind a real 20 ms servo delay the paper aircraft's pitch gain moved +0.2-0.4 +- 0.3-0.6 % beside a damping
-+5-7 +- 1-1.6 %). A bias the other way (the gain's magnitude significantly up) is the simulated world's own (an agile aircraft's yaw in 2 Hz Dryden gusts, its gust fitted at 7 Hz, gave
-+40 % on the damping with the gain +11 % where the flight's fit was within 2.4 %), not the loop's.
++5-7 +- 1-1.6 %). A bias the other way (the gain's magnitude significantly up) is the simulated world's own
+(an agile aircraft's yaw in 2 Hz Dryden gusts, its gust fitted at 7 Hz, gave +40 % on the damping with the
+gain +11 % where the flight's fit was within 2.4 %), not the loop's.
 
 An axis with a servo delay or lag is flown through its servo (eq. 31, Padé, discretised exactly as the likelihood
 does, :func:`~identification.likelihood.state_space.servo_step`) and its flights fitted with the flight's timing
@@ -48,10 +49,9 @@ from heli_core.terms import AXES, STICK_ROW
 from ..errors import IdentifiabilityError
 from ..flight import Flight
 from ..validation.model_verdict import bound_side
-from .axis_likelihood import AxisLikelihood
+from .axis_likelihood import MIN_SERVO_DELAY, AxisLikelihood
 from .axis_pool import map_axes
 from .pilot_model import AxisSignals, PilotModel, fit_pilot, reaction_delay
-from .axis_likelihood import MIN_SERVO_DELAY
 from .state_space import covariance_root, discrete_model, rts_smooth, servo_increments, servo_step, wind_block
 
 CLOSED_LOOP_MODES = ("auto", "report")
@@ -165,7 +165,8 @@ class ClosedLoopCheck:
                 verdict = "removed" if k in c.removed else "left"
                 parts.append(f"{k} {100 * b:+.1f} ± {100 * c.bias_se[k]:.1f} % ({verdict})")
             delays = ", ".join(f"{p['reaction_delay_s']:.2f}" for p in c.pilots)
-            other = "" if c.loops_direction else " (not the loop's direction, damping up and the gain not significantly up: left)"
+            other = ("" if c.loops_direction else
+                     " (not the loop's direction, damping up and the gain not significantly up: left)")
             out.append(f"{axis}: pilot sees the aircraft (reaction {delays} s); bias " + "; ".join(parts) + other)
         out += [d.line() for d in self.delays.values()]
         if self.hold is not None:
@@ -299,10 +300,10 @@ def _fly(Ad, g0, g1, kicks, noise, gain, other, delay, coef, angle_mean, rest, d
 
     ``kicks`` (m, n) are the process noise, ``noise`` (n,) the gyro's; the stick drives the rate through
     ``servo`` (:attr:`_AxisLoop.servo`, its state settled on the trim), the other torque through ``g0``, ``g1``;
-    ``other`` and ``rest`` are padded with
-    their first value and zeros over the settling samples. The pilot's stick at k reads the angle (about
-    ``angle_mean``), the rate, the gyro's noise and the angle's integral ``delay`` samples before, plus
-    ``rest[k]``, clipped to the stick's range (:class:`~identification.likelihood.pilot_model.PilotModel`)."""
+    ``other`` and ``rest`` are padded with their first value and zeros over the settling samples. The pilot's
+    stick at k reads the angle (about ``angle_mean``), the rate, the gyro's noise and the angle's integral
+    ``delay`` samples before, plus ``rest[k]``, clipped to the stick's range
+    (:class:`~identification.likelihood.pilot_model.PilotModel`)."""
     m, n = Ad.shape[0], rest.size
     rate = np.zeros(n)
     angle = np.zeros(n)

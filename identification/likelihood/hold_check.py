@@ -139,8 +139,8 @@ def decide_hold_in_loop(ident, check, n_flights: int, seed: int = 0, workers=Non
         return HoldCheck(decided, decided, reason=why)
     axes = tuple(a for a, c in check.axes.items() if c.checked and not has_servo(ident.axes_[a]))
     if not axes:
-        return HoldCheck(decided, decided, reason="every checked axis has a servo delay or lag, and a delay shapes the "
-                         "phase as a hold does: the hold is read on axes without one")
+        return HoldCheck(decided, decided, reason="every checked axis has a servo delay or lag, and a delay shapes "
+                         "the phase as a hold does: the hold is read on axes without one")
     names = {axis: ident._kept_terms(AXES.index(axis), ident.axes_[axis]) for axis in axes}
     fitted = {h: {axis: axis_refit(ident, axis, kept, ident.flights_, h) for axis, kept in names.items()} for h in HOLDS}
     flight_lr = float(sum(fitted["zoh"][a].axes_[a].nll - fitted["linear"][a].axes_[a].nll for a in axes))
