@@ -123,3 +123,12 @@ def test_held_sticks_behind_the_same_gyro_stay_held():
     assert ml.hold_decision_["named"] == "zoh"
     stored = json.loads(json.dumps(jsonable(ml.closed_loop_.describe()), allow_nan=False))  # as model.json stores it
     assert stored["hold"]["chosen"] == "zoh" and stored["hold"]["applied"] is False
+
+
+def test_an_axis_left_for_its_direction_says_what_was_found():
+    down = _check(-0.05, loops_direction=False)
+    assert "not the loop's direction: the damping down; left" in down.lines()[0]
+    agile_yaw = AxisCheck("yaw", True, bias={"k10": 0.11, "k11": 0.40}, bias_se={"k10": 0.01, "k11": 0.03},
+                          loops_direction=False)  # the agile yaw in 2 Hz Dryden gusts (closed_loop's docstring)
+    line = ClosedLoopCheck({"yaw": agile_yaw}, 8, 0, "auto", 1.0).lines()[0]
+    assert "the gain's magnitude up beyond its noise" in line

@@ -165,8 +165,9 @@ class ClosedLoopCheck:
                 verdict = "removed" if k in c.removed else "left"
                 parts.append(f"{k} {100 * b:+.1f} ± {100 * c.bias_se[k]:.1f} % ({verdict})")
             delays = ", ".join(f"{p['reaction_delay_s']:.2f}" for p in c.pilots)
-            other = ("" if c.loops_direction else
-                     " (not the loop's direction, damping up and the gain not significantly up: left)")
+            found = ("the damping down" if list(c.bias.values())[1] <= 0.0
+                     else "the gain's magnitude up beyond its noise")
+            other = "" if c.loops_direction else f" (not the loop's direction: {found}; left)"
             out.append(f"{axis}: pilot sees the aircraft (reaction {delays} s); bias " + "; ".join(parts) + other)
         out += [d.line() for d in self.delays.values()]
         if self.hold is not None:
