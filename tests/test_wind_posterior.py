@@ -212,3 +212,18 @@ def test_the_shipped_library_replays_posterior_draws_with_the_identified_wind_po
                 band = p[(f >= lo) & (f < hi)].sum() * (f[1] - f[0])
                 expected = _gauss_markov_band_power(wind["torque_std"], wind["time_constants_s"], lo, hi)
                 assert 0.8 < band / expected < 1.25, (entry["id"], axis, lo, hi, band / expected)
+
+
+def test_an_input_given_as_the_rates_increment_smooths_as_the_same_torque_held():
+    """``rts_smooth(direct=)`` (a command through the servo, as the closed-loop check gives it) enters the rate
+    where a held torque does: held over the sample, ``g0`` feeds the rate alone, so ``direct = g0[0] * u`` is
+    ``drive = u``."""
+    rng = np.random.default_rng(5)
+    _, y = _flight_of_the_model(rng, 2000)
+    u = np.sin(np.arange(y.size) * DT * 3.0) + 0.1 * rng.standard_normal(y.size)
+    _, g0, g1, _ = discrete_model(*MODEL, DT, "zoh", "gm2")
+    assert np.all(g0[1:] == 0.0) and np.all(g1 == 0.0)
+    as_torque = rts_smooth(y, u, *MODEL, DT, "zoh", "gm2")
+    as_increment = rts_smooth(y, np.zeros(y.size), *MODEL, DT, "zoh", "gm2", direct=g0[0] * u)
+    assert_allclose(as_increment, as_torque, rtol=1e-9, atol=1e-9 * np.abs(as_torque).max())
+    assert not np.allclose(as_increment, rts_smooth(y, np.zeros(y.size), *MODEL, DT, "zoh", "gm2"))
