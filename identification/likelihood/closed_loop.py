@@ -381,6 +381,19 @@ def unflyable(loops: list, signals: list) -> str:
     return next(filter(None, (_implausible(lp, sig) for lp, sig in zip(loops, signals))), "")
 
 
+def world_loops(world, axes) -> tuple[dict, str]:
+    """The loops of ``world``'s axes ``axes`` (an estimator, or a world of :func:`with_fits`) as the check flies
+    them (:func:`_loops`), and why they cannot be flown, empty when they can: the first of the check's own reasons
+    not to fly an axis (:func:`_skip_reason`, :func:`unflyable`) that one of them has."""
+    data = {axis: world._fitted_data(AXES.index(axis), world.axes_[axis], world.flights_, 0) for axis in axes}
+    why = next(filter(None, (_skip_reason(world, AXES.index(axis), world.axes_[axis], data[axis]) for axis in axes)),
+               "")
+    if why:
+        return {}, why
+    loops, signals = _loops(world, data)
+    return loops, next(filter(None, (unflyable(loops[axis], signals[axis]) for axis in axes)), "")
+
+
 def flown_flights(ident, axis: str, loops: list, rng: np.random.Generator) -> list:
     """``ident``'s flights with axis ``axis``' gyro, attitude and stick replaced by one simulated flight of each
     of its ``loops`` (one per fitted flight); the other axes as logged."""

@@ -30,7 +30,7 @@ from heli_core.terms import AXES
 from ..errors import IdentifiabilityError
 from .axis_likelihood import MIN_SERVO_DELAY
 from .axis_pool import map_axes
-from .closed_loop import _loops, _skip_reason, axis_refit, flown_flights, unflyable, with_fits
+from .closed_loop import axis_refit, flown_flights, with_fits, world_loops
 
 N_DELAY_FLIGHTS = 16
 """Flights of the delay-free world flown per delay tested (the loop's optimum appeared on 1 of 10)."""
@@ -131,11 +131,7 @@ def check_delay(ident, axis: str, min_lr: float, n_flights: int = N_DELAY_FLIGHT
                           f"keep it (LR {flight[1]:.1f})", dt=dt)
     null_fit = replace(flight[2], dropped=fit.dropped)
     world = with_fits(ident, {axis: null_fit})
-    data = world._fitted_data(a, null_fit, world.flights_, 0)
-    why = _skip_reason(world, a, null_fit, data)  # the closed-loop check's own reasons not to fly an axis
-    if not why:
-        loops, signals = _loops(world, {axis: data})
-        why = unflyable(loops[axis], signals[axis])
+    loops, why = world_loops(world, (axis,))  # the closed-loop check's own reasons not to fly an axis
     if why:
         return DelayCheck(axis, fit.delay, reason=why, dt=dt)
 

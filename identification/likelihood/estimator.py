@@ -346,8 +346,8 @@ class MaximumLikelihoodIdentifier:
         found servo delay tested and the hold decided again in the loop's world where the loop's bias could reach
         them: :mod:`identification.likelihood.loop_checks`): in mode "auto" the significant biases are removed
         from :attr:`params_` and :attr:`axes_` (a delay the loop makes, and a hold its world rejects, too); the
-        result is kept in
-        :attr:`closed_loop_` and ``closed_loop`` records the mode (as a fit with ``closed_loop=mode`` does).
+        result is kept in :attr:`closed_loop_` and ``closed_loop`` records the mode (as a fit with
+        ``closed_loop=mode`` does).
 
         Raises
         ------

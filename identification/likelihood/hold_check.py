@@ -40,8 +40,7 @@ from ..errors import IdentifiabilityError
 from .axis_pool import map_axes
 from .axis_search import BURN_IN
 from .axis_fit import model_values
-from .closed_loop import (SIGNIFICANCE, _loops, _skip_reason, axis_refit, flown_flights, has_servo, unflyable,
-                           with_fits)
+from .closed_loop import SIGNIFICANCE, axis_refit, flown_flights, has_servo, with_fits, world_loops
 from .input_hold import HOLDS
 
 MAX_Z = 3.0
@@ -148,10 +147,7 @@ def decide_hold_in_loop(ident, check, n_flights: int, seed: int = 0, workers=Non
     for tag, h in enumerate(HOLDS, start=1):
         fits[h] = {a: replace(fitted[h][a].axes_[a], dropped=ident.axes_[a].dropped) for a in axes}
         world = with_fits(ident, fits[h])
-        data = {a: world._fitted_data(AXES.index(a), world.axes_[a], world.flights_, 0) for a in axes}
-        unfit = next(filter(None, (_skip_reason(world, AXES.index(a), world.axes_[a], data[a]) for a in axes)), "")
-        loops, signals = _loops(world, data)
-        unfit = unfit or next(filter(None, (unflyable(loops[a], signals[a]) for a in axes)), "")
+        loops, unfit = world_loops(world, axes)
         if unfit:
             return HoldCheck(decided, decided, axes, flight_lr, reason=f"the {h} hold's world cannot be flown: {unfit}")
         lrs = map_axes(lambda b: _lr(ident, world, loops, names, seed, tag, b), range(n_flights), workers)

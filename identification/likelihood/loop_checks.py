@@ -2,7 +2,7 @@
 :meth:`~identification.likelihood.estimator.MaximumLikelihoodIdentifier.closed_loop_check`:
 
 1. a servo delay the search found is tested in the delay-free loop (:mod:`.delay_check`): a delay that loop makes
-   too is the loop's, and removed, so that the check can fly the axis;
+   too is the loop's, and removed (a delay that stands is flown by step 2 through the servo);
 2. the bias of each axis is measured in its loop (:mod:`.closed_loop`);
 3. where a bias the loop's way was found, the log's hold is decided again in the loop's world
    (:mod:`.hold_check`), and when it changes, step 2 runs again at the new hold.
