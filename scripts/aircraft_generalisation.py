@@ -26,6 +26,14 @@ Usage::
 
 With ``--servo-delay`` the truths carry a servo delay (eq. 31) and the fitted delay's range and RMS error are
 printed per axis.
+
+With ``--at-truth`` the closed-loop check is flown a second time, on each checked axis at the truth's values
+instead of the fitted ones (the flight's own pilot, hold, gust model and timing): the bias an exact correction would
+remove, and the estimator's own spread where the truth is. Printed per aircraft and cell and per checked
+parameter: the RMS error after that exact correction (the best any correction by this bootstrap can do), the
+spread of the fits of the truth's world (their standard deviation, the mean over flights), and ``z``, the
+flight's fitted value less the mean of those fits, over their spread (mean and RMS: about 0 and 1 where the
+check's world flies as the flight's did).
 """
 
 from __future__ import annotations
@@ -107,7 +115,7 @@ def _one(job):
     from identification.bench.synthetic import simulate_flight
     from identification.likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
 
-    aircraft, cell, rate, seed, duration, diagnose, effect, closed_loop, settings, delays = job
+    aircraft, cell, rate, seed, duration, diagnose, effect, closed_loop, settings, delays, at_truth = job
     with threadpool_limits(limits=1, user_api="blas"):
         config = replace(BENCH_CELLS[cell], duration=duration, sample_rate=float(rate), **dict(settings))
         truth = replace(_aircraft(aircraft), **{f"tau_{axis}": tau for axis, tau in delays})
@@ -127,6 +135,8 @@ def _one(job):
         out["delays"] = {axis: (tau, ml.axes_[axis].delay) for axis, tau in delays}
         hold = getattr(ml.closed_loop_, "hold", None)
         out["hold_check"] = None if hold is None else hold.describe()
+        if at_truth and ml.closed_loop_ is not None:
+            out["at_truth"] = _check_at_truth(ml, truth, dict(delays))
         if diagnose:
             from identification.diagnosis.likelihood_diagnoser import LikelihoodDiagnoser
 
@@ -136,6 +146,52 @@ def _one(job):
             out["named"] = [(s.axis, s.effect, round(float(s.lr), 1)) for s in d.steps_]
             out["effect"] = effect
     return out
+
+
+def _check_at_truth(ml, truth: dict, delays: dict) -> dict:
+    """The closed-loop check of ``ml`` (fitted and checked) flown again with each checked axis at the ``truth``'s
+    values (``delays``: axis -> the true servo delay; none elsewhere), in mode "report": per checked parameter, the
+    error [%] of the fitted value corrected by the bias measured there, the fits' spread there [%] and the flight's
+    ``z`` (module docstring)."""
+    from identification.likelihood.closed_loop import check_closed_loop, set_axis_values
+
+    first = ml.closed_loop_
+    checked = {axis: c for axis, c in first.axes.items() if c.checked}
+    for axis, c in checked.items():
+        set_axis_values(ml, axis, {k: delays.get(axis, 0.0) if k.startswith("tau_") else truth[k] for k in c.fitted})
+    again = check_closed_loop(ml, ml.closed_loop_flights, seed=1, mode="report", workers=1)
+    out = {}
+    for axis, c in checked.items():
+        a = again.axes[axis]
+        if not a.checked:
+            continue
+        for k, fitted in c.fitted.items():
+            if k not in a.bias:  # a delay fitted where the truth has none: its world flies no servo
+                continue
+            true, spread = a.fitted[k], a.bias_se[k] * np.sqrt(again.n_flights)
+            out[k] = {"exact": 100.0 * (fitted / (1.0 + a.bias[k]) - true) / true, "spread": 100.0 * spread,
+                      "z": (fitted / true - 1.0 - a.bias[k]) / max(spread, 1e-12)}
+    return out
+
+
+def _truth_table(rows) -> None:
+    """The ``--at-truth`` rows (module docstring)."""
+    keys = sorted({(r["aircraft"], r["cell"], r["rate"]) for r in rows if r.get("at_truth")}, key=str)
+    if not keys:
+        return
+    print("\nThe check flown at the truth: error after the exact correction, RMS [worst] %; the fits' spread there, "
+          "% (mean); z of the flight's fit, mean / RMS")
+    print("| aircraft | cell | log rate | parameter | exact correction | spread at the truth | z | flights |")
+    print("|---|---|---|---|---|---|---|---|")
+    for key in keys:
+        rs = [r["at_truth"] for r in rows if (r["aircraft"], r["cell"], r["rate"]) == key and r.get("at_truth")]
+        for k in sorted({k for r in rs for k in r}, key=lambda k: (k.startswith("tau"), k[:1], len(k), k)):
+            v = [r[k] for r in rs if k in r]
+            exact = np.array([x["exact"] for x in v])
+            z = np.array([x["z"] for x in v])
+            print(f"| {key[0]} | {key[1]} | {key[2]:g} Hz | {k} | {np.sqrt(np.mean(exact ** 2)):.1f} "
+                  f"[{np.abs(exact).max():.1f}] | {np.mean([x['spread'] for x in v]):.1f} | {z.mean():+.2f} / "
+                  f"{np.sqrt(np.mean(z ** 2)):.2f} | {len(v)} |")
 
 
 def _wrong(named: list, effect: str | None) -> list:
@@ -207,6 +263,8 @@ def main(argv=None) -> None:
                     help="a true servo delay in every truth, e.g. pitch=0.01")
     ap.add_argument("--closed-loop", choices=("auto", "off"), default="auto",
                     help="the closed-loop check as heli identify runs it ('auto', default) or none ('off')")
+    ap.add_argument("--at-truth", action="store_true",
+                    help="also fly the check at the truth's values (the exact correction and the spread there)")
     args = ap.parse_args(argv)
     from identification.bench.cells import BENCH_CELLS
     from identification.bench.flight_config import EFFECTS
@@ -218,7 +276,9 @@ def main(argv=None) -> None:
         raise SystemExit(f"unknown effect {args.effect!r}; known: {', '.join(EFFECTS)}")
     check = None if args.closed_loop == "off" else args.closed_loop
     settings, delays = tuple(args.set), tuple(args.servo_delay)
-    jobs = [(a, c, r, s, args.duration, args.diagnose, args.effect, check, settings, delays) for a in args.aircraft
+    if args.at_truth and check is None:
+        raise SystemExit("--at-truth flies the closed-loop check again: it needs --closed-loop auto")
+    jobs = [(a, c, r, s, args.duration, args.diagnose, args.effect, check, settings, delays, args.at_truth) for a in args.aircraft
             for c in args.cells for r in args.rates for s in range(args.first_seed, args.first_seed + args.seeds)]
     from tqdm import tqdm
 
@@ -235,8 +295,9 @@ def main(argv=None) -> None:
           + (" --diagnose" if args.diagnose else "") + (f" --effect {args.effect}" if args.effect else "")
           + (" --set " + " ".join(f"{k}={v!r}" for k, v in settings) if settings else "")
           + (" --servo-delay " + " ".join(f"{a}={t:g}" for a, t in delays) if delays else "")
-          + ("" if check else " --closed-loop off"))
+          + ("" if check else " --closed-loop off") + (" --at-truth" if args.at_truth else ""))
     _table(rows, args.diagnose, args.effect)
+    _truth_table(rows)
 
 
 if __name__ == "__main__":

@@ -67,6 +67,26 @@ def test_auto_removes_the_significant_bias_from_the_fit_and_keeps_what_was_fitte
     assert again.params_.k7 == check.fitted["k7"] and again.axes_["pitch"].state[0] == check.fitted["k7"]
 
 
+def test_the_check_flies_the_values_an_axis_is_given(sluggish_pitch):
+    """``set_axis_values`` gives an axis other values for the loop, the smoother and ``params_`` (what
+    scripts/aircraft_generalisation.py --at-truth flies): checked at the truth, the fits come out high there too,
+    and the estimator the values were copied from is untouched."""
+    import copy
+
+    from identification.likelihood.closed_loop import check_closed_loop, set_axis_values
+
+    sim, ml = sluggish_pitch
+    world = copy.copy(ml)
+    world.axes_ = dict(ml.axes_)
+    truth = {"k6": sim.truth.k6, "k7": sim.truth.k7}
+    set_axis_values(world, "pitch", truth)
+    assert world.params_.k7 == truth["k7"] and world.axes_["pitch"].state[0] == truth["k7"]
+    assert ml.params_.k7 == ml.closed_loop_.axes["pitch"].fitted["k7"] != truth["k7"]
+    at_truth = check_closed_loop(world, 4, mode="report").axes["pitch"]
+    assert at_truth.fitted == truth
+    assert at_truth.bias["k7"] > 2.0 * at_truth.bias_se["k7"]
+
+
 def test_an_autopilots_loop_closes_on_the_gyro_and_is_left_alone():
     sim = _flight("broadband-autopilot", 3, 120.0, gyro_noise=0.03)
     ml = MaximumLikelihoodIdentifier(input_hold=0.0, axes=("roll",), closed_loop="auto").fit(sim.flight)

@@ -567,16 +567,20 @@ def apply_check(ident, check: ClosedLoopCheck, which: str = "corrected") -> None
     """Set ``ident``'s values after the check (:attr:`AxisCheck.corrected`; ``which="fitted"``: back to those
     before it): the axis fits' parameters and servo delay, the damping in their search vectors (the smoother and
     the wind draws use it) and ``params_``. The fitted values stay in ``check``."""
-    values = {}
     for axis, c in check.axes.items():
-        if not c.removed:
-            continue
-        fit = ident.axes_[axis]
-        chosen = dict(getattr(c, which))
-        delay = chosen.pop(f"tau_{axis}", fit.delay)
-        params = {**fit.params, **chosen}
-        state = np.array(fit.state, dtype=float, copy=True)
-        state[0] = list(chosen.values())[1]  # the damping (gain first: _biases); the search vector starts with it
-        ident.axes_[axis] = replace(fit, params=params, state=state, delay=delay)
-        values.update(chosen, **{f"tau_{axis}": delay})
-    ident.params_ = ident.params_.with_values(**values)
+        if c.removed:
+            set_axis_values(ident, axis, getattr(c, which))
+
+
+def set_axis_values(ident, axis: str, values: dict) -> None:
+    """Give axis ``axis`` of ``ident`` the checked ``values`` (:func:`checked_values`' keys: the gain, the damping,
+    in that order, and ``tau_<axis>`` when present): its fit's parameters and servo delay, the damping in its
+    search vector (the smoother and the wind draws use it) and ``params_``."""
+    fit = ident.axes_[axis]
+    chosen = dict(values)
+    delay = chosen.pop(f"tau_{axis}", fit.delay)
+    params = {**fit.params, **chosen}
+    state = np.array(fit.state, dtype=float, copy=True)
+    state[0] = list(chosen.values())[1]  # the damping (gain first: _biases); the search vector starts with it
+    ident.axes_[axis] = replace(fit, params=params, state=state, delay=delay)
+    ident.params_ = ident.params_.with_values(**chosen, **{f"tau_{axis}": delay})
