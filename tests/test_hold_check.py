@@ -16,7 +16,8 @@ from identification.bench.cells import BENCH_CELLS
 from identification.bench.synthetic import simulate_flight
 from identification.likelihood.closed_loop import AxisCheck, ClosedLoopCheck
 from identification.likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
-from identification.likelihood.hold_check import HoldCheck, choose_hold, decide_hold_in_loop, needs_hold_check
+from identification.likelihood.hold_check import (HoldCheck, axis_votes, choose_hold, decide_hold_in_loop, majority_hold,
+                                                  needs_hold_check)
 from identification.reports.identify import method_sentence
 
 SLUGGISH = ModelParams(k2=0.7, k3=1.2, kd1=0.02, k6=-0.5, k7=1.1, kd2=0.01, k10=6.0, k11=1.6, k12=-0.3, kd3=0.05)
@@ -42,6 +43,32 @@ def test_the_flights_lr_chooses_the_world_that_reproduces_it():
 def test_a_flight_neither_world_reproduces_keeps_the_decided_hold_and_says_so():
     chosen, _, reason = choose_hold(-80.0, {"linear": LINEAR_WORLD, "zoh": HELD_WORLD}, decided="linear")
     assert chosen == "linear" and "neither world" in reason
+
+
+def _per_axis(means: dict, spread: float = 2.0) -> list:
+    """Eight simulated flights' per-axis LRs about ``means`` (axis -> mean), the same deviations on each axis."""
+    offsets = [-2.5, -1.5, -0.8, -0.2, 0.2, 0.8, 1.5, 2.5]
+    return [{a: m + spread * d for a, m in means.items()} for d in offsets]
+
+
+def test_one_axis_whose_hold_is_confounded_does_not_carry_the_others():
+    """A delay the search did not find makes its axis look held (half a sample late): summed, its LR puts a
+    pilot's hand in the held world; the other two axes' own LRs point to the interpolated one, and decide."""
+    worlds = {"linear": _per_axis({"roll": -2.0, "pitch": -1.0, "yaw": -2.0}),
+              "zoh": _per_axis({"roll": -9.0, "pitch": -10.0, "yaw": -9.0})}
+    flight = {"roll": -2.5, "pitch": -24.0, "yaw": -3.0}
+    total = sum(flight.values())
+    chosen, _, _ = choose_hold(total, {h: [sum(r.values()) for r in lrs] for h, lrs in worlds.items()}, "zoh")
+    assert chosen == "zoh"  # the sum alone: held
+    votes = axis_votes(flight, worlds, "zoh")
+    assert votes == {"roll": "linear", "pitch": None, "yaw": "linear"}  # pitch: beyond both worlds' spreads
+    assert majority_hold(votes) == "linear"
+    # held sticks: every axis in the held world
+    held = {"roll": -9.5, "pitch": -10.5, "yaw": -8.0}
+    assert majority_hold(axis_votes(held, worlds, "zoh")) == "zoh"
+    # fewer than three axes, or no majority: the sum decides
+    assert majority_hold({"roll": "linear", "yaw": "linear"}) is None
+    assert majority_hold({"roll": "linear", "pitch": "zoh", "yaw": None}) is None
 
 
 def _check(damping_bias: float, loops_direction: bool = True) -> ClosedLoopCheck:
