@@ -39,6 +39,7 @@ check's world flies as the flight's did).
 from __future__ import annotations
 
 import argparse
+import shlex
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
@@ -278,8 +279,9 @@ def main(argv=None) -> None:
     settings, delays = tuple(args.set), tuple(args.servo_delay)
     if args.at_truth and check is None:
         raise SystemExit("--at-truth flies the closed-loop check again: it needs --closed-loop auto")
-    jobs = [(a, c, r, s, args.duration, args.diagnose, args.effect, check, settings, delays, args.at_truth) for a in args.aircraft
-            for c in args.cells for r in args.rates for s in range(args.first_seed, args.first_seed + args.seeds)]
+    jobs = [(a, c, r, s, args.duration, args.diagnose, args.effect, check, settings, delays, args.at_truth)
+            for a in args.aircraft for c in args.cells for r in args.rates
+            for s in range(args.first_seed, args.first_seed + args.seeds)]
     from tqdm import tqdm
 
     if args.workers > 1:
@@ -293,7 +295,7 @@ def main(argv=None) -> None:
           f"--aircraft {' '.join(args.aircraft)} "
           f"--cells {' '.join(args.cells)} --rates {' '.join(f'{r:g}' for r in args.rates)}"
           + (" --diagnose" if args.diagnose else "") + (f" --effect {args.effect}" if args.effect else "")
-          + (" --set " + " ".join(f"{k}={v!r}" for k, v in settings) if settings else "")
+          + (" --set " + " ".join(shlex.quote(f"{k}={v!r}") for k, v in settings) if settings else "")
           + (" --servo-delay " + " ".join(f"{a}={t:g}" for a, t in delays) if delays else "")
           + ("" if check else " --closed-loop off") + (" --at-truth" if args.at_truth else ""))
     _table(rows, args.diagnose, args.effect)
