@@ -16,8 +16,8 @@ from identification.bench.cells import BENCH_CELLS
 from identification.bench.synthetic import simulate_flight
 from identification.likelihood.closed_loop import AxisCheck, ClosedLoopCheck
 from identification.likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
-from identification.likelihood.hold_check import (HoldCheck, axis_votes, choose_hold, decide_hold_in_loop, majority_hold,
-                                                  needs_hold_check)
+from identification.likelihood.hold_check import (HoldCheck, axis_votes, choose_hold, decide_hold_in_loop,
+                                                  majority_hold, needs_hold_check)
 from identification.reports.identify import method_sentence
 
 SLUGGISH = ModelParams(k2=0.7, k3=1.2, kd1=0.02, k6=-0.5, k7=1.1, kd2=0.01, k10=6.0, k11=1.6, k12=-0.3, kd3=0.05)
