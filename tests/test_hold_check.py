@@ -69,6 +69,13 @@ def test_one_axis_whose_hold_is_confounded_does_not_carry_the_others():
     # fewer than three axes, or no majority: the sum decides
     assert majority_hold({"roll": "linear", "yaw": "linear"}) is None
     assert majority_hold({"roll": "linear", "pitch": "zoh", "yaw": None}) is None
+    # said so: the terminal's line names the majority, not a world that reproduces the sum
+    hold = HoldCheck("zoh", "linear", ("roll", "pitch", "yaw"), total, {"linear": {"mean": -5.0, "sd": 3.0},
+                     "zoh": {"mean": -28.0, "sd": 4.0}}, "the axes' majority (roll, yaw) points to linear where "
+                     "their sum pointed to zoh", applied=True, votes=votes, by_majority=True)
+    assert hold.line().endswith("the axes' majority (roll, yaw) points to linear where their sum pointed to zoh: "
+                                "hold zoh -> linear")
+    assert json.loads(json.dumps(hold.describe()))["votes"]["pitch"] is None
 
 
 def _check(damping_bias: float, loops_direction: bool = True) -> ClosedLoopCheck:

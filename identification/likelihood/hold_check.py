@@ -76,6 +76,8 @@ class HoldCheck:
         The fit was moved to the chosen hold (:func:`switch_hold`, the check's mode "auto").
     votes : dict
         Axis -> the hold its own LR chose against its own worlds' (None: neither reproduces it).
+    by_majority : bool
+        The axes' majority chose the hold against their sum.
     """
 
     decided: str
@@ -86,6 +88,7 @@ class HoldCheck:
     reason: str = ""
     applied: bool = False
     votes: dict = field(default_factory=dict)  # axis -> the hold its own LR chose (axis_votes), None: neither
+    by_majority: bool = False  # the axes' majority overrode their sum (reason says so)
     fits: dict = field(default_factory=dict, repr=False, compare=False)  # the chosen hold's axis fits
 
     @property
@@ -96,17 +99,16 @@ class HoldCheck:
         """JSON-ready."""
         return {"decided": self.decided, "chosen": self.chosen, "axes": list(self.axes), "flight_lr": self.flight_lr,
                 "worlds": self.worlds, "reason": self.reason, "switched": self.switched,
-                "applied": self.applied, "votes": self.votes}
+                "applied": self.applied, "votes": self.votes, "by_majority": self.by_majority}
 
     def line(self) -> str:
         """One line for a report or the terminal."""
         if not self.worlds:
             return f"hold: {self.decided} kept ({self.reason})"
         seen = "; ".join(f"{h} world {w['mean']:+.1f} ± {w['sd']:.1f}" for h, w in self.worlds.items())
-        verdict = (f"the {self.chosen} hold's world reproduces it: hold {self.decided} -> {self.chosen}"
-                   + (f" ({self.reason})" if self.reason else "")
-                   + ("" if self.applied else " (reported, not applied)") if self.switched
-                   else f"hold {self.chosen} kept" + (f" ({self.reason})" if self.reason else ""))
+        why = self.reason if self.by_majority else f"the {self.chosen} hold's world reproduces it"
+        verdict = (f"{why}: hold {self.decided} -> {self.chosen}" + ("" if self.applied else " (reported, not applied)")
+                   if self.switched else f"hold {self.chosen} kept" + (f" ({self.reason})" if self.reason else ""))
         return (f"hold in the loop's world: the flight's LR (held - interpolated) {self.flight_lr:+.1f} over "
                 f"{', '.join(self.axes)}; {seen}: {verdict}")
 
@@ -172,11 +174,13 @@ def decide_hold_in_loop(ident, check, n_flights: int, seed: int = 0, workers=Non
                                           decided)
     votes = axis_votes(flight_lrs, worlds, decided)
     majority = majority_hold(votes)
-    if not reason and majority is not None and majority != chosen:
+    overridden = not reason and majority is not None and majority != chosen
+    if overridden:
         reason = (f"the axes' majority ({', '.join(a for a, v in votes.items() if v == majority)}) points to "
                   f"{majority} where their sum pointed to {chosen}")
         chosen = majority
-    return HoldCheck(decided, chosen, axes, flight_lr, summary, reason, votes=votes, fits=fits[chosen])
+    return HoldCheck(decided, chosen, axes, flight_lr, summary, reason, votes=votes, by_majority=overridden,
+                     fits=fits[chosen])
 
 
 def axis_votes(flight_lrs: dict, worlds: dict, decided: str) -> dict:
