@@ -4,7 +4,8 @@ For one body rate (eq. 18 or 21 with the wind of eqs. 41-42 as a random
 process, :mod:`identification.likelihood.state_space`), :class:`AxisLikelihood` turns a
 search vector (the damping, the gust time constants and levels, and the servo
 delay when it is searched) into the innovations of the steady-state Kalman
-filter, computed by linear filters (``scipy.signal.lfilter``) over every
+filter, computed by linear filters (``scipy.signal.lfilter``'s arithmetic, compiled:
+:func:`~identification.likelihood.kalman_kernels.filter_rows`) over every
 flight at once. The parameters that enter linearly (control gain, offsets,
 couplings, added terms) are solved exactly at every step (variable
 projection), so that the search of
@@ -93,16 +94,22 @@ class AxisLikelihood:
         servo = d.servo_row is not None and (tau > MIN_SERVO_DELAY or (d.lag > 0.0 and tau >= -MIN_SERVO_DELAY))
         if servo:
             b_v, _ = strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), np.eye(Ad.shape[0])[0])
+        from .kalman_kernels import filter_rows  # numba loads with the first evaluation, not with the package
+
         ys, zs = [], []
         for i, (y, X) in enumerate(zip(d.y, regressors)):
-            ys.append((y - signal.lfilter(b_y, a, y))[d.burn:])
-            Z = signal.lfilter(b_u, a, X, axis=-1)
+            # every row through its filter in one compiled pass (lfilter's arithmetic: kalman_kernels.filter_rows)
+            rows, B = np.empty((1 + X.shape[0], y.size)), np.empty((1 + X.shape[0], a.size))
+            rows[0], rows[1:], B[0], B[1:] = y, X, b_y, b_u
             for r in d.causal_rows:
-                Z[r] = signal.lfilter(b_c, a, X[r])
+                B[1 + r] = b_c
             if servo:
-                v = servo_increments(d.servo_sticks[i], x[0], max(tau, 0.0), d.dt, self.hold_at(x), d.lag)
-                Z[d.servo_row] = signal.lfilter(b_v, a, v)
-            zs.append(Z[:, d.burn:])
+                rows[1 + d.servo_row] = servo_increments(d.servo_sticks[i], x[0], max(tau, 0.0), d.dt,
+                                                         self.hold_at(x), d.lag)
+                B[1 + d.servo_row] = b_v
+            F = filter_rows(B, a, rows)
+            ys.append((y - F[0])[d.burn:])
+            zs.append(F[1:, d.burn:])
         return np.concatenate(ys), np.concatenate(zs, axis=1), S
 
     def solve_linear(self, x):
