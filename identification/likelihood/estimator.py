@@ -516,6 +516,12 @@ class MaximumLikelihoodIdentifier:
             # a log biased the damping (effect-free autopilot flights, 180 s: 5.5 % RMS against 2.6 %)
             kind = base
             cost, x, tau = undelayed[base][0], undelayed[base][1], 0.0
+        elif problem.searches_damping and x[0] <= 0.0 < undelayed[base][1][0]:
+            # an alignment that makes a stable axis unstable is neither a servo delay nor a late column: the
+            # T-REX hover's yaw (2 % of its rate from its pedal) took 0.48 s with its damping 0.18 -> -0.24 and
+            # its gain's sign flipped (k10 0.86 -> -5.4), and the model diverged
+            kind = base
+            cost, x, tau = undelayed[base][0], undelayed[base][1], 0.0
         return WindFit(cost, x, kind, tau), profile
 
     def _finish_axis(self, problem: AxisProblem, found: WindFit, lag, free_tau, profile=(), lag_profile=(),
