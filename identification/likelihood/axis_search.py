@@ -48,13 +48,15 @@ XTOL, FTOL = 1e-6, 1e-8
 """Stopping tolerances of the likelihood search: a relative cost change of 1e-8 is a change of the
 log-likelihood of about 1e-4 on a 300 s flight, far below any difference a test looks at."""
 
-JACOBIAN = "3-point"
-"""The search's Jacobian: central differences, scipy's step eps^(1/3) (6e-6 of a unit or of the parameter).
-Forward differences at scipy's step sqrt(eps) (1.5e-8) read the innovations' rounding as slope: the same flight
-fitted with the Kalman gain changed in its 13th digit (what another BLAS kernel or Riccati solver does) ended
-up to 20 in log-likelihood and 2 % in damping apart on 23 % of axis fits, and on the real T-REX hover one
-machine's BLAS wrote a model where another's diverged. Central differences: at most 0.13 and 0.07 %
-(`python scripts/search_stability.py`, docs/method.md), at about the same time a fit."""
+FD_STEP = 1e-5
+"""Forward-difference step of the search's Jacobian, relative to ``max(1, |x|)`` of the damping, the gust model's
+log time constants and levels, the hold fraction and ζ (:func:`forward_jacobian`). scipy's own, sqrt(eps) =
+1.5e-8, read the innovations' rounding as slope: the same flight fitted with the Kalman gain changed in its 13th
+digit (what another BLAS kernel or Riccati solver does) ended up to 20 apart in log-likelihood and 2 % in damping
+on 23 % of axis fits, and on the real T-REX hover one machine's BLAS wrote a model where another's diverged. At
+1e-5 two such fits agree within 0.13 in log-likelihood and 0.02 % in damping, on the same optima as central
+differences, at 0.8 of the time (`python scripts/search_stability.py`, docs/method.md). The alignment keeps
+scipy's step in its own unit (:data:`TAU_UNIT`)."""
 
 DAMPING_BOUNDS = (-2.0, 200.0)
 """The interval each damping is searched in [1/s]: a damping at a bound was not placed by the data
@@ -63,10 +65,34 @@ DAMPING_BOUNDS = (-2.0, 200.0)
 TIME_CONSTANT_BOUNDS = ((0.8, 120.0), (0.02, 0.8))
 """Bounds of the slow and the fast gust time constants [s]."""
 
-TAU_UNIT = 50.0
-"""Unit of the alignment in a search started at no delay [s]: scipy's finite-difference step (eps^(1/3) of a
-unit for :data:`JACOBIAN`) is then 0.3 ms, three times the band around 0 where no delay is modelled
-(MIN_SERVO_DELAY), a thirtieth of a 100 Hz sample."""
+TAU_UNIT = 2e4
+"""Unit of the alignment in a search started at no delay [s]: scipy's finite-difference step (sqrt(eps) of a
+unit) is then 0.3 ms, three times the band around 0 where no delay is modelled (MIN_SERVO_DELAY), a
+thirtieth of a 100 Hz sample."""
+
+
+def forward_jacobian(residual, upper, steps) -> tuple:
+    """``(fun, jac)`` for ``scipy.optimize.least_squares``: ``residual`` and its forward-difference Jacobian with the
+    step ``steps[j] * max(1, |x_j|)`` per parameter (backward where the forward one would pass ``upper``), the
+    residual at the point itself reused from the search's last evaluation there (:data:`FD_STEP`)."""
+    last = {}
+
+    def fun(x):
+        r = residual(x)
+        last["x"], last["r"] = np.array(x, dtype=float, copy=True), r
+        return r
+
+    def jac(x):
+        r0 = last["r"] if "x" in last and np.array_equal(last["x"], x) else residual(x)
+        J = np.empty((r0.size, x.size))
+        for j in range(x.size):
+            h = steps[j] * max(1.0, abs(x[j]))
+            xj = np.array(x, dtype=float, copy=True)
+            xj[j] = x[j] + h if x[j] + h <= upper[j] else x[j] - h
+            J[:, j] = (residual(xj) - r0) / (xj[j] - x[j])
+        return J
+
+    return fun, jac
 
 
 class WindFit(NamedTuple):
@@ -205,10 +231,9 @@ class AxisProblem:
         # an alignment search started in the band where no delay is modelled (|tau| <= MIN_SERVO_DELAY, where
         # the likelihood is flat) runs in units of TAU_UNIT: with x_scale="jac" the search is the same in any
         # units but for its finite-difference step, which then reaches past the band; scipy's step in seconds
-        # (1.5e-8 s when the search used forward differences) saw no slope at 0 and the search never left it (a
-        # 20 ms tail delay identified as none, damping 3.3 for 6.0). Started elsewhere, the search keeps scipy's
-        # step (6e-6 s): the band's one let a weakly excited axis leap 0.9 s into an unstable fit (the T-REX
-        # hover's yaw)
+        # (1.5e-8 s) saw no slope at 0 and the search never left it (a 20 ms tail delay identified as none,
+        # damping 3.3 for 6.0). Started elsewhere, the search keeps scipy's step: the larger one let a weakly
+        # excited axis leap 0.9 s into an unstable fit (the T-REX hover's yaw)
         unit = np.ones(full.size)
         if like.free_tau and abs(tau0) <= MIN_SERVO_DELAY:
             unit[-1] = TAU_UNIT
@@ -220,7 +245,11 @@ class AxisProblem:
             x[free] = z * unit[free]
             return like.residual(x)
 
-        res = optimize.least_squares(residual, z0, jac=JACOBIAN, bounds=(lo[free], hi[free]), x_scale="jac",
+        steps = np.full(z0.size, FD_STEP)
+        if like.free_tau:
+            steps[-1] = np.sqrt(np.finfo(float).eps)  # scipy's own step, in the alignment's unit (above)
+        fun, jac = forward_jacobian(residual, hi[free], steps)
+        res = optimize.least_squares(fun, z0, jac=jac, bounds=(lo[free], hi[free]), x_scale="jac",
                                      max_nfev=max_nfev or self.max_nfev, xtol=XTOL, ftol=FTOL)
         full[free] = res.x * unit[free]
         res.x = full
