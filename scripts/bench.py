@@ -83,7 +83,7 @@ def bench_identification(repeats: int) -> dict:
         "met" if out["decoupled, 3 axes, with FIR prefilter [ms]"] <= 10.0 else "NOT met")
     from identification.diagnosis.likelihood_diagnoser import LikelihoodDiagnoser
     from identification.likelihood.axis_pool import workers_available
-    from identification.likelihood.estimator import MaximumLikelihoodIdentifier
+    from identification.likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
 
     few = max(3, repeats // 20)
     one = {"workers": 1}  # one core: the axes one after another (identification.likelihood.axis_pool)
@@ -95,6 +95,9 @@ def bench_identification(repeats: int) -> dict:
     delayed = simulate_flight(300, seed=2, effects=("servo_delay",)).flight
     ml_delay = _median_time(lambda: MaximumLikelihoodIdentifier(delay="auto", **one).fit(delayed), few)
     ml_delay_pool = _median_time(lambda: MaximumLikelihoodIdentifier(delay="auto").fit(delayed), few)
+    identify = {**CLI_TIMING, "closed_loop": "auto"}  # heli identify's defaults, the closed-loop check included
+    checked_one = _median_time(lambda: MaximumLikelihoodIdentifier(**identify, **one).fit(flight), 1)
+    checked = _median_time(lambda: MaximumLikelihoodIdentifier(**identify).fit(flight), 1)
     diag_one = _median_time(lambda: LikelihoodDiagnoser(**one).fit(flight), 1)
     diag = _median_time(lambda: LikelihoodDiagnoser().fit(flight), 1)
     lagged = _median_time(lambda: MaximumLikelihoodIdentifier(delay="auto", servo_lag="auto", **one).fit(delayed), 1)
@@ -103,10 +106,12 @@ def bench_identification(repeats: int) -> dict:
         "the same with the hold fixed linear (the default before) [s]": ml_linear,
         "hold estimated / fixed time ratio": ml / ml_linear,
         f"the default, axes side by side on {workers_available()} cores [s]": ml_pool,
-        "heli identify's default: the same with a servo delay tested (delay='detect', none found), one core [s]":
-            ml_detect,
+        "the same with a servo delay tested (delay='detect', none found), one core [s]": ml_detect,
         "servo-delay test / no test time ratio": ml_detect / ml,
-        f"heli identify's default, axes side by side on {workers_available()} cores [s]": ml_detect_pool,
+        f"the same, axes side by side on {workers_available()} cores [s]": ml_detect_pool,
+        "heli identify's default: the same with the closed-loop check (8 flights flown and fitted), one core [s]":
+            checked_one,
+        f"heli identify's default, on {workers_available()} cores [s]": checked,
         "maximum likelihood with the alignment profiled over -0.6-0.5 s, 3 axes, one core [s]": ml_delay,
         f"the same, axes side by side on {workers_available()} cores (default) [s]": ml_delay_pool,
         "the same with the servo lag profiled too (10-200 ms), 3 axes, one core [s]": lagged,
