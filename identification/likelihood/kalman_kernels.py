@@ -22,35 +22,29 @@ PAIR_TAPS = 6
 """Coefficients (order + 1) the paired filter loop holds in registers; longer filters take the general loop."""
 
 
+@numba.njit(cache=True, inline="always")
+def _tap(x, p, a, z):  # pragma: no cover - compiled
+    """One sample of direct form II transposed with :data:`PAIR_TAPS` coefficients ``p`` / ``a`` (``a[0]`` = 1): the
+    output and the next state ``z`` (five values), in lfilter's order of operations."""
+    y = z[0] + p[0] * x
+    return y, (z[1] + x * p[1] - y * a[1], z[2] + x * p[2] - y * a[2], z[3] + x * p[3] - y * a[3],
+               z[4] + x * p[4] - y * a[4], x * p[5] - y * a[5])
+
+
 @numba.njit(cache=True)
 def _filter_pairs(b, an, U, out):  # pragma: no cover - compiled
     """:func:`filter_rows` with :data:`PAIR_TAPS` coefficients (zeros padding shorter filters: they add exact
-    zeros), two rows a step in scalars so that their recursions overlap."""
-    a1, a2, a3, a4, a5 = an[1], an[2], an[3], an[4], an[5]
+    zeros), two rows a step, their states in registers, so that their recursions overlap."""
+    a = (an[0], an[1], an[2], an[3], an[4], an[5])
     rows, n = U.shape
     for r in range(0, rows, 2):
         s = min(r + 1, rows - 1)
-        p0, p1, p2, p3, p4, p5 = b[r, 0], b[r, 1], b[r, 2], b[r, 3], b[r, 4], b[r, 5]
-        q0, q1, q2, q3, q4, q5 = b[s, 0], b[s, 1], b[s, 2], b[s, 3], b[s, 4], b[s, 5]
-        z0 = z1 = z2 = z3 = z4 = 0.0
-        w0 = w1 = w2 = w3 = w4 = 0.0
+        p = (b[r, 0], b[r, 1], b[r, 2], b[r, 3], b[r, 4], b[r, 5])
+        q = (b[s, 0], b[s, 1], b[s, 2], b[s, 3], b[s, 4], b[s, 5])
+        z = w = (0.0, 0.0, 0.0, 0.0, 0.0)
         for k in range(n):
-            x = U[r, k]
-            y = z0 + p0 * x
-            z0 = z1 + x * p1 - y * a1
-            z1 = z2 + x * p2 - y * a2
-            z2 = z3 + x * p3 - y * a3
-            z3 = z4 + x * p4 - y * a4
-            z4 = x * p5 - y * a5
-            out[r, k] = y
-            x = U[s, k]
-            y = w0 + q0 * x
-            w0 = w1 + x * q1 - y * a1
-            w1 = w2 + x * q2 - y * a2
-            w2 = w3 + x * q3 - y * a3
-            w3 = w4 + x * q4 - y * a4
-            w4 = x * q5 - y * a5
-            out[s, k] = y
+            out[r, k], z = _tap(U[r, k], p, a, z)
+            out[s, k], w = _tap(U[s, k], q, a, w)
 
 
 @numba.njit(cache=True)
