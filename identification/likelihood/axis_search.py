@@ -52,11 +52,11 @@ FD_STEP = 1e-5
 """Forward-difference step of the search's Jacobian, relative to ``max(1, |x|)`` of the damping, the gust model's
 log time constants and levels, the hold fraction and ζ (:func:`forward_jacobian`). scipy's own, sqrt(eps) =
 1.5e-8, read the innovations' rounding as slope: the same flight fitted with the Kalman gain changed in its 13th
-digit (what another BLAS kernel or Riccati solver does) ended up to 20 apart in log-likelihood and 2 % in damping
-on 23 % of axis fits, and on the real T-REX hover one machine's BLAS wrote a model where another's diverged. At
-1e-5 two such fits agree within 0.13 in log-likelihood and 0.02 % in damping, on the same optima as central
-differences, at 0.8 of the time (`python scripts/search_stability.py`, docs/method.md). The alignment keeps
-scipy's step in its own unit (:data:`TAU_UNIT`)."""
+digit (what another BLAS kernel or Riccati solver does) ended up to 16 apart in log-likelihood (more than 1 on 19 %
+of 48 axis fits) and 2 % in damping, and on the real T-REX hover one machine's BLAS wrote a model where another's
+diverged. At 1e-5 two such fits agree within 0.22 in log-likelihood, 0.01 % in damping on the bench's flights
+(`python scripts/search_stability.py`, docs/method.md), on the optima central differences find, in fewer
+evaluations than before. The alignment keeps scipy's step in its own unit (:data:`TAU_UNIT`)."""
 
 DAMPING_BOUNDS = (-2.0, 200.0)
 """The interval each damping is searched in [1/s]: a damping at a bound was not placed by the data

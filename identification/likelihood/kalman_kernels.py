@@ -8,9 +8,8 @@ output is lfilter's bit for bit (a test holds it to that), two rows at a time so
 0.34 ms for the bench's five rows where lfilter took 0.95 ms. Compiled by numba (``cache=True``); this module is
 imported on the first evaluation, so importing the package does not load numba.
 
-Bit for bit matters: the search stops on a relative cost change of 1e-8 (``axis_search.FTOL``), and a change of
-the innovations in the 12th digit (another Riccati solver, say) moved the bench flight's fitted dampings by up to
-1.4 % (docs/benchmarks.md).
+Bit for bit, so that the change of speed changed no fitted value (the search itself no longer hangs on the
+innovations' last digits: ``axis_search.FD_STEP``).
 """
 
 from __future__ import annotations
