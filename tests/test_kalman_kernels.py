@@ -1,5 +1,5 @@
-"""The likelihood's compiled filter loop is scipy's lfilter, bit for bit: an axis fit stops on a relative cost change
-of 1e-8, so the last digit of the innovations decides where (identification.likelihood.kalman_kernels)."""
+"""The likelihood's compiled filter loop is scipy's lfilter, bit for bit: its speed changed no fitted value
+(identification.likelihood.kalman_kernels)."""
 
 import numpy as np
 import pytest
