@@ -19,13 +19,15 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
-TREX = Path(__file__).resolve().parents[2] / "shared" / "fixtures" / "logs" / "trex550_hovertest.csv"
+sys.path.insert(0, str(Path(__file__).parent))  # the T-REX hover where real_heli.py finds it
+from real_heli import DEFAULT_LOG as TREX  # noqa: E402
 
 
 def _fit(flight, perturbation: float):
@@ -47,15 +49,10 @@ def _fit(flight, perturbation: float):
         return f"{type(exc).__name__}: {exc}"[:120]
     finally:
         axis_likelihood.kalman = exact
-    from identification.likelihood.closed_loop import _names
+    from identification.diagnosis.alignment_check import DAMPING
 
-    out = {}
-    for axis, fit in ml.axes_.items():
-        a = ("roll", "pitch", "yaw").index(axis)
-        damping = _names(ml, a, fit, ml._fitted_data(a, fit, ml.flights_, 0))[1]
-        out[axis] = (float(fit.nll), float(fit.params.get(damping, np.nan)) if damping else np.nan,
-                     float(fit.input_hold), fit.wind["model"], float(fit.delay))
-    return out
+    return {axis: (float(fit.nll), float(fit.params.get(DAMPING[axis], np.nan)), float(fit.input_hold),
+                   fit.wind["model"], float(fit.delay)) for axis, fit in ml.axes_.items()}
 
 
 def _one(job):

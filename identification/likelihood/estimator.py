@@ -510,16 +510,15 @@ class MaximumLikelihoodIdentifier:
         kind = min(fits, key=lambda k: fits[k][3])
         cost, x, tau, aic = fits[kind]
         base = min(undelayed, key=lambda k: undelayed[k][3])
-        if 2.0 * (undelayed[base][3] - aic) < MIN_LR_DELAY:
-            # the data do not support an alignment (twice the Akaike difference is the likelihood ratio: the
-            # gust models have as many parameters): a delay of a few ms fitted to the timing conventions of
-            # a log biased the damping (effect-free autopilot flights, 180 s: 5.5 % RMS against 2.6 %)
-            kind = base
-            cost, x, tau = undelayed[base][0], undelayed[base][1], 0.0
-        elif problem.searches_damping and x[0] <= 0.0 < undelayed[base][1][0]:
-            # an alignment that makes a stable axis unstable is neither a servo delay nor a late column: the
-            # T-REX hover's yaw (2 % of its rate from its pedal) took 0.48 s with its damping 0.18 -> -0.24 and
-            # its gain's sign flipped (k10 0.86 -> -5.4), and the model diverged
+        # the undelayed fit stands where the data do not support an alignment (twice the Akaike difference is the
+        # likelihood ratio: the gust models have as many parameters; a delay of a few ms fitted to the timing
+        # conventions of a log biased the damping, effect-free autopilot flights, 180 s: 5.5 % RMS against 2.6 %),
+        # and where the alignment makes a stable axis unstable: neither a servo delay nor a late column does that
+        # (the T-REX hover's yaw, 2 % of its rate from its pedal, took 0.48 s with its damping 0.18 -> -0.24 and
+        # its gain's sign flipped, k10 0.86 -> -5.4, and the model diverged)
+        unsupported = 2.0 * (undelayed[base][3] - aic) < MIN_LR_DELAY
+        destabilising = problem.searches_damping and x[0] <= 0.0 < undelayed[base][1][0]
+        if unsupported or destabilising:
             kind = base
             cost, x, tau = undelayed[base][0], undelayed[base][1], 0.0
         return WindFit(cost, x, kind, tau), profile
