@@ -55,7 +55,11 @@ def test_no_effect_control_flight_is_none():
     assert all(max(r["gain"] for r in rows) < d.min_gain for rows in d.rounds_)
 
 
-@pytest.mark.parametrize("effect", ["cross_coupling", "gyroscopic", "gain_scheduling", "collective_torque"])
+SLOW = pytest.mark.slow  # over 5 s each: make test-slow (the same path as the two kept in make test)
+
+
+@pytest.mark.parametrize("effect", ["cross_coupling", pytest.param("gyroscopic", marks=SLOW), "gain_scheduling",
+                                    pytest.param("collective_torque", marks=SLOW)])
 def test_hidden_term_effect_is_named_on_its_axis(effect):
     d = Diagnoser().fit(_flight(seed=1, effects=(effect,)))
     _assert_found(d, effect, _effect_axes(effect))
@@ -90,6 +94,7 @@ def test_log_time_misalignment_in_either_direction_is_a_servo_delay(shift):
         assert abs(value + shift) <= 0.02  # the alignment undoes the shift
 
 
+@pytest.mark.slow  # over 5 s; each effect alone is named in make test
 def test_two_hidden_effects_are_both_found():
     d = Diagnoser().fit(_flight(seed=1, effects=("cross_coupling", "gain_scheduling")))
     assert d.verdict_ == "found"

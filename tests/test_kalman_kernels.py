@@ -37,3 +37,33 @@ def test_the_likelihoods_own_filters_come_out_as_lfilter_gives_them():
     out = filter_rows(np.vstack([b_y, b_u, b_u, b_u]), a, np.vstack([y, X]))
     assert np.array_equal(out[0], signal.lfilter(b_y, a, y))
     assert np.array_equal(out[1:], signal.lfilter(b_u, a, X, axis=-1))
+
+
+@pytest.mark.parametrize("wind_model", ["gm2", "gm_so"])
+def test_a_point_whose_hold_or_alignment_alone_changed_reuses_its_riccati_solution_with_the_same_bits(wind_model):
+    """The search's Jacobian perturbs one entry at a time; the hold and the alignment leave the Kalman gain as it
+    was (AxisLikelihood.system keeps it), and every evaluation equals a fresh likelihood's bit for bit."""
+    from identification.likelihood.axis_likelihood import AxisData, AxisLikelihood
+    from identification.likelihood.state_space import HOLD_INDEX, N_NONLINEAR
+
+    rng = np.random.default_rng(3)
+    y, X = rng.standard_normal(3000), rng.standard_normal((2, 3000))
+    data = AxisData(y=[y], regressors=[X], names=("k", "kd@0"), dt=0.01, hold=0.5, burn=200, wind_model=wind_model)
+    base = np.array([2.4, 0.0, np.log(0.3), np.log(80.0), np.log(120.0), 0.5, np.log(0.7)][:N_NONLINEAR[wind_model]])
+    points = [base]
+    for j in range(base.size):  # a forward-difference Jacobian's points, then a new point
+        points.append(base.copy())
+        points[-1][j] += 1e-5
+    points.append(base + 0.01)
+    warm = AxisLikelihood(data)
+    solves = []
+    for x in points:
+        kept = len(warm._systems)
+        got = warm.filtered(x)
+        solves.append(len(warm._systems) > kept)
+        fresh = AxisLikelihood(data).filtered(x)
+        assert all(np.array_equal(a, b) for a, b in zip(got, fresh))
+    assert solves[1 + HOLD_INDEX] is False  # the hold's column: the point's own Riccati solution
+    assert sum(solves) == len(points) - 1
+    with pytest.raises(ValueError, match="read-only"):
+        warm.system(base)[0][0, 0] = 0.0  # shared between evaluations: nobody may change it in place

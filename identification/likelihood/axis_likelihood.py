@@ -22,8 +22,12 @@ import numpy as np
 from scipy import signal
 
 from .input_hold import hold_fraction
-from .state_space import (HOLD_INDEX, N_NONLINEAR, discrete_model, innovation_filters, kalman, servo_increments,
-                          strictly_proper_tf)
+from .state_space import (HOLD_INDEX, N_NONLINEAR, discrete_system, innovation_filters, input_vectors, kalman,
+                          servo_increments, strictly_proper_tf)
+
+SYSTEMS_KEPT = 8
+"""How many recent systems (:meth:`AxisLikelihood.system`) an axis keeps: the search's Jacobian perturbs one entry
+at a time around one point, so the hold's and the alignment's columns find their point's system here."""
 
 MIN_SERVO_DELAY = 1e-4
 """Delays below this are no delay (the Padé servo of eq. 31 degenerates at zero) [s]."""
@@ -57,6 +61,7 @@ class AxisLikelihood:
         self.nw = N_NONLINEAR[data.wind_model]
         """Length of the model part of the search vector (damping, wind, hold fraction); the servo delay follows
         when ``free_tau``."""
+        self._systems = {}
 
     def unpack(self, x):
         """(damping, T_slow, T_fast, var_slow/R, var_fast/R, zeta) from the search vector."""
@@ -78,14 +83,33 @@ class AxisLikelihood:
         """The input's hold fraction at ``x`` (0 held over the sample, 1 linearly interpolated)."""
         return float(x[HOLD_INDEX])
 
+    def system(self, x):
+        """``(Ad, ga, gb, Qd, L, S)`` at ``x``: the discretised axis (:func:`~.state_space.discrete_system`) and
+        its steady-state Kalman gain, which neither the hold nor the alignment changes. The last
+        :data:`SYSTEMS_KEPT` are kept, keyed by the exact values they depend on, so that the Jacobian's hold and
+        alignment columns and the Fisher information's reuse them (the same numbers: the same bits)."""
+        key = self.unpack(x)
+        hit = self._systems.get(key)
+        if hit is None:
+            Ad, ga, gb, Qd = discrete_system(*key, self.data.dt, self.data.wind_model)
+            _, L, S = kalman(Ad, Qd)
+            for shared in (Ad, ga, gb, Qd, L):
+                shared.setflags(write=False)  # handed out again: nobody may change them in place
+            if len(self._systems) >= SYSTEMS_KEPT:
+                del self._systems[next(iter(self._systems))]
+            hit = self._systems[key] = (Ad, ga, gb, Qd, L, S)
+        return hit
+
     def discrete(self, x):
-        return discrete_model(*self.unpack(x), self.data.dt, self.hold_at(x), self.data.wind_model)
+        """``Ad, g0, g1, Qd`` at ``x`` (:func:`~.state_space.discrete_model`)."""
+        Ad, ga, gb, Qd, _, _ = self.system(x)
+        return (Ad, *input_vectors(ga, gb, self.hold_at(x)), Qd)
 
     def filtered(self, x):
         """Innovation-domain measurements ``y~`` (n,) and regressors ``Z`` (m, n), burn-in removed, and ``S``."""
         d = self.data
-        Ad, g0, g1, Qd = self.discrete(x)
-        _, L, S = kalman(Ad, Qd)
+        Ad, ga, gb, _, L, S = self.system(x)
+        g0, g1 = input_vectors(ga, gb, self.hold_at(x))
         b_y, b_u, a = innovation_filters(Ad, g0, g1, L)
         if d.causal_rows:  # a measured rate at k+1 carries the noise of y[k+1]: only u[k] may predict y[k+1]
             b_c, _ = strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), g0 + g1)

@@ -65,7 +65,7 @@ def wind_block(kind: str, t_slow: float, t_fast: float, zeta: float = 1.0):
 
 
 def discrete_model(damping: float, t_slow: float, t_fast: float, q_slow: float, q_fast: float, zeta: float,
-                    dt: float, hold: str, kind: str = "gm2"):
+                   dt: float, hold: str, kind: str = "gm2"):
     """Exact discretisation of the axis model over one sample.
 
     State ``(rate, gust states...)``. Returns ``Ad``, the input vectors ``g0``,
@@ -73,6 +73,15 @@ def discrete_model(damping: float, t_slow: float, t_fast: float, q_slow: float, 
     held input; ``hold`` a name or fraction, :func:`hold_fraction`) and the process-noise
     covariance ``Qd`` by Van Loan's method, for stationary gust-torque variances ``q_slow``, ``q_fast``.
     """
+    Ad, ga, gb, Qd = discrete_system(damping, t_slow, t_fast, q_slow, q_fast, zeta, dt, kind)
+    g0, g1 = input_vectors(ga, gb, hold)
+    return Ad, g0, g1, Qd
+
+
+def discrete_system(damping: float, t_slow: float, t_fast: float, q_slow: float, q_fast: float, zeta: float,
+                    dt: float, kind: str = "gm2"):
+    """The part of :func:`discrete_model` the input's hold does not touch: ``Ad``, the held input's vector
+    ``ga``, the ramp's ``gb`` (:func:`input_vectors` combines them for a hold) and ``Qd``."""
     Aw, cw, cols = wind_block(kind, t_slow, t_fast, zeta)
     m = Aw.shape[0] + 1
     A = np.zeros((m, m))
@@ -86,8 +95,6 @@ def discrete_model(damping: float, t_slow: float, t_fast: float, q_slow: float, 
     E = expm(M)
     Ad = E[:m, :m]
     ga, gb = E[:m, m], E[:m, m + 1]
-    frac = hold_fraction(hold)  # u(t) = u_k + frac (u_{k+1} - u_k) (t - t_k)/dt
-    g0, g1 = ga - frac * gb, frac * gb
     Qd = np.zeros((m, m))
     for q, col in zip((q_slow, q_fast), cols):  # unit intensities keep expm well scaled
         b = np.concatenate([[0.0], col])
@@ -97,7 +104,13 @@ def discrete_model(damping: float, t_slow: float, t_fast: float, q_slow: float, 
         V[m:, m:] = A.T * dt
         F = expm(V)
         Qd += q * (F[m:, m:].T @ F[:m, m:])
-    return Ad, g0, g1, 0.5 * (Qd + Qd.T)
+    return Ad, ga, gb, 0.5 * (Qd + Qd.T)
+
+
+def input_vectors(ga, gb, hold):
+    """``g0``, ``g1`` of :func:`discrete_model` from :func:`discrete_system`'s ``ga``, ``gb`` for a hold."""
+    frac = hold_fraction(hold)  # u(t) = u_k + frac (u_{k+1} - u_k) (t - t_k)/dt
+    return ga - frac * gb, frac * gb
 
 
 def kalman(Ad, Qd, R: float = 1.0):
