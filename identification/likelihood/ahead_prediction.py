@@ -32,7 +32,7 @@ from ..flight import Flight
 from .ahead_score import AHEAD_S, is_diverged
 from .axis_likelihood import AxisLikelihood
 from .axis_search import BURN_IN
-from .state_space import kalman, lti_apply
+from .state_space import lti_apply
 
 
 
@@ -51,8 +51,7 @@ def _ahead_sums(like: AxisLikelihood, x, theta, horizon: int) -> tuple[float, fl
     """The squared ``horizon``-ahead prediction errors and the squared deviations of the rate from its mean,
     each summed over the flights of ``like`` after the burn-in (:func:`ahead_r2` is ``1 - num / den``)."""
     d = like.data
-    Ad, g0, g1, Qd = like.discrete(x)
-    _, L, _ = kalman(Ad, Qd)
+    Ad, g0, g1, L, _ = like.predictor(x)
     m = Ad.shape[0]
     eye = np.eye(m)
     Phi = Ad - np.outer(Ad @ L, eye[0])

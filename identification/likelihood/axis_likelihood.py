@@ -100,16 +100,16 @@ class AxisLikelihood:
             hit = self._systems[key] = (Ad, ga, gb, Qd, L, S)
         return hit
 
-    def discrete(self, x):
-        """``Ad, g0, g1, Qd`` at ``x`` (:func:`~.state_space.discrete_model`)."""
-        Ad, ga, gb, Qd, _, _ = self.system(x)
-        return (Ad, *input_vectors(ga, gb, self.hold_at(x)), Qd)
+    def predictor(self, x):
+        """``(Ad, g0, g1, L, S)`` at ``x``: the discretised axis with its input vectors at ``x``'s hold
+        (:func:`~.state_space.discrete_model`) and its steady-state Kalman gain and innovation variance."""
+        Ad, ga, gb, _, L, S = self.system(x)
+        return (Ad, *input_vectors(ga, gb, self.hold_at(x)), L, S)
 
     def filtered(self, x):
         """Innovation-domain measurements ``y~`` (n,) and regressors ``Z`` (m, n), burn-in removed, and ``S``."""
         d = self.data
-        Ad, ga, gb, _, L, S = self.system(x)
-        g0, g1 = input_vectors(ga, gb, self.hold_at(x))
+        Ad, g0, g1, L, S = self.predictor(x)
         b_y, b_u, a = innovation_filters(Ad, g0, g1, L)
         if d.causal_rows:  # a measured rate at k+1 carries the noise of y[k+1]: only u[k] may predict y[k+1]
             b_c, _ = strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), g0 + g1)
