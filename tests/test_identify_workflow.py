@@ -34,3 +34,22 @@ def test_without_comparing_structures_only_the_written_model_is_fitted(flight, t
     report = (tmp_path / "alone" / "report.md").read_text()
     assert "| Parameter | Unit | decoupled |" in report and "| coupled |" not in report
     assert "Coupled model:" not in report
+
+
+def test_a_model_fitted_before_is_written_as_it_is_not_fitted_again(flight, tmp_path, monkeypatch):
+    """``fitted=`` (``heli refresh`` hands over its drift table's fit of the new flights): that identifier is the
+    one written, and no other maximum-likelihood fit is made."""
+    from identification.likelihood.estimator import MaximumLikelihoodIdentifier
+    from identification.workflows.identify import identify_and_report
+
+    before = MaximumLikelihoodIdentifier().fit([flight])
+
+    def refuse(self, *args, **kwargs):
+        raise AssertionError("fitted again")
+
+    monkeypatch.setattr(MaximumLikelihoodIdentifier, "fit", refuse)
+    run = identify_and_report([flight], tmp_path / "given", plots=False, compare_structures=False,
+                              fitted={"decoupled": before})
+    assert run.identifiers["decoupled"] is before
+    written = json.loads((tmp_path / "given" / "model.json").read_text())["parameters"]
+    assert written == pytest.approx(before.params_.values())

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
 from functools import partial
 from pathlib import Path
@@ -214,6 +214,11 @@ class IdentifyOptions:
         Results on flights that could not be validated on again, carried over from an earlier model with their
         ``computed_on`` (``heli refresh``, :mod:`identification.workflows.refresh_validation`): shown after the new
         ones, marked.
+    fitted : mapping of str to identifier, optional
+        Identifiers already fitted on exactly these flights with the settings this call would give them, by
+        structure (``"decoupled"``, ``"coupled"``): taken as they are instead of fitted again (``heli refresh``
+        fitted the new flights for its drift table). One fitted with the closed-loop check of the mode asked for
+        is not checked again.
     """
 
     coupled: bool = False
@@ -236,6 +241,7 @@ class IdentifyOptions:
     validate_names: Sequence | None = None
     validate_paths: Sequence | None = None
     carried_validation: Sequence = ()
+    fitted: Mapping | None = None
 
     def say(self, text: str) -> None:
         """Tell :attr:`stage` that a step starts (nothing without one)."""
@@ -362,8 +368,11 @@ def _fit_models(flights: list, opts: IdentifyOptions) -> dict:
     opts.say(f"fitting {what} {how} ({sum(f.duration for f in flights):.0f} s of flight)")
     closed_loop = kw.pop("closed_loop", None)  # checked on the model written, after both are fitted
     settings = {"decoupled": kw, "coupled": {**kw, "select_terms": True} if opts.method == "ml" else kw}
-    fitted = {name: make_identifier(opts.method, name, **settings[name]).fit(flights) for name in structures}
-    if closed_loop is not None and opts.method == "ml":
+    given = opts.fitted or {}
+    fitted = {name: given[name] if name in given else make_identifier(opts.method, name, **settings[name])
+              .fit(flights) for name in structures}
+    checked = getattr(fitted[chosen], "closed_loop_", None) is not None and fitted[chosen].closed_loop == closed_loop
+    if closed_loop is not None and opts.method == "ml" and not checked:
         opts.say(f"closed-loop check of the {chosen} model: flying it under the pilot fitted to the sticks")
         fitted[chosen].closed_loop_check(closed_loop)
     return fitted

@@ -321,19 +321,27 @@ class _Refresh:
         flagged = [r.name for r in drift if r.flagged]
         mode, reason = self.choose_fit(previous, flagged)
         fit_flights = flights + (previous.flights if mode == "pooled" else [])
-        boot_model = boot_new
+        boot_model, model_fit = boot_new, new_ident
         if mode == "pooled":
             if self.estimator != "integral":
                 _say(s, f"fitting the {len(fit_flights)} pooled flights for the refreshed model's uncertainty")
             pooled = self.identifier() if self.estimator == "integral" else self.identifier().fit(fit_flights)
             boot_model = self.uncertainty(pooled, fit_flights, self.seeds[2], "bootstrap (refreshed model)")
+            model_fit = pooled if self.estimator != "integral" else None
         criterion = {"alpha": s.alpha, "z": z_crit, "n_parameters": len(names), "min_relative": s.min_relative,
                      "rule": "|new - old| > z * sqrt(se_old^2 + se_new^2), z = Phi^-1(1 - alpha / (2 m))"
                      + (" and |new - old| >= min_relative * |old|" if s.min_relative > 0 else "")}
         result = RefreshResult(drift, criterion, mode, reason, {"found": previous.found, "missing": previous.missing},
                                boot_new, previous.bootstrap, boot_model, None, None, {}, previous.notes)
-        self.stage(result, fit_flights, digests, flights, new_ident)
+        self.stage(result, fit_flights, digests, flights, new_ident, self.as_written(model_fit))
         return result
+
+    def as_written(self, fitted) -> dict:
+        """``fitted`` (fitted on the refreshed model's flights, or None) by structure where it is the fit
+        :func:`~identification.workflows.identify.identify_and_report` would make of them, so that it is not made
+        twice: the drift table's identifier leaves out the term selection a coupled ML model is written with."""
+        same = self.estimator == "integral" or self.structure == "decoupled" and not self.kw.get("select_terms")
+        return {self.structure: fitted} if fitted is not None and same else {}
 
     def previous(self, names, boot_new: BootstrapResult) -> _Previous:
         """The current model's uncertainty: its flights refitted and bootstrapped when all are at hand, else
@@ -381,12 +389,13 @@ class _Refresh:
                            "flights no longer describe this aircraft")
         return "pooled", "pooled previous and new flights: no parameter changed significantly"
 
-    def stage(self, result: RefreshResult, fit_flights, digests, flights, new_ident) -> None:
+    def stage(self, result: RefreshResult, fit_flights, digests, flights, new_ident, fitted: dict) -> None:
         """Step 6: keep the files a refresh replaces in ``history/``, identify and report the refreshed model
         with the new flights' winds as a library version
         (:func:`identification.workflows.identify.identify_and_report`),
-        and write ``refresh.json`` and ``refresh.md``; all is committed when the transaction ends. Sets
-        ``result.run``, ``result.library_version`` and ``result.paths``."""
+        and write ``refresh.json`` and ``refresh.md``; all is committed when the transaction ends (``fitted``:
+        :meth:`as_written`'s identifiers, not fitted again). Sets ``result.run``, ``result.library_version`` and
+        ``result.paths``."""
         from .identify import identify_and_report, source_entry
 
         tx, s = self.tx, self.settings
@@ -417,7 +426,7 @@ class _Refresh:
             method=self.estimator, transaction=tx, draw_figures=False,
             stage=None if s.stage is None else (lambda text: s.stage(f"refreshed model: {text}")),
             validate_flights=checked.flights, validate_names=checked.names, validate_paths=checked.paths,
-            carried_validation=checked.carried,
+            carried_validation=checked.carried, fitted=fitted,
         )
         result.run, result.library_version = run, run.library_version
         doc_out = self.document(result, record, flights, new_ident, kept)
