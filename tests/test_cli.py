@@ -7,8 +7,10 @@ installed ``heli`` console script.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
+import io
 import json
 import os
 import subprocess
@@ -22,16 +24,23 @@ from heli_core.terms import BASE_PARAMS
 from model_store.model_file import load_model
 
 
+PRINTED = {}
+"""What the ``identified`` fixture's command printed: its stdout under "out", its stderr (progress) under "err"."""
+
+
 @pytest.fixture(scope="session")
 def identified(flight_csv, tmp_path_factory):
     """``heli identify X.csv --out DIR`` with the defaults (decoupled model, figures, the closed-loop check)."""
     out = tmp_path_factory.mktemp("ident") / "DIR"
     saved = os.environ.pop("HELI_CLOSED_LOOP", None)  # conftest turns the check off for the other CLI tests
+    stdout, stderr = io.StringIO(), io.StringIO()  # not a terminal: one progress line per stage
     try:
-        assert main(["identify", str(flight_csv), "--out", str(out)]) == 0
+        with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+            assert main(["identify", str(flight_csv), "--out", str(out)]) == 0
     finally:
         if saved is not None:
             os.environ["HELI_CLOSED_LOOP"] = saved
+    PRINTED.update(out=stdout.getvalue(), err=stderr.getvalue())
     return out
 
 
@@ -139,11 +148,12 @@ def test_identify_writes_the_disturbance_library(identified, flight_csv):
 @pytest.mark.slow
 def test_identifying_again_keeps_the_previous_model_and_library_version(flight_csv, tmp_path, capsys):
     out = tmp_path / "DIR"
-    assert main(["identify", str(flight_csv), "--out", str(out), "--no-plots"]) == 0
+    fast = ["--no-plots", "--method", "integral"]  # the folder's versions are the CLI's, whatever the method
+    assert main(["identify", str(flight_csv), "--out", str(out), *fast]) == 0
     first = (out / "model.json").read_bytes()
     other = tmp_path / "Y.csv"
     assert main(["simulate-flight", "--duration", "30", "--seed", "4", "--out", str(other)]) == 0
-    assert main(["identify", str(other), "--out", str(out), "--no-plots"]) == 0
+    assert main(["identify", str(other), "--out", str(out), *fast]) == 0
     from model_store.disturbance_library import DisturbanceLibrary
 
     lib = DisturbanceLibrary.open(out)
@@ -158,32 +168,31 @@ def test_identify_several_flights_pools_them(flight_csv, tmp_path):
     other = tmp_path / "Z.csv"
     assert main(["simulate-flight", "--duration", "30", "--seed", "5", "--out", str(other)]) == 0
     out = tmp_path / "DIR"
-    assert main(["identify", str(flight_csv), str(other), "--out", str(out), "--no-plots"]) == 0
+    # pooling is the CLI's, whatever the method: the integral method's fit is the fast one (ML's pooled fit:
+    # tests/test_ml_estimator.py)
+    assert main(["identify", str(flight_csv), str(other), "--out", str(out), "--no-plots", "--method",
+                 "integral"]) == 0
     assert len(_model(out)["provenance"]["sources"]) == 2
     from model_store.disturbance_library import DisturbanceLibrary
 
     assert len(DisturbanceLibrary.open(out).load()) == 2
 
 
-def test_identify_prints_a_summary(flight_csv, capsys, tmp_path):
-    assert main(["identify", str(flight_csv), "--out", str(tmp_path), "--no-plots", "--interval", "2"]) == 0
-    out = capsys.readouterr().out
+def test_identify_prints_a_summary(identified):
+    out = PRINTED["out"]
     assert out.startswith("model verdict: ")  # first: whether the model can be used (issue #31)
     assert "\nidentified decoupled model from 1 flight(s) by maximum likelihood:" in out
-    assert f"wrote {tmp_path / 'model.json'}" in out
+    assert f"wrote {identified / 'model.json'}" in out
 
 
-def test_identify_prints_the_numbers_before_drawing_the_figures(flight_csv, tmp_path, capsys):
-    out = tmp_path / "DIR"
-    assert main(["identify", str(flight_csv), "--out", str(out), "--method", "integral"]) == 0
-    captured = capsys.readouterr()
-    lines = captured.out.splitlines()
+def test_identify_prints_the_numbers_before_drawing_the_figures(identified):
+    lines = PRINTED["out"].splitlines()
     figures = [i for i, line in enumerate(lines) if line.endswith(".png")]
-    assert figures and lines.index(f"wrote {out / 'report.md'}") < min(figures)
-    assert all((out / name).exists() for name in ("rates.png", "attitude.png", "disturbance_simulation.png"))
+    assert figures and lines.index(f"wrote {identified / 'report.md'}") < min(figures)
+    assert all((identified / name).exists() for name in ("rates.png", "attitude.png", "disturbance_simulation.png"))
     # stderr is no terminal here: one line per stage, the figures last
-    stages = captured.err.splitlines()
-    assert stages[0].startswith("identify: fitting the decoupled and coupled models by the integral method")
+    stages = PRINTED["err"].splitlines()
+    assert stages[0].startswith("identify: fitting the decoupled and coupled models by maximum likelihood")
     assert stages[-1] == "identify: drawing the figures ..."
 
 
