@@ -36,7 +36,7 @@ import numpy as np
 
 from heli_core.files import atomic_path, write_text
 from heli_core.params import ModelParams
-from heli_core.physics import initial_state, kernel
+from heli_core.physics import COMPILED_STEPS, compiled_rk4, initial_state, kernel
 from heli_core.quaternion import euler_from_quaternion, euler_from_quaternion_scalar, euler_rates
 from heli_core.terms import AXES
 
@@ -278,7 +278,8 @@ def _fly(params: ModelParams, cfg: FlightConfig, sweeps, jitter, col, torque, er
     estimator = _AttitudeEstimator(cfg, errors, n) if cfg.attitude_filter_tau > 0 else None
     sensed = _AutopilotSensing(cfg, errors, fs, estimator) if cfg.pilot == "autopilot" else None
 
-    rk4 = kernel(params)[0]["rk4"]
+    # compiled: the same states bit for bit, 3-4x faster a long flight
+    rk4 = (compiled_rk4(params) if n * cfg.substeps >= COMPILED_STEPS else None) or kernel(params)[0]["rk4"]
     x = tuple(float(v) for v in initial_state(sticks=trim))
     h = dt / cfg.substeps
     states = np.empty((n, 10))
@@ -290,7 +291,7 @@ def _fly(params: ModelParams, cfg: FlightConfig, sweeps, jitter, col, torque, er
     sweeps_l = sweeps.T.tolist()
     jitter_l = jitter.T.tolist()
     col_l = col.tolist()
-    torque_l = torque.T.tolist()
+    torque_l = [tuple(row) for row in torque.T.tolist()]
 
     def _pilot(k, ahead):
         """Sticks at sample k from what the pilot saw ``delay`` samples earlier."""
@@ -326,7 +327,7 @@ def _fly(params: ModelParams, cfg: FlightConfig, sweeps, jitter, col, torque, er
         u_next = _pilot(k + 1, 1)
         for j in range(cfg.substeps):
             w = 0.0 if hold else (j + 0.5) / cfg.substeps
-            uj = [a + w * (b - a) for a, b in zip(u, u_next)]
+            uj = tuple([a + w * (b - a) for a, b in zip(u, u_next)])
             x = rk4(x, uj, torque_l[k], h)
         if len(hist_ang) > 4 * (delay + 2):
             del hist_ang[: -(delay + 2)], hist_rate[: -(delay + 2)]
