@@ -1,7 +1,7 @@
 """Tests of :mod:`identification.bench.synthetic`: the truth-model flights the other tests identify.
 
-Session fixtures fly one 90 s flight twice with the same seed (about 1.5 s
-each); everything else uses flights of a few seconds or no simulation at all.
+Session fixtures fly one 90 s flight twice with the same seed (under a second each,
+the model's step compiled); everything else uses flights of a few seconds or no simulation at all.
 """
 
 from __future__ import annotations
