@@ -149,6 +149,7 @@ sub-steps): numba takes about half a second to compile a parameter set's step, w
 a call where the Python one takes 15."""
 
 
+@lru_cache(maxsize=1)  # find_library may ask ldconfig: once a process
 def _libm_pow():
     """The C library's ``pow``, which Python's ``x**y`` calls, as a ctypes function numba can call (None where
     it cannot be found). numba compiles ``x**0.5`` to a square root, and glibc's ``pow(x, 0.5)`` differs from
