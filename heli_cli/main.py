@@ -162,7 +162,10 @@ def main(argv=None) -> int:
     created = None  # an output folder this run creates, removed again if the run fails and leaves it empty
     if getattr(args, "out", None) and getattr(args, "out_kind", None) == "dir" and not Path(args.out).exists():
         created = Path(args.out)
-    code = _run(args)
+    from .closed_pipe import guarded_stdout
+
+    with guarded_stdout():  # a reader who stops reading (`| head`) does not stop the files being written
+        code = _run(args)
     if code != 0 and created is not None and created.is_dir() and not any(created.iterdir()):
         created.rmdir()
     return code
