@@ -570,7 +570,8 @@ RL_TARGET_SETTINGS = {"n_envs": 32, "delay_spread": 0.02, "stick_step_weight": 0
 
 def bench_rl(repeats: int) -> dict:
     """Issue #33's RL figures: the residual PPO of the target's runs (on the shipped model's LQG baseline, with
-    :data:`RL_TARGET_SETTINGS`) trained for ``max(30, repeats)`` s of wall time, quiet: one seed alone,
+    :data:`RL_TARGET_SETTINGS`) trained for ``max(30, repeats)`` s of wall time, quiet (after 5 s untimed, which
+    compile the env's kernels and warm torch): one seed alone,
     then seeds 0 and 1 side by side (``train_seeds``, local backend, 2 workers) and each one's ratio to the one
     alone (target >= 0.8); then one alone beside a CPU-bound neighbour process. Steps/s are ``learn``'s (the
     set-up, which flies the base on the training gusts, is outside), and the minutes are those the target's
@@ -594,6 +595,9 @@ def bench_rl(repeats: int) -> dict:
 
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
+        # a few seconds first, not timed: the first training of a process compiles (or loads) the env's kernels
+        # and warms torch, which made 'alone' 20 % slower than each of two side by side (2026-12-02, Zen 5)
+        train_agent(out=Path(tmp) / "warm", seed=0, **{**kw, "max_seconds": 5.0})
         before = _load()
         train_agent(out=Path(tmp) / "one", seed=0, **kw)
         alone, alone_cpu = rate(Path(tmp) / "one_training"), rate(Path(tmp) / "one_training", "steps_per_cpu_second")
