@@ -106,6 +106,20 @@ def closed_loop_mode(args) -> str:
     return text
 
 
+def ml_settings(args, closed_loop: str) -> dict:
+    """The maximum-likelihood identifier's settings of a command line: ``--delay``, ``--servo-lag`` (when not
+    given, :data:`~identification.likelihood.estimator.CLI_TIMING`), ``--input-hold``, ``--wind-model`` (when the
+    command has none, "auto") and the closed-loop mode (:func:`closed_loop_mode`). ``heli tune`` identifies its
+    LOG with these too, so that the same flight gives the same model whichever command identifies it."""
+    from identification.likelihood.estimator import CLI_TIMING
+
+    timing = {name: CLI_TIMING[name] if value is None else None if value == "none" else value
+              for name, value in (("delay", args.delay), ("servo_lag", args.servo_lag))}
+    return {**timing, "input_hold": getattr(args, "input_hold", "auto"),
+            "wind_model": getattr(args, "wind_model", "auto"),
+            "closed_loop": None if closed_loop == "off" else closed_loop}
+
+
 def run(args) -> int:
     from identification.io import read_flight
     from identification.workflows.identify import identify_and_report, source_entry
@@ -130,12 +144,7 @@ def run(args) -> int:
         delay = None if args.delay == "none" else args.delay
         lag = None if args.servo_lag == "none" else args.servo_lag
         if args.method == "ml":
-            from identification.likelihood.estimator import CLI_TIMING
-
-            kwargs = {"delay": CLI_TIMING["delay"] if args.delay is None else delay, "input_hold": args.input_hold,
-                      "wind_model": args.wind_model,
-                      "servo_lag": CLI_TIMING["servo_lag"] if args.servo_lag is None else lag,
-                      "closed_loop": None if closed_loop == "off" else closed_loop}
+            kwargs = ml_settings(args, closed_loop)
         else:
             for option, given in (("--servo-lag", lag is not None), ("--delay detect", delay == "detect"),
                                   (f"--closed-loop {closed_loop}", args.closed_loop == "report")):

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from .argtypes import number, output_path, per_axis, seconds_or, servo_lag, seed, whole
+from .identify import CLOSED_LOOP_CHOICES, CLOSED_LOOP_ENV, closed_loop_mode, ml_settings
 from .model_gate import add_accept_option, check_model
 
 FIRMWARE_CHOICES = ("ardupilot", "rotorflight")
@@ -18,7 +20,7 @@ def _scale(text):
     return values if isinstance(values, float) else tuple(values)
 
 
-_delay = seconds_or(("auto", "none"), "delay", 2.0)
+_delay = seconds_or(("detect", "auto", "none"), "delay", 2.0)
 
 
 def register(sub):
@@ -50,12 +52,17 @@ def register(sub):
     p.add_argument("--scale", type=_scale, default=None, metavar="S|R,P,Y",
                    help="model stick per firmware output unit (one number, or roll,pitch,yaw); default: measured "
                    "from LOG (the model's input against the firmware's logged output), else 1")
-    p.add_argument("--delay", type=_delay, default="auto",
-                   help="servo delay when identifying from LOG: 'auto' (default: the likelihood profiled over "
-                   "0-0.5 s), 'none' or seconds")
-    p.add_argument("--servo-lag", type=servo_lag, default="detect",
+    p.add_argument("--delay", type=_delay, default=None,
+                   help="servo delay when identifying from LOG, as heli identify's: 'detect' (default: searched "
+                   "from the undelayed fit and kept on the axes whose likelihood supports one), 'auto' (the "
+                   "likelihood profiled on every axis), 'none' or seconds")
+    p.add_argument("--servo-lag", type=servo_lag, default=None,
                    help="the servos' first-order lag when identifying from LOG, as heli identify's: 'detect' "
                    "(default: profiled where a servo delay is found), 'auto', 'none' or seconds")
+    p.add_argument("--closed-loop", choices=CLOSED_LOOP_CHOICES, default=None,
+                   help="the closed-loop check when identifying from LOG, as heli identify's: where a pilot's "
+                   f"sticks follow the aircraft, remove the damping's bias they cause ('auto', the default, or "
+                   f"${CLOSED_LOOP_ENV} when set), only report it ('report'), or skip it ('off')")
     p.add_argument("--window", type=number("a window length in seconds > 0", 0.0), default=20.0,
                    help="length of the gust windows flown in the time domain (default 20 s; they tile the library)")
     p.add_argument("--candidates", type=whole(1, 10), default=3,
@@ -142,8 +149,9 @@ def _checked_log(args, spec, progress):
     return flight, flight.metadata.get("input_source")
 
 
-def _model(args, spec, current, progress):
-    """``(EnvModel, model folder, the input source of LOG's flight or None, segment or None)``."""
+def _model(args, spec, current, progress, settings):
+    """``(EnvModel, model folder, the input source of LOG's flight or None, segment or None)``; without
+    ``--model`` identified from LOG with the identifier's ``settings`` (:func:`heli_cli.identify.ml_settings`: ``heli identify``'s)."""
     from heli_env.env_model import load_env_model
 
     if args.model is not None:
@@ -163,11 +171,9 @@ def _model(args, spec, current, progress):
         read_flight(args.log)  # an ArduPilot text log: refused here, saying what it holds and lacks
     _check_mapping(spec, current, flight.sample_rate)
     folder = Path(args.out) / "model"
-    delay = None if args.delay == "none" else args.delay
-    lag = None if args.servo_lag == "none" else args.servo_lag
     # the decoupled model alone: the firmware loops fly it, and the coupled one cost a third of this step
     identify_and_report([flight], folder, sources=[source_entry(args.log)], flight_paths=[args.log], plots=False,
-                        identifier_kwargs={"delay": delay, "servo_lag": lag}, stage=progress.stage, progress=False,
+                        identifier_kwargs=settings, stage=progress.stage, progress=False,
                         compare_structures=False)
     args.model = str(folder)
     check_model(args, "tune firmware gains on it")
@@ -185,11 +191,18 @@ def run(args) -> int:
     from .progress import progress_of
 
     spec = FIRMWARES[args.firmware]
+    settings = None
+    if args.model is None:
+        try:
+            settings = ml_settings(args, closed_loop_mode(args))
+        except ValueError as exc:  # $HELI_CLOSED_LOOP misspelt: refused before any work, as heli identify does
+            print(f"heli tune: error: {exc}", file=sys.stderr)
+            return 2
     if not Path(args.log).is_file():
         raise FileNotFoundError(2, "no such flight log", str(args.log))
     current, read_notes, source = _flown_gains(args, spec)  # refused before any work or file
     progress = progress_of(args)
-    env_model, folder, input_source, segment = _model(args, spec, current, progress)
+    env_model, folder, input_source, segment = _model(args, spec, current, progress, settings)
     progress.stage("measuring the command scale" if args.scale is None else "using the given command scale")
     foreign = _own_log(args, spec)
     if args.scale is not None:

@@ -7,10 +7,12 @@ heavier one in between with 50 ms servos — each in a bench cell's weather,
 
 1. a 300 s synthetic flight of the truth (``heli simulate-flight``'s generator) written as a CSV;
 2. ``heli tune FLIGHT.csv --firmware F --params FLOWN --scale S --out DIR`` for ArduPilot (identifying the
-   model, ``--delay auto``) and Rotorflight (on the model the first run identified); FLOWN are the
-   firmware's default gains (the aircraft "flew" an untuned firmware) and ``S`` the bench's command scale,
-   the one at which each firmware's default feed-forward holds a rate target in steady state on the truth
-   (``s = k_damp/(|k|·FF_default)``; :func:`bench_scale`);
+   model with ``heli identify``'s defaults, the closed-loop check included; ``--delay auto`` and
+   ``HELI_CLOSED_LOOP=off`` give the settings ``heli tune`` identified with before 2026-12-02) and
+   Rotorflight (on the model the first run identified); FLOWN are the firmware's default gains (the
+   aircraft "flew" an untuned firmware) and ``S`` the bench's command scale, the one at which each
+   firmware's default feed-forward holds a rate target in steady state on the truth (``s =
+   k_damp/(|k|·FF_default)``; :func:`bench_scale`);
 3. the exported file (``ardupilot.param`` / ``rotorflight.txt``), read by the plain loop's own reader, and
    the firmware's defaults, flown by **the plain, per-tick implementation of each firmware written apart
    from the package** (``tests/firmware_plain_loop.py``) around the physics core's scalar RK4 on the
@@ -34,7 +36,7 @@ delay given instead of searched.
 Usage::
 
     python scripts/firmware_tune_check.py [--aircraft paper-40ms agile heavy] [--firmware ardupilot rotorflight]
-                                          [--flights 12] [--duration 20] [--delay auto|S] [--delay-margin S]
+                                          [--flights 12] [--duration 20] [--delay detect|auto|S] [--delay-margin S]
                                           [--out DIR] [--json FILE]
 """
 
@@ -278,8 +280,8 @@ def main(argv=None) -> int:
     p.add_argument("--out", default=None, help="keep the tunes in this folder (default: a temporary one)")
     p.add_argument("--json", default=None, help="write the rows as JSON here")
     p.add_argument("--delay", default=None,
-                   help="heli tune's --delay when it identifies the flight (default its own, auto; 0.02 reproduces "
-                   "the agile aircraft's yaw with its tail delay given, docs/firmware.md)")
+                   help="heli tune's --delay when it identifies the flight (default its own, heli identify's "
+                   "detect; 0.02 reproduces the agile aircraft's yaw with its tail delay given, docs/firmware.md)")
     p.add_argument("--delay-margin", type=float, default=None,
                    help="passed to heli tune (default: its own, 25 ms; 0 reproduces the measurement without it)")
     args = p.parse_args(argv)

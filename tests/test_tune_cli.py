@@ -121,6 +121,37 @@ def test_the_servo_lag_option_takes_identifys_words_or_seconds(tmp_path, capsys,
     assert e.value.code == 2 and "servo lag" in capsys.readouterr().err and not (tmp_path / "out").exists()
 
 
+def test_tune_identifies_a_log_with_identifys_settings(monkeypatch, flight_csv, ap_params):
+    """Without --model, ``heli tune LOG`` fits the model ``heli identify LOG`` would write: the same timing
+    defaults and the closed-loop check (it fitted with --delay auto and no check before), each option passed on."""
+    from heli_cli.identify import closed_loop_mode, ml_settings
+    from heli_cli.main import build_parser
+
+    monkeypatch.delenv("HELI_CLOSED_LOOP", raising=False)
+    parse = build_parser().parse_args
+
+    def settings(*words):
+        args = parse(list(words))
+        return ml_settings(args, closed_loop_mode(args))
+
+    tune = ("tune", str(flight_csv), "--firmware", "ardupilot", "--params", str(ap_params), "--out", "t")
+    identify = ("identify", str(flight_csv), "--out", "m")
+    assert settings(*tune) == settings(*identify)
+    assert settings(*tune)["closed_loop"] == "auto" and settings(*tune)["delay"] == "detect"
+    for option, value, key, expected in (("--delay", "auto", "delay", "auto"), ("--delay", "none", "delay", None),
+                                         ("--servo-lag", "0.03", "servo_lag", 0.03),
+                                         ("--closed-loop", "off", "closed_loop", None)):
+        assert settings(*tune, option, value)[key] == expected == settings(*identify, option, value)[key]
+
+
+def test_a_misspelt_closed_loop_variable_is_refused_before_any_work(tmp_path, capsys, monkeypatch, flight_csv,
+                                                                     ap_params):
+    monkeypatch.setenv("HELI_CLOSED_LOOP", "of")
+    out = tmp_path / "out"
+    _refused(["tune", str(flight_csv), "--firmware", "ardupilot", "--params", str(ap_params), "--out", str(out)],
+             capsys, "HELI_CLOSED_LOOP must be one of auto, report, off; got 'of'", out)
+
+
 def test_a_loop_rate_the_gusts_cannot_hold_is_refused(tmp_path, capsys, flight_csv, ideal_model_dir):
     params = tmp_path / "p.param"
     params.write_text("SCHED_LOOP_RATE,250\n")
