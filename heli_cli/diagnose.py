@@ -123,6 +123,10 @@ def _print_run(run_, evidence) -> int:
 
         if flight_controller_note(d):
             print(flight_controller_note(d))
+    from identification.reports.likelihood_diagnosis import timing_note
+
+    if d.steps_ and timing_note(d):  # the model written carries it
+        print(timing_note(d))
     for key, path in run_.paths.items():
         print(f"wrote {path}")
     return 0

@@ -29,7 +29,8 @@ import numpy as np
 def per_axis(name: str, setting, upper: float, words: tuple = ("auto",)) -> list:
     """An identifier's servo setting (``delay``, ``servo_lag``) per axis (roll, pitch, yaw): seconds in
     [0, ``upper``], or one of ``words`` (``"auto"``: profiled; the ML estimator's delay also takes
-    ``"detect"``). None means 0 on every axis, one value every axis the same.
+    ``"detect"``). None means 0 on every axis, one value every axis the same; three values may mix words and
+    seconds (``[0.02, 0.02, "detect"]``).
 
     Raises
     ------
@@ -43,6 +44,8 @@ def per_axis(name: str, setting, upper: float, words: tuple = ("auto",)) -> list
         if setting not in words:
             raise ValueError(f"{name} must be {takes}, got {setting!r}")
         return [setting] * 3
+    if isinstance(setting, (list, tuple)) and len(setting) == 3 and any(isinstance(v, str) for v in setting):
+        return [per_axis(name, v, upper, words)[0] for v in setting]  # a word on some axes, seconds on others
     try:
         values = np.asarray(setting, dtype=float)
     except (TypeError, ValueError):

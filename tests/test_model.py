@@ -401,6 +401,10 @@ def test_servo_settings_per_axis_are_parsed_once_for_both_identifiers():
 
     assert per_axis("delay", None, 2.0) == [0.0, 0.0, 0.0] and per_axis("delay", "auto", 2.0) == ["auto"] * 3
     assert per_axis("servo_lag", 0.03, 1.0) == [0.03] * 3 and per_axis("delay", (0.1, 0, 0.2), 2.0) == [0.1, 0, 0.2]
+    # words on some axes, seconds on others (the diagnosis' final fit: found delays kept, the rest detected)
+    assert per_axis("delay", [0.02, 0.0, "detect"], 2.0, ("auto", "detect")) == [0.02, 0.0, "detect"]
+    with pytest.raises(ValueError, match="delay must be"):
+        per_axis("delay", [0.02, "sometimes", 0.0], 2.0, ("auto", "detect"))
     for bad, says in (("slow", "delay must be None, 'auto'"), ([0.1, 0.2], "delay needs one value per axis"),
                       (-0.1, r"delay must be .* in \[0, 2\], got -0.1")):
         with pytest.raises(ValueError, match=says):

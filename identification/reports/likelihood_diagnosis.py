@@ -111,6 +111,17 @@ def flight_controller_note(d: LikelihoodDiagnoser) -> str | None:
             "corrections leave, with its gyro's vibration removed from the commands and the rates alike.")
 
 
+def timing_note(d: LikelihoodDiagnoser) -> str | None:
+    """The servo timing the final fit detected on axes where no effect was named (None when there is none)."""
+    found = getattr(d, "timing_detected_", None)
+    if not found:
+        return None
+    parts = [f"{axis} {1e3 * delay:.1f} ms" for axis, delay in found.items()]
+    return ("servo delay in the model, not named: " + ", ".join(parts) + ". Detected as heli identify detects it "
+            "(--delay detect); below 2 samples a delay cannot be told from the log's timing convention, so it is "
+            "not named as an effect, but the model keeps it: left out, it biases the damping.")
+
+
 def diagnosis_markdown(d: LikelihoodDiagnoser, figure: Path | None, verdict: ModelVerdict | None = None) -> str:
     """``diagnosis.md``: the written model's verdict, the diagnosis' verdict, closed-loop shares, the steps, and
     every candidate per round."""
@@ -144,6 +155,8 @@ def diagnosis_markdown(d: LikelihoodDiagnoser, figure: Path | None, verdict: Mod
                         f"{s.threshold:.1f}", f"{s.runner_up} ({s.runner_up_lr:.1f})" if s.runner_up else "—",
                         _r2(s.r2_before), _r2(s.r2_after), heldout_change(s.r2_before, s.r2_after)]
                        for s in d.steps_]), ""]
+    if timing_note(d):
+        md += ["## The model's timing", "", timing_note(d), ""]
     for i, rows in enumerate(d.rounds_, start=1):
         md += [f"## Candidates, round {i}", "",
                _table(["Axis", "Effect", "k", "LR", "threshold", "timing (s)", "accepted"],

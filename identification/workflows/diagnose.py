@@ -114,9 +114,12 @@ def _likelihood_model(d: LikelihoodDiagnoser, flight: Flight, model_document, so
         "added": [{"round": s.round, "axis": s.axis, "effect": s.effect, "parameters": s.parameters, "lr": s.lr,
                    "threshold": s.threshold} for s in d.steps_],
         "input_alignment_s": {a: log_shift[i] for i, a in enumerate(AXES)},
+        "timing_detected_s": dict(d.timing_detected_),
         "note": "A positive alignment is the servo delay of eq. (31) (first-order Padé). input_alignment_s < 0: "
                 "the log's input column lags the response; advance it by this much "
-                "(identification.preprocess.shift_inputs) before comparing this model with the log.",
+                "(identification.preprocess.shift_inputs) before comparing this model with the log. "
+                "timing_detected_s: servo delays shorter than two samples, kept in the model (servo_delay_s) "
+                "as heli identify's --delay detect keeps them, not named as an effect.",
         "criterion": likelihood_criterion(d),
     }
     sources = [s.to_dict() for s in (model_document.sources if model_document is not None else ())] + (
