@@ -151,7 +151,8 @@ def _checked_log(args, spec, progress):
 
 def _model(args, spec, current, progress, settings):
     """``(EnvModel, model folder, the input source of LOG's flight or None, segment or None)``; without
-    ``--model`` identified from LOG with the identifier's ``settings`` (:func:`heli_cli.identify.ml_settings`: ``heli identify``'s)."""
+    ``--model`` identified from LOG with the identifier's ``settings`` (``heli identify``'s:
+    :func:`heli_cli.identify.ml_settings`)."""
     from heli_env.env_model import load_env_model
 
     if args.model is not None:
