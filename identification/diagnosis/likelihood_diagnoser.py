@@ -134,9 +134,9 @@ BASE_TIMING_SAMPLES = 1.5
 """A servo delay the hold's fit detects (as ``heli identify`` does) shorter than this many samples starts the
 base of the candidates (:meth:`LikelihoodDiagnoser._decide_hold`): the log's convention reaches a sample of
 stamping and half a sample of hold, and no delay that short is named (:data:`~.axis_scores.RESOLUTION_SAMPLES`,
-2). Between 1.5 and 2 samples the alignment candidate decides, as before: a true 20 ms delay at 100 Hz, detected
-at 19.6-19.7 ms, started the base on 4 of 6 bench flights at a bound of 2 samples and was then named on none of
-them; the final fit keeps such a delay where it is not named (:meth:`LikelihoodDiagnoser._final_fit`)."""
+2). Between 1.5 and 2 samples the alignment candidate decides, as before: with a bound of 2 samples a true 20 ms
+pitch delay at 100 Hz, detected at 19.6-19.7 ms, was no longer named on 2 of the 4 bench flights that named it;
+the final fit keeps such a delay where it is not named (:meth:`LikelihoodDiagnoser._final_fit`)."""
 
 
 class LikelihoodDiagnoser(DiagnosisResult):
