@@ -62,7 +62,8 @@ def register(sub):
     p.add_argument("--closed-loop", choices=CLOSED_LOOP_CHOICES, default=None,
                    help="the closed-loop check when identifying from LOG, as heli identify's: where a pilot's "
                    f"sticks follow the aircraft, remove the damping's bias they cause ('auto', the default, or "
-                   f"${CLOSED_LOOP_ENV} when set), only report it ('report'), or skip it ('off')")
+                   f"${CLOSED_LOOP_ENV} when set), only report it ('report'), or skip it ('off': quicker; the "
+                   "check costs 8-24 fits of the flight, each profiling a servo delay the flight's fit found)")
     p.add_argument("--window", type=number("a window length in seconds > 0", 0.0), default=20.0,
                    help="length of the gust windows flown in the time domain (default 20 s; they tile the library)")
     p.add_argument("--candidates", type=whole(1, 10), default=3,
