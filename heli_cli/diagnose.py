@@ -125,8 +125,8 @@ def _print_run(run_, evidence) -> int:
             print(flight_controller_note(d))
     from identification.reports.likelihood_diagnosis import timing_note
 
-    if d.steps_ and timing_note(d):  # the model written carries it
-        print(timing_note(d))
+    if d.steps_ and (note := timing_note(d)):  # the model written carries it
+        print(note)
     for key, path in run_.paths.items():
         print(f"wrote {path}")
     return 0

@@ -112,7 +112,9 @@ def flight_controller_note(d: LikelihoodDiagnoser) -> str | None:
 
 
 def timing_note(d: LikelihoodDiagnoser) -> str | None:
-    """The servo timing the final fit detected on axes where no effect was named (None when there is none)."""
+    """The servo delays kept in the model without being named (:attr:`LikelihoodDiagnoser.timing_detected_`:
+    shorter than the timing resolution, in the candidates' base or found by the final fit); None when there is
+    none."""
     found = getattr(d, "timing_detected_", None)
     if not found:
         return None
@@ -155,8 +157,8 @@ def diagnosis_markdown(d: LikelihoodDiagnoser, figure: Path | None, verdict: Mod
                         f"{s.threshold:.1f}", f"{s.runner_up} ({s.runner_up_lr:.1f})" if s.runner_up else "—",
                         _r2(s.r2_before), _r2(s.r2_after), heldout_change(s.r2_before, s.r2_after)]
                        for s in d.steps_]), ""]
-    if timing_note(d):
-        md += ["## The model's timing", "", timing_note(d), ""]
+    if note := timing_note(d):
+        md += ["## The model's timing", "", note, ""]
     for i, rows in enumerate(d.rounds_, start=1):
         md += [f"## Candidates, round {i}", "",
                _table(["Axis", "Effect", "k", "LR", "threshold", "timing (s)", "accepted"],
