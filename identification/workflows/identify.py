@@ -268,8 +268,8 @@ def identify_and_report(flights, out_dir, options: IdentifyOptions | None = None
     if opts.validate_flights:  # refused before anything is fitted or written
         check_validation_flights(flights, opts.validate_flights, opts.validate_names)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     identifiers = _fit_models(flights, opts)
+    out.mkdir(parents=True, exist_ok=True)  # after the fits: an interrupted or refused fit leaves no folder
     chosen = "coupled" if opts.coupled else "decoupled"
     ident = identifiers[chosen]
     first = ident.flights_[0]  # filtered as identified
