@@ -214,3 +214,16 @@ def affordable(what: str, bytes_per_unit: float, unit: str, low: float = 0.0, *,
         return v
 
     return parse
+
+
+def segment_option(text):
+    """``--segment``: 'auto', 'all' or ``T0:T1`` on the log's own clock (seconds, T0 < T1) as a pair."""
+    if text in ("auto", "all"):
+        return text
+    try:
+        a, b = (float(v) for v in text.split(":"))
+    except ValueError:
+        a = b = math.nan
+    if not (math.isfinite(a) and math.isfinite(b) and b > a):
+        raise argparse.ArgumentTypeError(f"expected 'auto', 'all' or T0:T1 in seconds with T0 < T1, got {text!r}")
+    return (a, b)

@@ -9,23 +9,9 @@ flash dump) is printed as one warning line each and kept in the metadata
 
 from __future__ import annotations
 
-import argparse
-import math
 import sys
 
-from .argtypes import number, output_path, whole
-
-
-def _segment(text):
-    if text in ("auto", "all"):
-        return text
-    try:
-        a, b = (float(v) for v in text.split(":"))
-    except ValueError:
-        a = b = math.nan
-    if not (math.isfinite(a) and math.isfinite(b) and b > a):
-        raise argparse.ArgumentTypeError(f"expected 'auto', 'all' or T0:T1 in seconds with T0 < T1, got {text!r}")
-    return (a, b)
+from .argtypes import number, output_path, segment_option, whole
 
 
 def register(sub):
@@ -51,7 +37,7 @@ def register(sub):
     p.add_argument("--log", dest="log_n", type=whole(1), default=None, metavar="N",
                    help="which log of a file holding several (from 1, as --list numbers them; default: the one "
                    "with the longest airborne segment)")
-    p.add_argument("--segment", type=_segment, default=None, metavar="auto|all|T0:T1",
+    p.add_argument("--segment", type=segment_option, default=None, metavar="auto|all|T0:T1",
                    help="airborne segment found automatically (default for flight-controller logs), the whole log "
                    "('all', the longest stretch without a logging gap), or T0:T1 on the log's own clock [s]")
     p.add_argument("--inputs", choices=("sticks", "controller", "servos"), default=None,

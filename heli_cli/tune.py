@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from .argtypes import number, output_path, per_axis, seconds_or, servo_lag, seed, whole
+from .argtypes import number, output_path, per_axis, seconds_or, segment_option, servo_lag, seed, whole
 from .identify import CLOSED_LOOP_CHOICES, CLOSED_LOOP_ENV, closed_loop_mode, ml_settings
 from .model_gate import add_accept_option, check_model
 
@@ -49,6 +49,10 @@ def register(sub):
                    help="the gains the aircraft flew: an ArduPilot parameter file (NAME,VALUE) or a Rotorflight "
                    "CLI file ('set name = value'); default: read from LOG")
     p.add_argument("--out", required=True, type=output_path, metavar="DIR", help="output directory")
+    p.add_argument("--segment", type=segment_option, default=None, metavar="auto|all|T0:T1",
+                   help="the stretch of LOG identified, as heli import's: the airborne segment found automatically "
+                   "(default), the whole log ('all') or T0:T1 on the log's own clock [s]; with --model LOG is read "
+                   "whole for its gains")
     p.add_argument("--scale", type=_scale, default=None, metavar="S|R,P,Y",
                    help="model stick per firmware output unit (one number, or roll,pitch,yaw); default: measured "
                    "from LOG (the model's input against the firmware's logged output), else 1")
@@ -146,7 +150,7 @@ def _checked_log(args, spec, progress):
             spec.read(args.log)  # refuses a text log without PARM messages
         return None, None
     progress.stage(f"reading {args.log}")
-    flight = read_log(args.log, segment="all" if args.model is not None else None)
+    flight = read_log(args.log, segment="all" if args.model is not None else args.segment)
     return flight, flight.metadata.get("input_source")
 
 

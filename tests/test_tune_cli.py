@@ -184,3 +184,26 @@ def test_tune_writes_the_files_and_the_plain_loop_flies_them(tmp_path, capsys, f
     values = plain.read_param_file(out / "ardupilot.param")
     assert 3.0 <= values["ATC_ANG_RLL_P"] <= 12.0 and 0.0 <= values["ATC_RAT_RLL_P"] <= 0.35
     assert values == pytest.approx(doc["written_values"])
+
+
+@pytest.mark.skipif(not LOGS.is_dir(), reason="needs ../shared/fixtures/logs (the shared fixtures are absent)")
+def test_a_log_the_airborne_detection_misses_is_tuned_with_segment(tmp_path, capsys, monkeypatch):
+    """A Rotorflight log with no airborne segment found is refused in one line advising tune's own --segment;
+    with ``--segment all`` the whole log is identified (the gains stay read from the log: the way round through
+    ``heli import`` would lose them)."""
+    import identification.workflows.identify as workflow
+
+    log, out = LOGS / "rotorflight_k110_LOG246.TXT", tmp_path / "out"
+    _refused(["tune", str(log), "--firmware", "rotorflight", "--out", str(out), "-q"], capsys, "pass --segment all", out)
+    seen = []
+
+    def identify(flights, folder, **kwargs):
+        seen.append(flights[0])
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(workflow, "identify_and_report", identify)
+    assert main(["tune", str(log), "--firmware", "rotorflight", "--segment", "all", "--out", str(out)]) == 130
+    assert seen and seen[0].duration > 15.0 and seen[0].metadata["segment_mode"] == "all"
+    with pytest.raises(SystemExit) as e:
+        main(["tune", str(log), "--firmware", "rotorflight", "--segment", "5:2", "--out", str(out)])
+    assert e.value.code == 2 and "T0 < T1" in capsys.readouterr().err
