@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from .argtypes import INPUT_HOLD_HELP, input_hold, number, output_path, whole
+from .identify import CLOSED_LOOP_CHOICES, closed_loop_mode
 
 
 def register(sub):
@@ -31,6 +33,11 @@ def register(sub):
     p.add_argument("--min-lr-alignment", type=number("a number >= 0", 0.0, low_open=False), default=None,
                    help="ml: smallest likelihood-ratio statistic of a servo delay / input shift (default 20)")
     p.add_argument("--input-hold", type=input_hold, default="auto", help=INPUT_HOLD_HELP)
+    p.add_argument("--closed-loop", choices=CLOSED_LOOP_CHOICES, default=None,
+                   help="ml: when an effect is found, check the model written in the flight's closed loop as heli "
+                   "identify checks its own ('auto', the default, or $HELI_CLOSED_LOOP when set: a bias a pilot "
+                   "who sees the aircraft gives the damping is removed; 'report': measured only; 'off': skipped); "
+                   "it costs 8-24 fits of the flight, more where a servo delay was found")
     p.add_argument("--folds", type=whole(2, 12), default=5,  # at most Diagnoser.min_windows (12)
                    help="integral: cross-validation blocks, 2 to 12 (default 5)")
     p.add_argument("--window", type=number("a positive number of seconds", 0.0),
@@ -52,6 +59,16 @@ def run(args) -> int:
 
     from .progress import progress_of
 
+    try:
+        closed_loop = closed_loop_mode(args)
+    except ValueError as exc:  # $HELI_CLOSED_LOOP misspelt: refused before any work, as heli identify does
+        print(f"heli diagnose: error: {exc}", file=sys.stderr)
+        return 2
+    if args.method != "ml" and args.closed_loop in ("auto", "report"):
+        print(f"heli diagnose: error: --closed-loop {args.closed_loop} needs the likelihood diagnosis (--method "
+              "ml), got --method integral", file=sys.stderr)
+        return 2
+    args.closed_loop = None if closed_loop == "off" else closed_loop
     flight = read_flight(args.flight)
     model = document = None
     if args.model is not None:
@@ -127,6 +144,12 @@ def _print_run(run_, evidence) -> int:
 
     if d.steps_ and (note := timing_note(d)):  # the model written carries it
         print(note)
+    from identification.reports.likelihood_diagnosis import written_model_check
+
+    if (check := written_model_check(d)) is not None:
+        print(f"closed-loop check of the model written ({check.headline()}):")
+        for line in check.lines():
+            print(f"  {line}")
     for key, path in run_.paths.items():
         print(f"wrote {path}")
     return 0
@@ -151,7 +174,8 @@ def _run_ml(args, flight, model, document, source, progress) -> int:
                                         step + (", then the report and its figures" if step.startswith("fitting the "
                                                 "final") and not args.no_plots else "")))
     run_ = diagnose_by_likelihood(flight, args.out, model=model, model_document=document, source=source,
-                                  plots=not args.no_plots, diagnoser=diagnoser, wait=not args.no_wait)
+                                  plots=not args.no_plots, diagnoser=diagnoser, wait=not args.no_wait,
+                                  closed_loop=args.closed_loop)
     progress.done()
     from identification.likelihood.ahead_score import format_r2
     from identification.reports.likelihood_diagnosis import heldout_change

@@ -13,11 +13,15 @@ telling it the truth, and counts per case:
 * **wrong**: any effect named that is not the truth (on a no-effect flight: any effect at all);
 
 and the dampings of the model the diagnosis fits at the end (what ``heli diagnose`` writes when it names an
-effect) against the truth's: RMS relative error per axis over the seeds, and the worst.
+effect) against the truth's: RMS relative error per axis over the seeds, and the worst. With ``--closed-loop auto``
+the model written is checked in the flight's closed loop first, as ``heli diagnose`` does by default
+(:func:`identification.workflows.diagnose.check_written_model`): the dampings before → after the check, and the
+check's seconds beside the diagnosis'.
 
 Usage::
 
     python scripts/likelihood_diagnosis_study.py [--seeds 20] [--duration 180] [--workers 2] [--cell NAME]
+        [--closed-loop auto]
     python scripts/likelihood_diagnosis_study.py --null-cells [--seeds 5]   # the floors' calibration
 """
 
@@ -95,12 +99,19 @@ def _one(job):
 
     from identification.diagnosis.likelihood_diagnoser import LikelihoodDiagnoser
 
-    name, seed, duration, cell = job
+    name, seed, duration, cell, closed_loop = job
     with threadpool_limits(limits=1, user_api="blas"):
         sim, flight = _flight(name, seed, duration, cell)
         t0 = time.perf_counter()
         d = LikelihoodDiagnoser().fit(flight)  # not told the truth: the sticks' hold is chosen by likelihood too
         seconds = time.perf_counter() - t0
+        fitted = _damping_error(d, sim)
+        check_seconds = 0.0
+        if closed_loop != "off" and d.steps_:  # heli diagnose checks the model it writes
+            from identification.workflows.diagnose import check_written_model
+
+            check_written_model(d, closed_loop)
+            check_seconds = time.perf_counter() - t0 - seconds
     found = {}
     for s in d.steps_:
         found.setdefault(s.effect, {})[s.axis] = s.parameters.get("alignment_s")
@@ -132,13 +143,20 @@ def _one(job):
             "lags": dict(zip(("roll", "pitch", "yaw"), d.lags_)),
             "alignment": dict(zip(("roll", "pitch", "yaw"), d.alignment_)),
             "timing_detected": dict(getattr(d, "timing_detected_", {})),
-            # the model heli diagnose writes when it names an effect: its dampings against the truth
-            "damping_error": {k: getattr(d.params_, k) / getattr(sim.truth, k) - 1.0 for k in ("k3", "k7", "k11")}}
+            # the model heli diagnose writes when it names an effect: its dampings against the truth, as fitted and
+            # after the closed-loop check (the same without it)
+            "damping_error_fitted": fitted, "damping_error": _damping_error(d, sim), "check_seconds": check_seconds}
 
 
-def _dampings(rows) -> str:
-    """The final model's dampings' RMS relative error over the rows, in %, and the worst single one."""
-    errs = np.array([[r["damping_error"][k] for k in ("k3", "k7", "k11")] for r in rows]) * 100.0
+def _damping_error(d, sim) -> dict:
+    """The relative errors of the diagnosis' final dampings against the truth's."""
+    return {k: getattr(d.params_, k) / getattr(sim.truth, k) - 1.0 for k in ("k3", "k7", "k11")}
+
+
+def _dampings(rows, key: str = "damping_error") -> str:
+    """The final model's dampings' RMS relative error over the rows, in %, and the worst single one (``key``:
+    after the closed-loop check, or ``"damping_error_fitted"`` before it)."""
+    errs = np.array([[r[key][k] for k in ("k3", "k7", "k11")] for r in rows]) * 100.0
     rms = np.sqrt(np.mean(errs ** 2, axis=0))
     return " / ".join(f"{v:.1f}" for v in rms) + f" [{np.max(np.abs(errs)):.1f}]"
 
@@ -189,6 +207,9 @@ def main(argv=None):
                     "(the calibration of the floors)")
     ap.add_argument("--cells", nargs="+", default=None, metavar="CELL",
                     help="with --null-cells: these bench cells only (default all)")
+    ap.add_argument("--closed-loop", choices=("off", "auto", "report"), default="off",
+                    help="check the model written in the flight's closed loop, as heli diagnose does by default "
+                    "('auto'; default off: the diagnosis alone)")
     ap.add_argument("--json", default=None, metavar="PATH", help="also write every flight's row (found effects, "
                     "round-1 statistics, closed-loop shares) to PATH")
     args = ap.parse_args(argv)
@@ -200,21 +221,24 @@ def main(argv=None):
         unknown = [c for c in cells if c not in BENCH_CELLS]
         if unknown:
             raise SystemExit(f"unknown cells {unknown}; known: {', '.join(BENCH_CELLS)}")
-        rows = _run([("none", s, args.duration, c) for s in seeds for c in cells], args)
+        rows = _run([("none", s, args.duration, c, "off") for s in seeds for c in cells], args)
         print(f"\nCommand: python scripts/likelihood_diagnosis_study.py --null-cells --seeds {args.seeds} "
               f"--duration {args.duration:g}" + (f" --first-seed {args.first_seed}" if args.first_seed != 1 else "")
               + (f" --cells {' '.join(args.cells)}" if args.cells else ""))
         _null_table(rows, cells)
         return
-    rows = _run([(c, s, args.duration, args.cell) for c in args.cases for s in seeds], args)
+    rows = _run([(c, s, args.duration, args.cell, args.closed_loop) for c in args.cases for s in seeds], args)
     print(f"\nLikelihood diagnosis, {args.seeds} seeds per case, {args.duration:g} s flights"
           + (f", bench cell {args.cell}" if args.cell else ", default heli simulate-flight pilot")
           + f". Command: python scripts/likelihood_diagnosis_study.py --seeds {args.seeds} --duration "
           f"{args.duration:g}" + (f" --cell {args.cell}" if args.cell else "")
-          + (f" --first-seed {args.first_seed}" if args.first_seed != 1 else ""))
+          + (f" --first-seed {args.first_seed}" if args.first_seed != 1 else "")
+          + (f" --closed-loop {args.closed_loop}" if args.closed_loop != "off" else ""))
+    checked = args.closed_loop != "off"
     print("\n| case | named (all true axes) | partly | wrong effect | median s | dampings' RMS error k3 / k7 / k11 "
-          "[worst] | what was named, most often |")
-    print("|---|---|---|---|---|---|---|")
+          "[worst]" + (" as fitted → after the check | check's median s" if checked else "")
+          + " | what was named, most often |")
+    print("|---|---|---|---|---|---|---|" + ("---|" if checked else ""))
     for c in args.cases:
         rs = [r for r in rows if r["case"] == c]
         n = len(rs)
@@ -225,7 +249,9 @@ def main(argv=None):
         top = sorted(common.items(), key=lambda kv: -kv[1])[:2]
         print(f"| {c} | {sum(r['named'] for r in rs)}/{n} | {sum(r['partly'] for r in rs)}/{n} "
               f"| {sum(r['wrong'] for r in rs)}/{n} | {np.median([r['seconds'] for r in rs]):.1f} | "
-              + _dampings(rs) + " | " + "; ".join(f"{k} ×{v}" for k, v in top) + " |")
+              + (f"{_dampings(rs, 'damping_error_fitted')} → {_dampings(rs)} | "
+                 f"{np.median([r['check_seconds'] for r in rs]):.1f}" if checked else _dampings(rs))
+              + " | " + "; ".join(f"{k} ×{v}" for k, v in top) + " |")
 
 
 if __name__ == "__main__":

@@ -68,6 +68,8 @@ def diagnosis_document(d: LikelihoodDiagnoser, source: dict | None = None, model
     out["criterion"]["text"] = criterion_text(d)
     out["parameters_after"] = d.params_.values() | {f"tau_{a}": d.params_.taus[i] for i, a in enumerate(AXES)}
     out["model_written"] = str(model_path) if model_path else None
+    if (check := written_model_check(d)) is not None:
+        out["closed_loop"] = check.describe()
     if verdict is not None:
         out["model_verdict"] = verdict.to_dict()
     return jsonable(out)
@@ -124,6 +126,13 @@ def timing_note(d: LikelihoodDiagnoser) -> str | None:
             "not named as an effect, but the model keeps it: left out, it biases the damping.")
 
 
+def written_model_check(d: LikelihoodDiagnoser):
+    """The closed-loop check run on the model the diagnosis wrote
+    (:func:`identification.workflows.diagnose.check_written_model`), or None when it was not run."""
+    ident = getattr(d, "identifier_", None)
+    return getattr(ident, "closed_loop_", None) if d.steps_ else None
+
+
 def diagnosis_markdown(d: LikelihoodDiagnoser, figure: Path | None, verdict: ModelVerdict | None = None) -> str:
     """``diagnosis.md``: the written model's verdict, the diagnosis' verdict, closed-loop shares, the steps, and
     every candidate per round."""
@@ -159,6 +168,11 @@ def diagnosis_markdown(d: LikelihoodDiagnoser, figure: Path | None, verdict: Mod
                        for s in d.steps_]), ""]
     if note := timing_note(d):
         md += ["## The model's timing", "", note, ""]
+    if (check := written_model_check(d)) is not None:
+        md += ["## The model written, checked in the closed loop", "",
+               f"As `heli identify` checks its model ({check.headline()}; mode `{check.mode}`): the effects above "
+               "were named on the fits as found, the model written carries the values after the check.", "",
+               *[f"- {line}" for line in check.lines()], ""]
     for i, rows in enumerate(d.rounds_, start=1):
         md += [f"## Candidates, round {i}", "",
                _table(["Axis", "Effect", "k", "LR", "threshold", "timing (s)", "accepted"],

@@ -70,17 +70,24 @@ class DiagnosisRun(PendingFigures):
 
 def diagnose_by_likelihood(flight: Flight, out_dir, *, model: ModelParams | None = None, model_document=None,
                            source: dict | None = None, plots: bool = True,
-                           diagnoser: LikelihoodDiagnoser | None = None, wait: bool = True) -> DiagnosisRun:
+                           diagnoser: LikelihoodDiagnoser | None = None, wait: bool = True,
+                           closed_loop: str | None = None) -> DiagnosisRun:
     """Diagnose ``flight`` by likelihood and write the outputs into ``out_dir`` (module docstring).
 
     When an effect is found, the new model, this flight's wind and the diagnosis files are written as one
     transaction of the model folder (:class:`model_store.ModelDir`): after a kill at any instant the folder
     reads as before or after. ``wait``: wait for another command writing ``out_dir`` (default), or raise
     :class:`~identification.errors.ModelDirBusyError`. The figure is drawn after the numbers are written.
+    ``closed_loop`` ("auto" or "report"; None: not run): the model written is checked in the flight's closed loop
+    first, as ``heli identify``'s is (:func:`check_written_model`).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     d = (diagnoser or LikelihoodDiagnoser()).fit(flight, model=model)
+    if d.steps_ and closed_loop is not None:
+        if callable(getattr(d, "progress", None)):
+            d.progress("checking the model written in the flight's closed loop (as heli identify checks its own)")
+        check_written_model(d, closed_loop)
     figure = out / "diagnosis_likelihood.png" if plots and d.rounds_ else None
     new_model = _likelihood_model(d, flight, model_document, source) if d.steps_ else None
     verdict = verdict_of(new_model[0]) if new_model is not None else None
@@ -89,6 +96,33 @@ def diagnose_by_likelihood(flight: Flight, out_dir, *, model: ModelParams | None
     if figure is not None and plot_statistics(d, figure) is not None:
         paths["likelihood_png"] = figure
     return DiagnosisRun(d, doc, paths)
+
+
+def check_written_model(d: LikelihoodDiagnoser, mode: str):
+    """Run ``heli identify``'s closed-loop check (:meth:`MaximumLikelihoodIdentifier.closed_loop_check`) on the
+    diagnosis' final fit, the model it writes: where a pilot who sees the aircraft moved the sticks, the damping's
+    bias his loop gives the likelihood is measured and, in mode "auto", removed, and a servo delay the loop makes
+    is taken out. The diagnosis' effects were named on the fits as found; the check changes only the values the
+    model written carries (``d.params_``, its holds, and a delay it removed from :attr:`timing_detected_`).
+
+    A servo delay the diagnosis named was found by a search, as ``heli identify``'s are: the check's flights are
+    fitted with it searched (profiled, ``delay="auto"``), so that its bias is measured and removed with the
+    damping's (held at the value found, the pilot's loop kept its +50 % in the sluggish aircraft's 20 ms pitch
+    delay, and with it the damping's bias), and the delay is tested in the delay-free loop as identify's are.
+    Returns the check (also ``d.identifier_.closed_loop_``)."""
+    ident = d.identifier_
+    named = {s.axis for s in d.steps_ if s.effect == "servo_delay" and d.alignment_[AXES.index(s.axis)] > 0.0}
+    given = ident.delay
+    ident.delay = ["auto" if axis in named else v for axis, v in zip(AXES, ident._delays())]
+    try:
+        check = ident.closed_loop_check(mode)
+    finally:
+        ident.delay = given
+    d.params_ = ident.params_
+    d.hold_fractions_ = {axis: fit.input_hold for axis, fit in ident.axes_.items()}
+    removed = {axis for axis, tested in check.delays.items() if tested.removed}
+    d.timing_detected_ = {axis: v for axis, v in d.timing_detected_.items() if axis not in removed}
+    return check
 
 
 def _verdict(ident, params: ModelParams, aligned: Flight) -> ModelVerdict:
@@ -128,7 +162,9 @@ def _likelihood_model(d: LikelihoodDiagnoser, flight: Flight, model_document, so
     settings["method"] += " after heli diagnose"
     aligned = shift_inputs(flight, log_shift) if min(log_shift) < 0 else flight
     document = new_model_document(d.params_, structure="custom", sample_rate=flight.sample_rate,
-                                  identification=settings, fit_statistics={"axes": ident.summary()},
+                                  identification=settings, fit_statistics={"axes": ident.summary(), **(
+                                      {"closed_loop": ident.closed_loop_.describe()}
+                                      if getattr(ident, "closed_loop_", None) is not None else {})},
                                   sources=sources, extra={"diagnosis": diagnosis},
                                   verdict=_verdict(ident, d.params_, aligned))
     return document, identify_disturbance(aligned, d.params_, wind_torque=ident.wind_torque(0))
