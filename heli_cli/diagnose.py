@@ -18,8 +18,8 @@ def register(sub):
         "gyroscopic, collective_torque, nonlinear_damping, gain_scheduling) on every axis, accept those whose "
         "likelihood-ratio statistic clears the threshold, add them and iterate (--method integral: the integral "
         "method with held-out forward simulation instead). Writes DIR/diagnosis.json, DIR/diagnosis.md with "
-        "figures and, when an effect is found, a new DIR/model.json version and the flight's wind in "
-        "DIR/disturbances.",
+        "figures and, when an effect is found, a new DIR/model.json version (checked in the flight's closed loop "
+        "as heli identify checks its own: --closed-loop) and the flight's wind in DIR/disturbances.",
     )
     p.add_argument("flight", metavar="FLIGHT.csv", help="canonical CSV flight log")
     p.add_argument("--model", metavar="DIR/model.json", default=None,
