@@ -62,6 +62,7 @@ class AxisLikelihood:
         """Length of the model part of the search vector (damping, wind, hold fraction); the servo delay follows
         when ``free_tau``."""
         self._systems = {}
+        self._servo = {}
 
     def unpack(self, x):
         """(damping, T_slow, T_fast, var_slow/R, var_fast/R, zeta) from the search vector."""
@@ -128,13 +129,27 @@ class AxisLikelihood:
             for r in d.causal_rows:
                 B[1 + r] = b_c
             if servo:
-                rows[1 + d.servo_row] = servo_increments(d.servo_sticks[i], x[0], max(tau, 0.0), d.dt,
-                                                         self.hold_at(x), d.lag)
+                rows[1 + d.servo_row] = self._servo_increments(i, x[0], max(tau, 0.0), self.hold_at(x))
                 B[1 + d.servo_row] = b_v
             F = filter_rows(B, a, rows)
             ys.append((y - F[0])[d.burn:])
             zs.append(F[1:, d.burn:])
         return np.concatenate(ys), np.concatenate(zs, axis=1), S
+
+    def _servo_increments(self, i: int, damping: float, tau: float, hold: float) -> np.ndarray:
+        """Flight ``i``'s stick through the servo (:func:`~.state_space.servo_increments`) at ``damping``, delay
+        ``tau`` and hold ``hold``. The last :data:`SYSTEMS_KEPT` are kept, keyed by those exact values, so that the
+        Jacobian's gust columns, which leave them as they are, reuse them (the same numbers: the same bits)."""
+        key = (i, float(damping), float(tau), float(hold))
+        hit = self._servo.get(key)
+        if hit is None:
+            d = self.data
+            hit = servo_increments(d.servo_sticks[i], damping, tau, d.dt, hold, d.lag)
+            hit.setflags(write=False)  # handed out again: nobody may change it in place
+            if len(self._servo) >= SYSTEMS_KEPT * len(d.y):
+                del self._servo[next(iter(self._servo))]
+            self._servo[key] = hit
+        return hit
 
     def solve_linear(self, x):
         """Innovations ``e``, the linear parameters ``theta`` minimising them at the nonlinear ``x``, and ``S``."""
