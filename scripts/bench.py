@@ -101,6 +101,13 @@ def bench_identification(repeats: int) -> dict:
     diag_one = _median_time(lambda: LikelihoodDiagnoser(**one).fit(flight), 1)
     diag = _median_time(lambda: LikelihoodDiagnoser().fit(flight), 1)
     lagged = _median_time(lambda: MaximumLikelihoodIdentifier(delay="auto", servo_lag="auto", **one).fit(delayed), 1)
+    # the check's slow path: a pilot's flight behind a noisy gyro with a fast servo on every axis, each delay found
+    # tested in the delay-free loop (16 flights) and the check's flights fitted with it profiled
+    from identification.bench.cells import BENCH_CELLS
+
+    slow = simulate_flight(300, seed=11, config=BENCH_CELLS["broadband-pd-noisy-gyro"], effects=("servo_delay",),
+                           effect_scale=0.25).flight
+    checked_delays = _median_time(lambda: MaximumLikelihoodIdentifier(**identify).fit(slow), 1)
     out.update({
         "maximum likelihood, decoupled, 3 axes, one core, hold estimated (default) [s]": ml,
         "the same with the hold fixed linear (the default before) [s]": ml_linear,
@@ -112,6 +119,8 @@ def bench_identification(repeats: int) -> dict:
         "heli identify's default: the same with the closed-loop check (8 flights flown and fitted), one core [s]":
             checked_one,
         f"heli identify's default, on {workers_available()} cores [s]": checked,
+        f"heli identify's default on a pilot's flight behind a noisy gyro with servo delays found on every axis "
+        f"(the check's slow path), on {workers_available()} cores [s]": checked_delays,
         "maximum likelihood with the alignment profiled over -0.6-0.5 s, 3 axes, one core [s]": ml_delay,
         f"the same, axes side by side on {workers_available()} cores (default) [s]": ml_delay_pool,
         "the same with the servo lag profiled too (10-200 ms), 3 axes, one core [s]": lagged,
