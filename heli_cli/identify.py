@@ -7,7 +7,7 @@ import os
 import sys
 from pathlib import Path
 
-from .argtypes import INPUT_HOLD_HELP, input_hold, number, output_path, seconds_or, servo_lag, whole
+from .argtypes import INPUT_HOLD_HELP, input_hold, number, output_path, seconds_or, segment_option, servo_lag, whole
 
 
 _delay = seconds_or(("detect", "auto", "none"), "delay", 2.0)
@@ -72,6 +72,10 @@ def register(sub):
                    default=1.0, help="integral method: integration interval T_i - T_(i-1) in s (default 1.0)")
     p.add_argument("--no-filter", action="store_true",
                    help="integral method: skip the 4/8 Hz zero-phase FIR prefilter (Section 3.1)")
+    p.add_argument("--segment", type=segment_option, default=None, metavar="auto|all|T0:T1",
+                   help="the stretch of each FLIGHT identified, as heli import's: a flight-controller log's airborne "
+                   "segment found automatically (its default), the whole log ('all') or T0:T1 on its own clock [s] "
+                   "(a CSV flight is whole by default)")
     p.add_argument("--validate", nargs="+", default=[], metavar="OTHER.csv",
                    help="after identifying, simulate the model on these flights (not used for the fit) and report "
                    "per axis the fit %% and R² of the simulation (as MATLAB's compare) and the R² of the 0.5 s-ahead "
@@ -121,7 +125,7 @@ def ml_settings(args, closed_loop: str) -> dict:
 
 
 def run(args) -> int:
-    from identification.io import read_flight
+    from identification.io import read_flight, read_log
     from identification.workflows.identify import identify_and_report, source_entry
 
     from .progress import progress_of
@@ -129,7 +133,7 @@ def run(args) -> int:
     with progress_of(args) as progress:
         if len(args.flights) > 1:  # one flight reads in a fraction of a second
             progress.stage(f"reading {len(args.flights)} flights")
-        flights = [read_flight(path) for path in args.flights]
+        flights = [read_log(path, segment=args.segment) for path in args.flights]
         others = [read_flight(path) for path in args.validate]  # a bad one refused before any fit
         for path, flight in zip(args.flights + args.validate, flights + others):
             for warning in flight.metadata.get("import_warnings") or ():

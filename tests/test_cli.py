@@ -450,3 +450,30 @@ def test_identify_timing_options(flight_csv, tmp_path, capsys, option, likelihoo
         main(["identify", str(flight_csv), "--out", str(tmp_path / "B"), option, bad])
     assert parser_says in capsys.readouterr().err
     assert not (tmp_path / "A" / "model.json").exists() and not (tmp_path / "B").exists()
+
+
+_LOGS = Path(__file__).resolve().parents[2] / "shared" / "fixtures" / "logs"
+
+
+@pytest.mark.skipif(not _LOGS.is_dir(), reason="needs ../shared/fixtures/logs (the shared fixtures are absent)")
+def test_identify_takes_the_stretch_of_a_log_the_airborne_detection_misses(tmp_path, capsys, monkeypatch):
+    """A log with no airborne segment found is refused in one line advising identify's own --segment; with
+    ``--segment all`` the whole log is identified, with T0:T1 that stretch."""
+    import identification.workflows.identify as workflow
+
+    log, out = _LOGS / "rotorflight_k110_LOG246.TXT", tmp_path / "out"
+    assert main(["identify", str(log), "--out", str(out), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "pass --segment all" in err[0] and not out.exists(), err
+    seen = []
+
+    def identify(flights, folder, **kwargs):
+        seen.append(flights[0])
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(workflow, "identify_and_report", identify)
+    assert main(["identify", str(log), "--segment", "all", "--out", str(out), "-q"]) == 130
+    assert main(["identify", str(log), "--segment", "20:27", "--out", str(out), "-q"]) == 130
+    whole, stretch = seen
+    assert whole.metadata["segment_mode"] == "all" and whole.duration > 15.0
+    assert stretch.duration == pytest.approx(7.0, abs=0.05) and not out.exists()
