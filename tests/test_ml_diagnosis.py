@@ -252,6 +252,11 @@ def test_diagnose_refuses_a_closed_loop_it_cannot_run(tmp_path, capsys, monkeypa
     monkeypatch.setenv("HELI_CLOSED_LOOP", "of")
     assert main(["diagnose", str(path), "--out", str(tmp_path / "d")]) == 2
     assert "HELI_CLOSED_LOOP must be one of" in capsys.readouterr().err and not (tmp_path / "d").exists()
+    from identification.workflows.diagnose import diagnose_by_likelihood
+
+    with pytest.raises(ValueError, match="closed_loop must be None or one of"):  # the CLI's 'off' is None here
+        diagnose_by_likelihood(coupled_flight.flight, tmp_path / "d", closed_loop="off")
+    assert not (tmp_path / "d").exists()
 
 
 @pytest.mark.slow

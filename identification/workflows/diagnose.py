@@ -30,6 +30,7 @@ from ..disturbance.equivalent_input import identify_disturbance
 from ..errors import SimulationDivergedError
 from ..flight import Flight
 from ..integral.method import IntegralIdentifier
+from ..likelihood.closed_loop import N_FLIGHTS, check_settings
 from ..preprocess import shift_inputs
 from ..reports.diagnosis import criterion_text as heldout_criterion
 from ..reports.diagnosis import diagnosis_document as heldout_document
@@ -80,7 +81,13 @@ def diagnose_by_likelihood(flight: Flight, out_dir, *, model: ModelParams | None
     :class:`~identification.errors.ModelDirBusyError`. The figure is drawn after the numbers are written.
     ``closed_loop`` ("auto" or "report"; None: not run): the model written is checked in the flight's closed loop
     first, as ``heli identify``'s is (:func:`check_written_model`).
+
+    Raises
+    ------
+    ValueError
+        ``closed_loop`` not None, "auto" or "report" (before any work).
     """
+    check_settings(closed_loop, N_FLIGHTS)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     d = (diagnoser or LikelihoodDiagnoser()).fit(flight, model=model)
