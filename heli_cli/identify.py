@@ -162,7 +162,8 @@ def run(args) -> int:
         backend = flight_backend(args)
         try:
             run = _identify_or_explain(args, flights, kwargs, progress, lambda: identify_and_report(
-                flights, args.out, coupled=args.coupled, sources=[source_entry(p) for p in args.flights],
+                flights, args.out, coupled=args.coupled,
+                sources=[source_entry(p, segment=read_segment(args, f)) for p, f in zip(args.flights, flights)],
                 identifier_kwargs=kwargs, flight_paths=args.flights, plots=not args.no_plots,
                 disturbances=not args.no_disturbances, backend=backend, method=args.method,
                 progress=progress.bars and len(flights) > 1, draw_figures=False, stage=progress.stage,
@@ -181,6 +182,13 @@ def run(args) -> int:
 
     print(f"wrote {write_html_report(run.paths['report'])}")  # after the figures: it embeds them
     return 0
+
+
+def read_segment(args, flight):
+    """The stretch ``(t0, t1)`` of its log ``flight`` was read as when ``--segment`` was given (recorded in the
+    model's sources, so that ``heli refresh`` reads it again the same way), else None."""
+    segment = flight.metadata.get("segment") if args.segment is not None else None
+    return None if segment is None else (float(segment[0]), float(segment[1]))
 
 
 def _identify_or_explain(args, flights, kwargs: dict, progress, identify):

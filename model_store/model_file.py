@@ -38,6 +38,7 @@ from __future__ import annotations
 import copy
 import datetime as _dt
 import json
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -270,14 +271,20 @@ class Source:
         The flight file's name (no folder).
     sha256 : str or None
         SHA-256 of its bytes (hex).
+    segment : (float, float) or None
+        The stretch of a flight-controller log that was fitted, on the log's own clock [s], when the flight was read
+        with one given (``--segment``); None: the file as it reads by default (a log's airborne segment found
+        automatically, a CSV whole). ``heli refresh`` reads the flight again the same way.
     """
 
     file: str | None
     sha256: str | None
+    segment: tuple | None = None
 
     def to_dict(self) -> dict:
         """The ``provenance.sources`` entry (what :func:`identification.workflows.identify.source_entry` writes)."""
-        return {"file": self.file, "sha256": self.sha256}
+        return {"file": self.file, "sha256": self.sha256,
+                **({"segment": list(self.segment)} if self.segment is not None else {})}
 
 
 def _sources(provenance, where: str) -> tuple:
@@ -291,7 +298,14 @@ def _sources(provenance, where: str) -> tuple:
         if not isinstance(entry, dict) or not all(isinstance(entry.get(k), (str, type(None))) for k in ("file", "sha256")):
             raise ModelFileError(f"{where}: 'provenance.sources[{i}]' must be an object "
                                  f"{{\"file\": name, \"sha256\": hex}}, got {entry!r}")
-        out.append(Source(entry.get("file"), entry.get("sha256")))
+        segment = entry.get("segment")
+        if segment is not None and not (isinstance(segment, list) and len(segment) == 2 and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in segment)
+                and segment[0] < segment[1]):
+            raise ModelFileError(f"{where}: 'provenance.sources[{i}].segment' must be [t0, t1] in seconds with "
+                                 f"t0 < t1, got {segment!r}")
+        out.append(Source(entry.get("file"), entry.get("sha256"),
+                          None if segment is None else (float(segment[0]), float(segment[1]))))
     return tuple(out)
 
 

@@ -442,7 +442,9 @@ def _posterior(ident, index: int, flight: Flight):
     return wind_posterior(ident, index, seed=flight_seed(source_of(flight)["sha256"]))
 
 
-def source_entry(path, sha256: str | None = None) -> dict:
-    """Provenance entry of a flight file; ``sha256`` when its digest is already known."""
+def source_entry(path, sha256: str | None = None, segment=None) -> dict:
+    """Provenance entry of a flight file; ``sha256`` when its digest is already known; ``segment`` ``(t0, t1)``
+    when the flight was read as that stretch of its log (:class:`model_store.model_file.Source`)."""
     p = Path(path)
-    return {"file": p.name, "sha256": sha256 or sha256_of(p)}
+    return {"file": p.name, "sha256": sha256 or sha256_of(p),
+            **({"segment": [float(segment[0]), float(segment[1])]} if segment is not None else {})}

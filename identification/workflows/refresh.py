@@ -239,15 +239,17 @@ def _say(settings: RefreshSettings, text: str) -> None:
         settings.stage(text)
 
 
-def _read_flights(paths, desc: str, show: bool) -> list:
+def _read_flights(paths, desc: str, show: bool, segments=None) -> list:
     """Read ``paths`` with a bar only on a terminal (``disable=None``: tqdm's own check; off one, a failing
-    read's error would land on the bar's line), closed on an error too."""
+    read's error would land on the bar's line), closed on an error too; each as the stretch ``segments`` gives
+    for it (``(t0, t1)``: the one its model recorded) or None (the file as it reads by default)."""
     from tqdm import tqdm
 
-    from ..io import read_flight
+    from ..io import read_log
 
-    with tqdm(paths, desc=desc, unit="flight", disable=None if show else True) as bar:
-        return [read_flight(p) for p in bar]
+    segments = list(segments) if segments is not None else [None] * len(paths)
+    with tqdm(list(zip(paths, segments)), desc=desc, unit="flight", disable=None if show else True) as bar:
+        return [read_log(p, segment=seg) for p, seg in bar]
 
 
 @dataclass
@@ -298,12 +300,13 @@ class _Refresh:
         _say(s, f"{desc}: {s.n_replicates} replicates")
         return interval_bootstrap(flights, fitted, s.n_replicates, s.block, seq, progress=bool(self.show), desc=desc)
 
-    def fitted(self, paths, what: str, why: str):
-        """(flights, the model's identifier fitted on them), the step announced with ``why``."""
+    def fitted(self, paths, what: str, why: str, segments=None):
+        """(flights, the model's identifier fitted on them), the step announced with ``why``; ``segments``: the
+        stretch of each log its model recorded (:func:`_read_flights`)."""
         n = len(paths)
         _say(self.settings, f"reading and fitting {n} {what} flight{'s' if n != 1 else ''} "
                             f"({'maximum likelihood' if self.estimator == 'ml' else 'integral method'}) {why}")
-        flights = _read_flights(paths, f"reading {what} flights", self.show)
+        flights = _read_flights(paths, f"reading {what} flights", self.show, segments)
         return flights, self.identifier().fit(flights)
 
     def run(self) -> RefreshResult:
@@ -353,7 +356,7 @@ class _Refresh:
                                                           self.old_sources, self.estimator)
             return _Previous(found, missing, [], None, se_old, se_source, None, [note] if note else [])
         old_flights, old_ident = self.fitted([f["path"] for f in found], "previous", "for the current model's "
-                                             "uncertainty")
+                                             "uncertainty", [f.get("segment") for f in found])
         boot_old = self.uncertainty(old_ident, old_flights, self.seeds[1], "bootstrap (previous flights)")
         old_params = self.tx.base.params
         diff = max((abs(old_ident.params_.get(k) - old_params.get(k)) / max(abs(old_params.get(k)), 1e-12)

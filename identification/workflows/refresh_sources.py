@@ -82,7 +82,8 @@ def find_source_flights(sources, search_dirs=(), candidates=()) -> tuple[list, l
     Returns
     -------
     found : list of dict
-        ``{"file", "sha256", "path"}`` per source found (its bytes hash to the recorded SHA-256).
+        ``{"file", "sha256", "path"}`` per source found (its bytes hash to the recorded SHA-256), and ``"segment"``
+        where the model was fitted on that stretch of the log.
     missing : list of dict
         Sources not found (or found with other content: ``"note"`` says so).
     """
@@ -106,7 +107,9 @@ def find_source_flights(sources, search_dirs=(), candidates=()) -> tuple[list, l
                         break
                     note = f"{p} has other content (SHA-256 differs)"
         if path is not None:
-            found.append({"file": name, "sha256": sha, "path": str(path)})
+            segment = getattr(src, "segment", None)  # the stretch of its log the model was fitted on
+            found.append({"file": name, "sha256": sha, "path": str(path)}
+                         | ({"segment": tuple(segment)} if segment is not None else {}))
         else:
             missing.append({"file": name, "sha256": sha} | ({"note": note} if note else {}))
     return found, missing
