@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from .argtypes import INPUT_HOLD_HELP, input_hold, number, output_path, whole
-from .identify import CLOSED_LOOP_CHOICES, closed_loop_mode
+from .identify import CLOSED_LOOP_CHOICES, closed_loop_mode, print_check
 
 
 def register(sub):
@@ -68,7 +68,6 @@ def run(args) -> int:
         print(f"heli diagnose: error: --closed-loop {args.closed_loop} needs the likelihood diagnosis (--method "
               "ml), got --method integral", file=sys.stderr)
         return 2
-    args.closed_loop = None if closed_loop == "off" else closed_loop
     flight = read_flight(args.flight)
     model = document = None
     if args.model is not None:
@@ -76,7 +75,8 @@ def run(args) -> int:
         model = document.params
     with progress_of(args) as progress:
         if args.method == "ml":
-            return _run_ml(args, flight, model, document, source_entry(args.flight), progress)
+            return _run_ml(args, flight, model, document, source_entry(args.flight), progress,
+                           None if closed_loop == "off" else closed_loop)
         from identification.diagnosis.heldout_diagnoser import ALPHA, MIN_GAIN, Diagnoser
         from identification.workflows.diagnose import DiagnosisConfig, diagnose_and_report
 
@@ -147,15 +147,14 @@ def _print_run(run_, evidence) -> int:
     from identification.reports.likelihood_diagnosis import written_model_check
 
     if (check := written_model_check(d)) is not None:
-        print(f"closed-loop check of the model written ({check.headline()}):")
-        for line in check.lines():
-            print(f"  {line}")
+        print_check(check, "closed-loop check of the model written")
     for key, path in run_.paths.items():
         print(f"wrote {path}")
     return 0
 
 
-def _run_ml(args, flight, model, document, source, progress) -> int:
+def _run_ml(args, flight, model, document, source, progress, closed_loop: str | None) -> int:
+    """The likelihood diagnosis, the model it writes checked in mode ``closed_loop`` (None: not checked)."""
     from identification.diagnosis.likelihood_diagnoser import (
         ALPHA,
         MIN_LR_ALIGNMENT,
@@ -175,7 +174,7 @@ def _run_ml(args, flight, model, document, source, progress) -> int:
                                                 "final") and not args.no_plots else "")))
     run_ = diagnose_by_likelihood(flight, args.out, model=model, model_document=document, source=source,
                                   plots=not args.no_plots, diagnoser=diagnoser, wait=not args.no_wait,
-                                  closed_loop=args.closed_loop)
+                                  closed_loop=closed_loop)
     progress.done()
     from identification.likelihood.ahead_score import format_r2
     from identification.reports.likelihood_diagnosis import heldout_change

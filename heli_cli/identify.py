@@ -184,6 +184,14 @@ def run(args) -> int:
     return 0
 
 
+def print_check(check, title: str) -> None:
+    """A closed-loop check (:class:`~identification.likelihood.closed_loop.ClosedLoopCheck`) as the terminal shows
+    it: ``title`` with its headline, then a line per axis, delay tested and hold."""
+    print(f"{title} ({check.headline()}):")
+    for line in check.lines():
+        print(f"  {line}")
+
+
 def read_segment(args, flight):
     """The stretch ``(t0, t1)`` of its log ``flight`` was read as when ``--segment`` was given (recorded in the
     model's sources, so that ``heli refresh`` reads it again the same way), else None."""
@@ -297,9 +305,7 @@ def _print_run(run, n_flights: int, method: str) -> None:
         print(f"  {axis:5s}: {vals}  (R² {fit.r2:.3f}{delay})")
     check = getattr(run.identifiers[run.chosen], "closed_loop_", None)
     if check is not None:
-        print(f"closed-loop check ({check.headline()}):")
-        for line in check.lines():
-            print(f"  {line}")
+        print_check(check, "closed-loop check")
     stats = run.validation.rate_stats[run.chosen]
     print("forward-simulation MAE (deg/s): " + ", ".join(f"{a} {stats[a]['mae_deg_s']:.3f}" for a in stats))
     for profile in run.disturbances:

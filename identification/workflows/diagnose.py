@@ -41,6 +41,7 @@ from ..reports.likelihood_diagnosis import criterion_text as likelihood_criterio
 from ..reports.likelihood_diagnosis import diagnosis_document as likelihood_document
 from ..reports.likelihood_diagnosis import diagnosis_markdown as likelihood_markdown
 from ..reports.likelihood_diagnosis import plot_statistics
+from ..reports.likelihood_diagnosis import written_model_check
 from ..validation.forward_simulation import validate_models
 from ..validation.model_verdict import judge_identifier
 from .identify import identification_settings
@@ -170,8 +171,8 @@ def _likelihood_model(d: LikelihoodDiagnoser, flight: Flight, model_document, so
     aligned = shift_inputs(flight, log_shift) if min(log_shift) < 0 else flight
     document = new_model_document(d.params_, structure="custom", sample_rate=flight.sample_rate,
                                   identification=settings, fit_statistics={"axes": ident.summary(), **(
-                                      {"closed_loop": ident.closed_loop_.describe()}
-                                      if getattr(ident, "closed_loop_", None) is not None else {})},
+                                      {"closed_loop": check.describe()}
+                                      if (check := written_model_check(d)) is not None else {})},
                                   sources=sources, extra={"diagnosis": diagnosis},
                                   verdict=_verdict(ident, d.params_, aligned))
     return document, identify_disturbance(aligned, d.params_, wind_torque=ident.wind_torque(0))
