@@ -60,3 +60,52 @@ def test_by_default_only_the_cores_other_work_leaves_idle(monkeypatch):
     assert workers_available() == 1
     monkeypatch.setenv("HELI_WORKERS", "2")  # those who know better
     assert workers_available() == 2
+
+
+_INTERRUPTED_POOL = """
+import os, sys, time
+from identification.likelihood.axis_pool import map_axes
+
+def fit(axis):
+    open(os.path.join(sys.argv[1], axis), "w").close()  # this worker has started its fit
+    time.sleep(120)
+    return axis
+
+try:
+    map_axes(fit, ["roll", "pitch", "yaw"], 2)
+except KeyboardInterrupt:
+    print("interrupted", flush=True)
+    sys.exit(130)
+"""
+
+
+def test_ctrl_c_during_a_pooled_fit_ends_the_caller_and_its_workers_at_once(tmp_path):
+    """A terminal's Ctrl-C reaches the whole process group. A worker interrupted inside the pool's queues left
+    `heli identify` waiting on it for ever; now the caller alone is interrupted and ends its workers."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    started = tmp_path / "started"
+    started.mkdir()
+    script = tmp_path / "pooled_fit.py"
+    script.write_text(_INTERRUPTED_POOL)
+    env = dict(os.environ, PYTHONPATH=os.getcwd())
+    process = subprocess.Popen([sys.executable, str(script), str(started)], env=env, start_new_session=True,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while len(list(started.iterdir())) < 2 and time.monotonic() < deadline:  # both workers in a fit
+            time.sleep(0.05)
+        assert len(list(started.iterdir())) == 2, "the workers never started"
+        os.killpg(process.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the whole group
+        out, err = process.communicate(timeout=30)  # the fits' 120 s are not waited for
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+    assert (process.returncode, out.strip()) == (130, "interrupted"), err
+    time.sleep(0.5)  # the terminated workers' exit
+    with pytest.raises(ProcessLookupError):  # no worker left running in the group
+        os.killpg(process.pid, 0)

@@ -13,12 +13,18 @@ The axes are fitted one after another when only one core is idle, when ``HELI_WO
 process that is itself a worker (a study's process pool: no pools within pools), or where the platform
 cannot fork. A task that fails in a worker is run again in the caller, so that its exception reaches the
 user exactly as a serial fit raises it.
+
+An interrupt is the caller's alone: the workers ignore SIGINT (a terminal's Ctrl-C reaches the whole process
+group, and a worker interrupted inside the pool's queues left the pool waiting on it for ever), and the caller,
+interrupted or failing while it waits, terminates them and re-raises at once instead of waiting for the running
+fits (what Python 3.14's ``ProcessPoolExecutor.terminate_workers`` does, used where it exists).
 """
 
 from __future__ import annotations
 
 import multiprocessing as mp
 import os
+import signal
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
 import numpy as np
@@ -95,21 +101,44 @@ def map_axes(fn, items, workers: int | None = None, on_done=None) -> list:
         return out
     global _TASK
     _TASK = fn
+    pool = ProcessPoolExecutor(n, mp_context=mp.get_context("fork"), initializer=_mark_worker)
     try:
-        with ProcessPoolExecutor(n, mp_context=mp.get_context("fork"), initializer=_mark_worker) as pool:
-            futures = {pool.submit(_run, item): i for i, item in enumerate(items)}
-            done = [None] * len(items)
-            for future in as_completed(futures):
-                done[futures[future]] = future.result()
-                report(items[futures[future]])
+        futures = {pool.submit(_run, item): i for i, item in enumerate(items)}
+        done = [None] * len(items)
+        for future in as_completed(futures):
+            done[futures[future]] = future.result()
+            report(items[futures[future]])
+    except BaseException:  # Ctrl-C above all: the workers go now, not when their fits end
+        _terminate(pool)
+        raise
     finally:
         _TASK = None
+    pool.shutdown(wait=True)  # every result is in: the workers are idle and leave at once
     return [result if ok else fn(item) for item, (ok, result) in zip(items, done)]
 
 
+def _terminate(pool: ProcessPoolExecutor) -> None:
+    """End ``pool``'s workers without waiting for their tasks: ``terminate_workers`` where Python has it (3.14),
+    else its steps (the pool shut without waiting, pending tasks cancelled, each live worker sent SIGTERM; the
+    pool's manager thread then reaps them)."""
+    if hasattr(pool, "terminate_workers"):
+        pool.terminate_workers()
+        return
+    processes = dict(pool._processes or {})  # noqa: SLF001 - what terminate_workers reads; shutdown clears it
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes.values():
+        try:
+            if process.is_alive():
+                process.terminate()
+        except (ProcessLookupError, ValueError):  # ended meanwhile, or already closed
+            continue
+
+
 def _mark_worker() -> None:
+    """A worker's start: it knows it is one, and leaves interrupts to the caller (module docstring)."""
     global _IN_WORKER
     _IN_WORKER = True
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _run(item):
