@@ -155,9 +155,33 @@ def _set_shared(shared):
 
 
 def _init_worker(shared, parent_pid):
-    """The pool's initializer: the shared data, and a watch that ends this worker with its parent."""
+    """The pool's initializer: the shared data, a watch that ends this worker with its parent, and interrupts
+    left to the parent (a terminal's Ctrl-C reaches the whole process group; the parent, interrupted, kills its
+    workers, and a worker interrupted too would only print its own traceback)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     _set_shared(shared)
     _exit_with_parent(parent_pid)
+
+
+def _start_forkserver() -> None:
+    """Start the forkserver (and its resource tracker) with SIGINT ignored, which they and the workers forked
+    from the server inherit: a Ctrl-C while the server imports its preload printed the server's traceback under
+    the command's "interrupted". The window in which this process ignores SIGINT is the spawn of the server
+    (milliseconds; its imports run after it); a server already running is left alone."""
+    import signal
+    import threading
+    from multiprocessing import forkserver
+
+    if threading.current_thread() is not threading.main_thread():  # only the main thread may set handlers
+        forkserver.ensure_running()
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        forkserver.ensure_running()
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _exit_with_parent(parent_pid: int) -> None:
@@ -263,6 +287,7 @@ class LocalBackend(Backend):
         ctx = multiprocessing.get_context(self.start_method)
         if self.start_method == "forkserver":  # effective when the server starts (first pool of this process)
             ctx.set_forkserver_preload(["numpy", getattr(fn, "__module__", None) or "numpy", __name__])
+            _start_forkserver()
         with _progress(len(items), progress, desc) as bar:
             while True:
                 todo = [i for i in range(len(items)) if i not in results]

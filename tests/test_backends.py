@@ -170,6 +170,29 @@ def test_local_pool_survives_a_killed_worker(tmp_path):
     assert (tmp_path / "killed").exists() and be.retries_ == 1
 
 
+def _ignores_sigint(pid) -> bool:
+    """Whether process ``pid`` ignores SIGINT (Linux: the SigIgn mask of /proc/PID/status)."""
+    with open(f"/proc/{pid}/status") as status:
+        mask = next(line for line in status if line.startswith("SigIgn:")).split()[1]
+    return bool(int(mask, 16) & (1 << (signal.SIGINT - 1)))
+
+
+def _worker_ignores_sigint(item, shared):
+    return _ignores_sigint("self")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/PID/status (Linux)")
+def test_a_terminals_ctrl_c_is_the_callers_alone():
+    """Ctrl-C reaches the whole process group: the caller handles it (kills its workers, prints one line); the
+    forkserver and the workers ignore it, and the caller's own handler is as it was."""
+    from multiprocessing import forkserver
+
+    before = signal.getsignal(signal.SIGINT)
+    assert LocalBackend(workers=2).map(_worker_ignores_sigint, range(2)) == [True, True]
+    assert _ignores_sigint(forkserver._forkserver._forkserver_pid)  # noqa: SLF001 - the server the pool used
+    assert signal.getsignal(signal.SIGINT) is before and not _ignores_sigint("self")
+
+
 def test_local_gives_up_after_max_retries():
     with pytest.raises(TaskFailed, match="died 2 times .max_retries=1.") as e:
         LocalBackend(2, max_retries=1).map(_always_die, range(3))
