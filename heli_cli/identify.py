@@ -195,8 +195,9 @@ def print_check(check, title: str) -> None:
 def read_segment(args, flight):
     """The stretch ``(t0, t1)`` of its log ``flight`` was read as when ``--segment`` was given (recorded in the
     model's sources, so that ``heli refresh`` reads it again the same way), else None."""
-    segment = flight.metadata.get("segment") if args.segment is not None else None
-    return None if segment is None else (float(segment[0]), float(segment[1]))
+    from identification.workflows.identify import segment_read
+
+    return segment_read(args.segment, flight)
 
 
 def _identify_or_explain(args, flights, kwargs: dict, progress, identify):

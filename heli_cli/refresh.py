@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from .argtypes import number, seed, whole
+from .argtypes import number, seed, segment_option, whole
 from .identify import add_flight_backend_options, flight_backend
 
 
@@ -24,6 +24,10 @@ def register(sub):
     p.add_argument("--previous-flights", nargs="+", default=[], metavar="FLIGHT.csv",
                    help="the current model's source flights, when not in MODEL_DIR or beside the new flights "
                    "(matched by SHA-256)")
+    p.add_argument("--segment", type=segment_option, default=None, metavar="auto|all|T0:T1",
+                   help="the stretch of each NEW_FLIGHT read, as heli identify's: a flight-controller log's airborne "
+                   "segment found automatically (its default), the whole log ('all') or T0:T1 on its own clock [s]; "
+                   "recorded in the model's sources (the previous flights are read as their sources record)")
     p.add_argument("--fit", choices=("auto", "pooled", "new"), default="auto",
                    help="flights of the refreshed model: auto (pooled unless a parameter changed or the previous "
                    "flights are missing), pooled, or new (default auto)")
@@ -57,7 +61,7 @@ def run(args) -> int:
             args.model_dir, args.flights, previous_flights=args.previous_flights, fit=args.fit,
             n_replicates=args.bootstrap, block=args.block, seed=args.seed, alpha=args.alpha,
             min_relative=args.min_change, plots=not args.no_plots, progress=progress.bars, backend=backend,
-            wait=not args.no_wait, stage=progress.stage,
+            wait=not args.no_wait, stage=progress.stage, segment=args.segment,
         )
     finally:
         progress.done()

@@ -227,6 +227,26 @@ def test_unchanged_aircraft_is_pooled_without_flags(model_dir, flights):
 
 
 @pytest.mark.slow  # over 5 s: make test-slow
+def test_a_new_flight_read_as_a_stretch_is_recorded_so(model_dir, flights):
+    """``heli refresh --segment T0:T1``: the new log is fitted on that stretch and its source records it (a later
+    refresh reads it the same way); the previous flight, read by default, records none."""
+    assert main(["refresh", str(model_dir), str(flights["f3"]), "--segment", "10:110", "--bootstrap", REPLICATES,
+                 "--no-plots", "-q"]) == 0
+    sources = {s["file"]: s for s in json.loads((model_dir / "model.json").read_text())["provenance"]["sources"]}
+    assert sources["f3.csv"]["segment"] == pytest.approx([10.0, 110.0], abs=0.011) and "segment" not in sources["f1.csv"]
+    new, = _refresh_doc(model_dir)["new_flights"]
+    assert new["duration_s"] == pytest.approx(100.0, abs=0.02) and new["segment"] == sources["f3.csv"]["segment"]
+
+
+def test_a_stretch_outside_the_new_flight_is_refused_in_one_line_and_nothing_written(model_dir, flights, capsys):
+    before = {p: p.read_bytes() for p in model_dir.rglob("*") if p.is_file()}
+    assert main(["refresh", str(model_dir), str(flights["f3"]), "--segment", "500:600", "--no-plots", "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("heli refresh: error: FlightLogError: segment [500.0, 600.0] s holds 0 samples")
+    assert {p: p.read_bytes() for p in model_dir.rglob("*") if p.is_file()} == before
+
+
+@pytest.mark.slow  # over 5 s: make test-slow
 def test_without_the_previous_flights_ml_uses_the_recorded_fisher_errors(model_dir, flights, tmp_path):
     lone = tmp_path / "elsewhere"
     lone.mkdir()

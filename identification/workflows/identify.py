@@ -442,6 +442,14 @@ def _posterior(ident, index: int, flight: Flight):
     return wind_posterior(ident, index, seed=flight_seed(source_of(flight)["sha256"]))
 
 
+def segment_read(asked, flight):
+    """The stretch ``(t0, t1)`` of its log ``flight`` was read as, where a segment was ``asked`` for (``read_log``'s
+    ``segment`` not None: recorded in the model's sources, so that ``heli refresh`` reads the log again the same
+    way), else None (the log's default reading, which a later read repeats by itself)."""
+    segment = flight.metadata.get("segment") if asked is not None else None
+    return None if segment is None else (float(segment[0]), float(segment[1]))
+
+
 def source_entry(path, sha256: str | None = None, segment=None) -> dict:
     """Provenance entry of a flight file; ``sha256`` when its digest is already known; ``segment`` ``(t0, t1)``
     when the flight was read as that stretch of its log (:class:`model_store.model_file.Source`)."""

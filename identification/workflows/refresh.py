@@ -146,6 +146,10 @@ class RefreshSettings:
         Called with a few words as each step that can take seconds starts (reading and fitting the new
         flights, their uncertainty, refitting the previous flights, the refreshed model's fit and winds,
         the figures), e.g. ``heli refresh``'s progress lines; None: nothing is said.
+    segment : None, "auto", "all" or (t0, t1)
+        The stretch of each new log read (:func:`identification.io.read_log`'s ``segment``); None: each as
+        its reader's default. A stretch given is recorded in the new flights' sources, so that a later refresh
+        reads them as this one did (the previous flights are always read as their sources record).
 
     Raises
     ------
@@ -164,6 +168,7 @@ class RefreshSettings:
     progress: bool | None = None
     backend: object = None
     stage: object = None
+    segment: object = None
 
     def __post_init__(self):
         if self.fit not in FIT_CHOICES:
@@ -193,8 +198,8 @@ def refresh_model(model_dir, new_flights, *, settings: RefreshSettings | None = 
         (:class:`model_store.ModelDir`): after a crash it holds the model before or after the refresh.
     **options
         Fields of :class:`RefreshSettings` (``previous_flights``, ``fit``, ``n_replicates``, ``block``,
-        ``seed``, ``alpha``, ``min_relative``, ``plots``, ``progress``, ``backend``), replacing those of
-        ``settings``.
+        ``seed``, ``alpha``, ``min_relative``, ``plots``, ``progress``, ``backend``, ``stage``, ``segment``),
+        replacing those of ``settings``.
 
     Raises
     ------
@@ -314,7 +319,8 @@ class _Refresh:
         s = self.settings
         digests = [sha256_of(p) for p in self.new_paths]
         check_new_flights(self.new_paths, digests, self.old_sources, self.tx.base.entries)
-        flights, new_ident = self.fitted(self.new_paths, "new", "for the drift table")
+        flights, new_ident = self.fitted(self.new_paths, "new", "for the drift table",
+                                         [s.segment] * len(self.new_paths))
         boot_new = self.uncertainty(new_ident, flights, self.seeds[0], "bootstrap (new flights)")
         names = list(boot_new.names)
         previous = self.previous(names, boot_new)
@@ -399,13 +405,14 @@ class _Refresh:
         and write ``refresh.json`` and ``refresh.md``; all is committed when the transaction ends (``fitted``:
         :meth:`as_written`'s identifiers, not fitted again). Sets ``result.run``, ``result.library_version`` and
         ``result.paths``."""
-        from .identify import identify_and_report, source_entry
+        from .identify import identify_and_report, segment_read, source_entry
 
         tx, s = self.tx, self.settings
         pooled = result.fit == "pooled"
         kept = _keep_in_history(tx.root)
         old_digest = tx.base.model_sha256
-        new_sources = [source_entry(p, sha) for p, sha in zip(self.new_paths, digests)]
+        new_sources = [source_entry(p, sha, segment_read(s.segment, f))
+                       for p, sha, f in zip(self.new_paths, digests, flights)]
         created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
         record = {
             "created": created,
