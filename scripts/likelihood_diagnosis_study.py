@@ -41,6 +41,10 @@ CASES = {
     # a fast servo, 20 / 20 / 12.5 ms: at 100 Hz roll's and pitch's two samples are named; yaw's is below the
     # timing resolution, not named, but the model written keeps it (the dampings column)
     "servo_delay (0.25x)": {"effects": ("servo_delay",), "effect_scale": 0.25},
+    # between the two: 32 / 32 / 20 ms (the yaw's on the two-sample bound, as the 0.25x roll and pitch) and
+    # 48 / 48 / 30 ms
+    "servo_delay (0.4x)": {"effects": ("servo_delay",), "effect_scale": 0.4},
+    "servo_delay (0.6x)": {"effects": ("servo_delay",), "effect_scale": 0.6},
     "servo_lag": {"effects": ("servo_lag",)},
     "servo_delay + servo_lag": {"effects": ("servo_delay", "servo_lag")},
     "log input lags 0.3 s": {"shift": 0.3},
@@ -57,6 +61,8 @@ CASES = {
 TRUE_AXES = {
     "servo_delay": {"servo_delay": ("roll", "pitch", "yaw")},
     "servo_delay (0.25x)": {"servo_delay": ("roll", "pitch")},
+    "servo_delay (0.4x)": {"servo_delay": ("roll", "pitch")},
+    "servo_delay (0.6x)": {"servo_delay": ("roll", "pitch", "yaw")},
     "servo_lag": {"servo_lag": ("roll", "pitch", "yaw")},
     "servo_delay + servo_lag": {"servo_delay": ("roll", "pitch", "yaw"), "servo_lag": ("roll", "pitch", "yaw")},
     "log input lags 0.3 s": {"servo_delay": ("roll", "pitch", "yaw")},
