@@ -115,14 +115,14 @@ def flight_controller_note(d: LikelihoodDiagnoser) -> str | None:
 
 def timing_note(d: LikelihoodDiagnoser) -> str | None:
     """The servo delays kept in the model without being named (:attr:`LikelihoodDiagnoser.timing_detected_`:
-    shorter than the timing resolution, in the candidates' base or found by the final fit); None when there is
-    none."""
+    shorter than the timing resolution, in the candidates' base, taken into it where the likelihood preferred it,
+    or found by the final fit); None when there is none."""
     found = getattr(d, "timing_detected_", None)
     if not found:
         return None
     parts = [f"{axis} {1e3 * delay:.1f} ms" for axis, delay in found.items()]
     return ("servo delay in the model, not named: " + ", ".join(parts) + ". Detected as heli identify detects it "
-            "(--delay detect); below 2 samples a delay cannot be told from the log's timing convention, so it is "
+            "(--delay detect) or as the likelihood placed the log's timing; below 2 samples a delay cannot be told from the log's timing convention, so it is "
             "not named as an effect, but the model keeps it: left out, it biases the damping.")
 
 
