@@ -200,6 +200,7 @@ def test_physical_bounds_of_candidate_terms():
     assert set(PHYSICAL_BOUNDS) == {"k1", "k5", "k9", "nld1", "nld2", "nld3"}
 
 
+@pytest.mark.slow  # over 5 s (7-9 s): make test-slow
 def test_an_unphysical_candidate_is_reported_but_never_accepted():
     # anti-damping on a flight whose roll rate grows faster than linear damping allows: the quadratic
     # term fits with the wrong sign, and that is not a physical effect

@@ -111,6 +111,7 @@ def test_detect_finds_a_servo_delay_and_profiles_every_axis():
     assert ident.summary()["roll"]["std_errors"]["tau_roll"] > 0  # searched with the rest, as with "auto"
 
 
+@pytest.mark.slow  # over 5 s (7-9 s): make test-slow
 def test_detect_looks_for_a_servo_lag_where_it_found_a_delay():
     # a 40 ms first-order servo lag looks like a delay at low frequency: the delay test finds one, and the lag's
     # profile (servo_lag="detect") then keeps the lag; the damping comes back (docs/method.md: 56-74 % low
