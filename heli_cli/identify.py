@@ -126,7 +126,7 @@ def ml_settings(args, closed_loop: str) -> dict:
 
 def run(args) -> int:
     from identification.io import read_flight, read_log
-    from identification.workflows.identify import identify_and_report, source_entry
+    from identification.workflows.identify import identify_and_report, segment_read, source_entry
 
     from .progress import progress_of
 
@@ -163,7 +163,7 @@ def run(args) -> int:
         try:
             run = _identify_or_explain(args, flights, kwargs, progress, lambda: identify_and_report(
                 flights, args.out, coupled=args.coupled,
-                sources=[source_entry(p, segment=read_segment(args, f)) for p, f in zip(args.flights, flights)],
+                sources=[source_entry(p, segment=segment_read(args.segment, f)) for p, f in zip(args.flights, flights)],
                 identifier_kwargs=kwargs, flight_paths=args.flights, plots=not args.no_plots,
                 disturbances=not args.no_disturbances, backend=backend, method=args.method,
                 progress=progress.bars and len(flights) > 1, draw_figures=False, stage=progress.stage,
@@ -190,14 +190,6 @@ def print_check(check, title: str) -> None:
     print(f"{title} ({check.headline()}):")
     for line in check.lines():
         print(f"  {line}")
-
-
-def read_segment(args, flight):
-    """The stretch ``(t0, t1)`` of its log ``flight`` was read as when ``--segment`` was given (recorded in the
-    model's sources, so that ``heli refresh`` reads it again the same way), else None."""
-    from identification.workflows.identify import segment_read
-
-    return segment_read(args.segment, flight)
 
 
 def _identify_or_explain(args, flights, kwargs: dict, progress, identify):

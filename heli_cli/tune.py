@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from .argtypes import number, output_path, per_axis, seconds_or, segment_option, servo_lag, seed, whole
-from .identify import CLOSED_LOOP_CHOICES, CLOSED_LOOP_ENV, closed_loop_mode, ml_settings, read_segment
+from .identify import CLOSED_LOOP_CHOICES, CLOSED_LOOP_ENV, closed_loop_mode, ml_settings
 from .model_gate import add_accept_option, check_model
 
 FIRMWARE_CHOICES = ("ardupilot", "rotorflight")
@@ -168,7 +168,7 @@ def _model(args, spec, current, progress, settings):
         _check_mapping(spec, current, env_model.sample_rate, env_model.params)
         _, source = _checked_log(args, spec, progress)
         return env_model, Path(args.model), source, None
-    from identification.workflows.identify import identify_and_report, source_entry
+    from identification.workflows.identify import identify_and_report, segment_read, source_entry
 
     flight, _ = _checked_log(args, spec, progress)
     if flight is None:
@@ -178,7 +178,8 @@ def _model(args, spec, current, progress, settings):
     _check_mapping(spec, current, flight.sample_rate)
     folder = Path(args.out) / "model"
     # the decoupled model alone: the firmware loops fly it, and the coupled one cost a third of this step
-    identify_and_report([flight], folder, sources=[source_entry(args.log, segment=read_segment(args, flight))],
+    source = source_entry(args.log, segment=segment_read(args.segment, flight))
+    identify_and_report([flight], folder, sources=[source],
                         flight_paths=[args.log], plots=False,
                         identifier_kwargs=settings, stage=progress.stage, progress=False,
                         compare_structures=False)

@@ -316,7 +316,7 @@ class LocalBackend(Backend):
                     failed = broken is not None
                 finally:
                     if failed:
-                        _kill_workers(pool)
+                        kill_workers(pool)
                     pool.shutdown(wait=True, cancel_futures=True)
                 if broken is None:
                     return [results[i] for i in range(len(items))]
@@ -329,8 +329,9 @@ class LocalBackend(Backend):
                         f"{len(lost)} of {len(items)} tasks unfinished, first item #{lost[0]}", lost[0]) from broken
 
 
-def _kill_workers(pool) -> None:
-    """SIGKILL the processes of a pool that broke or whose task failed.
+def kill_workers(pool) -> None:
+    """SIGKILL the processes of a ``ProcessPoolExecutor`` that broke, whose task failed, or whose caller was
+    interrupted (also :func:`identification.likelihood.axis_pool.map_axes`'s), before its ``shutdown``.
 
     A broken ``ProcessPoolExecutor`` terminates the workers it knows of, but a worker
     it starts for a task submitted while it was breaking (a race in CPython 3.11)

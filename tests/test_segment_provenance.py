@@ -47,11 +47,11 @@ def test_a_found_source_keeps_its_segment(tmp_path):
 
 
 def test_identify_records_the_stretch_it_read_only_when_one_was_given():
-    from heli_cli.identify import read_segment
+    from identification.workflows.identify import segment_read
 
     flight = Namespace(metadata={"segment": [17.5, 36.25], "segment_mode": "all"})
-    assert read_segment(Namespace(segment="all"), flight) == (17.5, 36.25)
-    assert read_segment(Namespace(segment=None), flight) is None  # the default: reads the same again
+    assert segment_read("all", flight) == (17.5, 36.25)
+    assert segment_read(None, flight) is None  # the default: reads the same again
 
 
 @pytest.mark.skipif(not LOGS.is_dir(), reason="needs ../shared/fixtures/logs (the shared fixtures are absent)")

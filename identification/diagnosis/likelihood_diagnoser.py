@@ -139,6 +139,13 @@ pitch delay at 100 Hz, detected at 19.6-19.7 ms, was no longer named on 2 of the
 the final fit keeps such a delay where it is not named (:meth:`LikelihoodDiagnoser._final_fit`)."""
 
 
+def _row(rnd: int, axis: str, effect: str, k: int, sc: AxisScore, lr: float, threshold: float, accepted: bool,
+         why: str | None, **extra) -> dict:
+    """One candidate's row of a round (:attr:`LikelihoodDiagnoser.rounds_`, the report's table)."""
+    return {"round": rnd, "axis": axis, "effect": effect, "lr": float(lr), "threshold": threshold, "n_parameters": k,
+            "alignment_s": sc.alignment, "lag_s": sc.lag, "accepted": accepted, **extra, "implausible": why}
+
+
 class LikelihoodDiagnoser(DiagnosisResult):
     """Name the physical effect a model misses by the likelihood of the wind-state model (module docstring).
 
@@ -289,9 +296,8 @@ class LikelihoodDiagnoser(DiagnosisResult):
                 break
         self.final_ = current
         named = {a for e, a in self.effects_found_ if e in (SERVO_DELAY, SERVO_LAG)}  # its timing is the effect's
-        taken = {r["axis"] for rows in self.rounds_ for r in rows if r.get("base_timing")}  # _log_timing's
         self.timing_detected_ = {**{a: v for a, v in self.timing_detected_.items() if a not in named},
-                                 **{a: float(current[a].alignment) for a in taken if a not in named}}
+                                 **{a: float(current[a].alignment) for a in self._timing_taken() if a not in named}}
         self.alignment_ = tuple(current[a].alignment if a in current else alignment[i] for i, a in enumerate(AXES))
         self.lags_ = tuple(current[a].lag if a in current else lags[i] for i, a in enumerate(AXES))
         self._say("fitting the final structure")
@@ -404,12 +410,10 @@ class LikelihoodDiagnoser(DiagnosisResult):
         timing = self._log_timing(a, base, cands) if log_timed else None
         if timing is not None:  # the log's timing, fitted: every candidate scored again from it
             name, k, sc, lr = next(c for c in cands if c[0] == SERVO_DELAY)
-            rows.append({"round": rnd, "axis": axis, "effect": name, "lr": float(lr),
-                         "threshold": self.threshold(len(cands), k, alignment=True), "n_parameters": k,
-                         "alignment_s": sc.alignment, "lag_s": sc.lag, "accepted": False, "base_timing": True,
-                         "implausible": f"the delay {1e3 * sc.alignment:.1f} ms is shorter than "
-                                        f"{RESOLUTION_SAMPLES} samples, the log's timing, not a servo: the base "
-                                        "takes it and every candidate is scored again from it"})
+            rows.append(_row(rnd, axis, name, k, sc, lr, self.threshold(len(cands), k, alignment=True), False,
+                             f"the delay {1e3 * sc.alignment:.1f} ms is shorter than {RESOLUTION_SAMPLES} samples, "
+                             "the log's timing, not a servo: the base takes it and every candidate is scored "
+                             "again from it", base_timing=True))
             self._say(f"round {rnd}, {axis}: the log's timing {1e3 * sc.alignment:.1f} ms in the base, every "
                       "candidate again")
             base = current[axis] = self._scores.describe(a, timing)
@@ -430,9 +434,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
             why = self._scores.implausible(a, origin, sc, lagged, behind, self.min_lr_alignment)
             if why is None:  # an unphysical fit is reported, never accepted nor runner-up
                 scored.append((lr / thr, name, k, sc, lr, thr))
-            rows.append({"round": rnd, "axis": axis, "effect": name, "lr": float(lr), "threshold": thr,
-                         "n_parameters": k, "alignment_s": sc.alignment, "lag_s": sc.lag,
-                         "accepted": bool(lr > thr and why is None), "implausible": why})
+            rows.append(_row(rnd, axis, name, k, sc, lr, thr, bool(lr > thr and why is None), why))
         scored.sort(key=lambda r: -r[0])
         after = None
         while scored and scored[0][0] > 1.0:
@@ -470,8 +472,11 @@ class LikelihoodDiagnoser(DiagnosisResult):
     def _log_timed(self, axis: str, base: AxisScore, free_tau: bool) -> bool:
         """Whether the base's timing on ``axis`` is the log's (nought, the delay the hold's fit detected, or one
         :meth:`_log_timing` took), not a servo's (one named, or the starting model's)."""
-        taken = any(r.get("base_timing") and r["axis"] == axis for rows in self.rounds_ for r in rows)
-        return not free_tau and (base.alignment == 0.0 or axis in self.timing_detected_ or taken)
+        return not free_tau and (base.alignment == 0.0 or axis in self.timing_detected_ or axis in self._timing_taken())
+
+    def _timing_taken(self) -> set:
+        """The axes whose base took the log's timing (:meth:`_log_timing`) in the rounds so far."""
+        return {r["axis"] for rows in self.rounds_ for r in rows if r.get("base_timing")}
 
     def _log_timing(self, a: int, base: AxisScore, cands: list) -> AxisScore | None:
         """On an axis whose base carries the log's timing (:meth:`_log_timed`), the alignment candidate where it

@@ -16,8 +16,8 @@ user exactly as a serial fit raises it.
 
 An interrupt is the caller's alone: the workers ignore SIGINT (a terminal's Ctrl-C reaches the whole process
 group, and a worker interrupted inside the pool's queues left the pool waiting on it for ever), and the caller,
-interrupted or failing while it waits, terminates them and re-raises at once instead of waiting for the running
-fits (what Python 3.14's ``ProcessPoolExecutor.terminate_workers`` does, used where it exists).
+interrupted or failing while it waits, kills them (:func:`heli_core.backends.kill_workers`, as the local
+backend's pools) and re-raises at once instead of waiting for the running fits.
 """
 
 from __future__ import annotations
@@ -28,6 +28,8 @@ import signal
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
 import numpy as np
+
+from heli_core.backends import kill_workers
 
 WORKERS_ENV = "HELI_WORKERS"
 """Environment variable capping the number of processes the axes are fitted in (1: one after another)."""
@@ -109,29 +111,13 @@ def map_axes(fn, items, workers: int | None = None, on_done=None) -> list:
             done[futures[future]] = future.result()
             report(items[futures[future]])
     except BaseException:  # Ctrl-C above all: the workers go now, not when their fits end
-        _terminate(pool)
+        kill_workers(pool)
+        pool.shutdown(wait=True, cancel_futures=True)
         raise
     finally:
         _TASK = None
     pool.shutdown(wait=True)  # every result is in: the workers are idle and leave at once
     return [result if ok else fn(item) for item, (ok, result) in zip(items, done)]
-
-
-def _terminate(pool: ProcessPoolExecutor) -> None:
-    """End ``pool``'s workers without waiting for their tasks: ``terminate_workers`` where Python has it (3.14),
-    else its steps (the pool shut without waiting, pending tasks cancelled, each live worker sent SIGTERM; the
-    pool's manager thread then reaps them)."""
-    if hasattr(pool, "terminate_workers"):
-        pool.terminate_workers()
-        return
-    processes = dict(pool._processes or {})  # noqa: SLF001 - what terminate_workers reads; shutdown clears it
-    pool.shutdown(wait=False, cancel_futures=True)
-    for process in processes.values():
-        try:
-            if process.is_alive():
-                process.terminate()
-        except (ProcessLookupError, ValueError):  # ended meanwhile, or already closed
-            continue
 
 
 def _mark_worker() -> None:
