@@ -126,10 +126,21 @@ class BlockLayout:
         self.n = n
         self.blocks = -(-n // BLOCK)
         self.S = np.zeros((self.blocks, (N_ROWS + extra_rows) * ROW))
-        self._cube = self.S.reshape(self.blocks, N_ROWS + extra_rows, ROW)
-        self._views = {}
+        self._bind()
         self._lane = np.arange(n) % BLOCK
         self._block = np.arange(n) // BLOCK
+
+    def _bind(self) -> None:
+        self._cube = self.S.reshape(self.blocks, -1, ROW)  # views of S
+        self._views = {}
+
+    def __getstate__(self) -> dict:
+        return {name: value for name, value in self.__dict__.items() if name not in ("_cube", "_views")}
+
+    def __setstate__(self, state: dict) -> None:
+        """A copy (``copy.deepcopy``) views its own ``S``: a copied view would be an array apart."""
+        self.__dict__.update(state)
+        self._bind()
 
     def view(self, row: int) -> np.ndarray:
         """Row ``row`` of every block, (blocks, BLOCK) (one block: its first ``n`` lanes): a view, for numpy's

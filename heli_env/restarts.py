@@ -3,12 +3,14 @@
 A copy's episode is drawn from its own generator (:func:`heli_env.tasks.draw_episodes`, then the gyro lines'
 phases and the noise key) and turned into the values its reset writes: a :class:`Starts`, one column per copy.
 Drawn for a few copies at a time, as autoresets come in a long run (a copy or two on every step of 4096
-copies), its thirty numpy operations cost about 150 us of fixed Python a step, against about 7 us a copy
-drawn in a batch. :class:`EpisodesAhead` therefore draws each copy's *next* episode ahead, for many copies at once,
-right after its episode started: the generator gives the same numbers whenever they are drawn, so an
+copies), its thirty numpy operations cost about 40 us of fixed Python a step, against under 1 us a copy
+drawn in a batch (the draws themselves are one compiled call: :mod:`heli_env.generator_draws`).
+:class:`EpisodesAhead` therefore draws each copy's *next* episode ahead, for many copies at once, right after
+its episode started: the generator gives the same numbers whenever they are drawn, so an
 episode drawn ahead is the episode a reset would have drawn, bit for bit. What would have drawn otherwise
-puts it back: a reset with options restores the generator's state from before the draw ahead (the options
-change what is drawn); a new seed replaces the generator, and the draw is dropped.
+puts it back: a reset with options returns the generator to where it was before the draw ahead (the options
+change what is drawn; :meth:`heli_env.generator_draws.Streams.put_back`); a new seed replaces the generator,
+and the draw is dropped.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ KEY = INTS.index("key")
 
 BATCH = 256
 """Episodes drawn ahead once this many copies (or every copy, in smaller envs) have used theirs: a batch's
-fixed cost (about 150 us) spread over its copies."""
+fixed cost (about 40 us) spread over its copies."""
 
 
 class Starts(NamedTuple):
@@ -90,18 +92,17 @@ class EpisodesAhead:
     """Each copy's next episode, drawn ahead in batches (see the module docstring).
 
     ``draw(which)`` draws the episodes of copies ``which`` (an index array) from their generators with the
-    default options, as a :class:`Starts`; ``rngs`` are the copies' generators (the env's list, read when
-    drawing and restoring). A copy whose last reset came with options (as an SB3 adapter's pinned gust
+    default options, as a :class:`Starts`; ``streams`` (:class:`heli_env.generator_draws.Streams`) are the
+    copies' generators, marked before a draw ahead and put back to the mark. A copy whose last reset came with options (as an SB3 adapter's pinned gust
     windows do) is not drawn ahead until a reset without them: its draw would be put back unused."""
 
-    def __init__(self, rngs: list, draw):
-        self._rngs = rngs
+    def __init__(self, streams, draw):
+        self._streams = streams
         self._draw = draw
         self.starts = None  # Starts of every copy, once drawn
-        n = len(rngs)
+        n = streams.states.size
         self.ready = np.zeros(n, dtype=bool)
         self._wanted = np.ones(n, dtype=bool)  # False: the copy's last reset had options
-        self._states = [None] * n  # each generator's state before its draw ahead
         self._batch = min(n, BATCH)
         self._missing = n  # copies wanted and not ready
 
@@ -115,8 +116,7 @@ class EpisodesAhead:
         self._missing = 0
         if which.size == 0:
             return
-        for i in which.tolist():
-            self._states[i] = self._rngs[i].bit_generator.state
+        self._streams.mark(which)
         drawn = self._draw(which)
         if self.starts is None:
             self.starts = Starts.zeros(drawn, self.ready.size)
@@ -141,8 +141,7 @@ class EpisodesAhead:
         drawn ahead until a reset without options; without it (new generators) the draws are dropped."""
         drop = which[self.ready[which]]
         if restore:
-            for i in drop.tolist():
-                self._rngs[i].bit_generator.state = self._states[i]
+            self._streams.put_back(drop)
             self._wanted[which] = False
         self.ready[drop] = False
         self._missing = int(np.count_nonzero(self._wanted & ~self.ready))

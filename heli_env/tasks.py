@@ -180,9 +180,10 @@ def draw_episodes(rngs, spec, options=None) -> Episodes:
     other draw: the initial roll and pitch (2) and rates (3), whether the reference is smooth (1, with
     ``reference="mixed"``), the staircase (3 per segment) and the sinusoids' amplitudes, frequencies and
     phases (3 x :data:`N_SINES` each), each turned into its range as ``rng.uniform`` does
-    (:func:`_uniform_ranges`). The generator draws the same numbers as one ``uniform`` call per quantity and
-    the episode is the same bit for bit; across generators the arithmetic is one numpy operation (a vector
-    env resets thousands of copies, or a few on every step of a long run).
+    (:func:`uniform_ranges`). The generator draws the same numbers as one ``uniform`` call per quantity and
+    the episode is the same bit for bit; across generators the arithmetic is one numpy operation
+    (:func:`episodes_from`). The native vector env draws the same numbers in compiled code
+    (:mod:`heli_env.generator_draws`).
 
     Parameters
     ----------
@@ -196,35 +197,76 @@ def draw_episodes(rngs, spec, options=None) -> Episodes:
     options : dict, optional
         ``trace`` (index) and ``offset`` (sample) pin the replayed gust.
     """
-    cfg, lengths, n_traces = spec.task, spec.model.lengths, spec.model.n_traces
-    options = options or {}
-    n_seg = int(spec.episode_steps * spec.dt // cfg.step_period) + 1
-    low, span, at = _uniform_ranges(float(spec.init_angle), float(spec.init_rate), cfg.reference == "mixed", n_seg)
-    m = len(rngs)
-    traces, offsets, uniforms = [], [], np.empty((m, low.size))
+    trace_pin, offset_pin = window_pins(spec, options)
+    counts = window_counts(spec)
+    uniforms = np.empty((len(rngs), uniform_ranges(spec)[0].size))
+    traces, offsets = [], []
     for i, rng in enumerate(rngs):
-        trace = int(rng.integers(n_traces))
-        if options.get("trace") is not None:
-            trace = int(options["trace"])
-            if not 0 <= trace < n_traces:
-                raise ValueError(f"options['trace'] must be a trace index in [0, {n_traces}), got {trace}")
-        offset = draw_offset(rng, max(window_count(lengths[trace], spec.needed), 1))  # a short trace ends early
-        if options.get("offset") is not None:
-            offset = int(options["offset"])
-            if not 0 <= offset < int(lengths[trace]) - 1:
-                raise ValueError(
-                    f"options['offset'] must be a sample in [0, {int(lengths[trace]) - 1}) of trace {trace}, "
-                    f"got {offset}")
+        trace = int(rng.integers(spec.model.n_traces))
+        trace = trace if trace_pin < 0 else trace_pin
+        offset = draw_offset(rng, int(counts[trace]))
         traces.append(trace)
-        offsets.append(offset)
+        offsets.append(offset if offset_pin is None else offset_pin)
         rng.random(out=uniforms[i])
+    traces, offsets = np.array(traces, dtype=np.int64), np.array(offsets, dtype=np.int64)
+    check_offset(spec, traces, offset_pin)
+    return episodes_from(spec, traces, offsets, uniforms)
+
+
+def window_pins(spec, options) -> tuple[int, int | None]:
+    """The trace (-1 where none) and the window offset (None where none) ``options`` pin, the trace checked
+    against the library (ValueError); the offset is checked on the trace drawn (:func:`check_offset`)."""
+    options = options or {}
+    trace, offset = options.get("trace"), options.get("offset")
+    n_traces = spec.model.n_traces
+    if trace is not None:
+        trace = int(trace)
+        if not 0 <= trace < n_traces:
+            raise ValueError(f"options['trace'] must be a trace index in [0, {n_traces}), got {trace}")
+    return (-1 if trace is None else trace), (None if offset is None else int(offset))
+
+
+def check_offset(spec, traces: np.ndarray, offset_pin: int | None) -> None:
+    """ValueError where a pinned offset (``offset_pin``, None: none) is not a sample of an episode's trace
+    (``traces``)."""
+    if offset_pin is None:
+        return
+    lengths = np.asarray(spec.model.lengths)[traces]
+    bad = np.flatnonzero((offset_pin < 0) | (offset_pin >= lengths - 1))
+    if bad.size:
+        trace = int(traces[bad[0]])
+        raise ValueError(f"options['offset'] must be a sample in [0, {int(lengths[bad[0]]) - 1}) of trace {trace}, "
+                         f"got {offset_pin}")
+
+
+def window_counts(spec) -> np.ndarray:
+    """Per trace, how many windows an episode's offset is drawn over (int64): :func:`window_count`, at least 1
+    (a short trace ends the episode early)."""
+    return np.array([max(window_count(length, spec.needed), 1) for length in spec.model.lengths], dtype=np.int64)
+
+
+def uniform_ranges(spec) -> tuple:
+    """:func:`_uniform_ranges` of ``spec``: an episode's standard uniforms' ``low``, ``span`` and slices, and its
+    reference's segments."""
+    cfg = spec.task
+    n_seg = int(spec.episode_steps * spec.dt // cfg.step_period) + 1
+    return (*_uniform_ranges(float(spec.init_angle), float(spec.init_rate), cfg.reference == "mixed", n_seg),
+            n_seg)
+
+
+def episodes_from(spec, traces: np.ndarray, offsets: np.ndarray, uniforms: np.ndarray) -> Episodes:
+    """The episodes drawn as ``traces``, ``offsets`` (m,) and standard ``uniforms`` (m, columns of
+    :func:`uniform_ranges`), each uniform turned into its quantity's range."""
+    cfg = spec.task
+    low, span, at, n_seg = uniform_ranges(spec)
+    m = traces.size
     v = low + span * uniforms
     smooth = v[:, at["smooth"].start] < 0.5 if cfg.reference == "mixed" else np.full(m, cfg.reference == "smooth")
     bound = reference_bounds(cfg)[:, None]
     unit_steps = v[:, at["steps"]].reshape(m, 3, n_seg)
     unit_steps[:, :, 0] = 0.0  # start from the current hold point, then step
     unit_amp = v[:, at["amp"]].reshape(m, 3, N_SINES)
-    return Episodes(np.array(traces, dtype=np.int64), np.array(offsets, dtype=np.int64), v[:, at["angles"]],
+    return Episodes(traces, offsets, v[:, at["angles"]],
                     v[:, at["rates"]], smooth, unit_steps * bound, unit_amp / unit_amp.sum(axis=2, keepdims=True) * bound,
                     TWO_PI * v[:, at["freq"]].reshape(m, 3, N_SINES), v[:, at["phase"]].reshape(m, 3, N_SINES))
 
@@ -313,7 +355,11 @@ def draw_line_phases(rngs, n_lines: int) -> np.ndarray:
     Drawn as a normalised Gaussian pair, so that a line reads ``sin(w t) cos + cos(w t) sin`` with only
     products and sums: the single and the vector environment compute it bit for bit alike.
     """
-    g = np.array([rng.normal(0.0, 1.0, (n_lines, 2)) for rng in rngs]).reshape(len(rngs), n_lines, 2)
+    return phases_from(np.array([rng.normal(0.0, 1.0, (n_lines, 2)) for rng in rngs]).reshape(len(rngs), n_lines, 2))
+
+
+def phases_from(g: np.ndarray) -> np.ndarray:
+    """The (cos, sin) pairs of normal pairs ``g`` (..., 2): each pair divided by its length."""
     norm = np.sqrt(g[..., 0] * g[..., 0] + g[..., 1] * g[..., 1])
     return g / norm[..., None]
 

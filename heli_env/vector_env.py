@@ -15,10 +15,11 @@ from .env_model import as_env_model
 from .errors import ActionError
 from .kernels import N_ROWS, OUT, R, BlockLayout, env_kernels, first_non_finite
 from .observation import MAX_RATE, OBS_DIM, action_space, observation_space
+from .generator_draws import Streams
 from .spec import build_spec, real_actions, reset_options
-from .sensor_noise import draw_noise_key
 from .restarts import INTS, KEY, START_ROWS, EpisodesAhead, Starts, write_starts
-from .tasks import N_SINES, draw_episodes, draw_line_phases, reward_coefficients
+from .tasks import (N_SINES, check_offset, episodes_from, phases_from, reward_coefficients, uniform_ranges,
+                    window_counts, window_pins)
 from .threads import ThreadChoice
 
 
@@ -81,11 +82,12 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._step_pool = kernels.step_pool if self._thread_choice.compiled_parallel else None
         self._constants = kernels.constants  # the model's values, read by the loops
         self._coef = np.array(reward_coefficients(s.task))
-        self._rngs = [None] * n
-        self._ahead = EpisodesAhead(self._rngs, self._draw)  # each copy's next episode, drawn ahead
+        self._rngs = [None] * n  # each copy's np_random, drawn through self._streams (heli_env.generator_draws)
+        self._streams = Streams(n)
+        self._counts = window_counts(s)  # per trace, the windows an episode's offset is drawn over
+        self._n_uniforms = uniform_ranges(s)[0].size
+        self._ahead = EpisodesAhead(self._streams, self._draw)  # each copy's next episode, drawn ahead
         self._ints = np.zeros((len(INTS), n), dtype=np.int64)  # restarts.INTS: rows written by a reset at once
-        self._k, self._base, self._last, self._nsteps, self._trace = self._ints[:KEY]
-        self._key = self._ints[KEY].view(np.uint64)  # each copy's episode noise key (heli_env.sensor_noise)
         self._gust = np.zeros(n)
         self._restart = None  # the copies whose episode ended in the last step (indices), None if none did
         self._restarting = np.zeros(n, dtype=np.uint8)  # 1: the copy starts its next episode in this step
@@ -101,11 +103,27 @@ class HeliAttitudeVectorEnv(VectorEnv):
         self._ones = np.ones(n, dtype=bool)
         self._no_actions = np.zeros((n, 3))  # what the loop is given when it only observes
         self._actions = np.empty((n, 3))  # float32 actions as the loop reads them
-        self._observe_arguments = (self._k, self._nsteps, self._key, self._noise_std, self._line_amp,
-                                   self._line_table, MAX_RATE, s.task.max_angle, self._coef)  # arrays kept in place
+        self._bind()
         self._out = None  # the last step's output rows (u_d, errors, reward, end): a fresh array each step
         self._renderer = None
         self._history = []
+
+    _VIEWS = ("_k", "_base", "_last", "_nsteps", "_trace", "_key", "_observe_arguments")
+
+    def _bind(self) -> None:
+        """The views of ``_ints`` the loops and resets share (its rows: :data:`heli_env.restarts.INTS`)."""
+        self._k, self._base, self._last, self._nsteps, self._trace = self._ints[:KEY]
+        self._key = self._ints[KEY].view(np.uint64)  # each copy's episode noise key (heli_env.sensor_noise)
+        self._observe_arguments = (self._k, self._nsteps, self._key, self._noise_std, self._line_amp,
+                                   self._line_table, MAX_RATE, self.spec_.task.max_angle, self._coef)  # in place
+
+    def __getstate__(self) -> dict:
+        return {name: value for name, value in self.__dict__.items() if name not in self._VIEWS}
+
+    def __setstate__(self, state: dict) -> None:
+        """A copy (``copy.deepcopy``) views its own arrays: a copied view would be an array apart."""
+        self.__dict__.update(state)
+        self._bind()
 
     @property
     def _x(self) -> np.ndarray:
@@ -138,10 +156,10 @@ class HeliAttitudeVectorEnv(VectorEnv):
             renewed = [i for i in range(n) if mask[i] or self._rngs[i] is None]
             self._ahead.forget(np.array(renewed, dtype=np.int64), restore=False)
             for i in renewed:
-                self._rngs[i] = seeding.np_random(seeds[i])[0]
+                self._adopt(i, seeding.np_random(seeds[i])[0])
         for i in range(n):
             if self._rngs[i] is None:
-                self._rngs[i] = seeding.np_random(None)[0]
+                self._adopt(i, seeding.np_random(None)[0])
         if self._rows is None:
             if not mask.all():
                 raise ResetNeeded("the first reset must reset every copy (no reset_mask)")
@@ -180,20 +198,29 @@ class HeliAttitudeVectorEnv(VectorEnv):
             left = self._restart[~np.isin(self._restart, which, assume_unique=True)]
             self._restart = left if left.size else None
 
+    def _adopt(self, i: int, rng) -> None:
+        self._rngs[i] = rng
+        self._streams.adopt(i, rng)
+
     def _draw(self, which, options=None, gust=None) -> Starts:
         """The episodes of copies ``which`` from their generators: the episode, then the gyro lines' phases, then
-        the noise key (the single env's order), as what their resets write."""
+        the noise key (the single env's order: :func:`heli_env.tasks.draw_episodes`, ``line_phases``,
+        ``draw_noise_key``, the same numbers drawn in one compiled call), as what their resets write."""
         s = self.spec_
-        rngs = [self._rngs[i] for i in which.tolist()]
-        eps = draw_episodes(rngs, s, options)
+        n_lines = len(s.line_axis)
+        trace_pin, offset_pin = window_pins(s, options)
+        traces, offsets, uniforms, normals, keys = self._streams.draw(
+            which, s.model.n_traces, self._counts, self._n_uniforms, 2 * n_lines, s.measured, trace_pin,
+            -1 if offset_pin is None else offset_pin)
+        check_offset(s, traces, offset_pin)
+        eps = episodes_from(s, traces, offsets, uniforms)
         m = which.size
-        rows = np.zeros((START_ROWS + 2 * len(s.line_axis), m))  # the action rows stay 0
-        if s.line_axis:
-            rows[START_ROWS:] = draw_line_phases(rngs, len(s.line_axis)).reshape(m, -1).T  # (cos, sin) of each
+        rows = np.zeros((START_ROWS + 2 * n_lines, m))  # the action rows stay 0
+        if n_lines:  # (cos, sin) of each line
+            rows[START_ROWS:] = phases_from(normals.reshape(m, n_lines, 2)).reshape(m, -1).T
         ints = np.zeros((len(INTS), m), dtype=np.int64)
         if s.measured:
-            ints[KEY] = np.array([draw_noise_key(rng) for rng in rngs], dtype=np.uint64).view(np.int64)
-        traces = eps.trace
+            ints[KEY] = keys.view(np.int64)
         base = s.model.starts[traces] + eps.offset
         stop = np.minimum(s.model.starts[traces] + s.model.lengths[traces], base + s.needed)
         last = (stop - base + s.ratio - 1) // s.ratio - 1  # len(range(base, stop, ratio)) - 1

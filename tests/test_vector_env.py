@@ -549,3 +549,24 @@ def test_a_reset_after_episodes_were_drawn_ahead_is_the_reset_of_a_single_env(op
     ready = np.array(ready)
     if options:  # a copy reset with options is not drawn ahead (its draw would be put back) until a plain reset
         assert not ready[:25, 1].any() and ready[30:, 1].any()
+
+
+def test_a_deep_copy_draws_from_its_own_generators_and_outlives_the_original():
+    """The compiled draws read each copy's generator at its state's address (heli_env.generator_draws): a deep
+    copy of the env (as a user's snapshot makes) must read its own generators, step as the original would, and
+    keep working once the original is gone."""
+    import copy
+    import gc
+
+    kwargs = {"episode_seconds": 0.2}
+    venv = HeliAttitudeVectorEnv(3, **kwargs)
+    venv.reset(seed=4)
+    actions = np.zeros((3, 3))
+    for _ in range(5):
+        venv.step(actions)
+    twin = copy.deepcopy(venv)
+    expected = [venv.step(actions)[0] for _ in range(60)]  # three more episodes each, drawn by the original
+    del venv
+    gc.collect()
+    for obs in expected:
+        assert np.array_equal(twin.step(actions)[0], obs)
