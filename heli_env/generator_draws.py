@@ -22,7 +22,9 @@ The 32-bit half kept between draws is the one part of a generator's state this m
 copy's draws can be put back (:meth:`Streams.put_back`): the 64-bit draws by the bit generator's own
 ``advance`` (modulo 2**128, backwards), the kept half from the values before. ``tests/test_generator_draws.py``
 holds every draw against numpy's, the rare branches included (Lemire's rejections, the ziggurat's wedges and
-tail).
+tail). Should numba no longer hold numpy's ziggurat tables where this module reads them (:data:`COMPILED`
+False), :class:`Streams` draws through numpy's own calls, copy by copy, and marks a generator by its ``state``:
+the same numbers, at the old cost.
 """
 
 from __future__ import annotations
@@ -34,7 +36,11 @@ import numpy as np
 from llvmlite import ir
 from numba.core import types
 from numba.extending import intrinsic
-from numba.np.random._constants import fi_double, ki_double, wi_double, ziggurat_nor_inv_r, ziggurat_nor_r
+try:  # numba's copy of numpy's ziggurat tables (numba.np.random, since numba 0.56)
+    from numba.np.random._constants import fi_double, ki_double, wi_double, ziggurat_nor_inv_r, ziggurat_nor_r
+    COMPILED = True
+except ImportError:  # a numba that moved them: the copies are drawn through numpy, as before (same numbers)
+    COMPILED = False
 
 _TWO_128 = 1 << 128
 _LOW32 = np.uint64(0xFFFFFFFF)
@@ -168,6 +174,18 @@ def _next64_address(rng: np.random.Generator) -> int:
     return ctypes.cast(bits.ctypes.next_uint64, ctypes.c_void_p).value
 
 
+def _numpy_draws(rng, n_traces, counts, trace_pin, offset_pin, uniforms, normals, keys, q):
+    """:func:`draw_copies` of one generator through numpy's calls (the single env's), into row ``q``."""
+    trace = int(rng.integers(n_traces))
+    trace = trace if trace_pin < 0 else trace_pin
+    offset = int(rng.integers(counts[trace]))
+    rng.random(out=uniforms[q])
+    normals[q] = rng.normal(0.0, 1.0, normals.shape[1])
+    if keys.size:
+        keys[q] = rng.integers(0, 2**64, dtype=np.uint64)
+    return trace, (offset if offset_pin < 0 else offset_pin)
+
+
 class Streams:
     """The generators of ``n`` copies, drawn in compiled code (:func:`draw_copies`).
 
@@ -177,6 +195,8 @@ class Streams:
     """
 
     def __init__(self, n: int):
+        self.compiled = COMPILED
+        self._saved: list = [None] * n  # without COMPILED: each generator's state at its mark
         self.states = np.zeros(n, dtype=np.intp)
         self.kept = np.zeros((2, n), dtype=np.uint64)
         self._rngs: list = [None] * n
@@ -203,6 +223,7 @@ class Streams:
         self.kept[0, i] = int(state["has_uint32"])
         self.kept[1, i] = int(state["uinteger"])
         self._rngs[i] = rng
+        self._saved[i] = None
         self._mark_count[i] = 0
         self._mark_kept[:, i] = self.kept[:, i]
 
@@ -214,18 +235,31 @@ class Streams:
         uniforms, normals = np.empty((m, n_uniform)), np.empty((m, n_normal))
         keys = np.empty(m if key else 0, dtype=np.uint64)
         traces, offsets = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
-        if m:
+        if m and not self.compiled:
+            for q, i in enumerate(which.tolist()):
+                traces[q], offsets[q] = _numpy_draws(self._rngs[i], n_traces, counts, trace_pin, offset_pin, uniforms,
+                                                     normals, keys, q)
+        elif m:
             draw_copies(self._function, self.states, self.kept, self._mark_count, which, int(n_traces), counts,
                         int(trace_pin), int(offset_pin), uniforms, normals, keys, traces, offsets)
         return traces, offsets, uniforms, normals, keys
 
     def mark(self, which: np.ndarray) -> None:
         """Remember where copies ``which``'s generators are (cheap: a copy's count and kept half)."""
+        if not self.compiled:
+            for i in which.tolist():
+                self._saved[i] = self._rngs[i].bit_generator.state
+            return
         self._mark_count[which] = 0
         self._mark_kept[:, which] = self.kept[:, which]
 
     def put_back(self, which: np.ndarray) -> None:
         """Return copies ``which``'s generators to their marks: as if nothing had been drawn since."""
+        if not self.compiled:
+            for i in which.tolist():
+                if self._saved[i] is not None:
+                    self._rngs[i].bit_generator.state = self._saved[i]
+            return
         for i in which.tolist():
             count = int(self._mark_count[i])
             if count:

@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
+from heli_env import generator_draws
 from heli_env.generator_draws import Streams
+from heli_env.vector_env import HeliAttitudeVectorEnv
 
 N_UNIFORM, N_NORMAL = 30, 400
 
@@ -24,8 +26,15 @@ def _numpy_draws(rng, n_traces, counts, key=True, trace_pin=-1, offset_pin=-1):
     return trace, (offset if offset_pin < 0 else offset_pin), uniforms, normals, key_drawn
 
 
+@pytest.fixture(params=[True, False], ids=["compiled", "numpy"])
+def compiled(request, monkeypatch):
+    """Both ways of drawing: compiled (the default) and numpy's calls (where numba lacks numpy's tables)."""
+    monkeypatch.setattr(generator_draws, "COMPILED", request.param)
+    return request.param
+
+
 @pytest.mark.parametrize("n_traces", [1, 5])
-def test_every_draw_is_numpys_own_including_its_rare_branches(n_traces):
+def test_every_draw_is_numpys_own_including_its_rare_branches(n_traces, compiled):
     """Copies' episodes drawn at once equal numpy's draws from the same seeds over three episodes each: the
     trace and offset (Lemire's bounded integers: a count of 1 draws nothing, 3e9 rejects about a third of its
     draws, 2**32 takes a 32-bit draw as it is), uniforms, normals (the ziggurat's wedges and tail) and the
@@ -49,10 +58,10 @@ def test_every_draw_is_numpys_own_including_its_rare_branches(n_traces):
             assert drawn[4][q] == expected[4]
         slow += int(streams._mark_count.sum())
     minimal = 3 * len(seeds) * (N_UNIFORM + N_NORMAL + 1)  # one 64-bit draw each, the integers' halves aside
-    assert slow > minimal + 100  # the ziggurat's slow paths and Lemire's rejections were taken
+    assert slow > minimal + 100 or not compiled  # the ziggurat's slow paths and Lemire's rejections were taken
 
 
-def test_pins_replace_what_was_drawn_as_the_single_env_does():
+def test_pins_replace_what_was_drawn_as_the_single_env_does(compiled):
     """A pinned trace decides the offset's count; the pins replace the values, the draws still happen."""
     seeds = range(50, 80)
     counts = np.array([4, 9_000, 2_000_000_000], dtype=np.int64)
@@ -69,7 +78,7 @@ def test_pins_replace_what_was_drawn_as_the_single_env_does():
         assert keys.size == 0
 
 
-def test_a_copy_put_back_draws_the_same_again_and_the_others_go_on():
+def test_a_copy_put_back_draws_the_same_again_and_the_others_go_on(compiled):
     """put_back returns marked copies' generators (the 64-bit state and the kept 32-bit half) to the mark;
     copies not put back keep their place."""
     seeds = range(7, 27)
@@ -79,7 +88,7 @@ def test_a_copy_put_back_draws_the_same_again_and_the_others_go_on():
         streams.adopt(i, rng)
     which = np.arange(len(seeds))
     streams.draw(which, 1, counts, N_UNIFORM, N_NORMAL, True)  # a half kept on some copies (rejections vary it)
-    assert 0 < streams.kept[0].sum() < len(seeds)
+    assert 0 < streams.kept[0].sum() < len(seeds) or not compiled
     streams.mark(which)
     first = streams.draw(which, 1, counts, N_UNIFORM, N_NORMAL, True)
     back = which[::2]
@@ -100,3 +109,21 @@ def test_a_copy_put_back_draws_the_same_again_and_the_others_go_on():
 def test_a_generator_other_than_pcg64_is_refused_by_name():
     with pytest.raises(TypeError, match="PCG64.*got MT19937"):
         Streams(1).adopt(0, np.random.Generator(np.random.MT19937(1)))
+
+
+def test_a_vector_env_drawing_through_numpy_runs_the_compiled_envs_episodes(monkeypatch):
+    """The fallback is the same env: episodes, autoresets drawn ahead, and a reset with options that puts a draw
+    ahead back, observed alike."""
+    def run():
+        venv = HeliAttitudeVectorEnv(4, episode_seconds=0.1)
+        observed = [venv.reset(seed=3)[0]]
+        for step in range(40):
+            if step == 17:
+                observed.append(venv.reset(options={"trace": 1, "reset_mask": np.array([0, 1, 0, 1], bool)})[0])
+            observed.append(venv.step(np.full((4, 3), 0.1))[0])
+        return observed
+
+    compiled = run()
+    monkeypatch.setattr(generator_draws, "COMPILED", False)
+    for got, expected in zip(run(), compiled):
+        assert np.array_equal(got, expected)
