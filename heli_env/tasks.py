@@ -198,13 +198,13 @@ def draw_episodes(rngs, spec, options=None) -> Episodes:
         ``trace`` (index) and ``offset`` (sample) pin the replayed gust.
     """
     trace_pin, offset_pin = window_pins(spec, options)
-    counts = window_counts(spec)
+    lengths = spec.model.lengths
     uniforms = np.empty((len(rngs), uniform_ranges(spec)[0].size))
     traces, offsets = [], []
     for i, rng in enumerate(rngs):
         trace = int(rng.integers(spec.model.n_traces))
         trace = trace if trace_pin < 0 else trace_pin
-        offset = draw_offset(rng, int(counts[trace]))
+        offset = draw_offset(rng, max(window_count(lengths[trace], spec.needed), 1))  # a short trace ends early
         traces.append(trace)
         offsets.append(offset if offset_pin is None else offset_pin)
         rng.random(out=uniforms[i])
