@@ -125,6 +125,10 @@ def _config(args):
                "wind_slow_fraction": args.slow_gusts, "reaction_delay": args.reaction_delay,
                "gyro_noise": args.gyro_noise, "input_shift": args.input_shift}
     cfg = replace(cfg, **{k: v for k, v in changes.items() if v is not None})
+    if args.wind_corner is not None and cfg.inert(["wind_corner_hz"]):
+        raise ValueError(f"--wind-corner shapes the lowpass and Dryden gusts; this flight's are gauss_markov"
+                         f"{' (from --cell ' + args.cell + ')' if args.cell else ''}: add --wind-model lowpass or "
+                         "dryden, or leave --wind-corner out")
     if args.wind_scale is not None:
         cfg = replace(cfg, wind_level=tuple(args.wind_scale * w for w in cfg.wind_level))
     if args.vibration_line:

@@ -119,6 +119,10 @@ def _one(job):
     aircraft, cell, rate, seed, duration, diagnose, effect, closed_loop, settings, delays, at_truth = job
     with threadpool_limits(limits=1, user_api="blas"):
         config = replace(BENCH_CELLS[cell], duration=duration, sample_rate=float(rate), **dict(settings))
+        inert = config.inert(dict(settings))
+        if inert:  # a study of a setting the flight does not read would report the cell's own figures
+            raise SystemExit(f"--set {', '.join(inert)}: cell {cell!r} does not read it "
+                             f"({'; '.join(inert.values())})")
         truth = replace(_aircraft(aircraft), **{f"tau_{axis}": tau for axis, tau in delays})
         sim = simulate_flight(duration, seed=seed, config=config, truth=truth, effects=(effect,) if effect else ())
         truth = sim.truth.values()

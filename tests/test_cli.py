@@ -100,6 +100,15 @@ def test_simulate_flight_rejects_bad_options(tmp_path, capsys, option, value):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_simulate_flight_refuses_a_wind_corner_its_gusts_do_not_have(tmp_path, capsys):
+    """A bench cell with Gauss-Markov gusts has no corner: --wind-corner would change nothing, silently."""
+    assert main(["simulate-flight", "--cell", "independent", "--wind-corner", "2", "--duration", "5",
+                 "--out", str(tmp_path / "f.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "gauss_markov (from --cell independent): add --wind-model lowpass or dryden" in err
+    assert list(tmp_path.iterdir()) == []
+
+
 # ---------------------------------------------------------------------------------------- identify
 
 

@@ -120,6 +120,17 @@ def test_flight_config_rejects_bad_values(field_name, value):
         FlightConfig(**{field_name: value})
 
 
+def test_a_config_names_the_settings_it_does_not_read():
+    """What a study's --set would change for nothing: the gusts' corner under Gauss-Markov gusts, their time
+    constant under the others, the slow gusts' time constant without slow gusts, the autopilot's D filter
+    under another pilot; a setting the flight reads is not named."""
+    fields = ["wind_corner_hz", "wind_fast_tau", "wind_slow_tau", "autopilot_dterm_hz", "reaction_delay"]
+    assert set(FlightConfig(wind_model="gauss_markov", wind_slow_fraction=0.5).inert(fields)) == {
+        "wind_corner_hz", "autopilot_dterm_hz"}
+    assert set(FlightConfig(wind_model="dryden", pilot="autopilot").inert(fields)) == {"wind_fast_tau",
+                                                                                       "wind_slow_tau"}
+
+
 def test_config_duration_is_used_when_no_duration_is_given():
     assert simulate_flight(config=FlightConfig(duration=2.0)).flight.duration == pytest.approx(2.0)
     assert simulate_flight(3.0, config=FlightConfig(duration=2.0)).flight.duration == pytest.approx(3.0)

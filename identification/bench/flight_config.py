@@ -203,6 +203,21 @@ class FlightConfig:
                 hint = f"; expected {expected[name]}" if name in expected else ""
                 raise ValueError(f"FlightConfig.{name} out of range: {getattr(self, name)!r}{hint}")
 
+    def inert(self, names) -> dict:
+        """Which of the fields ``names`` this flight does not read, each with the reason: a changed value there
+        would leave the flight as it was (``wind_corner_hz`` shapes the lowpass and Dryden gusts only,
+        ``wind_fast_tau`` the Gauss-Markov ones, ``wind_slow_tau`` the slow part when it has a share,
+        ``autopilot_dterm_hz`` the autopilot pilot)."""
+        reasons = {
+            "wind_corner_hz": (self.wind_model == "gauss_markov",
+                               "the gusts are gauss_markov (their time constant is wind_fast_tau)"),
+            "wind_fast_tau": (self.wind_model != "gauss_markov",
+                              f"the gusts are {self.wind_model} (their corner is wind_corner_hz)"),
+            "wind_slow_tau": (self.wind_slow_fraction == 0, "the slow gusts have no share (wind_slow_fraction 0)"),
+            "autopilot_dterm_hz": (self.pilot != "autopilot", f"the pilot is {self.pilot!r}, not the autopilot"),
+        }
+        return {name: reasons[name][1] for name in names if name in reasons and reasons[name][0]}
+
 
 WIND_MODELS = ("lowpass", "gauss_markov", "dryden")
 """Gust spectra of :class:`FlightConfig` (``wind_model``)."""
