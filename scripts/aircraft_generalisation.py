@@ -119,10 +119,6 @@ def _one(job):
     aircraft, cell, rate, seed, duration, diagnose, effect, closed_loop, settings, delays, at_truth = job
     with threadpool_limits(limits=1, user_api="blas"):
         config = replace(BENCH_CELLS[cell], duration=duration, sample_rate=float(rate), **dict(settings))
-        inert = config.inert(dict(settings))
-        if inert:  # a study of a setting the flight does not read would report the cell's own figures
-            raise SystemExit(f"--set {', '.join(inert)}: cell {cell!r} does not read it "
-                             f"({'; '.join(inert.values())})")
         truth = replace(_aircraft(aircraft), **{f"tau_{axis}": tau for axis, tau in delays})
         sim = simulate_flight(duration, seed=seed, config=config, truth=truth, effects=(effect,) if effect else ())
         truth = sim.truth.values()
@@ -281,6 +277,11 @@ def main(argv=None) -> None:
         raise SystemExit(f"unknown effect {args.effect!r}; known: {', '.join(EFFECTS)}")
     check = None if args.closed_loop == "off" else args.closed_loop
     settings, delays = tuple(args.set), tuple(args.servo_delay)
+    for cell in args.cells:  # a study of a setting the flight does not read would report the cell's own figures
+        inert = replace(BENCH_CELLS[cell], **dict(settings)).inert(dict(settings))
+        if inert:
+            raise SystemExit(f"--set {', '.join(inert)}: cell {cell!r} does not read it "
+                             f"({'; '.join(inert.values())})")
     if args.at_truth and check is None:
         raise SystemExit("--at-truth flies the closed-loop check again: it needs --closed-loop auto")
     jobs = [(a, c, r, s, args.duration, args.diagnose, args.effect, check, settings, delays, args.at_truth)
