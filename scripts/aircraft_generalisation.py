@@ -16,7 +16,8 @@ positive pitch gain) and log rates, and per flight runs what a user runs with no
   is then named too is the lag's first step, not a wrong effect; on an axis without the lag it is wrong.
 
 Prints per aircraft and cell the RMS [worst] relative error of each parameter over the seeds, the hold
-fractions, and the wrong diagnoses.
+fractions, and the wrong diagnoses; then, over every flight, whether the standard errors the model reports hold
+its errors (z = error / standard error: RMS about 1 where they do).
 
 Usage::
 
@@ -51,6 +52,7 @@ from heli_core.params import ModelParams
 GAINS = ("k2", "k6", "k10")
 DAMPINGS = ("k3", "k7", "k11")
 PARAMS = GAINS + DAMPINGS
+AXIS_OF = {"k2": "roll", "k3": "roll", "k6": "pitch", "k7": "pitch", "k10": "yaw", "k11": "yaw"}
 
 AIRCRAFT: dict[str, ModelParams] = {
     # a 450-class flybarless helicopter: three times the control power, more than twice the damping
@@ -115,6 +117,7 @@ def _one(job):
     from identification.bench.cells import BENCH_CELLS
     from identification.bench.synthetic import simulate_flight
     from identification.likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
+    from identification.likelihood.input_hold import std_errors_with_hold
 
     aircraft, cell, rate, seed, duration, diagnose, effect, closed_loop, settings, delays, at_truth = job
     with threadpool_limits(limits=1, user_api="blas"):
@@ -132,6 +135,12 @@ def _one(job):
         out["ml_time_s"] = time.perf_counter() - t0
         v = ml.params_.values()
         out["ml"] = {k: 100.0 * (v[k] - truth[k]) / truth[k] for k in PARAMS}
+        alternative = getattr(ml, "hold_alternative_", None)  # the hold's doubt, where the data leave one
+        se = {k: std_errors_with_hold(ml.axes_[AXIS_OF[k]].params, ml.axes_[AXIS_OF[k]].std_errors, alternative,
+                                      AXIS_OF[k]).get(k, 0.0) for k in PARAMS}
+        out["hold_doubt"] = alternative is not None
+        out["z"] = {k: (v[k] - truth[k]) / se[k] for k in PARAMS if se[k] > 0}
+        out["se"] = {k: 100.0 * se[k] / abs(truth[k]) for k in PARAMS}
         out["hold"] = [f.input_hold for f in ml.axes_.values()]
         out["delays"] = {axis: (tau, ml.axes_[axis].delay) for axis, tau in delays}
         hold = getattr(ml.closed_loop_, "hold", None)
@@ -240,11 +249,30 @@ def _table(rows, diagnose: bool, effect: str | None) -> None:
         print(f"{axis} servo delay {1000 * pairs[0, 0]:g} ms: fitted {1000 * pairs[:, 1].min():.1f}-"
               f"{1000 * pairs[:, 1].max():.1f} ms, error RMS {np.sqrt(np.mean(err ** 2)):.1f} ms "
               f"over {len(pairs)} flights")
+    _standard_error_line(rows)
     checked = [r["hold_check"] for r in rows if r.get("hold_check")]
     if checked:
         moved = [f"{c['decided']} -> {c['chosen']}" for c in checked if c["switched"]]
         print(f"Hold decided again in the closed loop's world on {len(checked)} of {len(rows)} flights; changed on "
               f"{len(moved)}" + (f" ({', '.join(sorted(set(moved)))})" if moved else ""))
+
+
+def _standard_error_line(rows) -> None:
+    """Whether the standard errors the model reports hold the errors: z = (fitted - truth) / standard error over
+    every flight (RMS about 1 and |z| > 2 on about 5 % where they do; a bias shows as a mean away from 0)."""
+    fitted = [r for r in rows if r.get("z")]
+    if not fitted:
+        return
+    cols = []
+    for k in PARAMS:
+        z = np.array([r["z"][k] for r in fitted if k in r["z"]])
+        se = np.median([r["se"][k] for r in fitted])
+        cols.append(f"{k} {np.sqrt(np.mean(z ** 2)):.2f} ({np.mean(z):+.2f}, SE {se:.1f} %)")
+    every = np.array([z for r in fitted for z in r["z"].values()])
+    doubt = sum(bool(r.get("hold_doubt")) for r in fitted)
+    print(f"Errors over the model's standard errors (the hold's doubt in them where the data leave one: {doubt} "
+          f"flights), z RMS (mean, median standard error) over {len(fitted)} flights: "
+          + ", ".join(cols) + f"; |z| > 2 on {100 * np.mean(np.abs(every) > 2):.1f} % of {every.size}")
 
 
 def main(argv=None) -> None:

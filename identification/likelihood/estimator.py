@@ -76,7 +76,8 @@ from .axis_pool import check_workers, map_axes
 from .axis_search import BURN_IN, DAMPING_BOUNDS, MAX_SHIFT, AxisProblem, WindFit
 from .closed_loop import N_FLIGHTS, ClosedLoopCheck, apply_check
 from .closed_loop import check_settings as check_closed_loop_settings
-from .input_hold import check_hold, decide_hold
+from .input_hold import (HOLDS, check_hold, decide_hold, hold_alternative, std_errors_with_hold,
+                         undecided_against)
 from .loop_checks import run_checks
 from .servo_lag import profile_lag
 from .state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll, rts_smooth, wind_block
@@ -191,6 +192,11 @@ class MaximumLikelihoodIdentifier:
     hold_decision_ : dict or None
         With ``input_hold="auto"``, the log's hold decided from every axis' estimate (:func:`decide_hold`):
         the axes whose estimate lay further from it than its standard error are fitted again at it.
+    hold_alternative_ : dict or None
+        Where the data reject neither named hold (:func:`~identification.likelihood.input_hold.undecided_against`),
+        every axis fitted at the other (:func:`~identification.likelihood.input_hold.hold_alternative`: its values,
+        standard errors, the likelihood ratio and weight), for the doubt it leaves on the values
+        (:func:`~identification.likelihood.input_hold.std_errors_with_hold`); else None.
     input_shifts_ : dict of str to float
         Per axis, the shift applied to its stick [s]: negative where ``delay="auto"`` found the log's input
         column late (``metadata["input_shift_s"]`` of :attr:`flights_`), else 0.
@@ -371,6 +377,7 @@ class MaximumLikelihoodIdentifier:
         named hold unless the data reject it); an axis whose estimate lies further from it than its standard
         error is searched again at it from its optimum (in ``fits``). Returns the decision, else None."""
         self._decided_hold = None
+        self.hold_alternative_ = None
         if self.input_hold != "auto" or not fits:
             return None
         decision = decide_hold({a: (f.input_hold, f.input_hold_se) for a, f in fits.items()},
@@ -381,6 +388,12 @@ class MaximumLikelihoodIdentifier:
                 if abs(fit.input_hold - self._decided_hold) > (fit.input_hold_se or 0.0)]
         fits.update(zip(redo, map_axes(lambda axis: self._refit_at_hold(axis, fits[axis], flights, burn), redo,
                                        self.workers)))
+        other = undecided_against(decision)
+        if other is not None:  # the data reject neither named hold: the fit at the other, for the doubt it leaves
+            self._decided_hold = HOLDS[other]
+            names = list(fits)
+            at_other = map_axes(lambda axis: self._refit_at_hold(axis, fits[axis], flights, burn), names, self.workers)
+            self.hold_alternative_ = hold_alternative(other, fits, dict(zip(names, at_other)), decision["threshold"])
         self._decided_hold = None
         return decision
 
@@ -620,6 +633,8 @@ class MaximumLikelihoodIdentifier:
                 "servo_lag_lr": f.lag_lr,
                 "input_hold": f.input_hold, "input_hold_se": f.input_hold_se,
                 "mean_square_innovation": list(f.history),
+                **({"std_errors_with_hold": std_errors_with_hold(f.params, f.std_errors, self.hold_alternative_, name)}
+                   if getattr(self, "hold_alternative_", None) else {}),
             }
             for name, f in self.axes_.items()
         }

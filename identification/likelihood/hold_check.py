@@ -237,4 +237,5 @@ def switch_hold(ident, hold: HoldCheck) -> HoldCheck:
         ident._decided_hold = None
     ident.params_ = ident.params_.with_values(**model_values(ident.axes_))
     ident.hold_decision_ = {**ident.hold_decision_, "fraction": fraction, "named": hold.chosen}
+    ident.hold_alternative_ = None  # the loop's world decided between the two holds
     return replace(hold, applied=True)

@@ -90,3 +90,58 @@ def check_hold(hold) -> None:
     if isinstance(hold, (int, float, np.integer, np.floating)) and not isinstance(hold, bool) and 0 <= hold <= 1:
         return
     raise ValueError(f"input_hold must be 'auto', 'linear', 'zoh' or a fraction in [0, 1], got {hold!r}")
+
+
+def other_hold(named: str) -> str:
+    """The named hold that is not ``named``."""
+    return "zoh" if named == "linear" else "linear"
+
+
+def undecided_against(decision: dict | None) -> str | None:
+    """The other named hold where the data leave the log's named hold in doubt, else None.
+
+    :func:`decide_hold` takes a named hold unless the data reject it; they may reject neither. Read from the
+    axes' pooled estimate, the log-likelihood ratio between the two named holds is the difference of their
+    ``nll_gain``; below the decision's own threshold (Schwarz's ``HOLD_BIC * ln n``) the other hold is as
+    admissible as the one taken. On a 60 s flight of a slow aircraft with held sticks the axes put it at 2.3 for
+    interpolated sticks (threshold 4.3), and the dampings fitted at the two holds differ by 10-20 %: four times
+    their standard errors, which assume the hold known.
+    """
+    if not decision or not decision.get("named") or not decision.get("nll_gain"):
+        return None
+    named = decision["named"]
+    other = other_hold(named)
+    return other if decision["nll_gain"][other] - decision["nll_gain"][named] < decision["threshold"] else None
+
+
+def hold_alternative(other: str, fits: dict, alternative: dict, threshold: float) -> dict:
+    """What the log's fit would be at the ``other`` named hold, and how much the data prefer the one taken.
+
+    ``fits`` and ``alternative`` map axes to their fits (``params``, ``std_errors``, ``nll``) at the hold taken and
+    at the other. ``lr`` is the summed ``nll(other) - nll(taken)`` (> 0: the taken hold is the likelier) and
+    ``weight`` the other hold's posterior probability under equal prior odds, ``1 / (1 + exp(lr))``: what
+    :func:`std_errors_with_hold` weighs the other fit by.
+    """
+    lr = float(sum(alternative[a].nll for a in alternative) - sum(fits[a].nll for a in alternative))
+    return {"hold": other, "lr": lr, "threshold": float(threshold), "weight": float(1.0 / (1.0 + np.exp(min(lr, 700.0)))),
+            "axes": {a: {"params": dict(f.params), "std_errors": dict(f.std_errors)} for a, f in alternative.items()}}
+
+
+def std_errors_with_hold(params: dict, std_errors: dict, alternative: dict | None, axis: str) -> dict:
+    """``std_errors`` of an axis' ``params`` widened by the hold's doubt (``alternative`` from
+    :func:`hold_alternative`, None: unchanged): the root mean square error of the values taken under the two holds'
+    posterior weights, ``sqrt((1 - w) se^2 + w (se_o^2 + (p_o - p)^2))`` with ``p_o``, ``se_o`` the value and
+    standard error at the other hold and ``w`` its weight."""
+    other = (alternative or {}).get("axes", {}).get(axis)
+    if other is None:
+        return dict(std_errors)
+    w = alternative["weight"]
+    out = {}
+    for name, se in std_errors.items():
+        if name in other["params"] and name in params:
+            se_o = other["std_errors"].get(name, se)
+            gap = other["params"][name] - params[name]
+            out[name] = float(np.sqrt((1 - w) * se ** 2 + w * (se_o ** 2 + gap ** 2)))
+        else:
+            out[name] = se
+    return out

@@ -17,6 +17,7 @@ from heli_core.params import ModelParams
 from heli_core.terms import AXES, BASE_PARAMS, TERMS
 
 from ..disturbance.profile import compare_with_truth
+from ..likelihood.input_hold import std_errors_with_hold
 from ..validation.result import ValidationResult
 from .disturbance import figure_names, profile_markdown, save_figures
 from .validation import flight_validation_markdown, plot_attitude_fit, plot_rate_fit, validation_markdown
@@ -50,7 +51,9 @@ def parameter_table(identifiers: dict, truth: ModelParams | None) -> str:
                 cells.append("—")
                 vals.append(None)
                 continue
-            v, se = fit.params[name], fit.std_errors.get(name, float("nan"))
+            axis = AXES[TERMS[name].axis]  # the standard errors with the hold's doubt, where the log leaves one
+            ses = std_errors_with_hold(fit.params, fit.std_errors, getattr(ident, "hold_alternative_", None), axis)
+            v, se = fit.params[name], ses.get(name, float("nan"))
             cells.append(f"{v:.4f} ± {se:.4f}" if np.isfinite(se) else f"{v:.4f}")
             vals.append(v)
         if all(v is None for v in vals):
@@ -131,6 +134,11 @@ def method_sentence(ident) -> str:
         decision = getattr(ident, "hold_decision_", None) or {}
         said = (f"the log's {decision['named']} hold, kept as the data do not reject it" if decision.get("named")
                 else "the axes' pooled fraction")
+        alternative = getattr(ident, "hold_alternative_", None)
+        if alternative:
+            said += (f"; nor do they reject the {alternative['hold']} hold (likelihood ratio {alternative['lr']:.1f}, "
+                     f"a decision needs {alternative['threshold']:.1f}): every axis was fitted at it too and the "
+                     f"standard errors include the gap, weighted by its probability {alternative['weight']:.2f}")
         moved = getattr(getattr(ident, "closed_loop_", None), "hold", None)
         if moved is not None and moved.applied:
             said = (f"the log's {moved.chosen} hold, decided in the closed loop's world where the likelihood "

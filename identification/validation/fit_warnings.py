@@ -22,7 +22,11 @@ quality and returns one line per concern, for the terminal and the report:
   :data:`MIN_RATE_STD` (half a degree per second): the control gain and damping of
   that axis are then not identifiable from the data, whatever R² says.
 
-The function is pure: it reads the flights and the figures and returns strings (the figures that judge a
+* **Hold in doubt** (:func:`hold_warning`) -- the log rejects neither held nor interpolated sticks
+  (:func:`identification.likelihood.input_hold.undecided_against`) and the values fitted at the two differ: the
+  line says by how much and what would decide it.
+
+The functions are pure: they read the flights and the figures and return strings (the figures that judge a
 fitted model come from :mod:`identification.validation.judged_fit`).
 """
 
@@ -125,3 +129,33 @@ def fit_warnings(flights, r2: Mapping | None = None, r2_label: str = "fit", *, m
 
 
 __getattr__ = module_getattr(__name__)
+
+
+HOLD_NAMES = {"zoh": "held over each sample", "linear": "interpolated between samples"}
+
+
+def hold_warning(ident) -> list[str]:
+    """One line where the log leaves its input hold in doubt (``ident.hold_alternative_``, see
+    :func:`identification.likelihood.input_hold.hold_alternative`): the values that move by more than their standard
+    error at the other hold, the likelihood ratio against the decision's threshold, and what would decide it."""
+    alternative = getattr(ident, "hold_alternative_", None)
+    if not alternative:
+        return []
+    moved = []
+    for axis, fit in ident.axes_.items():
+        other = alternative["axes"].get(axis, {}).get("params", {})
+        for name, value in fit.params.items():
+            se = fit.std_errors.get(name, 0.0)
+            if name in other and value != 0 and abs(other[name] - value) > se:
+                moved.append(f"{name} {100 * (other[name] - value) / abs(value):+.0f} %")
+    other = alternative["hold"]
+    taken = "zoh" if other == "linear" else "linear"
+    lr = alternative["lr"]
+    preferred = (f"which the data prefer to {HOLD_NAMES[other]}" if lr >= 0
+                 else f"though the data prefer {HOLD_NAMES[other]}")
+    return [f"the log does not decide how its sticks reach the aircraft: read as {HOLD_NAMES[taken]}, {preferred} "
+            f"by a factor of only exp({abs(lr):.1f}) (a clear decision needs exp({alternative['threshold']:.1f}))"
+            + (f"; read as {'held' if other == 'zoh' else 'interpolated'}: {', '.join(moved)}" if moved else "")
+            + ". The standard errors reported include this doubt. If you know, give --input-hold zoh (a flight "
+            "controller or a digital radio link) or --input-hold linear (a pilot's hand sampled); a longer flight "
+            "decides it"]
