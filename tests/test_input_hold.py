@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from dataclasses import replace
+from types import SimpleNamespace
 
 from heli_core.params import ModelParams
 from identification.bench.cells import BENCH_CELLS, bench_flight
@@ -105,6 +106,13 @@ def test_a_hold_the_data_leave_in_doubt_is_named_and_widens_the_errors():
     assert widened["k3"] == pytest.approx(np.sqrt(0.8 * 0.1 ** 2 + 0.2 * (0.2 ** 2 + 1.0 ** 2)))
     assert widened["k2"] == pytest.approx(0.01)  # the same value at both holds: its own error
     assert std_errors_with_hold({"k11": 3.0}, {"k11": 0.3}, alternative, "yaw") == {"k11": 0.3}
+    # the warning: where a value moves past its standard error, not where the doubt moves nothing that far
+    fit = SimpleNamespace(params={"k3": 2.0, "k2": 1.0}, std_errors={"k3": 0.1, "k2": 0.01})
+    ident = SimpleNamespace(axes_={"roll": fit}, hold_alternative_={**alternative, "lr": 1.4, "threshold": 4.5})
+    (line,) = hold_warning(ident)
+    assert "read as held: k3 +50 %" in line and "k2" not in line.split("read as held")[1]
+    fit.params["k3"] = 2.95
+    assert hold_warning(ident) == []
 
 
 SLUGGISH = ModelParams(k2=0.7, k3=1.2, kd1=0.02, k6=-0.5, k7=1.1, kd2=0.01, k10=6.0, k11=1.6, k12=-0.3, kd3=0.05)
