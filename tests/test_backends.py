@@ -163,6 +163,7 @@ def test_local_task_errors_are_the_callers_own():
         LocalBackend(2).map(_raise_on_three, range(6))
 
 
+@pytest.mark.slow  # over 5 s: make test-slow
 def test_local_pool_survives_a_killed_worker(tmp_path):
     be = LocalBackend(2)
     out = _KillingBackend(be, tmp_path / "killed").map(_square, range(6), 1)
@@ -193,6 +194,7 @@ def test_a_terminals_ctrl_c_is_the_callers_alone():
     assert signal.getsignal(signal.SIGINT) is before and not _ignores_sigint("self")
 
 
+@pytest.mark.slow  # over 5 s: make test-slow
 def test_local_gives_up_after_max_retries():
     with pytest.raises(TaskFailed, match="died 2 times .max_retries=1.") as e:
         LocalBackend(2, max_retries=1).map(_always_die, range(3))

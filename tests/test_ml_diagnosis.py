@@ -264,6 +264,7 @@ def test_heli_diagnose_by_likelihood_writes_the_model(tmp_path, coupled_flight):
     assert len(design_gains(params).kp) == 3
 
 
+@pytest.mark.slow  # over 5 s: make test-slow
 def test_the_model_diagnose_writes_is_checked_in_the_closed_loop_as_identifys(tmp_path, coupled_flight, capsys):
     """``--closed-loop`` (default auto, as heli identify's): the model written when an effect is found is checked
     in the flight's closed loop; 'report' measures without changing it, and each axis says why it was or was not
