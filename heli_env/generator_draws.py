@@ -231,6 +231,10 @@ class Streams:
              key: bool, trace_pin: int = -1, offset_pin: int = -1):
         """Copies ``which``'s draws (:func:`draw_copies`): traces, offsets (m,) int64, uniforms (m,
         n_uniform), normals (m, n_normal), keys (m,) uint64 (empty without ``key``)."""
+        if not 1 <= n_traces <= 2**32 or counts.size == 0 or counts.min() < 1 or counts.max() > 2**32:
+            raise ValueError(f"draws are bounded by 1 to 2**32 traces and windows a trace, got {n_traces} traces "
+                             f"and {counts.min() if counts.size else 'no'}-{counts.max() if counts.size else ''} "
+                             "windows")
         m = which.size
         uniforms, normals = np.empty((m, n_uniform)), np.empty((m, n_normal))
         keys = np.empty(m if key else 0, dtype=np.uint64)

@@ -93,8 +93,9 @@ class EpisodesAhead:
 
     ``draw(which)`` draws the episodes of copies ``which`` (an index array) from their generators with the
     default options, as a :class:`Starts`; ``streams`` (:class:`heli_env.generator_draws.Streams`) are the
-    copies' generators, marked before a draw ahead and put back to the mark. A copy whose last reset came with options (as an SB3 adapter's pinned gust
-    windows do) is not drawn ahead until a reset without them: its draw would be put back unused."""
+    copies' generators, marked before a draw ahead and put back to the mark. A copy whose last reset came with
+    options (as an SB3 adapter's pinned gust windows do) is not drawn ahead until a reset without them: its draw
+    would be put back unused."""
 
     def __init__(self, streams, draw):
         self._streams = streams

@@ -127,3 +127,10 @@ def test_a_vector_env_drawing_through_numpy_runs_the_compiled_envs_episodes(monk
     monkeypatch.setattr(generator_draws, "COMPILED", False)
     for got, expected in zip(run(), compiled):
         assert np.array_equal(got, expected)
+
+
+def test_counts_beyond_a_32_bit_draw_are_refused_not_drawn_wrong():
+    streams = Streams(1)
+    streams.adopt(0, np.random.Generator(np.random.PCG64(0)))
+    with pytest.raises(ValueError, match="1 to 2\\*\\*32 traces and windows"):
+        streams.draw(np.arange(1), 1, np.array([2**32 + 1], dtype=np.int64), 2, 0, False)
