@@ -7,9 +7,12 @@ Gymnasium's ``CartPoleVectorEnv`` after each, as ``scripts/bench.py --only env``
 difference to the full step is what that part costs in the step; the variants compute wrong values and are
 never used otherwise.
 
-    python scripts/env_profile.py [--rounds 12] [--variants NAME ...]
+    python scripts/env_profile.py [--rounds 12] [--variants NAME ...] [--long-run]
 
-Prints nanoseconds per copy-step (medians over the rounds) and each variant's ratio to CartPole.
+Prints nanoseconds per copy-step (medians over the rounds) and each variant's ratio to CartPole. With
+``--long-run`` a second env, in a long run's state (its copies' episodes ending on different steps, some on
+every step: ``scripts/bench.py``'s ``_spread_episode_ends``), takes its place in the rotation with the full step:
+what a long run's autoresets and its copies' differing steps cost (``--variants`` with no name times only these).
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ import heli_env.kernels as kernels  # noqa: E402
 from heli_env.vector_env import HeliAttitudeVectorEnv  # noqa: E402
 
 COPIES = 4096
+LONG = "full step, a long run's state"
 
 
 def _without_slow_path(lines):
@@ -112,7 +116,8 @@ def _compiled_variants(env, names):
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=12, help="rounds of 40-step blocks (default 12)")
-    parser.add_argument("--variants", nargs="+", choices=list(VARIANTS), default=list(VARIANTS))
+    parser.add_argument("--variants", nargs="*", choices=list(VARIANTS), default=list(VARIANTS))
+    parser.add_argument("--long-run", action="store_true", help="also time the full step in a long run's state")
     args = parser.parse_args(argv)
     from gymnasium.envs.classic_control.cartpole import CartPoleVectorEnv
 
@@ -132,13 +137,21 @@ def main(argv=None) -> int:
     for step in steps.values():  # compile and warm each
         env._step_loop = step
         block(env, actions, 5)
+    envs = {name: env for name in steps}
+    if args.long_run:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from bench import _spread_episode_ends
+
+        envs[LONG] = HeliAttitudeVectorEnv(COPIES, threads=1)
+        _spread_episode_ends(envs[LONG], actions)
+        steps[LONG] = envs[LONG]._step_loop
     times = {name: [] for name in steps}
     times["CartPoleVectorEnv"] = []
     names = list(steps)
     for r in range(args.rounds):
         for name in names[r % len(names):] + names[:r % len(names)]:  # each variant takes each place in turn
-            env._step_loop = steps[name]
-            times[name].append(block(env, actions))
+            envs[name]._step_loop = steps[name]
+            times[name].append(block(envs[name], actions))
             times["CartPoleVectorEnv"].append(block(cart, cart_actions))
     cart_ns = statistics.median(times["CartPoleVectorEnv"])
     full = statistics.median(times["full step"])
@@ -146,6 +159,7 @@ def main(argv=None) -> int:
     for name, values in times.items():
         ns = statistics.median(values)
         change = "" if name in ("full step", "CartPoleVectorEnv") else f"  ({ns - full:+.1f} against the full step)"
+        change += f"  (the fresh env / this {full / ns:.3f})" if name == LONG else ""
         print(f"- {name}: {ns:.1f} ns, CartPole / this {cart_ns / ns:.3f}{change}")
     return 0
 
