@@ -450,11 +450,19 @@ class ModelDocument:
         return entry if isinstance(entry, Mapping) else MappingProxyType({})
 
     def std_errors(self) -> dict:
-        """The standard errors the fit recorded, every axis' together (parameter name -> value)."""
+        """The standard errors the fit recorded, every axis' together (parameter name -> value): widened by the
+        input hold's doubt where the fit recorded one (``std_errors_with_hold``: the log rejected neither held nor
+        interpolated sticks), the Fisher information's elsewhere."""
         out = {}
         for axis in AXES:
-            out.update(self.axis_statistics(axis).get("std_errors") or {})
+            stats = self.axis_statistics(axis)
+            out.update(stats.get("std_errors") or {})
+            out.update(stats.get("std_errors_with_hold") or {})
         return out
+
+    def hold_in_doubt(self) -> bool:
+        """Whether the fit recorded the input hold in doubt (``fit_statistics.input_hold_alternative``)."""
+        return bool(self.fit_statistics.get("input_hold_alternative"))
 
     def wind(self, axis: str):
         """The wind model the maximum-likelihood fit stored for ``axis`` (its dictionary), or None."""

@@ -103,6 +103,18 @@ def test_non_finite_fit_statistics_are_stored_as_null(tmp_path):
                    "history": [1.0, None], "ok": 0.25}
 
 
+def test_standard_errors_read_widened_by_the_holds_doubt_where_the_fit_recorded_one():
+    """A refresh's drift table reads the previous model's standard errors: where identify found the log's hold in
+    doubt, the ones widened by it (what the report printed), the Fisher information's elsewhere."""
+    axes = {"roll": {"std_errors": {"k2": 0.01, "k3": 0.1}, "std_errors_with_hold": {"k2": 0.01, "k3": 0.3}},
+            "pitch": {"std_errors": {"k6": 0.02, "k7": 0.2}}}
+    plain = ModelDocument.from_dict(model_document(PARAMS, fit_statistics={"axes": axes}))
+    assert plain.std_errors() == {"k2": 0.01, "k3": 0.3, "k6": 0.02, "k7": 0.2} and not plain.hold_in_doubt()
+    doubt = ModelDocument.from_dict(model_document(PARAMS, fit_statistics={
+        "axes": axes, "input_hold_alternative": {"hold": "zoh", "lr": 2.3}}))
+    assert doubt.hold_in_doubt()
+
+
 # ---------------------------------------------------------------------------------------- bad input
 
 

@@ -181,7 +181,9 @@ def previous_std_errors(doc: dict, names, new: BootstrapResult, library_entries,
     if estimator == "ml":  # the fit's own Fisher errors, recorded by heli identify
         fisher = doc.std_errors()
         if all(isinstance(fisher.get(k), (int, float)) for k in names):
-            return {k: float(fisher[k]) for k in names}, "Fisher information recorded in model.json", None
+            source = "Fisher information recorded in model.json"
+            return ({k: float(fisher[k]) for k in names},
+                    source + (", widened by the input hold's doubt" if doc.hold_in_doubt() else ""), None)
     durations = {}
     for e in library_entries:
         sha = (e.get("source") or {}).get("sha256")
