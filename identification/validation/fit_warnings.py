@@ -41,6 +41,7 @@ from heli_core.deprecation import module_getattr
 from heli_core.terms import AXES
 
 from ..excitation import AXIS_STICK, MIN_STICK_STD, from_a_log, static_collective
+from ..likelihood.input_hold import other_hold
 from ..log_band import log_band
 
 MIN_R2 = 0.30
@@ -138,7 +139,8 @@ def hold_warning(ident) -> list[str]:
     """One line where the log leaves its input hold in doubt (``ident.hold_alternative_``, see
     :func:`identification.likelihood.input_hold.hold_alternative`) and the values move with it: those that move by
     more than their standard error at the other hold, the likelihood ratio against the decision's threshold, and
-    what would decide it. None where nothing moves that far (the doubt is then in model.json alone)."""
+    what would decide it (the gains and dampings; the offsets' relative moves mean little). None where nothing
+    moves that far (the doubt is then in model.json alone)."""
     alternative = getattr(ident, "hold_alternative_", None)
     if not alternative:
         return []
@@ -147,18 +149,18 @@ def hold_warning(ident) -> list[str]:
         other = alternative["axes"].get(axis, {}).get("params", {})
         for name, value in fit.params.items():
             se = fit.std_errors.get(name, 0.0)
-            if name in other and value != 0 and abs(other[name] - value) > se:
+            if name in other and not name.startswith("kd") and value != 0 and abs(other[name] - value) > se:
                 moved.append(f"{name} {100 * (other[name] - value) / abs(value):+.0f} %")
     if not moved:  # the doubt moves nothing past its error (the T-REX hover, filtered at 2.4 Hz): no concern
         return []
     other = alternative["hold"]
-    taken = "zoh" if other == "linear" else "linear"
+    taken = other_hold(other)
     lr = alternative["lr"]
     preferred = (f"which the data prefer to {HOLD_NAMES[other]}" if lr >= 0
                  else f"though the data prefer {HOLD_NAMES[other]}")
     return [f"the log does not decide how its sticks reach the aircraft: read as {HOLD_NAMES[taken]}, {preferred} "
             f"by a factor of only exp({abs(lr):.1f}) (a clear decision needs exp({alternative['threshold']:.1f}))"
-            + (f"; read as {'held' if other == 'zoh' else 'interpolated'}: {', '.join(moved)}" if moved else "")
+            + f"; read as {'held' if other == 'zoh' else 'interpolated'}: {', '.join(moved)}"
             + ". The standard errors reported include this doubt. If you know, give --input-hold zoh (a flight "
             "controller or a digital radio link) or --input-hold linear (a pilot's hand sampled); a longer flight "
             "decides it"]
