@@ -136,6 +136,7 @@ def test_the_loop_drives_the_rate_through_the_servo_the_likelihood_fits(tau, lag
     np.testing.assert_allclose(rate, expected, atol=1e-12)
 
 
+@pytest.mark.slow  # over 5 s: make test-slow
 def test_a_searched_servo_delay_is_flown_and_its_bias_removed_with_the_dampings():
     """Behind a noisy gyro a pilot who sees the aircraft lengthens the fitted servo delay (the sluggish pitch's
     20 ms came out 29 ms here); the check flies the axis through its servo, fits each flight with the delay searched

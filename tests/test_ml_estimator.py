@@ -97,6 +97,7 @@ def test_detect_leaves_an_undelayed_fit_alone_bit_for_bit(fitted, flight180):
     assert all(f.delay == 0.0 and not f.delay_profile for f in detect.axes_.values())
 
 
+@pytest.mark.slow  # over 5 s: make test-slow
 def test_detect_finds_a_servo_delay_and_profiles_every_axis():
     # an unmodelled 40 ms servo delay biases the damping low by more than half (docs/method.md); the default
     # test finds it, profiles the axes as delay="auto" would, and the damping comes back

@@ -166,6 +166,7 @@ def test_refresh_killed_at_every_file_event_reads_old_or_new_and_runs_again(base
     assert "old" in kinds and "new" in kinds
 
 
+@pytest.mark.slow  # over 5 s: make test-slow
 def test_identify_into_an_existing_folder_killed_at_every_file_event(base, flights, tmp_path):
     old_sha = ModelDir(base).load().model_sha256
     probe = tmp_path / "probe"

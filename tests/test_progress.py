@@ -56,6 +56,7 @@ def test_sweep_and_evaluate_announce_their_stages_off_a_terminal(tmp_path, capsy
     assert capsys.readouterr().err == ""
 
 
+@pytest.mark.slow  # over 5 s: make test-slow
 def test_sweep_and_evaluate_skip_their_figures_with_no_plots(tmp_path):
     from heli_cli.main import main
 
