@@ -131,8 +131,10 @@ def _standard_normal(function, state, used, i):
                     if (rabs >> np.uint64(8)) & np.uint64(1):
                         return -(ziggurat_nor_r + xx)
                     return ziggurat_nor_r + xx
-        elif (fi_double[idx - 1] - fi_double[idx]) * _double(function, state, used, i) + fi_double[idx] < np.exp(-0.5 * x * x):
-            return x
+        else:
+            wedge = (fi_double[idx - 1] - fi_double[idx]) * _double(function, state, used, i) + fi_double[idx]
+            if wedge < np.exp(-0.5 * x * x):
+                return x
 
 
 @numba.njit(cache=True)

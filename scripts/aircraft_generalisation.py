@@ -52,7 +52,6 @@ from heli_core.params import ModelParams
 GAINS = ("k2", "k6", "k10")
 DAMPINGS = ("k3", "k7", "k11")
 PARAMS = GAINS + DAMPINGS
-AXIS_OF = {"k2": "roll", "k3": "roll", "k6": "pitch", "k7": "pitch", "k10": "yaw", "k11": "yaw"}
 
 AIRCRAFT: dict[str, ModelParams] = {
     # a 450-class flybarless helicopter: three times the control power, more than twice the damping
@@ -117,6 +116,7 @@ def _one(job):
     from identification.bench.cells import BENCH_CELLS
     from identification.bench.synthetic import simulate_flight
     from identification.likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
+    from heli_core.terms import AXES, TERMS
     from identification.likelihood.input_hold import std_errors_with_hold
 
     aircraft, cell, rate, seed, duration, diagnose, effect, closed_loop, settings, delays, at_truth = job
@@ -136,8 +136,9 @@ def _one(job):
         v = ml.params_.values()
         out["ml"] = {k: 100.0 * (v[k] - truth[k]) / truth[k] for k in PARAMS}
         alternative = getattr(ml, "hold_alternative_", None)  # the hold's doubt, where the data leave one
-        se = {k: std_errors_with_hold(ml.axes_[AXIS_OF[k]].params, ml.axes_[AXIS_OF[k]].std_errors, alternative,
-                                      AXIS_OF[k]).get(k, 0.0) for k in PARAMS}
+        widened = {axis: std_errors_with_hold(f.params, f.std_errors, alternative, axis)
+                   for axis, f in ml.axes_.items()}
+        se = {k: widened[AXES[TERMS[k].axis]].get(k, 0.0) for k in PARAMS}
         out["hold_doubt"] = alternative is not None
         out["z"] = {k: (v[k] - truth[k]) / se[k] for k in PARAMS if se[k] > 0}
         out["se"] = {k: 100.0 * se[k] / abs(truth[k]) for k in PARAMS}

@@ -407,9 +407,10 @@ class LikelihoodDiagnoser(DiagnosisResult):
         base = current[axis] = self._scores.describe(a, min(tries, key=lambda sc: sc.nll))
         cands = self._candidates(a, axis, base, free_tau, rnd)
         log_timed = self._log_timed(axis, base, free_tau)
-        timing = self._log_timing(a, base, cands) if log_timed else None
-        if timing is not None:  # the log's timing, fitted: every candidate scored again from it
-            name, k, sc, lr = next(c for c in cands if c[0] == SERVO_DELAY)
+        found = self._log_timing(cands) if log_timed else None
+        timing = None if found is None else found[2]
+        if found is not None:  # the log's timing, fitted: every candidate scored again from it
+            name, k, sc, lr = found
             rows.append(_row(rnd, axis, name, k, sc, lr, self.threshold(len(cands), k, alignment=True), False,
                              f"the delay {1e3 * sc.alignment:.1f} ms is shorter than {RESOLUTION_SAMPLES} samples, "
                              "the log's timing, not a servo: the base takes it and every candidate is scored "
@@ -478,10 +479,11 @@ class LikelihoodDiagnoser(DiagnosisResult):
         """The axes whose base took the log's timing (:meth:`_log_timing`) in the rounds so far."""
         return {r["axis"] for rows in self.rounds_ for r in rows if r.get("base_timing")}
 
-    def _log_timing(self, a: int, base: AxisScore, cands: list) -> AxisScore | None:
-        """On an axis whose base carries the log's timing (:meth:`_log_timed`), the alignment candidate where it
-        is that timing, better placed: a positive delay shorter than the timing resolution in all (never named,
-        :data:`~.axis_scores.RESOLUTION_SAMPLES`) that the likelihood prefers past the alignment's threshold.
+    def _log_timing(self, cands: list) -> tuple | None:
+        """On an axis whose base carries the log's timing (:meth:`_log_timed`), the alignment candidate of
+        ``cands`` (its ``(effect, added parameters, score, LR)``) where it is that timing, better placed: a positive
+        delay shorter than the timing resolution in all (never named, :data:`~.axis_scores.RESOLUTION_SAMPLES`)
+        that the likelihood prefers past the alignment's threshold.
         Left at the base's detected timing, the difference went to a term: a 20 ms yaw servo detected at
         13.5 ms gave a 18.8 ms candidate LR 86, and quadratic damping LR 13.3 (above its floor of 12) where, from
         18.8 ms, it scored 1.4."""
@@ -492,7 +494,7 @@ class LikelihoodDiagnoser(DiagnosisResult):
         resolution = RESOLUTION_SAMPLES / self.flight_.sample_rate
         if not 0.0 < sc.alignment < resolution or lr <= self.threshold(len(cands), k, alignment=True):
             return None
-        return sc
+        return found
 
     def _candidates(self, a: int, axis: str, base: AxisScore, free_tau: bool, rnd: int = 0,
                     alignment: AxisScore | None = None) -> list:

@@ -384,16 +384,16 @@ class MaximumLikelihoodIdentifier:
                                sum(f.n_samples for f in fits.values()) / len(fits))
         self._decided_hold = decision["fraction"]
 
-        redo = [axis for axis, fit in fits.items()
-                if abs(fit.input_hold - self._decided_hold) > (fit.input_hold_se or 0.0)]
-        fits.update(zip(redo, map_axes(lambda axis: self._refit_at_hold(axis, fits[axis], flights, burn), redo,
-                                       self.workers)))
+        def at_hold(axes):  # searched again from their optima in fits, at the hold in force
+            return dict(zip(axes, map_axes(lambda axis: self._refit_at_hold(axis, fits[axis], flights, burn), axes,
+                                           self.workers)))
+
+        fits.update(at_hold([axis for axis, fit in fits.items()
+                             if abs(fit.input_hold - self._decided_hold) > (fit.input_hold_se or 0.0)]))
         other = undecided_against(decision)
         if other is not None:  # the data reject neither named hold: the fit at the other, for the doubt it leaves
             self._decided_hold = HOLDS[other]
-            names = list(fits)
-            at_other = map_axes(lambda axis: self._refit_at_hold(axis, fits[axis], flights, burn), names, self.workers)
-            self.hold_alternative_ = hold_alternative(other, fits, dict(zip(names, at_other)), decision["threshold"])
+            self.hold_alternative_ = hold_alternative(other, fits, at_hold(list(fits)), decision["threshold"])
         self._decided_hold = None
         return decision
 

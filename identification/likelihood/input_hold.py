@@ -123,7 +123,8 @@ def hold_alternative(other: str, fits: dict, alternative: dict, threshold: float
     :func:`std_errors_with_hold` weighs the other fit by.
     """
     lr = float(sum(alternative[a].nll for a in alternative) - sum(fits[a].nll for a in alternative))
-    return {"hold": other, "lr": lr, "threshold": float(threshold), "weight": float(1.0 / (1.0 + np.exp(min(lr, 700.0)))),
+    weight = float(1.0 / (1.0 + np.exp(min(lr, 700.0))))
+    return {"hold": other, "lr": lr, "threshold": float(threshold), "weight": weight,
             "axes": {a: {"params": dict(f.params), "std_errors": dict(f.std_errors)} for a, f in alternative.items()}}
 
 

@@ -42,18 +42,19 @@ def parameter_table(identifiers: dict, truth: ModelParams | None) -> str:
         header += ["Truth"] + [f"{lab} error (%)" for lab in labels]
     rows = []
     names = list(BASE_PARAMS) + sorted({k for ident in identifiers.values() for k, _ in ident.params_.extra})
+    ses = {lab: {axis: std_errors_with_hold(f.params, f.std_errors, getattr(ident, "hold_alternative_", None), axis)
+                 for axis, f in ident.axes_.items()}  # with the hold's doubt, where the log leaves one
+           for lab, ident in identifiers.items()}
     for name in names:
         cells, vals = [], []
+        axis = AXES[TERMS[name].axis]
         for lab in labels:
-            ident = identifiers[lab]
-            fit = ident.axes_.get(AXES[TERMS[name].axis])
+            fit = identifiers[lab].axes_.get(axis)
             if fit is None or name not in fit.params:
                 cells.append("—")
                 vals.append(None)
                 continue
-            axis = AXES[TERMS[name].axis]  # the standard errors with the hold's doubt, where the log leaves one
-            ses = std_errors_with_hold(fit.params, fit.std_errors, getattr(ident, "hold_alternative_", None), axis)
-            v, se = fit.params[name], ses.get(name, float("nan"))
+            v, se = fit.params[name], ses[lab][axis].get(name, float("nan"))
             cells.append(f"{v:.4f} ± {se:.4f}" if np.isfinite(se) else f"{v:.4f}")
             vals.append(v)
         if all(v is None for v in vals):

@@ -122,8 +122,9 @@ def timing_note(d: LikelihoodDiagnoser) -> str | None:
         return None
     parts = [f"{axis} {1e3 * delay:.1f} ms" for axis, delay in found.items()]
     return ("servo delay in the model, not named: " + ", ".join(parts) + ". Detected as heli identify detects it "
-            "(--delay detect) or as the likelihood placed the log's timing; below 2 samples a delay cannot be told from the log's timing convention, so it is "
-            "not named as an effect, but the model keeps it: left out, it biases the damping.")
+            "(--delay detect) or as the likelihood placed the log's timing; below 2 samples a delay cannot be told "
+            "from the log's timing convention, so it is not named as an effect, but the model keeps it: left out, it "
+            "biases the damping.")
 
 
 def written_model_check(d: LikelihoodDiagnoser):
