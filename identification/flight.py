@@ -37,6 +37,8 @@ from types import MappingProxyType
 
 import numpy as np
 
+from heli_core.sampling import is_uniform
+
 from heli_core.quaternion import euler_rates
 
 from .errors import FlightLogError, UnitError
@@ -194,7 +196,11 @@ def _check_finite(name: str, values: np.ndarray, time: np.ndarray | None) -> Non
         )
 
 
-def _check_time(time: np.ndarray) -> None:
+def check_time_base(time: np.ndarray) -> None:
+    """Refuse a time column that is not finite, has fewer than 2 samples, does not strictly increase or is not in
+    seconds (:class:`FlightLogError`, :class:`UnitError`); whether it is uniform is checked apart (a CSV's
+    clock is settled in between: :mod:`identification.io.csv_timing`)."""
+    _check_finite("time", time, None)
     if time.size < 2:
         raise FlightLogError(f"a flight needs at least 2 samples, got {time.size}")
     dt = np.diff(time)
@@ -207,6 +213,11 @@ def _check_time(time: np.ndarray) -> None:
             f"(t={time[i]:.4f} s then t={time[i + 1]:.4f} s)"
         )
     _check_time_units(time, dt)
+
+
+def _check_time(time: np.ndarray) -> None:
+    check_time_base(time)
+    dt = np.diff(time)
     med = float(np.median(dt))
     gaps = dt > GAP_FACTOR * med
     if gaps.any():
@@ -216,6 +227,12 @@ def _check_time(time: np.ndarray) -> None:
             f"{med * 1e3:.2f} ms; the first is {dt[i] * 1e3:.2f} ms between rows {i} and {i + 1} "
             f"(t={time[i]:.3f} s to {time[i + 1]:.3f} s). "
             "Expected uniform sampling: cut the flight into segments or resample it"
+        )
+    if not is_uniform(time):
+        raise FlightLogError(
+            f"time is not uniformly sampled: intervals range {dt.min() * 1e3:.6g}..{dt.max() * 1e3:.6g} ms around "
+            f"the median {med * 1e3:.6g} ms; expected uniform sampling (a CSV read by read_log or read_csv_flight "
+            "has its clock settled first: identification.io.csv_timing)"
         )
 
 

@@ -36,6 +36,7 @@ import numpy as np
 
 import model_store.faults as faults
 from heli_core.files import atomic_path, jsonable, sha256_of, write_text
+from heli_core.sampling import is_uniform
 from heli_core.terms import AXES
 
 from .errors import LibraryError
@@ -108,9 +109,8 @@ class Trace:
         for name, a in (("time", time), ("ud", ud), ("collective", col)):
             if not np.all(np.isfinite(a)):
                 raise LibraryError(f"trace {name} has {int(np.sum(~np.isfinite(a)))} non-finite values")
-        dt = np.diff(time)
-        med = float(np.median(dt))
-        if med <= 0 or np.max(np.abs(dt - med)) > 1e-6 * max(med, 1.0) + 1e-9:
+        if not is_uniform(time):
+            dt = np.diff(time)
             raise LibraryError(
                 f"trace time must be uniformly sampled; steps range {dt.min():.6g}..{dt.max():.6g} s"
             )

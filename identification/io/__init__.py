@@ -62,6 +62,12 @@ def detect_format(path) -> str:
 def _read_csv(path, inputs, segment, calibration):
     if inputs not in (None, "sticks", "servos"):
         raise InputSourceError(f"{path}: a CSV flight holds sticks (or servo pulses), not {inputs!r} inputs")
+    if segment == "auto":
+        raise SegmentError(f"{path}: segment='auto' needs a flight-controller log (throttle, vibration); a CSV "
+                           "flight is used as it is: pass 'all' or T0:T1")
+    from .raw_log import _parse_segment
+
+    span = None if segment is None else "all" if segment == "all" else _parse_segment(segment)[1]
     with open(path, encoding="utf-8-sig", errors="replace") as fh:
         header = [h.strip() for h in fh.readline().split(",")]
     if inputs == "servos" or (calibration is not None and all(c in header for c in SERVO_COLUMNS)):
@@ -69,21 +75,15 @@ def _read_csv(path, inputs, segment, calibration):
             from .raw_log import h3_120_calibration
 
             calibration = h3_120_calibration()
-        flight = read_servo_csv(path, calibration)
+        flight = read_servo_csv(path, calibration, span)
     else:
         if calibration is not None:
             raise InputSourceError(f"{path}: a servo calibration was given but the CSV has no servo columns "
                                    f"{','.join(SERVO_COLUMNS)}")
-        flight = read_csv_flight(path).with_metadata(input_source="sticks", **_imported_from(path))
-    if segment in (None, "all"):
+        flight = read_csv_flight(path, span).with_metadata(input_source="sticks", **_imported_from(path))
+    if span is None or span == "all":  # (where the logging stopped, "all" read the longest stretch)
         return flight
-    if segment == "auto":
-        raise SegmentError(f"{path}: segment='auto' needs a flight-controller log (throttle, vibration); a CSV "
-                           "flight is used as it is: pass 'all' or T0:T1")
-    from .raw_log import _parse_segment
-
-    _, (t0, t1) = _parse_segment(segment)
-    return flight.segment(t0, t1)
+    return flight.segment(*span)
 
 
 def meta_path(csv_path) -> Path:

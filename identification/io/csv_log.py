@@ -21,8 +21,10 @@ from heli_core.files import atomic_path, sha256_of
 
 from ..errors import FlightLogError
 from ..flight import (
-    ATTITUDE_COLUMNS, CSV_COLUMNS, RATE_COLUMNS, REQUIRED_COLUMNS, STICK_COLUMNS, Flight, _check_finite, make_flight,
+    ATTITUDE_COLUMNS, CSV_COLUMNS, RATE_COLUMNS, REQUIRED_COLUMNS, STICK_COLUMNS, Flight, _check_finite,
+    check_time_base, make_flight,
 )
+from .csv_timing import regular_columns
 
 SERVO_COLUMNS = ("u_aile", "u_aux", "u_elev", "u_rudd")
 """Servo pulse widths of eq. (65), in the order of its left-hand side."""
@@ -63,14 +65,45 @@ def _attitude_columns(path: Path, header: list[str], get: dict) -> np.ndarray | 
     return np.array([get[c] for c in ATTITUDE_COLUMNS]) if att_present else None
 
 
-def read_csv_flight(path) -> Flight:
+def _on_uniform_clock(path: Path, get: dict, segment) -> tuple[dict, dict]:
+    """The columns ``get`` with their time checked and made uniform (:func:`.csv_timing.regular_columns`), and
+    the metadata that says how: ``resampling``, and ``import_warnings`` where samples were interpolated."""
+    try:
+        check_time_base(get["time"])
+        for name in (*CSV_COLUMNS[1:], *SERVO_COLUMNS):  # before any is interpolated: rows as in the file
+            if name in get:
+                _check_finite(name, get[name], get["time"])
+    except FlightLogError as e:
+        raise type(e)(f"{path}: {e}") from None
+    get, resampling, stretch = regular_columns(path, get, ATTITUDE_COLUMNS, segment)
+    meta = {} if stretch is None else {"segment": stretch}  # one stretch of several
+    if resampling is not None:
+        meta["resampling"] = resampling
+        if "note" in resampling:
+            meta["import_warnings"] = [resampling["note"]]
+    return get, meta
+
+
+def read_csv_flight(path, segment=None) -> Flight:
     """Read a canonical CSV flight log into a validated :class:`Flight`.
+
+    The time column is made uniform first where it is not (a clock rounded to a millisecond, jitter, missing
+    samples: :mod:`identification.io.csv_timing`; recorded in ``metadata["resampling"]``).
+
+    Parameters
+    ----------
+    path : str or Path
+    segment : None, "all" or (t0, t1)
+        Where the logging stopped during the flight: the stretch to read (``"all"`` the longest); otherwise
+        unused (the caller cuts the flight).
 
     Raises
     ------
     FlightLogError
         Missing required columns, non-numeric fields, and everything
         :func:`identification.flight.make_flight` checks.
+    SegmentError
+        The logging stopped during the flight and ``segment`` does not choose one stretch.
     """
     path = Path(path)
     header, cols = _read_table(path)
@@ -80,10 +113,10 @@ def read_csv_flight(path) -> Flight:
             f"{path}: missing required column(s) {missing}; expected at least "
             f"{','.join(REQUIRED_COLUMNS)}, found {','.join(header)}"
         )
-    get = {name: cols[i] for i, name in enumerate(header)}
+    get, clock_meta = _on_uniform_clock(path, {name: cols[i] for i, name in enumerate(header)}, segment)
     attitude = _attitude_columns(path, header, get)
     extra = {k: v for k, v in get.items() if k not in CSV_COLUMNS}
-    meta = {"source": path.name, "sha256": sha256_of(path), "format": "csv"}
+    meta = {"source": path.name, "sha256": sha256_of(path), "format": "csv", **clock_meta}
     try:
         return make_flight(
             get["time"], np.array([get[c] for c in RATE_COLUMNS]), np.array([get[c] for c in STICK_COLUMNS]),
@@ -143,7 +176,7 @@ def sticks_from_servos(servos, gain, trim) -> np.ndarray:
     return delta[order]
 
 
-def read_servo_csv(path, calibration) -> Flight:
+def read_servo_csv(path, calibration, segment=None) -> Flight:
     """Read a raw servo log and convert it to sticks with eqs. (65)-(67).
 
     Parameters
@@ -153,6 +186,8 @@ def read_servo_csv(path, calibration) -> Flight:
         pulse-width columns ``u_aile,u_aux,u_elev,u_rudd``.
     calibration : dict or str or Path
         ``{"G": 4x4 list, "U_trim": 4 list}`` or a JSON file holding it.
+    segment : None, "all" or (t0, t1)
+        As for :func:`read_csv_flight`: the stretch to read where the logging stopped during the flight.
     """
     path = Path(path)
     if not isinstance(calibration, dict):
@@ -172,17 +207,12 @@ def read_servo_csv(path, calibration) -> Flight:
     missing = [c for c in need if c not in header]
     if missing:
         raise FlightLogError(f"{path}: missing column(s) {missing}; a servo log needs {','.join(need)}")
-    get = {name: cols[i] for i, name in enumerate(header)}
+    get, clock_meta = _on_uniform_clock(path, {name: cols[i] for i, name in enumerate(header)}, segment)
     servos = np.array([get[c] for c in SERVO_COLUMNS])
-    try:  # name the servo column (not the stick it mixes into) when a pulse width is NaN/inf
-        for name in SERVO_COLUMNS:
-            _check_finite(name, get[name], get["time"])
-    except FlightLogError as e:
-        raise type(e)(f"{path}: {e}") from None
     sticks = sticks_from_servos(servos, calibration["G"], calibration["U_trim"])
     att = _attitude_columns(path, header, get)
     meta = {"source": path.name, "sha256": sha256_of(path), "format": "servo-csv",
-            "input_source": "servos (eq. 67)", "servo_calibration": calibration}
+            "input_source": "servos (eq. 67)", "servo_calibration": calibration, **clock_meta}
     extra = {k: v for k, v in get.items() if k not in need and k not in ATTITUDE_COLUMNS}
     try:
         return make_flight(get["time"], np.array([get[c] for c in RATE_COLUMNS]), sticks, attitude=att,
