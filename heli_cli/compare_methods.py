@@ -10,6 +10,7 @@ from __future__ import annotations
 import sys
 
 from .argtypes import output_path
+from .identify import print_read_warnings
 
 DEFAULT_OUT = "method-comparison"
 
@@ -50,10 +51,12 @@ def run(args) -> int:
     from .progress import progress_of
 
     flight = read_flight(args.flight)
+    print_read_warnings(args.flight, flight)
     truth = load_truth_if_any(args.flight)
     validation = validation_truth = None
     if args.validate:
         validation = read_flight(args.validate)
+        print_read_warnings(args.validate, validation)
         validation_truth = load_truth_if_any(args.validate)
     else:
         print("No --validate flight: in-sample errors only, where NLR, which minimises that very error, is "

@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from .argtypes import INPUT_HOLD_HELP, input_hold, number, output_path, whole
-from .identify import CLOSED_LOOP_CHOICES, closed_loop_mode, print_check
+from .identify import CLOSED_LOOP_CHOICES, closed_loop_mode, print_check, print_read_warnings
 
 
 def register(sub):
@@ -69,6 +69,7 @@ def run(args) -> int:
               "ml), got --method integral", file=sys.stderr)
         return 2
     flight = read_flight(args.flight)
+    print_read_warnings(args.flight, flight)
     model = document = None
     if args.model is not None:
         document = ModelDir(_existing_model(args.model)).load(library=False).document

@@ -75,7 +75,7 @@ def register(sub):
     p.add_argument("--segment", type=segment_option, default=None, metavar="auto|all|T0:T1",
                    help="the stretch of each FLIGHT identified, as heli import's: a flight-controller log's airborne "
                    "segment found automatically (its default), the whole log ('all') or T0:T1 on its own clock [s] "
-                   "(a CSV flight is whole by default)")
+                   "(a CSV flight is whole by default; 'all' its longest stretch where the logging stopped during it)")
     p.add_argument("--validate", nargs="+", default=[], metavar="OTHER.csv",
                    help="after identifying, simulate the model on these flights (not used for the fit) and report "
                    "per axis the fit %% and R² of the simulation (as MATLAB's compare) and the R² of the 0.5 s-ahead "
@@ -136,9 +136,7 @@ def run(args) -> int:
         flights = [read_log(path, segment=args.segment) for path in args.flights]
         others = [read_flight(path) for path in args.validate]  # a bad one refused before any fit
         for path, flight in zip(args.flights + args.validate, flights + others):
-            for warning in flight.metadata.get("import_warnings") or ():
-                progress.done()
-                print(f"warning: {path}: {warning}")
+            print_read_warnings(path, flight, progress)
         try:
             closed_loop = closed_loop_mode(args)
         except ValueError as exc:
@@ -182,6 +180,15 @@ def run(args) -> int:
 
     print(f"wrote {write_html_report(run.paths['report'])}")  # after the figures: it embeds them
     return 0
+
+
+def print_read_warnings(path, flight, progress=None) -> None:
+    """Print what reading ``flight`` from ``path`` changed or doubted (``metadata["import_warnings"]``: a log
+    imported as real loggers write them, a CSV whose clock was resampled), one line each."""
+    for warning in flight.metadata.get("import_warnings") or ():
+        if progress is not None:
+            progress.done()
+        print(f"warning: {path}: {warning}")
 
 
 def print_check(check, title: str) -> None:

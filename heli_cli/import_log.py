@@ -26,7 +26,9 @@ def register(sub):
         "0xFF/0x00 padding skipped, a restarted clock continued, a missing attitude reconstructed from the rates, "
         "each printed as a one-line warning and kept in the metadata; damage in the middle of a log needs "
         "--allow-damaged. An old ArduPilot text DataFlash log (.log, ArduCopter <= 3.0) is recognised and refused "
-        "in one line saying what it holds and what identification would need. Nothing is written for a refused log.",
+        "in one line saying what it holds and what identification would need. A CSV whose clock is not uniform "
+        "(rounded stamps, jitter, missing samples) is written on a uniform clock, saying what was done; one where the "
+        "logging stopped needs --segment. Nothing is written for a refused log.",
     )
     p.add_argument("log", metavar="LOG", help="PX4 .ulg, ArduPilot .bin, Betaflight/Rotorflight blackbox, or CSV "
                    "(an ArduPilot text .log is described and refused)")

@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from .argtypes import number, output_path, per_axis, seconds_or, segment_option, servo_lag, seed, whole
-from .identify import CLOSED_LOOP_CHOICES, CLOSED_LOOP_ENV, closed_loop_mode, ml_settings
+from .identify import CLOSED_LOOP_CHOICES, CLOSED_LOOP_ENV, closed_loop_mode, ml_settings, print_read_warnings
 from .model_gate import add_accept_option, check_model
 
 FIRMWARE_CHOICES = ("ardupilot", "rotorflight")
@@ -151,6 +151,7 @@ def _checked_log(args, spec, progress):
         return None, None
     progress.stage(f"reading {args.log}")
     flight = read_log(args.log, segment="all" if args.model is not None else args.segment)
+    print_read_warnings(args.log, flight, progress)
     return flight, flight.metadata.get("input_source")
 
 
