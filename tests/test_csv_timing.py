@@ -172,3 +172,57 @@ def test_heli_import_writes_the_flight_as_read(tmp_path, truth):
     assert "2 sample(s) missing" in run.stdout + run.stderr
     again = read_log(out)
     assert again.time.size == 1500 and "resampling" not in again.metadata
+
+
+def _write_with_blanks(path, rows, blank):
+    """A CSV whose fields where ``blank`` (n, columns) are left empty, as a multi-rate export writes them."""
+    lines = [",".join(CSV_COLUMNS)]
+    lines += [",".join("" if b else repr(float(v)) for v, b in zip(row, empty)) for row, empty in zip(rows, blank)]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_a_slower_stream_leaves_fields_empty_and_is_interpolated_onto_the_rates(tmp_path, truth):
+    """Rates at 100 Hz, sticks at 50 Hz, attitude at 25 Hz (its yaw crossing +-pi): the flight is the rates' rows,
+    the slower columns interpolated between their values (angles unwrapped), and the user is told."""
+    rows = _sample(truth, np.arange(2000) * 0.01)
+    rows[:, 6] = np.angle(np.exp(1j * (rows[:, 6] + 3.1)))  # a heading near +-pi
+    blank = np.zeros(rows.shape, bool)
+    blank[1::2, 7:] = True
+    blank[np.arange(rows.shape[0]) % 4 != 0, 4:7] = True
+    flight = read_log(_write_with_blanks(tmp_path / "f.csv", rows, blank))
+    n = flight.time.size
+    assert n == 1997 and is_uniform(flight.time)  # to the last row every column has reached
+    assert_array_equal(flight.rates, rows[:n, 1:4].T)
+    assert_allclose(flight.sticks, rows[:n, 7:].T, atol=2e-3)
+    assert np.max(np.abs(np.angle(np.exp(1j * (flight.attitude[2] - rows[:n, 6]))))) < 2e-3
+    (warning,) = flight.metadata["import_warnings"]
+    assert warning.startswith("fields left empty: phi, theta, psi, lat, lon, col, ped hold values on 25% / 50% of "
+                              "the rows and were interpolated linearly")
+
+
+def test_rows_without_a_rate_are_missing_samples(tmp_path, truth):
+    rows = _sample(truth, np.arange(1000) * 0.01)
+    blank = np.zeros(rows.shape, bool)
+    blank[[100, 400], 1:4] = True
+    flight = read_log(_write_with_blanks(tmp_path / "f.csv", rows, blank))
+    assert flight.time.size == 1000 and flight.metadata["resampling"]["missing_samples"] == 2
+    assert len(flight.metadata["import_warnings"]) == 2
+
+
+def test_empty_fields_that_cannot_be_read(tmp_path, truth):
+    rows = _sample(truth, np.arange(100) * 0.01)
+    blank = np.zeros(rows.shape, bool)
+    blank[1:, 10] = True  # the pedal logged once
+    with pytest.raises(FlightLogError, match="column\\(s\\) ped hold fewer than two values"):
+        read_log(_write_with_blanks(tmp_path / "f.csv", rows, blank))
+    path = _write_with_blanks(tmp_path / "g.csv", rows, np.zeros(rows.shape, bool) | (np.arange(11) == 9))
+    text = path.read_text().splitlines()
+    text[5] = text[5].replace(",,", ",x,", 1)
+    path.write_text("\n".join(text) + "\n")
+    with pytest.raises(FlightLogError, match="expected numbers in every field after the header"):
+        read_log(path)
+    text[5] = text[5] + ",1.0"
+    path.write_text("\n".join(text) + "\n")
+    with pytest.raises(FlightLogError, match="header names 11 columns but row 5 has 12"):
+        read_log(path)

@@ -24,7 +24,7 @@ from ..flight import (
     ATTITUDE_COLUMNS, CSV_COLUMNS, RATE_COLUMNS, REQUIRED_COLUMNS, STICK_COLUMNS, Flight, _check_finite,
     check_time_base, make_flight,
 )
-from .csv_timing import regular_columns
+from .csv_timing import regular_columns, rows_of_the_rates
 
 SERVO_COLUMNS = ("u_aile", "u_aux", "u_elev", "u_rudd")
 """Servo pulse widths of eq. (65), in the order of its left-hand side."""
@@ -32,7 +32,8 @@ SERVO_STICK_ORDER = ("lon", "lat", "col", "ped")
 """Order of the stick vector delta in eqs. (65)-(67)."""
 
 
-def _read_table(path: Path) -> tuple[list[str], np.ndarray]:
+def _read_table(path: Path) -> tuple[list[str], np.ndarray, dict | None]:
+    """The header, the columns (k, n) and, where fields were empty, which rows of each column were (None if none)."""
     if not path.exists():
         raise FlightLogError(f"flight log {str(path)!r} does not exist")
     if not path.is_file():  # a folder, or a pipe that reading would block on for ever
@@ -46,15 +47,36 @@ def _read_table(path: Path) -> tuple[list[str], np.ndarray]:
     if len(set(header)) != len(header):
         dup = sorted({h for h in header if header.count(h) > 1})
         raise FlightLogError(f"{path}: duplicated column(s) {dup} in the header")
+    blank = None
     try:
         data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, dtype=float)
-    except ValueError as e:
-        raise FlightLogError(f"{path}: expected numbers in every field after the header: {e}") from e
+    except ValueError as e:  # an empty field is a value not logged on that row (a slower stream); else refused
+        data, blank = _read_with_blanks(path, len(header), e)
     if data.shape[0] == 0:
         raise FlightLogError(f"{path}: header but no data rows")
     if data.shape[1] != len(header):
         raise FlightLogError(f"{path}: header names {len(header)} columns but rows have {data.shape[1]}")
-    return header, data.T
+    return header, data.T, (None if blank is None else dict(zip(header, blank.T)))
+
+
+def _read_with_blanks(path: Path, width: int, error: ValueError) -> tuple[np.ndarray, np.ndarray]:
+    """The table of a CSV some of whose fields are empty (NaN there) and which fields are, (n, width) each;
+    ``error`` (numpy's) re-raised as :class:`FlightLogError` where a field is neither a number nor empty."""
+    rows, blank = [], []
+    with open(path, encoding="utf-8-sig", errors="replace") as fh:
+        fh.readline()
+        for number, line in enumerate(fh, start=1):
+            if not line.strip():
+                continue
+            fields = [f.strip() for f in line.rstrip("\r\n").split(",")]
+            if len(fields) != width:
+                raise FlightLogError(f"{path}: header names {width} columns but row {number} has {len(fields)}")
+            try:
+                rows.append([float(f) if f else np.nan for f in fields])
+            except ValueError:
+                raise FlightLogError(f"{path}: expected numbers in every field after the header: {error}") from error
+            blank.append([not f for f in fields])
+    return np.array(rows, dtype=float).reshape(-1, width), np.array(blank, dtype=bool).reshape(-1, width)
 
 
 def _attitude_columns(path: Path, header: list[str], get: dict) -> np.ndarray | None:
@@ -65,9 +87,20 @@ def _attitude_columns(path: Path, header: list[str], get: dict) -> np.ndarray | 
     return np.array([get[c] for c in ATTITUDE_COLUMNS]) if att_present else None
 
 
-def _on_uniform_clock(path: Path, get: dict, segment) -> tuple[dict, dict]:
+def _on_uniform_clock(path: Path, get: dict, segment, blank: dict | None = None) -> tuple[dict, dict]:
     """The columns ``get`` with their time checked and made uniform (:func:`.csv_timing.regular_columns`), and
-    the metadata that says how: ``resampling``, and ``import_warnings`` where samples were interpolated."""
+    the metadata that says how: ``resampling``, and ``import_warnings`` where samples were interpolated. Where
+    fields were empty (``blank``: name -> rows), the rows of the rates are read first, the other columns
+    interpolated onto them (:func:`.csv_timing.rows_of_the_rates`)."""
+    warnings = []
+    if blank is not None:
+        try:
+            check_time_base(get["time"])
+        except FlightLogError as e:
+            raise type(e)(f"{path}: {e}") from None
+        get, note = rows_of_the_rates(path, get, blank, RATE_COLUMNS, STICK_COLUMNS + ATTITUDE_COLUMNS,
+                                      ATTITUDE_COLUMNS)
+        warnings.append(note)
     try:
         check_time_base(get["time"])
         for name in (*CSV_COLUMNS[1:], *SERVO_COLUMNS):  # before any is interpolated: rows as in the file
@@ -80,7 +113,9 @@ def _on_uniform_clock(path: Path, get: dict, segment) -> tuple[dict, dict]:
     if resampling is not None:
         meta["resampling"] = resampling
         if "note" in resampling:
-            meta["import_warnings"] = [resampling["note"]]
+            warnings.append(resampling["note"])
+    if warnings:
+        meta["import_warnings"] = warnings
     return get, meta
 
 
@@ -106,14 +141,14 @@ def read_csv_flight(path, segment=None) -> Flight:
         The logging stopped during the flight and ``segment`` does not choose one stretch.
     """
     path = Path(path)
-    header, cols = _read_table(path)
+    header, cols, blank = _read_table(path)
     missing = [c for c in REQUIRED_COLUMNS if c not in header]
     if missing:
         raise FlightLogError(
             f"{path}: missing required column(s) {missing}; expected at least "
             f"{','.join(REQUIRED_COLUMNS)}, found {','.join(header)}"
         )
-    get, clock_meta = _on_uniform_clock(path, {name: cols[i] for i, name in enumerate(header)}, segment)
+    get, clock_meta = _on_uniform_clock(path, {name: cols[i] for i, name in enumerate(header)}, segment, blank)
     attitude = _attitude_columns(path, header, get)
     extra = {k: v for k, v in get.items() if k not in CSV_COLUMNS}
     meta = {"source": path.name, "sha256": sha256_of(path), "format": "csv", **clock_meta}
@@ -202,12 +237,12 @@ def read_servo_csv(path, calibration, segment=None) -> Flight:
     for key in ("G", "U_trim"):
         if key not in calibration:
             raise FlightLogError(f"servo calibration lacks {key!r}; expected keys 'G' (4x4) and 'U_trim' (4)")
-    header, cols = _read_table(path)
+    header, cols, blank = _read_table(path)
     need = ("time",) + RATE_COLUMNS + SERVO_COLUMNS
     missing = [c for c in need if c not in header]
     if missing:
         raise FlightLogError(f"{path}: missing column(s) {missing}; a servo log needs {','.join(need)}")
-    get, clock_meta = _on_uniform_clock(path, {name: cols[i] for i, name in enumerate(header)}, segment)
+    get, clock_meta = _on_uniform_clock(path, {name: cols[i] for i, name in enumerate(header)}, segment, blank)
     servos = np.array([get[c] for c in SERVO_COLUMNS])
     sticks = sticks_from_servos(servos, calibration["G"], calibration["U_trim"])
     att = _attitude_columns(path, header, get)

@@ -284,3 +284,67 @@ def regular_columns(path, columns: dict, angles: tuple = (), segment=None) -> tu
     resampling = clock.to_dict()
     warning = clock.warning(path)
     return out, {**resampling, **({"note": warning} if warning else {})}, stretch
+
+
+def rows_of_the_rates(path, columns: dict, blank: dict, rates: tuple, required: tuple, angles: tuple = ()
+                      ) -> tuple[dict, str]:
+    """A CSV with empty fields (a multi-rate export, as PlotJuggler's, or a spreadsheet's: a stream logged
+    slower than the gyro leaves the rows between its samples empty) as rows of the gyro's samples.
+
+    The rows where every one of ``rates`` has a value are the samples; every other column is interpolated
+    linearly onto them from the rows where it has a value (angles unwrapped), as the flight-controller logs'
+    slower streams are (:mod:`identification.io.resample`); the rows before the last and after the first
+    value of the ``required`` columns that are present are dropped (interpolation would hold them).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file, for messages.
+    columns : dict of str to ndarray, shape (n,)
+        ``"time"`` (strictly increasing) and the other columns, NaN where empty.
+    blank : dict of str to ndarray of bool, shape (n,)
+        Which fields of each column were empty.
+    rates, required, angles : tuple of str
+        The gyro's columns, the columns the flight needs where present, the columns holding angles [rad].
+
+    Returns
+    -------
+    columns : dict
+        The rows of the rates.
+    note : str
+        What was done, one line (a warning: the user should know).
+
+    Raises
+    ------
+    FlightLogError
+        A column with fewer than two values, or no row with every rate.
+    """
+    from ..errors import FlightLogError
+
+    time = columns["time"]
+    sampled = ~np.any([blank[c] for c in rates], axis=0)
+    sparse = [c for c in columns if c != "time" and c not in rates and blank[c].any()]
+    few = [c for c in (*rates, *sparse) if np.count_nonzero(~blank[c]) < 2]
+    if few or np.count_nonzero(sampled) < 2:
+        raise FlightLogError(f"{path}: column(s) {', '.join(few) or ', '.join(rates)} hold fewer than two values; "
+                             "expected a value on most rows (an empty field is a row where the column was not logged)")
+    keep = sampled.copy()
+    for c in (c for c in required if c in sparse):
+        logged = time[~blank[c]]
+        keep &= (time >= logged[0]) & (time <= logged[-1])
+    if np.count_nonzero(keep) < 2:
+        raise FlightLogError(f"{path}: the rates and {', '.join(c for c in required if c in sparse)} share no "
+                             "stretch of the flight")
+    out = {name: values[keep] for name, values in columns.items() if name not in sparse}
+    for c in sparse:
+        logged = ~blank[c]
+        values = np.unwrap(columns[c][logged]) if c in angles else columns[c][logged]
+        v = np.interp(time[keep], time[logged], values)
+        out[c] = np.angle(np.exp(1j * v)) if c in angles else v
+    shares = sorted({f"{np.count_nonzero(~blank[c]) / time.size:.0%}" for c in sparse})
+    note = (f"fields left empty: {', '.join(sparse) or 'none'} hold values on {' / '.join(shares) or '-'} of the "
+            f"rows and were interpolated linearly between their values onto the rows of {', '.join(rates)}")
+    dropped = time.size - np.count_nonzero(keep)
+    if dropped:
+        note += f"; {dropped} row(s) without a rate or outside every needed column's values not read"
+    return out, note
