@@ -413,3 +413,18 @@ def test_a_folder_or_a_pipe_is_refused_not_read(tmp_path):
         read_flight(tmp_path / "folder.csv")
     with pytest.raises(FlightLogError, match=r"'.*pipe\.csv' is not a regular file; expected a CSV file"):
         read_csv_flight(tmp_path / "pipe.csv")
+
+
+@pytest.mark.parametrize("separator, decimal", [(";", ","), (";", "."), ("\t", ".")])
+def test_a_spreadsheet_export_with_another_separator_reads_the_same(tmp_path, simulated, separator, decimal):
+    """Spreadsheets in much of Europe write ``;`` between fields and a decimal comma; others write tabs."""
+    t, rates, sticks, att = simulated
+    comma = tmp_path / "flight.csv"
+    _write(comma, HEADER, np.column_stack([t, *rates, *att, *sticks]))
+    other = tmp_path / "export.csv"
+    text = comma.read_text().replace(",", separator)
+    other.write_text(text.replace(".", decimal))
+    a, b = read_flight(comma), read_flight(other)
+    assert_array_equal(b.time, a.time)
+    assert_array_equal(b.rates, a.rates)
+    assert_array_equal(b.sticks, a.sticks)

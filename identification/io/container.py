@@ -13,7 +13,8 @@ What each format must contain
 format                     what :func:`locate` and the loaders need
 =========================  =================================================================================
 canonical CSV              A header line naming ``time`` and ``p, q, r, lat, lon, col, ped`` (``phi, theta,
-                           psi`` optional), comma separated, then numbers only: time [s], rates [rad/s],
+                           psi`` optional), comma separated (or by ``;``, a decimal comma allowed, or tabs),
+                           then numbers or empty fields: time [s], rates [rad/s],
                            angles [rad], sticks in [-1, 1]. Or the servo columns ``u_aile, u_aux, u_elev,
                            u_rudd`` [us] instead of the sticks (``--inputs servos``).
 PX4 ULog (``.ulg``)        The bytes ``ULog`` 0x01 0x12 0x35 at the start (after any padding); topic
@@ -162,7 +163,7 @@ def locate_bytes(data: bytes, name: str = "file") -> Located:
         fmt = "ardupilot-dataflash-text"
     if fmt is None:
         first = data[lead:].split(b"\n", 1)[0].lstrip(b"\xef\xbb\xbf").decode("ascii", "replace")
-        if not lead and "," in first and "time" in [c.strip() for c in first.split(",")]:
+        if not lead and any(d in first and "time" in [c.strip() for c in first.split(d)] for d in ",;\t"):
             return Located("csv", size, (Span(0, size),))
         after = f" after {lead} bytes of 0xFF/0x00 padding" if lead else ""
         raise LogFormatError(

@@ -12,6 +12,8 @@ ped yaw, col is collective). Any further column is kept as an extra column.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 from pathlib import Path
 
@@ -41,7 +43,8 @@ def _read_table(path: Path) -> tuple[list[str], np.ndarray, dict | None]:
                              "expected a CSV file")
     with open(path, encoding="utf-8-sig", errors="replace") as fh:  # -sig: drop a spreadsheet BOM
         header_line = fh.readline()
-    header = [h.strip() for h in header_line.strip().split(",")]
+    source, delimiter = _comma_separated(path, header_line)
+    header = [h.strip() for h in header_line.strip().split(delimiter)]
     if not header or header == [""]:
         raise FlightLogError(f"{path}: empty file; expected a header line {','.join(CSV_COLUMNS)}")
     if len(set(header)) != len(header):
@@ -49,9 +52,9 @@ def _read_table(path: Path) -> tuple[list[str], np.ndarray, dict | None]:
         raise FlightLogError(f"{path}: duplicated column(s) {dup} in the header")
     blank = None
     try:
-        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, dtype=float)
+        data = np.loadtxt(source, delimiter=",", skiprows=1, ndmin=2, dtype=float)
     except ValueError as e:  # an empty field is a value not logged on that row (a slower stream); else refused
-        data, blank = _read_with_blanks(path, len(header), e)
+        data, blank = _read_with_blanks(path, source, len(header), e)
     if data.shape[0] == 0:
         raise FlightLogError(f"{path}: header but no data rows")
     if data.shape[1] != len(header):
@@ -59,11 +62,28 @@ def _read_table(path: Path) -> tuple[list[str], np.ndarray, dict | None]:
     return header, data.T, (None if blank is None else dict(zip(header, blank.T)))
 
 
-def _read_with_blanks(path: Path, width: int, error: ValueError) -> tuple[np.ndarray, np.ndarray]:
-    """The table of a CSV some of whose fields are empty (NaN there) and which fields are, (n, width) each;
-    ``error`` (numpy's) re-raised as :class:`FlightLogError` where a field is neither a number nor empty."""
+def _comma_separated(path: Path, header_line: str):
+    """What ``np.loadtxt`` reads the table from, comma separated, and the file's own separator: the path itself
+    for a comma-separated file; for one separated by ``;`` (a spreadsheet's export where the decimal mark is a
+    comma, which is then read as a point) or by tabs, its text so rewritten."""
+    if "," in header_line or not any(d in header_line for d in ";\t"):
+        return path, ","
+    delimiter = ";" if ";" in header_line else "\t"
+    text = path.read_text(encoding="utf-8-sig", errors="replace")
+    if delimiter == ";":
+        text = text.replace(",", ".")
+    return io.StringIO(text.replace(delimiter, ",")), delimiter
+
+
+def _read_with_blanks(path: Path, source, width: int, error: ValueError) -> tuple[np.ndarray, np.ndarray]:
+    """The table of a CSV (read from ``source``: :func:`_comma_separated`) some of whose fields are empty (NaN
+    there) and which fields are, (n, width) each; ``error`` (numpy's) re-raised as :class:`FlightLogError` where
+    a field is neither a number nor empty."""
     rows, blank = [], []
-    with open(path, encoding="utf-8-sig", errors="replace") as fh:
+    if isinstance(source, io.StringIO):
+        source.seek(0)
+    with (open(source, encoding="utf-8-sig", errors="replace") if isinstance(source, Path)
+          else contextlib.nullcontext(source)) as fh:
         fh.readline()
         for number, line in enumerate(fh, start=1):
             if not line.strip():
