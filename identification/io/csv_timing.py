@@ -23,10 +23,10 @@ wind was written to the library, minutes later (jitter), or refused at once with
   does for a flight-controller log.
 
 Why a row goes to its slot rather than being interpolated between its neighbours at the slot's time:
-measured (``python scripts/csv_clock_study.py``: 2 kHz flights logged at 100 Hz with samples taken up to 1-3 ms
-off the clock), the interpolation's change of the identified dampings against the flight logged on time was
-larger in 7 of 9 cells than that of the rows at their slots: a sample taken late by a random amount errs by
-the rate's change over it, a white error the estimator's gyro noise takes in, while interpolation low-passes
+measured (``python scripts/csv_clock_study.py``: 2 kHz flights logged at 100 Hz with samples taken up to 1 or 2 ms
+off the clock; docs/method.md), the interpolation's change of the identified dampings against the flight logged
+on time was larger in 5 of 6 cells than that of the rows at their slots: a sample taken late by a random amount
+errs by the rate's change over it, a white error the estimator's gyro noise takes in, while interpolation low-passes
 the signal and colours the noise, which its model does not expect.
 
 The rate is the clock's own: the least-squares slope of the stamps against their slot numbers, not the median
