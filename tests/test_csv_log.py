@@ -428,3 +428,16 @@ def test_a_spreadsheet_export_with_another_separator_reads_the_same(tmp_path, si
     assert_array_equal(b.time, a.time)
     assert_array_equal(b.rates, a.rates)
     assert_array_equal(b.sticks, a.sticks)
+
+
+def test_column_names_are_read_in_any_case(tmp_path, simulated):
+    t, rates, sticks, att = simulated
+    rows = np.column_stack([t, *rates, *att, *sticks])
+    _write(tmp_path / "a.csv", HEADER, rows)
+    _write(tmp_path / "b.csv", ",".join(c.capitalize() for c in CSV_COLUMNS), rows)
+    a, b = read_flight(tmp_path / "a.csv"), read_flight(tmp_path / "b.csv")
+    assert_array_equal(b.rates, a.rates)
+    assert_array_equal(b.attitude, a.attitude)
+    _write(tmp_path / "c.csv", HEADER + ",P", np.column_stack([rows, rows[:, 1]]))
+    with pytest.raises(FlightLogError, match=r"duplicated column\(s\) \['p'\]"):
+        read_flight(tmp_path / "c.csv")

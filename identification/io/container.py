@@ -163,7 +163,7 @@ def locate_bytes(data: bytes, name: str = "file") -> Located:
         fmt = "ardupilot-dataflash-text"
     if fmt is None:
         first = data[lead:].split(b"\n", 1)[0].lstrip(b"\xef\xbb\xbf").decode("ascii", "replace")
-        if not lead and any(d in first and "time" in [c.strip() for c in first.split(d)] for d in ",;\t"):
+        if not lead and any(d in first and "time" in [c.strip().lower() for c in first.split(d)] for d in ",;\t"):
             return Located("csv", size, (Span(0, size),))
         after = f" after {lead} bytes of 0xFF/0x00 padding" if lead else ""
         raise LogFormatError(

@@ -44,7 +44,8 @@ def _read_table(path: Path) -> tuple[list[str], np.ndarray, dict | None]:
     with open(path, encoding="utf-8-sig", errors="replace") as fh:  # -sig: drop a spreadsheet BOM
         header_line = fh.readline()
     source, delimiter = _comma_separated(path, header_line)
-    header = [h.strip() for h in header_line.strip().split(delimiter)]
+    known = {c.lower(): c for c in (*CSV_COLUMNS, *SERVO_COLUMNS)}
+    header = [known.get(h.strip().lower(), h.strip()) for h in header_line.strip().split(delimiter)]  # Time -> time
     if not header or header == [""]:
         raise FlightLogError(f"{path}: empty file; expected a header line {','.join(CSV_COLUMNS)}")
     if len(set(header)) != len(header):
