@@ -37,9 +37,8 @@ from types import MappingProxyType
 
 import numpy as np
 
-from heli_core.sampling import is_uniform
-
 from heli_core.quaternion import euler_rates
+from heli_core.sampling import is_uniform
 
 from .errors import FlightLogError, UnitError
 

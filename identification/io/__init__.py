@@ -24,7 +24,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .csv_log import SERVO_COLUMNS, read_csv_flight, read_servo_csv, sticks_from_servos, write_csv_flight
+from .csv_log import (
+    SERVO_COLUMNS, csv_header, read_csv_flight, read_servo_csv, sticks_from_servos, write_csv_flight,
+)
 from .errors import (
     DamagedLogError, InputSourceError, InsufficientLogError, LogFormatError, LogSelectionError, MissingStreamError,
     NotAirborneError, SegmentError,
@@ -68,8 +70,7 @@ def _read_csv(path, inputs, segment, calibration):
     from .raw_log import _parse_segment
 
     span = None if segment is None else "all" if segment == "all" else _parse_segment(segment)[1]
-    with open(path, encoding="utf-8-sig", errors="replace") as fh:
-        header = [h.strip() for h in fh.readline().split(",")]
+    header, _ = csv_header(path)
     if inputs == "servos" or (calibration is not None and all(c in header for c in SERVO_COLUMNS)):
         if calibration is None:
             from .raw_log import h3_120_calibration

@@ -41,11 +41,7 @@ def _read_table(path: Path) -> tuple[list[str], np.ndarray, dict | None]:
     if not path.is_file():  # a folder, or a pipe that reading would block on for ever
         raise FlightLogError(f"flight log {str(path)!r} is {'a folder' if path.is_dir() else 'not a regular file'}; "
                              "expected a CSV file")
-    with open(path, encoding="utf-8-sig", errors="replace") as fh:  # -sig: drop a spreadsheet BOM
-        header_line = fh.readline()
-    source, delimiter = _comma_separated(path, header_line)
-    known = {c.lower(): c for c in (*CSV_COLUMNS, *SERVO_COLUMNS)}
-    header = [known.get(h.strip().lower(), h.strip()) for h in header_line.strip().split(delimiter)]  # Time -> time
+    header, source = csv_header(path)
     if not header or header == [""]:
         raise FlightLogError(f"{path}: empty file; expected a header line {','.join(CSV_COLUMNS)}")
     if len(set(header)) != len(header):
@@ -61,6 +57,17 @@ def _read_table(path: Path) -> tuple[list[str], np.ndarray, dict | None]:
     if data.shape[1] != len(header):
         raise FlightLogError(f"{path}: header names {len(header)} columns but rows have {data.shape[1]}")
     return header, data.T, (None if blank is None else dict(zip(header, blank.T)))
+
+
+def csv_header(path) -> tuple[list[str], object]:
+    """A CSV's column names, the canonical ones in their own case (``Time`` is ``time``), and what ``np.loadtxt``
+    reads its table from (:func:`_comma_separated`)."""
+    path = Path(path)
+    with open(path, encoding="utf-8-sig", errors="replace") as fh:  # -sig: drop a spreadsheet BOM
+        header_line = fh.readline()
+    source, delimiter = _comma_separated(path, header_line)
+    known = {c.lower(): c for c in (*CSV_COLUMNS, *SERVO_COLUMNS)}
+    return [known.get(h.strip().lower(), h.strip()) for h in header_line.strip().split(delimiter)], source
 
 
 def _comma_separated(path: Path, header_line: str):
@@ -119,8 +126,8 @@ def _on_uniform_clock(path: Path, get: dict, segment, blank: dict | None = None)
             check_time_base(get["time"])
         except FlightLogError as e:
             raise type(e)(f"{path}: {e}") from None
-        get, note = rows_of_the_rates(path, get, blank, RATE_COLUMNS, STICK_COLUMNS + ATTITUDE_COLUMNS,
-                                      ATTITUDE_COLUMNS)
+        get, note = rows_of_the_rates(path, get, blank, RATE_COLUMNS,
+                                      STICK_COLUMNS + ATTITUDE_COLUMNS + SERVO_COLUMNS, ATTITUDE_COLUMNS)
         warnings.append(note)
     try:
         check_time_base(get["time"])
