@@ -18,7 +18,7 @@ Prints per cell and condition the RMS [worst] relative error in % of the gains (
 k7, k11) over the seeds, worst parameter first, and the change against ``clean`` on the same flights.
 
     python scripts/csv_clock_study.py [--seeds 3] [--cells independent dryden-2Hz-pd broadband-pd-2x]
-        [--jitter-ms 1 2 2.5] [--drop 2 5] [--gyro-noise 0.002] [--workers 2] [--duration 300]
+        [--jitter-ms 1 2 2.5] [--drop 2 5] [--gyro-noise 0.002] [--log-rate 100] [--workers 2] [--duration 300]
 """
 
 from __future__ import annotations
@@ -39,6 +39,7 @@ GAINS = ("k2", "k6", "k10")
 DAMPINGS = ("k3", "k7", "k11")
 FINE_HZ = 2000.0
 LOG_HZ = 100.0
+"""Hz: the log's rate (``--log-rate``)."""
 
 
 def _rows(flight, index):
@@ -49,12 +50,12 @@ def _rows(flight, index):
                             *flight.sticks[:, index]])
 
 
-def _files(sim, seed: int, jitters, drops, folder: Path) -> dict:
-    """The conditions' CSV files of one fine flight: name -> path."""
+def _files(sim, seed: int, jitters, drops, folder: Path, log_hz: float = LOG_HZ) -> dict:
+    """The conditions' CSV files of one fine flight logged at ``log_hz``: name -> path."""
     from identification.flight import CSV_COLUMNS
 
     rng = np.random.default_rng(10_000 + seed)
-    step = int(FINE_HZ / LOG_HZ)
+    step = int(FINE_HZ / log_hz)
     on_time = np.arange(0, sim.flight.n, step)
     files = {}
 
@@ -102,7 +103,7 @@ def _one(job):
     from identification.io import read_log
     from identification.likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
 
-    cell, seed, duration, jitters, drops, gyro = job
+    cell, seed, duration, jitters, drops, gyro, log_hz = job
     with threadpool_limits(limits=1, user_api="blas"), tempfile.TemporaryDirectory() as tmp:
         config = replace(BENCH_CELLS[cell], duration=duration, sample_rate=FINE_HZ)
         if gyro is not None:
@@ -110,7 +111,7 @@ def _one(job):
         sim = simulate_flight(duration, seed=seed, config=config)
         truth = sim.truth.values()
         out = {"cell": cell, "seed": seed, "errors": {}}
-        for name, path in _files(sim, seed, jitters, drops, Path(tmp)).items():
+        for name, path in _files(sim, seed, jitters, drops, Path(tmp), log_hz).items():
             try:
                 flight = read_log(path)
                 ml = MaximumLikelihoodIdentifier(**CLI_TIMING, closed_loop="auto").fit(flight)
@@ -145,11 +146,12 @@ def main(argv=None) -> None:
     ap.add_argument("--drop", nargs="+", type=float, default=[2.0, 5.0], help="missing samples in %%")
     ap.add_argument("--gyro-noise", type=float, default=None, help="the gyro's white noise [rad/s] (default the "
                     "cell's; the flight's samples are 2 kHz, each logged sample one of them)")
+    ap.add_argument("--log-rate", type=float, default=LOG_HZ, help="Hz: the files' rate (2000 / a whole number)")
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args(argv)
     from tqdm import tqdm
 
-    jobs = [(c, s, args.duration, tuple(args.jitter_ms), tuple(args.drop), args.gyro_noise)
+    jobs = [(c, s, args.duration, tuple(args.jitter_ms), tuple(args.drop), args.gyro_noise, args.log_rate)
             for c in args.cells for s in range(args.first_seed, args.first_seed + args.seeds)]
     with ProcessPoolExecutor(args.workers) as pool:
         rows = list(tqdm(pool.map(_one, jobs), total=len(jobs), desc="flights", unit="flight"))
