@@ -106,12 +106,13 @@ class Clock:
             what.append(f"{self.missing} sample(s) missing (the longest interval {_duration(self.longest_missing_s)})")
         if self.quantum is None and self.jitter > JITTER_WARNING:
             what.append(f"stamps up to {self.jitter:.0%} of the {_duration(self.interval)} interval off a uniform "
-                        f"{self.rate:.6g} Hz clock")
+                        f"{self.rate:.6g} Hz clock" + ("" if self.on_clock else " (their mean rate)"))
         if self.on_clock and not what:
             return None
         how = (("each row read at its slot of the clock" + (", the missing ones interpolated between their "
                                                              "neighbours" if self.missing else ""))
-               if self.on_clock else "resampled onto it by linear interpolation")
+               if self.on_clock else "no clock places every row, so the stamps were taken as the sample times and "
+               "resampled onto a uniform grid at their mean rate by linear interpolation")
         return (f"the time column is not uniform: {' and '.join(what)}; {how} (`heli import {path} --out "
                 "flight.csv` writes the flight as read)")
 
@@ -173,7 +174,9 @@ def clock_of(time: np.ndarray) -> Clock:
     longest = float(dt[steps > 1].max()) if np.any(steps > 1) else 0.0
     if off_clock > ON_CLOCK:  # no clock places the rows: the stamps are the sample times
         mean = float((time[-1] - time[0]) / (time.size - 1))
-        return Clock(mean, float(time[0]), np.arange(time.size), off_clock, None, longest, on_clock=False)
+        number = np.arange(time.size)
+        off_mean = float(np.max(np.abs(time - time[0] - mean * number))) / mean  # off the mean rate's grid
+        return Clock(mean, float(time[0]), number, off_mean, None, longest, on_clock=False)
     quantum = next((q for q in QUANTA_S if _on_quantum(time, q)), None)
     if quantum is not None and off_clock * slope > quantum * (1.0 + 1e-6):
         quantum = None  # stamps on a quantum, but further off the clock than rounding puts them: jitter
