@@ -125,9 +125,12 @@ def test_clock_of_tells_rounding_from_jitter():
     jittered = clock_of(np.round(t + rng.uniform(-0.002, 0.002, t.size), 3))  # a stamp up to 25 % off its slot
     assert jittered.quantum is None and jittered.on_clock  # further off the clock than the rounding puts them
     assert (jittered.interval, jittered.missing) == (0.01, 0) and "stamps up to" in jittered.warning("f.csv")
-    lost = clock_of(t + rng.uniform(-0.0045, 0.0045, t.size))  # up to 45 %: the slots are no longer sure
+    far = clock_of(np.delete(t + rng.uniform(-0.004, 0.004, t.size), [50, 1200]))  # up to 40 %: counted by phase
+    assert far.on_clock and far.interval == 0.01 and far.missing == 2 and far.slots[1199] == 1201
+    wandering = np.concatenate(([0.0], np.cumsum(0.01 * (1.0 + 0.2 * np.sin(np.arange(2999) * 2 * np.pi / 300)))))
+    lost = clock_of(wandering)  # a rate that wanders 8-12 ms: no clock places the rows
     assert not lost.on_clock and lost.interval == pytest.approx(0.01, rel=1e-3)
-    assert "taken as the sample times" in lost.warning("f.csv") and lost.jitter < 1.0
+    assert "taken as the sample times" in lost.warning("f.csv") and 0.5 < lost.jitter < 20
     clock = clock_of(np.round(np.delete(np.arange(3000) / 400.0, [7, 900]), 6))
     assert (clock.missing, clock.interval, clock.slots[8], clock.slots[-1]) == (2, 0.0025, 9, 2999)
 

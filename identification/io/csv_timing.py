@@ -33,8 +33,9 @@ The rate is the clock's own: the least-squares slope of the stamps against their
 interval (a 400 Hz clock rounded to milliseconds has intervals of 2 and 3 ms and no 2.5), rounded to a whole
 microsecond where that moves the last slot by under 5 % of an interval. The slots are counted from the intervals,
 which is exact while every stamp lies within a quarter of an interval of its slot (an interval then never reads
-as none or two); further off, a count can slip, the fitted clock then misses the stamps by more than half an
-interval, and the rows are interpolated from their stamps instead.
+as none or two); further off, where a count slipped and the fitted clock misses the stamps by more than half an
+interval, they are counted by phase (:func:`phase_slots`, exact to about 45 %), and where that too puts two rows
+in a slot the rows are interpolated from their stamps instead.
 """
 
 from __future__ import annotations
@@ -170,6 +171,12 @@ def clock_of(time: np.ndarray) -> Clock:
             break
         slots = again
     off_clock = float(np.max(np.abs(time - (offset + slope * slots)))) / slope
+    if off_clock > ON_CLOCK:  # a count slipped (stamps over a quarter of an interval off): count by phase
+        phased = phase_slots(time)
+        if phased is not None:
+            slots = phased
+            slope, offset = _fitted_clock(time, slots)
+            off_clock = float(np.max(np.abs(time - (offset + slope * slots)))) / slope
     steps = np.diff(slots)
     longest = float(dt[steps > 1].max()) if np.any(steps > 1) else 0.0
     if off_clock > ON_CLOCK:  # no clock places the rows: the stamps are the sample times
@@ -182,6 +189,34 @@ def clock_of(time: np.ndarray) -> Clock:
         quantum = None  # stamps on a quantum, but further off the clock than rounding puts them: jitter
     start = round(float(offset), 6)  # (to a microsecond: a stamp a reader can compare with the file's)
     return Clock(float(slope), start, slots, off_clock, quantum, longest)
+
+
+def phase_slots(time: np.ndarray, search: float = 0.05) -> np.ndarray | None:
+    """Each row's slot where the stamps lie up to half an interval off their clock, counted by phase, or None
+    where the count puts two rows in one slot (no clock places them).
+
+    The clock's interval is the one on which the stamps' phases ``2 pi t / T`` gather most (the length of
+    their mean resultant: the circular statistics of a periodic point process), searched within ``search`` of
+    :func:`nominal_interval` on the first 1000 rows, then 10 000, then all, each time at a quarter of the
+    peak's width (``T^2 / span``); the slots are the stamps rounded on that clock, its phase the resultant's
+    angle. Unlike a count of the intervals, which slips where an interval reads as none or two, this is exact
+    for stamps up to about 45 % of an interval off (measured on 30 000 rows at 100 and 400 Hz, uniform jitter
+    of 10-45 %, 0-5 % of the samples missing, stamps rounded to 1 ms or not: 42 of 45 cases read right, the
+    other three, at 45 % with samples missing, found to put two rows in a slot)."""
+    t = time - time[0]
+    interval = nominal_interval(np.diff(time))
+    width = search
+    for m in sorted({min(t.size, 1000), min(t.size, 10_000), t.size}):
+        step = interval * interval / (4.0 * max(t[m - 1], interval))
+        half = int(np.ceil(width * interval / step))
+        grid = interval + step * np.arange(-half, half + 1)
+        strength = [abs(np.mean(np.exp(2j * np.pi * t[:m] / g))) for g in grid]
+        interval = float(grid[int(np.argmax(strength))])
+        width = 4.0 * step / interval
+    phase = np.angle(np.mean(np.exp(2j * np.pi * t / interval)))
+    slots = np.rint(t / interval - phase / (2.0 * np.pi)).astype(np.int64)
+    slots -= slots[0]
+    return slots if np.all(np.diff(slots) >= 1) else None
 
 
 def _fitted_clock(time: np.ndarray, slots: np.ndarray) -> tuple[float, float]:
