@@ -214,8 +214,15 @@ def test_the_same_flight_twice_is_refused(model_dir, flights):
 
 
 @pytest.mark.slow  # over 5 s: make test-slow
-def test_unchanged_aircraft_is_pooled_without_flags(model_dir, flights):
-    r = refresh_model(model_dir, [flights["f3"]], n_replicates=60, seed=0, plots=False, progress=False)
+def test_unchanged_aircraft_is_pooled_without_flags(model_dir, flights, tmp_path):
+    """The new flight with three samples missing, as a logger drops them: read on its clock (the missing ones
+    interpolated), and the refresh's notes say so."""
+    lines = flights["f3"].read_text().splitlines(keepends=True)
+    f3 = tmp_path / "f3.csv"
+    f3.write_text("".join(line for i, line in enumerate(lines) if i not in (501, 502, 2001)))
+    (tmp_path / "f1.csv").write_bytes(flights["f1"].read_bytes())  # the previous flight, found beside it
+    r = refresh_model(model_dir, [f3], n_replicates=60, seed=0, plots=False, progress=False)
+    assert r.notes[0].startswith("f3.csv: the time column is not uniform: 3 sample(s) missing")
     assert r.flagged == [] and r.fit == "pooled"
     assert max(row.z for row in r.drift) < r.criterion["z"]
     model = json.loads((model_dir / "model.json").read_text())

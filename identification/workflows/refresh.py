@@ -340,8 +340,10 @@ class _Refresh:
         criterion = {"alpha": s.alpha, "z": z_crit, "n_parameters": len(names), "min_relative": s.min_relative,
                      "rule": "|new - old| > z * sqrt(se_old^2 + se_new^2), z = Phi^-1(1 - alpha / (2 m))"
                      + (" and |new - old| >= min_relative * |old|" if s.min_relative > 0 else "")}
+        read = [f"{Path(p).name}: {w}" for p, f in zip(self.new_paths, flights)  # what reading a new flight changed
+                for w in f.metadata.get("import_warnings") or ()]
         result = RefreshResult(drift, criterion, mode, reason, {"found": previous.found, "missing": previous.missing},
-                               boot_new, previous.bootstrap, boot_model, None, None, {}, previous.notes)
+                               boot_new, previous.bootstrap, boot_model, None, None, {}, read + previous.notes)
         self.stage(result, fit_flights, digests, flights, new_ident, self.as_written(model_fit))
         return result
 
