@@ -43,9 +43,7 @@ LOG_HZ = 100.0
 
 
 def _rows(flight, index):
-    """Rows (time, canonical columns) of the fine flight at sample indices ``index``."""
-    from identification.flight import CSV_COLUMNS  # noqa: F401  (the column order written below)
-
+    """Rows (time, then the canonical columns in order) of the fine flight at sample indices ``index``."""
     return np.column_stack([flight.time[index], *flight.rates[:, index], *flight.attitude[:, index],
                             *flight.sticks[:, index]])
 
@@ -53,6 +51,7 @@ def _rows(flight, index):
 def _files(sim, seed: int, jitters, drops, folder: Path, log_hz: float = LOG_HZ) -> dict:
     """The conditions' CSV files of one fine flight logged at ``log_hz``: name -> path."""
     from identification.flight import CSV_COLUMNS
+    from identification.io.csv_timing import interpolated
 
     rng = np.random.default_rng(10_000 + seed)
     step = int(FINE_HZ / log_hz)
@@ -77,8 +76,7 @@ def _files(sim, seed: int, jitters, drops, folder: Path, log_hz: float = LOG_HZ)
         grid = sim.flight.time[on_time]
         stamps = rows[:, 0]
         write(f"jitter {j:g} ms interpolated", np.column_stack([grid, *(
-            np.angle(np.exp(1j * np.interp(grid, stamps, np.unwrap(c)))) if 4 <= i < 7 else np.interp(grid, stamps, c)
-            for i, c in enumerate(rows[:, 1:].T, start=1))]))
+            interpolated(grid, stamps, c, angle=4 <= i < 7) for i, c in enumerate(rows[:, 1:].T, start=1))]))
     for p in drops:
         keep = rng.random(on_time.size) >= p / 100.0
         run = np.zeros(on_time.size, int)

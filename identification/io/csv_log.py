@@ -121,16 +121,15 @@ def _on_uniform_clock(path: Path, get: dict, segment, blank: dict | None = None)
     fields were empty (``blank``: name -> rows), the rows of the rates are read first, the other columns
     interpolated onto them (:func:`.csv_timing.rows_of_the_rates`)."""
     warnings = []
+    try:
+        check_time_base(get["time"])  # (the rows of the rates below are some of its rows: their time holds too)
+    except FlightLogError as e:
+        raise type(e)(f"{path}: {e}") from None
     if blank is not None:
-        try:
-            check_time_base(get["time"])
-        except FlightLogError as e:
-            raise type(e)(f"{path}: {e}") from None
         get, note = rows_of_the_rates(path, get, blank, RATE_COLUMNS,
                                       STICK_COLUMNS + ATTITUDE_COLUMNS + SERVO_COLUMNS, ATTITUDE_COLUMNS)
         warnings.append(note)
     try:
-        check_time_base(get["time"])
         for name in (*CSV_COLUMNS[1:], *SERVO_COLUMNS):  # before any is interpolated: rows as in the file
             if name in get:
                 _check_finite(name, get[name], get["time"])

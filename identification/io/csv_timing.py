@@ -127,6 +127,14 @@ class Clock:
                 "quantum_s": self.quantum}
 
 
+def interpolated(at: np.ndarray, where: np.ndarray, values: np.ndarray, angle: bool = False) -> np.ndarray:
+    """``values`` known at ``where`` (increasing), linearly interpolated at ``at``; an ``angle`` [rad] on its
+    unwrapped phase, wrapped back to (-pi, pi] (as :func:`identification.io.resample.resample_stream`)."""
+    if not angle:
+        return np.interp(at, where, values)
+    return np.angle(np.exp(1j * np.interp(at, where, np.unwrap(values))))
+
+
 def _duration(seconds: float) -> str:
     return f"{seconds * 1e3:.3g} ms" if seconds >= 1e-3 else f"{seconds * 1e6:.3g} us"
 
@@ -170,13 +178,13 @@ def clock_of(time: np.ndarray) -> Clock:
         if np.array_equal(again, slots) or np.any(np.diff(again) < 1):
             break
         slots = again
-    off_clock = float(np.max(np.abs(time - (offset + slope * slots)))) / slope
+    off_clock = _off_clock(time, slots, slope, offset)
     if off_clock > ON_CLOCK:  # a count slipped (stamps over a quarter of an interval off): count by phase
         phased = phase_slots(time)
         if phased is not None:
             slots = phased
             slope, offset = _fitted_clock(time, slots)
-            off_clock = float(np.max(np.abs(time - (offset + slope * slots)))) / slope
+            off_clock = _off_clock(time, slots, slope, offset)
     steps = np.diff(slots)
     longest = float(dt[steps > 1].max()) if np.any(steps > 1) else 0.0
     if off_clock > ON_CLOCK:  # no clock places the rows: the stamps are the sample times
@@ -227,6 +235,11 @@ def _fitted_clock(time: np.ndarray, slots: np.ndarray) -> tuple[float, float]:
     if whole > 0 and abs(whole - slope) * slots[-1] <= 0.05 * slope:
         return whole, float(np.mean(time - whole * slots))
     return float(slope), float(offset)
+
+
+def _off_clock(time: np.ndarray, slots: np.ndarray, interval: float, start: float) -> float:
+    """The largest distance of a stamp from its slot's time on the clock (``interval``, ``start``), in intervals."""
+    return float(np.max(np.abs(time - (start + interval * slots)))) / interval
 
 
 def _on_quantum(time: np.ndarray, quantum: float) -> bool:
@@ -316,9 +329,7 @@ def regular_columns(path, columns: dict, angles: tuple = (), segment=None) -> tu
         if clock.on_clock and not clock.missing:
             out[name] = values
             continue
-        unwrap = name in angles
-        v = np.interp(at, held, np.unwrap(values) if unwrap else values)
-        out[name] = np.angle(np.exp(1j * v)) if unwrap else v
+        out[name] = interpolated(at, held, values, name in angles)
     resampling = clock.to_dict()
     warning = clock.warning(path)
     return out, {**resampling, **({"note": warning} if warning else {})}, stretch
@@ -376,9 +387,7 @@ def rows_of_the_rates(path, columns: dict, blank: dict, rates: tuple, required: 
     out = {name: values[keep] for name, values in columns.items() if name not in sparse}
     for c in sparse:
         logged = ~blank[c]
-        values = np.unwrap(columns[c][logged]) if c in angles else columns[c][logged]
-        v = np.interp(time[keep], time[logged], values)
-        out[c] = np.angle(np.exp(1j * v)) if c in angles else v
+        out[c] = interpolated(time[keep], time[logged], columns[c][logged], c in angles)
     shares = sorted({f"{np.count_nonzero(~blank[c]) / time.size:.0%}" for c in sparse})
     note = (f"fields left empty: {', '.join(sparse) or 'none'} hold values on {' / '.join(shares) or '-'} of the "
             f"rows and were interpolated linearly between their values onto the rows of {', '.join(rates)}")
