@@ -23,7 +23,7 @@ from scipy import signal
 
 from .input_hold import hold_fraction
 from .state_space import (HOLD_INDEX, N_NONLINEAR, discrete_system, innovation_filters, input_vectors, kalman,
-                          servo_increments, strictly_proper_tf)
+                          servo_increments)
 
 SYSTEMS_KEPT = 8
 """How many recent systems (:meth:`AxisLikelihood.system`) an axis keeps: the search's Jacobian perturbs one entry
@@ -111,14 +111,15 @@ class AxisLikelihood:
         """Innovation-domain measurements ``y~`` (n,) and regressors ``Z`` (m, n), burn-in removed, and ``S``."""
         d = self.data
         Ad, g0, g1, L, S = self.predictor(x)
-        b_y, b_u, a = innovation_filters(Ad, g0, g1, L)
-        if d.causal_rows:  # a measured rate at k+1 carries the noise of y[k+1]: only u[k] may predict y[k+1]
-            b_c, _ = strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), g0 + g1)
         tau = self.tau_of(x)
         regressors = d.rebuild(tau) if tau < -MIN_SERVO_DELAY else d.regressors
         servo = d.servo_row is not None and (tau > MIN_SERVO_DELAY or (d.lag > 0.0 and tau >= -MIN_SERVO_DELAY))
-        if servo:
-            b_v, _ = strictly_proper_tf(Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0]), np.eye(Ad.shape[0])[0])
+        # a measured rate at k+1 carries the noise of y[k+1]: only u[k] may predict y[k+1] (b_c); a command through
+        # the servo enters the rate on its own (b_v)
+        more = ([g0 + g1] if d.causal_rows else []) + ([np.eye(Ad.shape[0])[0]] if servo else [])
+        b_y, b_u, a, *paths = innovation_filters(Ad, g0, g1, L, *more)
+        b_c = paths[0] if d.causal_rows else None
+        b_v = paths[-1] if servo else None
         from .kalman_kernels import filter_rows  # numba loads with the first evaluation, not with the package
 
         ys, zs = [], []
