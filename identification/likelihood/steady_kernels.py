@@ -7,8 +7,8 @@ checks, ``np.poly`` four times) that took 1.5 ms of an evaluation's 2.3 ms, more
 samples (0.35 ms): Python's overhead on 4 x 4 matrices. Here the same quantities, compiled:
 
 * :func:`filter_riccati`: the predicted covariance ``P`` of the filter that measures the first state, by the
-  structure-preserving doubling algorithm (Chu, Fan & Lin 2005, "A structure-preserving doubling algorithm for
-  continuous-time algebraic Riccati equations", and its discrete form, SDA-1): about 15-20 doublings, each
+  structure-preserving doubling algorithm for discrete-time algebraic Riccati equations (SDA; Chu, Fan, Lin and
+  Wang, International Journal of Control 77, 2004): about 15-20 doublings, each
   squaring the closed loop's transition, so that the error after ``k`` falls as ``rho^(2^k)``. Its Riccati
   residual is at or below scipy's (1e-16 against 1e-14 relative where they differ); where it does not converge,
   or its filter is not stable, the caller solves with scipy (:func:`identification.likelihood.state_space.kalman`).
@@ -76,7 +76,7 @@ def filter_riccati(Ad, Qd, R):  # pragma: no cover - compiled
 @numba.njit(cache=True)
 def char_poly(M):  # pragma: no cover - compiled
     """``np.poly(M)`` of a real square matrix: the characteristic polynomial's coefficients (highest power first)
-    from its eigenvalues, multiplied out one root at a time as numpy does, real part."""
+    from its eigenvalues, multiplied out one root at a time (numpy's algorithm), real part."""
     roots = np.linalg.eigvals(M.astype(np.complex128))
     c = np.zeros(roots.size + 1, dtype=np.complex128)
     c[0] = 1.0
