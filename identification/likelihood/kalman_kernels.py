@@ -95,29 +95,10 @@ def _filter_pairs(b, an, U, out, state):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def filter_rows(B, a, U):  # pragma: no cover - compiled
-    """Each row ``U[r]`` through the filter ``B[r] / a`` from rest: ``scipy.signal.lfilter(B[r], a, U[r])`` for
-    every row, bit for bit (the same direct form II transposed, the same operations in the same order, the
-    coefficients divided by ``a[0]``), 2-3 times faster on the likelihood's filters. ``B`` (rows, l) and ``a``
-    (l,) of one length, ``l >= 2``."""
+def _filter_long(b, an, U, out):  # pragma: no cover - compiled
+    """:func:`filter_rows` for filters longer than :data:`PAIR_TAPS` (coefficients already divided by ``a[0]``)."""
     rows, n = U.shape
-    nb = a.size
-    out = np.empty((rows, n))
-    if nb <= PAIR_TAPS:
-        width = max(nb, MIN_TAPS)
-        b = np.zeros((rows, width))
-        an = np.zeros((1, width))
-        b[:, :nb] = B / a[0]
-        an[0, :nb] = a / a[0]
-        if width == 4:
-            _filter_pairs(b, an, U, out, (0.0, 0.0, 0.0))
-        elif width == 5:
-            _filter_pairs(b, an, U, out, (0.0, 0.0, 0.0, 0.0))
-        else:
-            _filter_pairs(b, an, U, out, (0.0, 0.0, 0.0, 0.0, 0.0))
-        return out
-    b = B / a[0]
-    an = a / a[0]
+    nb = an.size
     z = np.zeros((rows, nb - 1))
     for k in range(n):
         for r in range(rows):
@@ -127,4 +108,25 @@ def filter_rows(B, a, U):  # pragma: no cover - compiled
                 z[r, j] = z[r, j + 1] + x * b[r, j + 1] - y * an[j + 1]
             z[r, nb - 2] = x * b[r, nb - 1] - y * an[nb - 1]
             out[r, k] = y
+
+
+def filter_rows(B, a, U):
+    """Each row ``U[r]`` through the filter ``B[r] / a`` from rest: ``scipy.signal.lfilter(B[r], a, U[r])`` for
+    every row, bit for bit (the same direct form II transposed, the same operations in the same order, the
+    coefficients divided by ``a[0]``), 2-3 times faster on the likelihood's filters. ``B`` (rows, l) and ``a``
+    (l,) of one length, ``l >= 2``. The loop for a filter's length is compiled when a filter of that length first
+    comes (a first fit compiles the two its gust models use, not every length)."""
+    U = np.asarray(U, dtype=float)
+    rows, n = U.shape
+    nb = a.size
+    out = np.empty((rows, n))
+    if nb > PAIR_TAPS:
+        _filter_long(np.asarray(B, dtype=float) / a[0], np.asarray(a, dtype=float) / a[0], U, out)
+        return out
+    width = max(nb, MIN_TAPS)
+    b = np.zeros((rows, width))
+    an = np.zeros((1, width))
+    b[:, :nb] = B / a[0]
+    an[0, :nb] = a / a[0]
+    _filter_pairs(b, an, U, out, (0.0,) * (width - 1))
     return out
