@@ -8,7 +8,7 @@ samples (0.35 ms): Python's overhead on 4 x 4 matrices. Here the same quantities
 
 * :func:`filter_riccati`: the predicted covariance ``P`` of the filter that measures the first state, by the
   structure-preserving doubling algorithm for discrete-time algebraic Riccati equations (SDA; Chu, Fan, Lin and
-  Wang, International Journal of Control 77, 2004): 12-21 doublings, each
+  Wang, International Journal of Control 77, 2004): 5-21 doublings, each
   squaring the closed loop's transition, so that the error after ``k`` falls as ``rho^(2^k)``. Its Riccati
   residual is at most 6e-16 relative where scipy's reaches 4e-13 (3000 random models); where it does not converge,
   or its filter is not stable, the caller solves with scipy (:func:`identification.likelihood.state_space.kalman`).
