@@ -3,6 +3,7 @@
 
 import numpy as np
 import pytest
+from scipy import signal
 from scipy.linalg import solve_discrete_are
 
 from identification.likelihood.state_space import discrete_system, innovation_filters, kalman
@@ -88,8 +89,6 @@ def test_the_innovation_filters_and_further_paths_are_the_predictors_transfer_fu
     Phi = Ad - np.outer(Ad @ L, np.eye(Ad.shape[0])[0])
     extra = np.eye(Ad.shape[0])[0]
     b_y, b_u, a, b_e = innovation_filters(Ad, g0, g1, L, extra)
-    from scipy import signal
-
     impulse = np.zeros(40)
     impulse[0] = 1.0
     for numerator, b in ((b_y, Ad @ L), (b_e, extra)):

@@ -161,8 +161,8 @@ def innovation_filters(Ad, g0, g1, L, *more):
     """
     from .steady_kernels import predictor_polynomials
 
-    a, numerators = predictor_polynomials(np.ascontiguousarray(Ad), np.asarray(L, dtype=float),
-                                          np.array([Ad @ L, g0, g1, *more], dtype=float))
+    gain = Ad @ L  # the predictor's gain on the innovation: Phi = Ad - gain e0', and the measurement's input
+    a, numerators = predictor_polynomials(np.ascontiguousarray(Ad), gain, np.array([gain, g0, g1, *more], dtype=float))
     b_y, b0, b1 = numerators[:3]
     b_u = b0.copy()
     b_u[:-1] += b1[1:]  # z * (strictly proper): the u_{k+1} path

@@ -144,18 +144,14 @@ def char_poly(M):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True)
-def predictor_polynomials(Ad, L, inputs):  # pragma: no cover - compiled
-    """``(den, numerators)`` of the steady-state predictor ``x+ = Phi x + b u``, ``Phi = Ad - (Ad L) e0'``, read at
-    its first state: ``den`` the characteristic polynomial of ``Phi`` (m + 1,) and, for each row ``b`` of
-    ``inputs`` (k, m), the numerator of ``e0' (zI - Phi)^-1 b`` (k, m + 1): ``e0' adj(zI - Phi) b =
-    det(zI - Phi + b e0') - det(zI - Phi)`` (the determinant lemma), so it is ``char_poly(Phi - b e0') - den``."""
+def predictor_polynomials(Ad, gain, inputs):  # pragma: no cover - compiled
+    """``(den, numerators)`` of the steady-state predictor ``x+ = Phi x + b u``, ``Phi = Ad - gain e0'`` (``gain`` the
+    predictor's, ``Ad L``), read at its first state: ``den`` the characteristic polynomial of ``Phi`` (m + 1,) and,
+    for each row ``b`` of ``inputs`` (k, m), the numerator of ``e0' (zI - Phi)^-1 b`` (k, m + 1): ``e0' adj(zI - Phi)
+    b = det(zI - Phi + b e0') - det(zI - Phi)`` (the determinant lemma), so it is ``char_poly(Phi - b e0') - den``."""
     m = Ad.shape[0]
     Phi = Ad.copy()
-    for i in range(m):
-        gain = 0.0  # (Ad L)_i
-        for j in range(m):
-            gain += Ad[i, j] * L[j]
-        Phi[i, 0] -= gain
+    Phi[:, 0] -= gain
     den = char_poly(Phi)
     numerators = np.empty((inputs.shape[0], m + 1))
     for i in range(inputs.shape[0]):
