@@ -139,3 +139,33 @@ def test_a_short_flight_that_cannot_tell_the_hold_says_so_and_its_errors_hold_th
     assert "does not decide how its sticks reach the aircraft" in line and "--input-hold zoh" in line
     at_held = alternative["axes"]["roll"]["params"]["k3"] / SLUGGISH.k3 - 1.0
     assert abs(at_held) < 0.12 < abs(_damping_errors(auto, sim.truth)[0])
+
+
+def test_a_gust_models_search_stuck_at_another_hold_is_searched_again_from_the_others():
+    """Both gust models share the hold and the damping; where one model's search ends at a hold far from the
+    other's (on the Dryden cell's seed 1 yaw, one arithmetic's second-order search ran to the hold's lower bound
+    and lost the comparison it won in another), it is searched again from the other's and the likelier kept."""
+    from heli_core.terms import DECOUPLED
+    from identification.likelihood.axis_search import HOLD_DISAGREEMENT, AxisProblem
+    from identification.likelihood.state_space import HOLD_INDEX
+
+    flight = bench_flight("dryden-2Hz-pd", 1, 120.0).flight
+    stuck = {}
+
+    class StuckOnce(AxisProblem):
+        """The second-order model's first search ends where a search held at the hold's bound ends."""
+
+        def search(self, like, x0, max_nfev=None, tau0=0.0):
+            if like.data.wind_model == "gm_so" and not stuck:
+                res = AxisProblem.search(replace(self, hold=0.0), like, x0, max_nfev, tau0)
+                stuck["cost"] = res.cost
+                return res
+            return super().search(like, x0, max_nfev, tau0)
+
+    x0 = np.array([0.5, np.log(4.0), np.log(0.3), np.log(100.0), np.log(100.0), 0.5])
+    problem = AxisProblem(2, DECOUPLED[2], [flight], burn=100)
+    free = problem.per_kind(0.0, x0, ("gm2", "gm_so"))
+    found = StuckOnce(2, DECOUPLED[2], [flight], burn=100).per_kind(0.0, x0, ("gm2", "gm_so"))
+    assert stuck["cost"] > free["gm_so"][0] + 1e-4  # the held search is a worse basin
+    assert found["gm_so"][0] == pytest.approx(free["gm_so"][0], rel=1e-6)
+    assert abs(found["gm_so"][1][HOLD_INDEX] - found["gm2"][1][HOLD_INDEX]) <= HOLD_DISAGREEMENT
