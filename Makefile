@@ -36,12 +36,16 @@ logs: setup
 # The suite without the tests marked slow (each over ~5 s and covered at smaller size by a fast one);
 # test-slow runs only those. One pytest worker per core (pytest-xdist), each test file in one worker so
 # that its module fixtures are built once; `make test PYTEST_WORKERS=0` runs in this process alone.
+# PYTHONDONTWRITEBYTECODE (set on some machines and runners) is lifted for the tests: with it every worker
+# rewrites every test file's assertions at collection and every process a test starts (the CLI, pool workers)
+# compiles the package from source again; the bytecode goes to __pycache__/, which git ignores.
 PYTEST_WORKERS ?= auto
+PYTEST := env -u PYTHONDONTWRITEBYTECODE $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile
 test: setup
-	$(BIN)/python -m pytest -q -m "not slow" -n $(PYTEST_WORKERS) --dist loadfile
+	$(PYTEST) -m "not slow"
 
 test-slow: setup
-	$(BIN)/python -m pytest -q -m slow -n $(PYTEST_WORKERS) --dist loadfile
+	$(PYTEST) -m slow
 
 demo: setup
 	$(BIN)/python scripts/demo.py --out demo-out
