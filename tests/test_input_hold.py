@@ -149,7 +149,7 @@ def test_a_gust_models_search_stuck_at_another_hold_is_searched_again_from_the_o
     from identification.likelihood.axis_search import HOLD_DISAGREEMENT, AxisProblem
     from identification.likelihood.state_space import HOLD_INDEX
 
-    flight = bench_flight("dryden-2Hz-pd", 1, 120.0).flight
+    flight = bench_flight("dryden-2Hz-pd", 1, 60.0).flight
     stuck = {}
 
     class StuckOnce(AxisProblem):
