@@ -130,9 +130,9 @@ def char_poly(M):  # pragma: no cover - compiled
     m = M.shape[0]
     c = np.zeros(m + 1)
     c[0] = 1.0
-    N = np.zeros((m, m))
+    MN = np.zeros((m, m))  # M N_0, N_0 = 0
     for k in range(1, m + 1):
-        N = _product(M, N)
+        N = MN  # N_k = M N_(k-1) + c_(k-1) I: the product the last step's trace was taken of
         for i in range(m):
             N[i, i] += c[k - 1]
         MN = _product(M, N)
