@@ -1,14 +1,12 @@
-"""Tests of the native vector environment (:class:`heli_env.vector_env.HeliAttitudeVectorEnv`).
+"""Tests of the native vector environment (:class:`heli_env.vector_env.HeliAttitudeVectorEnv`): its
+autoresets and masked resets, seeds, spaces, bad input, threads, compiled-loop cache and pinned episodes.
 
-The central test runs ``num_envs`` single environments seeded ``seed + i``
-beside one vector environment seeded ``seed`` under the same actions, through
-terminations, truncations and autoresets, and requires the same state bit for
-bit and the same observations, rewards and infos.
+That it reproduces single environments bit for bit in each task and configuration is
+``tests/test_vector_env_matches_single_envs.py``.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 
 import gymnasium
@@ -18,114 +16,13 @@ from gymnasium.error import ResetNeeded
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 from numpy.testing import assert_allclose
+from vector_side_by_side import random_actions
 
 import heli_env  # noqa: F401  (registers HeliAttitude-v0)
-from heli_core.sensors import GyroLine, SensorModel
-from heli_env import ActionError, HeliAttitudeEnv, default_model_dir, load_env_model
-from heli_env.kernels import BLOCK
-from heli_env.tasks import TaskConfig
+from heli_env import ActionError, HeliAttitudeEnv
 from heli_env.vector_env import HeliAttitudeVectorEnv
-from identification.bench.flight_config import EFFECTS
 
 ENV_ID = "HeliAttitude-v0"
-INFO_KEYS = ("time", "disturbance", "attitude_error_deg", "rate_error_deg_s", "trace")
-
-
-def _actions(n_steps, n, seed=0):
-    """Random actions, some beyond [-1, 1]; copy 0 holds full right stick (it terminates), copy 1 full left."""
-    a = np.random.default_rng(seed).uniform(-1.3, 1.3, (n_steps, n, 3)).astype(np.float32)
-    a[:, 0] = (1.0, 0.0, 0.0)
-    a[:, 1] = (-1.0, 0.3, 0.0)
-    return a
-
-
-def _run_side_by_side(kwargs, n=4, n_steps=600, seed=100, options=None, watch=None):
-    """Step a vector env of n copies and a single env for each copy of ``watch`` (all by default) with the same
-    actions; check they agree; return event counts."""
-    venv = HeliAttitudeVectorEnv(n, **kwargs)
-    watch = list(range(n)) if watch is None else list(watch)
-    envs = {i: HeliAttitudeEnv(**kwargs) for i in watch}
-    vobs, vinfo = venv.reset(seed=seed, options=options)
-    singles = [env.reset(seed=seed + i, options=options) for i, env in envs.items()]
-    _check_same(venv, envs, vobs, vinfo, [o for o, _ in singles], [i for _, i in singles])
-    done = dict.fromkeys(watch, False)
-    counts = {"terminated": 0, "truncated": 0, "autoreset": 0}
-    for actions in _actions(n_steps, n):
-        vobs, vrew, vterm, vtrunc, vinfo = venv.step(actions)
-        obs, infos = [], []
-        for i, env in envs.items():
-            if done[i]:  # NEXT_STEP autoreset: this step resets the copy, reward 0, not done
-                o, info = env.reset()
-                r, te, tr = 0.0, False, False
-                counts["autoreset"] += 1
-            else:
-                o, r, te, tr, info = env.step(actions[i])
-            done[i] = te or tr
-            counts["terminated"] += te
-            counts["truncated"] += tr
-            assert vterm[i] == te and vtrunc[i] == tr
-            assert_allclose(vrew[i], r, rtol=1e-12, atol=1e-12)
-            obs.append(o)
-            infos.append(info)
-        _check_same(venv, envs, vobs, vinfo, obs, infos)
-    return counts
-
-
-def _check_same(venv, envs, vobs, vinfo, obs, infos):
-    x = np.array(venv._x)
-    for (i, env), o, info in zip(envs.items(), obs, infos):
-        assert np.array_equal(np.array(env._x), x[:, i]), f"state of copy {i}"
-        assert_allclose(vobs[i], o, rtol=1e-12, atol=1e-12)
-        for key in INFO_KEYS:
-            assert_allclose(vinfo[key][i], info[key], rtol=1e-12, atol=1e-12, err_msg=key)
-            assert vinfo[f"_{key}"][i]
-
-
-@pytest.mark.parametrize("task", ["hold", "track", "rate"])
-def test_vector_env_reproduces_single_envs_across_autoresets(task):
-    counts = _run_side_by_side({"task": task, "episode_seconds": 2.5})
-    assert counts["terminated"] >= 1 and counts["truncated"] >= 2
-    ends = counts["terminated"] + counts["truncated"]
-    assert ends - 4 <= counts["autoreset"] <= ends  # every episode end but those on the last step
-
-
-@pytest.mark.parametrize(
-    "kwargs",
-    [
-        {"task": "track", "reference": "smooth", "obs_noise": (0.01, 0.03), "action_delay": 2},
-        {"task": "rate", "dt": 0.02, "gust_scale": 2.0, "collective": 0.1},
-        {"task": "hold", "init_angle_deg": 0.0, "init_rate_deg": 0.0},
-        {"task": TaskConfig(task="track", axis_weights=(1.0, 9.0, 0.25)), "obs_noise": (0.01, 0.03)},
-        {"task": "hold", "obs_noise": SensorModel((0.01, 0.02, 0.03), (0.003, 0.002, 0.0), (
-            GyroLine("roll", 30.0, 0.04), GyroLine("yaw", 40.0, 0.02), GyroLine("roll", 27.0, 0.03)))},
-        {"task": TaskConfig(task="hold", stick_step_weight=0.5), "action_delay": 1, "obs_noise": (0.01, 0.03)},
-    ],
-    ids=["noise-delay", "dt-gust-collective", "level", "axis-weights", "identified-sensors", "stick-step"],
-)
-def test_vector_env_reproduces_single_envs_with_other_settings(kwargs):
-    counts = _run_side_by_side({**kwargs, "episode_seconds": 2.0}, n=3, n_steps=300, seed=7)
-    assert counts["autoreset"] >= 1
-
-
-@pytest.mark.parametrize("effects", [(), tuple(EFFECTS)], ids=["shipped", "every-effect"])
-def test_copies_in_every_block_reproduce_single_envs(effects):
-    """The step loop runs a block of copies at a time: copies at the edges of the blocks and in a last,
-    partial block step and observe as their single envs do (the shipped model's sensors and gyro lines; a
-    model whose every constant is used: the loop reads them from an argument)."""
-    shipped = load_env_model(default_model_dir())
-    model = dataclasses.replace(shipped, params=shipped.params.with_values(
-        **{k: v for e in effects for k, v in EFFECTS[e].items()}))
-    n = 2 * BLOCK + 3
-    counts = _run_side_by_side({"model": model, "episode_seconds": 1.0}, n=n, n_steps=160, seed=3,
-                               watch=[0, 2, BLOCK - 1, BLOCK, 2 * BLOCK - 1, 2 * BLOCK, n - 1])
-    assert counts["autoreset"] >= 7
-
-
-def test_vector_env_reproduces_pinned_traces_running_out():
-    """A pinned offset near the end of a trace: each copy truncates where a single env does."""
-    length = int(HeliAttitudeEnv().model.lengths[2])
-    counts = _run_side_by_side({"task": "hold"}, n=3, n_steps=60, options={"trace": 2, "offset": length - 21})
-    assert counts["truncated"] >= 2
 
 
 def test_autoreset_is_next_step():
@@ -307,7 +204,7 @@ def test_thread_count_does_not_change_results():
         venv = HeliAttitudeVectorEnv(64, task="track", episode_seconds=1.0, threads=threads)
         obs, _ = venv.reset(seed=3)
         trail = [obs]
-        for actions in _actions(150, 64, seed=4):
+        for actions in random_actions(150, 64, seed=4):
             obs, rew, term, trunc, info = venv.step(actions)
             trail += [obs, rew, term, trunc, info["attitude_error_deg"], info["disturbance"]]
         runs.append((np.array(venv._x), trail))
@@ -326,13 +223,13 @@ def test_copies_of_every_chunk_step_as_their_own_env():
 
     n = 2 * CHUNK + 5
     most = numba.config.NUMBA_NUM_THREADS
-    big = HeliAttitudeVectorEnv(n, episode_seconds=0.5, threads=most)
+    big = HeliAttitudeVectorEnv(n, task="track", episode_seconds=0.5, threads=most)  # the thread test's loops
     picks = [0, CHUNK + 1, n - 1]
-    lone = [HeliAttitudeVectorEnv(1, episode_seconds=0.5, threads=1) for _ in picks]
+    lone = [HeliAttitudeVectorEnv(1, task="track", episode_seconds=0.5, threads=1) for _ in picks]
     big.reset(seed=11)
     for env, i in zip(lone, picks):
         env.reset(seed=11 + i)
-    for k, actions in enumerate(_actions(80, n, seed=3)):
+    for k, actions in enumerate(random_actions(80, n, seed=3)):
         big._thread_choice.parallel = most > 1 and k % 3 != 0  # the pool's loop and the one-thread loop in turn
         obs, rew, term, trunc, info = big.step(actions)
         for env, i in zip(lone, picks):
@@ -412,7 +309,7 @@ def test_a_rejected_action_changes_nothing(delay):
     clean, hit = HeliAttitudeVectorEnv(3, action_delay=delay), HeliAttitudeVectorEnv(3, action_delay=delay)
     clean.reset(seed=1)
     hit.reset(seed=1)
-    actions = _actions(6, 3, seed=2)
+    actions = random_actions(6, 3, seed=2)
     bad = actions[0].copy()
     bad[2, 1] = np.nan
     for k, a in enumerate(actions):
@@ -445,8 +342,8 @@ def test_default_thread_count_follows_the_batch_size(monkeypatch):
 def test_a_masked_reset_leaves_the_other_copies_alone():
     """Resetting copy 0 alone neither changes copy 1's observation nor spends its sensor noise: copy 1 goes on
     exactly as the single env of its seed."""
-    venv = HeliAttitudeVectorEnv(2, obs_noise=(0.01, 0.03), episode_seconds=5.0)
-    single = HeliAttitudeEnv(obs_noise=(0.01, 0.03), episode_seconds=5.0)
+    venv = HeliAttitudeVectorEnv(2, episode_seconds=5.0)  # the shipped model's sensors
+    single = HeliAttitudeEnv(episode_seconds=5.0)
     obs, _ = venv.reset(seed=[4, 9])
     s_obs, _ = single.reset(seed=9)
     actions = np.random.default_rng(2).uniform(-0.2, 0.2, (40, 3)).astype(np.float32)
@@ -519,8 +416,7 @@ def test_a_reset_after_episodes_were_drawn_ahead_is_the_reset_of_a_single_env(op
     episode a single env's reset would: the one drawn ahead when its options are the defaults, one drawn from
     the generator's state before that draw when they are not (the options change the draws), one from the new
     generator with a new seed; and the copies' later episodes follow on."""
-    kwargs = {"episode_seconds": 0.3, "obs_noise": SensorModel((0.01, 0.02, 0.03), (0.003, 0.002, 0.001), (
-        GyroLine("roll", 30.0, 0.04),))}
+    kwargs = {"episode_seconds": 0.3}  # the shipped model's sensors: noise and gyro lines, phases drawn per episode
     venv = HeliAttitudeVectorEnv(3, **kwargs)
     venv.reset(seed=10)
     single = HeliAttitudeEnv(**kwargs)
