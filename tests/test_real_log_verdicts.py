@@ -36,13 +36,19 @@ def _verdict(model_dir) -> dict:
 
 def test_betaflight_quad_model_is_unusable_and_says_why(tmp_path, capsys):
     """A rate-controlled quad whose sticks explain 3-4 % of its rates: by default (the timing searched) the fit
-    diverges and no model is written, the line saying why; at the logged timing the model is written and judged
-    unusable, its dampings at the search's bound and its gains' signs against the integral method's."""
+    diverges and no model is written, the line saying why, or (the fit is ill-posed, its dampings at the
+    search's bound, and the last bits of the machine's arithmetic decide: diverging on a Zen 5, not on a Zen 3)
+    a model judged unusable is written; at the logged timing the model is written and judged unusable, its
+    dampings at the search's bound and its gains' signs against the integral method's."""
     csv = _import("betaflight_quad_btfl_035.bbl", "orangebox", tmp_path, capsys)
-    assert main(["identify", csv, "--out", str(tmp_path / "default"), "--no-plots", "-q"]) == 2
-    err = capsys.readouterr().err
-    assert "SimulationDivergedError" in err and "too weakly excited by its stick" in err
-    assert not (tmp_path / "default" / "model.json").exists()
+    code = main(["identify", csv, "--out", str(tmp_path / "default"), "--no-plots", "-q"])
+    printed = capsys.readouterr()
+    if code == 2:
+        assert "SimulationDivergedError" in printed.err and "too weakly excited by its stick" in printed.err
+        assert not (tmp_path / "default" / "model.json").exists()
+    else:
+        assert code == 0 and printed.out.startswith("model verdict: unusable:")
+        assert _verdict(tmp_path / "default")["level"] == "unusable"
     model = tmp_path / "plain"
     assert main(["identify", csv, "--out", str(model), "--no-plots", "-q", "--delay", "none"]) == 0
     out = capsys.readouterr().out
@@ -71,7 +77,7 @@ def test_ardupilot_quad_divergence_names_its_cause_not_absent_terms(tmp_path, ca
     err = _identify_error(csv, tmp_path / "model", capsys)
     assert err.count("\n") == 0 and "SimulationDivergedError" in err
     assert "added terms" not in err  # none were added
-    assert "decay faster than the simulation's fixed 0.02 s step" in err
+    assert re.search(r"decays? faster than the simulation's fixed 0\.02 s step", err)  # one damping or two
     assert not (tmp_path / "model" / "model.json").exists()
 
 
