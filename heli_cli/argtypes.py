@@ -227,3 +227,15 @@ def segment_option(text):
     if not (math.isfinite(a) and math.isfinite(b) and b > a):
         raise argparse.ArgumentTypeError(f"expected 'auto', 'all' or T0:T1 in seconds with T0 < T1, got {text!r}")
     return (a, b)
+
+
+def segment_or_each(text):
+    """``--segment`` of ``heli import`` and ``heli identify``: :func:`segment_option`, or 'each': every airborne
+    run of a flight-controller log, a flight each."""
+    if text == "each":
+        return text
+    try:
+        return segment_option(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"expected 'auto', 'all', 'each' or T0:T1 in seconds with T0 < T1, "
+                                         f"got {text!r}") from None

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import sys
 
-from .argtypes import number, output_path, segment_option, whole
+from .argtypes import number, output_path, segment_or_each, whole
 
 
 def register(sub):
@@ -39,9 +39,11 @@ def register(sub):
     p.add_argument("--log", dest="log_n", type=whole(1), default=None, metavar="N",
                    help="which log of a file holding several (from 1, as --list numbers them; default: the one "
                    "with the longest airborne segment)")
-    p.add_argument("--segment", type=segment_option, default=None, metavar="auto|all|T0:T1",
-                   help="airborne segment found automatically (default for flight-controller logs), the whole log "
-                   "('all', the longest stretch without a logging gap), or T0:T1 on the log's own clock [s]")
+    p.add_argument("--segment", type=segment_or_each, default=None, metavar="auto|each|all|T0:T1",
+                   help="airborne segment found automatically (default for flight-controller logs: the longest "
+                   "airborne run), every airborne run as a CSV of its own ('each': OUT's name numbered, "
+                   "flight-1.csv, flight-2.csv, ... in time order), the whole log ('all', the longest stretch "
+                   "without a logging gap), or T0:T1 on the log's own clock [s]")
     p.add_argument("--inputs", choices=("sticks", "controller", "servos"), default=None,
                    help="input source: pilot sticks, rate-controller outputs, or swash servos through eq. 67 "
                    "(default: the one closest to the bare airframe: controller for multirotors; servos, else "
@@ -131,11 +133,7 @@ class _LogBar:
 
 
 def run(args) -> int:
-    import json
-
-    from heli_core.files import jsonable, write_text
-    from identification.io import read_log, write_csv_flight
-    from identification.io.raw_log import rate_attitude_agreement
+    from identification.io import read_log, read_log_runs
 
     from .progress import progress_of
 
@@ -146,22 +144,58 @@ def run(args) -> int:
         print("heli import: error: --out FLIGHT.csv is required (or --list to see the logs in the file)",
               file=sys.stderr)
         return 2
+    options = {"inputs": args.inputs, "rate": args.rate, "calibration": args.calibration,
+               "allow_damaged": args.allow_damaged, "log": args.log_n}
     with progress_of(args) as progress:
         progress.stage(f"reading {args.log}")
-        flight = read_log(args.log, inputs=args.inputs, segment=args.segment, rate=args.rate,
-                          calibration=args.calibration, allow_damaged=args.allow_damaged, log=args.log_n)
-    measured = flight.metadata.get("attitude_source") == "measured"
-    agreement = rate_attitude_agreement(flight) if measured else None
-    meta = {**dict(flight.metadata), "rate_attitude_correlation": agreement}
-    write_csv_flight(flight, args.out)
-    mpath = meta_path(args.out)
-    write_text(mpath, json.dumps(jsonable(meta), indent=2, sort_keys=True) + "\n")
-    m = flight.metadata
+        if args.segment == "each":
+            flights = read_log_runs(args.log, **options)
+        else:
+            flights = [read_log(args.log, segment=args.segment, **options)]
+    outs = [args.out] if args.segment != "each" else [run_path(args.out, k + 1) for k in range(len(flights))]
+    agreements = [_write(flight, out) for flight, out in zip(flights, outs)]  # all read before any is written
+    m = flights[0].metadata
     for line in m.get("import_warnings") or ():
         print(f"heli import: warning: {line}", file=sys.stderr)
     log_note = f", log {m['log_index']} of {m['logs_in_file']}" if m.get("logs_in_file", 1) > 1 else ""
     print(f"{m.get('format', 'csv')} log ({m.get('vehicle', 'flight')}{log_note}), inputs: {m.get('input_source')}")
-    print(f"segment {flight.time[0]:.3f}..{flight.time[-1]:.3f} s ({flight.duration:.1f} s, "
+    for flight, out, agreement in zip(flights, outs, agreements):
+        _print_flight(flight, out, agreement, args.segment == "each")
+    if len(flights) > 1:
+        print(f"identify from every run: heli identify {' '.join(str(o) for o in outs)} --out model/")
+    return 0
+
+
+def run_path(out, k: int):
+    """The CSV of airborne run ``k`` (from 1) of ``--segment each``: ``flight.csv`` -> ``flight-2.csv``."""
+    from pathlib import Path
+
+    out = Path(out)
+    return out.with_name(f"{out.stem}-{k}{out.suffix}")
+
+
+def _write(flight, out) -> dict | None:
+    """``flight`` as the CSV ``out`` and its metadata beside it (each written atomically); returns the
+    attitude-derivative vs rate correlation per axis (None without a logged attitude)."""
+    import json
+
+    from heli_core.files import jsonable, write_text
+    from identification.io import write_csv_flight
+    from identification.io.raw_log import rate_attitude_agreement
+
+    measured = flight.metadata.get("attitude_source") == "measured"
+    agreement = rate_attitude_agreement(flight) if measured else None
+    write_csv_flight(flight, out)
+    write_text(meta_path(out), json.dumps(jsonable({**dict(flight.metadata), "rate_attitude_correlation": agreement}),
+                                          indent=2, sort_keys=True) + "\n")
+    return agreement
+
+
+def _print_flight(flight, out, agreement, numbered: bool) -> None:
+    """What was written of ``flight``: its segment, its attitude's check, clipped inputs, damage, its files."""
+    m = flight.metadata
+    run = f"airborne run {m['airborne_run']['index']} of {m['airborne_run']['of']}: " if numbered else ""
+    print(f"{run}segment {flight.time[0]:.3f}..{flight.time[-1]:.3f} s ({flight.duration:.1f} s, "
           f"{m.get('segment_mode', 'given')}), {flight.n} samples at {flight.sample_rate:.1f} Hz")
     if agreement is None:
         print("attitude: reconstructed from the rates (eqs. 25-29); the log has no attitude stream")
@@ -173,6 +207,5 @@ def run(args) -> int:
         print("inputs clipped to [-1, 1] (samples): " + ", ".join(f"{k} {v}" for k, v in clipped.items()))
     if m.get("damage"):
         print("damaged log, imported what decodes: " + "; ".join(m["damage"]))
-    print(f"wrote {args.out}")
-    print(f"wrote {mpath}")
-    return 0
+    print(f"wrote {out}")
+    print(f"wrote {meta_path(out)}")

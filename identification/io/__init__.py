@@ -34,7 +34,7 @@ from .errors import (
 
 __all__ = [
     "read_csv_flight", "read_servo_csv", "sticks_from_servos", "write_csv_flight", "read_flight", "read_log",
-    "detect_format", "list_logs", "LogFormatError", "DamagedLogError", "MissingStreamError", "InputSourceError",
+    "read_log_runs", "detect_format", "list_logs", "LogFormatError", "DamagedLogError", "MissingStreamError", "InputSourceError",
     "LogSelectionError", "NotAirborneError", "SegmentError", "InsufficientLogError", "FORMATS", "meta_path",
 ]
 
@@ -64,8 +64,8 @@ def detect_format(path) -> str:
 def _read_csv(path, inputs, segment, calibration):
     if inputs not in (None, "sticks", "servos"):
         raise InputSourceError(f"{path}: a CSV flight holds sticks (or servo pulses), not {inputs!r} inputs")
-    if segment == "auto":
-        raise SegmentError(f"{path}: segment='auto' needs a flight-controller log (throttle, vibration); a CSV "
+    if segment in ("auto", "each"):
+        raise SegmentError(f"{path}: segment={segment!r} needs a flight-controller log (throttle, vibration); a CSV "
                            "flight is used as it is: pass 'all' or T0:T1")
     from .raw_log import _parse_segment
 
@@ -164,31 +164,53 @@ def read_log(path, inputs: str | None = None, segment=None, rate: float | None =
     MissingDependency
         The parser of the format (extra ``logs``) is not installed.
     """
+    path, fmt = _located(path, log)
+    if fmt == "csv":
+        return _read_csv(path, inputs, segment, calibration)
+    from .raw_log import to_flight
+
+    return to_flight(_load_raw(path, fmt, allow_damaged, log), inputs=inputs, segment=segment, rate=rate,
+                     calibration=calibration)
+
+
+def read_log_runs(path, inputs: str | None = None, rate: float | None = None, calibration=None,
+                  allow_damaged: bool = False, log: int | None = None) -> list:
+    """Every airborne run of a flight-controller log as a validated :class:`~identification.flight.Flight`
+    of its own, in time order (:func:`~identification.io.raw_log.to_flights`; ``heli import --segment
+    each``): :func:`read_log` with ``segment="auto"`` keeps the longest run alone. ``heli identify`` and
+    :func:`identification.identify` take the flights together. Arguments and errors as :func:`read_log`'s;
+    a CSV flight raises ``SegmentError`` (it has no throttle or vibration to find runs by)."""
+    path, fmt = _located(path, log)
+    if fmt == "csv":
+        raise SegmentError(f"{path}: segment 'each' needs a flight-controller log (throttle, vibration) to find "
+                           "the airborne runs; a CSV flight is used as it is: pass 'all' or T0:T1")
+    from .raw_log import to_flights
+
+    return to_flights(_load_raw(path, fmt, allow_damaged, log), inputs=inputs, rate=rate, calibration=calibration)
+
+
+def _located(path, log) -> tuple[Path, str]:
+    """``path`` as a Path and its format, after checking it is a readable file and ``log`` can exist in it."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"flight log {str(path)!r} does not exist")
     _check_regular_file(path)
     from .container import locate
 
-    where = locate(path)
-    fmt = where.format
+    fmt = locate(path).format
     if log is not None and fmt != "blackbox" and int(log) != 1:
         raise LogSelectionError(f"{path}: a {fmt} file holds one log; there is no log {log} "
                                 "(only blackbox flash dumps hold several)")
-    if fmt == "csv":
-        return _read_csv(path, inputs, segment, calibration)
+    return path, fmt
+
+
+def _load_raw(path: Path, fmt: str, allow_damaged: bool, log: int | None = None):
+    """The decoded :class:`~identification.io.raw_log.RawLog` of a flight-controller log of format ``fmt`` (an
+    ArduPilot text log raises ``InsufficientLogError``, saying what it holds)."""
     if fmt == "ardupilot-dataflash-text":
         from .dataflash_text import load_dataflash_text
 
         load_dataflash_text(path)  # raises InsufficientLogError
-    from .raw_log import to_flight
-
-    raw = _load_raw(path, fmt, allow_damaged, log)
-    return to_flight(raw, inputs=inputs, segment=segment, rate=rate, calibration=calibration)
-
-
-def _load_raw(path: Path, fmt: str, allow_damaged: bool, log: int | None = None):
-    """The decoded :class:`~identification.io.raw_log.RawLog` of a flight-controller log of format ``fmt``."""
     if fmt == "px4-ulog":
         from .px4 import load_px4
 

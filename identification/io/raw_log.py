@@ -30,6 +30,7 @@ import os
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -183,11 +184,11 @@ def check_damage(raw_damage: list, path, allow_damaged: bool, fmt: str) -> None:
 
 
 def _parse_segment(segment):
-    """None/"auto"/"all"/(t0, t1)/"T0:T1" -> ("auto"|"all"|"range", (t0, t1) or None)."""
+    """None/"auto"/"all"/"each"/(t0, t1)/"T0:T1" -> ("auto"|"all"|"each"|"range", (t0, t1) or None)."""
     if segment is None or segment == "auto":
         return "auto", None
-    if segment == "all":
-        return "all", None
+    if segment in ("all", "each"):
+        return segment, None
     if isinstance(segment, str):
         try:
             a, b = segment.split(":")
@@ -271,7 +272,8 @@ def to_flight(raw: RawLog, inputs: str | None = None, segment=None, rate: float 
     segment : "auto", "all", (t0, t1), "T0:T1" or None
         "auto" (the default): the longest airborne run found by
         :func:`~identification.io.segment.detect_airborne`; "all": the longest
-        stretch without a gap; (t0, t1): that span of the log's clock [s].
+        stretch without a gap; (t0, t1): that span of the log's clock [s]. Every airborne run, each a
+        flight: :func:`to_flights`.
     rate : float, optional
         Grid rate [Hz]; default the gyro stream's rate, at most 200 Hz.
     calibration : dict or path, optional
@@ -285,8 +287,74 @@ def to_flight(raw: RawLog, inputs: str | None = None, segment=None, rate: float 
     InputSourceError, MissingStreamError, NotAirborneError, SegmentError, DamagedLogError
     """
     mode, span = _parse_segment(segment)
+    if mode == "each":
+        raise SegmentError("segment 'each' makes a flight of every airborne run: read it with "
+                           "identification.io.read_log_runs (heli import --segment each)")
+    on = _on_grid(raw, inputs, span, rate, calibration)
+    detection = None
+    if mode == "auto":
+        detection = detect_airborne(on.grid, raw.segment_signals, on.rates, on.att, on.valid, source=str(raw.path))
+        i0, i1 = detection.start, detection.stop
+        on = on._replace(warnings=on.warnings + _runs_left_out(detection, on.grid_rate))
+    else:
+        i0, i1 = _chosen_rows(raw, mode, span, on.grid, on.grid_rate, on.valid)
+    if i1 - i0 < 2:
+        if mode == "all":
+            raise SegmentError(f"{raw.path}: the longest stretch of the log without a gap holds {i1 - i0} sample(s) "
+                               f"at {on.grid_rate:g} Hz; there is no flight to import")
+        raise SegmentError(f"{raw.path}: the chosen segment holds {i1 - i0} samples; pass --segment all or a "
+                           "longer T0:T1")
+    return _cut(raw, on, int(i0), int(i1), mode, detection)
+
+
+def to_flights(raw: RawLog, inputs: str | None = None, rate: float | None = None, calibration=None) -> list:
+    """Every airborne run of the log (:func:`~identification.io.segment.detect_airborne`: at least
+    ``MIN_AIRBORNE_S`` long, each trimmed as the longest is) as a :class:`Flight` of its own, in time order:
+    a log of several take-offs, or of a flight the detector cut where the aircraft sat for a moment, gives
+    all its airborne data, where :func:`to_flight` gives the longest run. Each flight's metadata has
+    ``segment_mode`` "each" and ``airborne_run`` ``{"index": k, "of": n}`` (from 1). Arguments and errors
+    as :func:`to_flight`'s."""
+    on = _on_grid(raw, inputs, None, rate, calibration)
+    detection = detect_airborne(on.grid, raw.segment_signals, on.rates, on.att, on.valid, source=str(raw.path))
+    n = len(detection.run_rows)
+    return [_cut(raw, on, a, b, "each", detection, {"index": k + 1, "of": n})
+            for k, (a, b) in enumerate(detection.run_rows)]
+
+
+def _runs_left_out(detection, grid_rate: float) -> list:
+    """A warning naming the airborne runs besides the longest, which a flight of the longest leaves out ([] when
+    there is one run)."""
+    runs = detection.runs
+    if len(runs) < 2:
+        return []
+    spans = [b - a for a, b in runs]
+    listed = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in runs)
+    kept = (detection.stop - detection.start) / grid_rate
+    return [f"the log holds {len(runs)} airborne runs ({listed}): this flight is the longest ({kept:.1f} s "
+            f"trimmed), the other {len(runs) - 1}'s {sum(spans) - max(spans):.1f} s are left out; heli import "
+            "--segment each writes every run as a CSV of its own, which heli identify takes together (Python: "
+            "identification.io.read_log_runs)"]
+
+
+class _OnGrid(NamedTuple):
+    """A decoded log's streams on its uniform grid (:func:`_on_grid`), before a segment is cut."""
+
+    grid: np.ndarray
+    valid: np.ndarray
+    rates: np.ndarray
+    att: np.ndarray | None
+    sticks: np.ndarray
+    source: str
+    extra_meta: dict
+    warnings: list
+    used: list
+    grid_rate: float
+
+
+def _on_grid(raw: RawLog, inputs, span, rate, calibration) -> _OnGrid:
+    """The input source chosen and the rates, attitude and inputs resampled onto the grid (``span`` limits
+    it when given)."""
     source, input_stream, extra_meta = _choose_input(raw, inputs, calibration)
-    warnings = list(raw.notes)
     used = [raw.rates, input_stream] + ([raw.attitude] if raw.attitude is not None else [])
     what = f"rates, {'attitude and ' if raw.attitude is not None else ''}{source}"
     grid_rate = float(rate) if rate is not None else min(raw.rates.rate, DEFAULT_MAX_RATE)
@@ -298,40 +366,34 @@ def to_flight(raw: RawLog, inputs: str | None = None, segment=None, rate: float 
         valid &= valid_on_grid(grid, s)
     if not valid.any():
         raise SegmentError(f"{raw.path}: no stretch of the log holds all of {what} without a gap")
-    rates = resample_stream(raw.rates, grid)
-    att = resample_stream(raw.attitude, grid) if raw.attitude is not None else None
-    sticks = resample_stream(input_stream, grid)
+    return _OnGrid(grid, valid, resample_stream(raw.rates, grid),
+                   resample_stream(raw.attitude, grid) if raw.attitude is not None else None,
+                   resample_stream(input_stream, grid), source, extra_meta, list(raw.notes), used, grid_rate)
 
-    detection = None
-    if mode == "auto":
-        detection = detect_airborne(grid, raw.segment_signals, rates, att, valid, source=str(raw.path))
-        i0, i1 = detection.start, detection.stop
-    else:
-        i0, i1 = _chosen_rows(raw, mode, span, grid, grid_rate, valid)
-    sl = slice(int(i0), int(i1))
-    if i1 - i0 < 2:
-        if mode == "all":
-            raise SegmentError(f"{raw.path}: the longest stretch of the log without a gap holds {i1 - i0} sample(s) "
-                               f"at {grid_rate:g} Hz; there is no flight to import")
-        raise SegmentError(f"{raw.path}: the chosen segment holds {i1 - i0} samples; pass --segment all or a "
-                           "longer T0:T1")
-    sticks = sticks[:, sl]
+
+def _cut(raw: RawLog, on: _OnGrid, i0: int, i1: int, mode: str, detection, run: dict | None = None) -> Flight:
+    """The flight of grid rows [i0, i1): inputs clipped to [-1, 1] (counted), metadata written."""
+    sl = slice(i0, i1)
+    sticks = on.sticks[:, sl]
     # Count what is really out of range; the anti-alias filter's ringing at a step (< 0.1 %) is clipped silently.
     clipped = {name: int((np.abs(sticks[i]) > 1.0 + CLIP_TOLERANCE).sum()) for i, name in enumerate(STICK_COLUMNS)}
     sticks = np.clip(sticks, -1.0, 1.0)
-    if att is None:
+    warnings = list(on.warnings)
+    if on.att is None:
         warnings.append("the log has no attitude stream (older firmware): the attitude is reconstructed from the "
                         "rates (eqs. 25-29), starting level")
-    meta = _provenance(raw, source, extra_meta, clipped, _resampling(used, grid_rate),
-                       [float(grid[i0]), float(grid[i1 - 1])], mode)
+    meta = _provenance(raw, on.source, on.extra_meta, clipped, _resampling(on.used, on.grid_rate),
+                       [float(on.grid[i0]), float(on.grid[i1 - 1])], mode)
     if detection is not None:
         meta["airborne_detection"] = detection.summary()
+    if run is not None:
+        meta["airborne_run"] = run
     if raw.damage:
         meta["damage"] = list(raw.damage)
     if warnings:
         meta["import_warnings"] = warnings
-    return make_flight(grid[sl], rates[:, sl], sticks, attitude=None if att is None else att[:, sl], metadata=meta,
-                       units_from=f"{raw.format} log")
+    return make_flight(on.grid[sl], on.rates[:, sl], sticks, attitude=None if on.att is None else on.att[:, sl],
+                       metadata=meta, units_from=f"{raw.format} log")
 
 
 def _grid(raw: RawLog, used: list, what: str, source: str, span, grid_rate: float) -> np.ndarray:

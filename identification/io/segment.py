@@ -30,7 +30,7 @@ any excursion removed too (a crashed aircraft lying on its side or back with
 its motors still running must not count, nor the tumble before it). Holes shorter than ``HOLE_S`` are filled,
 runs shorter than ``MIN_AIRBORNE_S`` discarded, and the longest remaining run,
 trimmed by ``TRIM_S`` at both ends (take-off and touch-down transients), is the
-segment. Finding none raises :class:`~identification.io.errors.NotAirborneError`
+segment (``segment="each"``: every remaining run, trimmed alike, a flight each). Finding none raises :class:`~identification.io.errors.NotAirborneError`
 with the figures that decided it, whether the vehicle was ever armed (when the log
 says), and what to try next (``--segment all`` or ``T0:T1``).
 
@@ -45,7 +45,7 @@ the figures say so.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.ndimage import uniform_filter1d
@@ -112,6 +112,9 @@ class Detection:
     airborne_s: float
     runs: list
     figures: dict
+    run_rows: list = field(default_factory=list)
+    """Grid indices [start, stop) of every airborne run, each trimmed as the longest is, in time order
+    (``heli import --segment each`` writes each as a flight)."""
 
     def summary(self) -> dict:
         return {"segment": [self.t_start, self.t_stop], "airborne_runs_s": self.runs,
@@ -257,14 +260,14 @@ def detect_airborne(grid: np.ndarray, signals: SegmentSignals, rates: np.ndarray
     if not len(long):
         raise NotAirborneError(_not_airborne_message(source, grid, valid, runs, f, figures, signals, crit))
     lengths = long[:, 1] - long[:, 0]
-    a, b = long[int(np.argmax(lengths))]
     trim = int(round(TRIM_S * fs))
-    a, b = int(a + trim), int(b - trim)
+    rows = [(int(i + trim), int(j - trim)) for i, j in long]
+    a, b = rows[int(np.argmax(lengths))]
     return Detection(
         start=a, stop=b, t_start=float(grid[a]), t_stop=float(grid[b - 1]),
         airborne_s=round(float(lengths.sum() / fs), 3),
         runs=[[round(float(grid[i]), 3), round(float(grid[j - 1]), 3)] for i, j in long],
-        figures=figures,
+        figures=figures, run_rows=rows,
     )
 
 

@@ -16,7 +16,9 @@ quality and returns one line per concern, for the terminal and the report:
   0.5 s ahead 0.10).
 * **Short flight** -- a flight shorter than :data:`MIN_DURATION_S`: too few
   independent gusts and manoeuvres for the parameters (and the wind statistics of
-  eqs. 41-47) to settle.
+  eqs. 41-47) to settle. Several flights are fitted together (one set of parameters and
+  gust statistics): they are judged by their total (the airborne runs of one log, ``heli
+  import --segment each``, are often shorter one by one).
 * **Barely excited axis** -- the axis' stick moves with a standard deviation below
   :data:`~identification.excitation.MIN_STICK_STD` (half a percent of the [-1, 1] range) or its rate below
   :data:`MIN_RATE_STD` (half a degree per second): the control gain and damping of
@@ -89,9 +91,15 @@ def fit_warnings(flights, r2: Mapping | None = None, r2_label: str = "fit", *, m
         flights = [flights]
     flights = list(flights) if isinstance(flights, Iterable) else [flights]
     out: list[str] = []
-    for k, f in enumerate(flights):
-        duration = float(f.time[-1] - f.time[0]) if len(f.time) > 1 else 0.0
-        if duration < min_duration_s:
+    durations = [float(f.time[-1] - f.time[0]) if len(f.time) > 1 else 0.0 for f in flights]
+    if len(flights) > 1 and sum(durations) < min_duration_s:  # the fit's parameters are the flights' together
+        each = ", ".join(f"{_name(f, k, len(flights))[len('flight '):]} {d:.1f} s"
+                         for k, (f, d) in enumerate(zip(flights, durations)))
+        out.append(f"the {len(flights)} flights ({each}) last {sum(durations):.1f} s in all, shorter than "
+                   f"{min_duration_s:.0f} s: too short for the parameters and the wind statistics to settle; "
+                   "identify from longer flights or more of them")
+    for k, (f, duration) in enumerate(zip(flights, durations)):
+        if len(flights) == 1 and duration < min_duration_s:
             out.append(f"{_name(f, k, len(flights))} lasts {duration:.1f} s, shorter than {min_duration_s:.0f} s: "
                        "too short for the parameters and the wind statistics to settle; identify from a longer "
                        "flight or several flights")
