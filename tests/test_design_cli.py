@@ -118,6 +118,7 @@ def test_a_50hz_models_controller_is_designed_for_and_flown_at_its_period(model_
     assert json.loads((tmp_path / "ev" / "evaluation.json").read_text())["settings"]["dt"] == 0.02
 
 
+@pytest.mark.slow  # 7-8 s: make test-slow (the suite's 5 minutes on a 2-core AVX2 machine)
 def test_servo_activity_that_cannot_be_flown_leaves_the_design_standing(model_50hz_40s, tmp_path, capsys):
     """--dt 0.01 on a 50 Hz model: the loop is designed and written; the servo activity, which the model's
     traces cannot fly at that period, is a note in the terminal and in design.md instead of the command's end."""

@@ -249,6 +249,7 @@ def test_cli_writes_json_and_markdown(heli, flight_path, tmp_path, capsys):
     assert not list(out.glob("*.tmp"))  # atomic writes leave no temporaries
 
 
+@pytest.mark.slow  # 7-8 s: make test-slow (the suite's 5 minutes on a 2-core AVX2 machine)
 def test_cli_validate_adds_heldout_errors(heli, flight_path, validation_path, tmp_path, capsys):
     out = tmp_path / "cmp"
     code = heli(["compare-methods", str(flight_path), "--validate", str(validation_path), "--out", str(out),
@@ -279,6 +280,7 @@ def test_cli_validate_at_another_sample_rate_exits_2(heli, flight_path, other_ra
                  "--out", str(tmp_path / "o")]) == 2
 
 
+@pytest.mark.slow  # 7-8 s: make test-slow (the suite's 5 minutes on a 2-core AVX2 machine)
 def test_script_flies_a_validation_twin(monkeypatch, tmp_path, capsys):
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         monkeypatch.setenv(var, "1")  # the script sets them at import; keep the test session's
