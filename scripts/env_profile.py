@@ -54,6 +54,22 @@ def _without_normals(lines):
     return out
 
 
+def _one_mixing_multiply(lines):
+    """SplitMix64's two 64-bit multiplies of a word (and the position's by its gamma) replaced by one: what
+    the stream's multiplies cost where the CPU has no 64-bit vector multiply (AVX2: three 32-bit ones and
+    shifts each). Another stream: the noise changes, its cost alone is timed."""
+    out = []
+    for line in lines:
+        m = re.match(r"(\s*)_b = stream_bits\(_key, (.*)\)$", line)
+        if m:
+            indent, position = m.groups()
+            out += [f"{indent}_z = _key ^ (({position}) << np.uint64(21))",
+                    f"{indent}_b = (_z ^ (_z >> np.uint64(29))) * np.uint64(0xBF58476D1CE4E5B9)"]
+        else:
+            out.append(line)
+    return out
+
+
 def _without_gyro_lines(lines):
     """The gyro vibration lines (the sensor model's sinusoids) left at zero."""
     first = next(i for i, line in enumerate(lines) if "_amp0 = line_amp[0]" in line)
@@ -80,6 +96,7 @@ def _without_prefetch(lines):
 
 
 VARIANTS = {"no slow path": _without_slow_path, "no normals": _without_normals,
+            "one mixing multiply": _one_mixing_multiply,
             "no gyro lines": _without_gyro_lines, "no inverse trig": _without_inverse_trig,
             "library row fixed": _library_row_fixed, "no prefetch": _without_prefetch}
 
