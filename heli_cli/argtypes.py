@@ -230,8 +230,8 @@ def segment_option(text):
 
 
 def segment_or_each(text):
-    """``--segment`` of ``heli import`` and ``heli identify``: :func:`segment_option`, or 'each': every airborne
-    run of a flight-controller log, a flight each."""
+    """``--segment`` of ``heli import``: :func:`segment_option`, or 'each': every airborne run of a
+    flight-controller log, a CSV each (``heli identify`` reads one flight per file: the runs' CSVs)."""
     if text == "each":
         return text
     try:

@@ -34,8 +34,9 @@ from .errors import (
 
 __all__ = [
     "read_csv_flight", "read_servo_csv", "sticks_from_servos", "write_csv_flight", "read_flight", "read_log",
-    "read_log_runs", "detect_format", "list_logs", "LogFormatError", "DamagedLogError", "MissingStreamError", "InputSourceError",
-    "LogSelectionError", "NotAirborneError", "SegmentError", "InsufficientLogError", "FORMATS", "meta_path",
+    "read_log_runs", "detect_format", "list_logs", "LogFormatError", "DamagedLogError", "MissingStreamError",
+    "InputSourceError", "LogSelectionError", "NotAirborneError", "SegmentError", "InsufficientLogError", "FORMATS",
+    "meta_path",
 ]
 
 FORMATS = ("csv", "px4-ulog", "ardupilot-dataflash", "ardupilot-dataflash-text", "blackbox")
@@ -177,8 +178,8 @@ def read_log_runs(path, inputs: str | None = None, rate: float | None = None, ca
                   allow_damaged: bool = False, log: int | None = None) -> list:
     """Every airborne run of a flight-controller log as a validated :class:`~identification.flight.Flight`
     of its own, in time order (:func:`~identification.io.raw_log.to_flights`; ``heli import --segment
-    each``): :func:`read_log` with ``segment="auto"`` keeps the longest run alone. ``heli identify`` and
-    :func:`identification.identify` take the flights together. Arguments and errors as :func:`read_log`'s;
+    each``): :func:`read_log` with ``segment="auto"`` keeps the longest run alone. An estimator's ``fit``
+    and ``heli identify`` (the runs' CSVs) take the flights together. Arguments and errors as :func:`read_log`'s;
     a CSV flight raises ``SegmentError`` (it has no throttle or vibration to find runs by)."""
     path, fmt = _located(path, log)
     if fmt == "csv":

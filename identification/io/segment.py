@@ -30,7 +30,8 @@ any excursion removed too (a crashed aircraft lying on its side or back with
 its motors still running must not count, nor the tumble before it). Holes shorter than ``HOLE_S`` are filled,
 runs shorter than ``MIN_AIRBORNE_S`` discarded, and the longest remaining run,
 trimmed by ``TRIM_S`` at both ends (take-off and touch-down transients), is the
-segment (``segment="each"``: every remaining run, trimmed alike, a flight each). Finding none raises :class:`~identification.io.errors.NotAirborneError`
+segment (``segment="each"``: every remaining run, trimmed alike, a flight each).
+Finding none raises :class:`~identification.io.errors.NotAirborneError`
 with the figures that decided it, whether the vehicle was ever armed (when the log
 says), and what to try next (``--segment all`` or ``T0:T1``).
 
