@@ -25,9 +25,9 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from csv_clock_study import rms_line  # noqa: E402  (this script's folder is on the path)
 
 GAINS = ("k2", "k6", "k10")
 DAMPINGS = ("k3", "k7", "k11")
@@ -69,16 +69,6 @@ def _one(job):
     return out
 
 
-def _cell_line(rows, name: str, keys) -> str:
-    """``RMS (worst parameter) [worst flight]`` of ``keys`` over the seeds."""
-    got = [r for r in rows if name in r]
-    if not got:
-        return "refused"
-    rms = {k: float(np.sqrt(np.mean([r[name][k] ** 2 for r in got]))) for k in keys}
-    worst_key = max(rms, key=rms.get)
-    return f"{rms[worst_key]:.1f} ({worst_key}) [{max(abs(r[name][k]) for r in got for k in keys):.1f}]"
-
-
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cells", nargs="+", default=["independent", "dryden-2Hz-pd", "held-sticks-pd"])
@@ -103,7 +93,7 @@ def main(argv=None) -> None:
     for cell in args.cells:
         got = [r for r in rows if r["cell"] == cell]
         for name, (r, L) in zip(names, [(1, args.duration), *args.splits]):
-            print(f"| {cell} | {name} | {r * L:g} | {_cell_line(got, name, GAINS)} | {_cell_line(got, name, DAMPINGS)} |")
+            print(f"| {cell} | {name} | {r * L:g} | {rms_line(got, name, GAINS)} | {rms_line(got, name, DAMPINGS)} |")
     for r in rows:
         for name, error in r["errors"].items():
             print(f"refused: {r['cell']} seed {r['seed']} {name}: {error}")

@@ -121,17 +121,24 @@ def _one(job):
     return out
 
 
-def _cell_line(rows, name: str, keys) -> str:
-    """``RMS [worst]`` of the worst parameter of ``keys``, and the RMS change against clean."""
+def rms_line(rows, name: str, keys) -> str:
+    """``RMS (worst parameter) [worst flight]`` of the relative errors ``row[name][key]`` [%] over ``rows``
+    (those that hold ``name``: the others were refused), or "refused"."""
     got = [r for r in rows if name in r]
     if not got:
         return "refused"
     rms = {k: float(np.sqrt(np.mean([r[name][k] ** 2 for r in got]))) for k in keys}
     worst_key = max(rms, key=rms.get)
-    worst = max(abs(r[name][k]) for r in got for k in keys)
-    change = max(float(np.sqrt(np.mean([(r[name][k] - r["clean"][k]) ** 2 for r in got if "clean" in r])))
-                 for k in keys)
-    return f"{rms[worst_key]:.1f} ({worst_key}) [{worst:.1f}]; vs clean {change:.2f}"
+    return f"{rms[worst_key]:.1f} ({worst_key}) [{max(abs(r[name][k]) for r in got for k in keys):.1f}]"
+
+
+def _cell_line(rows, name: str, keys) -> str:
+    """:func:`rms_line`, and the RMS change against clean."""
+    got = [r for r in rows if name in r and "clean" in r]
+    if not got:
+        return rms_line(rows, name, keys)
+    change = max(float(np.sqrt(np.mean([(r[name][k] - r["clean"][k]) ** 2 for r in got]))) for k in keys)
+    return f"{rms_line(rows, name, keys)}; vs clean {change:.2f}"
 
 
 def main(argv=None) -> None:
