@@ -167,5 +167,6 @@ def plot_servo_activity(results, path, episode: int | None = None) -> Path:
     axs[1, 0].set_ylabel("stick PSD [stick²/Hz]")
     axs[0, 0].legend(fontsize=8, loc="upper right")
     fig.suptitle(f"servo activity at dt = {dt:g} s (RMS stick step per period in the legend)", fontsize=10)
-    fig.tight_layout()
+    # Fixed margins, not tight_layout: its extra draw of the log axes' ticks was about half the figure's time.
+    fig.subplots_adjust(left=0.06, right=0.99, top=0.9, bottom=0.08, wspace=0.2, hspace=0.32)
     return save_figure(fig, path, dpi=100)
