@@ -54,11 +54,15 @@ MIN_RATE_STD = math.radians(0.5)
 """rad/s: least standard deviation of an axis' rate."""
 
 
-def _name(flight, k: int, n: int) -> str:
+def _label(flight, k: int, n: int) -> str:
+    """Flight ``k`` of ``n`` as a warning names it: its source file quoted, else its place among several ('')."""
     meta = getattr(flight, "metadata", {}) or {}
     source = meta.get("source")
-    label = f"'{source}'" if source else (f"{k + 1} of {n}" if n > 1 else "")
-    return f"flight {label}".strip()
+    return f"'{source}'" if source else (f"{k + 1} of {n}" if n > 1 else "")
+
+
+def _name(flight, k: int, n: int) -> str:
+    return f"flight {_label(flight, k, n)}".strip()
 
 
 def fit_warnings(flights, r2: Mapping | None = None, r2_label: str = "fit", *, min_r2: float = MIN_R2,
@@ -93,7 +97,7 @@ def fit_warnings(flights, r2: Mapping | None = None, r2_label: str = "fit", *, m
     out: list[str] = []
     durations = [float(f.time[-1] - f.time[0]) if len(f.time) > 1 else 0.0 for f in flights]
     if len(flights) > 1 and sum(durations) < min_duration_s:  # the fit's parameters are the flights' together
-        each = ", ".join(f"{_name(f, k, len(flights))[len('flight '):]} {d:.1f} s"
+        each = ", ".join(f"{_label(f, k, len(flights))} {d:.1f} s"
                          for k, (f, d) in enumerate(zip(flights, durations)))
         out.append(f"the {len(flights)} flights ({each}) last {sum(durations):.1f} s in all, shorter than "
                    f"{min_duration_s:.0f} s: too short for the parameters and the wind statistics to settle; "
