@@ -29,7 +29,10 @@ def atomic_path(path, suffix: str = ""):
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=(suffix or path.suffix) + ".tmp", dir=path.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=(suffix or path.suffix) + ".tmp", dir=path.parent)
+    except OSError as err:
+        raise _naming(err, path) from err
     os.close(fd)
     tmp_path = Path(tmp)
     umask = os.umask(0)
@@ -40,10 +43,21 @@ def atomic_path(path, suffix: str = ""):
         with open(tmp_path, "rb+") as fh:
             os.fsync(fh.fileno())
         os.replace(tmp_path, path)
-    except BaseException:
+    except BaseException as err:
         with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
+        if isinstance(err, OSError) and err.filename == str(tmp_path):
+            raise _naming(err, path) from err
         raise
+
+
+def _naming(err: OSError, path: Path) -> OSError:
+    """``err`` (same class and errno) naming ``path``, the file the user asked for, not the temporary beside it.
+
+    A full disk or a folder that refuses new files fails on the temporary file first ("Permission denied",
+    "No space left on device"); the user never saw its name.
+    """
+    return type(err)(err.errno, err.strerror, str(path))
 
 
 def write_text(path, text: str) -> Path:

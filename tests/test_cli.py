@@ -373,6 +373,18 @@ def test_an_output_path_under_a_file_is_one_line_and_exit_2(tmp_path, capsys):
     assert err.startswith("heli simulate-flight: error:") and "afile" in err and "Traceback" not in err
 
 
+def test_a_folder_refusing_new_files_is_named_by_the_path_given_not_the_temporary(monkeypatch, tmp_path, capsys):
+    import tempfile
+
+    def refuse(prefix, suffix, dir):  # what a read-only folder does to a user who is not root
+        raise PermissionError(13, "Permission denied", f"{dir}/{prefix}abc123{suffix}")
+
+    monkeypatch.setattr(tempfile, "mkstemp", refuse)
+    out = tmp_path / "flights" / "f.csv"
+    assert main(["simulate-flight", "--duration", "10", "-q", "--out", str(out)]) == 2
+    assert capsys.readouterr().err == f"heli simulate-flight: error: Permission denied: {out}\n"
+
+
 def _out_of_memory(args):
     import numpy as np
 

@@ -157,6 +157,22 @@ def test_write_is_atomic_when_the_writer_fails_midway(tmp_path, monkeypatch):
     assert [p.name for p in tmp_path.iterdir()] == ["flight.csv"]
 
 
+def test_a_full_disk_met_on_the_temporary_file_names_the_destination(tmp_path, monkeypatch):
+    t = 0.01 * np.arange(50)
+    f = make_flight(t, np.zeros((3, 50)), np.zeros((4, 50)))
+    dest = tmp_path / "flight.csv"
+    dest.write_text("previous content\n")
+
+    def full_disk(fname, X, *args, **kwargs):
+        raise OSError(28, "No space left on device", str(fname))  # what the kernel says, naming the file it wrote
+
+    monkeypatch.setattr(np, "savetxt", full_disk)
+    with pytest.raises(OSError, match="No space left on device") as raised:
+        write_csv_flight(f, dest)
+    assert raised.value.filename == str(dest) and raised.value.errno == 28
+    assert [p.read_text() for p in tmp_path.iterdir()] == ["previous content\n"]
+
+
 # ------------------------------------------------------------------------ bad files, one per class
 
 
