@@ -203,5 +203,21 @@ def _run(args) -> int:
         return 1
 
 
+def run() -> int:
+    """The ``heli`` program (its console script): :func:`main` on the command line's arguments.
+
+    After an interrupt the command has ended ("interrupted", 130), a second SIGINT is ignored: the exit hooks
+    still to run (a worker pool's join) would otherwise print Python's "Exception ignored" traceback. A
+    terminal's double Ctrl-C and ``timeout -s INT`` (the child, then its group) both send one. :func:`main`
+    itself leaves the caller's SIGINT handler alone.
+    """
+    code = main()
+    if code == 130:
+        import signal
+
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return code
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    sys.exit(run())

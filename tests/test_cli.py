@@ -498,3 +498,46 @@ def test_identify_takes_the_stretch_of_a_log_the_airborne_detection_misses(tmp_p
     whole, stretch = seen
     assert whole.metadata["segment_mode"] == "all" and whole.duration > 15.0
     assert stretch.duration == pytest.approx(7.0, abs=0.05) and not out.exists()
+
+
+_INTERRUPTED_TWICE = """
+import atexit, sys, time
+import heli_cli.design
+from heli_cli.main import run
+
+def exit_hook():  # what a worker pool's join does at exit: it takes a while
+    print("exiting", file=sys.stderr, flush=True)
+    time.sleep(2.0)
+
+def design(args):
+    print("ready", file=sys.stderr, flush=True)
+    time.sleep(60)
+
+atexit.register(exit_hook)
+heli_cli.design.run = design
+sys.argv = ["heli", "design"]
+sys.exit(run())
+"""
+
+
+def test_a_second_ctrl_c_while_heli_exits_prints_no_traceback(tmp_path):
+    """`timeout -s INT` and a double Ctrl-C send a second SIGINT; arriving in an exit hook (a pool's join) it
+    printed Python's "Exception ignored" traceback after "interrupted"."""
+    import signal
+
+    script = tmp_path / "interrupted_twice.py"
+    script.write_text(_INTERRUPTED_TWICE)
+    env = dict(os.environ, PYTHONPATH=os.getcwd())
+    process = subprocess.Popen([sys.executable, str(script)], env=env, stderr=subprocess.PIPE, text=True)
+    try:
+        assert process.stderr.readline() == "ready\n"
+        process.send_signal(signal.SIGINT)
+        assert process.stderr.readline() == "heli design: interrupted\n"
+        assert process.stderr.readline() == "exiting\n"
+        process.send_signal(signal.SIGINT)
+        rest = process.stderr.read()
+        process.wait(timeout=30)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert (process.returncode, rest) == (130, "")
