@@ -63,8 +63,12 @@ def servo_coefficients(tau: float, lag: float = 0.0) -> tuple[float, float, floa
     """Coefficients ``(d1, n1, n2)`` of the servo model, eq. (31).
 
     ``theta + d1*theta' = n1*delta - n2*delta'`` is the first-order Padé
-    approximation of ``exp(-s*tau)``, computed with ``control.pade``, with the
-    servo's first-order ``lag`` added to ``d1`` (module docstring).
+    approximation of ``exp(-s*tau)``, ``(1 - s tau/2) / (1 + s tau/2)``, with the
+    servo's first-order ``lag`` added to ``d1`` (module docstring). The paper
+    takes it from MATLAB's ``pade``; the closed form here is what
+    ``control.pade(tau, 1)`` returns (``tests/test_model.py`` compares the two to
+    1e-12), written out because importing python-control costs 1.4 s, most of
+    building an env in a new process.
 
     Parameters
     ----------
@@ -85,17 +89,15 @@ def servo_coefficients(tau: float, lag: float = 0.0) -> tuple[float, float, floa
     lag = max(float(lag), 0.0)
     if tau <= 0.0:
         return (lag, 1.0, 0.0)
-    import control
-
-    num, den = control.pade(tau, 1)  # (-s + 2/tau) / (s + 2/tau)
-    return (den[0] / den[1] + lag, num[1] / den[1], -num[0] / den[1])
+    half = float(tau) / 2.0
+    return (half + lag, 1.0, half)
 
 
 def pade_filter(command: np.ndarray, tau: float, fs: float, lag: float = 0.0) -> np.ndarray:
     """Pass a command through the servo of eq. (31): the first-order Padé delay (and the servo's lag).
 
     The continuous filter ``(n1 - n2 s)/(1 + d1 s)`` (coefficients from
-    ``control.pade``, :func:`servo_coefficients`) is discretised with the
+    :func:`servo_coefficients`) is discretised with the
     bilinear transform and run from rest at the first sample's value.
 
     Parameters

@@ -33,8 +33,8 @@ Servo delay (eq. 31). With ``delay="auto"`` the delay of each axis is chosen on
 a grid as the one whose Padé-delayed command best explains the response (the
 highest coefficient of determination of the integral fit, i.e. the best
 correlation between the command-driven prediction and the measured rate); the
-command is then passed through the first-order Padé filter whose coefficients
-come from ``control.pade``.
+command is then passed through the first-order Padé filter
+(:func:`heli_core.servo.servo_coefficients`, equal to ``control.pade(tau, 1)``).
 """
 
 from __future__ import annotations
