@@ -9,7 +9,8 @@ runs, so ``heli --help`` and every ``heli COMMAND --help`` answer at once.
 Errors the user can fix (any :class:`heli_core.errors.HeliError`: bad input
 files, unidentifiable data; and a path that is not what the command needs) are printed as one line without a traceback and
 exit with status 2; anything else is a bug, printed as one line with a request
-to report it, exit status 1. ``--debug`` adds the traceback to either.
+to report it, exit status 1. ``--debug`` adds the traceback to either. Ctrl-C ends a command with
+"interrupted" and exit status 130 (:func:`run`, the console script, then ignores a second one).
 """
 
 from __future__ import annotations
