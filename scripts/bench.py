@@ -513,10 +513,21 @@ def bench_backends(repeats: int) -> dict:
     return out
 
 
+def _process_seconds(argv: list, runs: int) -> float:
+    """Median wall time of ``runs`` new processes running ``argv`` (their output discarded)."""
+    import subprocess
+
+    times = []
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        subprocess.run(argv, check=True, stdout=subprocess.DEVNULL)
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
 def bench_cli(repeats: int) -> dict:
     """``heli --help`` and each ``heli COMMAND --help`` as a user runs them: a new process each time,
     median of ``max(5, repeats // 6)`` runs (5 at the default 30)."""
-    import subprocess
     import sys
     from pathlib import Path
 
@@ -530,14 +541,42 @@ def bench_cli(repeats: int) -> dict:
     out = {}
     for command in commands:
         argv = [str(heli)] + ([command] if command else []) + ["--help"]
-        times = []
-        for _ in range(runs):
-            t0 = time.perf_counter()
-            subprocess.run(argv, check=True, stdout=subprocess.DEVNULL)
-            times.append(time.perf_counter() - t0)
-        out[f"heli {command + ' ' if command else ''}--help [s]"] = statistics.median(times)
+        out[f"heli {command + ' ' if command else ''}--help [s]"] = _process_seconds(argv, runs)
     worst = max(out.values())
     out["target (<= 0.5 s each)"] = f"{'met' if worst <= 0.5 else 'NOT met'} (slowest {worst:.3f} s)"
+    return out
+
+
+_FIRST_STEP = """
+import gymnasium as gym, numpy as np
+{imports}
+env = {make}
+env.reset(seed=0)
+env.step(np.zeros(env.action_space.shape, dtype=env.action_space.dtype))
+"""
+
+
+def bench_startup(repeats: int) -> dict:
+    """A new process to its first step, as a subprocess env worker or a command meets it: ``HeliAttitude-v0``
+    (single) and its native vector env (16 copies, the compiled step cached by a first run), beside
+    ``Pendulum-v1`` in the same run; median of ``max(5, repeats // 6)`` runs."""
+    import subprocess
+    import sys
+
+    cases = {
+        "Pendulum-v1": ("", "gym.make('Pendulum-v1')"),
+        "HeliAttitude-v0": ("import heli_env", "gym.make('HeliAttitude-v0')"),
+        "HeliAttitude-v0 vector (16)": ("import heli_env", "gym.make_vec('HeliAttitude-v0', num_envs=16, "
+                                        "vectorization_mode='vector_entry_point')"),
+    }
+    runs = max(5, repeats // 6)
+    out = {}
+    for label, (imports, make) in cases.items():
+        argv = [sys.executable, "-c", _FIRST_STEP.format(imports=imports, make=make)]
+        subprocess.run(argv, check=True)  # the compiled code cached, as for a user
+        out[f"{label}: new process to its first step [s]"] = _process_seconds(argv, runs)
+    out["single ÷ Pendulum-v1 (time)"] = out["HeliAttitude-v0: new process to its first step [s]"] / out[
+        "Pendulum-v1: new process to its first step [s]"]
     return out
 
 
@@ -646,7 +685,7 @@ def bench_rl(repeats: int) -> dict:
 
 SECTIONS = {"identification": bench_identification, "physics": bench_physics, "env": bench_env,
             "env-threads": bench_env_threads, "sweep": bench_sweep,
-            "backends": bench_backends, "cli": bench_cli, "rl-seeds": bench_rl_seeds, "rl": bench_rl}
+            "backends": bench_backends, "cli": bench_cli, "startup": bench_startup, "rl-seeds": bench_rl_seeds, "rl": bench_rl}
 
 
 def main(argv=None):
