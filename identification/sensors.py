@@ -4,7 +4,8 @@ The noise of a sampled signal is read from its third difference: for white noise
 σ the third difference has variance C(6, 3)·σ² = 20σ², while the motion of a rotorcraft sampled at tens
 of Hz contributes almost nothing to it (its third derivative times dt³). A robust scale (1.4826 times the
 median absolute deviation) keeps the estimate away from a few spikes. The gyros are read after their
-vibration lines are removed by regression on their sinusoids (:func:`identification.vibration.remove_vibration_lines`);
+vibration lines are removed by regression on their sinusoids (:func:`identification.vibration.remove_vibration_lines`,
+and below 8 Hz the lines a slow log folded there, :func:`identification.vibration.remove_folded_lines`);
 the lines themselves are kept, with their frequency as logged and their amplitude. Over several flights the
 levels are the median of the flights'; the lines those found in any flight, each at its largest amplitude.
 
@@ -21,7 +22,7 @@ from heli_core.sensors import GyroLine, SensorModel
 from heli_core.terms import AXES
 
 from .flight import Flight
-from .vibration import remove_vibration_lines
+from .vibration import remove_folded_lines, remove_vibration_lines
 
 DIFFERENCE_ORDER = 3
 """Order of the difference the white-noise level is read from."""
@@ -52,6 +53,8 @@ def identify_sensors(flights, min_hz: float = 8.0) -> SensorModel:
     gyro, att, lines = [], [], {}
     for f in flights:
         cleaned, found = remove_vibration_lines(f.rates, f.sample_rate, min_hz)
+        cleaned, folded = remove_folded_lines(cleaned, f.attitude, f.sample_rate, min_hz)
+        found = found + folded
         gyro.append(white_noise_level(cleaned))
         att.append(white_noise_level(np.unwrap(f.attitude, axis=1)))  # yaw across +-pi is not noise
         for line in found:

@@ -6,6 +6,14 @@ predicting a response the cleaned rates no longer hold (on the autopilot bench c
 came out likelier, likelihood-ratio statistic 50-85 on effect-free flights). :func:`remove_common_lines`
 removes the lines from the commands and the rates together: the same prefilter on the input and the output,
 which leaves their relation unchanged.
+
+A gyro logged slower than twice a line's frequency folds the line into the aircraft's own band (27 Hz logged at
+25 Hz is a line at 2 Hz, 30 Hz one at 5 Hz): on the bench at 25 Hz such lines, which the search above 8 Hz never
+saw, left the dampings 450-600 % off. There a line cannot be told from the motion by its frequency, so
+:func:`remove_folded_lines` asks the attitude: the aircraft's own motion at a frequency shows in the attitude
+as the rate's integral, a sensor's line does not, and only the part of the line the attitude does not explain is
+removed (the whole line behind a pilot, the sensor's share behind an autopilot that flew on it; nothing of a
+sine-dwell the pilot flew).
 """
 
 from __future__ import annotations
@@ -61,16 +69,152 @@ def remove_vibration_lines(rates, fs: float, min_hz: float = 8.0, max_lines: int
             neighbourhood = np.concatenate([power[lo:max(lo, k - 8)], power[min(hi, k + 9):hi]])
             if neighbourhood.size == 0 or power[k] < prominence * np.median(neighbourhood):
                 break
-            y0, y1, y2 = np.log(power[k - 1:k + 2] + 1e-300)
-            denom = y0 - 2 * y1 + y2
-            shift = 0.5 * (y0 - y2) / denom if denom != 0 else 0.0
-            f0 = float(freqs[k] + np.clip(shift, -0.5, 0.5) * df)
-            basis = np.vstack([np.cos(2 * np.pi * f0 * t), np.sin(2 * np.pi * f0 * t)])
+            f0 = _refined(power, freqs, k)
+            basis = _basis(f0, t)
             coef = np.linalg.lstsq(basis.T, x, rcond=None)[0]
             rates[a] -= coef @ basis
             found.append({"axis": AXES[a] if rates.shape[0] == 3 else a, "frequency_hz": f0,
                           "amplitude": float(np.hypot(*coef))})
     return rates, found
+
+
+def _refined(power, freqs, k: int) -> float:
+    """The frequency of the line at bin ``k``, refined by a parabola through the log-power of its 3 bins."""
+    y0, y1, y2 = np.log(power[k - 1:k + 2] + 1e-300)
+    denom = y0 - 2 * y1 + y2
+    shift = 0.5 * (y0 - y2) / denom if denom != 0 else 0.0
+    return float(freqs[k] + np.clip(shift, -0.5, 0.5) * freqs[1])
+
+
+def _basis(hz: float, t) -> np.ndarray:
+    return np.vstack([np.cos(2 * np.pi * hz * t), np.sin(2 * np.pi * hz * t)])
+
+
+FOLDED_FLOOR_HZ = 0.5
+"""Lowest frequency :func:`remove_folded_lines` searches [Hz]: below it the gusts' own power hides a line, and
+the slow wind state absorbs one."""
+
+_GAP = 8
+"""Bins either side of a peak left out of its sides: the Hann window's main lobe, zero-padded 4x."""
+
+_NARROW = 32
+"""Bins just beyond the main lobe that a folded line must stand above on each side."""
+
+_SEARCHED_ABOVE = 4.0
+"""Width of band above ``min_hz`` [Hz] that :func:`remove_vibration_lines` needs to search at all (its ±2 Hz
+neighbourhood): a log at 20 Hz leaves 8-10 Hz to :func:`remove_folded_lines` (a 31 Hz rotor folds to 9 Hz)."""
+
+_CANDIDATES = 64
+"""Local maxima tried per axis, the strongest first."""
+
+
+def remove_folded_lines(rates, attitude, fs: float, below_hz: float = 8.0, max_lines: int = 4,
+                        prominence: float = 30.0):
+    """Remove from the gyro the lines a slow log folded into the aircraft's band (module docstring).
+
+    Each axis' periodogram (zero-padded 4x, Hann window) between :data:`FOLDED_FLOOR_HZ` and ``below_hz`` is
+    searched for narrow peaks: a local maximum standing ``prominence`` times above the median power on *each*
+    side of it, both over ±2 Hz and over the :data:`_NARROW` bins just beyond its main lobe. A line lasting the
+    whole record is that narrow; a sweep's or a gust's spectral bump is not, and one side alone would take the
+    edge of a band that a logger low-passed (the T-REX log: nothing above 2.4 Hz) for a line. On the bench's
+    flights of 60 and 300 s at 20-100 Hz the motion's peaks stood at most 16.6 times above their sides, folded
+    rotor lines 18-30 000 times.
+
+    Each line's rate amplitude is fitted by least squares, and so is that of the attitude's central
+    difference at the same frequency (corrected by the difference's ``wdt / sin(wdt)``; the attitude itself
+    would let a heading's drift over the flight leak in). That rate, the kinematics near hover, is the
+    aircraft's motion; the rest is the sensor's. Where the sensor's share is at least half the line, that share
+    is subtracted from the rate. A line's frequency is the least-squares one near its peak.
+
+    Parameters
+    ----------
+    rates, attitude : ndarray, shape (3, n)
+        Gyro [rad/s] and Euler angles [rad] (yaw unwrapped here).
+    fs : float
+        Sample rate [Hz].
+
+    Returns
+    -------
+    cleaned : ndarray, shape (3, n)
+    lines : list of dict
+        ``axis``, ``frequency_hz``, ``amplitude`` [rad/s] (the share removed) and ``folded`` (True) of each.
+    """
+    rates = np.array(rates, dtype=float, copy=True)
+    angles = np.unwrap(np.asarray(attitude, dtype=float), axis=1)
+    n = rates.shape[1]
+    nfft = 1 << int(np.ceil(np.log2(4 * max(n, 16))))
+    freqs = np.fft.rfftfreq(nfft, 1.0 / fs)
+    top = below_hz if fs / 2 - below_hz >= _SEARCHED_ABOVE else fs / 2  # what remove_vibration_lines searched
+    band = np.where((freqs >= FOLDED_FLOOR_HZ) & (freqs < top))[0]
+    band = band[band < freqs.size - 1]
+    if n < 64 or band.size < 3:
+        return rates, []
+    t = np.arange(n) / fs
+    half = max(3, int(round(2.0 / freqs[1])))
+    win = np.hanning(n)
+    turn = np.gradient(angles, 1.0 / fs, axis=1)  # the attitude's rate: a heading's drift leaks into no line
+    found = []
+    for a in range(rates.shape[0]):
+        x = rates[a] - np.mean(rates[a])
+        power = np.abs(np.fft.rfft(x * win, nfft)) ** 2
+        inner = power[band[1:-1]]
+        peaks = band[1:-1][(inner > power[band[:-2]]) & (inner >= power[band[2:]])]  # local maxima
+        removed = 0
+        for k in peaks[np.argsort(power[peaks])[::-1][:_CANDIDATES]]:
+            left, right = max(0, k - _GAP), k + _GAP + 1
+            sides = (power[max(0, left - _NARROW):left], power[right:right + _NARROW],  # the cheap ones first
+                     power[max(0, k - half):left], power[right:k + half + 1])
+            if not all(side.size for side in sides) or any(power[k] < prominence * np.median(side)
+                                                           for side in sides):
+                continue
+            hz = _least_squares_frequency(x, t, _refined(power, freqs, k), 2 * freqs[1])
+            basis = _basis(hz, t)
+            line = np.linalg.lstsq(basis.T, x, rcond=None)[0]
+            wdt = 2 * np.pi * hz / fs  # a central difference passes a sinusoid's rate times sin(wdt) / wdt
+            moving = np.linalg.lstsq(basis.T, turn[a], rcond=None)[0] * (wdt / np.sin(wdt))
+            sensor = line - moving
+            if np.hypot(*sensor) < 0.5 * np.hypot(*line):
+                continue  # the aircraft moved so: its motion, not a sensor's line
+            rates[a] -= sensor @ basis
+            x = x - sensor @ basis
+            found.append({"axis": AXES[a] if rates.shape[0] == 3 else a, "frequency_hz": hz,
+                          "amplitude": float(np.hypot(*sensor)), "folded": True})
+            removed += 1
+            if removed == max_lines:
+                break
+        rates[a], line = _nyquist_line(rates[a], x, power, half, prominence)
+        if line:
+            found.append({"axis": AXES[a] if rates.shape[0] == 3 else a, "frequency_hz": fs / 2,
+                          "amplitude": line, "folded": True})
+    return rates, found
+
+
+def _nyquist_line(rate, x, power, half: int, prominence: float) -> tuple:
+    """``rate`` without a line folded onto half the sample rate (a 30 Hz rotor logged at 20 Hz: the samples
+    alternate, ``B (-1)^k``), and ``|B|`` (0.0 if none): the last bin standing ``prominence`` times above the
+    medians of the bins below it, over ±2 Hz and just beyond the main lobe. No aircraft moves at that
+    frequency; the attitude cannot tell (its central difference passes nothing there)."""
+    end = power.size - 1 - _GAP
+    if end - half < 0 or power[-1] < prominence * max(np.median(power[end - half:end]),
+                                                       np.median(power[end - _NARROW:end])):
+        return rate, 0.0
+    alternating = np.where(np.arange(x.size) % 2, -1.0, 1.0)
+    b = float(alternating @ x) / x.size
+    return rate - b * alternating, abs(b)
+
+
+def _least_squares_frequency(x, t, hz: float, width: float) -> float:
+    """The frequency within ``hz`` ± ``width`` whose sinusoid explains most of ``x`` (least squares). The
+    parabola through the periodogram is pulled by the motion around a line inside the motion's band (by
+    0.0003 Hz at 2 Hz: a quarter turn of phase over 300 s); the fit is not."""
+    from scipy.optimize import minimize_scalar
+
+    def unexplained(f):
+        basis = _basis(f, t)
+        return -float(np.sum((np.linalg.lstsq(basis.T, x, rcond=None)[0] @ basis) ** 2))
+
+    return float(minimize_scalar(unexplained, bounds=(hz - width, hz + width), method="bounded",
+                                 options={"xatol": width * 1e-4}).x)
 
 
 def remove_lines(x, fs: float, frequencies) -> np.ndarray:
@@ -85,14 +229,17 @@ def remove_lines(x, fs: float, frequencies) -> np.ndarray:
     return x - coef @ basis
 
 
-def remove_common_lines(rates, commands, fs: float, min_hz: float = 8.0) -> tuple[np.ndarray, np.ndarray, list]:
+def remove_common_lines(rates, commands, fs: float, min_hz: float = 8.0,
+                        attitude=None) -> tuple[np.ndarray, np.ndarray, list]:
     """Vibration lines removed from the gyro, and from the commands where these carry lines too.
 
     Each axis' gyro (``rates``, (3, n)) is cleaned by :func:`remove_vibration_lines`. Where that axis'
     command (``commands``, (3, n): lat, lon, ped) has lines of its own (a flight controller feeding its
     gyro back), the lines of either are removed from both, from the raw signals in one regression, so that
     input and output see the same prefilter. A pilot's sticks have no such lines: then only the gyro is
-    cleaned, exactly as :func:`remove_vibration_lines` does.
+    cleaned, exactly as :func:`remove_vibration_lines` does. With the ``attitude`` (3, n) the lines a slow
+    log folded below ``min_hz`` are then taken out of the gyro by :func:`remove_folded_lines` (the commands
+    keep them: what the aircraft answered is in the attitude, and only the sensor's share is removed).
 
     Returns
     -------
@@ -116,4 +263,7 @@ def remove_common_lines(rates, commands, fs: float, min_hz: float = 8.0) -> tupl
         cleaned[a] = remove_lines(np.asarray(rates[a], dtype=float), fs, freqs)
         commands[a] = remove_lines(commands[a], fs, freqs)
         lines += [{**ln, "signal": "command"} for ln in in_commands if ln["axis"] == AXES[a]]
+    if attitude is not None:
+        cleaned, folded = remove_folded_lines(cleaned, attitude, fs, min_hz)
+        lines += folded
     return cleaned, commands, lines

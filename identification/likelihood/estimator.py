@@ -155,7 +155,9 @@ class MaximumLikelihoodIdentifier:
         Remove narrow spectral lines above ``vibration_min_hz`` (rotor
         vibration) from the gyro by regression on their sinusoids before the fit.
     vibration_min_hz : float
-        Lowest frequency treated as vibration [Hz].
+        Lowest frequency treated as vibration [Hz]; below it only the lines a slow log folded there,
+        told from the motion by the attitude
+        (:func:`identification.vibration.remove_folded_lines`).
     axes : sequence of str
         Axes to identify.
     max_nfev : int
@@ -261,7 +263,7 @@ class MaximumLikelihoodIdentifier:
             return flight, []
         rows = list(STICK_ROW)
         rates, commands, found = remove_common_lines(flight.rates, flight.sticks[rows], flight.sample_rate,
-                                                     self.vibration_min_hz)
+                                                     self.vibration_min_hz, flight.attitude)
         sticks = flight.sticks
         if any(ln.get("signal") == "command" for ln in found):
             sticks = np.array(flight.sticks, dtype=float, copy=True)

@@ -176,3 +176,20 @@ def hold_warning(ident) -> list[str]:
             + ". The standard errors reported include this doubt. If you know, give --input-hold zoh (a flight "
             "controller or a digital radio link) or --input-hold linear (a pilot's hand sampled); a longer flight "
             "decides it"]
+
+
+def folded_lines_warning(ident) -> list[str]:
+    """One line where the gyro carried lines a slow log folded into the aircraft's band
+    (:func:`identification.vibration.remove_folded_lines`, ``ident.vibration_lines_``): which, at what rate, and
+    what avoids them. They are removed before the fit; left in, the bench's dampings came out 450-600 % off."""
+    lines = [ln for per_flight in getattr(ident, "vibration_lines_", None) or [] for ln in per_flight
+             if ln.get("folded")]
+    if not lines:
+        return []
+    where = sorted({round(ln["frequency_hz"], 2) for ln in lines})
+    axes = [axis for axis in AXES if any(ln["axis"] == axis for ln in lines)]
+    return [f"the gyro ({', '.join(axes)}) carries narrow lines at {', '.join(f'{hz:g}' for hz in where)} Hz that the "
+            "attitude does not show: vibration faster than half the log's rate, folded into the aircraft's band by "
+            "sampling. Their sensor share was removed before the fit; log the gyro at more than twice the rotor's "
+            "frequency, or low-passed below half the log's rate, to be rid of them"]
+

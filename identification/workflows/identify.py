@@ -32,7 +32,7 @@ from ..integral.method import IntegralIdentifier
 from ..reports.figures import PendingFigures
 from ..reports.identify import ReportContent, comparison_figures, fit_figures, report_markdown, wind_figures, wind_section
 from ..sensors import identify_sensors
-from ..validation.fit_warnings import fit_warnings, hold_warning
+from ..validation.fit_warnings import fit_warnings, folded_lines_warning, hold_warning
 from ..validation.judged_fit import judged_r2
 from ..validation.forward_simulation import validate_models
 from ..validation.model_verdict import judge_identifier
@@ -274,7 +274,7 @@ def identify_and_report(flights, out_dir, options: IdentifyOptions | None = None
     ident = identifiers[chosen]
     first = ident.flights_[0]  # filtered as identified
     # judged by what the model predicts (ML: 0.5 s ahead), not by what the sticks explain alone (low in strong wind)
-    warnings = fit_warnings(flights, *judged_r2(ident, flights)) + hold_warning(ident)
+    warnings = fit_warnings(flights, *judged_r2(ident, flights)) + hold_warning(ident) + folded_lines_warning(ident)
     opts.say(f"validating {'both models' if len(identifiers) > 1 else 'the model'} by forward simulation")
     validation, diverged = _validate(first, identifiers, chosen)
     warnings += diverged
