@@ -13,6 +13,7 @@ from identification.bench.cells import BENCH_CELLS
 from identification.bench.synthetic import simulate_flight
 from identification.likelihood.estimator import MaximumLikelihoodIdentifier
 from identification.sensors import identify_sensors
+from identification.validation.fit_warnings import folded_lines_warning
 from identification.vibration import remove_folded_lines
 
 FS = 25.0
@@ -84,9 +85,14 @@ def slow_log():
     return simulate_flight(300, seed=931, config=replace(BENCH_CELLS["independent"], duration=300, sample_rate=FS))
 
 
-def test_a_flight_logged_at_25_hz_is_fitted_as_at_100(slow_log):
+@pytest.fixture(scope="module")
+def slow_fit(slow_log):
+    return MaximumLikelihoodIdentifier(closed_loop=None).fit(slow_log.flight)
+
+
+def test_a_flight_logged_at_25_hz_is_fitted_as_at_100(slow_log, slow_fit):
     """Before the folded lines were removed, this flight's dampings came out 570 % high."""
-    fit = MaximumLikelihoodIdentifier(closed_loop=None).fit(slow_log.flight)
+    fit = slow_fit
     truth, got = slow_log.truth.values(), fit.params_.values()
     for name in ("k2", "k6", "k10", "k3", "k7", "k11"):
         assert abs(got[name] / truth[name] - 1) < 0.08, name
@@ -97,3 +103,9 @@ def test_a_flight_logged_at_25_hz_is_fitted_as_at_100(slow_log):
 def test_the_sensor_model_keeps_the_lines_as_the_log_shows_them(slow_log):
     model = identify_sensors(slow_log.flight)
     assert sorted({round(ln.frequency_hz, 1) for ln in model.gyro_lines}) == [2.0, 5.0, 10.0]
+
+
+def test_the_user_is_told_the_gyro_carried_folded_lines(slow_fit):
+    (warning,) = folded_lines_warning(slow_fit)
+    assert "(roll, pitch, yaw)" in warning and "at 2, 5 Hz" in warning and "twice the rotor's" in warning
+    assert folded_lines_warning(MaximumLikelihoodIdentifier()) == []  # nothing fitted, nothing said
