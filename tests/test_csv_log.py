@@ -134,11 +134,15 @@ def test_segment_of_a_read_flight(tmp_path):
 # ----------------------------------------------------------------------------- atomic writing
 
 
-def test_write_is_atomic_when_the_writer_fails_midway(tmp_path, monkeypatch):
-    t = 0.01 * np.arange(50)
-    f = make_flight(t, np.zeros((3, 50)), np.zeros((4, 50)))
-    dest = tmp_path / "flight.csv"
+def _a_flight_and_a_file_it_replaces(folder):
+    """A 50-sample flight and ``folder/flight.csv`` holding "previous content"."""
+    dest = folder / "flight.csv"
     dest.write_text("previous content\n")
+    return make_flight(0.01 * np.arange(50), np.zeros((3, 50)), np.zeros((4, 50))), dest
+
+
+def test_write_is_atomic_when_the_writer_fails_midway(tmp_path, monkeypatch):
+    f, dest = _a_flight_and_a_file_it_replaces(tmp_path)
 
     def failing_savetxt(fname, X, *args, **kwargs):
         with open(fname, "w") as fh:  # half a file, then the crash
@@ -158,10 +162,7 @@ def test_write_is_atomic_when_the_writer_fails_midway(tmp_path, monkeypatch):
 
 
 def test_a_full_disk_met_on_the_temporary_file_names_the_destination(tmp_path, monkeypatch):
-    t = 0.01 * np.arange(50)
-    f = make_flight(t, np.zeros((3, 50)), np.zeros((4, 50)))
-    dest = tmp_path / "flight.csv"
-    dest.write_text("previous content\n")
+    f, dest = _a_flight_and_a_file_it_replaces(tmp_path)
 
     def full_disk(fname, X, *args, **kwargs):
         raise OSError(28, "No space left on device", str(fname))  # what the kernel says, naming the file it wrote
