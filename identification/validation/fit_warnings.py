@@ -192,4 +192,3 @@ def folded_lines_warning(ident) -> list[str]:
             "attitude does not show: vibration faster than half the log's rate, folded into the aircraft's band by "
             "sampling. Their sensor share was removed before the fit; log the gyro at more than twice the rotor's "
             "frequency, or low-passed below half the log's rate, to be rid of them"]
-
