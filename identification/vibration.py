@@ -23,6 +23,20 @@ import numpy as np
 from heli_core.terms import AXES
 
 
+FOLDED_FLOOR_HZ = 0.5
+"""Lowest frequency :func:`remove_folded_lines` searches [Hz]: below it the gusts' own power hides a line, and
+the slow wind state absorbs one."""
+
+_GAP = 8
+"""Bins either side of a peak left out of its sides: the Hann window's main lobe, zero-padded 4x."""
+
+_NARROW = 32
+"""Bins just beyond the main lobe that a folded line must stand above on each side."""
+
+_CANDIDATES = 64
+"""Local maxima tried per axis, the strongest first."""
+
+
 def remove_vibration_lines(rates, fs: float, min_hz: float = 8.0, max_lines: int = 4, prominence: float = 30.0):
     """Remove narrow spectral lines (rotor vibration) from gyro signals by regression on their sinusoids.
 
@@ -50,32 +64,46 @@ def remove_vibration_lines(rates, fs: float, min_hz: float = 8.0, max_lines: int
     if min_hz >= fs / 2 or n < 64:
         return rates, []
     t = np.arange(n) / fs
-    nfft = 1 << int(np.ceil(np.log2(4 * n)))
-    freqs = np.fft.rfftfreq(nfft, 1.0 / fs)
+    nfft, freqs, half = _grid(n, fs)
     win = np.hanning(n)
-    df = freqs[1]
-    half = max(3, int(round(2.0 / df)))
+    band = _searched_band(freqs, min_hz, half)
     found = []
-    for a in range(rates.shape[0]):
+    for a in range(rates.shape[0] if band.size else 0):
         for _ in range(max_lines):
             x = rates[a] - np.mean(rates[a])
             power = np.abs(np.fft.rfft(x * win, nfft)) ** 2
-            band = np.where(freqs >= min_hz)[0]
-            band = band[band < power.size - 1]
-            if band.size < 2 * half:
-                break
             k = band[np.argmax(power[band])]
             lo, hi = max(0, k - half), min(power.size, k + half + 1)
-            neighbourhood = np.concatenate([power[lo:max(lo, k - 8)], power[min(hi, k + 9):hi]])
+            neighbourhood = np.concatenate([power[lo:max(lo, k - _GAP)], power[min(hi, k + _GAP + 1):hi]])
             if neighbourhood.size == 0 or power[k] < prominence * np.median(neighbourhood):
                 break
             f0 = _refined(power, freqs, k)
             basis = _basis(f0, t)
             coef = np.linalg.lstsq(basis.T, x, rcond=None)[0]
             rates[a] -= coef @ basis
-            found.append({"axis": AXES[a] if rates.shape[0] == 3 else a, "frequency_hz": f0,
-                          "amplitude": float(np.hypot(*coef))})
+            found.append(_line(rates, a, f0, float(np.hypot(*coef))))
     return rates, found
+
+
+def _grid(n: int, fs: float) -> tuple:
+    """The periodogram's length (``n`` zero-padded 4x, a power of two), its frequencies [Hz] and the bins in
+    2 Hz (a line's neighbourhood on either side)."""
+    nfft = 1 << int(np.ceil(np.log2(4 * n)))
+    freqs = np.fft.rfftfreq(nfft, 1.0 / fs)
+    return nfft, freqs, max(3, int(round(2.0 / freqs[1])))
+
+
+def _searched_band(freqs, min_hz: float, half: int) -> np.ndarray:
+    """The bins :func:`remove_vibration_lines` searches: from ``min_hz`` to below the last; none where that
+    band is narrower than a line's two neighbourhoods (a log at 20 Hz above 8 Hz)."""
+    band = np.where(freqs >= min_hz)[0]
+    band = band[band < freqs.size - 1]
+    return band if band.size >= 2 * half else band[:0]
+
+
+def _line(rates, a: int, hz: float, amplitude: float, **more) -> dict:
+    """The record of a line removed from row ``a`` of ``rates`` (named by its axis where there are three)."""
+    return {"axis": AXES[a] if rates.shape[0] == 3 else a, "frequency_hz": hz, "amplitude": amplitude, **more}
 
 
 def _refined(power, freqs, k: int) -> float:
@@ -88,24 +116,6 @@ def _refined(power, freqs, k: int) -> float:
 
 def _basis(hz: float, t) -> np.ndarray:
     return np.vstack([np.cos(2 * np.pi * hz * t), np.sin(2 * np.pi * hz * t)])
-
-
-FOLDED_FLOOR_HZ = 0.5
-"""Lowest frequency :func:`remove_folded_lines` searches [Hz]: below it the gusts' own power hides a line, and
-the slow wind state absorbs one."""
-
-_GAP = 8
-"""Bins either side of a peak left out of its sides: the Hann window's main lobe, zero-padded 4x."""
-
-_NARROW = 32
-"""Bins just beyond the main lobe that a folded line must stand above on each side."""
-
-_SEARCHED_ABOVE = 4.0
-"""Width of band above ``min_hz`` [Hz] that :func:`remove_vibration_lines` needs to search at all (its ±2 Hz
-neighbourhood): a log at 20 Hz leaves 8-10 Hz to :func:`remove_folded_lines` (a 31 Hz rotor folds to 9 Hz)."""
-
-_CANDIDATES = 64
-"""Local maxima tried per axis, the strongest first."""
 
 
 def remove_folded_lines(rates, attitude, fs: float, below_hz: float = 8.0, max_lines: int = 4,
@@ -142,15 +152,15 @@ def remove_folded_lines(rates, attitude, fs: float, below_hz: float = 8.0, max_l
     rates = np.array(rates, dtype=float, copy=True)
     angles = np.unwrap(np.asarray(attitude, dtype=float), axis=1)
     n = rates.shape[1]
-    nfft = 1 << int(np.ceil(np.log2(4 * max(n, 16))))
-    freqs = np.fft.rfftfreq(nfft, 1.0 / fs)
-    top = below_hz if fs / 2 - below_hz >= _SEARCHED_ABOVE else fs / 2  # what remove_vibration_lines searched
+    if n < 64:
+        return rates, []
+    nfft, freqs, half = _grid(n, fs)
+    top = below_hz if _searched_band(freqs, below_hz, half).size else fs / 2  # above it remove_vibration_lines
     band = np.where((freqs >= FOLDED_FLOOR_HZ) & (freqs < top))[0]
     band = band[band < freqs.size - 1]
-    if n < 64 or band.size < 3:
+    if band.size < 3:
         return rates, []
     t = np.arange(n) / fs
-    half = max(3, int(round(2.0 / freqs[1])))
     win = np.hanning(n)
     turn = np.gradient(angles, 1.0 / fs, axis=1)  # the attitude's rate: a heading's drift leaks into no line
     found = []
@@ -177,15 +187,13 @@ def remove_folded_lines(rates, attitude, fs: float, below_hz: float = 8.0, max_l
                 continue  # the aircraft moved so: its motion, not a sensor's line
             rates[a] -= sensor @ basis
             x = x - sensor @ basis
-            found.append({"axis": AXES[a] if rates.shape[0] == 3 else a, "frequency_hz": hz,
-                          "amplitude": float(np.hypot(*sensor)), "folded": True})
+            found.append(_line(rates, a, hz, float(np.hypot(*sensor)), folded=True))
             removed += 1
             if removed == max_lines:
                 break
         rates[a], line = _nyquist_line(rates[a], x, power, half, prominence)
         if line:
-            found.append({"axis": AXES[a] if rates.shape[0] == 3 else a, "frequency_hz": fs / 2,
-                          "amplitude": line, "folded": True})
+            found.append(_line(rates, a, fs / 2, line, folded=True))
     return rates, found
 
 
