@@ -98,8 +98,9 @@ class SweepConfig:
         Length of each replayed window [s]; None replays each selected trace whole
         (from its start, for the length of the shortest), or each explicit window
         from its offset to the end of its trace (for the length of the shortest).
-    dt : float
-        Control period [s], a whole number of the traces' sample periods.
+    dt : float or None
+        Control period [s], a whole number of the traces' sample periods; None (default): the environment's
+        for the model (:func:`heli_core.control_period.default_dt`: 0.01 s, or 0.02 s for a 50 Hz log's model).
     seed : int
         Seeds the window offsets (``numpy.random.Generator``); same seed, same result.
     traces : sequence of int, or of (trace, offset), optional
@@ -152,7 +153,7 @@ class SweepConfig:
 
     axis: object = "roll"
     duration: float | None = 60.0
-    dt: float = 0.01
+    dt: float | None = None
     seed: int = 0
     traces: object = None
     windows: int | None = None

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from heli_core.control_period import default_dt
 from heli_core.physics import trim_sticks
 from heli_env.tasks import draw_offsets, window_count
 
@@ -245,7 +246,7 @@ def _control_ratio(env_model, dt) -> int:
     ratio = int(round(ratio_f))
     if ratio < 1 or abs(ratio_f - ratio) > 1e-6:
         raise SweepError(f"dt={dt} s must be a whole number of the traces' sample periods "
-                         f"({1.0 / env_model.sample_rate:g} s)")
+                         f"({1.0 / env_model.sample_rate:g} s; left unset, dt is {default_dt(env_model.sample_rate):g} s)")
     return ratio
 
 
@@ -292,6 +293,8 @@ def prepare(model, axis, duration, dt, seed, traces, windows, sensors: bool = Tr
     with ``sensors`` the autopilot reads the state through the model's identified sensors."""
     env_model = load_model(model)
     ax = axis_index(axis)
+    if dt is None:
+        dt = default_dt(env_model.sample_rate)
     ratio = _control_ratio(env_model, dt)
     steps, wins = _window_steps(env_model, duration, dt, ratio, traces, windows)
     if wins is None:

@@ -1,27 +1,26 @@
-"""The control period a controller is designed for when ``--dt`` is not given: ``heli design`` (PD and
-``--lqg``) picks it, and ``heli evaluate`` names it when a PD's period does not fit a model.
+"""The control period a command uses when ``--dt`` is not given, and the note that says so: ``heli design``
+(PD and ``--lqg``) and ``heli sweep`` take it, and ``heli evaluate`` names it when a PD's period does not fit a
+model.
 
-The environment steps whole samples of a gust trace (:func:`heli_env.spec.build_spec`), so the period is
-:data:`DEFAULT_DT` or, for a model whose traces are sampled more slowly, the shortest whole number of their
-sample periods above it.
+The period is the environment's own default (:func:`heli_core.control_period.default_dt`): :data:`DEFAULT_DT`, or, where
+that is not a whole number of the model's gust-trace sample periods, the shortest whole number of them above it.
 """
 
 from __future__ import annotations
 
-import math
+from heli_core.control_period import DEFAULT_DT, default_dt
 
-DEFAULT_DT = 0.01
-"""Control period designed for unless told [s]: the environment's."""
+__all__ = ["DEFAULT_DT", "control_period"]
 
 
 def control_period(sample_rate: float) -> tuple[float, str | None]:
-    """The default control period [s] for a model whose gust traces are sampled at ``sample_rate`` [Hz]:
-    :data:`DEFAULT_DT`, or the shortest whole number of sample periods above it (the environment steps whole
-    samples of a trace: a PD designed for 0.01 s could not be flown on a 50 Hz log's model), and a note then."""
-    periods = max(1, math.ceil(DEFAULT_DT * sample_rate - 1e-6))
-    dt = round(periods / sample_rate, 9)  # a measured 50.000000001 Hz still designs for 0.02 s
-    if abs(dt - DEFAULT_DT) <= 1e-9:
+    """The default control period [s] for a model whose gust traces are sampled at ``sample_rate`` [Hz]
+    (:func:`heli_core.control_period.default_dt`: a PD designed for 0.01 s could not be flown on a 50 Hz log's model),
+    and a note when it is not :data:`DEFAULT_DT`."""
+    dt = default_dt(sample_rate)
+    if dt == DEFAULT_DT:
         return DEFAULT_DT, None
+    periods = round(dt * sample_rate)
     what = "the sample period" if periods == 1 else f"{periods} sample periods"
     return dt, (f"note: control period {dt:.4g} s, {what} of the model's {sample_rate:g} Hz gust traces (the "
                 f"default {DEFAULT_DT:g} s is not a whole number of them); pass --dt to choose")

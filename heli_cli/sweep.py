@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from heli_core.control_period import DEFAULT_DT
+
 from .argtypes import number, output_path, per_axis, seed, whole
 from .model_gate import add_accept_option, check_model
 
@@ -51,8 +53,9 @@ def register(sub):
     p.add_argument("--axis", default="roll", choices=("roll", "pitch", "yaw"), help="axis to sweep (default roll)")
     p.add_argument("--duration", type=number("a finite number > 0", 0.0),
                    default=60.0, help="seconds per gust window (default 60)")
-    p.add_argument("--dt", type=number("a finite number > 0", 0.0),
-                   default=0.01, help="control period in seconds (default 0.01)")
+    p.add_argument("--dt", type=number("a finite number > 0", 0.0), default=None,
+                   help=f"control period in seconds (default {DEFAULT_DT:g}, the env's, or the shortest whole number "
+                   "of the model's gust-trace sample periods above it: 0.02 for a 50 Hz log's model)")
     p.add_argument("--windows", type=whole(1), default=None,
                    help="number of (trace, offset) gust windows drawn at random (default: windows that tile every "
                    "library trace end to end, the whole library flown once; each p90 comes with its 90 %% interval)")
@@ -102,11 +105,20 @@ def run(args) -> int:
         raise SweepError(f"model directory {args.model!r} does not exist (write one with 'heli identify')")
     from .progress import progress_of
 
+    from controllers.sweep_inputs import load_model
+
+    from .control_period import control_period
+
     progress = progress_of(args)
+    model = load_model(args.model)
+    if args.dt is None:
+        args.dt, note = control_period(model.sample_rate)
+        if note:
+            print(note)
     backend = backend_from_args(args)
     progress.stage(f"sweeping {len(kp)} x {len(kd)} gain pairs on {args.axis} in the model's gusts")
     try:
-        result = sweep_gains(args.model, kp, kd, axis=args.axis, duration=args.duration, dt=args.dt,
+        result = sweep_gains(model, kp, kd, axis=args.axis, duration=args.duration, dt=args.dt,
                              seed=args.seed, windows=args.windows, progress=not args.quiet, backend=backend,
                              extend=not args.no_extend, max_extensions=args.max_extensions,
                              sensors=not args.no_sensors, d_filter_hz=args.d_filter_hz)
@@ -130,7 +142,7 @@ def run(args) -> int:
             pairs = default_pairs(result, args.flight_pairs)
         if pairs:
             progress.stage(f"flying {args.flights} flight test(s) per pair at {len(pairs)} gain pair(s)")
-            flights = validate_against_flights(args.model, pairs, axis=args.axis, n_flights=args.flights,
+            flights = validate_against_flights(model, pairs, axis=args.axis, n_flights=args.flights,
                                                duration=args.duration, seed=args.seed, truth=args.truth, dt=args.dt,
                                                gusts=args.flight_gusts, progress=not args.quiet,
                                                d_filter_hz=args.d_filter_hz)

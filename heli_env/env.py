@@ -44,7 +44,9 @@ class HeliAttitudeEnv(gym.Env):
     identified itself from synthetic flights of its truth model
     (``scripts/build_default_model.py``; its report is ``heli_env/data/default/report.md``).
 
-    The control period is ``dt`` (default 0.01 s). Each period is integrated
+    The control period is ``dt``: by default 0.01 s, or where that is not a whole number of the model's
+    gust-trace sample periods, the shortest whole number of them above it (0.02 s for a 50 Hz log's model,
+    0.012 s for a 250 Hz one; :func:`heli_core.control_period.default_dt`); ``env.unwrapped.spec_.dt`` says which. Each period is integrated
     exactly for the model's linear part under a zero-order hold of the action
     (:func:`heli_core.discrete.discrete_step`); products of rates are held
     over the period and the attitude turns by the mean rate. Largest error
@@ -120,7 +122,7 @@ class HeliAttitudeEnv(gym.Env):
     ## Arguments
 
     ```python
-    gymnasium.make("HeliAttitude-v0", model=None, task="hold", reference="mixed", dt=0.01,
+    gymnasium.make("HeliAttitude-v0", model=None, task="hold", reference="mixed", dt=None,
                    episode_seconds=30.0, collective="trace", gust_scale=1.0, obs_noise="model",
                    action_delay=0, init_angle_deg=5.0, init_rate_deg=5.0, library_version=None,
                    render_mode=None)
@@ -152,7 +154,7 @@ class HeliAttitudeEnv(gym.Env):
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 25}
 
-    def __init__(self, model=None, task="hold", reference="mixed", dt: float = 0.01, episode_seconds: float = 30.0,
+    def __init__(self, model=None, task="hold", reference="mixed", dt: float | None = None, episode_seconds: float = 30.0,
                  collective="trace", gust_scale: float = 1.0, obs_noise="model", action_delay: int = 0,
                  init_angle_deg: float = 5.0, init_rate_deg: float = 5.0, library_version=None,
                  render_mode: str | None = None):
@@ -163,7 +165,7 @@ class HeliAttitudeEnv(gym.Env):
         self.render_mode = render_mode
         self.observation_space = observation_space()
         self.action_space = action_space()
-        self.metadata = {**self.metadata, "render_fps": int(round(1.0 / dt)) if dt >= 0.04 else 25}
+        self.metadata = {**self.metadata, "render_fps": int(round(1.0 / self.spec_.dt)) if self.spec_.dt >= 0.04 else 25}
         self._x = None
         self._lines = None
         self._renderer = None

@@ -16,6 +16,7 @@ from functools import cached_property
 import numpy as np
 
 from heli_core.config import is_real
+from heli_core.control_period import default_dt
 from heli_core.deprecation import module_getattr
 from heli_core.discrete import discrete_kernel
 from heli_core.physics import trim_sticks
@@ -23,6 +24,7 @@ from heli_core.sensors import SensorModel
 
 from .errors import ActionError, OptionError
 from .tasks import TaskConfig
+
 
 @dataclass(frozen=True, eq=False)
 class EnvSpec:
@@ -155,7 +157,7 @@ def measurement_model(obs_noise, model: EnvModel) -> SensorModel:
     return SensorModel(gyro_noise=(noise[1],) * 3, attitude_noise=(noise[0],) * 3)
 
 
-def build_spec(env_model: EnvModel, task="hold", reference="mixed", dt: float = 0.01,
+def build_spec(env_model: EnvModel, task="hold", reference="mixed", dt: float | None = None,
                episode_seconds: float = 30.0, collective="trace", gust_scale: float = 1.0, obs_noise="model",
                action_delay: int = 0, init_angle_deg: float = 5.0, init_rate_deg: float = 5.0) -> EnvSpec:
     """Validate the environment arguments (see :class:`heli_env.env.HeliAttitudeEnv`) and precompute.
@@ -164,6 +166,8 @@ def build_spec(env_model: EnvModel, task="hold", reference="mixed", dt: float = 
     (:func:`heli_env.env_model.as_env_model`), so that the spec is a function of a model, not of a folder.
     """
     cfg = task if isinstance(task, TaskConfig) else TaskConfig(task=task, reference=reference)
+    if dt is None:
+        dt = default_dt(env_model.sample_rate)
     if not (isinstance(dt, (int, float)) and dt > 0 and math.isfinite(dt)):
         raise ValueError(f"dt must be a positive control period in seconds, got {dt!r}")
     ratio_f = dt * env_model.sample_rate
@@ -171,7 +175,8 @@ def build_spec(env_model: EnvModel, task="hold", reference="mixed", dt: float = 
     if ratio < 1 or abs(ratio_f - ratio) > 1e-6:
         raise ValueError(
             f"dt={dt} s must be a whole number of the disturbance traces' sample periods "
-            f"({1.0 / env_model.sample_rate:g} s); got {ratio_f:g} periods"
+            f"({1.0 / env_model.sample_rate:g} s); got {ratio_f:g} periods (left unset, dt is "
+            f"{default_dt(env_model.sample_rate):g} s)"
         )
     if not (episode_seconds > 0 and math.isfinite(episode_seconds)):
         raise ValueError(f"episode_seconds must be positive, got {episode_seconds!r}")

@@ -55,7 +55,7 @@ class HeliAttitudeVectorEnv(VectorEnv):
 
     metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP, "render_fps": 25}
 
-    def __init__(self, num_envs: int = 1, model=None, task="hold", reference="mixed", dt: float = 0.01,
+    def __init__(self, num_envs: int = 1, model=None, task="hold", reference="mixed", dt: float | None = None,
                  episode_seconds: float = 30.0, collective="trace", gust_scale: float = 1.0, obs_noise="model",
                  action_delay: int = 0, init_angle_deg: float = 5.0, init_rate_deg: float = 5.0,
                  library_version=None, render_mode: str | None = None, threads: int | None = None):

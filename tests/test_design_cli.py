@@ -10,6 +10,7 @@ import pytest
 
 from controllers.pd import PDController, design_gains, loop_analysis
 from heli_cli.main import main
+from heli_core.control_period import default_dt
 from heli_env import load_env_model
 
 
@@ -144,6 +145,37 @@ def test_a_pd_of_another_control_period_is_refused_naming_the_design_that_flies(
     assert err.count("\n") == 0 and "designed for a control period of 0.01 s" in err
     assert f"heli design --model {model_50hz_40s}, which picks 0.02 s" in err
     assert not (tmp_path / "ev").exists()
+
+
+@pytest.mark.parametrize("rate, dt", [(100.0, 0.01), (200.0, 0.01), (1000.0, 0.01), (50.0, 0.02),
+                                      (50.000000001, 0.02), (25.0, 0.04), (250.0, 0.012), (120.0, 2 / 120.0)])
+def test_the_default_control_period_is_the_shortest_whole_number_of_samples_from_10_ms(rate, dt):
+    assert default_dt(rate) == pytest.approx(dt, rel=1e-7, abs=0.0)  # rounded to the ns
+    assert abs(default_dt(rate) * rate - round(default_dt(rate) * rate)) < 1e-6
+
+
+def test_a_50hz_models_env_sweep_and_training_step_at_its_period_by_default(model_50hz_40s, tmp_path, capsys):
+    """Unasked, every stage flies a 50 Hz log's model at 0.02 s (before: gym.make, heli sweep and heli train
+    refused it with 'dt=0.01 s must be a whole number ...', and heli train had no option to mend it)."""
+    import gymnasium as gym
+
+    env = gym.make("HeliAttitude-v0", model=str(model_50hz_40s), episode_seconds=2.0)
+    env.reset(seed=0)
+    assert env.unwrapped.spec_.dt == 0.02 and np.isfinite(env.step(np.zeros(3, np.float32))[1])
+    venv = gym.make_vec("HeliAttitude-v0", num_envs=2, vectorization_mode="vector_entry_point",
+                        model=str(model_50hz_40s), episode_seconds=2.0)
+    assert venv.unwrapped.spec_.dt == 0.02
+    with pytest.raises(ValueError, match=r"got 0\.5 periods \(left unset, dt is 0\.02 s\)"):
+        gym.make("HeliAttitude-v0", model=str(model_50hz_40s), dt=0.01)
+    capsys.readouterr()
+    assert main(["sweep", "--model", str(model_50hz_40s), "--kp", "2", "--kd", "0.2", "--no-extend", "--no-plots",
+                 "--duration", "5", "--out", str(tmp_path / "sweep")]) == 0
+    assert "note: control period 0.02 s, the sample period of the model's 50 Hz" in capsys.readouterr().out
+    assert json.loads((tmp_path / "sweep" / "sweep.json").read_text())["settings"]["dt"] == 0.02
+    assert main(["train", "--model", str(model_50hz_40s), "--algo", "ppo", "--timesteps", "64", "--n-envs", "2",
+                 "--episode-seconds", "2", "--eval-freq", "0", "--no-compare", "--algo-kwargs", '{"n_steps": 32, "batch_size": 32}',
+                 "-q", "--out", str(tmp_path / "agent")]) == 0
+    assert json.loads((tmp_path / "agent_training" / "training.json").read_text())["dt"] == 0.02
 
 
 def test_a_d_filter_above_nyquist_is_said_to_filter_nothing(tmp_path, capsys):

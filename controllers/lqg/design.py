@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from heli_core.config import is_real
+from heli_core.control_period import default_dt
 from heli_core.terms import AXES
 
 from ..closed_loop import GAUSS_ABS_FACTOR
@@ -375,7 +376,7 @@ class LQGDesign:
         return "\n".join(rows)
 
 
-def design_lqg(model=None, dt: float = 0.01, weights: LQGWeights | None = None, recovery=RECOVERY_GRID,
+def design_lqg(model=None, dt: float | None = None, weights: LQGWeights | None = None, recovery=RECOVERY_GRID,
                gain_margin_db: float = MIN_GAIN_MARGIN_DB, phase_margin_deg: float = MIN_PHASE_MARGIN_DEG,
                lines: bool = True, wind=None, collective: float | None = None) -> LQGDesign:
     """Design the per-axis LQG of an identified model (module docstring).
@@ -384,8 +385,9 @@ def design_lqg(model=None, dt: float = 0.01, weights: LQGWeights | None = None, 
     ----------
     model : str, Path, EnvModel or None
         Model directory (None: the shipped model).
-    dt : float
-        Control period [s] (the environment's), in (0, 1).
+    dt : float or None
+        Control period [s], in (0, 1); None (default): the environment's for the model
+        (:func:`heli_core.control_period.default_dt`: 0.01 s, or 0.02 s for a 50 Hz log's model).
     weights : LQGWeights, optional
         Bryson's allowed errors and stick (default :class:`LQGWeights`).
     recovery : float or sequence of float
@@ -410,6 +412,8 @@ def design_lqg(model=None, dt: float = 0.01, weights: LQGWeights | None = None, 
     from heli_env.env_model import as_env_model
 
     env_model = as_env_model(model)
+    if dt is None:
+        dt = default_dt(env_model.sample_rate)
     for name, value in (("gain_margin_db", gain_margin_db), ("phase_margin_deg", phase_margin_deg)):
         if not (is_real(value) and value >= 0):
             raise DesignError(f"{name} must be a number >= 0, got {value!r}")

@@ -30,11 +30,15 @@ COMPARISON_EPISODES_PER_TRACE = 4
 """Episodes per held-out segment flown by both agents (``heli evaluate``'s default)."""
 
 
-def reference_pd(env_model, dt: float = 0.01):
-    """The PD ``heli design`` writes for a model with its defaults (bandwidth, 45° margin, D filter)."""
+def reference_pd(env_model, dt: float | None = None):
+    """The PD ``heli design`` writes for a model with its defaults (bandwidth, 45° margin, D filter, and the
+    control period: the environment's for the model unless ``dt``)."""
+    from heli_core.control_period import default_dt
+
     from ..pd.controller import PDController
     from ..pd.design import DEFAULT_D_FILTER, design_gains
 
+    dt = default_dt(env_model.sample_rate) if dt is None else dt
     gains = design_gains(env_model.params, dt=dt, d_filter_hz=DEFAULT_D_FILTER)
     return PDController.from_model(env_model.params, gains, dt)
 
