@@ -155,7 +155,7 @@ def run(args) -> int:
                     print(f"heli identify: error: {option} needs the maximum-likelihood estimator (--method ml), "
                           "got --method integral", file=sys.stderr)
                     return 2
-            kwargs = {"interval": args.interval, "delay": delay, "prefilter": not args.no_filter,
+            kwargs = {"interval": args.interval, "delay": delay, "prefilter": not args.no_filter, "remove_folded": True,
                       "input_hold": "linear" if args.input_hold == "auto" else args.input_hold}
         backend = flight_backend(args)
         try:

@@ -26,6 +26,7 @@ from heli_core.terms import INPUT_FOR_AXIS
 
 from .errors import FlightLogError
 from .flight import Flight
+from .vibration import remove_folded_lines
 
 DEFAULT_PASS_HZ = 4.0
 DEFAULT_STOP_HZ = 8.0
@@ -146,6 +147,17 @@ def lowpass_flight(flight: Flight, pass_hz: float = DEFAULT_PASS_HZ, stop_hz: fl
                                              "stop_hz": stop_hz, "taps": int(fir_lowpass(flight.sample_rate, pass_hz, stop_hz).size)}}
     sticks = np.clip(both[3:], -1.0, 1.0, out=both[3:])
     return Flight(flight.time, both[:3], flight.attitude, sticks, MappingProxyType(meta), flight.extra)
+
+
+def without_folded_lines(flight: Flight) -> tuple[Flight, list]:
+    """``flight`` with the sensor share of the vibration lines a slow log folded into the aircraft's band taken
+    out of its gyro (:func:`identification.vibration.remove_folded_lines`; no low-pass can remove them), and those
+    lines: ``(flight, [])`` itself where there are none."""
+    rates, found = remove_folded_lines(flight.rates, flight.attitude, flight.sample_rate)
+    if not found:
+        return flight, []
+    meta = MappingProxyType({**flight.metadata, "vibration_lines": found})
+    return Flight(flight.time, rates, flight.attitude, flight.sticks, meta, flight.extra), found
 
 
 def shift_inputs(flight: Flight, shifts) -> Flight:

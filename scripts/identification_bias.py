@@ -39,13 +39,15 @@ def _one(job):
     """Fly one (cell, seed) and identify it with every estimator; relative errors in %."""
     from threadpoolctl import threadpool_limits
 
-    from identification.bench.cells import bench_flight
+    from identification.bench.cells import BENCH_CELLS
+    from identification.bench.synthetic import simulate_flight
     from identification.integral.method import IntegralIdentifier
     from identification.likelihood.estimator import MaximumLikelihoodIdentifier
 
-    cell, seed, duration, ml_hold, closed_loop = job
+    cell, seed, duration, ml_hold, closed_loop, rate = job
     with threadpool_limits(limits=1, user_api="blas"):
-        sim = bench_flight(cell, seed, duration)
+        config = replace(BENCH_CELLS[cell], duration=duration, sample_rate=rate)
+        sim = simulate_flight(duration, seed=seed, config=config)
         truth = sim.truth.values()
         # the ML estimator as `heli identify` runs it (the hold estimated, the closed-loop check), unless --hold
         # names one or --closed-loop off; the integral method, which cannot estimate the hold, is told the truth
@@ -80,7 +82,7 @@ def grid(args):
         raise SystemExit(f"unknown cells {unknown}; known: {', '.join(BENCH_CELLS)}")
     hold = args.hold if args.hold in ("auto", "linear", "zoh", "truth") else float(args.hold)
     check = None if args.closed_loop == "off" else args.closed_loop
-    jobs = [(c, s, args.duration, hold, check) for c in cells for s in range(1, args.seeds + 1)]
+    jobs = [(c, s, args.duration, hold, check, args.rate) for c in cells for s in range(1, args.seeds + 1)]
     from tqdm import tqdm
 
     if args.workers > 1:
@@ -90,8 +92,9 @@ def grid(args):
         rows = [_one(j) for j in tqdm(jobs, desc="flights", unit="flight")]
     by_cell = {c: [r for r in rows if r["cell"] == c] for c in cells}
     print(f"\nRelative error (%) against the truth: RMS over {args.seeds} seeds [worst |error|], "
-          f"{args.duration:g} s flights at 100 Hz. Command: python scripts/identification_bias.py "
-          f"--seeds {args.seeds} --duration {args.duration:g} --hold {args.hold} --closed-loop {args.closed_loop}")
+          f"{args.duration:g} s flights logged at {args.rate:g} Hz. Command: python scripts/identification_bias.py "
+          f"--seeds {args.seeds} --duration {args.duration:g} --hold {args.hold} --closed-loop {args.closed_loop}"
+          + (f" --rate {args.rate:g}" if args.rate != 100.0 else "") + (f" --cells {' '.join(cells)}" if args.cells else ""))
     print("\n| cell | estimator | " + " | ".join(PARAMS) + " | smoother wind corr. (worst) | hold fraction (range) |")
     print("|---|---|" + "---|" * (len(PARAMS) + 2))
     for c in cells:
@@ -159,6 +162,9 @@ def main(argv=None):
     ap.add_argument("--duration", type=float, default=300.0)
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--cells", nargs="+", default=None, help="bench cells (default: all)")
+    ap.add_argument("--rate", type=float, default=100.0,
+                    help="log rate of the flights [Hz] (default 100; at 20-33 Hz the bench's 27 and 30 Hz gyro lines "
+                         "fold into the aircraft's band)")
     ap.add_argument("--json", default=None, help="also write every flight's errors to this JSON file")
     ap.add_argument("--hold", default="auto",
                     help="the ML estimator's input hold: 'auto' (default, as heli identify), 'linear', 'zoh', a "

@@ -11,6 +11,7 @@ from scipy.signal import butter, sosfiltfilt
 
 from identification.bench.cells import BENCH_CELLS
 from identification.bench.synthetic import simulate_flight
+from identification.integral.method import IntegralIdentifier
 from identification.likelihood.estimator import MaximumLikelihoodIdentifier
 from identification.sensors import identify_sensors
 from identification.validation.fit_warnings import folded_lines_warning
@@ -109,3 +110,18 @@ def test_the_user_is_told_the_gyro_carried_folded_lines(slow_fit):
     (warning,) = folded_lines_warning(slow_fit)
     assert "(roll, pitch, yaw)" in warning and "at 2, 5 Hz" in warning and "twice the rotor's" in warning
     assert folded_lines_warning(MaximumLikelihoodIdentifier()) == []  # nothing fitted, nothing said
+
+
+def test_the_integral_method_removes_them_too(slow_log):
+    """The paper's method low-passes at 4/8 Hz, which cannot reach a line folded to 2 Hz: left in, roll's damping
+    came out 77 % high and pitch's 64 % low on this flight (31-35 % RMS over five 25 Hz flights); the same
+    search removes them first and says so."""
+    truth = slow_log.truth.values()
+    fit = IntegralIdentifier().fit(slow_log.flight)
+    got = fit.params_.values()
+    assert all(abs(got[k] / truth[k] - 1) < 0.05 for k in ("k2", "k6", "k10"))
+    assert all(abs(got[k] / truth[k] - 1) < 0.15 for k in ("k3", "k7", "k11"))
+    assert "at 2, 5 Hz" in folded_lines_warning(fit)[0]
+    left = IntegralIdentifier(remove_folded=False).fit(slow_log.flight)
+    assert max(abs(left.params_.values()[k] / truth[k] - 1) for k in ("k3", "k7")) > 0.5
+    assert left.vibration_lines_ == [[]] and folded_lines_warning(left) == []

@@ -53,7 +53,7 @@ from heli_core.terms import AXES, INPUT_FOR_AXIS
 
 from ..errors import IdentifiabilityError
 from ..flight import Flight
-from ..preprocess import lowpass_flight
+from ..preprocess import lowpass_flight, without_folded_lines
 from ..validation.forward_simulation import rate_error_stats
 from .effects import CATALOGUE, MAX_ALIGNMENT, NONE, UNDECIDED, DiagnosisResult
 from .heldout import HeldOut, Score, Spec
@@ -187,7 +187,8 @@ class Diagnoser(DiagnosisResult):
         Catalogue effects to consider (default: all of :data:`identification.diagnosis.effects.CATALOGUE` but
         ``servo_lag``, which the integral method cannot fit: it has no servo filter).
     prefilter : bool
-        Zero-phase FIR low-pass of Section 3.1 before everything.
+        Zero-phase FIR low-pass of Section 3.1 before everything, the gyro's folded vibration lines removed first
+        (:func:`identification.preprocess.without_folded_lines`, as the integral method's fit does).
     min_duration, min_windows, min_r2 : float, int, float
         Reliability limits (module docstring).
     progress : bool
@@ -323,7 +324,7 @@ class Diagnoser(DiagnosisResult):
             raise TypeError(f"flight must be a Flight, got {type(flight).__name__}")
         if model is not None and not isinstance(model, ModelParams):
             raise TypeError(f"model must be a ModelParams or None, got {type(model).__name__}")
-        fl = lowpass_flight(flight) if self.prefilter else flight
+        fl = lowpass_flight(without_folded_lines(flight)[0]) if self.prefilter else flight
         self.flight_ = fl
         spec = Spec.from_params(model) if model is not None else Spec()
         self.baseline_spec_ = spec

@@ -97,7 +97,7 @@ from heli_core.terms import AXES, STICK_ROW, TERMS, evaluate_features
 
 from ..errors import DisturbanceError, SimulationDivergedError
 from ..flight import Flight
-from ..preprocess import lowpass_flight
+from ..preprocess import lowpass_flight, without_folded_lines
 from ..validation.forward_simulation import validate_models
 from ..validation.result import ValidationResult
 from .profile import MODEL_LABELS, OFFSET, DisturbanceProfile, interval90
@@ -171,7 +171,9 @@ def identify_disturbance(flight: Flight, params: ModelParams, interval: float | 
         two samples when that is longer.
     prefilter : bool
         Zero-phase FIR low-pass 4/8 Hz on rates and sticks before eq. (46),
-        as for the parameters (:func:`~identification.preprocess.lowpass_flight`).
+        as for the parameters (:func:`~identification.preprocess.lowpass_flight`),
+        the gyro's folded vibration lines removed first
+        (:func:`~identification.preprocess.without_folded_lines`).
     smoothing : "auto" or int
         Number of 10-point moving-average passes on the interval-level u_d
         (default :data:`DEFAULT_SMOOTHING`), or "auto" to choose them per axis
@@ -206,7 +208,7 @@ def identify_disturbance(flight: Flight, params: ModelParams, interval: float | 
     smoothing = check_smoothing(smoothing)
     axes, rows = _checked_axes(axes, params)
     N = _intervals(flight, max(DEFAULT_INTERVAL, 2.0 / flight.sample_rate) if interval is None else interval)
-    data = lowpass_flight(flight) if prefilter else flight
+    data = lowpass_flight(without_folded_lines(flight)[0]) if prefilter else flight
     torque = interval_torque(data, params, N)
     kd, ud_raw = _equivalent_input(torque, params.control_gains, rows)
     # Smoothing (Section 3.3): the paper's rule is evaluated for every pass count on

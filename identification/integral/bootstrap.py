@@ -38,7 +38,6 @@ from heli_core.terms import AXES, STICK_ROW
 
 from ..errors import IdentifiabilityError
 from ..flight import Flight
-from ..preprocess import lowpass_flight
 from .method import IntegralIdentifier
 
 DEFAULT_REPLICATES = 200
@@ -135,8 +134,8 @@ def interval_flights(flights, identifier: IntegralIdentifier) -> tuple[list[Flig
     -------
     pieces : list of Flight
         Interval ``i`` as a flight of N + 1 samples (it shares its end sample
-        with the next interval, as in the integral method), already prefiltered
-        and with the command sticks passed through the identified Padé delay.
+        with the next interval, as in the integral method), prepared as the fit
+        prepared it (:meth:`IntegralIdentifier.prepared`) and with the command sticks passed through the identified Padé delay.
     flight_index : ndarray of int, shape (len(pieces),)
         Which flight each interval comes from.
     """
@@ -144,7 +143,7 @@ def interval_flights(flights, identifier: IntegralIdentifier) -> tuple[list[Flig
     taus = identifier.params_.taus
     pieces, owner = [], []
     for j, flight in enumerate(flights):
-        data = lowpass_flight(flight, identifier.pass_hz, identifier.stop_hz) if identifier.prefilter else flight
+        data = identifier.prepared(flight)
         fs = data.sample_rate
         sticks = np.array(data.sticks)
         for axis, row in enumerate(STICK_ROW):

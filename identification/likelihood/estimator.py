@@ -313,7 +313,8 @@ class MaximumLikelihoodIdentifier:
                   for a in names}
         names = {a: tuple(p for p in names[a] if p not in static[a]) for a in names}
         # The integral method (Fig. 5) on the same structure is the starting point.
-        start = IntegralIdentifier(structure=names, delay=0.0, axes=self.axes).fit(flights)
+        # (on the flights as cleaned above: their folded lines are out already)
+        start = IntegralIdentifier(structure=names, delay=0.0, axes=self.axes, remove_folded=False).fit(flights)
         delays, lags = self._delays(), self._lags()
 
         def one_axis(axis_name, delay=None):

@@ -162,14 +162,11 @@ def _same_flight(a: Flight, b: Flight) -> bool:
 def as_fitted(identifier, flight: Flight) -> Flight:
     """``flight`` prepared as ``identifier`` (fitted) prepared the flights it was fitted on: a
     maximum-likelihood fit's sticks advanced by its input shifts and its vibration lines removed, the integral
-    method's zero-phase prefilter (Section 3.1)."""
+    method's folded lines removed and its zero-phase prefilter (Section 3.1)."""
     if hasattr(identifier, "wind_torque"):  # the maximum-likelihood estimator
         return identifier._clean(identifier.aligned(flight))[0]
-    if getattr(identifier, "prefilter", False):
-        from ..preprocess import lowpass_flight
-
-        return lowpass_flight(flight, identifier.pass_hz, identifier.stop_hz)
-    return flight
+    prepared = getattr(identifier, "prepared", None)  # the integral method's
+    return flight if prepared is None else prepared(flight)
 
 
 def validate_on_flight(identifier, flight: Flight, label: str, name: str | None = None,

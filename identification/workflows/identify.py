@@ -146,7 +146,7 @@ def identification_settings(ident) -> dict:
     else:
         settings = {"method": "integral (Fig. 5)", "estimator": "integral"}
         settings.update({k: getattr(ident, k) for k in ("interval", "offsets", "disturbance_order", "input_hold",
-                                                         "prefilter", "max_iter", "tol")})
+                                                         "prefilter", "remove_folded", "max_iter", "tol")})
     settings["delay"] = ident.delay if not isinstance(ident.delay, np.ndarray) else ident.delay.tolist()
     return settings
 

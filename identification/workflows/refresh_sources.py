@@ -53,7 +53,8 @@ def identifier_settings(doc: ModelDocument, where: str = "model.json") -> tuple[
     keys = (("input_hold", "wind_model", "remove_vibration", "vibration_min_hz", "max_nfev", "select_terms",
              "servo_lag", "closed_loop")
             if estimator == "ml"
-            else ("interval", "offsets", "disturbance_order", "input_hold", "prefilter", "max_iter", "tol"))
+            else ("interval", "offsets", "disturbance_order", "input_hold", "prefilter", "remove_folded", "max_iter",
+                  "tol"))
     kw = {k: ident[k] for k in keys if ident.get(k) is not None}
     if "delay" in ident:
         kw["delay"] = ident["delay"]
