@@ -28,9 +28,21 @@ delay the search did not find is the case: on seed 302 (the sluggish aircraft, a
 pitch delay fitted as none) the delay-free pitch put the sum in the held world while roll and yaw pointed to
 the interpolated one; one axis whose hold is confounded with something else should not carry the others.
 
-It runs only where it can matter: the hold was decided by ``input_hold="auto"`` as a named hold, and the
-closed-loop check found a bias the loop's way beyond its significance (elsewhere the loop does not reach the
-likelihood far enough to move the hold). A flight whose LR neither world reproduces (both beyond
+The leak can also stop short of a named hold: logged at 25 Hz behind a 0.03 rad/s gyro, a pilot's hand on the
+paper aircraft was read as a fraction 0.72 (both named holds rejected), its dampings 12-18 % high, and a check
+flown at that fraction measured its own world's 1-5 %. A fraction decided is therefore read the same way, against
+three worlds: both named holds' and its own (LR +66 on the flight; +88 +- 13 interpolated, -185 +- 18 held,
++18 +- 15 at the fraction: the hand's). A log whose sticks really are stamped part-way through their sample
+sits in its fraction's world, and the fraction stands. The axes do not vote there: a fraction's world lies
+between the named ones, each axis' own worlds closer still, and on seed 2 of the same cell two axes' votes kept
+a fraction 0.73 (dampings 18-26 % high) where the sum, by a hair, chose the hand's world (4-11 %).
+
+It runs only where it can matter: the hold was decided by ``input_hold="auto"`` (a hold the user gives is not
+second-guessed), and the closed-loop check found a bias the loop's way beyond its significance (elsewhere the
+loop does not reach the likelihood far enough to move a named hold), or the hold decided is a fraction and the
+check flew at least one axis: flown at the fraction the check measures its own world's bias, which may be small
+where the fraction is the loop's doing. A named world that cannot be flown (its pilot fit reads a flight
+controller) is left out of a fraction's comparison. A flight whose LR no world reproduces (all beyond
 :data:`MAX_Z` spreads) keeps the hold decided, and says so.
 """
 
@@ -60,7 +72,8 @@ class HoldCheck:
     Attributes
     ----------
     decided : str
-        The named hold :func:`~identification.likelihood.input_hold.decide_hold` chose ("zoh" or "linear").
+        The hold :func:`~identification.likelihood.input_hold.decide_hold` chose ("zoh", "linear", or a fraction
+        as :func:`decided_label` names it, "fraction 0.72").
     chosen : str
         The hold this check found the flight's (the decided one when ``reason`` says why it was kept).
     axes : tuple of str
@@ -70,7 +83,7 @@ class HoldCheck:
     worlds : dict
         Per hold, the simulated flights' LRs (``lr``), their ``mean``, ``sd`` and the flight's ``z``.
     reason : str
-        Why the decided hold was kept without a comparison, why neither world reproduces the flight, or that the
+        Why the decided hold was kept without a comparison, why no world reproduces the flight, or that the
         axes' majority overrode their sum.
     applied : bool
         The fit was moved to the chosen hold (:func:`switch_hold`, the check's mode "auto").
@@ -114,11 +127,14 @@ class HoldCheck:
 
 
 def needs_hold_check(ident, check) -> str:
-    """Why the hold is not checked (empty when it is): only a hold decided by the estimator as a named hold,
-    and only where the closed-loop check found a bias the loop's way beyond its significance."""
+    """Why the hold is not checked (empty when it is): only a hold the estimator decided, and only where the
+    closed-loop check found a bias the loop's way beyond its significance or, for a fraction, checked an axis
+    (module docstring)."""
     decision = getattr(ident, "hold_decision_", None) or {}
-    if ident.input_hold != "auto" or not decision.get("named"):
-        return "the hold was not decided as a named hold by the estimator"
+    if ident.input_hold != "auto" or "fraction" not in decision:
+        return "the hold was not decided by the estimator"
+    if not decision.get("named") and any(c.checked for c in check.axes.values()):
+        return ""  # a fraction may be the loop's own doing: the check at it measures its own world's bias only
     for c in check.axes.values():
         if c.checked and c.loops_direction:
             damping = list(c.bias)[1]
@@ -142,28 +158,42 @@ def _lr(ident, world, loops: dict, names: dict, seed: int, tag: int, b: int):
     return out
 
 
+def decided_label(decision: dict) -> str:
+    """The hold the estimator decided, as :class:`HoldCheck` names it: "linear", "zoh" or "fraction 0.77"."""
+    return decision.get("named") or f"fraction {decision['fraction']:.2f}"
+
+
 def decide_hold_in_loop(ident, check, n_flights: int, seed: int = 0, workers=None) -> HoldCheck:
     """Decide the log's hold in the closed loop's world (module docstring). Does not change ``ident``;
     :func:`switch_hold` does."""
-    decided = ident.hold_decision_["named"]
     why = needs_hold_check(ident, check)
     if why:
-        return HoldCheck(decided, decided, reason=why)
+        decision = getattr(ident, "hold_decision_", None) or {}
+        given = decided_label(decision) if "fraction" in decision else str(ident.input_hold)
+        return HoldCheck(given, given, reason=why)
+    decided = decided_label(ident.hold_decision_)
+    candidates = {h: h for h in HOLDS}  # world -> the hold its fits take: each named hold, and a fraction decided
+    if decided not in HOLDS:
+        candidates[decided] = float(ident.hold_decision_["fraction"])
     axes = tuple(a for a, c in check.axes.items() if c.checked and not has_servo(ident.axes_[a]))
     if not axes:
         return HoldCheck(decided, decided, reason="every checked axis has a servo delay or lag, and a delay shapes "
                          "the phase as a hold does: the hold is read on axes without one")
     names = {axis: ident._kept_terms(AXES.index(axis), ident.axes_[axis]) for axis in axes}
-    fitted = {h: {axis: axis_refit(ident, axis, kept, ident.flights_, h) for axis, kept in names.items()} for h in HOLDS}
+    fitted = {h: {axis: axis_refit(ident, axis, kept, ident.flights_, value) for axis, kept in names.items()}
+              for h, value in candidates.items()}
     flight_lrs = {a: float(fitted["zoh"][a].axes_[a].nll - fitted["linear"][a].axes_[a].nll) for a in axes}
     flight_lr = float(sum(flight_lrs.values()))
-    worlds, fits = {}, {}
-    for tag, h in enumerate(HOLDS, start=1):
+    worlds, fits, unflown = {}, {}, []
+    for tag, h in enumerate(candidates, start=1):
         fits[h] = {a: replace(fitted[h][a].axes_[a], dropped=ident.axes_[a].dropped) for a in axes}
         world = with_fits(ident, fits[h])
         loops, unfit = world_loops(world, axes)
-        if unfit:
+        if unfit and (h == decided or len(candidates) == 2):  # nothing left to compare the decision with
             return HoldCheck(decided, decided, axes, flight_lr, reason=f"the {h} hold's world cannot be flown: {unfit}")
+        if unfit:  # a fraction decided is compared with the named world that can be flown
+            unflown.append(f"the {h} hold's world cannot be flown: {unfit}")
+            continue
         lrs = map_axes(lambda b: _lr(ident, world, loops, names, seed, tag, b), range(n_flights), workers)
         refused = next((r for r in lrs if isinstance(r, str)), None)
         if refused is not None:
@@ -173,14 +203,14 @@ def decide_hold_in_loop(ident, check, n_flights: int, seed: int = 0, workers=Non
     chosen, summary, reason = choose_hold(flight_lr, {h: [sum(r.values()) for r in lrs] for h, lrs in worlds.items()},
                                           decided)
     votes = axis_votes(flight_lrs, worlds, decided)
-    majority = majority_hold(votes)
+    majority = majority_hold(votes) if decided in HOLDS else None  # a fraction's world lies between: the sum decides
     overridden = not reason and majority is not None and majority != chosen
     if overridden:
         reason = (f"the axes' majority ({', '.join(a for a, v in votes.items() if v == majority)}) points to "
                   f"{majority} where their sum pointed to {chosen}")
         chosen = majority
-    return HoldCheck(decided, chosen, axes, flight_lr, summary, reason, votes=votes, by_majority=overridden,
-                     fits=fits[chosen])
+    return HoldCheck(decided, chosen, axes, flight_lr, summary, "; ".join([reason] * bool(reason) + unflown),
+                     votes=votes, by_majority=overridden, fits=fits[chosen])
 
 
 def axis_votes(flight_lrs: dict, worlds: dict, decided: str) -> dict:
@@ -207,7 +237,7 @@ def choose_hold(flight_lr: float, lrs: dict, decided: str) -> tuple[str, dict, s
     """The hold whose world makes the flight's LR the more probable, from each world's simulated LRs ``lrs``
     (hold -> list): a normal density per world, its mean and spread those of its flights. Returns the hold,
     the worlds' summaries (``lr``, ``mean``, ``sd``, the flight's ``z``) and a reason when ``decided`` is kept
-    because neither world reproduces the flight (both beyond :data:`MAX_Z` spreads)."""
+    because no world reproduces the flight (each beyond :data:`MAX_Z` spreads)."""
     worlds = {}
     for h, values in lrs.items():
         values = np.asarray(values, dtype=float)
@@ -216,7 +246,7 @@ def choose_hold(flight_lr: float, lrs: dict, decided: str) -> tuple[str, dict, s
                      "z": float((flight_lr - values.mean()) / sd)}
     density = {h: -0.5 * w["z"] ** 2 - np.log(w["sd"]) for h, w in worlds.items()}
     if min(abs(w["z"]) for w in worlds.values()) > MAX_Z:
-        return decided, worlds, f"neither world reproduces the flight's LR (beyond {MAX_Z:g} spreads)"
+        return decided, worlds, f"no world reproduces the flight's LR (beyond {MAX_Z:g} spreads)"
     return max(density, key=density.get), worlds, ""
 
 
