@@ -232,3 +232,36 @@ def test_a_damping_at_the_searchs_bound_is_not_flown():
     found = check_closed_loop(ml, mode="report")
     assert not found.axes["roll"].checked and "k3 is at the upper bound of the search" in found.axes["roll"].reason
     assert found.headline() == "no axis flown" and found.n_flights == 0
+
+
+def test_an_axis_clear_of_the_loops_bias_is_not_fitted_again_while_another_axis_is_in_doubt(monkeypatch):
+    """Batches of flights continue while an axis is in doubt: yaw, its damping clearly not biased up after the first
+    batch, is not fitted again while pitch's doubt flies a second; a yaw whose bias is clear rides along (its
+    correction the surer). Pitch's flights are the same draws either way."""
+    from identification.likelihood import closed_loop
+
+    sim = _flight("independent", 4, 40.0, gyro_noise=0.03)
+    ml = MaximumLikelihoodIdentifier(input_hold=1.0, axes=("pitch", "yaw")).fit(sim.flight)
+    refit = closed_loop.axis_refit
+    fitted = []
+
+    def counted(ident, axis, *args, **kwargs):
+        fitted.append(axis)
+        return refit(ident, axis, *args, **kwargs)
+
+    def checks(yaw_z):
+        fitted.clear()
+        z = {"k7": 2.0, "k11": yaw_z}  # the dampings' z: pitch in doubt (CONCLUSIVE's 1-3)
+        monkeypatch.setattr(closed_loop, "_damping_z", lambda rel: z[list(rel)[1]])
+        return closed_loop.check_closed_loop(ml, 2, mode="report", workers=1, max_flights=4)
+
+    monkeypatch.setattr(closed_loop, "axis_refit", counted)
+    along = checks(yaw_z=5.0)
+    assert sorted(fitted) == ["pitch"] * 4 + ["yaw"] * 4 and along.axes["yaw"].flights == 4
+    assert along.headline().startswith("4 flights of the model flown")
+    clear = checks(yaw_z=0.5)
+    assert sorted(fitted) == ["pitch"] * 4 + ["yaw"] * 2
+    assert (clear.axes["yaw"].flights, clear.axes["pitch"].flights, clear.n_flights) == (2, 4, 4)
+    assert clear.axes["pitch"].bias == along.axes["pitch"].bias and clear.axes["yaw"].bias != along.axes["yaw"].bias
+    assert "(pitch 4, yaw 2: an axis clear of the loop's bias is not fitted further)" in clear.headline()
+    assert json.loads(json.dumps(jsonable(clear.describe())))["axes"]["yaw"]["flights"] == 2

@@ -103,6 +103,8 @@ class AxisCheck:
     loops_direction : bool
         The biases point the loop's way (damping up, the gain's magnitude not significantly up); only then is one
         removed.
+    flights : int
+        The check's flights fitted on this axis (batches of them until its bias was clear).
     """
 
     axis: str
@@ -114,6 +116,7 @@ class AxisCheck:
     bias_se: dict = field(default_factory=dict)
     corrected: dict = field(default_factory=dict)
     loops_direction: bool = True
+    flights: int = 0
 
     @property
     def removed(self) -> tuple:
@@ -124,7 +127,7 @@ class AxisCheck:
         """JSON-ready."""
         return {"axis": self.axis, "checked": self.checked, "reason": self.reason, "pilots": list(self.pilots),
                 "fitted": self.fitted, "bias": self.bias, "bias_se": self.bias_se, "corrected": self.corrected,
-                "loops_direction": self.loops_direction, "removed": list(self.removed)}
+                "loops_direction": self.loops_direction, "removed": list(self.removed), "flights": self.flights}
 
 
 @dataclass(frozen=True)
@@ -151,7 +154,12 @@ class ClosedLoopCheck:
         """What was flown, in a few words (a report's or the terminal's heading of :meth:`lines`)."""
         if not self.n_flights:
             return "no axis flown"
-        return f"{self.n_flights} flights of the model flown under the pilot fitted to the sticks and fitted again"
+        counts = sorted({c.flights for c in self.axes.values() if c.checked and c.flights})
+        if len(counts) < 2:
+            return f"{self.n_flights} flights of the model flown under the pilot fitted to the sticks and fitted again"
+        fitted = ", ".join(f"{a} {c.flights}" for a, c in self.axes.items() if c.checked and c.flights)
+        return (f"{self.n_flights} flights of the model flown under the pilot fitted to the sticks and fitted again "
+                f"({fitted}: an axis clear of the loop's bias is not fitted further)")
 
     def lines(self) -> list[str]:
         """One line per axis, for a report or the terminal."""
@@ -457,12 +465,16 @@ def _searched_delay(ident, axis: str) -> bool:
     return fitted_timing(ident, axis)["delay"] in ("auto", "detect")
 
 
-def _replicate(ident, loops: dict, checked: dict, seed: int, b: int) -> dict:
-    """Fly replicate ``b`` of every checked axis and fit it as the flight was: ``{axis: {name: value}}``."""
+def _replicate(ident, loops: dict, checked: dict, seed: int, b: int, fitted: tuple | None = None) -> dict:
+    """Fly replicate ``b`` of every checked axis and fit it as the flight was, the axes of ``fitted`` only (default
+    all; every checked axis is flown, so that an axis' flights are the same draws whichever others are fitted):
+    ``{axis: {name: value}}``."""
     rng = np.random.default_rng([seed, b])
     out = {}
     for axis, names in checked.items():
         flights = flown_flights(ident, axis, loops[axis], rng)
+        if fitted is not None and axis not in fitted:
+            continue
         try:
             again = axis_refit(ident, axis, names[2], flights, ident.axes_[axis].input_hold,
                                **fitted_timing(ident, axis))
@@ -488,7 +500,9 @@ def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: st
     closed loop (module docstring). Does not change ``ident``; :func:`apply_check` does.
 
     The flights are flown in batches of ``n_flights``, up to ``max_flights`` (default three batches), another
-    batch while a bias is neither clearly there nor clearly not (:data:`CONCLUSIVE`).
+    batch while a bias is neither clearly there nor clearly not (:data:`CONCLUSIVE`); an axis whose damping is
+    clearly not biased the loop's way is not fitted again (its flights are still flown, so that the others' are
+    the same draws).
 
     Raises
     ------
@@ -515,19 +529,23 @@ def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: st
         results[axis] = AxisCheck(axis, not why, why, pilots)
         if not why:
             checked[axis] = _names(ident, AXES.index(axis), fit, data[axis])
-    runs = []
-    while checked and len(runs) < max_flights:
+    runs, fitting = [], tuple(checked)
+    while fitting and len(runs) < max_flights:
         start = len(runs)
         batch = range(start, min(start + n_flights, max_flights))
-        runs += map_axes(lambda b: _replicate(ident, loops, checked, seed, b), batch, workers)
+        runs += map_axes(lambda b: _replicate(ident, loops, checked, seed, b, fitting), batch, workers)
         for axis in list(checked):
-            failed = next((run[axis] for run in runs if isinstance(run[axis], str)), None)
+            failed = next((run[axis] for run in runs if isinstance(run.get(axis), str)), None)
             if failed is not None:
                 results[axis] = replace(results[axis], checked=False,
                                         reason=f"a flight flown by the check could not be fitted ({failed})")
                 del checked[axis]
-        if not _inconclusive(_biases(ident, checked, runs)):
+        biases = {a: b for a, b in _biases(ident, checked, runs).items() if a in fitting}
+        if not _inconclusive(biases):
             break
+        # an axis whose damping shows no bias the loop's way is not fitted again while another is in doubt:
+        # nothing of it would be removed; one whose bias is clear is, its correction the surer for it
+        fitting = tuple(a for a in biases if _damping_z(biases[a][1]) > CONCLUSIVE[0])
     for axis, (fitted, rel) in _biases(ident, checked, runs).items():
         bias = {k: float(r.mean()) for k, r in rel.items()}
         se = {k: float(r.std(ddof=1) / np.sqrt(r.size)) for k, r in rel.items()}
@@ -537,17 +555,18 @@ def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: st
         corrected = {k: (v * (1.0 - bias[k]) if mode == "auto" and loops_bias and abs(bias[k]) > SIGNIFICANCE * se[k]
                          else v) for k, v in fitted.items()}
         results[axis] = replace(results[axis], fitted=fitted, bias=bias, bias_se=se, corrected=corrected,
-                                loops_direction=loops_bias)
+                                loops_direction=loops_bias, flights=int(rel[damping].size))
     return ClosedLoopCheck(results, len(runs), int(seed), mode, time.perf_counter() - t0)
 
 
 def _biases(ident, checked: dict, runs: list) -> dict:
     """Per checked axis, its fitted gain and damping (in that order; the delay after them when searched) and their
-    relative errors over ``runs``."""
+    relative errors over the ``runs`` that fitted it."""
     out = {}
     for axis, names in checked.items():
         fitted = checked_values(ident.axes_[axis], axis, names, _searched_delay(ident, axis))
-        out[axis] = fitted, {k: np.array([run[axis][k] / v - 1.0 for run in runs]) for k, v in fitted.items()}
+        out[axis] = fitted, {k: np.array([run[axis][k] / v - 1.0 for run in runs if axis in run])
+                             for k, v in fitted.items()}
     return out
 
 
@@ -555,12 +574,13 @@ def _inconclusive(biases: dict) -> bool:
     """True while some damping's bias points the loop's way (up) by between :data:`CONCLUSIVE` standard errors
     of its mean: the next batch of flights is flown (a damping biased down is not removed whatever its size;
     the gains' biases are a few tenths of a per cent: they do not decide it)."""
-    for _, rel in biases.values():
-        r = list(rel.values())[1]  # the damping (_biases)
-        z = r.mean() / max(r.std(ddof=1) / np.sqrt(r.size), 1e-300)
-        if CONCLUSIVE[0] < z < CONCLUSIVE[1]:
-            return True
-    return False
+    return any(CONCLUSIVE[0] < _damping_z(rel) < CONCLUSIVE[1] for _, rel in biases.values())
+
+
+def _damping_z(rel: dict) -> float:
+    """The damping's mean relative error over its standard error, from an axis' relative errors (:func:`_biases`)."""
+    r = list(rel.values())[1]  # the damping (_biases)
+    return float(r.mean() / max(r.std(ddof=1) / np.sqrt(r.size), 1e-300))
 
 
 def apply_check(ident, check: ClosedLoopCheck, which: str = "corrected") -> None:
