@@ -265,3 +265,16 @@ def test_an_axis_clear_of_the_loops_bias_is_not_fitted_again_while_another_axis_
     assert clear.axes["pitch"].bias == along.axes["pitch"].bias and clear.axes["yaw"].bias != along.axes["yaw"].bias
     assert "(pitch 4, yaw 2: an axis clear of the loop's bias is not fitted further)" in clear.headline()
     assert json.loads(json.dumps(jsonable(clear.describe())))["axes"]["yaw"]["flights"] == 2
+
+
+@pytest.mark.parametrize("gain, damping, loops", [
+    (-0.015, -0.005, True),   # the sluggish yaw behind a 0.03 rad/s gyro: the gain down, the damping within noise
+    (0.003, 0.06, True),      # the paper's pitch behind a 20 ms servo: the damping up, the gain within noise
+    (-0.02, -0.05, False),    # the damping down beyond its noise
+    (0.11, 0.40, False),      # the gain's magnitude up beyond its noise (the agile yaw in 2 Hz Dryden gusts)
+])
+def test_the_loops_direction_is_neither_the_damping_down_nor_the_gain_up_beyond_their_noise(gain, damping, loops):
+    from identification.likelihood.closed_loop import loops_direction
+
+    se = {"k10": 0.004, "k11": 0.015}
+    assert loops_direction({"k10": gain, "k11": damping}, se, "k10", "k11") is loops

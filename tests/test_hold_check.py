@@ -213,7 +213,7 @@ def test_a_controller_twice_as_fast_as_its_log_keeps_its_fraction():
 
 def test_an_axis_left_for_its_direction_says_what_was_found():
     down = _check(-0.05, loops_direction=False)
-    assert "not the loop's direction: the damping down; left" in down.lines()[0]
+    assert "not the loop's direction: the damping down beyond its noise; left" in down.lines()[0]
     agile_yaw = AxisCheck("yaw", True, bias={"k10": 0.11, "k11": 0.40}, bias_se={"k10": 0.01, "k11": 0.03},
                           loops_direction=False)  # the agile yaw in 2 Hz Dryden gusts (closed_loop's docstring)
     line = ClosedLoopCheck({"yaw": agile_yaw}, 8, 0, "auto", 1.0).lines()[0]

@@ -23,11 +23,15 @@ of bootstrap bias correction, ``value * (1 - bias)``: the bias at the estimate s
 truth); a smaller one is reported and left. So is every bias of an axis whose biases do not point the loop's
 way. That way has one direction: a pilot who opposes the motion puts into his sticks, with the opposite sign,
 motion the gyro did not see, and the likelihood reads it as more damping and less control power (the
-damping up, the gain's magnitude down or within its noise: on every aircraft, pilot, gyro and wind measured;
-behind a real 20 ms servo delay the paper aircraft's pitch gain moved +0.2-0.4 +- 0.3-0.6 % beside a damping
-+5-7 +- 1-1.6 %). A bias the other way (the gain's magnitude significantly up) is the simulated world's own
-(an agile aircraft's yaw in 2 Hz Dryden gusts, its gust fitted at 7 Hz, gave +40 % on the damping with the
-gain +11 % where the flight's fit was within 2.4 %), not the loop's.
+damping up, the gain's magnitude down, either of them within its noise: on every aircraft, pilot, gyro and wind
+measured; behind a real 20 ms servo delay the paper aircraft's pitch gain moved +0.2-0.4 +- 0.3-0.6 % beside a
+damping +5-7 +- 1-1.6 %, and the sluggish aircraft's yaw behind a 0.03 rad/s gyro the other way round, its gain
+-0.9 to -1.8 +- 0.4 % beside a damping -2.0 to +0.3 +- 1.4-2.2 %). A bias the other way (the gain's magnitude
+significantly up, or the damping significantly down) is the simulated world's own (an agile aircraft's yaw in
+2 Hz Dryden gusts, its gust fitted at 7 Hz, gave +40 % on the damping with the gain +11 % where the flight's fit
+was within 2.4 %), not the loop's. (Until 2026-12-04 a damping whose bias was down by any amount, within its
+noise too, kept every bias of its axis: the sluggish yaw's gain bias was then removed or left by the sign of a
+damping bias of +0.3 or -0.5 +- 1.3-2.2 %.)
 
 An axis with a servo delay or lag is flown through its servo (eq. 31, Padé, discretised exactly as the likelihood
 does, :func:`~identification.likelihood.state_space.servo_step`) and its flights fitted with the flight's timing
@@ -173,8 +177,8 @@ class ClosedLoopCheck:
                 verdict = "removed" if k in c.removed else "left"
                 parts.append(f"{k} {100 * b:+.1f} ± {100 * c.bias_se[k]:.1f} % ({verdict})")
             delays = ", ".join(f"{p['reaction_delay_s']:.2f}" for p in c.pilots)
-            found = ("the damping down" if list(c.bias.values())[1] <= 0.0
-                     else "the gain's magnitude up beyond its noise")
+            found = ("the gain's magnitude up beyond its noise" if list(c.bias.values())[0] > 0.0
+                     else "the damping down beyond its noise")
             other = "" if c.loops_direction else f" (not the loop's direction: {found}; left)"
             out.append(f"{axis}: pilot sees the aircraft (reaction {delays} s); bias " + "; ".join(parts) + other)
         out += [d.line() for d in self.delays.values()]
@@ -550,13 +554,18 @@ def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: st
         bias = {k: float(r.mean()) for k, r in rel.items()}
         se = {k: float(r.std(ddof=1) / np.sqrt(r.size)) for k, r in rel.items()}
         gain, damping = checked[axis][:2]
-        # the direction of the loop's bias (docstring): the damping up, the gain's magnitude not significantly up
-        loops_bias = bias[damping] > 0.0 and bias[gain] < SIGNIFICANCE * se[gain]
+        loops_bias = loops_direction(bias, se, gain, damping)
         corrected = {k: (v * (1.0 - bias[k]) if mode == "auto" and loops_bias and abs(bias[k]) > SIGNIFICANCE * se[k]
                          else v) for k, v in fitted.items()}
         results[axis] = replace(results[axis], fitted=fitted, bias=bias, bias_se=se, corrected=corrected,
                                 loops_direction=loops_bias, flights=int(rel[damping].size))
     return ClosedLoopCheck(results, len(runs), int(seed), mode, time.perf_counter() - t0)
+
+
+def loops_direction(bias: dict, se: dict, gain: str, damping: str) -> bool:
+    """The biases point the loop's way (module docstring): neither the damping significantly down nor the gain's
+    magnitude significantly up (``bias``, ``se``: relative, by parameter name)."""
+    return bias[damping] > -SIGNIFICANCE * se[damping] and bias[gain] < SIGNIFICANCE * se[gain]
 
 
 def _biases(ident, checked: dict, runs: list) -> dict:
