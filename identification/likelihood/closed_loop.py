@@ -105,8 +105,8 @@ class AxisCheck:
     corrected : dict
         The values after the check: the fitted ones less the significant biases.
     loops_direction : bool
-        The biases point the loop's way (damping up, the gain's magnitude not significantly up); only then is one
-        removed.
+        The biases point the loop's way (:func:`loops_direction`: neither the damping significantly down nor the
+        gain's magnitude significantly up); only then is one removed.
     flights : int
         The check's flights fitted on this axis (batches of them until its bias was clear).
     """
@@ -177,7 +177,8 @@ class ClosedLoopCheck:
                 verdict = "removed" if k in c.removed else "left"
                 parts.append(f"{k} {100 * b:+.1f} ± {100 * c.bias_se[k]:.1f} % ({verdict})")
             delays = ", ".join(f"{p['reaction_delay_s']:.2f}" for p in c.pilots)
-            found = ("the gain's magnitude up beyond its noise" if list(c.bias.values())[0] > 0.0
+            gain = next(iter(c.bias))
+            found = ("the gain's magnitude up beyond its noise" if c.bias[gain] >= SIGNIFICANCE * c.bias_se[gain]
                      else "the damping down beyond its noise")
             other = "" if c.loops_direction else f" (not the loop's direction: {found}; left)"
             out.append(f"{axis}: pilot sees the aircraft (reaction {delays} s); bias " + "; ".join(parts) + other)
