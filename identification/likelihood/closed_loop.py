@@ -26,12 +26,12 @@ motion the gyro did not see, and the likelihood reads it as more damping and les
 damping up, the gain's magnitude down, either of them within its noise: on every aircraft, pilot, gyro and wind
 measured; behind a real 20 ms servo delay the paper aircraft's pitch gain moved +0.2-0.4 +- 0.3-0.6 % beside a
 damping +5-7 +- 1-1.6 %, and the sluggish aircraft's yaw behind a 0.03 rad/s gyro the other way round, its gain
--0.9 to -1.8 +- 0.4 % beside a damping -2.0 to +0.3 +- 1.4-2.2 %). A bias the other way (the gain's magnitude
+-0.9 to -1.8 +- 0.2-0.4 % beside a damping -2.0 to +0.3 +- 1.0-2.2 %). A bias the other way (the gain's magnitude
 significantly up, or the damping significantly down) is the simulated world's own (an agile aircraft's yaw in
 2 Hz Dryden gusts, its gust fitted at 7 Hz, gave +40 % on the damping with the gain +11 % where the flight's fit
 was within 2.4 %), not the loop's. (Until 2026-12-04 a damping whose bias was down by any amount, within its
 noise too, kept every bias of its axis: the sluggish yaw's gain bias was then removed or left by the sign of a
-damping bias of +0.3 or -0.5 +- 1.3-2.2 %.)
+damping bias of +0.3 +- 1.3 % or -0.5 +- 2.2 %.)
 
 An axis with a servo delay or lag is flown through its servo (eq. 31, Padé, discretised exactly as the likelihood
 does, :func:`~identification.likelihood.state_space.servo_step`) and its flights fitted with the flight's timing
