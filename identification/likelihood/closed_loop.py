@@ -108,7 +108,8 @@ class AxisCheck:
         The biases point the loop's way (:func:`loops_direction`: neither the damping significantly down nor the
         gain's magnitude significantly up); only then is one removed.
     flights : int
-        The check's flights fitted on this axis (batches of them until its bias was clear).
+        The check's flights fitted on this axis: every batch flown until its damping was clearly not biased up
+        (or no axis was in doubt).
     """
 
     axis: str
@@ -158,8 +159,7 @@ class ClosedLoopCheck:
         """What was flown, in a few words (a report's or the terminal's heading of :meth:`lines`)."""
         if not self.n_flights:
             return "no axis flown"
-        counts = sorted({c.flights for c in self.axes.values() if c.checked and c.flights})
-        if len(counts) < 2:
+        if len({c.flights for c in self.axes.values() if c.checked and c.flights}) < 2:
             return f"{self.n_flights} flights of the model flown under the pilot fitted to the sticks and fitted again"
         fitted = ", ".join(f"{a} {c.flights}" for a, c in self.axes.items() if c.checked and c.flights)
         return (f"{self.n_flights} flights of the model flown under the pilot fitted to the sticks and fitted again "
@@ -177,9 +177,7 @@ class ClosedLoopCheck:
                 verdict = "removed" if k in c.removed else "left"
                 parts.append(f"{k} {100 * b:+.1f} ± {100 * c.bias_se[k]:.1f} % ({verdict})")
             delays = ", ".join(f"{p['reaction_delay_s']:.2f}" for p in c.pilots)
-            gain = next(iter(c.bias))
-            found = ("the gain's magnitude up beyond its noise" if c.bias[gain] >= SIGNIFICANCE * c.bias_se[gain]
-                     else "the damping down beyond its noise")
+            found = against_the_loop(c.bias, c.bias_se, *list(c.bias)[:2])  # the gain, the damping (_biases)
             other = "" if c.loops_direction else f" (not the loop's direction: {found}; left)"
             out.append(f"{axis}: pilot sees the aircraft (reaction {delays} s); bias " + "; ".join(parts) + other)
         out += [d.line() for d in self.delays.values()]
@@ -563,10 +561,19 @@ def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: st
     return ClosedLoopCheck(results, len(runs), int(seed), mode, time.perf_counter() - t0)
 
 
+def against_the_loop(bias: dict, se: dict, gain: str, damping: str) -> str:
+    """What points against the loop's way (module docstring), empty when nothing does: the gain's magnitude
+    significantly up, or the damping significantly down (``bias``, ``se``: relative, by parameter name)."""
+    if bias[gain] >= SIGNIFICANCE * se[gain]:
+        return "the gain's magnitude up beyond its noise"
+    if bias[damping] <= -SIGNIFICANCE * se[damping]:
+        return "the damping down beyond its noise"
+    return ""
+
+
 def loops_direction(bias: dict, se: dict, gain: str, damping: str) -> bool:
-    """The biases point the loop's way (module docstring): neither the damping significantly down nor the gain's
-    magnitude significantly up (``bias``, ``se``: relative, by parameter name)."""
-    return bias[damping] > -SIGNIFICANCE * se[damping] and bias[gain] < SIGNIFICANCE * se[gain]
+    """The biases point the loop's way: nothing :func:`against_the_loop`."""
+    return not against_the_loop(bias, se, gain, damping)
 
 
 def _biases(ident, checked: dict, runs: list) -> dict:
