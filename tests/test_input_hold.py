@@ -166,6 +166,8 @@ def test_a_gust_models_search_stuck_at_another_hold_is_searched_again_from_the_o
     problem = AxisProblem(2, DECOUPLED[2], [flight], burn=100)
     free = problem.per_kind(0.0, x0, ("gm2", "gm_so"))
     found = StuckOnce(2, DECOUPLED[2], [flight], burn=100).per_kind(0.0, x0, ("gm2", "gm_so"))
-    assert stuck["cost"] > free["gm_so"][0] + 1e-4  # the held search is a worse basin
-    assert found["gm_so"][0] == pytest.approx(free["gm_so"][0], rel=1e-6)
+    gap = stuck["cost"] - free["gm_so"][0]
+    assert gap > 1e-4  # the held search is a worse basin
+    # the free search's basin again (the optimiser's end within it moves by ~1e-5 with the machine's arithmetic)
+    assert found["gm_so"][0] == pytest.approx(free["gm_so"][0], abs=0.1 * gap)
     assert abs(found["gm_so"][1][HOLD_INDEX] - found["gm2"][1][HOLD_INDEX]) <= HOLD_DISAGREEMENT
