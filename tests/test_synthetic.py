@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 import re
-from dataclasses import fields
+from dataclasses import fields, replace
 
 import numpy as np
 import pytest
@@ -111,7 +111,7 @@ def test_unknown_effect_is_rejected_naming_the_known_ones():
         ("wind_level", -0.01), ("wind_level", (0.09, -0.09, 0.03)), ("wind_level", (0.09, 0.09)),
         ("wind_level", float("nan")),
         ("wind_corner_hz", 0.0), ("pilot_bandwidth", -1.0), ("reaction_delay", -0.1),
-        ("substeps", 0), ("substeps", 2.5),
+        ("substeps", 0), ("substeps", 2.5), ("log_every", 0), ("log_every", 2.0),
         ("gyro_noise", -0.01), ("attitude_noise", -0.01), ("vibration", -0.01), ("stick_noise", -0.01),
     ],
 )
@@ -145,6 +145,20 @@ def test_sample_rate_is_100_hz(flight):
     assert_allclose(np.diff(f.time), 0.01, rtol=1e-9)
     assert f.n == int(DURATION * 100) + 1
     assert f.time[0] == 0.0
+
+
+def test_a_log_of_a_faster_world_keeps_every_nth_sample_of_it():
+    """``log_every``: the world (pilot, gusts, sensors) steps that many times faster and the log samples it, as a
+    25 Hz logger samples a pilot and a flight that do not wait for it."""
+    cfg = FlightConfig(duration=4.0, sample_rate=25.0, log_every=4)
+    logged = simulate_flight(seed=5, config=cfg)
+    fast = simulate_flight(seed=5, config=replace(cfg, sample_rate=100.0, log_every=1))
+    assert logged.flight.n == 101 and logged.flight.sample_rate == pytest.approx(25.0, rel=1e-9)
+    for name in ("rates", "attitude", "sticks"):
+        assert np.array_equal(getattr(logged.flight, name), getattr(fast.flight, name)[:, ::4]), name
+    for name in ("wind", "wind_torque", "true_rates"):
+        assert np.array_equal(getattr(logged, name), getattr(fast, name)[:, ::4]), name
+    assert logged.config == cfg and logged.flight.metadata["log_every"] == 4
 
 
 def test_sticks_stay_in_range(flight):

@@ -140,6 +140,11 @@ class FlightConfig:
         Standard deviation of white noise added to every logged command, sample by sample [stick units]
         (a digital link's quantisation and the hand's tremor: what makes a held stick differ most from an
         interpolated one).
+    log_every : int
+        1 (default): the aircraft's world (pilot, gusts, sensors) steps at ``sample_rate``, the log's rate. > 1:
+        it steps ``log_every`` times faster and the log keeps every ``log_every``-th sample, as a logger
+        sampling a faster loop writes it: a pilot who decides, a link that delivers and gusts that change
+        between the log's samples, none of which the log shows (docs/method.md, "A world faster than its log").
     """
 
     duration: float = 300.0
@@ -172,6 +177,7 @@ class FlightConfig:
     autopilot_dterm_hz: float = 20.0
     held_sticks: bool = False
     command_noise: float = 0.0
+    log_every: int = 1
 
     def __post_init__(self):
         wind = np.asarray(self.wind_level, dtype=float)
@@ -181,6 +187,7 @@ class FlightConfig:
             "wind_corner_hz": self.wind_corner_hz > 0,
             "pilot_bandwidth": self.pilot_bandwidth > 0, "reaction_delay": self.reaction_delay >= 0,
             "substeps": isinstance(self.substeps, (int, np.integer)) and self.substeps >= 1,
+            "log_every": isinstance(self.log_every, (int, np.integer)) and self.log_every >= 1,
             "sweep_mode": self.sweep_mode in ("sequential", "simultaneous"),
             "wind_model": self.wind_model in WIND_MODELS,
             "wind_fast_tau": 0 < self.wind_fast_tau < math.inf,
@@ -197,7 +204,8 @@ class FlightConfig:
             checks[name] = getattr(self, name) >= 0
         expected = {"wind_model": f"one of {WIND_MODELS}", "pilot": f"one of {PILOTS}",
                     "wind_slow_fraction": "a fraction in [0, 1]", "input_shift": "|shift| < half the duration",
-                    "vibration_lines": "(frequency Hz > 0, amplitude rad/s >= 0) pairs"}
+                    "vibration_lines": "(frequency Hz > 0, amplitude rad/s >= 0) pairs",
+                    "log_every": "a whole number >= 1"}
         for name, ok in checks.items():
             if not ok:
                 hint = f"; expected {expected[name]}" if name in expected else ""

@@ -29,7 +29,7 @@ is :mod:`identification.bench.flight_config`; this module is the flight loop and
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -223,6 +223,9 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
     cfg = config or FlightConfig()
     if duration is not None and duration != cfg.duration:
         cfg = FlightConfig(**{**asdict(cfg), "duration": float(duration)})
+    if cfg.log_every > 1:
+        return _sampled(simulate_flight(seed=seed, effects=effects, truth=truth, effect_scale=effect_scale, config=replace(
+            cfg, sample_rate=cfg.sample_rate * cfg.log_every, log_every=1)), cfg)
     params = truth_params(effects, truth or PAPER_PARAMS, effect_scale)
     rng = np.random.default_rng(seed)  # draws in a fixed order: wind, collective, jitter, then the sensors
     fs = cfg.sample_rate
@@ -242,6 +245,17 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
     rates, att = _sensors(errors, true_rates, euler_from_quaternion(states[:, 6:10].T), estimated)
     flight = _logged_flight(cfg, seed, effects, time, rates, att, sticks)
     return SyntheticFlight(flight, params, wind, torque, true_rates, cfg, int(seed), tuple(effects), float(effect_scale))
+
+
+def _sampled(fast: SyntheticFlight, cfg: FlightConfig) -> SyntheticFlight:
+    """``fast`` (its world stepped ``cfg.log_every`` times faster than ``cfg.sample_rate``) as the logger wrote it:
+    every ``log_every``-th sample of the log, the wind and the true rates, with ``cfg`` as its config."""
+    m = cfg.log_every
+    f = fast.flight
+    flight = make_flight(f.time[::m], f.rates[:, ::m], np.ascontiguousarray(f.sticks[:, ::m]),
+                         attitude=f.attitude[:, ::m], metadata={**f.metadata, "log_every": m})
+    return replace(fast, flight=flight, wind=fast.wind[:, ::m], wind_torque=fast.wind_torque[:, ::m],
+                   true_rates=fast.true_rates[:, ::m], config=cfg)
 
 
 def _wind(rng: np.random.Generator, n: int, cfg: FlightConfig) -> np.ndarray:
