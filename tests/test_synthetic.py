@@ -159,6 +159,8 @@ def test_a_log_of_a_faster_world_keeps_every_nth_sample_of_it():
     for name in ("wind", "wind_torque", "true_rates"):
         assert np.array_equal(getattr(logged, name), getattr(fast, name)[:, ::4]), name
     assert logged.config == cfg and logged.flight.metadata["log_every"] == 4
+    held = simulate_flight(seed=5, config=replace(cfg, held_sticks=True)).flight.metadata["input_hold"]
+    assert held == "zoh at 100 Hz, one sample in 4 logged"  # held by the link, not at the log's rate
 
 
 def test_sticks_stay_in_range(flight):

@@ -252,8 +252,11 @@ def _sampled(fast: SyntheticFlight, cfg: FlightConfig) -> SyntheticFlight:
     every ``log_every``-th sample of the log, the wind and the true rates, with ``cfg`` as its config."""
     m = cfg.log_every
     f = fast.flight
+    # the sticks' hold is the world's, not the log's: a link holding them at the world's rate is not held here
+    meta = {**f.metadata, "log_every": m,
+            "input_hold": f"{f.metadata['input_hold']} at {cfg.sample_rate * m:g} Hz, one sample in {m} logged"}
     flight = make_flight(f.time[::m], f.rates[:, ::m], np.ascontiguousarray(f.sticks[:, ::m]),
-                         attitude=f.attitude[:, ::m], metadata={**f.metadata, "log_every": m})
+                         attitude=f.attitude[:, ::m], metadata=meta)
     return replace(fast, flight=flight, wind=fast.wind[:, ::m], wind_torque=fast.wind_torque[:, ::m],
                    true_rates=fast.true_rates[:, ::m], config=cfg)
 
