@@ -16,7 +16,7 @@ EFFECT_NAMES = ("servo_delay", "cross_coupling", "gyroscopic", "nonlinear_dampin
 EFFECT_ALIAS_NAMES = ("flybar", "quadratic_damping", "collective_effectiveness")
 """The names of :data:`identification.bench.flight_config.EFFECT_ALIASES` (a test keeps the two equal)."""
 
-from .argtypes import FLIGHT_BYTES_PER_SECOND, affordable, number, output_path, seed
+from .argtypes import FLIGHT_BYTES_PER_SECOND, affordable, number, output_path, seed, whole
 
 
 def register(sub):
@@ -64,6 +64,10 @@ def register(sub):
                    help="an extra vibration line on every gyro axis, e.g. 27:0.03 (Hz : rad/s; repeatable)")
     p.add_argument("--input-shift", type=number("seconds", None), default=None,
                    help="shift the logged sticks in s: > 0 the log's inputs lag the response, < 0 they lead")
+    p.add_argument("--log-every", type=whole(1, 16), default=None, metavar="N",
+                   help="fly the world (pilot, radio link, gusts, sensors) N times faster than the 100 Hz log and log "
+                   "every N-th step, as a logger samples a flight that does not wait for it (default 1: the world "
+                   "steps at the log's rate)")
     p.set_defaults(func=run, out_kind="file")
 
 
@@ -123,7 +127,7 @@ def _config(args):
         cfg = replace(cfg, wind_level=(args.wind, args.wind, args.wind / 3.0))
     changes = {"wind_model": args.wind_model, "wind_corner_hz": args.wind_corner, "pilot": args.pilot,
                "wind_slow_fraction": args.slow_gusts, "reaction_delay": args.reaction_delay,
-               "gyro_noise": args.gyro_noise, "input_shift": args.input_shift}
+               "gyro_noise": args.gyro_noise, "input_shift": args.input_shift, "log_every": args.log_every}
     cfg = replace(cfg, **{k: v for k, v in changes.items() if v is not None})
     if args.wind_corner is not None and cfg.inert(["wind_corner_hz"]):
         raise ValueError(f"--wind-corner shapes the lowpass and Dryden gusts; this flight's are gauss_markov"

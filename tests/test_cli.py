@@ -90,7 +90,7 @@ def test_simulate_flight_writes_flight_truth_and_wind(flight_csv):
 @pytest.mark.parametrize(
     "option, value",
     [("--duration", "-1"), ("--duration", "0"), ("--duration", "nan"), ("--wind", "-0.1"), ("--wind", "inf"),
-     ("--effect", "bogus")],
+     ("--effect", "bogus"), ("--log-every", "0"), ("--log-every", "2.5")],
 )
 def test_simulate_flight_rejects_bad_options(tmp_path, capsys, option, value):
     with pytest.raises(SystemExit) as exc:
@@ -428,6 +428,17 @@ def test_simulate_flight_scales_effects_and_flies_the_manoeuvre(tmp_path, capsys
     truth = json.loads(out.with_suffix(".truth.json").read_text())
     assert {k: truth["parameters"][k] for k in ("nld1", "nld2", "nld3")} == {"nld1": 10.0, "nld2": 10.0, "nld3": 3.0}
     assert truth["config"]["sweep_mode"] == "simultaneous"
+
+
+def test_simulate_flight_logs_a_faster_world_by_sampling_it(tmp_path, capsys):
+    out = tmp_path / "fast.csv"
+    assert main(["simulate-flight", "--duration", "4", "--cell", "held-sticks-pd", "--log-every", "4", "--out", str(out),
+                 "-q"]) == 0
+    printed = capsys.readouterr().out
+    assert "401 samples at 100 Hz" in printed
+    assert "held over each sample" not in printed  # the link held them at 400 Hz, not the log's samples
+    truth = json.loads(out.with_suffix(".truth.json").read_text())
+    assert truth["config"]["log_every"] == 4 and truth["config"]["sample_rate"] == 100.0
 
 
 def test_a_flight_logged_too_slowly_for_the_prefilter_is_named(tmp_path, capsys):
