@@ -181,7 +181,7 @@ def available_memory() -> int:
         return 2**63
 
 
-def _gib(n: float) -> str:
+def gib(n: float) -> str:
     return f"{n / 2**30:.3g} GiB"
 
 
@@ -209,8 +209,8 @@ def affordable(what: str, bytes_per_unit: float, unit: str, low: float = 0.0, *,
         need, have = v * bytes_per_unit, memory()
         if need > have:
             raise argparse.ArgumentTypeError(
-                f"expected {what}; {text} {unit} would need about {_gib(need)} of memory and "
-                f"{_gib(have)} are available")
+                f"expected {what}; {text} {unit} would need about {gib(need)} of memory and "
+                f"{gib(have)} are available")
         return v
 
     return parse

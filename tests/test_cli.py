@@ -441,6 +441,17 @@ def test_simulate_flight_logs_a_faster_world_by_sampling_it(tmp_path, capsys):
     assert truth["config"]["log_every"] == 4 and truth["config"]["sample_rate"] == 100.0
 
 
+def test_simulate_flight_refuses_a_faster_world_larger_than_the_memory(tmp_path, capsys, monkeypatch):
+    import heli_cli.argtypes as argtypes
+
+    monkeypatch.setattr(argtypes, "available_memory", lambda: 5_000_000)  # 4 s fit; 4 s of a 16x world do not
+    out = tmp_path / "f.csv"
+    assert main(["simulate-flight", "--duration", "4", "--log-every", "16", "--out", str(out), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "--log-every 16 flies 64 s of 100 Hz steps" in err and "available" in err and err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_flight_logged_too_slowly_for_the_prefilter_is_named(tmp_path, capsys):
     from identification.io import write_csv_flight
     from identification.bench.synthetic import simulate_flight
