@@ -181,8 +181,15 @@ def available_memory() -> int:
         return 2**63
 
 
-def gib(n: float) -> str:
+def _gib(n: float) -> str:
     return f"{n / 2**30:.3g} GiB"
+
+
+def memory_shortfall(need: float, memory=None) -> str:
+    """Empty when ``need`` bytes fit in the available memory (``memory()``, default :func:`available_memory`), else
+    how much that is against what there is, for a one-line refusal."""
+    have = (memory or available_memory)()
+    return "" if need <= have else f"about {_gib(need)} of memory and {_gib(have)} are available"
 
 
 def affordable(what: str, bytes_per_unit: float, unit: str, low: float = 0.0, *, memory=available_memory):
@@ -206,11 +213,9 @@ def affordable(what: str, bytes_per_unit: float, unit: str, low: float = 0.0, *,
 
     def parse(text):
         v = check(text)
-        need, have = v * bytes_per_unit, memory()
-        if need > have:
-            raise argparse.ArgumentTypeError(
-                f"expected {what}; {text} {unit} would need about {gib(need)} of memory and "
-                f"{gib(have)} are available")
+        short = memory_shortfall(v * bytes_per_unit, memory)
+        if short:
+            raise argparse.ArgumentTypeError(f"expected {what}; {text} {unit} would need {short}")
         return v
 
     return parse

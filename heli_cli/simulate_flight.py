@@ -138,11 +138,11 @@ def _config(args):
     if args.vibration_line:
         cfg = replace(cfg, vibration_lines=tuple(cfg.vibration_lines) + tuple(args.vibration_line))
     if cfg.log_every > 1:  # the faster world is flown whole before it is sampled: its memory is log_every times more
-        from . import argtypes
+        from .argtypes import memory_shortfall
 
-        need, have = args.duration * cfg.log_every * argtypes.FLIGHT_BYTES_PER_SECOND, argtypes.available_memory()
-        if need > have:
+        short = memory_shortfall(args.duration * cfg.log_every * FLIGHT_BYTES_PER_SECOND)
+        if short:
             raise ValueError(f"--duration {args.duration:g} with --log-every {cfg.log_every} flies "
-                             f"{args.duration * cfg.log_every:g} s of 100 Hz steps: about {argtypes.gib(need)} of "
-                             f"memory, and {argtypes.gib(have)} are available; shorten the flight or log more of it")
+                             f"{args.duration * cfg.log_every:g} s of 100 Hz steps: {short}; shorten the flight or "
+                             "log more of it")
     return cfg
