@@ -38,18 +38,22 @@ def test_without_comparing_structures_only_the_written_model_is_fitted(flight, t
 
 def test_a_model_fitted_before_is_written_as_it_is_not_fitted_again(flight, tmp_path, monkeypatch):
     """``fitted=`` (``heli refresh`` hands over its drift table's fit of the new flights): that identifier is the
-    one written, and no other maximum-likelihood fit is made."""
+    one written, and no other fit of the model is made (the stick-noise test, which fits its own two with the
+    given fit's decisions, is handed the given identifier)."""
     from identification.likelihood.estimator import MaximumLikelihoodIdentifier
+    from identification.workflows import identify
     from identification.workflows.identify import identify_and_report
 
     before = MaximumLikelihoodIdentifier().fit([flight])
+    tested = []
 
     def refuse(self, *args, **kwargs):
         raise AssertionError("fitted again")
 
     monkeypatch.setattr(MaximumLikelihoodIdentifier, "fit", refuse)
+    monkeypatch.setattr(identify, "check_stick_noise", lambda ident: tested.append(ident))
     run = identify_and_report([flight], tmp_path / "given", plots=False, compare_structures=False,
                               fitted={"decoupled": before})
-    assert run.identifiers["decoupled"] is before
+    assert run.identifiers["decoupled"] is before and tested == [before]
     written = json.loads((tmp_path / "given" / "model.json").read_text())["parameters"]
     assert written == pytest.approx(before.params_.values())

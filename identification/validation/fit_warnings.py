@@ -27,6 +27,8 @@ quality and returns one line per concern, for the terminal and the report:
 * **Hold in doubt** (:func:`hold_warning`) -- the log rejects neither held nor interpolated sticks
   (:func:`identification.likelihood.input_hold.undecided_against`) and the values fitted at the two differ by
   more than their standard errors: the line says by how much and what would decide it.
+* **Stick noise the aircraft did not feel** (:func:`stick_noise_warning`) -- the sticks moved between the log's
+  samples (:mod:`identification.likelihood.stick_noise`): the line names the axes and what avoids it.
 
 The functions are pure: they read the flights and the figures and return strings (the figures that judge a
 fitted model come from :mod:`identification.validation.judged_fit`).
@@ -192,3 +194,25 @@ def folded_lines_warning(ident) -> list[str]:
             "attitude does not show: vibration faster than half the log's rate, folded into the aircraft's band by "
             "sampling. Their sensor share was removed before the fit; log the gyro at more than twice the rotor's "
             "frequency, or low-passed below half the log's rate, to be rid of them"]
+
+
+def stick_noise_warning(check) -> list[str]:
+    """One line where the sticks carry noise the aircraft did not feel
+    (:func:`identification.likelihood.stick_noise.check_stick_noise`, a :class:`StickNoiseCheck` or None): which
+    axes, by what likelihood ratio, which way their values lie, and what avoids it. The fit is left as it is: no
+    estimate from the logged samples alone recovers what the aircraft felt between them."""
+    if check is None or not check.axes:
+        return []
+    axes = check.axes
+    ratios = ", ".join(f"{axis} exp({check.lr[axis]:.0f})" for axis in axes)
+    moved = [f"{name} {pct:+.1f} %" for axis in axes for name, pct in check.moved.get(axis, {}).items()
+             if abs(pct) >= 0.5]
+    shrunk = f"; fitted so: {', '.join(moved)}" if moved else ""
+    return [f"the {', '.join(axes)} stick{'s' if len(axes) > 1 else ''} carr{'y' if len(axes) > 1 else 'ies'} noise "
+            f"the aircraft did not feel: with each sample pulled {check.shrink:g} of the way to its neighbours' mean, "
+            f"the rates are explained better by a factor of {ratios} (a clear sign needs "
+            f"exp({max(check.thresholds[a] for a in axes):.1f})){shrunk}. A loop or radio link that updates its "
+            "commands faster than the log records them leaves sticks that moved between samples; gains and "
+            "dampings fitted to them are biased low (8-10 % on the bench's agile yaw, docs/method.md), and by more "
+            "than the shrunk fit moves them. Log the commands at the loop's rate, or each one's mean over its "
+            "sample, to identify this aircraft"]

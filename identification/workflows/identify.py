@@ -32,7 +32,8 @@ from ..integral.method import IntegralIdentifier
 from ..reports.figures import PendingFigures
 from ..reports.identify import ReportContent, comparison_figures, fit_figures, report_markdown, wind_figures, wind_section
 from ..sensors import identify_sensors
-from ..validation.fit_warnings import fit_warnings, folded_lines_warning, hold_warning
+from ..likelihood.stick_noise import check_stick_noise
+from ..validation.fit_warnings import fit_warnings, folded_lines_warning, hold_warning, stick_noise_warning
 from ..validation.judged_fit import judged_r2
 from ..validation.forward_simulation import validate_models
 from ..validation.model_verdict import judge_identifier
@@ -275,6 +276,8 @@ def identify_and_report(flights, out_dir, options: IdentifyOptions | None = None
     first = ident.flights_[0]  # filtered as identified
     # judged by what the model predicts (ML: 0.5 s ahead), not by what the sticks explain alone (low in strong wind)
     warnings = fit_warnings(flights, *judged_r2(ident, flights)) + hold_warning(ident) + folded_lines_warning(ident)
+    stick_noise = _stick_noise(ident, opts)
+    warnings += stick_noise_warning(stick_noise)
     opts.say(f"validating {'both models' if len(identifiers) > 1 else 'the model'} by forward simulation")
     validation, diverged = _validate(first, identifiers, chosen)
     warnings += diverged
@@ -290,6 +293,7 @@ def identify_and_report(flights, out_dir, options: IdentifyOptions | None = None
                            if getattr(ident, "hold_alternative_", None) else {}),
                         **({"closed_loop": ident.closed_loop_.describe()}
                            if getattr(ident, "closed_loop_", None) is not None else {}),
+                        **({"stick_noise": stick_noise.describe()} if stick_noise is not None else {}),
                         **({"input_shifts_s": ident.input_shifts_}
                            if min(getattr(ident, "input_shifts_", {}).values(), default=0.0) < 0.0 else {}),
                         **({"frequency_response": frequency.to_dict()} if not isinstance(frequency, str) else {}),
@@ -357,6 +361,15 @@ def _options(options: IdentifyOptions | None, settings: dict) -> IdentifyOptions
         if name not in known:
             raise TypeError(f"identify_and_report() got an unexpected keyword argument {name!r}")
     return replace(options or IdentifyOptions(), **settings)
+
+
+def _stick_noise(ident, opts: IdentifyOptions):
+    """The maximum-likelihood fit's stick-noise test (:mod:`identification.likelihood.stick_noise`), or None for
+    the integral method."""
+    if opts.method != "ml":
+        return None
+    opts.say("testing the sticks for noise the aircraft did not feel (two more fits)")
+    return check_stick_noise(ident)
 
 
 def _fit_models(flights: list, opts: IdentifyOptions) -> dict:

@@ -1,0 +1,100 @@
+"""The stick-noise test (``identification.likelihood.stick_noise``): a log whose sticks moved between its samples is
+named, one whose sticks the aircraft felt as logged is not, and ``heli identify``'s warning says so."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from heli_core.params import ModelParams
+
+AGILE = ModelParams(k2=4.0, k3=6.0, kd1=0.10, k6=-2.7, k7=6.5, kd2=0.05, k10=35.0, k11=7.0, k12=-1.0, kd3=0.20)
+"""A 450-class flybarless helicopter (scripts/aircraft_generalisation.py's 'agile'): its stiff yaw shows stick
+noise most."""
+
+
+def _flight(log_every: int, seed: int = 1301, duration: float = 90.0):
+    from identification.bench.cells import BENCH_CELLS
+    from identification.bench.synthetic import simulate_flight
+
+    config = replace(BENCH_CELLS["held-sticks-pd"], duration=duration, log_every=log_every)
+    return simulate_flight(duration, seed=seed, config=config, truth=AGILE)
+
+
+@pytest.fixture(scope="module")
+def checks():
+    """The test on a link four times faster than its log (command noise 0.01 on the frames the log skips) and on
+    the same cell held at the log's rate."""
+    from identification.likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
+    from identification.likelihood.stick_noise import check_stick_noise
+
+    out = {}
+    for every in (4, 1):
+        ident = MaximumLikelihoodIdentifier(**CLI_TIMING).fit(_flight(every).flight)
+        out[every] = (ident, check_stick_noise(ident))
+    return out
+
+
+def test_neighbour_shrinking_keeps_lines_and_ends_and_damps_alternation():
+    from identification.likelihood.stick_noise import neighbour_shrunk
+
+    t = np.arange(50.0)
+    sticks = np.vstack([np.full(50, 0.3), 0.01 * t - 0.2, (-1.0) ** t * 0.1, np.sin(0.05 * t)])
+    out = neighbour_shrunk(sticks, 0.75)
+    assert out.shape == sticks.shape
+    np.testing.assert_allclose(out[:2], sticks[:2], atol=1e-15)  # a constant and a straight line
+    np.testing.assert_array_equal(out[:, [0, -1]], sticks[:, [0, -1]])
+    np.testing.assert_allclose(out[2, 1:-1], (1 - 2 * 0.75) * sticks[2, 1:-1])  # -0.5 x the alternation
+    np.testing.assert_allclose(out[3], sticks[3], atol=0.75 * 0.5 * 0.05 ** 2 + 1e-12)  # a slow sine barely moves
+    np.testing.assert_array_equal(neighbour_shrunk(sticks, 0.0), sticks)
+
+
+def test_sticks_that_moved_between_samples_are_named_on_the_axis_they_bias(checks):
+    """At a link four times the log's rate the agile yaw gain reads 4-10 % low; its shrunk sticks explain the yaw
+    rate far better than a parameter's worth, and the fit on them moves the gain and damping up."""
+    ident, check = checks[4]
+    assert "yaw" in check.axes
+    assert check.lr["yaw"] > 5 * check.thresholds["yaw"]
+    assert check.moved["yaw"]["k10"] > 1.0 and check.moved["yaw"]["k11"] > 1.0
+    assert set(check.describe()["axes"]) == set(check.axes)
+
+
+def test_sticks_felt_as_logged_are_not_named(checks):
+    """Held at the log's rate (the same pilot and command noise): the shrunk sticks explain the rates worse."""
+    _, check = checks[1]
+    assert check.axes == ()
+    assert check.lr["yaw"] < 0
+
+
+def test_the_warning_names_the_axes_and_what_avoids_it(checks):
+    from identification.validation.fit_warnings import stick_noise_warning
+
+    [line] = stick_noise_warning(checks[4][1])
+    assert "yaw stick carries noise the aircraft did not feel" in line
+    assert "Log the commands at the loop's rate" in line and "k10 +" in line
+    assert stick_noise_warning(checks[1][1]) == [] and stick_noise_warning(None) == []
+
+
+def test_an_unfitted_estimator_is_refused():
+    from identification.likelihood.estimator import MaximumLikelihoodIdentifier
+    from identification.likelihood.stick_noise import check_stick_noise
+
+    with pytest.raises(ValueError, match="needs a fitted MaximumLikelihoodIdentifier"):
+        check_stick_noise(MaximumLikelihoodIdentifier())
+
+
+def test_heli_identify_writes_the_warning_and_the_figures(tmp_path):
+    """The workflow behind ``heli identify``: the warning among the run's warnings and in report.md, the test's
+    figures in model.json."""
+    import json
+
+    from identification.workflows.identify import identify_and_report
+
+    run = identify_and_report([_flight(4, seed=1302).flight], tmp_path / "m", plots=False, compare_structures=False,
+                              disturbances=False)
+    assert any("noise the aircraft did not feel" in w for w in run.warnings)
+    noted = json.loads((tmp_path / "m" / "model.json").read_text())["fit_statistics"]["stick_noise"]
+    assert "yaw" in noted["axes"] and noted["lr"]["yaw"] > noted["thresholds"]["yaw"]
+    assert "noise the aircraft did not feel" in (tmp_path / "m" / "report.md").read_text()
