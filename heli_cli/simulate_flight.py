@@ -18,6 +18,11 @@ EFFECT_ALIAS_NAMES = ("flybar", "quadratic_damping", "collective_effectiveness")
 
 from .argtypes import FLIGHT_BYTES_PER_SECOND, affordable, number, output_path, seed, whole
 
+MIN_RATE_HZ, MAX_RATE_HZ = 10.0, 2000.0
+"""The log rates ``--rate`` takes [Hz]: from a slow logger's to a flight controller's loop."""
+DEFAULT_RATE_HZ = 100.0
+"""The log rate of a flight without ``--rate`` (``FlightConfig``'s) [Hz]; ``FLIGHT_BYTES_PER_SECOND`` is measured at it."""
+
 
 def register(sub):
     p = sub.add_parser(
@@ -49,7 +54,7 @@ def register(sub):
     p.add_argument("--wind-model", choices=("lowpass", "gauss_markov", "dryden"), default=None,
                    help="gust spectrum: 'lowpass' (2nd-order, default), 'gauss_markov' (1st-order, broadband), "
                    "'dryden' (lateral Dryden form)")
-    p.add_argument("--wind-corner", type=number("a frequency in Hz from 0.001 to below 50 (Nyquist of the 100 Hz flight)", 0.001, 50.0, low_open=False), default=None,
+    p.add_argument("--wind-corner", type=number("a frequency in Hz from 0.001 to below 50 (Nyquist of a 100 Hz flight)", 0.001, 50.0, low_open=False), default=None,
                    help="corner of the lowpass/Dryden gusts in Hz (0.2 to 2 typical; default 0.5)")
     p.add_argument("--slow-gusts", type=number("a fraction in [0, 1)", 0.0, 1.0, low_open=False), default=None,
                    help="share of the wind's variance in slow gusts (first-order, 4 s)")
@@ -64,8 +69,13 @@ def register(sub):
                    help="an extra vibration line on every gyro axis, e.g. 27:0.03 (Hz : rad/s; repeatable)")
     p.add_argument("--input-shift", type=number("seconds", None), default=None,
                    help="shift the logged sticks in s: > 0 the log's inputs lag the response, < 0 they lead")
+    p.add_argument("--rate", type=number(f"a log rate in Hz from {MIN_RATE_HZ:g} to {MAX_RATE_HZ:g}", MIN_RATE_HZ,
+                                         MAX_RATE_HZ, low_open=False, high_open=False),
+                   default=None, metavar="HZ",
+                   help="the log's sample rate in Hz (default 100); the world steps at it unless --log-every says "
+                   "otherwise")
     p.add_argument("--log-every", type=whole(1, 16), default=None, metavar="N",
-                   help="fly the world (pilot, radio link, gusts, sensors) N times faster than the 100 Hz log and log "
+                   help="fly the world (pilot, radio link, gusts, sensors) N times faster than the log and log "
                    "every N-th step, as a logger samples a flight that does not wait for it (default 1: the world "
                    "steps at the log's rate)")
     p.set_defaults(func=run, out_kind="file")
@@ -127,7 +137,8 @@ def _config(args):
         cfg = replace(cfg, wind_level=(args.wind, args.wind, args.wind / 3.0))
     changes = {"wind_model": args.wind_model, "wind_corner_hz": args.wind_corner, "pilot": args.pilot,
                "wind_slow_fraction": args.slow_gusts, "reaction_delay": args.reaction_delay,
-               "gyro_noise": args.gyro_noise, "input_shift": args.input_shift, "log_every": args.log_every}
+               "gyro_noise": args.gyro_noise, "input_shift": args.input_shift, "log_every": args.log_every,
+               "sample_rate": args.rate}
     cfg = replace(cfg, **{k: v for k, v in changes.items() if v is not None})
     if args.wind_corner is not None and cfg.inert(["wind_corner_hz"]):
         raise ValueError(f"--wind-corner shapes the lowpass and Dryden gusts; this flight's are gauss_markov"
@@ -137,12 +148,18 @@ def _config(args):
         cfg = replace(cfg, wind_level=tuple(args.wind_scale * w for w in cfg.wind_level))
     if args.vibration_line:
         cfg = replace(cfg, vibration_lines=tuple(cfg.vibration_lines) + tuple(args.vibration_line))
-    if cfg.log_every > 1:  # the faster world is flown whole before it is sampled: its memory is log_every times more
+    if cfg.wind_corner_hz >= cfg.sample_rate / 2 and not cfg.inert(["wind_corner_hz"]):
+        raise ValueError(f"--wind-corner {cfg.wind_corner_hz:g} Hz is not below the Nyquist frequency of a "
+                         f"{cfg.sample_rate:g} Hz log ({cfg.sample_rate / 2:g} Hz): lower it or raise --rate")
+    steps = cfg.log_every * cfg.sample_rate / DEFAULT_RATE_HZ  # the world is flown whole before it is sampled
+    if steps > 1:
         from .argtypes import memory_shortfall
 
-        short = memory_shortfall(args.duration * cfg.log_every * FLIGHT_BYTES_PER_SECOND)
+        short = memory_shortfall(args.duration * steps * FLIGHT_BYTES_PER_SECOND)
         if short:
-            raise ValueError(f"--duration {args.duration:g} with --log-every {cfg.log_every} flies "
-                             f"{args.duration * cfg.log_every:g} s of 100 Hz steps: {short}; shorten the flight or "
-                             "log more of it")
+            world = cfg.sample_rate * cfg.log_every
+            raise ValueError(f"--duration {args.duration:g} with --rate {cfg.sample_rate:g}"
+                             + (f" and --log-every {cfg.log_every}" if cfg.log_every > 1 else "")
+                             + f" flies a {world:g} Hz world for {args.duration:g} s: {short}; shorten the flight, "
+                             "or lower --rate or --log-every")
     return cfg

@@ -448,8 +448,32 @@ def test_simulate_flight_refuses_a_faster_world_larger_than_the_memory(tmp_path,
     out = tmp_path / "f.csv"
     assert main(["simulate-flight", "--duration", "4", "--log-every", "16", "--out", str(out), "-q"]) == 2
     err = capsys.readouterr().err
-    assert "--log-every 16 flies 64 s of 100 Hz steps" in err and "available" in err and err.count("\n") == 1
+    assert "--log-every 16 flies a 1600 Hz world for 4 s" in err and "available" in err and err.count("\n") == 1
     assert list(tmp_path.iterdir()) == []
+
+
+def test_simulate_flight_logs_at_the_rate_asked_and_refuses_what_it_cannot(tmp_path, capsys, monkeypatch):
+    """``--rate``: the log's sample rate (the world steps at it, or --log-every times faster); a rate outside
+    10-2000 Hz, a gust corner above its Nyquist frequency and a flight too large for the memory are refused in one
+    line, nothing written."""
+    import heli_cli.argtypes as argtypes
+
+    out = tmp_path / "f.csv"
+    assert main(["simulate-flight", "--duration", "4", "--rate", "25", "--log-every", "2", "--out", str(out), "-q"]) == 0
+    assert "101 samples at 25 Hz" in capsys.readouterr().out
+    truth = json.loads(out.with_suffix(".truth.json").read_text())
+    assert truth["config"]["sample_rate"] == 25.0 and truth["config"]["log_every"] == 2
+    for option in (["--rate", "5"], ["--rate", "3000"], ["--rate", "fast"]):
+        with pytest.raises(SystemExit):
+            main(["simulate-flight", *option, "--out", str(tmp_path / "g.csv")])
+        assert "a log rate in Hz from 10 to 2000" in capsys.readouterr().err
+    assert main(["simulate-flight", "--duration", "4", "--rate", "20", "--wind-model", "dryden", "--wind-corner", "12",
+                 "--out", str(tmp_path / "h.csv"), "-q"]) == 2
+    assert "not below the Nyquist frequency of a 20 Hz log (10 Hz)" in capsys.readouterr().err
+    monkeypatch.setattr(argtypes, "available_memory", lambda: 5_000_000)  # 4 s at 100 Hz fit; at 1600 Hz not
+    assert main(["simulate-flight", "--duration", "4", "--rate", "1600", "--out", str(tmp_path / "i.csv"), "-q"]) == 2
+    assert "--rate 1600 flies a 1600 Hz world for 4 s" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(p.name for p in tmp_path.glob("f.*"))
 
 
 def test_a_flight_logged_too_slowly_for_the_prefilter_is_named(tmp_path, capsys):
