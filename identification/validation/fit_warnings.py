@@ -207,12 +207,12 @@ def stick_noise_warning(check) -> list[str]:
     ratios = ", ".join(f"{axis} exp({check.lr[axis]:.0f})" for axis in axes)
     moved = [f"{name} {pct:+.1f} %" for axis in axes for name, pct in check.moved.get(axis, {}).items()
              if abs(pct) >= 0.5]
-    shrunk = f"; fitted so: {', '.join(moved)}" if moved else ""
+    shrunk = f"; the gains solved on them move: {', '.join(moved)}" if moved else ""
     return [f"the {', '.join(axes)} stick{'s' if len(axes) > 1 else ''} carr{'y' if len(axes) > 1 else 'ies'} noise "
             f"the aircraft did not feel: with each sample pulled {check.shrink:g} of the way to its neighbours' mean, "
             f"the rates are explained better by a factor of {ratios} (a clear sign needs "
             f"exp({max(check.thresholds[a] for a in axes):.1f})){shrunk}. A loop or radio link that updates its "
             "commands faster than the log records them leaves sticks that moved between samples; gains and "
-            "dampings fitted to them are biased low (8-10 % on the bench's agile yaw, docs/method.md), and by more "
-            "than the shrunk fit moves them. Log the commands at the loop's rate, or each one's mean over its "
+            "dampings fitted to them are biased low (8-10 % on the bench's agile yaw, docs/method.md), by about twice "
+            "what the shrunk sticks move them. Log the commands at the loop's rate, or each one's mean over its "
             "sample, to identify this aircraft"]

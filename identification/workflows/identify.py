@@ -368,7 +368,6 @@ def _stick_noise(ident, opts: IdentifyOptions):
     the integral method."""
     if opts.method != "ml":
         return None
-    opts.say("testing the sticks for noise the aircraft did not feel (two more fits)")
     return check_stick_noise(ident)
 
 
