@@ -211,8 +211,9 @@ def stick_noise_warning(check) -> list[str]:
     return [f"the {', '.join(axes)} stick{'s' if len(axes) > 1 else ''} carr{'y' if len(axes) > 1 else 'ies'} noise "
             f"the aircraft did not feel: with each sample pulled {check.shrink:g} of the way to its neighbours' mean, "
             f"the rates are explained better by a factor of {ratios} (a clear sign needs "
-            f"exp({max(check.thresholds[a] for a in axes):.1f})){shrunk}. A loop or radio link that updates its "
-            "commands faster than the log records them leaves sticks that moved between samples; gains and "
-            "dampings fitted to them are biased low (8-10 % on the bench's agile yaw, docs/method.md), by about twice "
-            "what the shrunk sticks move them. Log the commands at the loop's rate, or each one's mean over its "
-            "sample, to identify this aircraft"]
+            f"exp({max(check.thresholds[a] for a in axes):.1f})){shrunk}. A radio link or loop that updates its "
+            "commands faster than the log records them leaves sticks that moved between samples: a link's noisy "
+            "commands bias the gains and dampings low (8-10 % on the bench's agile yaw, about twice what the shrunk "
+            "sticks move them), and a flight controller's loop correcting the aircraft inside each sample biases "
+            "the dampings high (17-45 %; docs/method.md). Log the commands at the loop's rate, or each one's mean "
+            "over its sample, to identify this aircraft"]
