@@ -89,3 +89,18 @@ def test_a_real_servo_delay_stands_and_the_check_flies_the_axis_through_it():
     assert pitch.checked and {"k7", "tau_pitch"} <= set(pitch.removed), check.lines()
     assert 0.02 < ml.axes_["pitch"].delay < fitted and ml.params_.tau_pitch == ml.axes_["pitch"].delay  # 29 ms
     assert abs(ml.params_.k7 / SLUGGISH.k7 - 1.0) < 0.08  # +4.6 %
+
+
+def test_a_profiled_fit_carries_its_undelayed_likelihood_for_the_world_flights_ratio():
+    """The world's flights take the delay-free likelihood from the profile's own undelayed fit instead of a second
+    fit (delay_check._lr without the fit): it is the delay-free fit's, to rounding, on an axis with a servo delay
+    and on one without; a fit that did not profile has none."""
+    truth = replace(SLUGGISH, tau_pitch=0.02)
+    flight = simulate_flight(60, seed=5, config=replace(BENCH_CELLS["independent"], duration=60), truth=truth).flight
+    settings = dict(axes=("roll", "pitch"), input_hold="zoh", wind_model="gm2", workers=1)
+    profiled = MaximumLikelihoodIdentifier(delay="auto", **settings).fit(flight)
+    plain = MaximumLikelihoodIdentifier(**settings).fit(flight)
+    assert profiled.axes_["pitch"].delay > 0.01 and profiled.axes_["roll"].delay == 0.0
+    for axis in ("roll", "pitch"):
+        assert profiled.axes_[axis].undelayed_nll == pytest.approx(plain.axes_[axis].nll, rel=1e-12, abs=1e-9)
+        assert plain.axes_[axis].undelayed_nll is None

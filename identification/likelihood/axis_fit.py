@@ -58,6 +58,9 @@ class MLAxisFit:
         Its standard error when estimated.
     input_shift : float
         The shift of the axis' stick found by ``delay="auto"`` [s]: negative for a log whose input lags.
+    undelayed_nll : float or None
+        Where the delay was profiled, the negative log-likelihood of the same axis fitted without a delay (the
+        profile's start: the likelihood ratio of the delay needs no second fit); else None.
     """
 
     axis: str
@@ -85,6 +88,7 @@ class MLAxisFit:
     input_hold: float = 1.0
     input_hold_se: float | None = None
     input_shift: float = 0.0
+    undelayed_nll: float | None = None
 
 
 def model_values(fits: dict) -> dict:

@@ -105,11 +105,15 @@ def delay_candidates(ident) -> list:
             if modes[AXES.index(axis)] in ("auto", "detect") and fit.delay > MIN_SERVO_DELAY and fit.lag == 0.0]
 
 
-def _lr(ident, axis: str, kept: tuple, flights: list, hold) -> tuple[float, float, object]:
-    """(delay profiled, ``2 (nll_none - nll_delay)``, the delay-free fit) of axis ``axis`` over ``flights``."""
-    none = axis_refit(ident, axis, kept, flights, hold).axes_[axis]
+def _lr(ident, axis: str, kept: tuple, flights: list, hold, with_fit: bool = True) -> tuple[float, float, object]:
+    """(delay profiled, ``2 (nll_none - nll_delay)``, the delay-free fit or None) of axis ``axis`` over
+    ``flights``. Without ``with_fit`` the delay-free likelihood is the profile's own undelayed fit
+    (:attr:`~identification.likelihood.axis_fit.MLAxisFit.undelayed_nll`: the same searches, the same number to
+    1e-11), not a second fit: a world's flights need only the ratio."""
     free = axis_refit(ident, axis, kept, flights, hold, delay="auto").axes_[axis]
-    return float(free.delay), float(max(2.0 * (none.nll - free.nll), 0.0)), none
+    none = axis_refit(ident, axis, kept, flights, hold).axes_[axis] if with_fit else None
+    nll_none = none.nll if none is not None else free.undelayed_nll
+    return float(free.delay), float(max(2.0 * (nll_none - free.nll), 0.0)), none
 
 
 def check_delay(ident, axis: str, min_lr: float, n_flights: int = N_DELAY_FLIGHTS, seed: int = 0,
@@ -138,7 +142,7 @@ def check_delay(ident, axis: str, min_lr: float, n_flights: int = N_DELAY_FLIGHT
     def one(b):
         flights = flown_flights(world, axis, loops[axis], np.random.default_rng([seed, b, 7]))
         try:
-            return _lr(ident, axis, kept, flights, hold)[:2]  # the fit stays in its worker
+            return _lr(ident, axis, kept, flights, hold, with_fit=False)[:2]
         except IdentifiabilityError as exc:
             return str(exc)
 

@@ -466,11 +466,11 @@ class MaximumLikelihoodIdentifier:
                        problem.hold_start()])
         models = WIND_MODELS if self.wind_model == "auto" else (self.wind_model,)
         fixed_lag = 0.0 if lag in ("auto", "detect") else float(lag)
-        profile = []
+        profile, undelayed = [], None
         if delay == "auto":
-            found, profile = self._profile_delay(problem, x0, models, fixed_lag)
+            found, profile, undelayed = self._profile_delay(problem, x0, models, fixed_lag)
         elif delay == "detect":
-            found, profile = self._detect_delay(problem, x0, models, fixed_lag)
+            found, profile, undelayed = self._detect_delay(problem, x0, models, fixed_lag)
         else:
             found = problem.best(float(delay), x0, models, lag=fixed_lag)
         free_tau = delay == "auto" or (delay == "detect" and found.tau != 0.0)
@@ -479,28 +479,31 @@ class MaximumLikelihoodIdentifier:
         lagged = lag == "auto" or (lag == "detect" and free_tau and found.tau > 0.0)
         if lagged and first.servo_row is not None:  # an axis without its stick has no servo
             fixed_lag, found, lag_profile, lag_lr = profile_lag(problem, found, models, free_tau)
-        return self._finish_axis(problem, found, fixed_lag, free_tau, profile, lag_profile, lag_lr)
+        fit = self._finish_axis(problem, found, fixed_lag, free_tau, profile, lag_profile, lag_lr)
+        if undelayed is not None:  # the profile's undelayed fit, for a likelihood ratio against no delay
+            fit = replace(fit, undelayed_nll=float(concentrated_nll(undelayed, fit.n_samples)))
+        return fit
 
-    def _detect_delay(self, problem: AxisProblem, x0, models, lag: float) -> tuple[WindFit, list]:
+    def _detect_delay(self, problem: AxisProblem, x0, models, lag: float) -> tuple[WindFit, list, float | None]:
         """``delay="detect"``: the undelayed fit (the same searches as ``delay=None``), then a short search of
         the alignment with every other parameter from it, in its gust model; only where that moves the
         likelihood ratio past :data:`MIN_LR_DELAY` (a servo delay, or an input logged late) is the axis profiled
-        as with ``"auto"``. Otherwise the undelayed fit, unchanged. Returns the optimum and the profile (empty
-        when not profiled)."""
+        as with ``"auto"``. Otherwise the undelayed fit, unchanged. Returns the optimum, the profile (empty
+        when not profiled) and the undelayed fit's cost (None when not profiled)."""
         undelayed = problem.per_kind(0.0, x0, models, lag=lag)
         kind = min(undelayed, key=lambda k: undelayed[k][3])
         cost, x, _, aic = undelayed[kind]
         aic_free = problem.per_kind(0.0, {kind: x}, (kind,), DETECT_NFEV, free_tau=True, lag=lag)[kind][3]
         if 2.0 * (aic - aic_free) < MIN_LR_DELAY:
-            return WindFit(cost, x, kind, 0.0), []
+            return WindFit(cost, x, kind, 0.0), [], None
         return self._profile_delay(problem, x0, models, lag, undelayed)
 
     def _profile_delay(self, problem: AxisProblem, x0, models, lag: float,
-                       undelayed: dict | None = None) -> tuple[WindFit, list]:
+                       undelayed: dict | None = None) -> tuple[WindFit, list, float]:
         """``delay="auto"``: the likelihood over a grid of delays with the damping and wind of the undelayed fit
         held (the linear parameters solved at each), then every parameter and the delay searched from the best.
-        ``undelayed``: :meth:`AxisProblem.per_kind` at no delay, when already searched. Returns the optimum and
-        the profile ``[(delay, cost)]``."""
+        ``undelayed``: :meth:`AxisProblem.per_kind` at no delay, when already searched. Returns the optimum,
+        the profile ``[(delay, cost)]`` and the undelayed fit's cost (the best gust model's)."""
         grid = np.asarray(self.delay_grid if self.delay_grid is not None else DEFAULT_DELAY_GRID, dtype=float)
         undelayed = undelayed or problem.per_kind(0.0, x0, models, lag=lag)
         kind = min(undelayed, key=lambda k: undelayed[k][3])
@@ -537,7 +540,7 @@ class MaximumLikelihoodIdentifier:
         if unsupported or destabilising:
             kind = base
             cost, x, tau = undelayed[base][0], undelayed[base][1], 0.0
-        return WindFit(cost, x, kind, tau), profile
+        return WindFit(cost, x, kind, tau), profile, float(undelayed[base][0])
 
     def _finish_axis(self, problem: AxisProblem, found: WindFit, lag, free_tau, profile=(), lag_profile=(),
                      lag_lr=None) -> MLAxisFit:
@@ -566,7 +569,7 @@ class MaximumLikelihoodIdentifier:
         _, x, tau, _ = found[kind]
         refit = self._finish_axis(problem, WindFit(found[kind][0], x, kind, tau), fit.lag, free_tau)
         return replace(refit, delay_profile=fit.delay_profile, lag_profile=fit.lag_profile, lag_lr=fit.lag_lr,
-                       dropped=fit.dropped)
+                       dropped=fit.dropped, undelayed_nll=fit.undelayed_nll)
 
     # ----------------------------------------------------------------- use
     def _check_fitted(self):
