@@ -124,6 +124,18 @@ def test_each_log_parses_into_a_canonical_flight(raw):
     assert flight.metadata["sha256"] and flight.metadata["inputs_clipped"].keys() == {"lat", "lon", "col", "ped"}
 
 
+LOOP_RATE_HZ = {"px4": None, "ardupilot": None, "betaflight": 4000.0, "rotorflight": 2000.0}
+"""The flight controller's loop rate each log states: the blackbox headers' ``looptime`` (125 µs) times
+``pid_process_denom`` (2, 4); this ArduCopter log has no ``SCHED_LOOP_RATE`` parameter; PX4's is not read."""
+
+
+def test_the_logs_own_loop_rate_is_kept_for_the_fit_s_warning(raw):
+    """The controller's loop rate rides on the flight's metadata (heli identify warns when its commands are fitted
+    slower than it)."""
+    name, r = raw
+    assert to_flight(r, segment="all").metadata.get("loop_rate_hz") == LOOP_RATE_HZ[name]
+
+
 # Least correlation of the attitude derivative with the rates per axis: the two flights
 # (ArduCopter, Betaflight) move a lot; the PX4 sample sits on a bench (rates ~0.1 deg/s)
 # and the Rotorflight log on the ground, so only the sign is checked there.
@@ -318,6 +330,7 @@ def test_a_cut_last_message_is_dropped_and_recorded():
     assert any("ends 24 bytes into its last message" in w for w in flight.metadata["import_warnings"])
     assert flight.metadata["vehicle"] == "fixed-wing"
     assert any("not a rotorcraft" in w for w in flight.metadata["import_warnings"])
+    assert flight.metadata["loop_rate_hz"] == 50.0  # its SCHED_LOOP_RATE parameter
 
 
 def test_logs_without_attitude_reconstruct_it_and_say_so():

@@ -103,3 +103,35 @@ def test_heli_identify_writes_the_warning_and_the_figures(tmp_path):
     noted = json.loads((tmp_path / "m" / "model.json").read_text())["fit_statistics"]["stick_noise"]
     assert "yaw" in noted["axes"] and noted["lr"]["yaw"] > noted["thresholds"]["yaw"]
     assert "noise the aircraft did not feel" in (tmp_path / "m" / "report.md").read_text()
+
+
+def test_a_flight_controller_faster_than_the_fit_is_named_and_one_at_its_rate_is_not():
+    """The inputs are a flight controller's commands: a warning where its loop (stated, or unknown) runs more
+    than a quarter faster than the rate they are fitted at; none where it runs at that rate or for a pilot's
+    sticks."""
+    from types import SimpleNamespace
+
+    from identification.bench.cells import BENCH_CELLS
+    from identification.bench.synthetic import simulate_flight
+    from identification.validation.fit_warnings import controller_loop_warning
+
+    def autopilot(every):
+        config = replace(BENCH_CELLS["broadband-autopilot"], duration=5.0, log_every=every)
+        return simulate_flight(5.0, seed=1, config=config).flight
+
+    [line] = controller_loop_warning([autopilot(4)])
+    assert "fitted at 100 Hz, and its loop runs at 400 Hz" in line and "reads that as damping" in line
+    assert controller_loop_warning([autopilot(1)]) == []  # the loop decides at each logged sample
+    pilot = simulate_flight(5.0, seed=1, config=replace(BENCH_CELLS["independent"], duration=5.0)).flight
+    assert controller_loop_warning([pilot]) == []
+
+    def imported(source, loop=None):
+        meta = {"imported_from": {"format": "betaflight-blackbox", "input_source": source,
+                                  **({"loop_rate_hz": loop} if loop else {})}}
+        return SimpleNamespace(metadata=meta, sample_rate=200.0)
+
+    [line] = controller_loop_warning([imported("controller")])
+    assert "(heli import --inputs controller) fitted at 200 Hz" in line and "not in the log" in line
+    assert controller_loop_warning([imported("servos", 240.0)]) == []  # within a quarter of the fit's rate
+    assert len(controller_loop_warning([imported("servos", 4000.0)])) == 1
+    assert controller_loop_warning([imported("sticks", 4000.0)]) == []

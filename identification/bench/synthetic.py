@@ -255,6 +255,7 @@ def _sampled(fast: SyntheticFlight, cfg: FlightConfig) -> SyntheticFlight:
     # the sticks' hold is the world's, not the log's: a link holding them at the world's rate is not held here
     meta = {**f.metadata, "log_every": m,
             "input_hold": f"{f.metadata['input_hold']} at {cfg.sample_rate * m:g} Hz, one sample in {m} logged"}
+    # (an autopilot's loop_rate_hz stays the world's: it decided at every step the log skips)
     flight = make_flight(f.time[::m], f.rates[:, ::m], np.ascontiguousarray(f.sticks[:, ::m]),
                          attitude=f.attitude[:, ::m], metadata=meta)
     return replace(fast, flight=flight, wind=fast.wind[:, ::m], wind_torque=fast.wind_torque[:, ::m],
@@ -453,6 +454,7 @@ def _logged_flight(cfg: FlightConfig, seed, effects, time, rates, att, sticks) -
         "effects": list(effects),
         "input_source": "flight controller commands" if cfg.pilot == "autopilot" else "pilot sticks",
         "input_hold": "zoh" if cfg.pilot == "autopilot" or cfg.held_sticks else "linear",
+        **({"loop_rate_hz": float(cfg.sample_rate)} if cfg.pilot == "autopilot" else {}),  # it decides every step
     }
     logged = np.ascontiguousarray(sticks.T)
     n = time.size

@@ -95,9 +95,11 @@ def meta_path(csv_path) -> Path:
 
 
 def _imported_from(csv_path) -> dict:
-    """``{"imported_from": {"format", "input_source"}}`` when ``heli import`` wrote this CSV from a log (its
-    ``.meta.json`` beside it names the log's format), else ``{}``: advice to import the log again with another
-    input source (``heli import --inputs``) is given only for such a flight, where it can change the outcome."""
+    """``{"imported_from": {"format", "input_source"[, "loop_rate_hz"]}}`` when ``heli import`` wrote this CSV from a
+    log (its ``.meta.json`` beside it names the log's format), else ``{}``: advice to import the log again with
+    another input source (``heli import --inputs``) is given only for such a flight, where it can change the
+    outcome; the flight controller's loop rate, where the log stated it, tells whether its commands moved between
+    the samples fitted (:func:`identification.validation.fit_warnings.controller_loop_warning`)."""
     import json
 
     try:
@@ -106,7 +108,9 @@ def _imported_from(csv_path) -> dict:
         return {}
     if not isinstance(meta, dict) or not isinstance(meta.get("format"), str):
         return {}
-    return {"imported_from": {"format": meta["format"], "input_source": str(meta.get("input_source", ""))}}
+    loop = meta.get("loop_rate_hz")
+    return {"imported_from": {"format": meta["format"], "input_source": str(meta.get("input_source", "")),
+                              **({"loop_rate_hz": float(loop)} if isinstance(loop, (int, float)) and loop > 0 else {})}}
 
 
 def _check_regular_file(path: Path) -> None:

@@ -210,6 +210,8 @@ def load_ardupilot(path, allow_damaged: bool = False) -> RawLog:
                                  "helicopter, RCOU (servos) messages with at least 2 samples")
     default = "servos" if servos is not None else ("controller" if "controller" in inputs else "sticks")
     meta = {"firmware": firmware, "frame": params.get("FRAME"), "parser": "pymavlink DFReader", **meta_end}
+    if params.get("SCHED_LOOP_RATE", 0.0) > 0:  # the main loop's rate, the rate controller's (ArduCopter >= 3.4)
+        meta["loop_rate_hz"] = float(params["SCHED_LOOP_RATE"])
     return RawLog(path=path, format="ardupilot-dataflash", vehicle=vehicle, rates=rates, attitude=attitude,
                   inputs=inputs, input_notes=notes, unavailable=unavailable, default_input=default, servos=servos,
                   segment_signals=SegmentSignals(power=power, accel=accel, altitude=altitude,

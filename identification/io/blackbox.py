@@ -381,6 +381,13 @@ def _num(hdr: dict, key: str, default: float) -> float:
     return v if np.isfinite(v) else default
 
 
+def _loop_rate(hdr) -> dict:
+    """``{"loop_rate_hz": ...}``: the PID loop's rate from the headers (the gyro loop's ``looptime`` in µs, every
+    ``pid_process_denom``-th of it), or ``{}`` where they do not say."""
+    looptime, denom = _num(hdr, "looptime", 0.0), _num(hdr, "pid_process_denom", 1.0)
+    return {"loop_rate_hz": 1e6 / (looptime * denom)} if looptime > 0 and denom >= 1 else {}
+
+
 def _raw_from_columns(path, name: str, log: _Decoded, index: int, count: int) -> RawLog:
     """Map a decoded log's columns to the canonical streams (table in the module docstring).
 
@@ -410,7 +417,7 @@ def _raw_from_columns(path, name: str, log: _Decoded, index: int, count: int) ->
     default = "servos" if servos is not None else ("controller" if "controller" in inputs else "sticks")
     meta = {"firmware": str(hdr.get("Firmware revision", firmware)), "craft": hdr.get("Craft name"),
             "logs_in_file": int(count), "log_index": int(index), "events": sorted(set(log.events)),
-            "parser": "orangebox", **log.metadata}
+            "parser": "orangebox", **log.metadata, **_loop_rate(hdr)}
     return RawLog(path=path, format="rotorflight-blackbox" if rotorflight else "betaflight-blackbox",
                   vehicle="helicopter" if rotorflight else "multirotor", rates=rates,
                   attitude=attitude, inputs=inputs, input_notes=notes, unavailable=unavailable,

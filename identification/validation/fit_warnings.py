@@ -29,6 +29,8 @@ quality and returns one line per concern, for the terminal and the report:
   more than their standard errors: the line says by how much and what would decide it.
 * **Stick noise the aircraft did not feel** (:func:`stick_noise_warning`) -- the sticks moved between the log's
   samples (:mod:`identification.likelihood.stick_noise`): the line names the axes and what avoids it.
+* **A flight controller's loop faster than the fit** (:func:`controller_loop_warning`) -- the inputs are its
+  commands, and its loop (stated by the log, or unknown) runs faster than the rate they are fitted at.
 
 The functions are pure: they read the flights and the figures and return strings (the figures that judge a
 fitted model come from :mod:`identification.validation.judged_fit`).
@@ -217,3 +219,41 @@ def stick_noise_warning(check) -> list[str]:
             "sticks move them), and a flight controller's loop correcting the aircraft inside each sample biases "
             "the dampings high (17-45 %; docs/method.md). Log the commands at the loop's rate, or each one's mean "
             "over its sample, to identify this aircraft"]
+
+
+CONTROLLER_SOURCES = ("controller", "servos", "flight controller commands")
+"""The input sources that are a flight controller's commands (``heli import --inputs controller|servos``, the
+bench's autopilot), not the pilot's sticks."""
+
+
+def _input_source(meta) -> tuple[str, float | None]:
+    """A flight's input source and its controller's loop rate [Hz] (None where the log did not state it), from its
+    own metadata or, for a CSV ``heli import`` wrote, the import's."""
+    imported = meta.get("imported_from") or {}
+    source = str(imported.get("input_source") or meta.get("input_source") or "")
+    loop = imported.get("loop_rate_hz", meta.get("loop_rate_hz"))
+    return source, (float(loop) if isinstance(loop, (int, float)) and loop > 0 else None)
+
+
+def controller_loop_warning(flights) -> list[str]:
+    """One line where the inputs are a flight controller's commands and its loop may run faster than the rate they
+    are fitted at: the loop then corrects the aircraft inside each fitted sample, and a model driven by the sampled
+    commands reads that correction as damping (the bench's autopilot 4x faster than its 100 Hz log: dampings 17-45 %
+    high with the closed-loop check, 7-31 % at 2x; docs/method.md, "Sticks that moved between the log's samples").
+    Silent where the log states a loop no faster than the fit's rate (a quarter more), and for a pilot's sticks."""
+    slower = []
+    for k, flight in enumerate(flights):
+        source, loop = _input_source(getattr(flight, "metadata", {}) or {})
+        if source.startswith(CONTROLLER_SOURCES) and (loop is None or loop > 1.25 * flight.sample_rate):
+            slower.append((source, loop, flight.sample_rate))
+    if not slower:
+        return []
+    source, loop, rate = slower[0]
+    stated = (f"its loop runs at {loop:g} Hz" if loop is not None else
+              "its loop's rate is not in the log (flight controllers run theirs at 400 Hz to 8 kHz)")
+    label = f" (heli import --inputs {source})" if source in ("controller", "servos") else ""
+    return [f"the inputs are a flight controller's commands{label} fitted at {rate:g} Hz, and {stated}: the "
+            "loop corrects the aircraft inside each fitted sample, and a model driven by the sampled commands reads "
+            "that as damping (the bench's autopilot with a loop 4x faster than its log: dampings 17-45 % high, 7-31 % "
+            "at 2x; docs/method.md). Identify from the pilot's sticks (heli import --inputs sticks: the stabilised "
+            "aircraft), or from commands and gyro logged at the loop's rate"]

@@ -33,7 +33,8 @@ from ..reports.figures import PendingFigures
 from ..reports.identify import ReportContent, comparison_figures, fit_figures, report_markdown, wind_figures, wind_section
 from ..sensors import identify_sensors
 from ..likelihood.stick_noise import check_stick_noise
-from ..validation.fit_warnings import fit_warnings, folded_lines_warning, hold_warning, stick_noise_warning
+from ..validation.fit_warnings import (controller_loop_warning, fit_warnings, folded_lines_warning, hold_warning,
+                                      stick_noise_warning)
 from ..validation.judged_fit import judged_r2
 from ..validation.forward_simulation import validate_models
 from ..validation.model_verdict import judge_identifier
@@ -277,7 +278,7 @@ def identify_and_report(flights, out_dir, options: IdentifyOptions | None = None
     # judged by what the model predicts (ML: 0.5 s ahead), not by what the sticks explain alone (low in strong wind)
     warnings = fit_warnings(flights, *judged_r2(ident, flights)) + hold_warning(ident) + folded_lines_warning(ident)
     stick_noise = _stick_noise(ident, opts)
-    warnings += stick_noise_warning(stick_noise)
+    warnings += stick_noise_warning(stick_noise) + controller_loop_warning(flights)
     opts.say(f"validating {'both models' if len(identifiers) > 1 else 'the model'} by forward simulation")
     validation, diverged = _validate(first, identifiers, chosen)
     warnings += diverged
