@@ -22,7 +22,7 @@ over its sample (from the same world flown unsampled): the error left when the s
 from __future__ import annotations
 
 import argparse
-import importlib.util
+import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
@@ -30,19 +30,13 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).parent))  # the study's aircraft and --set are aircraft_generalisation's
+from aircraft_generalisation import AIRCRAFT, _aircraft, config_field  # noqa: E402
+
 AXES = ("roll", "pitch", "yaw")
 PARAMS = ("k2", "k3", "k6", "k7", "k10", "k11")
 DEFAULT_CELLS = ("independent", "held-sticks-pd", "broadband-pd-noisy-gyro", "dryden-2Hz-pd", "broadband-pd-2x",
                  "broadband-autopilot", "default")
-
-
-def _aircraft_study():
-    """``scripts/aircraft_generalisation.py``, whose table of aircraft and ``--set`` parsing this study shares."""
-    path = Path(__file__).with_name("aircraft_generalisation.py")
-    spec = importlib.util.spec_from_file_location("aircraft_generalisation", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _one(job):
@@ -57,7 +51,7 @@ def _one(job):
     out = {"row": (aircraft, cell, rate, every), "seed": seed}
     with threadpool_limits(limits=1, user_api="blas"):
         config = replace(BENCH_CELLS[cell], duration=duration, sample_rate=rate, log_every=every, **dict(settings))
-        sim = simulate_flight(duration, seed=seed, config=config, truth=_aircraft_study()._aircraft(aircraft))
+        sim = simulate_flight(duration, seed=seed, config=config, truth=_aircraft(aircraft))
         truth = sim.truth.values()
         try:
             ml = MaximumLikelihoodIdentifier(**CLI_TIMING, workers=1).fit(sim.flight)
@@ -86,7 +80,7 @@ def _interval_mean_errors(sim, config, aircraft: str, truth: dict) -> dict:
     from identification.likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
 
     every = config.log_every
-    world = simulate_flight(config.duration, seed=sim.seed, truth=_aircraft_study()._aircraft(aircraft),
+    world = simulate_flight(config.duration, seed=sim.seed, truth=_aircraft(aircraft),
                             config=replace(config, sample_rate=config.sample_rate * every, log_every=1)).flight
     logged = sim.flight
     n = logged.n
@@ -123,9 +117,8 @@ def _table(rows) -> None:
 
 
 def main(argv=None) -> None:
-    study = _aircraft_study()
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--aircraft", nargs="+", default=["paper", "agile", "sluggish"], choices=["paper", *study.AIRCRAFT])
+    ap.add_argument("--aircraft", nargs="+", default=["paper", "agile", "sluggish"], choices=["paper", *AIRCRAFT])
     ap.add_argument("--cells", nargs="+", default=list(DEFAULT_CELLS))
     ap.add_argument("--rates", nargs="+", type=float, default=[100.0], help="log rates [Hz]")
     ap.add_argument("--log-every", nargs="+", type=int, default=[1, 4],
@@ -137,7 +130,7 @@ def main(argv=None) -> None:
     ap.add_argument("--interval-mean", action="store_true",
                     help="also fit each flight whose world is faster than its log on each stick's mean over its "
                          "sample (the world flown again unsampled; about a fit and a flight more)")
-    ap.add_argument("--set", type=study.config_field, nargs="*", default=[], metavar="FIELD=VALUE",
+    ap.add_argument("--set", type=config_field, nargs="*", default=[], metavar="FIELD=VALUE",
                     help="FlightConfig fields changed in every cell, e.g. command_noise=0.005")
     args = ap.parse_args(argv)
     from identification.bench.cells import BENCH_CELLS
