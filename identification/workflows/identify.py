@@ -29,10 +29,10 @@ from ..disturbance.equivalent_input import identify_disturbance, source_of
 from ..errors import IdentifiabilityError, SimulationDivergedError
 from ..flight import Flight
 from ..integral.method import IntegralIdentifier
+from ..likelihood.stick_noise import check_stick_noise
 from ..reports.figures import PendingFigures
 from ..reports.identify import ReportContent, comparison_figures, fit_figures, report_markdown, wind_figures, wind_section
 from ..sensors import identify_sensors
-from ..likelihood.stick_noise import check_stick_noise
 from ..validation.fit_warnings import (controller_loop_warning, fit_warnings, folded_lines_warning, hold_warning,
                                       stick_noise_warning)
 from ..validation.judged_fit import judged_r2
