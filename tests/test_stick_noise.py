@@ -135,3 +135,5 @@ def test_a_flight_controller_faster_than_the_fit_is_named_and_one_at_its_rate_is
     assert controller_loop_warning([imported("servos", 240.0)]) == []  # within a quarter of the fit's rate
     assert len(controller_loop_warning([imported("servos", 4000.0)])) == 1
     assert controller_loop_warning([imported("sticks", 4000.0)]) == []
+    own_servos = SimpleNamespace(metadata={"input_source": "servos (eq. 67)"}, sample_rate=100.0)
+    assert controller_loop_warning([own_servos]) == []  # a CSV's servo columns: the pilot's radio drives them

@@ -222,8 +222,9 @@ def stick_noise_warning(check) -> list[str]:
 
 
 CONTROLLER_SOURCES = ("controller", "servos", "flight controller commands")
-"""The input sources that are a flight controller's commands (``heli import --inputs controller|servos``, the
-bench's autopilot), not the pilot's sticks."""
+"""The input sources that are a flight controller's commands (``heli import --inputs controller|servos`` of a
+flight controller's log, the bench's autopilot), not the pilot's sticks. A CSV's own servo columns ("servos (eq.
+67)", the paper's flybar helicopter: the pilot's radio drives them) are not among them."""
 
 
 def _input_source(meta) -> tuple[str, float | None]:
@@ -239,12 +240,13 @@ def controller_loop_warning(flights) -> list[str]:
     """One line where the inputs are a flight controller's commands and its loop may run faster than the rate they
     are fitted at: the loop then corrects the aircraft inside each fitted sample, and a model driven by the sampled
     commands reads that correction as damping (the bench's autopilot 4x faster than its 100 Hz log: dampings 17-45 %
-    high with the closed-loop check, 7-31 % at 2x; docs/method.md, "Sticks that moved between the log's samples").
+    high with the closed-loop check; 2x faster, 7-31 % without it; docs/method.md, "Sticks that moved between the
+    log's samples").
     Silent where the log states a loop no faster than the fit's rate (a quarter more), and for a pilot's sticks."""
     slower = []
-    for k, flight in enumerate(flights):
+    for flight in flights:
         source, loop = _input_source(getattr(flight, "metadata", {}) or {})
-        if source.startswith(CONTROLLER_SOURCES) and (loop is None or loop > 1.25 * flight.sample_rate):
+        if source in CONTROLLER_SOURCES and (loop is None or loop > 1.25 * flight.sample_rate):
             slower.append((source, loop, flight.sample_rate))
     if not slower:
         return []
@@ -254,6 +256,6 @@ def controller_loop_warning(flights) -> list[str]:
     label = f" (heli import --inputs {source})" if source in ("controller", "servos") else ""
     return [f"the inputs are a flight controller's commands{label} fitted at {rate:g} Hz, and {stated}: the "
             "loop corrects the aircraft inside each fitted sample, and a model driven by the sampled commands reads "
-            "that as damping (the bench's autopilot with a loop 4x faster than its log: dampings 17-45 % high, 7-31 % "
-            "at 2x; docs/method.md). Identify from the pilot's sticks (heli import --inputs sticks: the stabilised "
+            "that as damping (the bench's autopilot with a loop 4x faster than its log: dampings 17-45 % high; "
+            "docs/method.md). Identify from the pilot's sticks (heli import --inputs sticks: the stabilised "
             "aircraft), or from commands and gyro logged at the loop's rate"]
