@@ -204,12 +204,16 @@ def _identify_or_explain(args, flights, kwargs: dict, progress, identify):
     a physical, stable model, and say so in the error with the command to run next only if it does."""
     from identification.diagnosis.alignment_check import check_alignment
     from identification.errors import SimulationDivergedError
+    from identification.validation.fit_warnings import controller_loop_warning
 
     try:
         return identify()
     except SimulationDivergedError as e:
         if args.method != "ml" or args.delay == "auto":
             raise
+        # a flight controller's commands fitted slower than its loop read as damping: a cause to name beside the
+        # refusal, whose warnings are never printed (the ArduCopter fixture: its RATE outputs at 9.9 Hz)
+        loop = "".join(f" Note: {line}." for line in controller_loop_warning(flights, advice=False))
         progress.stage("the model diverged: fitting again with the alignment searched (--delay auto)")
         finding = check_alignment(flights, kwargs)
         if finding.helps:
@@ -220,7 +224,7 @@ def _identify_or_explain(args, flights, kwargs: dict, progress, identify):
             # ended in the same refusal on the ArduCopter fixture)
             advice = (f"Searching the alignment (--delay auto) does not mend it: {finding.describe()}."
                       + _weak_axes_advice(finding))
-        raise SimulationDivergedError(f"{e} {advice}") from None
+        raise SimulationDivergedError(f"{e}{loop} {advice}") from None
 
 
 def _weak_axes_advice(finding) -> str:

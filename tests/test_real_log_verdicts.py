@@ -79,6 +79,8 @@ def test_ardupilot_quad_divergence_names_its_cause_not_absent_terms(tmp_path, ca
     assert "added terms" not in err  # none were added
     assert re.search(r"decays? faster than the simulation's fixed 0\.02 s step", err)  # one damping or two
     assert not (tmp_path / "model" / "model.json").exists()
+    # its inputs are the rate controller's outputs, whose loop the log does not state: named beside the refusal
+    assert "Note: the inputs are a flight controller's commands (heli import --inputs controller)" in err
 
 
 def test_ardupilot_quad_diagnosis_says_what_identify_says(tmp_path, capsys):

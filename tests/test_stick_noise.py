@@ -121,6 +121,8 @@ def test_a_flight_controller_faster_than_the_fit_is_named_and_one_at_its_rate_is
 
     [line] = controller_loop_warning([autopilot(4)])
     assert "fitted at 100 Hz, and its loop runs at 400 Hz" in line and "reads that as damping" in line
+    [cause] = controller_loop_warning([autopilot(4)], advice=False)
+    assert line.startswith(cause) and "Identify from" not in cause and "Identify from the pilot's sticks" in line
     assert controller_loop_warning([autopilot(1)]) == []  # the loop decides at each logged sample
     pilot = simulate_flight(5.0, seed=1, config=replace(BENCH_CELLS["independent"], duration=5.0)).flight
     assert controller_loop_warning([pilot]) == []

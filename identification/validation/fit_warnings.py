@@ -236,13 +236,15 @@ def _input_source(meta) -> tuple[str, float | None]:
     return source, (float(loop) if isinstance(loop, (int, float)) and loop > 0 else None)
 
 
-def controller_loop_warning(flights) -> list[str]:
+def controller_loop_warning(flights, advice: bool = True) -> list[str]:
     """One line where the inputs are a flight controller's commands and its loop may run faster than the rate they
     are fitted at: the loop then corrects the aircraft inside each fitted sample, and a model driven by the sampled
     commands reads that correction as damping (the bench's autopilot 4x faster than its 100 Hz log: dampings 17-45 %
     high with the closed-loop check; 2x faster, 7-31 % without it; docs/method.md, "Sticks that moved between the
     log's samples").
-    Silent where the log states a loop no faster than the fit's rate (a quarter more), and for a pilot's sticks."""
+    Silent where the log states a loop no faster than the fit's rate (a quarter more), and for a pilot's sticks.
+    Without ``advice`` the cause alone (beside a refusal whose own advice stands: on the ArduCopter fixture the
+    pilot's sticks end in a refusal too)."""
     slower = []
     for flight in flights:
         source, loop = _input_source(getattr(flight, "metadata", {}) or {})
@@ -254,8 +256,9 @@ def controller_loop_warning(flights) -> list[str]:
     stated = (f"its loop runs at {loop:g} Hz" if loop is not None else
               "its loop's rate is not in the log (flight controllers run theirs at 400 Hz to 8 kHz)")
     label = f" (heli import --inputs {source})" if source in ("controller", "servos") else ""
-    return [f"the inputs are a flight controller's commands{label} fitted at {rate:g} Hz, and {stated}: the "
-            "loop corrects the aircraft inside each fitted sample, and a model driven by the sampled commands reads "
-            "that as damping (the bench's autopilot with a loop 4x faster than its log: dampings 17-45 % high; "
-            "docs/method.md). Identify from the pilot's sticks (heli import --inputs sticks: the stabilised "
-            "aircraft), or from commands and gyro logged at the loop's rate"]
+    cause = (f"the inputs are a flight controller's commands{label} fitted at {rate:g} Hz, and {stated}: the loop "
+             "corrects the aircraft inside each fitted sample, and a model driven by the sampled commands reads that "
+             "as damping (the bench's autopilot with a loop 4x faster than its log: dampings 17-45 % high; "
+             "docs/method.md)")
+    return [cause + (". Identify from the pilot's sticks (heli import --inputs sticks: the stabilised aircraft), or "
+                     "from commands and gyro logged at the loop's rate" if advice else "")]
