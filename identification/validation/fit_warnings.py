@@ -240,7 +240,7 @@ def controller_loop_warning(flights, advice: bool = True) -> list[str]:
     """One line where the inputs are a flight controller's commands and its loop may run faster than the rate they
     are fitted at: the loop then corrects the aircraft inside each fitted sample, and a model driven by the sampled
     commands reads that correction as damping (the bench's autopilot 4x faster than its 100 Hz log: dampings 17-45 %
-    high with the closed-loop check; 2x faster, 7-31 % without it; docs/method.md, "Sticks that moved between the
+    high with the closed-loop check; 2x faster, 7-36 % without it; docs/method.md, "Sticks that moved between the
     log's samples").
     Silent where the log states a loop no faster than the fit's rate (a quarter more), and for a pilot's sticks.
     Without ``advice`` the cause alone (beside a refusal whose own advice stands: on the ArduCopter fixture the
