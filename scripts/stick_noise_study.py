@@ -107,9 +107,9 @@ def _table(rows) -> None:
             if ok else f"{'-':>11s}" for p in PARAMS)
         refused = f"  ({len(rs) - len(ok)} refused)" if len(ok) < len(rs) else ""
         print(f"{key[0]:10s} {key[1]:24s} {key[2]:4g} {key[3]:5d}  {lr}  {named:>5s} of {len(ok):<3d} {err}{refused}")
-        for label, key in (("refitted on neighbour-shrunk sticks", "shrunk_pct"),
-                           ("on each sample's mean over its interval", "interval_mean_pct")):
-            errs = [r[key] for r in ok if key in r]
+        for label, column in (("refitted on neighbour-shrunk sticks", "shrunk_pct"),
+                              ("on each sample's mean over its interval", "interval_mean_pct")):
+            errs = [r[column] for r in ok if column in r]
             if errs:
                 print(f"{label + ':':>121s}      " + "  ".join(
                     f"{np.sqrt(np.mean([m[p] ** 2 for m in errs])):4.1f} [{max(abs(m[p]) for m in errs):4.1f}]"

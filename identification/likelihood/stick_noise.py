@@ -34,6 +34,7 @@ from heli_core.terms import AXES, TERMS
 from .axis_likelihood import AxisLikelihood
 from .axis_search import BURN_IN
 from .input_hold import HOLD_BIC
+from .state_space import concentrated_nll
 
 SHRINK = 0.75
 """How far each stick sample is pulled to the mean of its neighbours in the test: the share of its sample a
@@ -110,7 +111,7 @@ def _at_optimum(ident, a: int, fit, flights: list, burn: int) -> tuple[float, di
     again, and those parameters but the offsets (as :meth:`~.axis_search.AxisProblem.result` counts them)."""
     like = AxisLikelihood(ident._fitted_data(a, fit, flights, burn))
     e, theta, _ = like.solve_linear(fit.state)
-    nll = 0.5 * e.size * (np.log(2.0 * np.pi * float(np.mean(e ** 2))) + 1.0)
+    nll = concentrated_nll(0.5 * float(e @ e), e.size)
     return float(nll), {name: float(t) for name, t in zip(like.data.names, theta) if "@" not in name}
 
 
