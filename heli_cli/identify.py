@@ -65,6 +65,11 @@ def register(sub):
                    "flights, and remove a gain's or damping's bias where it is significant ('auto', the default, "
                    f"or ${CLOSED_LOOP_ENV} when set), only report it ('report'), or skip the check ('off'); it "
                    "costs about 8 fits of the flight")
+    p.add_argument("--controller-loop", type=number("a loop rate in Hz above 0", 0.0), default=None, metavar="HZ",
+                   help="ml: the inputs are a flight controller's commands from a loop at HZ (for a CSV, which cannot "
+                   "say so; imported logs state it): where HZ is faster than the log, the loop corrects the aircraft "
+                   "inside each sample and the dampings read high, so the hold is taken as held and the closed-loop "
+                   "check flies the loop at HZ to measure and remove that bias")
     p.add_argument("--wind-model", choices=("auto", "gm2", "gm_so"), default="auto",
                    help="ml: gust model per axis, 'gm2' two first-order Gauss-Markov processes, 'gm_so' a slow "
                    "first-order and a fast second-order one, 'auto' the more likely (default)")
@@ -134,6 +139,8 @@ def run(args) -> int:
         if len(args.flights) > 1:  # one flight reads in a fraction of a second
             progress.stage(f"reading {len(args.flights)} flights")
         flights = [read_log(path, segment=args.segment) for path in args.flights]
+        if getattr(args, "controller_loop", None):  # stated by the user for logs that cannot state it
+            flights = [stated_controller(f, args.controller_loop) for f in flights]
         others = [read_flight(path) for path in args.validate]  # a bad one refused before any fit
         for path, flight in zip(args.flights + args.validate, flights + others):
             print_read_warnings(path, flight, progress)
@@ -180,6 +187,16 @@ def run(args) -> int:
 
     print(f"wrote {write_html_report(run.paths['report'])}")  # after the figures: it embeds them
     return 0
+
+
+def stated_controller(flight, loop_hz: float):
+    """``flight`` with its inputs stated as a flight controller's commands from a loop at ``loop_hz`` (``heli identify
+    --controller-loop``), over what its file or import said."""
+    items = {"input_source": "flight controller commands", "loop_rate_hz": float(loop_hz)}
+    imported = flight.metadata.get("imported_from")
+    if imported:  # an import's own statement is read first (fit_warnings.input_source): the user's replaces it
+        items["imported_from"] = {**imported, **items}
+    return flight.with_metadata(**items)
 
 
 def print_read_warnings(path, flight, progress=None) -> None:

@@ -120,6 +120,11 @@ def run(args) -> int:
     if f.metadata.get("input_hold") == "zoh":  # a CSV does not carry it: the estimators find it
         print("the sticks reach the aircraft held over each sample (a CSV does not say so: heli identify and "
               "diagnose estimate the hold from the data)")
+    loop = f.metadata.get("loop_rate_hz")
+    if loop and loop > f.sample_rate * 1.25:  # a CSV cannot say so either: the user states it
+        print(f"the inputs are a flight controller's commands from a {loop:g} Hz loop, faster than the log (a CSV "
+              f"does not say so: heli identify {paths['flight']} --controller-loop {loop:g} flies that loop in its "
+              "closed-loop check)")
     return 0
 
 

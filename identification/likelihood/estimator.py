@@ -71,10 +71,10 @@ from ..integral.method import IntegralIdentifier
 from ..preprocess import shift_inputs
 from ..vibration import remove_common_lines
 from .axis_fit import MLAxisFit, model_values
-from .axis_likelihood import AxisData, AxisLikelihood
+from .axis_likelihood import MIN_SERVO_DELAY, AxisData, AxisLikelihood
 from .axis_pool import check_workers, map_axes
 from .axis_search import BURN_IN, DAMPING_BOUNDS, MAX_SHIFT, AxisProblem, WindFit
-from .closed_loop import N_FLIGHTS, ClosedLoopCheck, apply_check
+from .closed_loop import N_FLIGHTS, ClosedLoopCheck, apply_check, loop_ticks
 from .closed_loop import check_settings as check_closed_loop_settings
 from .input_hold import (HOLDS, check_hold, decide_hold, hold_alternative, std_errors_with_hold,
                          undecided_against)
@@ -316,15 +316,21 @@ class MaximumLikelihoodIdentifier:
         # (on the flights as cleaned above: their folded lines are out already)
         start = IntegralIdentifier(structure=names, delay=0.0, axes=self.axes, remove_folded=False).fit(flights)
         delays, lags = self._delays(), self._lags()
+        stated = self._stated_hold(flights)
+        self._decided_hold = None if stated is None else stated["fraction"]
 
         def one_axis(axis_name, delay=None):
             a = AXES.index(axis_name)
             problem = self.axis_problem(a, names[a], flights, burn)
             fit = self._fit_axis(problem, start.params_, delays[a] if delay is None else delay, lags[a])
             whole = round(fit.delay * fs) / fs
-            if fit.delay < -0.5 / fs and abs(whole - fit.delay) > 1e-9:
+            late = fit.delay < (-MIN_SERVO_DELAY if stated is not None else -0.5 / fs)
+            if late and abs(whole - fit.delay) > 1e-9:
                 # a late input column is late by whole samples of the log's clock: the fraction of a sample
-                # is the hold's (the two trade against each other and the damping, 8 % on a 150 s flight)
+                # is the hold's (the two trade against each other and the damping, 8 % on a 150 s flight), or,
+                # where the hold is stated (a controller faster than its log), its loop's inside the sample: the
+                # bench's autopilot 4x faster than its 50 Hz log put roll 4 ms late, its damping 16 % high
+                # where the check measured +31 % on a world without it
                 fit = self._refit(problem, fit, tau=whole)
             if self.select_terms:
                 fit = self._supported(problem, fit, start.params_)
@@ -340,7 +346,8 @@ class MaximumLikelihoodIdentifier:
             # profiled (the T-REX hover's yaw, whose pedal barely moves it, is late as its sticks are)
             rest = [a for a in detected if not fits[a].delay_profile]
             fits.update(zip(rest, map_axes(partial(one_axis, delay="auto"), rest, self.workers)))
-        self.hold_decision_ = self._decide_log_hold(fits, flights, burn)
+        self.hold_decision_ = stated if stated is not None else self._decide_log_hold(fits, flights, burn)
+        self._decided_hold = None
         flights = self._apply_shifts(fits, flights)
         self.axes_ = fits
         self.params_ = ModelParams().with_values(**model_values(fits))
@@ -374,6 +381,23 @@ class MaximumLikelihoodIdentifier:
         apply_check(self, check)
         self.closed_loop, self.closed_loop_ = mode, check
         return check
+
+    def _stated_hold(self, flights) -> dict | None:
+        """With ``input_hold="auto"``, the hold the log states: where every flight's inputs are a flight
+        controller's commands and its loop runs faster than the log
+        (:func:`~identification.likelihood.closed_loop.loop_ticks`), held (the controller holds each command over
+        its tick; what moves inside a logged sample is its loop, which the closed-loop check flies at its rate). A
+        hold searched there takes the loop's motion for the input's: on the bench's autopilot 4x faster than its
+        log, fractions of 0.5-1.0 on the sluggish aircraft, its yaw damping +104 % where held it read +43 % before
+        the check. Else None (decided from the data)."""
+        if self.input_hold != "auto":
+            return None
+        ticks = [loop_ticks(f) for f in flights]
+        if min(ticks) <= 1:
+            return None
+        return {"fraction": 0.0, "named": "zoh", "stated": (
+            f"a flight controller's commands, its loop {min(ticks)}x faster than the log: held over each of its "
+            "ticks")}
 
     def _decide_log_hold(self, fits: dict, flights, burn) -> dict | None:
         """With ``input_hold="auto"``: one hold for the log from every axis' estimate (:func:`decide_hold`, a

@@ -133,6 +133,9 @@ def needs_hold_check(ident, check) -> str:
     decision = getattr(ident, "hold_decision_", None) or {}
     if ident.input_hold != "auto" or "fraction" not in decision:
         return "the hold was not decided by the estimator"
+    if any(c.checked and c.loop_ticks > 1 for c in check.axes.values()):
+        return ("a flight controller's loop faster than the log was flown at its own rate: it holds its command over "
+                "each of its ticks, and the log's hold is how its commands were sampled, not a hand's")
     if not decision.get("named") and any(c.checked for c in check.axes.values()):
         return ""  # a fraction may be the loop's own doing: the check at it measures its own world's bias only
     for c in check.axes.values():

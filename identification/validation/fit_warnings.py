@@ -227,7 +227,12 @@ flight controller's log, the bench's autopilot), not the pilot's sticks. A CSV's
 67)", the paper's flybar helicopter: the pilot's radio drives them) are not among them."""
 
 
-def _input_source(meta) -> tuple[str, float | None]:
+FASTER_LOOP = 1.25
+"""A flight controller's loop faster than the fit's rate by more than this factor corrects the aircraft inside each
+fitted sample (:func:`controller_loop_warning`, :func:`~identification.likelihood.closed_loop.loop_ticks`)."""
+
+
+def input_source(meta) -> tuple[str, float | None]:
     """A flight's input source and its controller's loop rate [Hz] (None where the log did not state it), from its
     own metadata or, for a CSV ``heli import`` wrote, the import's."""
     imported = meta.get("imported_from") or {}
@@ -236,19 +241,21 @@ def _input_source(meta) -> tuple[str, float | None]:
     return source, (float(loop) if isinstance(loop, (int, float)) and loop > 0 else None)
 
 
-def controller_loop_warning(flights, advice: bool = True) -> list[str]:
+def controller_loop_warning(flights, advice: bool = True, check=None) -> list[str]:
     """One line where the inputs are a flight controller's commands and its loop may run faster than the rate they
     are fitted at: the loop then corrects the aircraft inside each fitted sample, and a model driven by the sampled
-    commands reads that correction as damping (the bench's autopilot 4x faster than its 100 Hz log: dampings 17-45 %
-    high with the closed-loop check; 2x faster, 7-36 % without it; docs/method.md, "Sticks that moved between the
-    log's samples").
+    commands reads that correction as damping (the bench's autopilot 4x faster than its 100 Hz log: dampings 16-32 %
+    high before the closed-loop check flew the loop at its rate; docs/method.md, "A flight controller faster than
+    its log").
+    Where the closed-loop ``check`` flew the loop at its stated rate (``loop_ticks`` > 1), the line says what it
+    removed and which axes it could not fly; without a stated rate the check cannot fly it, and the line advises.
     Silent where the log states a loop no faster than the fit's rate (a quarter more), and for a pilot's sticks.
     Without ``advice`` the cause alone (beside a refusal whose own advice stands: on the ArduCopter fixture the
     pilot's sticks end in a refusal too)."""
     slower = []
     for flight in flights:
-        source, loop = _input_source(getattr(flight, "metadata", {}) or {})
-        if source in CONTROLLER_SOURCES and (loop is None or loop > 1.25 * flight.sample_rate):
+        source, loop = input_source(getattr(flight, "metadata", {}) or {})
+        if source in CONTROLLER_SOURCES and (loop is None or loop > FASTER_LOOP * flight.sample_rate):
             slower.append((source, loop, flight.sample_rate))
     if not slower:
         return []
@@ -258,7 +265,27 @@ def controller_loop_warning(flights, advice: bool = True) -> list[str]:
     label = f" (heli import --inputs {source})" if source in ("controller", "servos") else ""
     cause = (f"the inputs are a flight controller's commands{label} fitted at {rate:g} Hz, and {stated}: the loop "
              "corrects the aircraft inside each fitted sample, and a model driven by the sampled commands reads that "
-             "as damping (the bench's autopilot with a loop 4x faster than its log: dampings 17-45 % high; "
-             "docs/method.md)")
+             "as damping")
+    flown = _flown_at_loop_rate(check)
+    if flown:
+        return [cause + f"; the closed-loop check flew the loop at its rate and {flown} (docs/method.md)"]
+    cause += " (the bench's autopilot with a loop 4x faster than its log: dampings 16-32 % high; docs/method.md)"
     return [cause + (". Identify from the pilot's sticks (heli import --inputs sticks: the stabilised aircraft), or "
                      "from commands and gyro logged at the loop's rate" if advice else "")]
+
+
+def _flown_at_loop_rate(check) -> str:
+    """What the closed-loop ``check`` did with a flight controller's loop flown at its own rate, empty where it flew
+    none: the dampings' biases it removed (or measured and left) per axis, and the axes it could not fly."""
+    axes = getattr(check, "axes", {}) or {}
+    flown = {a: c for a, c in axes.items() if c.checked and c.loop_ticks > 1}
+    if not flown:
+        return ""
+    parts = []
+    for axis, c in flown.items():
+        damping = list(c.bias)[1]  # the gain, the damping (closed_loop._biases)
+        verdict = "removed" if damping in c.removed else "left"
+        parts.append(f"{axis} {damping} {100 * c.bias[damping]:+.0f} % ({verdict})")
+    said = "measured the dampings' bias: " + ", ".join(parts)
+    left = [a for a, c in axes.items() if not c.checked]
+    return said + (f"; not flown, so still biased: {', '.join(left)}" if left else "")

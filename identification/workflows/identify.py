@@ -278,7 +278,8 @@ def identify_and_report(flights, out_dir, options: IdentifyOptions | None = None
     # judged by what the model predicts (ML: 0.5 s ahead), not by what the sticks explain alone (low in strong wind)
     warnings = fit_warnings(flights, *judged_r2(ident, flights)) + hold_warning(ident) + folded_lines_warning(ident)
     stick_noise = _stick_noise(ident, opts)
-    warnings += stick_noise_warning(stick_noise) + controller_loop_warning(flights)
+    warnings += stick_noise_warning(stick_noise)
+    warnings += controller_loop_warning(flights, check=getattr(ident, "closed_loop_", None))
     opts.say(f"validating {'both models' if len(identifiers) > 1 else 'the model'} by forward simulation")
     validation, diverged = _validate(first, identifiers, chosen)
     warnings += diverged

@@ -1,0 +1,141 @@
+"""A flight controller whose loop runs faster than its log (identification.likelihood.closed_loop.loop_ticks): the
+loop corrects the aircraft inside each logged sample, the model reads that as damping, and the closed-loop check
+flies the loop at the rate the log states to measure and remove it."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from identification.bench.cells import BENCH_CELLS
+from identification.bench.synthetic import simulate_flight
+from identification.likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
+
+
+def _autopilot(duration: float, seed: int, every: int = 4):
+    """The bench's autopilot, its loop ``every`` times faster than its 100 Hz log (no vibration: the check's refits
+    do not remove it)."""
+    config = replace(BENCH_CELLS["broadband-autopilot"], vibration_lines=(), vibration=0.0, log_every=every,
+                     duration=duration)
+    return simulate_flight(duration, seed=seed, config=config)
+
+
+def _imported(source: str, loop=None, rate: float = 100.0):
+    meta = {"imported_from": {"format": "ardupilot-dataflash", "input_source": source,
+                              **({"loop_rate_hz": loop} if loop else {})}}
+    return SimpleNamespace(metadata=meta, sample_rate=rate)
+
+
+def test_the_loops_ticks_a_sample_come_from_the_rate_the_log_states():
+    from identification.likelihood.closed_loop import MAX_LOOP_TICKS, loop_ticks
+
+    assert loop_ticks(_imported("controller", 400.0)) == 4
+    assert loop_ticks(_imported("servos", 1000.0, rate=200.0)) == 5
+    assert loop_ticks(_imported("controller", 110.0)) == 1  # within a quarter of the log's rate: at it
+    assert loop_ticks(_imported("controller")) == 1  # a rate the log does not state cannot be flown
+    assert loop_ticks(_imported("sticks", 400.0)) == 1  # a pilot's sticks are no controller's commands
+    assert loop_ticks(_imported("controller", 8000.0, rate=50.0)) == MAX_LOOP_TICKS
+    assert loop_ticks(_autopilot(5.0, 1).flight) == 4 and loop_ticks(_autopilot(5.0, 1, every=1).flight) == 1
+
+
+def test_a_controller_faster_than_its_log_is_flown_at_its_rate_and_its_dampings_bias_removed():
+    """The paper's roll, its autopilot 4x faster than the 100 Hz log (120 s): fitted 16 % high, the check's world
+    flown at 400 Hz measures +17.6 +- 0.9 %, and the corrected damping is within 5 % (three seeds: -4.1, +5.8,
+    +1.6 % from +16, +26, +23)."""
+    sim = _autopilot(120.0, 1)
+    ml = MaximumLikelihoodIdentifier(axes=("roll",), closed_loop="auto").fit(sim.flight)
+    assert ml.hold_decision_["named"] == "zoh" and "4x faster" in ml.hold_decision_["stated"]
+    assert ml.axes_["roll"].input_hold == 0.0  # stated, not searched
+    check = ml.closed_loop_.axes["roll"]
+    assert check.checked and check.loop_ticks == 4, check.reason
+    assert check.pilots[0]["reaction_delay_s"] == 0.0  # the law reads the state of the sample it commands
+    assert check.bias["k3"] > max(0.10, 2.0 * check.bias_se["k3"]) and "k3" in check.removed
+    truth = sim.truth.k3
+    assert check.fitted["k3"] / truth - 1.0 > 0.12
+    assert abs(ml.params_.k3 / truth - 1.0) < 0.06
+    assert "flown at 4 ticks a logged sample" in ml.closed_loop_.lines()[0]
+    from identification.likelihood.hold_check import needs_hold_check
+
+    assert "faster than the log was flown at its own rate" in needs_hold_check(ml, ml.closed_loop_)
+    assert ml.closed_loop_.hold is None  # the hold is the log's statement, not decided again in the loop's world
+
+
+def test_a_controller_at_its_logs_rate_is_still_left_alone():
+    """At the log's rate the controller's commands are what the aircraft felt: its loop is not flown, the hold is
+    searched."""
+    sim = _autopilot(60.0, 3, every=1)
+    ml = MaximumLikelihoodIdentifier(axes=("roll",), closed_loop="auto").fit(sim.flight)
+    check = ml.closed_loop_.axes["roll"]
+    assert check.loop_ticks == 1 and not check.checked and "follow the logged gyro" in check.reason
+    assert "stated" not in (ml.hold_decision_ or {})
+
+
+@pytest.mark.parametrize("ticks, loops", [(1, False), (4, True)])
+def test_a_controllers_loop_flown_at_its_rate_reads_as_damping_whatever_its_gains_tenths(ticks, loops):
+    """The gain's bias up beyond its noise rules a human's loop out; a controller's flown at its rate moves its gain
+    a few tenths of a per cent either way (+0.5 +- 0.2 % beside a damping +17 %), so only the damping counts."""
+    from identification.likelihood.closed_loop import loops_direction
+
+    se = {"k2": 0.002, "k3": 0.007}
+    assert loops_direction({"k2": 0.005, "k3": 0.17}, se, "k2", "k3", ticks) is loops
+    assert not loops_direction({"k2": 0.0, "k3": -0.05}, se, "k2", "k3", ticks)
+
+
+def test_the_warning_says_what_the_check_did_with_the_loop_and_what_it_could_not_fly():
+    from identification.validation.fit_warnings import controller_loop_warning
+
+    flown = SimpleNamespace(checked=True, loop_ticks=4, bias={"k2": 0.005, "k3": 0.17}, removed=("k3",))
+    unflown = SimpleNamespace(checked=False, loop_ticks=4, bias={}, removed=())
+    check = SimpleNamespace(axes={"roll": flown, "yaw": unflown})
+    [line] = controller_loop_warning([_imported("controller", 400.0)], check=check)
+    assert "flew the loop at its rate" in line and "roll k3 +17 % (removed)" in line
+    assert "not flown, so still biased: yaw" in line and "Identify from" not in line
+    [unchecked] = controller_loop_warning([_imported("controller", 400.0)], check=SimpleNamespace(axes={}))
+    assert "Identify from the pilot's sticks" in unchecked  # nothing flown: the advice stands
+    [unknown] = controller_loop_warning([_imported("controller")], check=check)
+    assert "not in the log" in unknown
+
+
+@pytest.mark.slow
+def test_a_delay_inside_a_sample_of_a_faster_controller_is_the_loops():
+    """The paper's yaw, its autopilot 4x faster than the log (300 s, seed 2): the search puts a 5 ms servo delay at
+    LR 39 that the loop's filters inside the sample make; it is taken for the loop's, and the damping is within 2 %
+    after the check (+19.6 % fitted)."""
+    sim = _autopilot(300.0, 2)
+    ml = MaximumLikelihoodIdentifier(**CLI_TIMING, axes=("yaw",), closed_loop="auto").fit(sim.flight)
+    delay = ml.closed_loop_.delays["yaw"]
+    assert delay.inside_sample == 4 and delay.loops and delay.removed and delay.delay <= 0.01
+    assert "within one logged sample" in delay.line() and ml.axes_["yaw"].delay == 0.0
+    assert abs(ml.params_.k11 / sim.truth.k11 - 1.0) < 0.03
+    check = ml.closed_loop_.axes["yaw"]
+    assert check.loop_ticks == 4 and "k11" in check.removed
+    assert np.isfinite(check.bias["k11"])
+
+
+def test_a_csv_of_a_controllers_commands_is_stated_on_the_command_line(tmp_path, capsys, monkeypatch):
+    """A CSV cannot say its inputs are a flight controller's or how fast its loop ran: simulate-flight says how to
+    state it, and ``heli identify --controller-loop HZ`` flies the loop at that rate in its check."""
+    import json
+
+    from heli_cli.main import main
+
+    monkeypatch.setenv("HELI_CLOSED_LOOP", "auto")
+    flight = tmp_path / "ap.csv"
+    assert main(["simulate-flight", "--cell", "broadband-autopilot", "--log-every", "4", "--duration", "60",
+                 "--seed", "1", "--out", str(flight)]) == 0
+    assert "--controller-loop 400 flies that loop" in capsys.readouterr().out
+    out = tmp_path / "m"
+    assert main(["identify", str(flight), "--out", str(out), "--no-plots", "--no-disturbances", "--delay", "none",
+                 "--servo-lag", "none", "--controller-loop", "400"]) == 0
+    printed = capsys.readouterr().out
+    stats = json.loads((out / "model.json").read_text())["fit_statistics"]
+    assert stats["input_hold"]["named"] == "zoh" and "4x faster" in stats["input_hold"]["stated"]
+    flown = [a for a, c in stats["closed_loop"]["axes"].items() if c["checked"] and c["loop_ticks"] == 4]
+    assert flown, stats["closed_loop"]["axes"]
+    assert "flew the loop at its rate" in printed and "the closed-loop check flew" in (out / "report.md").read_text()
+    with pytest.raises(SystemExit):
+        main(["identify", str(flight), "--out", str(tmp_path / "bad"), "--controller-loop", "0"])
+    assert "--controller-loop: expected a loop rate in Hz above 0, got '0'" in capsys.readouterr().err
