@@ -115,7 +115,7 @@ def test_the_loop_drives_the_rate_through_the_servo_the_likelihood_fits(tau, lag
     ``rate[k+1] = Ad[0,0] rate[k] + gain v[k]`` with ``v`` the servo's exact increments (eq. 31)."""
     from types import SimpleNamespace
 
-    from identification.likelihood.closed_loop import _compiled_fly, _stick_path
+    from identification.likelihood.loop_world import _compiled_fly, _stick_path
     from identification.likelihood.state_space import discrete_model, servo_increments
 
     dt, damping, gain, n = 0.01, 1.3, 2.0, 400
@@ -204,7 +204,7 @@ def test_the_bench_autopilot_can_fly_on_a_flight_controllers_attitude_estimate()
 
 
 def test_a_flight_the_check_cannot_fit_leaves_the_axis_unchecked_not_the_identification_failed(monkeypatch):
-    from identification.likelihood import closed_loop
+    from identification.likelihood import loop_world
 
     sim = _flight("independent", 4, 60.0)
     logged = sim.flight.rates[0]
@@ -212,7 +212,7 @@ def test_a_flight_the_check_cannot_fit_leaves_the_axis_unchecked_not_the_identif
     def still_stick(loop, rng):  # a loop whose pilot never moves the stick: nothing to fit
         return logged + 0.01 * rng.standard_normal(logged.size), sim.flight.attitude[0], np.zeros(logged.size)
 
-    monkeypatch.setattr(closed_loop, "_fly_loop", still_stick)
+    monkeypatch.setattr(loop_world, "fly_loop", still_stick)
     ml = MaximumLikelihoodIdentifier(input_hold=1.0, axes=("roll",), closed_loop="auto").fit(sim.flight)
     check = ml.closed_loop_.axes["roll"]
     assert not check.checked and "could not be fitted" in check.reason and "constant" in check.reason

@@ -1,4 +1,4 @@
-"""A flight controller whose loop runs faster than its log (identification.likelihood.closed_loop.loop_ticks): the
+"""A flight controller whose loop runs faster than its log (identification.likelihood.loop_world.loop_ticks): the
 loop corrects the aircraft inside each logged sample, the model reads that as damping, and the closed-loop check
 flies the loop at the rate the log states to measure and remove it."""
 
@@ -30,7 +30,7 @@ def _imported(source: str, loop=None, rate: float = 100.0):
 
 
 def test_the_loops_ticks_a_sample_come_from_the_rate_the_log_states():
-    from identification.likelihood.closed_loop import MAX_LOOP_TICKS, loop_ticks
+    from identification.likelihood.loop_world import MAX_LOOP_TICKS, loop_ticks
 
     assert loop_ticks(_imported("controller", 400.0)) == 4
     assert loop_ticks(_imported("servos", 1000.0, rate=200.0)) == 5
@@ -139,3 +139,37 @@ def test_a_csv_of_a_controllers_commands_is_stated_on_the_command_line(tmp_path,
     with pytest.raises(SystemExit):
         main(["identify", str(flight), "--out", str(tmp_path / "bad"), "--controller-loop", "0"])
     assert "--controller-loop: expected a loop rate in Hz above 0, got '0'" in capsys.readouterr().err
+
+
+def test_a_large_bias_of_a_controllers_loop_is_measured_again_at_the_corrected_values(monkeypatch):
+    """A damping bias above AGAIN_BIAS (a controller's loop flown at its rate, the bias removed) changes with the
+    damping it is measured at: the loop is flown again at the corrected values and the fit divided by one plus the
+    bias found there; a smaller bias, a human's loop, or a bias left, is not."""
+    from identification.likelihood import closed_loop as cl
+
+    def result(axis, bias, ticks=4, removed=("k3",)):
+        fitted = {"k2": 1.0, "k3": 3.0}
+        corrected = {k: v * (1.0 - bias[k]) if k in removed else v for k, v in fitted.items()}
+        return cl.AxisCheck(axis, True, fitted=fitted, bias=bias, bias_se={"k2": 0.01, "k3": 0.01},
+                            corrected=corrected, loop_ticks=ticks)
+
+    flown = {}
+
+    def second_round(world, n_flights, **kw):
+        flown.update(axes=tuple(world.axes_), values={a: dict(world.axes_[a]) for a in world.axes_}, **kw)
+        return SimpleNamespace(axes={a: SimpleNamespace(checked=True, bias={"k2": -0.02, "k3": 0.5})
+                                     for a in world.axes_})
+
+    monkeypatch.setattr(cl, "check_closed_loop", second_round)
+    monkeypatch.setattr(cl, "set_axis_values", lambda world, axis, values: world.axes_.__setitem__(axis, values))
+    ident = SimpleNamespace(axes_={a: {} for a in ("roll", "pitch", "yaw")})
+    results = {"roll": result("roll", {"k2": 0.0, "k3": 0.3}), "pitch": result("pitch", {"k2": 0.0, "k3": 0.1}),
+               "yaw": result("yaw", {"k2": 0.0, "k3": 0.3}, ticks=1)}
+    out = cl._measured_again(ident, results, 8, 5, None)
+    assert flown["axes"] == ("roll",) and flown["values"]["roll"] == pytest.approx({"k2": 1.0, "k3": 2.1})
+    assert flown["mode"] == "report" and flown["again"] is False and flown["seed"] == 6
+    assert out["roll"].corrected == pytest.approx({"k2": 1.0, "k3": 2.0}) and out["roll"].bias_again["k3"] == 0.5
+    assert out["pitch"] is results["pitch"] and out["yaw"] is results["yaw"]
+    assert "measured again at the corrected values: k3 +50.0 %" in cl.ClosedLoopCheck(out, 8, 0, "auto", 0.0).lines()[0]
+    left = {"roll": result("roll", {"k2": 0.0, "k3": 0.3}, removed=())}
+    assert cl._measured_again(ident, left, 8, 5, None) is left

@@ -18,7 +18,7 @@ the flight's — the delay is the loop's: the axis takes its delay-free fit. Whe
 the delay. The test can only remove a delay its world reproduces; one it misses stays as ``delay="detect"``
 found it, and is checked.
 
-A flight controller whose loop runs faster than its log (:func:`~identification.likelihood.closed_loop.loop_ticks`)
+A flight controller whose loop runs faster than its log (:func:`~identification.likelihood.loop_world.loop_ticks`)
 moves its command inside each logged sample through filters the log does not show (a D-term low-pass on the
 gyro), and that shapes the phase as a delay shorter than a sample would: the bench's autopilot 4x faster than its
 100 Hz log put a yaw delay of 4.5-6.1 ms at LR 25-43 on effect-free flights, its damping +23-43 % with it after the
@@ -38,7 +38,8 @@ from heli_core.terms import AXES
 from ..errors import IdentifiabilityError
 from .axis_likelihood import MIN_SERVO_DELAY
 from .axis_pool import map_axes
-from .closed_loop import axis_refit, flown_flights, loop_ticks, with_fits, world_loops
+from .closed_loop import axis_refit
+from .loop_world import flown_flights, loop_ticks, with_fits, world_loops
 
 N_DELAY_FLIGHTS = 16
 """Flights of the delay-free world flown per delay tested (the loop's optimum appeared on 1 of 10)."""

@@ -74,11 +74,12 @@ from .axis_fit import MLAxisFit, model_values
 from .axis_likelihood import MIN_SERVO_DELAY, AxisData, AxisLikelihood
 from .axis_pool import check_workers, map_axes
 from .axis_search import BURN_IN, DAMPING_BOUNDS, MAX_SHIFT, AxisProblem, WindFit
-from .closed_loop import N_FLIGHTS, ClosedLoopCheck, apply_check, loop_ticks
+from .closed_loop import N_FLIGHTS, ClosedLoopCheck, apply_check
 from .closed_loop import check_settings as check_closed_loop_settings
 from .input_hold import (HOLDS, check_hold, decide_hold, hold_alternative, std_errors_with_hold,
                          undecided_against)
 from .loop_checks import run_checks
+from .loop_world import loop_ticks
 from .servo_lag import profile_lag
 from .state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll, rts_smooth, wind_block
 
@@ -385,7 +386,7 @@ class MaximumLikelihoodIdentifier:
     def _stated_hold(self, flights) -> dict | None:
         """With ``input_hold="auto"``, the hold the log states: where every flight's inputs are a flight
         controller's commands and its loop runs faster than the log
-        (:func:`~identification.likelihood.closed_loop.loop_ticks`), held (the controller holds each command over
+        (:func:`~identification.likelihood.loop_world.loop_ticks`), held (the controller holds each command over
         its tick; what moves inside a logged sample is its loop, which the closed-loop check flies at its rate). A
         hold searched there takes the loop's motion for the input's: on the bench's autopilot 4x faster than its
         log, fractions of 0.5-1.0 on the sluggish aircraft, its yaw damping +104 % where held it read +43 % before

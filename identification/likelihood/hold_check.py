@@ -58,7 +58,8 @@ from ..errors import IdentifiabilityError
 from .axis_pool import map_axes
 from .axis_search import BURN_IN
 from .axis_fit import model_values
-from .closed_loop import SIGNIFICANCE, axis_refit, flown_flights, has_servo, with_fits, world_loops
+from .closed_loop import SIGNIFICANCE, axis_refit
+from .loop_world import flown_flights, has_servo, with_fits, world_loops
 from .input_hold import HOLDS
 
 MAX_Z = 3.0

@@ -30,7 +30,8 @@ quality and returns one line per concern, for the terminal and the report:
 * **Stick noise the aircraft did not feel** (:func:`stick_noise_warning`) -- the sticks moved between the log's
   samples (:mod:`identification.likelihood.stick_noise`): the line names the axes and what avoids it.
 * **A flight controller's loop faster than the fit** (:func:`controller_loop_warning`) -- the inputs are its
-  commands, and its loop (stated by the log, or unknown) runs faster than the rate they are fitted at.
+  commands, and its loop (stated by the log, or unknown) runs faster than the rate they are fitted at: what the
+  closed-loop check removed where it flew the loop at its stated rate, and what to state where it could not.
 
 The functions are pure: they read the flights and the figures and return strings (the figures that judge a
 fitted model come from :mod:`identification.validation.judged_fit`).
@@ -229,7 +230,7 @@ flight controller's log, the bench's autopilot), not the pilot's sticks. A CSV's
 
 FASTER_LOOP = 1.25
 """A flight controller's loop faster than the fit's rate by more than this factor corrects the aircraft inside each
-fitted sample (:func:`controller_loop_warning`, :func:`~identification.likelihood.closed_loop.loop_ticks`)."""
+fitted sample (:func:`controller_loop_warning`, :func:`~identification.likelihood.loop_world.loop_ticks`)."""
 
 
 def input_source(meta) -> tuple[str, float | None]:
@@ -244,7 +245,7 @@ def input_source(meta) -> tuple[str, float | None]:
 def controller_loop_warning(flights, advice: bool = True, check=None) -> list[str]:
     """One line where the inputs are a flight controller's commands and its loop may run faster than the rate they
     are fitted at: the loop then corrects the aircraft inside each fitted sample, and a model driven by the sampled
-    commands reads that correction as damping (the bench's autopilot 4x faster than its 100 Hz log: dampings 16-32 %
+    commands reads that correction as damping (the bench's autopilot 4x faster than its 100 Hz log: dampings 17-45 %
     high before the closed-loop check flew the loop at its rate; docs/method.md, "A flight controller faster than
     its log").
     Where the closed-loop ``check`` flew the loop at its stated rate (``loop_ticks`` > 1), the line says what it
@@ -269,7 +270,7 @@ def controller_loop_warning(flights, advice: bool = True, check=None) -> list[st
     flown = _flown_at_loop_rate(check)
     if flown:
         return [cause + f"; the closed-loop check flew the loop at its rate and {flown} (docs/method.md)"]
-    cause += " (the bench's autopilot with a loop 4x faster than its log: dampings 16-32 % high; docs/method.md)"
+    cause += " (the bench's autopilot with a loop 4x faster than its log: dampings 17-45 % high; docs/method.md)"
     return [cause + (". Identify from the pilot's sticks (heli import --inputs sticks: the stabilised aircraft), or "
                      "from commands and gyro logged at the loop's rate" if advice else "")]
 
