@@ -68,8 +68,8 @@ def register(sub):
     p.add_argument("--controller-loop", type=number("a loop rate in Hz above 0", 0.0), default=None, metavar="HZ",
                    help="ml: the inputs are a flight controller's commands from a loop at HZ (for a CSV, which cannot "
                    "say so; imported logs state it): where HZ is faster than the log, the loop corrects the aircraft "
-                   "inside each sample and the dampings read high, so the hold is taken as held and the closed-loop "
-                   "check flies the loop at HZ to measure and remove that bias")
+                   "inside each sample and the dampings read high, so the hold is taken as held where the data do not "
+                   "reject it, and the closed-loop check flies the loop at HZ to measure and remove that bias")
     p.add_argument("--wind-model", choices=("auto", "gm2", "gm_so"), default="auto",
                    help="ml: gust model per axis, 'gm2' two first-order Gauss-Markov processes, 'gm_so' a slow "
                    "first-order and a fast second-order one, 'auto' the more likely (default)")

@@ -47,8 +47,7 @@ def test_a_controller_faster_than_its_log_is_flown_at_its_rate_and_its_dampings_
     +1.6 % from +16, +26, +23)."""
     sim = _autopilot(120.0, 1)
     ml = MaximumLikelihoodIdentifier(axes=("roll",), closed_loop="auto").fit(sim.flight)
-    assert ml.hold_decision_["named"] == "zoh" and "4x faster" in ml.hold_decision_["stated"]
-    assert ml.axes_["roll"].input_hold == 0.0  # stated, not searched
+    assert ml.hold_decision_["named"] == "zoh" and "4x faster" in ml.hold_decision_["preferred"]
     check = ml.closed_loop_.axes["roll"]
     assert check.checked and check.loop_ticks == 4, check.reason
     assert check.pilots[0]["reaction_delay_s"] == 0.0  # the law reads the state of the sample it commands
@@ -63,6 +62,22 @@ def test_a_controller_faster_than_its_log_is_flown_at_its_rate_and_its_dampings_
     assert ml.closed_loop_.hold is None  # the hold is the log's statement, not decided again in the loop's world
 
 
+def test_a_controllers_commands_are_held_unless_the_data_reject_it():
+    """Where neither named hold is rejected a controller's log takes held (the bench's sluggish autopilot 4x faster
+    than its log: 0.49 / 0.57 / 1.0 on its axes); where the data reject held (the real Betaflight quad, by 7065) the
+    data's hold stands, as for any log; without a preference the nearer named hold."""
+    from identification.likelihood.input_hold import decide_hold
+
+    both = {"roll": (0.49, 3.6), "pitch": (0.57, 0.81), "yaw": (1.0, 2.1)}
+    assert decide_hold(both, 30000)["named"] == "linear"
+    assert decide_hold(both, 30000, prefer="zoh")["named"] == "zoh"
+    rejected = {"roll": (0.98, 0.01), "pitch": (0.97, 0.02)}
+    decided = decide_hold(rejected, 5000, prefer="zoh")
+    assert decided["named"] == "linear" and decided["nll_gain"]["zoh"] > decided["threshold"]
+    fraction = {"roll": (0.31, 0.05), "pitch": (0.30, 0.09), "yaw": (0.31, 0.05)}
+    assert decide_hold(fraction, 15000, prefer="zoh")["named"] is None  # both rejected: the pooled fraction
+
+
 def test_a_controller_at_its_logs_rate_is_still_left_alone():
     """At the log's rate the controller's commands are what the aircraft felt: its loop is not flown, the hold is
     searched."""
@@ -70,7 +85,7 @@ def test_a_controller_at_its_logs_rate_is_still_left_alone():
     ml = MaximumLikelihoodIdentifier(axes=("roll",), closed_loop="auto").fit(sim.flight)
     check = ml.closed_loop_.axes["roll"]
     assert check.loop_ticks == 1 and not check.checked and "follow the logged gyro" in check.reason
-    assert "stated" not in (ml.hold_decision_ or {})
+    assert "preferred" not in (ml.hold_decision_ or {})
 
 
 @pytest.mark.parametrize("ticks, loops", [(1, False), (4, True)])
@@ -132,7 +147,7 @@ def test_a_csv_of_a_controllers_commands_is_stated_on_the_command_line(tmp_path,
                  "--servo-lag", "none", "--controller-loop", "400"]) == 0
     printed = capsys.readouterr().out
     stats = json.loads((out / "model.json").read_text())["fit_statistics"]
-    assert stats["input_hold"]["named"] == "zoh" and "4x faster" in stats["input_hold"]["stated"]
+    assert "4x faster" in stats["input_hold"]["preferred"]
     flown = [a for a, c in stats["closed_loop"]["axes"].items() if c["checked"] and c["loop_ticks"] == 4]
     assert flown, stats["closed_loop"]["axes"]
     assert "flew the loop at its rate" in printed and "the closed-loop check flew" in (out / "report.md").read_text()

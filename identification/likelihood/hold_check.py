@@ -136,7 +136,8 @@ def needs_hold_check(ident, check) -> str:
         return "the hold was not decided by the estimator"
     if any(c.checked and c.loop_ticks > 1 for c in check.axes.values()):
         return ("a flight controller's loop faster than the log was flown at its own rate: it holds its command over "
-                "each of its ticks, and the log's hold is how its commands were sampled, not a hand's")
+                "each of its ticks, and the log's hold is how its commands were sampled, not a hand's (held where "
+                "the data do not reject it)")
     if not decision.get("named") and any(c.checked for c in check.axes.values()):
         return ""  # a fraction may be the loop's own doing: the check at it measures its own world's bias only
     for c in check.axes.values():

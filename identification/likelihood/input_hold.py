@@ -48,7 +48,7 @@ HOLD_BIC = 0.5
 kept (Schwarz's criterion: one parameter costs ``HOLD_BIC * ln n``)."""
 
 
-def decide_hold(estimates: dict, n: float) -> dict:
+def decide_hold(estimates: dict, n: float, prefer: str | None = None) -> dict:
     """One hold for a log from each axis' estimate ``{axis: (fraction, se)}`` over ``n`` samples per axis.
 
     The axes' likelihoods are independent given the hold, and near its optimum each is quadratic in it, so
@@ -57,6 +57,11 @@ def decide_hold(estimates: dict, n: float) -> dict:
     ``HOLD_BIC * ln n`` over it; then the pooled fraction stands (a log whose sticks are stamped part-way
     through their sample). A lone axis' weak estimate (0.03 +- 0.32 on a noisy pitch gyro, whose damping it
     biased 13 %) is so outvoted by the others and by the evidence it needs.
+
+    With ``prefer`` (a named hold), that hold is taken wherever the data do not reject it, the other named hold
+    only where they reject ``prefer`` and not it: a flight controller's commands logged slower than its loop are
+    held over each of its ticks, while the loop moves them inside each logged sample, and the likelihood alone
+    reads both ways there (:meth:`~identification.likelihood.estimator.MaximumLikelihoodIdentifier._controller_hold`).
 
     Returns
     -------
@@ -78,6 +83,8 @@ def decide_hold(estimates: dict, n: float) -> dict:
     threshold = HOLD_BIC * float(np.log(max(n, 2.0)))
     gain = {name: cost(HOLDS[name]) - cost(pooled) for name in ("linear", "zoh")}
     named = min(gain, key=gain.get)
+    if prefer is not None and gain[prefer] < threshold:
+        named = prefer
     keep = gain[named] < threshold
     return {"fraction": HOLDS[named] if keep else pooled, "pooled": pooled, "pooled_se": float(w.sum() ** -0.5),
             "named": named if keep else None, "nll_gain": gain, "threshold": threshold}
