@@ -156,7 +156,8 @@ def run(args) -> int:
             kwargs = ml_settings(args, closed_loop)
         else:
             for option, given in (("--servo-lag", lag is not None), ("--delay detect", delay == "detect"),
-                                  (f"--closed-loop {closed_loop}", args.closed_loop == "report")):
+                                  (f"--closed-loop {closed_loop}", args.closed_loop == "report"),
+                                  ("--controller-loop", getattr(args, "controller_loop", None) is not None)):
                 if given:
                     progress.done()
                     print(f"heli identify: error: {option} needs the maximum-likelihood estimator (--method ml), "

@@ -154,6 +154,10 @@ def test_a_csv_of_a_controllers_commands_is_stated_on_the_command_line(tmp_path,
     with pytest.raises(SystemExit):
         main(["identify", str(flight), "--out", str(tmp_path / "bad"), "--controller-loop", "0"])
     assert "--controller-loop: expected a loop rate in Hz above 0, got '0'" in capsys.readouterr().err
+    assert main(["identify", str(flight), "--out", str(tmp_path / "integral"), "--method", "integral",
+                 "--controller-loop", "400"]) == 2  # the integral method flies no loop: said, not ignored
+    assert "--controller-loop needs the maximum-likelihood estimator" in capsys.readouterr().err
+    assert not (tmp_path / "integral").exists()
 
 
 def test_a_large_bias_of_a_controllers_loop_is_measured_again_at_the_corrected_values(monkeypatch):
@@ -172,8 +176,8 @@ def test_a_large_bias_of_a_controllers_loop_is_measured_again_at_the_corrected_v
 
     def second_round(world, n_flights, **kw):
         flown.update(axes=tuple(world.axes_), values={a: dict(world.axes_[a]) for a in world.axes_}, **kw)
-        return SimpleNamespace(axes={a: SimpleNamespace(checked=True, bias={"k2": -0.02, "k3": 0.5})
-                                     for a in world.axes_})
+        seen = SimpleNamespace(checked=True, bias={"k2": -0.02, "k3": 0.5}, loops_direction=True)
+        return SimpleNamespace(axes={a: seen for a in world.axes_})
 
     monkeypatch.setattr(cl, "check_closed_loop", second_round)
     monkeypatch.setattr(cl, "set_axis_values", lambda world, axis, values: world.axes_.__setitem__(axis, values))
@@ -188,3 +192,7 @@ def test_a_large_bias_of_a_controllers_loop_is_measured_again_at_the_corrected_v
     assert "measured again at the corrected values: k3 +50.0 %" in cl.ClosedLoopCheck(out, 8, 0, "auto", 0.0).lines()[0]
     left = {"roll": result("roll", {"k2": 0.0, "k3": 0.3}, removed=())}
     assert cl._measured_again(ident, left, 8, 5, None) is left
+    against = SimpleNamespace(axes={"roll": SimpleNamespace(checked=True, bias={"k2": 0.0, "k3": -0.2},
+                                                            loops_direction=False)})
+    monkeypatch.setattr(cl, "check_closed_loop", lambda world, n, **kw: against)
+    assert cl._measured_again(ident, results, 8, 5, None)["roll"] is results["roll"]  # the first correction stands

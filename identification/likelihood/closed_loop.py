@@ -356,7 +356,7 @@ def _measured_again(ident, results: dict, n_flights: int, seed: int, workers) ->
     out = dict(results)
     for axis in axes:
         c, seen = results[axis], second.axes[axis]
-        if not seen.checked:
+        if not seen.checked or not seen.loops_direction:  # a second look against the loop's way: the first stands
             continue
         corrected = {k: v / (1.0 + seen.bias[k]) if k in c.removed else v for k, v in c.fitted.items()}
         out[axis] = replace(c, corrected=corrected, bias_again=dict(seen.bias))
