@@ -6,7 +6,8 @@ import sys
 from pathlib import Path
 
 from .argtypes import INPUT_HOLD_HELP, input_hold, number, output_path, whole
-from .identify import CLOSED_LOOP_CHOICES, closed_loop_mode, print_check, print_read_warnings
+from .identify import (CLOSED_LOOP_CHOICES, add_controller_loop, closed_loop_mode, print_check, print_read_warnings,
+                       stated_controller)
 
 
 def register(sub):
@@ -38,6 +39,7 @@ def register(sub):
                    "identify checks its own ('auto', the default, or $HELI_CLOSED_LOOP when set: a bias a pilot "
                    "who sees the aircraft gives the damping is removed; 'report': measured only; 'off': skipped); "
                    "it costs 8-24 fits of the flight, more where a servo delay was found")
+    add_controller_loop(p)
     p.add_argument("--folds", type=whole(2, 12), default=5,  # at most Diagnoser.min_windows (12)
                    help="integral: cross-validation blocks, 2 to 12 (default 5)")
     p.add_argument("--window", type=number("a positive number of seconds", 0.0),
@@ -64,11 +66,15 @@ def run(args) -> int:
     except ValueError as exc:  # $HELI_CLOSED_LOOP misspelt: refused before any work, as heli identify does
         print(f"heli diagnose: error: {exc}", file=sys.stderr)
         return 2
-    if args.method != "ml" and args.closed_loop in ("auto", "report"):
-        print(f"heli diagnose: error: --closed-loop {args.closed_loop} needs the likelihood diagnosis (--method "
-              "ml), got --method integral", file=sys.stderr)
-        return 2
+    for option, given in ((f"--closed-loop {args.closed_loop}", args.closed_loop in ("auto", "report")),
+                          ("--controller-loop", args.controller_loop is not None)):
+        if args.method != "ml" and given:
+            print(f"heli diagnose: error: {option} needs the likelihood diagnosis (--method ml), got --method "
+                  "integral", file=sys.stderr)
+            return 2
     flight = read_flight(args.flight)
+    if args.controller_loop:  # stated by the user for a log that cannot state it
+        flight = stated_controller(flight, args.controller_loop)
     print_read_warnings(args.flight, flight)
     model = document = None
     if args.model is not None:

@@ -65,11 +65,7 @@ def register(sub):
                    "flights, and remove a gain's or damping's bias where it is significant ('auto', the default, "
                    f"or ${CLOSED_LOOP_ENV} when set), only report it ('report'), or skip the check ('off'); it "
                    "costs about 8 fits of the flight")
-    p.add_argument("--controller-loop", type=number("a loop rate in Hz above 0", 0.0), default=None, metavar="HZ",
-                   help="ml: the inputs are a flight controller's commands from a loop at HZ (for a CSV, which cannot "
-                   "say so; imported logs state it): where HZ is faster than the log, the loop corrects the aircraft "
-                   "inside each sample and the dampings read high, so the hold is taken as held where the data do not "
-                   "reject it, and the closed-loop check flies the loop at HZ to measure and remove that bias")
+    add_controller_loop(p)
     p.add_argument("--wind-model", choices=("auto", "gm2", "gm_so"), default="auto",
                    help="ml: gust model per axis, 'gm2' two first-order Gauss-Markov processes, 'gm_so' a slow "
                    "first-order and a fast second-order one, 'auto' the more likely (default)")
@@ -188,6 +184,15 @@ def run(args) -> int:
 
     print(f"wrote {write_html_report(run.paths['report'])}")  # after the figures: it embeds them
     return 0
+
+
+def add_controller_loop(p) -> None:
+    """``--controller-loop HZ`` (heli identify and diagnose): the inputs stated as a flight controller's commands."""
+    p.add_argument("--controller-loop", type=number("a loop rate in Hz above 0", 0.0), default=None, metavar="HZ",
+                   help="ml: the inputs are a flight controller's commands from a loop at HZ (for a CSV, which cannot "
+                   "say so; imported logs state it): where HZ is faster than the log, the loop corrects the aircraft "
+                   "inside each sample and the dampings read high, so the hold is taken as held where the data do not "
+                   "reject it, and the closed-loop check flies the loop at HZ to measure and remove that bias")
 
 
 def stated_controller(flight, loop_hz: float):

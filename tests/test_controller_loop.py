@@ -196,3 +196,26 @@ def test_a_large_bias_of_a_controllers_loop_is_measured_again_at_the_corrected_v
                                                             loops_direction=False)})
     monkeypatch.setattr(cl, "check_closed_loop", lambda world, n, **kw: against)
     assert cl._measured_again(ident, results, 8, 5, None)["roll"] is results["roll"]  # the first correction stands
+
+
+def test_diagnose_takes_the_controllers_loop_as_identify_does(tmp_path, capsys, monkeypatch):
+    """``heli diagnose --controller-loop HZ`` states the CSV's inputs for the diagnosis' fits and checks; the
+    integral diagnosis, which flies no loop, refuses it in one line."""
+    from heli_cli import diagnose
+    from heli_cli.main import main
+
+    flight = tmp_path / "ap.csv"
+    assert main(["simulate-flight", "--cell", "broadband-autopilot", "--duration", "20", "--out", str(flight)]) == 0
+    seen = {}
+
+    def run_ml(args, read, *rest):
+        seen.update(read.metadata)
+        return 0
+
+    monkeypatch.setattr(diagnose, "_run_ml", run_ml)
+    assert main(["diagnose", str(flight), "--out", str(tmp_path / "d"), "--controller-loop", "400"]) == 0
+    assert seen["input_source"] == "flight controller commands" and seen["loop_rate_hz"] == 400.0
+    capsys.readouterr()
+    assert main(["diagnose", str(flight), "--out", str(tmp_path / "i"), "--method", "integral",
+                 "--controller-loop", "400"]) == 2
+    assert "--controller-loop needs the likelihood diagnosis (--method ml)" in capsys.readouterr().err
