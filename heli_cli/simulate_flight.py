@@ -96,6 +96,7 @@ def _line(text):
 
 def run(args) -> int:
     from identification.bench.synthetic import simulate_flight
+    from identification.likelihood.loop_world import loop_ticks
 
     from .progress import progress_of
 
@@ -120,8 +121,8 @@ def run(args) -> int:
     if f.metadata.get("input_hold") == "zoh":  # a CSV does not carry it: the estimators find it
         print("the sticks reach the aircraft held over each sample (a CSV does not say so: heli identify and "
               "diagnose estimate the hold from the data)")
-    loop = f.metadata.get("loop_rate_hz")
-    if loop and loop > f.sample_rate * 1.25:  # a CSV cannot say so either: the user states it
+    if loop_ticks(f) > 1:  # a CSV cannot say so either: the user states it
+        loop = f.metadata["loop_rate_hz"]
         print(f"the inputs are a flight controller's commands from a {loop:g} Hz loop, faster than the log (a CSV "
               f"does not say so: heli identify {paths['flight']} --controller-loop {loop:g} flies that loop in its "
               "closed-loop check)")

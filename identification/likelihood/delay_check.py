@@ -39,7 +39,7 @@ from ..errors import IdentifiabilityError
 from .axis_likelihood import MIN_SERVO_DELAY
 from .axis_pool import map_axes
 from .closed_loop import axis_refit
-from .loop_world import flown_flights, loop_ticks, with_fits, world_loops
+from .loop_world import flown_flights, log_ticks, with_fits, world_loops
 
 N_DELAY_FLIGHTS = 16
 """Flights of the delay-free world flown per delay tested (the loop's optimum appeared on 1 of 10)."""
@@ -152,7 +152,7 @@ def check_delay(ident, axis: str, min_lr: float, n_flights: int = N_DELAY_FLIGHT
         return DelayCheck(axis, fit.delay, flight[1], reason=f"refitted at the log's hold the flight itself does not "
                           f"keep it (LR {flight[1]:.1f})", dt=dt)
     null_fit = replace(flight[2], dropped=fit.dropped)
-    ticks = max(loop_ticks(f, dt) for f in ident.flights_)
+    ticks = log_ticks(ident.flights_, dt)
     if ticks > 1 and flight[0] <= dt * (1.0 + 1e-6):
         return DelayCheck(axis, flight[0], flight[1], loops=True, dt=dt, fit=null_fit, inside_sample=ticks)
     world = with_fits(ident, {axis: null_fit})

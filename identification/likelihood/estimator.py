@@ -79,7 +79,7 @@ from .closed_loop import check_settings as check_closed_loop_settings
 from .input_hold import (HOLDS, check_hold, decide_hold, hold_alternative, std_errors_with_hold,
                          undecided_against)
 from .loop_checks import run_checks
-from .loop_world import loop_ticks
+from .loop_world import log_ticks
 from .servo_lag import profile_lag
 from .state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll, rts_smooth, wind_block
 
@@ -317,7 +317,7 @@ class MaximumLikelihoodIdentifier:
         # (on the flights as cleaned above: their folded lines are out already)
         start = IntegralIdentifier(structure=names, delay=0.0, axes=self.axes, remove_folded=False).fit(flights)
         delays, lags = self._delays(), self._lags()
-        controller = min(loop_ticks(f) for f in flights)  # > 1: a controller's commands, slower than its loop
+        controller = log_ticks(flights)  # > 1: a controller's commands, slower than its loop
 
         def one_axis(axis_name, delay=None):
             a = AXES.index(axis_name)

@@ -59,6 +59,14 @@ def loop_ticks(flight, dt: float | None = None) -> int:
     return int(min(MAX_LOOP_TICKS, round(loop / rate)))
 
 
+def log_ticks(flights, dt: float | None = None) -> int:
+    """The controller ticks a sample that every one of a log's ``flights`` has (:func:`loop_ticks`, the least):
+    > 1 only where each is a flight controller's commands logged slower than its stated loop. What the log as a
+    whole is decided by (its hold, a delay within a sample, the gyro noise a check needs); each flight's own loop
+    is still flown at its own ticks."""
+    return min((loop_ticks(f, dt) for f in flights), default=1)
+
+
 @dataclass(frozen=True, eq=False)
 class _AxisLoop:
     """One axis of one flight as the simulated loop flies it."""
@@ -92,7 +100,7 @@ def skip_reason(ident, a: int, fit, data) -> str:
     if side is not None:  # the model verdict names it; nothing downstream is built on it here
         return f"its damping {damping} is at the {side} bound of the search (the data did not place it)"
     share = fit.noise_std / max(float(np.std(np.concatenate(data.y))), 1e-300)
-    fast = any(loop_ticks(f, data.dt) > 1 for f in ident.flights_)  # its bias needs no noise (docs/method.md)
+    fast = log_ticks(ident.flights_, data.dt) > 1  # a controller's loop: its bias needs no noise (docs/method.md)
     if share < MIN_NOISE_SHARE and not fast:
         return (f"the gyro shows next to no white noise ({100 * share:.2g} % of the rate's std; a log filtered before "
                 "it was written): there is nothing in the rate a pilot could see better than it")

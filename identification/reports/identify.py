@@ -136,7 +136,7 @@ def method_sentence(ident) -> str:
         said = (f"the log's {decision['named']} hold, kept as the data do not reject it" if decision.get("named")
                 else "the axes' pooled fraction")
         if decision.get("preferred") and decision.get("named") == "zoh":  # a controller's, not rejected by the data
-            said = f"the log's zoh hold, kept as the data do not reject it: {decision['preferred']}"
+            said += f": {decision['preferred']}"
         alternative = getattr(ident, "hold_alternative_", None)
         if alternative:
             said += (f"; nor do they reject the {alternative['hold']} hold (likelihood ratio {alternative['lr']:.1f}, "
