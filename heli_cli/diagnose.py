@@ -6,8 +6,7 @@ import sys
 from pathlib import Path
 
 from .argtypes import INPUT_HOLD_HELP, input_hold, number, output_path, whole
-from .identify import (CLOSED_LOOP_CHOICES, add_controller_loop, closed_loop_mode, print_check, print_read_warnings,
-                       stated_controller)
+from .identify import CLOSED_LOOP_CHOICES, add_controller_loop, closed_loop_mode, print_check, print_read_warnings
 
 
 def register(sub):
@@ -72,6 +71,8 @@ def run(args) -> int:
             print(f"heli diagnose: error: {option} needs the likelihood diagnosis (--method ml), got --method "
                   "integral", file=sys.stderr)
             return 2
+    from identification.validation.fit_warnings import stated_controller
+
     flight = read_flight(args.flight)
     if args.controller_loop:  # stated by the user for a log that cannot state it
         flight = stated_controller(flight, args.controller_loop)
@@ -82,7 +83,7 @@ def run(args) -> int:
         model = document.params
     with progress_of(args) as progress:
         if args.method == "ml":
-            return _run_ml(args, flight, model, document, source_entry(args.flight), progress,
+            return _run_ml(args, flight, model, document, source_entry(args.flight, controller_loop_hz=args.controller_loop), progress,
                            None if closed_loop == "off" else closed_loop)
         from identification.diagnosis.heldout_diagnoser import ALPHA, MIN_GAIN, Diagnoser
         from identification.workflows.diagnose import DiagnosisConfig, diagnose_and_report
@@ -95,7 +96,7 @@ def run(args) -> int:
         progress.stage(f"diagnosing {args.flight} by held-out forward simulation (every catalogue effect on "
                        "every axis)")
         run_ = diagnose_and_report(flight, args.out, config, model=model, model_document=document,
-                                   source=source_entry(args.flight))
+                                   source=source_entry(args.flight, controller_loop_hz=args.controller_loop))
         progress.done()
         _print_run(run_, lambda s: (
             f"held-out MAE {s.gap_before['mae_deg_s']:.3f} -> {s.gap_after['mae_deg_s']:.3f} deg/s, gain "

@@ -127,6 +127,7 @@ def ml_settings(args, closed_loop: str) -> dict:
 
 def run(args) -> int:
     from identification.io import read_flight, read_log
+    from identification.validation.fit_warnings import stated_controller
     from identification.workflows.identify import identify_and_report, segment_read, source_entry
 
     from .progress import progress_of
@@ -165,7 +166,9 @@ def run(args) -> int:
         try:
             run = _identify_or_explain(args, flights, kwargs, progress, lambda: identify_and_report(
                 flights, args.out, coupled=args.coupled,
-                sources=[source_entry(p, segment=segment_read(args.segment, f)) for p, f in zip(args.flights, flights)],
+                sources=[source_entry(p, segment=segment_read(args.segment, f),
+                                     controller_loop_hz=getattr(args, "controller_loop", None))
+                        for p, f in zip(args.flights, flights)],
                 identifier_kwargs=kwargs, flight_paths=args.flights, plots=not args.no_plots,
                 disturbances=not args.no_disturbances, backend=backend, method=args.method,
                 progress=progress.bars and len(flights) > 1, draw_figures=False, stage=progress.stage,
@@ -186,23 +189,14 @@ def run(args) -> int:
     return 0
 
 
-def add_controller_loop(p) -> None:
-    """``--controller-loop HZ`` (heli identify and diagnose): the inputs stated as a flight controller's commands."""
+def add_controller_loop(p, which: str = "the inputs") -> None:
+    """``--controller-loop HZ`` (heli identify, diagnose and refresh): ``which`` inputs stated as a flight
+    controller's commands."""
     p.add_argument("--controller-loop", type=number("a loop rate in Hz above 0", 0.0), default=None, metavar="HZ",
-                   help="ml: the inputs are a flight controller's commands from a loop at HZ (for a CSV, which cannot "
+                   help=f"ml: {which} are a flight controller's commands from a loop at HZ (for a CSV, which cannot "
                    "say so; imported logs state it): where HZ is faster than the log, the loop corrects the aircraft "
                    "inside each sample and the dampings read high, so the hold is taken as held where the data do not "
                    "reject it, and the closed-loop check flies the loop at HZ to measure and remove that bias")
-
-
-def stated_controller(flight, loop_hz: float):
-    """``flight`` with its inputs stated as a flight controller's commands from a loop at ``loop_hz`` (``heli identify
-    --controller-loop``), over what its file or import said."""
-    items = {"input_source": "flight controller commands", "loop_rate_hz": float(loop_hz)}
-    imported = flight.metadata.get("imported_from")
-    if imported:  # an import's own statement is read first (fit_warnings.input_source): the user's replaces it
-        items["imported_from"] = {**imported, **items}
-    return flight.with_metadata(**items)
 
 
 def print_read_warnings(path, flight, progress=None) -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 from .argtypes import number, seed, segment_option, whole
-from .identify import add_flight_backend_options, flight_backend
+from .identify import add_controller_loop, add_flight_backend_options, flight_backend
 
 
 def register(sub):
@@ -42,6 +42,8 @@ def register(sub):
                    default=0.0, metavar="FRACTION",
                    help="smallest relative change that may be flagged, e.g. 0.05 (default 0: any significant change)")
     p.add_argument("--no-plots", action="store_true", help="do not draw PNG figures")
+    add_controller_loop(p, "the NEW_FLIGHTs' inputs (recorded in their sources; the previous flights are read as "
+                           "theirs record)")
     add_flight_backend_options(p)
     p.add_argument("--no-wait", action="store_true",
                    help="refuse at once when another command is writing the model folder (default: wait for it)")
@@ -61,7 +63,7 @@ def run(args) -> int:
             args.model_dir, args.flights, previous_flights=args.previous_flights, fit=args.fit,
             n_replicates=args.bootstrap, block=args.block, seed=args.seed, alpha=args.alpha,
             min_relative=args.min_change, plots=not args.no_plots, progress=progress.bars, backend=backend,
-            wait=not args.no_wait, stage=progress.stage, segment=args.segment,
+            wait=not args.no_wait, stage=progress.stage, segment=args.segment, controller_loop=args.controller_loop,
         )
     finally:
         progress.done()

@@ -275,16 +275,22 @@ class Source:
         The stretch of a flight-controller log that was fitted, on the log's own clock [s], when the flight was read
         with one given (``--segment``); None: the file as it reads by default (a log's airborne segment found
         automatically, a CSV whole). ``heli refresh`` reads the flight again the same way.
+    controller_loop_hz : float or None
+        Where the flight's inputs were stated as a flight controller's commands from a loop at this rate [Hz]
+        (``--controller-loop``, for a CSV that cannot say so); None: as its file states them. ``heli refresh`` states
+        them again when it reads the flight.
     """
 
     file: str | None
     sha256: str | None
     segment: tuple | None = None
+    controller_loop_hz: float | None = None
 
     def to_dict(self) -> dict:
         """The ``provenance.sources`` entry (what :func:`identification.workflows.identify.source_entry` writes)."""
         return {"file": self.file, "sha256": self.sha256,
-                **({"segment": list(self.segment)} if self.segment is not None else {})}
+                **({"segment": list(self.segment)} if self.segment is not None else {}),
+                **({"controller_loop_hz": self.controller_loop_hz} if self.controller_loop_hz is not None else {})}
 
 
 def _sources(provenance, where: str) -> tuple:
@@ -304,8 +310,14 @@ def _sources(provenance, where: str) -> tuple:
                 and segment[0] < segment[1]):
             raise ModelFileError(f"{where}: 'provenance.sources[{i}].segment' must be [t0, t1] in seconds with "
                                  f"t0 < t1, got {segment!r}")
+        loop = entry.get("controller_loop_hz")
+        if loop is not None and not (isinstance(loop, (int, float)) and not isinstance(loop, bool)
+                                     and math.isfinite(loop) and loop > 0):
+            raise ModelFileError(f"{where}: 'provenance.sources[{i}].controller_loop_hz' must be a loop rate in Hz "
+                                 f"above 0, got {loop!r}")
         out.append(Source(entry.get("file"), entry.get("sha256"),
-                          None if segment is None else (float(segment[0]), float(segment[1]))))
+                          None if segment is None else (float(segment[0]), float(segment[1])),
+                          None if loop is None else float(loop)))
     return tuple(out)
 
 

@@ -219,3 +219,31 @@ def test_diagnose_takes_the_controllers_loop_as_identify_does(tmp_path, capsys, 
     assert main(["diagnose", str(flight), "--out", str(tmp_path / "i"), "--method", "integral",
                  "--controller-loop", "400"]) == 2
     assert "--controller-loop needs the likelihood diagnosis (--method ml)" in capsys.readouterr().err
+
+
+@pytest.mark.slow  # 20-30 s: two fits of a pooled refresh
+def test_refresh_states_the_new_flights_loop_and_reads_the_previous_as_their_sources_record(tmp_path, capsys):
+    """``heli refresh --controller-loop HZ`` states the new CSVs' inputs as identify's option does and records it in
+    their sources; a previous flight identified with it is read so again (pooled, the log's hold is then decided as a
+    controller's 4x faster than its log: it would not be, were one flight of the pool read as a pilot's sticks)."""
+    import json
+
+    from heli_cli.main import main
+
+    paths = [tmp_path / f"ap{seed}.csv" for seed in (1, 2)]
+    for seed, path in zip((1, 2), paths):
+        assert main(["simulate-flight", "--cell", "broadband-autopilot", "--log-every", "4", "--duration", "60",
+                     "--seed", str(seed), "--out", str(path)]) == 0
+    out = tmp_path / "m"
+    common = ["--no-plots", "-q"]
+    assert main(["identify", str(paths[0]), "--out", str(out), "--controller-loop", "400", *common]) == 0
+    assert main(["refresh", str(out), str(paths[1]), "--controller-loop", "400", "--fit", "pooled", *common]) == 0
+    model = json.loads((out / "model.json").read_text())
+    assert {s["file"]: s.get("controller_loop_hz") for s in model["provenance"]["sources"]} == {
+        "ap1.csv": 400.0, "ap2.csv": 400.0}
+    assert "4x faster" in model["fit_statistics"]["input_hold"]["preferred"]
+    capsys.readouterr()
+    integral = tmp_path / "integral"
+    assert main(["identify", str(paths[0]), "--out", str(integral), "--method", "integral", *common]) == 0
+    assert main(["refresh", str(integral), str(paths[1]), "--controller-loop", "400", *common]) == 2
+    assert "a controller loop is flown by the maximum-likelihood estimator's check only" in capsys.readouterr().err

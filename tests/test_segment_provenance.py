@@ -63,3 +63,30 @@ def test_refresh_reads_a_previous_log_as_the_stretch_its_model_recorded():
         _read_flights([log], "previous", False)
     flight, = _read_flights([log], "previous", False, [(20.0, 27.0)])
     assert flight.duration == pytest.approx(7.0, abs=0.05)
+
+
+def test_a_stated_controller_loop_round_trips_is_found_and_read_so_again(tmp_path):
+    """``--controller-loop HZ`` is recorded in the source (a CSV cannot state it), and the refresh's reader states the
+    flight's inputs so again; a rate not above 0 is refused when the model is read."""
+    from identification.bench.synthetic import simulate_flight
+    from identification.validation.fit_warnings import input_source
+
+    csv = tmp_path / "ap.csv"
+    simulate_flight(duration=5.0, seed=1).save(csv)
+    entry = source_entry(csv, controller_loop_hz=400)
+    assert entry["controller_loop_hz"] == 400.0 and "controller_loop_hz" not in source_entry(csv)
+    path = save_model(tmp_path, ModelParams(), structure="decoupled", sample_rate=100.0, sources=[entry])
+    _, typed = load_model(path)
+    assert typed.sources == (Source("ap.csv", entry["sha256"], None, 400.0),)
+    assert typed.sources[0].to_dict() == entry
+    found, missing = find_source_flights(typed.sources, [tmp_path])
+    assert not missing and found[0]["controller_loop_hz"] == 400.0
+    stated, plain = _read_flights([csv, csv], "previous", False, None, [400.0, None])
+    assert input_source(stated.metadata) == ("flight controller commands", 400.0)
+    assert input_source(plain.metadata) == ("sticks", None)  # as simulate_flight wrote it
+    doc = json.loads(path.read_text())
+    for bad in (0, -5.0, "400", True):
+        doc["provenance"]["sources"][0]["controller_loop_hz"] = bad
+        path.write_text(json.dumps(doc))
+        with pytest.raises(ModelFileError, match="controller_loop_hz' must be a loop rate in Hz above 0"):
+            load_model(path)

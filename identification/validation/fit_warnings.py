@@ -242,6 +242,17 @@ def input_source(meta) -> tuple[str, float | None]:
     return source, (float(loop) if isinstance(loop, (int, float)) and loop > 0 else None)
 
 
+def stated_controller(flight, loop_hz: float):
+    """``flight`` with its inputs stated as a flight controller's commands from a loop at ``loop_hz`` (``heli identify``,
+    ``diagnose`` and ``refresh --controller-loop``, and a model's source that recorded it), over what its file or
+    import said (:func:`input_source` reads it back)."""
+    items = {"input_source": "flight controller commands", "loop_rate_hz": float(loop_hz)}
+    imported = flight.metadata.get("imported_from")
+    if imported:  # an import's own statement is read first (input_source): the user's replaces it
+        items["imported_from"] = {**imported, **items}
+    return flight.with_metadata(**items)
+
+
 def controller_loop_warning(flights, advice: bool = True, check=None) -> list[str]:
     """One line where the inputs are a flight controller's commands and its loop may run faster than the rate they
     are fitted at: the loop then corrects the aircraft inside each fitted sample, and a model driven by the sampled

@@ -150,11 +150,16 @@ class RefreshSettings:
         The stretch of each new log read (:func:`identification.io.read_log`'s ``segment``); None: each as
         its reader's default. A stretch given is recorded in the new flights' sources, so that a later refresh
         reads them as this one did (the previous flights are always read as their sources record).
+    controller_loop : float, optional
+        The new flights' inputs stated as a flight controller's commands from a loop at this rate [Hz]
+        (``heli refresh --controller-loop``, for CSVs that cannot say so; as ``heli identify``'s); recorded in their
+        sources. The previous flights are stated as their sources record, whatever this says.
 
     Raises
     ------
     RefreshError
-        ``fit`` not one of :data:`FIT_CHOICES`, ``alpha`` outside (0, 1) or a negative ``min_relative``.
+        ``fit`` not one of :data:`FIT_CHOICES`, ``alpha`` outside (0, 1), a negative ``min_relative`` or a
+        ``controller_loop`` not above 0.
     """
 
     previous_flights: tuple = ()
@@ -169,6 +174,7 @@ class RefreshSettings:
     backend: object = None
     stage: object = None
     segment: object = None
+    controller_loop: float | None = None
 
     def __post_init__(self):
         if self.fit not in FIT_CHOICES:
@@ -177,6 +183,8 @@ class RefreshSettings:
             raise RefreshError(f"alpha must lie in (0, 1), got {self.alpha!r}")
         if not self.min_relative >= 0.0:
             raise RefreshError(f"min_relative must be >= 0, got {self.min_relative!r}")
+        if self.controller_loop is not None and not self.controller_loop > 0:
+            raise RefreshError(f"controller_loop must be a loop rate in Hz above 0, got {self.controller_loop!r}")
 
 
 def refresh_model(model_dir, new_flights, *, settings: RefreshSettings | None = None, wait: bool = True,
@@ -244,17 +252,21 @@ def _say(settings: RefreshSettings, text: str) -> None:
         settings.stage(text)
 
 
-def _read_flights(paths, desc: str, show: bool, segments=None) -> list:
+def _read_flights(paths, desc: str, show: bool, segments=None, loops=None) -> list:
     """Read ``paths`` with a bar only on a terminal (``disable=None``: tqdm's own check; off one, a failing
     read's error would land on the bar's line), closed on an error too; each as the stretch ``segments`` gives
-    for it (``(t0, t1)``: the one its model recorded) or None (the file as it reads by default)."""
+    for it (``(t0, t1)``: the one its model recorded) or None (the file as it reads by default), and its inputs
+    stated as a flight controller's from a loop at the rate ``loops`` gives for it (None: as its file states them)."""
     from tqdm import tqdm
 
     from ..io import read_log
+    from ..validation.fit_warnings import stated_controller
 
     segments = list(segments) if segments is not None else [None] * len(paths)
-    with tqdm(list(zip(paths, segments)), desc=desc, unit="flight", disable=None if show else True) as bar:
-        return [read_log(p, segment=seg) for p, seg in bar]
+    loops = list(loops) if loops is not None else [None] * len(paths)
+    with tqdm(list(zip(paths, segments, loops)), desc=desc, unit="flight", disable=None if show else True) as bar:
+        flights = [(read_log(p, segment=seg), loop) for p, seg, loop in bar]
+    return [flight if loop is None else stated_controller(flight, loop) for flight, loop in flights]
 
 
 @dataclass
@@ -285,6 +297,9 @@ class _Refresh:
         self.doc = tx.base.document
         self.structure, self.kw = identifier_settings(self.doc, str(self.model_path))
         self.estimator = estimator_of(self.doc, str(self.model_path))
+        if settings.controller_loop is not None and self.estimator != "ml":  # as heli identify refuses it
+            raise RefreshError(f"{self.model_path}: a controller loop is flown by the maximum-likelihood estimator's "
+                               f"check only; this model was identified by the {self.estimator} method")
         self.old_sources = self.doc.sources
         self.show = (len(new_paths) > 1) if settings.progress is None else settings.progress
         self.seeds = np.random.SeedSequence(settings.seed).spawn(3)
@@ -305,13 +320,14 @@ class _Refresh:
         _say(s, f"{desc}: {s.n_replicates} replicates")
         return interval_bootstrap(flights, fitted, s.n_replicates, s.block, seq, progress=bool(self.show), desc=desc)
 
-    def fitted(self, paths, what: str, why: str, segments=None):
-        """(flights, the model's identifier fitted on them), the step announced with ``why``; ``segments``: the
-        stretch of each log its model recorded (:func:`_read_flights`)."""
+    def fitted(self, paths, what: str, why: str, segments=None, loops=None):
+        """(flights, the model's identifier fitted on them), the step announced with ``why``; ``segments`` and
+        ``loops``: the stretch of each log and the controller loop of its inputs its model recorded
+        (:func:`_read_flights`)."""
         n = len(paths)
         _say(self.settings, f"reading and fitting {n} {what} flight{'s' if n != 1 else ''} "
                             f"({'maximum likelihood' if self.estimator == 'ml' else 'integral method'}) {why}")
-        flights = _read_flights(paths, f"reading {what} flights", self.show, segments)
+        flights = _read_flights(paths, f"reading {what} flights", self.show, segments, loops)
         return flights, self.identifier().fit(flights)
 
     def run(self) -> RefreshResult:
@@ -320,7 +336,7 @@ class _Refresh:
         digests = [sha256_of(p) for p in self.new_paths]
         check_new_flights(self.new_paths, digests, self.old_sources, self.tx.base.entries)
         flights, new_ident = self.fitted(self.new_paths, "new", "for the drift table",
-                                         [s.segment] * len(self.new_paths))
+                                         [s.segment] * len(self.new_paths), [s.controller_loop] * len(self.new_paths))
         boot_new = self.uncertainty(new_ident, flights, self.seeds[0], "bootstrap (new flights)")
         names = list(boot_new.names)
         previous = self.previous(names, boot_new)
@@ -364,7 +380,8 @@ class _Refresh:
                                                           self.old_sources, self.estimator)
             return _Previous(found, missing, [], None, se_old, se_source, None, [note] if note else [])
         old_flights, old_ident = self.fitted([f["path"] for f in found], "previous", "for the current model's "
-                                             "uncertainty", [f.get("segment") for f in found])
+                                             "uncertainty", [f.get("segment") for f in found],
+                                             [f.get("controller_loop_hz") for f in found])
         boot_old = self.uncertainty(old_ident, old_flights, self.seeds[1], "bootstrap (previous flights)")
         old_params = self.tx.base.params
         diff = max((abs(old_ident.params_.get(k) - old_params.get(k)) / max(abs(old_params.get(k)), 1e-12)
@@ -413,7 +430,7 @@ class _Refresh:
         pooled = result.fit == "pooled"
         kept = _keep_in_history(tx.root)
         old_digest = tx.base.model_sha256
-        new_sources = [source_entry(p, sha, segment_read(s.segment, f))
+        new_sources = [source_entry(p, sha, segment_read(s.segment, f), s.controller_loop)
                        for p, sha, f in zip(self.new_paths, digests, flights)]
         created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
         record = {

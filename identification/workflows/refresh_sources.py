@@ -83,8 +83,9 @@ def find_source_flights(sources, search_dirs=(), candidates=()) -> tuple[list, l
     Returns
     -------
     found : list of dict
-        ``{"file", "sha256", "path"}`` per source found (its bytes hash to the recorded SHA-256), and ``"segment"``
-        where the model was fitted on that stretch of the log.
+        ``{"file", "sha256", "path"}`` per source found (its bytes hash to the recorded SHA-256), ``"segment"``
+        where the model was fitted on that stretch of the log, and ``"controller_loop_hz"`` where its inputs were
+        stated as a flight controller's commands from a loop at that rate.
     missing : list of dict
         Sources not found (or found with other content: ``"note"`` says so).
     """
@@ -109,8 +110,10 @@ def find_source_flights(sources, search_dirs=(), candidates=()) -> tuple[list, l
                     note = f"{p} has other content (SHA-256 differs)"
         if path is not None:
             segment = getattr(src, "segment", None)  # the stretch of its log the model was fitted on
+            loop = getattr(src, "controller_loop_hz", None)  # its inputs stated as a controller's (--controller-loop)
             found.append({"file": name, "sha256": sha, "path": str(path)}
-                         | ({"segment": tuple(segment)} if segment is not None else {}))
+                         | ({"segment": tuple(segment)} if segment is not None else {})
+                         | ({"controller_loop_hz": loop} if loop is not None else {}))
         else:
             missing.append({"file": name, "sha256": sha} | ({"note": note} if note else {}))
     return found, missing
