@@ -167,13 +167,13 @@ def _run_seeds(args, config, progress) -> int:
     finally:
         backend.close()
     reference = {}  # the PD compared with, made once for every seed
-    reports = {seed: _report(args, res, progress, reference) for seed, res in results.items()}
+    reports = {s: _report(args, res, progress, reference) for s, res in results.items()}
     print(f"heli train: {args.algo.upper()}, {len(results)} seeds on {where}")
-    for seed, res in results.items():
+    for k, res in results.items():  # not `seed` (nor `number`): argument types imported above
         last = f"; held-out return {res.evaluations[-1][1]:.2f}" if res.evaluations else ""
         why = " (time budget reached)" if res.stopped_by_time else ""
-        print(f"  seed {seed}: {res.timesteps} timesteps in {res.seconds:.1f} s{why}{last}; wrote {res.path}")
-        _print_report(reports[seed], f"  seed {seed} ")
+        print(f"  seed {k}: {res.timesteps} timesteps in {res.seconds:.1f} s{why}{last}; wrote {res.path}")
+        _print_report(reports[k], f"  seed {k} ")
     return 0
 
 
