@@ -64,18 +64,27 @@ def main(argv=None):
         cells = [" / ".join(format_r2(v) for v in table[h][a]) for h in HORIZONS]
         worst = np.nanmin(table[0.5][a]) if not np.all(np.isnan(table[0.5][a])) else float("nan")
         print(f"| {a} | " + " | ".join(cells) + f" | {format_r2(worst)} |")
-    ceiling = linear_ceiling(ident.aligned(flight), 0.5)
+    aligned = ident.aligned(flight)
+    ceiling = linear_ceiling(aligned, 0.5)
     print("\nreference, in the fit's own data: the best linear model of rates, attitudes and all three sticks "
           "(least squares on the aligned flight, no wind state) 0.5 s ahead from the measured state: "
           + ", ".join(f"{a} {v:.3f}" for a, v in ceiling.items()))
+    print("the same, each axis from its own rate and stick (the minimal model's structure) / with the attitudes / "
+          "with the other axes' rates and sticks:")
+    parts = {(att, cross): linear_ceiling(aligned, 0.5, att, cross) for att, cross in
+             ((False, False), (True, False), (False, True))}
+    for a in ceiling:
+        print(f"  {a}: " + " / ".join(f"{parts[k][a]:.3f}" for k in parts))
     print(f"\nCommand: python scripts/real_heli.py --folds {args.folds}")
 
 
-def linear_ceiling(flight, horizon_s: float) -> dict:
+def linear_ceiling(flight, horizon_s: float, attitudes: bool = True, cross: bool = True) -> dict:
     """R² of the best linear model ``x' = M x + N u + c`` (x: p, q, r, roll, pitch; u: the three cyclic and
     pedal sticks), fitted by least squares on the whole flight, predicting the rates ``horizon_s`` ahead from
     the measured state with the sticks known (Euler steps at the log's rate): what any linear model of these
-    sticks can explain without a wind state, in sample (so an optimistic bound)."""
+    sticks can explain without a wind state, in sample (so an optimistic bound). Without ``attitudes`` the rates'
+    derivatives take no attitude; without ``cross`` each takes its own rate and stick alone (the minimal model's
+    structure, eqs. 18 and 21 without their products): what each part of the model's structure is worth."""
     from heli_core.terms import STICK_ROW
 
     dt, n = flight.dt, flight.n
@@ -84,15 +93,16 @@ def linear_ceiling(flight, horizon_s: float) -> dict:
     att = att - att.mean(axis=1, keepdims=True)
     sticks = np.asarray(flight.sticks[list(STICK_ROW)], dtype=float)
     x = np.vstack([rates, att])
-    rhs = np.vstack([x, sticks, np.ones(n)])
-    theta = np.linalg.lstsq(rhs.T, np.gradient(rates, dt, axis=1).T, rcond=None)[0].T
-    M = np.zeros((5, 5))
-    M[:3] = theta[:, :5]
+    M, N, c = np.zeros((5, 5)), np.zeros((5, 3)), np.zeros(5)
     M[3, 0] = M[4, 1] = 1.0
-    N = np.zeros((5, 3))
-    N[:3] = theta[:, 5:8]
-    c = np.zeros(5)
-    c[:3] = theta[:, 8]
+    for axis in range(3):
+        states = ([0, 1, 2] if cross else [axis]) + ([3, 4] if attitudes else [])
+        inputs = [0, 1, 2] if cross else [axis]
+        rhs = np.vstack([x[states], sticks[inputs], np.ones(n)])
+        theta = np.linalg.lstsq(rhs.T, np.gradient(rates[axis], dt), rcond=None)[0]
+        M[axis, states] = theta[:len(states)]
+        N[axis, inputs] = theta[len(states):-1]
+        c[axis] = theta[-1]
     h = int(round(horizon_s / dt))
     starts = np.arange(0, n - h, 10)
     state = x[:, starts].copy()
