@@ -244,3 +244,17 @@ def segment_or_each(text):
     except argparse.ArgumentTypeError:
         raise argparse.ArgumentTypeError(f"expected 'auto', 'all', 'each' or T0:T1 in seconds with T0 < T1, "
                                          f"got {text!r}") from None
+
+
+def fit_rate_option(text):
+    """``--fit-rate``: 'auto', 'log' or a rate in Hz above 0 (the log's rate over a whole number, checked when the
+    log is read: :func:`identification.fit_rate.every_for`)."""
+    if text in ("auto", "log"):
+        return text
+    try:
+        hz = float(text)
+    except ValueError:
+        hz = math.nan
+    if not (math.isfinite(hz) and hz > 0):
+        raise argparse.ArgumentTypeError(f"expected 'auto', 'log' or a rate in Hz above 0, got {text!r}")
+    return hz

@@ -6,7 +6,8 @@ import sys
 from pathlib import Path
 
 from .argtypes import INPUT_HOLD_HELP, input_hold, number, output_path, whole
-from .identify import CLOSED_LOOP_CHOICES, add_controller_loop, closed_loop_mode, print_check, print_read_warnings
+from .identify import (CLOSED_LOOP_CHOICES, add_controller_loop, add_fit_rate, closed_loop_mode, fit_rate_flights,
+                       print_check, print_read_warnings)
 
 
 def register(sub):
@@ -39,6 +40,7 @@ def register(sub):
                    "who sees the aircraft gives the damping is removed; 'report': measured only; 'off': skipped); "
                    "it costs 8-24 fits of the flight, more where a servo delay was found")
     add_controller_loop(p)
+    add_fit_rate(p)
     p.add_argument("--folds", type=whole(2, 12), default=5,  # at most Diagnoser.min_windows (12)
                    help="integral: cross-validation blocks, 2 to 12 (default 5)")
     p.add_argument("--window", type=number("a positive number of seconds", 0.0),
@@ -82,6 +84,9 @@ def run(args) -> int:
         document = ModelDir(_existing_model(args.model)).load(library=False).document
         model = document.params
     with progress_of(args) as progress:
+        if (at_rate := fit_rate_flights(args, [flight], "diagnose", progress)) is None:
+            return 2
+        (flight,), _ = at_rate
         if args.method == "ml":
             return _run_ml(args, flight, model, document, source_entry(args.flight, controller_loop_hz=args.controller_loop), progress,
                            None if closed_loop == "off" else closed_loop)

@@ -7,7 +7,8 @@ import os
 import sys
 from pathlib import Path
 
-from .argtypes import INPUT_HOLD_HELP, input_hold, number, output_path, seconds_or, segment_option, servo_lag, whole
+from .argtypes import (INPUT_HOLD_HELP, fit_rate_option, input_hold, number, output_path, seconds_or, segment_option,
+                       servo_lag, whole)
 
 
 _delay = seconds_or(("detect", "auto", "none"), "delay", 2.0)
@@ -66,6 +67,7 @@ def register(sub):
                    f"or ${CLOSED_LOOP_ENV} when set), only report it ('report'), or skip the check ('off'); it "
                    "costs about 8 fits of the flight")
     add_controller_loop(p)
+    add_fit_rate(p)
     p.add_argument("--wind-model", choices=("auto", "gm2", "gm_so"), default="auto",
                    help="ml: gust model per axis, 'gm2' two first-order Gauss-Markov processes, 'gm_so' a slow "
                    "first-order and a fast second-order one, 'auto' the more likely (default)")
@@ -141,6 +143,10 @@ def run(args) -> int:
         others = [read_flight(path) for path in args.validate]  # a bad one refused before any fit
         for path, flight in zip(args.flights + args.validate, flights + others):
             print_read_warnings(path, flight, progress)
+        if (at_rate := fit_rate_flights(args, flights, "identify", progress)) is None:
+            return 2
+        flights, fit_rate = at_rate
+        others = [thinned_alike(o, fit_rate) for o in others]
         try:
             closed_loop = closed_loop_mode(args)
         except ValueError as exc:
@@ -189,6 +195,45 @@ def run(args) -> int:
     return 0
 
 
+def add_fit_rate(p) -> None:
+    """``--fit-rate auto|log|HZ`` (heli identify and diagnose): the rate the log is fitted at."""
+    p.add_argument("--fit-rate", type=fit_rate_option, default="auto", metavar="auto|log|HZ",
+                   help="ml: the rate the log is fitted at: 'auto' (default) its own unless the damping fitted there "
+                   "is inflated against the one fitted at half of it, the mark of a gyro low-passed before it was "
+                   "logged (a flight controller's gyro filter), whose noise the likelihood takes for motion: then "
+                   "every second sample, again while the same holds; 'log' its own; or HZ, the log's rate over a "
+                   "whole number")
+
+
+def fit_rate_flights(args, flights, command: str, progress=None):
+    """``(flights, FitRate)``: ``flights`` at the rate ``--fit-rate`` gives ('auto' for the maximum-likelihood
+    estimator only: the integral method's prefilter keeps below 8 Hz whatever the gyro's filter did), or None after
+    saying why in one line on stderr (a rate the log's is not a whole multiple of)."""
+    from identification.fit_rate import at_fit_rate
+
+    setting = getattr(args, "fit_rate", "auto")
+    if getattr(args, "method", "ml") != "ml":
+        setting = "log" if setting == "auto" else setting
+    if setting == "auto" and progress is not None:
+        progress.stage("choosing the fit rate (the log's fitted at its rate and at half of it)")
+    try:
+        fitted, chosen = at_fit_rate(flights, setting)
+    except ValueError as exc:
+        if progress is not None:
+            progress.done()
+        print(f"heli {command}: error: --fit-rate: {exc}", file=sys.stderr)
+        return None
+    return fitted, chosen
+
+
+def thinned_alike(flight, fit_rate):
+    """``flight`` (a validation flight) thinned as the fitted log was, where it was logged at the log's rate."""
+    from identification.fit_rate import thinned
+
+    same = abs(flight.sample_rate - fit_rate.log_hz) <= 1e-6 * fit_rate.log_hz
+    return thinned(flight, fit_rate.every) if fit_rate.every > 1 and same else flight
+
+
 def add_controller_loop(p, which: str = "the inputs") -> None:
     """``--controller-loop HZ`` (heli identify, diagnose and refresh): ``which`` inputs stated as a flight
     controller's commands."""
@@ -231,6 +276,7 @@ def _identify_or_explain(args, flights, kwargs: dict, progress, identify):
         # a flight controller's commands fitted slower than its loop read as damping: a cause to name beside the
         # refusal, whose warnings are never printed (the ArduCopter fixture: its RATE outputs at 9.9 Hz)
         loop = "".join(f" Note: {line}." for line in controller_loop_warning(flights, advice=False))
+        loop += "".join(f" Note: {why}." for why in dict.fromkeys(f.metadata.get("fit_rate") for f in flights) if why)
         progress.stage("the model diverged: fitting again with the alignment searched (--delay auto)")
         finding = check_alignment(flights, kwargs)
         if finding.helps:

@@ -65,6 +65,9 @@ def register(sub):
                    help="the pilot's reaction delay in s (0.1-0.25 typical; default 0.2)")
     p.add_argument("--gyro-noise", type=number("rad/s >= 0", 0.0, low_open=False), default=None,
                    help="gyro white-noise standard deviation in rad/s (default 0.01)")
+    p.add_argument("--gyro-filter", type=number("a corner in Hz above 0", 0.0), default=None, metavar="HZ",
+                   help="log the gyro through a flight controller's 2-pole low-pass at HZ, run at the world's rate "
+                   "(ArduPilot's INS_GYRO_FILTER is 20 Hz; default: the gyro as sampled); the autopilot flies on it")
     p.add_argument("--vibration-line", action="append", default=[], type=_line, metavar="HZ:AMP",
                    help="an extra vibration line on every gyro axis, e.g. 27:0.03 (Hz : rad/s; repeatable)")
     p.add_argument("--input-shift", type=number("seconds", None), default=None,
@@ -144,7 +147,7 @@ def _config(args):
     changes = {"wind_model": args.wind_model, "wind_corner_hz": args.wind_corner, "pilot": args.pilot,
                "wind_slow_fraction": args.slow_gusts, "reaction_delay": args.reaction_delay,
                "gyro_noise": args.gyro_noise, "input_shift": args.input_shift, "log_every": args.log_every,
-               "sample_rate": args.rate}
+               "sample_rate": args.rate, "gyro_filter_hz": args.gyro_filter}
     cfg = replace(cfg, **{k: v for k, v in changes.items() if v is not None})
     if args.wind_corner is not None and cfg.inert(["wind_corner_hz"]):
         raise ValueError(f"--wind-corner shapes the lowpass and Dryden gusts; this flight's are gauss_markov"

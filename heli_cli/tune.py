@@ -177,6 +177,12 @@ def _model(args, spec, current, progress, settings):
 
         read_flight(args.log)  # an ArduPilot text log: refused here, saying what it holds and lacks
     _check_mapping(spec, current, flight.sample_rate)
+    from identification.fit_rate import at_fit_rate
+
+    progress.stage("choosing the fit rate (the log's fitted at its rate and at half of it)")
+    (flight,), fit_rate = at_fit_rate([flight])  # a firmware's gyro is low-passed before it is logged
+    if fit_rate.every > 1:
+        _check_mapping(spec, current, flight.sample_rate)  # the gusts' period the model is written with
     folder = Path(args.out) / "model"
     # the decoupled model alone: the firmware loops fly it, and the coupled one cost a third of this step
     source = source_entry(args.log, segment=segment_read(args.segment, flight))

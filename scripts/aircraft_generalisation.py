@@ -115,6 +115,7 @@ def _one(job):
 
     from identification.bench.cells import BENCH_CELLS
     from identification.bench.synthetic import simulate_flight
+    from identification.fit_rate import at_fit_rate
     from identification.likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
     from heli_core.terms import AXES, TERMS
     from identification.likelihood.input_hold import std_errors_with_hold
@@ -127,8 +128,10 @@ def _one(job):
         truth = sim.truth.values()
         out = {"aircraft": aircraft, "cell": cell, "rate": rate, "seed": seed}
         t0 = time.perf_counter()
+        (flight,), fit_rate = at_fit_rate([sim.flight])  # as heli identify reads a log (--fit-rate auto)
+        out["fit_every"] = fit_rate.every
         try:
-            ml = MaximumLikelihoodIdentifier(**CLI_TIMING, closed_loop=closed_loop).fit(sim.flight)
+            ml = MaximumLikelihoodIdentifier(**CLI_TIMING, closed_loop=closed_loop).fit(flight)
         except Exception as exc:  # a refusal is a finding of this study, not its end
             out["error"] = f"{type(exc).__name__}: {exc}"
             return out
@@ -152,7 +155,7 @@ def _one(job):
             from identification.diagnosis.likelihood_diagnoser import LikelihoodDiagnoser
 
             t0 = time.perf_counter()
-            d = LikelihoodDiagnoser().fit(sim.flight)
+            d = LikelihoodDiagnoser().fit(flight)
             out["diagnosis_s"] = time.perf_counter() - t0
             out["named"] = [(s.axis, s.effect, round(float(s.lr), 1)) for s in d.steps_]
             out["effect"] = effect
@@ -214,9 +217,9 @@ def _wrong(named: list, effect: str | None) -> list:
 
 def _table(rows, diagnose: bool, effect: str | None) -> None:
     keys = sorted({(r["aircraft"], r["cell"], r["rate"]) for r in rows}, key=str)
-    print("\n| aircraft | cell | log rate | " + " | ".join(PARAMS) + " | hold fractions |"
+    print("\n| aircraft | cell | log rate | " + " | ".join(PARAMS) + " | hold fractions | fitted at |"
           + (" wrong diagnoses |" if diagnose else "") + (" hidden effect named |" if effect else ""))
-    print("|---|---|---|" + "---|" * (len(PARAMS) + 1) + ("---|" if diagnose else "") + ("---|" if effect else ""))
+    print("|---|---|---|" + "---|" * (len(PARAMS) + 2) + ("---|" if diagnose else "") + ("---|" if effect else ""))
     worst = {"gains": 0.0, "dampings": 0.0}
     for key in keys:
         rs = [r for r in rows if (r["aircraft"], r["cell"], r["rate"]) == key]
@@ -232,7 +235,9 @@ def _table(rows, diagnose: bool, effect: str | None) -> None:
             hold = f"{holds.min():.2f}-{holds.max():.2f}"
         else:
             cells, hold = ["-"] * len(PARAMS), "-"
-        text = f"| {key[0]} | {key[1]} | {key[2]:g} Hz | " + " | ".join(cells) + f" | {hold} |"
+        rates = [key[2] / r.get("fit_every", 1) for r in rs]  # identification.fit_rate: a filtered gyro's log thinned
+        fitted = ", ".join(f"{hz:g} Hz ({rates.count(hz)}/{len(rs)})" for hz in sorted(set(rates), reverse=True))
+        text = f"| {key[0]} | {key[1]} | {key[2]:g} Hz | " + " | ".join(cells) + f" | {hold} | {fitted} |"
         if failed:
             text += f" refused {len(failed)}/{len(rs)}: {failed[0][:80]}"
         if diagnose:

@@ -113,6 +113,7 @@ def test_unknown_effect_is_rejected_naming_the_known_ones():
         ("wind_corner_hz", 0.0), ("pilot_bandwidth", -1.0), ("reaction_delay", -0.1),
         ("substeps", 0), ("substeps", 2.5), ("log_every", 0), ("log_every", 2.0),
         ("gyro_noise", -0.01), ("attitude_noise", -0.01), ("vibration", -0.01), ("stick_noise", -0.01),
+        ("gyro_filter_hz", -20.0), ("gyro_filter_hz", 50.0),
     ],
 )
 def test_flight_config_rejects_bad_values(field_name, value):
@@ -161,6 +162,34 @@ def test_a_log_of_a_faster_world_keeps_every_nth_sample_of_it():
     assert logged.config == cfg and logged.flight.metadata["log_every"] == 4
     held = simulate_flight(seed=5, config=replace(cfg, held_sticks=True)).flight.metadata["input_hold"]
     assert held == "zoh at 100 Hz, one sample in 4 logged"  # held by the link, not at the log's rate
+
+
+def test_a_filtered_gyro_is_the_same_flight_logged_through_the_filter_and_flown_on_by_the_autopilot():
+    """``gyro_filter_hz``: a human pilot's flight is the same flight (no draw added), its logged rates the gyro's
+    through a 2-pole Butterworth (about 10 ms late at 20 Hz on 100 Hz); the autopilot flies on that filtered
+    gyro, so its flight changes."""
+    from scipy.signal import butter, lfilter, lfilter_zi
+
+    from identification.bench.synthetic import GyroFilter
+
+    plain = simulate_flight(seed=3, config=FlightConfig(duration=6.0))
+    filtered = simulate_flight(seed=3, config=FlightConfig(duration=6.0, gyro_filter_hz=20.0))
+    for name in ("sticks", "attitude"):
+        assert np.array_equal(getattr(filtered.flight, name), getattr(plain.flight, name)), name
+    assert np.array_equal(filtered.true_rates, plain.true_rates)
+    b, a = butter(2, 20.0, fs=100.0)
+    zi = lfilter_zi(b, a)
+    expected = np.array([lfilter(b, a, row, zi=zi * row[0])[0] for row in plain.flight.rates])
+    assert_allclose(filtered.flight.rates, expected, rtol=0, atol=1e-12)
+    lag = np.argmax(np.correlate(filtered.flight.rates[0] - filtered.flight.rates[0].mean(),
+                                 plain.flight.rates[0] - plain.flight.rates[0].mean(), "full")) - (plain.flight.n - 1)
+    assert lag == 1  # 10 ms, one sample
+    one_by_one = GyroFilter(20.0, 100.0)
+    stepped = np.array([one_by_one.step(list(col)) for col in plain.flight.rates.T]).T
+    assert_allclose(stepped, expected, rtol=0, atol=1e-12)
+    autopilot = FlightConfig(duration=6.0, pilot="autopilot")
+    assert not np.array_equal(simulate_flight(seed=3, config=replace(autopilot, gyro_filter_hz=20.0)).flight.sticks,
+                              simulate_flight(seed=3, config=autopilot).flight.sticks)
 
 
 def test_sticks_stay_in_range(flight):

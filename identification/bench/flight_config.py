@@ -140,6 +140,11 @@ class FlightConfig:
         Standard deviation of white noise added to every logged command, sample by sample [stick units]
         (a digital link's quantisation and the hand's tremor: what makes a held stick differ most from an
         interpolated one).
+    gyro_filter_hz : float
+        0 (default): the log carries the gyro as sampled. > 0: a flight controller's gyro low-pass, a 2-pole
+        Butterworth at this corner [Hz] run at the world's rate (ArduPilot's ``INS_GYRO_FILTER``, 20 Hz by default;
+        ``docs/method.md``, "A filtered gyro"): the log's rates and the gyro the autopilot flies on are the filtered
+        ones, late by about ``sqrt(2) / (2 pi f)`` (11 ms at 20 Hz) against the sticks.
     log_every : int
         1 (default): the aircraft's world (pilot, gusts, sensors) steps at ``sample_rate``, the log's rate. > 1:
         it steps ``log_every`` times faster and the log keeps every ``log_every``-th sample, as a logger
@@ -178,6 +183,7 @@ class FlightConfig:
     held_sticks: bool = False
     command_noise: float = 0.0
     log_every: int = 1
+    gyro_filter_hz: float = 0.0
 
     def __post_init__(self):
         wind = np.asarray(self.wind_level, dtype=float)
@@ -188,6 +194,7 @@ class FlightConfig:
             "pilot_bandwidth": self.pilot_bandwidth > 0, "reaction_delay": self.reaction_delay >= 0,
             "substeps": isinstance(self.substeps, (int, np.integer)) and self.substeps >= 1,
             "log_every": isinstance(self.log_every, (int, np.integer)) and self.log_every >= 1,
+            "gyro_filter_hz": self.gyro_filter_hz == 0.0 or 0.0 < self.gyro_filter_hz < self.sample_rate * self.log_every / 2,
             "sweep_mode": self.sweep_mode in ("sequential", "simultaneous"),
             "wind_model": self.wind_model in WIND_MODELS,
             "wind_fast_tau": 0 < self.wind_fast_tau < math.inf,
@@ -205,7 +212,8 @@ class FlightConfig:
         expected = {"wind_model": f"one of {WIND_MODELS}", "pilot": f"one of {PILOTS}",
                     "wind_slow_fraction": "a fraction in [0, 1]", "input_shift": "|shift| < half the duration",
                     "vibration_lines": "(frequency Hz > 0, amplitude rad/s >= 0) pairs",
-                    "log_every": "a whole number >= 1"}
+                    "log_every": "a whole number >= 1",
+                    "gyro_filter_hz": "0 (none) or a corner in Hz below the world's Nyquist rate"}
         for name, ok in checks.items():
             if not ok:
                 hint = f"; expected {expected[name]}" if name in expected else ""

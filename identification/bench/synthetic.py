@@ -17,8 +17,9 @@ model, coloured wind torque, and a sensor model:
   Section 3.3). The torque is ``k*u_d`` with the axis' control gain; the constant
   offsets ``kd`` are part of the truth parameters.
 * **Sensors**: gyro white noise, rotor vibration (main-rotor 1/rev and 2/rev
-  sinusoids, aliased by the 100 Hz sampling), attitude noise; sticks are logged
-  as commanded (before the servo).
+  sinusoids, aliased by the 100 Hz sampling), attitude noise, and where
+  ``gyro_filter_hz`` is set a flight controller's 2-pole gyro low-pass; sticks
+  are logged as commanded (before the servo).
 
 Optional physical effects can be switched on to hide them in the data
 (:data:`identification.bench.flight_config.EFFECTS`). The truth (parameters and wind) is kept beside the
@@ -243,6 +244,8 @@ def simulate_flight(duration: float | None = None, seed: int = 1, effects=(), co
     states, sticks, estimated = _fly(params, cfg, sweep_schedule(time, cfg), jitter, col, torque, errors)
     true_rates = states[:, :3].T
     rates, att = _sensors(errors, true_rates, euler_from_quaternion(states[:, 6:10].T), estimated)
+    if cfg.gyro_filter_hz > 0:  # the log's gyro is the flight controller's, filtered (no draw: the flight's the same)
+        rates = GyroFilter(cfg.gyro_filter_hz, fs).run(rates)
     flight = _logged_flight(cfg, seed, effects, time, rates, att, sticks)
     return SyntheticFlight(flight, params, wind, torque, true_rates, cfg, int(seed), tuple(effects), float(effect_scale))
 
@@ -364,6 +367,7 @@ class _AutopilotSensing:
         self._a = float(np.exp(-2.0 * np.pi * cfg.autopilot_dterm_hz / fs))
         self._state = None
         self._estimator = estimator
+        self._filter = GyroFilter(cfg.gyro_filter_hz, fs) if cfg.gyro_filter_hz > 0 else None
 
     def attitude(self, k: int, true_att) -> list:
         if self._estimator is not None:  # updated at sample k already
@@ -372,11 +376,46 @@ class _AutopilotSensing:
 
     def rate(self, k: int, true_rate) -> list:
         raw = [t + e for t, e in zip(true_rate, self._gyro[k])]
+        if self._filter is not None:  # the gyro the log carries: the D-term filter comes after it
+            raw = self._filter.step(raw)
         if self._state is None:
             self._state = raw
         else:
             self._state = [self._a * s + (1.0 - self._a) * r for s, r in zip(self._state, raw)]
         return list(self._state)
+
+
+class GyroFilter:
+    """A flight controller's gyro low-pass (``FlightConfig.gyro_filter_hz``): a 2-pole Butterworth at ``hz`` on
+    each axis, sampled at ``fs`` (scipy's bilinear design, as ArduPilot's ``LowPassFilter2p``), started in its
+    steady state at the first reading. :meth:`step` filters one reading of the three axes (the autopilot's loop),
+    :meth:`run` a whole series (the log): the same filter, the same values but for rounding."""
+
+    def __init__(self, hz: float, fs: float):
+        from scipy.signal import butter
+
+        self._b, self._a = (tuple(float(v) for v in c) for c in butter(2, hz, fs=fs))
+        self._z = None
+
+    def run(self, rates: np.ndarray) -> np.ndarray:
+        """``rates`` (3, n) filtered along time."""
+        from scipy.signal import lfilter, lfilter_zi
+
+        zi = lfilter_zi(self._b, self._a)
+        return np.array([lfilter(self._b, self._a, row, zi=zi * row[0])[0] for row in np.asarray(rates, float)])
+
+    def step(self, raw) -> list:
+        """One reading (3 floats) filtered (transposed direct form II, as ``lfilter``)."""
+        (b0, b1, b2), (_, a1, a2) = self._b, self._a
+        if self._z is None:  # the steady state at the first reading: the output equals it
+            self._z = [[x * (1.0 - b0), x * (b2 - a2)] for x in raw]  # unit gain at 0 Hz: b0+b1+b2 = 1+a1+a2
+        out = []
+        for i, x in enumerate(raw):
+            z0, z1 = self._z[i]
+            y = b0 * x + z0
+            self._z[i] = [b1 * x - a1 * y + z1, b2 * x - a2 * y]
+            out.append(y)
+        return out
 
 
 def _per_sample(errors: tuple) -> tuple[list, list]:

@@ -115,6 +115,8 @@ def fit_warnings(flights, r2: Mapping | None = None, r2_label: str = "fit", *, m
         band = log_band(f) if hasattr(f, "sample_rate") else None
         if band is not None and band.filtered:
             out.append(f"{_name(f, k, len(flights))}: {band.describe()}")
+    # thinned to where its gyro's noise is white (identification.fit_rate): one reason for a log's flights
+    out += list(dict.fromkeys(f.metadata["fit_rate"] for f in flights if getattr(f, "metadata", {}).get("fit_rate")))
     collective = static_collective(flights) if flights else None
     imported = bool(flights) and from_a_log(flights)
     if collective is not None:

@@ -252,11 +252,29 @@ def _say(settings: RefreshSettings, text: str) -> None:
         settings.stage(text)
 
 
-def _read_flights(paths, desc: str, show: bool, segments=None, loops=None) -> list:
+def _at_model_rate(flight, model_hz):
+    """``flight`` thinned to the rate its model was fitted at (``model_hz``, :mod:`identification.fit_rate`: a log
+    whose gyro was low-passed before it was logged is fitted at a fraction of its rate), where its own rate is a
+    whole multiple of it; else as read (the estimator then says what it can of a log at another rate)."""
+    from ..fit_rate import every_for, nth, thinned
+
+    if not model_hz or flight.sample_rate < 1.5 * model_hz:
+        return flight
+    try:
+        every = every_for(flight.sample_rate, model_hz)
+    except ValueError:
+        return flight
+    return thinned(flight, every).with_metadata(
+        fit_rate=f"fitted at the model's {model_hz:g} Hz, every {nth(every)} sample of the {flight.sample_rate:g} Hz "
+        "log")
+
+
+def _read_flights(paths, desc: str, show: bool, segments=None, loops=None, model_hz=None) -> list:
     """Read ``paths`` with a bar only on a terminal (``disable=None``: tqdm's own check; off one, a failing
     read's error would land on the bar's line), closed on an error too; each as the stretch ``segments`` gives
     for it (``(t0, t1)``: the one its model recorded) or None (the file as it reads by default), and its inputs
-    stated as a flight controller's from a loop at the rate ``loops`` gives for it (None: as its file states them)."""
+    stated as a flight controller's from a loop at the rate ``loops`` gives for it (None: as its file states them),
+    at the model's rate ``model_hz`` (:func:`_at_model_rate`)."""
     from tqdm import tqdm
 
     from ..io import read_log
@@ -266,7 +284,8 @@ def _read_flights(paths, desc: str, show: bool, segments=None, loops=None) -> li
     loops = list(loops) if loops is not None else [None] * len(paths)
     with tqdm(list(zip(paths, segments, loops)), desc=desc, unit="flight", disable=None if show else True) as bar:
         flights = [(read_log(p, segment=seg), loop) for p, seg, loop in bar]
-    return [flight if loop is None else stated_controller(flight, loop) for flight, loop in flights]
+    return [_at_model_rate(flight if loop is None else stated_controller(flight, loop), model_hz)
+            for flight, loop in flights]
 
 
 @dataclass
@@ -327,7 +346,7 @@ class _Refresh:
         n = len(paths)
         _say(self.settings, f"reading and fitting {n} {what} flight{'s' if n != 1 else ''} "
                             f"({'maximum likelihood' if self.estimator == 'ml' else 'integral method'}) {why}")
-        flights = _read_flights(paths, f"reading {what} flights", self.show, segments, loops)
+        flights = _read_flights(paths, f"reading {what} flights", self.show, segments, loops, self.doc.sample_rate)
         return flights, self.identifier().fit(flights)
 
     def run(self) -> RefreshResult:

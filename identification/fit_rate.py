@@ -1,0 +1,192 @@
+"""The rate a log is fitted at: where its gyro's noise is white.
+
+The wind-state model (:mod:`identification.likelihood.state_space`) measures the body rate with *white* noise.
+A flight controller's gyro is low-pass filtered before it is logged (ArduPilot's ``INS_GYRO_FILTER``, a 2-pole
+filter at 20 Hz by default on helicopters; PX4's ``IMU_GYRO_CUTOFF``; ``../shared/research/firmware-loops.md``),
+and where the log is written well above that corner its noise is no longer white: neighbouring samples of it move
+together. The likelihood then reads that noise as the aircraft's motion and the fit runs away — on the bench's
+flights with the gyro through 20 Hz and logged at 100 Hz, dampings 2 to 45 times the truth and a "servo delay" of
+0.13 s (docs/method.md, "A filtered gyro").
+
+Fitted at a lower rate, where the filter's corner lies near the new Nyquist frequency, the noise is white again
+and the same flights fit within a few per cent. Whether a log needs it is decided by the data, the way the damping
+reacts (:func:`choose_fit_rate`): the flight fitted at its rate and at half of it (every second sample) with the
+plain estimator. A white gyro gives the two fits' dampings within a few per cent (the full rate's at most 1.07
+times the half rate's on the bench's cells, usually below it); a filtered gyro's full-rate damping is inflated,
+1.27 to 45 times the half rate's. Above :data:`RATIO`, and by :data:`Z` standard errors, on some axis the half
+rate is taken and tried again against its own half, down to :data:`MIN_RATE`.
+
+Taking every ``m``-th sample needs no anti-aliasing filter here: the rates were low-passed by the gyro's filter
+(that is why they are thinned), and a pilot's sticks are smooth. A flight controller's held commands are thinned
+as they are; the hold search then finds what they are at the new rate.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .flight import Flight, make_flight
+
+RATIO = 1.15
+"""A log is fitted at half its rate where, on some axis, the damping fitted at its rate exceeds the one fitted at
+half of it by this factor and by :data:`Z` standard errors (bench: white gyros at most 1.07, filtered ones that
+the full rate biases 1.27-45; module docstring)."""
+
+Z = 3.0
+"""... and by this many standard errors of the difference (the two fits' errors combined as if independent)."""
+
+MIN_RATE = 20.0
+"""No log is thinned below this rate [Hz]: a helicopter's attitude modes need it."""
+
+DAMPINGS = {"roll": "k3", "pitch": "k7", "yaw": "k11"}
+
+
+@dataclass(frozen=True)
+class FitRate:
+    """The rate a log is fitted at, and what decided it.
+
+    Attributes
+    ----------
+    every : int
+        The log's samples per fitted sample (1: fitted at the log's own rate).
+    log_hz : float
+        The log's rate [Hz].
+    steps : tuple of (float, dict)
+        Per rate tried, the rate [Hz] and per axis the damping fitted there over the one fitted at half of it.
+    """
+
+    every: int
+    log_hz: float
+    steps: tuple = ()
+
+    @property
+    def hz(self) -> float:
+        """The rate fitted at [Hz]."""
+        return self.log_hz / self.every
+
+    def describe(self) -> str:
+        """One sentence for the terminal and the report."""
+        def ratios(step):
+            rate, by_axis = step
+            return f"at {rate:g} Hz " + ", ".join(f"{axis} {value:.2f}" for axis, value in by_axis.items())
+
+        tried = "; ".join(ratios(s) for s in self.steps)
+        if self.every == 1:
+            return (f"fitted at the log's {self.log_hz:g} Hz: the dampings fitted there and at half of it agree "
+                    f"(their ratio {tried}; a filtered gyro's is above {RATIO:g})" if self.steps else
+                    f"fitted at the log's {self.log_hz:g} Hz")
+        return (f"fitted at {self.hz:g} Hz, every {nth(self.every)} sample of the {self.log_hz:g} Hz log: the gyro's "
+                f"noise is not white at the log's rate (a flight controller's gyro filter), and the likelihood, which "
+                f"takes it for white, read it as motion: the damping fitted at a rate over the one at half of it "
+                f"was {tried} (white gyros at most about 1.07, so above {RATIO:g} the half rate is taken)")
+
+
+def nth(k: int) -> str:
+    """"2nd", "4th": the ordinal of a thinning."""
+    suffix = "th" if k % 100 in (11, 12, 13) else {1: "st", 2: "nd", 3: "rd"}.get(k % 10, "th")
+    return f"{k}{suffix}"
+
+
+def thinned(flight: Flight, every: int) -> Flight:
+    """Every ``every``-th sample of ``flight`` (its extra columns too), with its metadata saying so."""
+    if every == 1:
+        return flight
+    keep = slice(None, None, every)
+    meta = {**flight.metadata, "fit_every": int(every)}
+    return make_flight(flight.time[keep], flight.rates[:, keep], np.ascontiguousarray(flight.sticks[:, keep]),
+                       attitude=flight.attitude[:, keep], metadata=meta,
+                       extra={k: np.ascontiguousarray(v[keep]) for k, v in flight.extra.items()})
+
+
+def _dampings(flights, every: int) -> dict | None:
+    """Per axis ``(damping, its standard error)`` the plain estimator fits to ``flights`` thinned by ``every``
+    (None where it refuses them)."""
+    from .errors import IdentifiabilityError
+    from .likelihood.estimator import MaximumLikelihoodIdentifier
+
+    try:
+        fitted = MaximumLikelihoodIdentifier(closed_loop=None).fit([thinned(f, every) for f in flights])
+    except (IdentifiabilityError, ValueError, np.linalg.LinAlgError):  # a refusal at either rate: the log's stands
+        return None
+    return {axis: (float(fit.params[DAMPINGS[axis]]), float(fit.std_errors.get(DAMPINGS[axis], np.inf)))
+            for axis, fit in fitted.axes_.items() if DAMPINGS[axis] in fit.params}
+
+
+def _inflated(here: dict, half: dict, ratio: float) -> tuple[dict, bool]:
+    """Per axis the damping at a rate over the one at half of it, and whether some axis' exceeds ``ratio`` by more
+    than :data:`Z` standard errors of the difference (so that a short flight's spread is not taken for a filter)."""
+    by_axis, inflated = {}, False
+    for axis, (d, se) in here.items():
+        if axis not in half or not (d > 0 and half[axis][0] > 0):
+            continue
+        d_half, se_half = half[axis]
+        by_axis[axis] = d / d_half
+        if d / d_half > ratio and d - d_half > Z * float(np.hypot(se, se_half)):
+            inflated = True
+    return by_axis, inflated
+
+
+def choose_fit_rate(flights, ratio: float = RATIO, min_rate: float = MIN_RATE) -> FitRate:
+    """The rate ``flights`` (one log's, at one rate) are fitted at (module docstring): halved while, on some axis,
+    the damping fitted at a rate exceeds the one fitted at half of it by ``ratio``, and the half rate is at least
+    ``min_rate``.
+
+    Raises
+    ------
+    ValueError
+        Flights of different rates.
+    """
+    flights = list(flights)
+    rates = {round(f.sample_rate, 6) for f in flights}
+    if len(rates) != 1:
+        raise ValueError(f"expected flights of one sample rate, got {sorted(rates)} Hz")
+    log_hz = round(float(flights[0].sample_rate), 6)  # a clock's last bits (100.00000000000213) are no rate
+    every, steps = 1, []
+    here = None
+    while log_hz / (2 * every) >= min_rate:
+        here = _dampings(flights, every) if here is None else here
+        half = _dampings(flights, 2 * every)
+        if here is None or half is None:
+            break
+        by_axis, inflated = _inflated(here, half, ratio)
+        steps.append((log_hz / every, by_axis))
+        if not inflated:
+            break
+        every, here = 2 * every, half
+    return FitRate(every, log_hz, tuple(steps))
+
+
+def every_for(log_hz: float, hz: float) -> int:
+    """The thinning that fits a ``log_hz`` log at ``hz``: a whole number of its samples per fitted sample.
+
+    Raises
+    ------
+    ValueError
+        ``hz`` not the log's rate divided by a whole number.
+    """
+    every = int(round(log_hz / hz)) if hz > 0 else 0
+    if every < 1 or abs(log_hz / every - hz) > 1e-6 * log_hz:
+        raise ValueError(f"a fit rate is the log's rate divided by a whole number ({log_hz:g}, {log_hz / 2:g}, "
+                         f"{log_hz / 3:g} ... Hz for this log), got {hz:g} Hz")
+    return every
+
+
+def at_fit_rate(flights, setting="auto") -> tuple[list, FitRate]:
+    """``flights`` (one log's, at one rate) as they are fitted, and the :class:`FitRate` that says why: ``setting``
+    "auto" (:func:`choose_fit_rate`), "log" (the log's rate) or a rate in Hz (:func:`every_for`). Thinned flights
+    carry the reason in ``metadata["fit_rate"]``, which the fit's warnings repeat."""
+    flights = list(flights)
+    log_hz = round(float(flights[0].sample_rate), 6)  # a clock's last bits (100.00000000000213) are no rate
+    if setting == "auto":
+        chosen = choose_fit_rate(flights)
+    elif setting == "log":
+        chosen = FitRate(1, log_hz)
+    else:
+        chosen = FitRate(every_for(log_hz, float(setting)), log_hz)
+    if chosen.every == 1:
+        return flights, chosen
+    reason = chosen.describe() if chosen.steps else f"fitted at {chosen.hz:g} Hz, every {nth(chosen.every)} " \
+        f"sample of the {log_hz:g} Hz log, as asked"
+    return [thinned(f, chosen.every).with_metadata(fit_rate=reason) for f in flights], chosen
