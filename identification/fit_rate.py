@@ -10,10 +10,12 @@ flights with the gyro through 20 Hz and logged at 100 Hz, dampings 2 to 45 times
 
 Fitted at a lower rate, where the filter's corner lies near the new Nyquist frequency, the noise is white again
 and the same flights fit within a few per cent. Whether a log needs it is decided by the data, the way the damping
-reacts (:func:`choose_fit_rate`): the flight fitted at its rate and at half of it (every second sample) with the
-plain estimator. A white gyro gives the two fits' dampings within a few per cent (the full rate's at most 1.07
+reacts (:func:`choose_fit_rate`): the flight fitted at its rate and at half of it (every second sample) with
+``heli identify``'s timing (a servo delay and lag searched where the data suggest one: on a filtered gyro that is
+where the fit runs away first, a "servo lag" of 0.1 s before a damping at the search's bound, while the fit without
+them may look sound). A white gyro gives the two fits' dampings within a few per cent (the full rate's at most 1.08
 times the half rate's on the bench's cells, usually below it); a filtered gyro's full-rate damping is inflated,
-1.27 to 45 times the half rate's. Above :data:`RATIO`, and by :data:`Z` standard errors, on some axis the half
+1.3 to 300 times the half rate's. Above :data:`RATIO`, and by :data:`Z` standard errors, on some axis the half
 rate is taken and tried again against its own half, down to :data:`MIN_RATE`.
 
 Taking every ``m``-th sample needs no anti-aliasing filter here: the rates were low-passed by the gyro's filter
@@ -35,7 +37,8 @@ half of it by this factor and by :data:`Z` standard errors (bench: white gyros a
 the full rate biases 1.27-45; module docstring)."""
 
 Z = 3.0
-"""... and by this many standard errors of the difference (the two fits' errors combined as if independent)."""
+"""... and by this many standard errors of the difference (the half rate's relative error on both, combined as if
+independent)."""
 
 MIN_RATE = 20.0
 """No log is thinned below this rate [Hz]: a helicopter's attitude modes need it."""
@@ -101,13 +104,14 @@ def thinned(flight: Flight, every: int) -> Flight:
 
 
 def _dampings(flights, every: int) -> dict | None:
-    """Per axis ``(damping, its standard error)`` the plain estimator fits to ``flights`` thinned by ``every``
-    (None where it refuses them)."""
+    """Per axis ``(damping, its standard error)`` the estimator fits to ``flights`` thinned by ``every`` with
+    ``heli identify``'s timing (the servo delay and lag searched where the data suggest one; no closed-loop check),
+    None where it refuses them."""
     from .errors import IdentifiabilityError
-    from .likelihood.estimator import MaximumLikelihoodIdentifier
+    from .likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
 
     try:
-        fitted = MaximumLikelihoodIdentifier(closed_loop=None).fit([thinned(f, every) for f in flights])
+        fitted = MaximumLikelihoodIdentifier(**CLI_TIMING, closed_loop=None).fit([thinned(f, every) for f in flights])
     except (IdentifiabilityError, ValueError, np.linalg.LinAlgError):  # a refusal at either rate: the log's stands
         return None
     return {axis: (float(fit.params[DAMPINGS[axis]]), float(fit.std_errors.get(DAMPINGS[axis], np.inf)))
@@ -116,14 +120,16 @@ def _dampings(flights, every: int) -> dict | None:
 
 def _inflated(here: dict, half: dict, ratio: float) -> tuple[dict, bool]:
     """Per axis the damping at a rate over the one at half of it, and whether some axis' exceeds ``ratio`` by more
-    than :data:`Z` standard errors of the difference (so that a short flight's spread is not taken for a filter)."""
+    than :data:`Z` standard errors of the difference (so that a short flight's spread is not taken for a filter).
+    Both fits are given the half rate's relative error: the log's rate holds at least the half rate's information,
+    and the standard error of a fit run away to the search's bound is itself unbounded, which would hide it."""
     by_axis, inflated = {}, False
-    for axis, (d, se) in here.items():
+    for axis, (d, _) in here.items():
         if axis not in half or not (d > 0 and half[axis][0] > 0):
             continue
         d_half, se_half = half[axis]
         by_axis[axis] = d / d_half
-        if d / d_half > ratio and d - d_half > Z * float(np.hypot(se, se_half)):
+        if d / d_half > ratio and d - d_half > Z * float(np.hypot(se_half, se_half * d / d_half)):
             inflated = True
     return by_axis, inflated
 

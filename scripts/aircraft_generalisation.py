@@ -120,7 +120,7 @@ def _one(job):
     from heli_core.terms import AXES, TERMS
     from identification.likelihood.input_hold import std_errors_with_hold
 
-    aircraft, cell, rate, seed, duration, diagnose, effect, closed_loop, settings, delays, at_truth = job
+    aircraft, cell, rate, seed, duration, diagnose, effect, closed_loop, settings, delays, at_truth, fit_rate = job
     with threadpool_limits(limits=1, user_api="blas"):
         config = replace(BENCH_CELLS[cell], duration=duration, sample_rate=float(rate), **dict(settings))
         truth = replace(_aircraft(aircraft), **{f"tau_{axis}": tau for axis, tau in delays})
@@ -128,8 +128,8 @@ def _one(job):
         truth = sim.truth.values()
         out = {"aircraft": aircraft, "cell": cell, "rate": rate, "seed": seed}
         t0 = time.perf_counter()
-        (flight,), fit_rate = at_fit_rate([sim.flight])  # as heli identify reads a log (--fit-rate auto)
-        out["fit_every"] = fit_rate.every
+        (flight,), chosen = at_fit_rate([sim.flight], fit_rate)  # as heli identify reads a log (--fit-rate)
+        out["fit_every"] = chosen.every
         try:
             ml = MaximumLikelihoodIdentifier(**CLI_TIMING, closed_loop=closed_loop).fit(flight)
         except Exception as exc:  # a refusal is a finding of this study, not its end
@@ -298,6 +298,9 @@ def main(argv=None) -> None:
                     help="a true servo delay in every truth, e.g. pitch=0.01")
     ap.add_argument("--closed-loop", choices=("auto", "off"), default="auto",
                     help="the closed-loop check as heli identify runs it ('auto', default) or none ('off')")
+    ap.add_argument("--fit-rate", choices=("auto", "log"), default="auto",
+                    help="the rate each log is fitted at, as heli identify's --fit-rate: chosen by the data ('auto', "
+                    "default) or the log's own ('log')")
     ap.add_argument("--at-truth", action="store_true",
                     help="also fly the check at the truth's values (the exact correction and the spread there)")
     args = ap.parse_args(argv)
@@ -318,7 +321,8 @@ def main(argv=None) -> None:
                              f"({'; '.join(inert.values())})")
     if args.at_truth and check is None:
         raise SystemExit("--at-truth flies the closed-loop check again: it needs --closed-loop auto")
-    jobs = [(a, c, r, s, args.duration, args.diagnose, args.effect, check, settings, delays, args.at_truth)
+    jobs = [(a, c, r, s, args.duration, args.diagnose, args.effect, check, settings, delays, args.at_truth,
+             args.fit_rate)
             for a in args.aircraft for c in args.cells for r in args.rates
             for s in range(args.first_seed, args.first_seed + args.seeds)]
     from tqdm import tqdm
@@ -336,7 +340,8 @@ def main(argv=None) -> None:
           + (" --diagnose" if args.diagnose else "") + (f" --effect {args.effect}" if args.effect else "")
           + (" --set " + " ".join(shlex.quote(f"{k}={v!r}") for k, v in settings) if settings else "")
           + (" --servo-delay " + " ".join(f"{a}={t:g}" for a, t in delays) if delays else "")
-          + ("" if check else " --closed-loop off") + (" --at-truth" if args.at_truth else ""))
+          + ("" if check else " --closed-loop off") + (" --at-truth" if args.at_truth else "")
+          + (" --fit-rate log" if args.fit_rate == "log" else ""))
     _table(rows, args.diagnose, args.effect)
     _truth_table(rows)
 
