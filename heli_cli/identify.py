@@ -197,8 +197,9 @@ def run(args) -> int:
 
 def add_fit_rate(p) -> None:
     """``--fit-rate auto|log|HZ`` (heli identify and diagnose): the rate the log is fitted at."""
-    p.add_argument("--fit-rate", type=fit_rate_option, default="auto", metavar="auto|log|HZ",
-                   help="ml: the rate the log is fitted at: 'auto' (default) its own unless the damping fitted there "
+    p.add_argument("--fit-rate", type=fit_rate_option, default=None, metavar="auto|log|HZ",
+                   help="ml: the rate the log is fitted at: 'auto' (the default, or $HELI_FIT_RATE when set) its own "
+                   "unless the damping fitted there "
                    "is inflated against the one fitted at half of it, the mark of a gyro low-passed before it was "
                    "logged (a flight controller's gyro filter), whose noise the likelihood takes for motion: then "
                    "every second sample, again while the same holds; 'log' its own; or HZ, the log's rate over a "
@@ -211,7 +212,11 @@ def fit_rate_flights(args, flights, command: str, progress=None):
     saying why in one line on stderr (a rate the log's is not a whole multiple of)."""
     from identification.fit_rate import at_fit_rate
 
-    setting = getattr(args, "fit_rate", "auto")
+    try:
+        setting = fit_rate_setting(getattr(args, "fit_rate", None))
+    except ValueError as exc:
+        print(f"heli {command}: error: {exc}", file=sys.stderr)
+        return None
     if getattr(args, "method", "ml") != "ml":
         setting = "log" if setting == "auto" else setting
     if setting == "auto" and progress is not None:
@@ -224,6 +229,32 @@ def fit_rate_flights(args, flights, command: str, progress=None):
         print(f"heli {command}: error: --fit-rate: {exc}", file=sys.stderr)
         return None
     return fitted, chosen
+
+
+FIT_RATE_ENV = "HELI_FIT_RATE"
+"""Sets ``--fit-rate``'s default (auto, log or Hz), as ``$HELI_CLOSED_LOOP`` sets ``--closed-loop``'s: the test
+suite identifies short flights some fifty times for other reasons and sets it to 'log'."""
+
+
+def fit_rate_setting(given):
+    """``--fit-rate`` as given, else ``$HELI_FIT_RATE``, else "auto".
+
+    Raises
+    ------
+    ValueError
+        ``HELI_FIT_RATE`` set to something else than 'auto', 'log' or a rate in Hz.
+    """
+    import argparse
+
+    from .argtypes import fit_rate_option
+
+    if given is not None:
+        return given
+    text = os.environ.get(FIT_RATE_ENV, "").strip() or "auto"
+    try:
+        return fit_rate_option(text)
+    except argparse.ArgumentTypeError as exc:
+        raise ValueError(f"{FIT_RATE_ENV}: {exc}") from None
 
 
 def thinned_alike(flight, fit_rate):

@@ -179,8 +179,12 @@ def _model(args, spec, current, progress, settings):
     _check_mapping(spec, current, flight.sample_rate)
     from identification.fit_rate import at_fit_rate
 
-    progress.stage("choosing the fit rate (the log's fitted at its rate and at half of it)")
-    (flight,), fit_rate = at_fit_rate([flight])  # a firmware's gyro is low-passed before it is logged
+    from .identify import fit_rate_setting
+
+    setting = fit_rate_setting(None)  # heli identify's default ($HELI_FIT_RATE, else auto)
+    if setting == "auto":
+        progress.stage("choosing the fit rate (the log's fitted at its rate and at half of it)")
+    (flight,), fit_rate = at_fit_rate([flight], setting)  # a firmware's gyro is low-passed before it is logged
     if fit_rate.every > 1:
         _check_mapping(spec, current, flight.sample_rate)  # the gusts' period the model is written with
     folder = Path(args.out) / "model"

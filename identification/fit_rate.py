@@ -18,6 +18,9 @@ times the half rate's on the bench's cells, usually below it); a filtered gyro's
 1.3 to 300 times the half rate's. Above :data:`RATIO`, and by :data:`Z` standard errors, on some axis the half
 rate is taken and tried again against its own half, down to :data:`MIN_RATE`.
 
+The estimator itself fits the flights it is given; the commands (``heli identify``, ``diagnose``, ``tune``, and
+``refresh`` at its model's rate) call :func:`at_fit_rate` first, and so should a script that wants their choice.
+
 Taking every ``m``-th sample needs no anti-aliasing filter here: the rates were low-passed by the gyro's filter
 (that is why they are thinned), and a pilot's sticks are smooth. A flight controller's held commands are thinned
 as they are; the hold search then finds what they are at the new rate.
@@ -33,8 +36,8 @@ from .flight import Flight, make_flight
 
 RATIO = 1.15
 """A log is fitted at half its rate where, on some axis, the damping fitted at its rate exceeds the one fitted at
-half of it by this factor and by :data:`Z` standard errors (bench: white gyros at most 1.07, filtered ones that
-the full rate biases 1.27-45; module docstring)."""
+half of it by this factor and by :data:`Z` standard errors (bench: white gyros at most 1.08 over 165 flights,
+``scripts/fit_rate_study.py``; module docstring)."""
 
 Z = 3.0
 """... and by this many standard errors of the difference (the half rate's relative error on both, combined as if
@@ -83,7 +86,7 @@ class FitRate:
         return (f"fitted at {self.hz:g} Hz, every {nth(self.every)} sample of the {self.log_hz:g} Hz log: the gyro's "
                 f"noise is not white at the log's rate (a flight controller's gyro filter), and the likelihood, which "
                 f"takes it for white, read it as motion: the damping fitted at a rate over the one at half of it "
-                f"was {tried} (white gyros at most about 1.07, so above {RATIO:g} the half rate is taken)")
+                f"was {tried} (white gyros at most about 1.08, so above {RATIO:g} the half rate is taken)")
 
 
 def nth(k: int) -> str:

@@ -19,6 +19,9 @@ if os.environ.get("PYTEST_XDIST_WORKER"):  # one pytest worker per core already:
 # flights some forty times for other reasons: they run without it. The check is the subject of
 # tests/test_closed_loop.py, and test_cli.py's test of the default unsets this for its run.
 os.environ.setdefault("HELI_CLOSED_LOOP", "off")
+# The fit rate's choice (identification.fit_rate) fits each log twice more (2-3 s for a 300 s flight): the suite's
+# logs are white gyros, fitted at their rate. The choice is the subject of tests/test_fit_rate.py, which sets 'auto'.
+os.environ.setdefault("HELI_FIT_RATE", "log")
 
 from heli_env.env_model import load_env_model
 

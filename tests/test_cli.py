@@ -201,8 +201,7 @@ def test_identify_prints_the_numbers_before_drawing_the_figures(identified):
     assert all((identified / name).exists() for name in ("rates.png", "attitude.png", "disturbance_simulation.png"))
     # stderr is no terminal here: one line per stage, the figures last
     stages = PRINTED["err"].splitlines()
-    assert stages[0] == "identify: choosing the fit rate (the log's fitted at its rate and at half of it) ..."
-    assert stages[1].startswith("identify: fitting the decoupled and coupled models by maximum likelihood")
+    assert stages[0].startswith("identify: fitting the decoupled and coupled models by maximum likelihood")
     assert stages[-1] == "identify: drawing the figures ..."
 
 

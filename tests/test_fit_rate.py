@@ -102,8 +102,27 @@ def test_a_fit_rate_the_log_cannot_take_is_refused_in_one_line_before_any_fit(tm
     assert "--fit-rate: expected 'auto', 'log' or a rate in Hz above 0, got 'fast'" in capsys.readouterr().err
 
 
+def test_heli_fit_rate_sets_the_default_and_a_bad_one_is_refused(tmp_path, capsys, monkeypatch):
+    """``$HELI_FIT_RATE`` is ``--fit-rate``'s default (the suite sets 'log'); misspelt, it is refused before any
+    fit, as ``$HELI_CLOSED_LOOP`` is."""
+    from heli_cli.identify import fit_rate_setting
+    from heli_cli.main import main
+
+    monkeypatch.delenv("HELI_FIT_RATE")
+    assert fit_rate_setting(None) == "auto" and fit_rate_setting(50.0) == 50.0
+    monkeypatch.setenv("HELI_FIT_RATE", "25")
+    assert fit_rate_setting(None) == 25.0
+    monkeypatch.setenv("HELI_FIT_RATE", "often")
+    csv = tmp_path / "f.csv"
+    simulate_flight(20, seed=1).save(csv)
+    assert main(["identify", str(csv), "--out", str(tmp_path / "m")]) == 2
+    assert ("heli identify: error: HELI_FIT_RATE: expected 'auto', 'log' or a rate in Hz above 0, got 'often'"
+            in capsys.readouterr().err)
+    assert not (tmp_path / "m").exists()
+
+
 @pytest.mark.slow  # 15-20 s: a 300 s identify with its check
-def test_heli_identify_fits_a_filtered_gyros_csv_at_the_rate_its_noise_is_white(tmp_path, capsys):
+def test_heli_identify_fits_a_filtered_gyros_csv_at_the_rate_its_noise_is_white(tmp_path, capsys, monkeypatch):
     """``heli simulate-flight --gyro-filter 20`` (a flight controller's gyro, filtered at 400 Hz and logged at 100 Hz)
     then ``heli identify`` by default: the model is written at 50 Hz, its dampings near the truth, and the report and
     the terminal say why; ``--fit-rate log`` keeps 100 Hz and the damping it reads there is far off."""
@@ -111,6 +130,7 @@ def test_heli_identify_fits_a_filtered_gyros_csv_at_the_rate_its_noise_is_white(
 
     from heli_cli.main import main
 
+    monkeypatch.delenv("HELI_FIT_RATE", raising=False)  # the suite's 'log' (conftest): the default is the subject
     csv = tmp_path / "ap.csv"
     assert main(["simulate-flight", "--cell", "independent", "--gyro-filter", "20", "--log-every", "4", "--seed", "7",
                  "--out", str(csv)]) == 0
