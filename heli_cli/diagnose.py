@@ -87,9 +87,9 @@ def run(args) -> int:
         if (at_rate := fit_rate_flights(args, [flight], "diagnose", progress)) is None:
             return 2
         (flight,), _ = at_rate
+        source = source_entry(args.flight, controller_loop_hz=args.controller_loop)
         if args.method == "ml":
-            return _run_ml(args, flight, model, document, source_entry(args.flight, controller_loop_hz=args.controller_loop), progress,
-                           None if closed_loop == "off" else closed_loop)
+            return _run_ml(args, flight, model, document, source, progress, None if closed_loop == "off" else closed_loop)
         from identification.diagnosis.heldout_diagnoser import ALPHA, MIN_GAIN, Diagnoser
         from identification.workflows.diagnose import DiagnosisConfig, diagnose_and_report
 
@@ -101,7 +101,7 @@ def run(args) -> int:
         progress.stage(f"diagnosing {args.flight} by held-out forward simulation (every catalogue effect on "
                        "every axis)")
         run_ = diagnose_and_report(flight, args.out, config, model=model, model_document=document,
-                                   source=source_entry(args.flight, controller_loop_hz=args.controller_loop))
+                                   source=source)
         progress.done()
         _print_run(run_, lambda s: (
             f"held-out MAE {s.gap_before['mae_deg_s']:.3f} -> {s.gap_after['mae_deg_s']:.3f} deg/s, gain "

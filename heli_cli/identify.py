@@ -143,16 +143,16 @@ def run(args) -> int:
         others = [read_flight(path) for path in args.validate]  # a bad one refused before any fit
         for path, flight in zip(args.flights + args.validate, flights + others):
             print_read_warnings(path, flight, progress)
-        if (at_rate := fit_rate_flights(args, flights, "identify", progress)) is None:
-            return 2
-        flights, fit_rate = at_rate
-        others = [thinned_alike(o, fit_rate) for o in others]
         try:
             closed_loop = closed_loop_mode(args)
         except ValueError as exc:
             progress.done()
             print(f"heli identify: error: {exc}", file=sys.stderr)
             return 2
+        if (at_rate := fit_rate_flights(args, flights, "identify", progress)) is None:
+            return 2
+        flights, fit_rate = at_rate
+        others = [thinned_alike(o, fit_rate) for o in others]
         delay = None if args.delay == "none" else args.delay
         lag = None if args.servo_lag == "none" else args.servo_lag
         if args.method == "ml":
@@ -215,6 +215,8 @@ def fit_rate_flights(args, flights, command: str, progress=None):
     try:
         setting = fit_rate_setting(getattr(args, "fit_rate", None))
     except ValueError as exc:
+        if progress is not None:
+            progress.done()
         print(f"heli {command}: error: {exc}", file=sys.stderr)
         return None
     if getattr(args, "method", "ml") != "ml":
@@ -223,10 +225,10 @@ def fit_rate_flights(args, flights, command: str, progress=None):
         progress.stage("choosing the fit rate (the log's fitted at its rate and at half of it)")
     try:
         fitted, chosen = at_fit_rate(flights, setting)
-    except ValueError as exc:
+    except ValueError as exc:  # a rate the log's is not a whole multiple of, or logs of two rates
         if progress is not None:
             progress.done()
-        print(f"heli {command}: error: --fit-rate: {exc}", file=sys.stderr)
+        print(f"heli {command}: error: {'--fit-rate: ' if isinstance(setting, float) else ''}{exc}", file=sys.stderr)
         return None
     return fitted, chosen
 
