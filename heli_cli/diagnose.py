@@ -68,7 +68,8 @@ def run(args) -> int:
         print(f"heli diagnose: error: {exc}", file=sys.stderr)
         return 2
     for option, given in ((f"--closed-loop {args.closed_loop}", args.closed_loop in ("auto", "report")),
-                          ("--controller-loop", args.controller_loop is not None)):
+                          ("--controller-loop", args.controller_loop is not None),
+                          ("--gyro-filter", args.gyro_filter is not None)):
         if args.method != "ml" and given:
             print(f"heli diagnose: error: {option} needs the likelihood diagnosis (--method ml), got --method "
                   "integral", file=sys.stderr)
@@ -76,8 +77,7 @@ def run(args) -> int:
     from identification.validation.fit_warnings import stated_controller
 
     flight = read_flight(args.flight)
-    if args.controller_loop:  # stated by the user for a log that cannot state it
-        flight = stated_controller(flight, args.controller_loop)
+    flight = stated_controller(flight, args.controller_loop, args.gyro_filter)  # stated for a log that cannot
     print_read_warnings(args.flight, flight)
     model = document = None
     if args.model is not None:
@@ -87,7 +87,7 @@ def run(args) -> int:
         if (at_rate := fit_rate_flights(args, [flight], "diagnose", progress)) is None:
             return 2
         (flight,), _ = at_rate
-        source = source_entry(args.flight, controller_loop_hz=args.controller_loop)
+        source = source_entry(args.flight, controller_loop_hz=args.controller_loop, gyro_filter_hz=args.gyro_filter)
         if args.method == "ml":
             return _run_ml(args, flight, model, document, source, progress, None if closed_loop == "off" else closed_loop)
         from identification.diagnosis.heldout_diagnoser import ALPHA, MIN_GAIN, Diagnoser

@@ -138,8 +138,8 @@ def run(args) -> int:
         if len(args.flights) > 1:  # one flight reads in a fraction of a second
             progress.stage(f"reading {len(args.flights)} flights")
         flights = [read_log(path, segment=args.segment) for path in args.flights]
-        if getattr(args, "controller_loop", None):  # stated by the user for logs that cannot state it
-            flights = [stated_controller(f, args.controller_loop) for f in flights]
+        # stated by the user for logs that cannot state it
+        flights = [stated_controller(f, args.controller_loop, args.gyro_filter) for f in flights]
         others = [read_flight(path) for path in args.validate]  # a bad one refused before any fit
         for path, flight in zip(args.flights + args.validate, flights + others):
             print_read_warnings(path, flight, progress)
@@ -160,7 +160,8 @@ def run(args) -> int:
         else:
             for option, given in (("--servo-lag", lag is not None), ("--delay detect", delay == "detect"),
                                   (f"--closed-loop {closed_loop}", args.closed_loop == "report"),
-                                  ("--controller-loop", getattr(args, "controller_loop", None) is not None)):
+                                  ("--controller-loop", args.controller_loop is not None),
+                                  ("--gyro-filter", args.gyro_filter is not None)):
                 if given:
                     progress.done()
                     print(f"heli identify: error: {option} needs the maximum-likelihood estimator (--method ml), "
@@ -173,7 +174,7 @@ def run(args) -> int:
             run = _identify_or_explain(args, flights, kwargs, progress, lambda: identify_and_report(
                 flights, args.out, coupled=args.coupled,
                 sources=[source_entry(p, segment=segment_read(args.segment, f),
-                                     controller_loop_hz=getattr(args, "controller_loop", None))
+                                     controller_loop_hz=args.controller_loop, gyro_filter_hz=args.gyro_filter)
                         for p, f in zip(args.flights, flights)],
                 identifier_kwargs=kwargs, flight_paths=args.flights, plots=not args.no_plots,
                 disturbances=not args.no_disturbances, backend=backend, method=args.method,
@@ -268,13 +269,18 @@ def thinned_alike(flight, fit_rate):
 
 
 def add_controller_loop(p, which: str = "the inputs") -> None:
-    """``--controller-loop HZ`` (heli identify, diagnose and refresh): ``which`` inputs stated as a flight
-    controller's commands."""
+    """``--controller-loop HZ`` and ``--gyro-filter HZ`` (heli identify, diagnose and refresh): ``which`` inputs
+    stated as a flight controller's commands, and the gyro its loop read as low-passed."""
     p.add_argument("--controller-loop", type=number("a loop rate in Hz above 0", 0.0), default=None, metavar="HZ",
                    help=f"ml: {which} are a flight controller's commands from a loop at HZ (for a CSV, which cannot "
                    "say so; imported logs state it): where HZ is faster than the log, the loop corrects the aircraft "
                    "inside each sample and the dampings read high, so the hold is taken as held where the data do not "
                    "reject it, and the closed-loop check flies the loop at HZ to measure and remove that bias")
+    p.add_argument("--gyro-filter", type=number("a filter's corner in Hz above 0", 0.0), default=None, metavar="HZ",
+                   help="ml: the gyro passed a 2-pole low-pass at HZ before the flight controller's loop read it and "
+                   "the log wrote it (ArduPilot's INS_GYRO_FILTER, which its logs state; PX4's IMU_GYRO_CUTOFF): the "
+                   "closed-loop check flies the loop through it. Without it, a loop faster than the log whose gyro "
+                   "the fit found filtered is not checked")
 
 
 def print_read_warnings(path, flight, progress=None) -> None:

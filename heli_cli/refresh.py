@@ -64,6 +64,7 @@ def run(args) -> int:
             n_replicates=args.bootstrap, block=args.block, seed=args.seed, alpha=args.alpha,
             min_relative=args.min_change, plots=not args.no_plots, progress=progress.bars, backend=backend,
             wait=not args.no_wait, stage=progress.stage, segment=args.segment, controller_loop=args.controller_loop,
+            gyro_filter=args.gyro_filter,
         )
     finally:
         progress.done()

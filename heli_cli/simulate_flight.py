@@ -126,9 +126,11 @@ def run(args) -> int:
               "diagnose estimate the hold from the data)")
     if loop_ticks(f) > 1:  # a CSV cannot say so either: the user states it
         loop = f.metadata["loop_rate_hz"]
+        corner = f.metadata.get("gyro_filter_hz")
+        through = f" --gyro-filter {corner:g}" if corner else ""
         print(f"the inputs are a flight controller's commands from a {loop:g} Hz loop, faster than the log (a CSV "
-              f"does not say so: heli identify {paths['flight']} --controller-loop {loop:g} flies that loop in its "
-              "closed-loop check)")
+              f"does not say so: heli identify {paths['flight']} --controller-loop {loop:g}{through} flies that loop "
+              f"{'through its gyro filter ' if corner else ''}in its closed-loop check)")
     return 0
 
 

@@ -46,6 +46,14 @@ independent)."""
 MIN_RATE = 20.0
 """No log is thinned below this rate [Hz]: a helicopter's attitude modes need it."""
 
+WHITE_ENOUGH = 0.3
+"""Where a log states its gyro filter's corner (:func:`~identification.validation.fit_warnings.gyro_filter`), it is
+fitted no faster than the rate whose neighbouring samples of the filtered noise correlate by at most this much
+(:func:`filtered_noise_correlation`; :func:`stated_every`). The bench's autopilot behind a 20 Hz filter, logged at
+100 Hz (correlation 0.58): the fit read the gyro's noise at half its std (0.0017 rad/s against 0.0033) and gave the
+rest to the aircraft's motion, and the closed-loop check's world built on it moved the dampings 23-70 % off; at 50 Hz
+(0.13) it read 0.0031 and the check ended within 2 % (docs/method.md)."""
+
 DAMPINGS = {"roll": "k3", "pitch": "k7", "yaw": "k11"}
 
 
@@ -61,11 +69,18 @@ class FitRate:
         The log's rate [Hz].
     steps : tuple of (float, dict)
         Per rate tried, the rate [Hz] and per axis the damping fitted there over the one fitted at half of it.
+    corner : float or None
+        The gyro filter's corner the log states [Hz] where it thinned the log before the data were asked
+        (:func:`stated_every`), else None.
+    stated : int
+        The thinning that corner asked for (1 where none).
     """
 
     every: int
     log_hz: float
     steps: tuple = ()
+    corner: float | None = None
+    stated: int = 1
 
     @property
     def hz(self) -> float:
@@ -79,6 +94,15 @@ class FitRate:
             return f"at {rate:g} Hz " + ", ".join(f"{axis} {value:.2f}" for axis, value in by_axis.items())
 
         tried = "; ".join(ratios(s) for s in self.steps)
+        if self.corner is not None:
+            stated = (f"fitted at {self.hz:g} Hz, every {nth(self.every)} sample of the {self.log_hz:g} Hz log: the log "
+                      f"states its gyro low-passed at {self.corner:g} Hz, whose noise is not white faster than "
+                      f"{self.log_hz / self.stated:g} Hz (neighbouring samples correlate by more than {WHITE_ENOUGH:g}, "
+                      "and the likelihood, which takes it for white, reads part of it as motion)")
+            if not self.steps:
+                return stated
+            further = "were above" if self.every > self.stated else "agree within"
+            return stated + f"; from there the dampings at a rate over those at half of it {further} {RATIO:g} ({tried})"
         if self.every == 1:
             return (f"fitted at the log's {self.log_hz:g} Hz: the dampings fitted there and at half of it agree "
                     f"(their ratio {tried}; a filtered gyro's is above {RATIO:g})" if self.steps else
@@ -137,10 +161,35 @@ def _inflated(here: dict, half: dict, ratio: float) -> tuple[dict, bool]:
     return by_axis, inflated
 
 
+def filtered_noise_correlation(corner_hz: float, spacing_s: float) -> float:
+    """The correlation of white noise passed through a 2-pole Butterworth low-pass at ``corner_hz`` between two
+    samples ``spacing_s`` apart: ``exp(-a) (cos a + sin a)``, ``a = 2 pi corner spacing / sqrt 2`` (the analogue
+    filter's autocorrelation, damping ratio 1/sqrt 2; the firmware's digital one at its kHz loop is near it)."""
+    a = 2.0 * np.pi * corner_hz * spacing_s / np.sqrt(2.0)
+    return float(np.exp(-a) * (np.cos(a) + np.sin(a)))
+
+
+def stated_every(flights, log_hz: float, min_rate: float = MIN_RATE) -> tuple[int, float | None]:
+    """``(every, corner)``: the least halving of a ``log_hz`` log whose samples of the gyro noise, low-passed at the
+    corner its flights state (the highest, where they differ), correlate by at most :data:`WHITE_ENOUGH`, no lower
+    than ``min_rate``; ``(1, None)`` where a flight states none."""
+    from .validation.fit_warnings import gyro_filter
+
+    corners = [gyro_filter(getattr(f, "metadata", {}) or {}) for f in flights]
+    if not corners or None in corners:
+        return 1, None
+    corner, every = max(corners), 1
+    while (filtered_noise_correlation(corner, every / log_hz) > WHITE_ENOUGH
+           and log_hz / (2 * every) >= min_rate):
+        every *= 2
+    return every, (corner if every > 1 else None)
+
+
 def choose_fit_rate(flights, ratio: float = RATIO, min_rate: float = MIN_RATE) -> FitRate:
-    """The rate ``flights`` (one log's, at one rate) are fitted at (module docstring): halved while, on some axis,
-    the damping fitted at a rate exceeds the one fitted at half of it by ``ratio``, and the half rate is at least
-    ``min_rate``.
+    """The rate ``flights`` (one log's, at one rate) are fitted at (module docstring): where the log states its gyro
+    filter, first halved until its noise is white enough there (:func:`stated_every`); then halved while, on some
+    axis, the damping fitted at a rate exceeds the one fitted at half of it by ``ratio``, and the half rate is at
+    least ``min_rate``.
 
     Raises
     ------
@@ -152,8 +201,8 @@ def choose_fit_rate(flights, ratio: float = RATIO, min_rate: float = MIN_RATE) -
     if len(rates) != 1:
         raise ValueError(f"expected flights of one sample rate, got {sorted(rates)} Hz")
     log_hz = round(float(flights[0].sample_rate), 6)  # a clock's last bits (100.00000000000213) are no rate
-    every, steps = 1, []
-    here = None
+    every, corner = stated_every(flights, log_hz, min_rate)
+    stated, steps, here = every, [], None
     while log_hz / (2 * every) >= min_rate:
         here = _dampings(flights, every) if here is None else here
         half = _dampings(flights, 2 * every)
@@ -164,7 +213,7 @@ def choose_fit_rate(flights, ratio: float = RATIO, min_rate: float = MIN_RATE) -
         if not inflated:
             break
         every, here = 2 * every, half
-    return FitRate(every, log_hz, tuple(steps))
+    return FitRate(every, log_hz, tuple(steps), corner, stated)
 
 
 def every_for(log_hz: float, hz: float) -> int:
@@ -196,6 +245,6 @@ def at_fit_rate(flights, setting="auto") -> tuple[list, FitRate]:
         chosen = FitRate(every_for(log_hz, float(setting)), log_hz)
     if chosen.every == 1:
         return flights, chosen
-    reason = chosen.describe() if chosen.steps else f"fitted at {chosen.hz:g} Hz, every {nth(chosen.every)} " \
+    reason = chosen.describe() if chosen.steps or chosen.corner else f"fitted at {chosen.hz:g} Hz, every {nth(chosen.every)} " \
         f"sample of the {log_hz:g} Hz log, as asked"
     return [thinned(f, chosen.every).with_metadata(fit_rate=reason) for f in flights], chosen

@@ -279,18 +279,23 @@ class Source:
         Where the flight's inputs were stated as a flight controller's commands from a loop at this rate [Hz]
         (``--controller-loop``, for a CSV that cannot say so); None: as its file states them. ``heli refresh`` states
         them again when it reads the flight.
+    gyro_filter_hz : float or None
+        Where the flight's gyro was stated low-passed at this corner [Hz] before its controller read it and its log
+        wrote it (``--gyro-filter``); None: as its file states it (an ArduPilot log's ``INS_GYRO_FILTER``).
     """
 
     file: str | None
     sha256: str | None
     segment: tuple | None = None
     controller_loop_hz: float | None = None
+    gyro_filter_hz: float | None = None
 
     def to_dict(self) -> dict:
         """The ``provenance.sources`` entry (what :func:`identification.workflows.identify.source_entry` writes)."""
         return {"file": self.file, "sha256": self.sha256,
                 **({"segment": list(self.segment)} if self.segment is not None else {}),
-                **({"controller_loop_hz": self.controller_loop_hz} if self.controller_loop_hz is not None else {})}
+                **({"controller_loop_hz": self.controller_loop_hz} if self.controller_loop_hz is not None else {}),
+                **({"gyro_filter_hz": self.gyro_filter_hz} if self.gyro_filter_hz is not None else {})}
 
 
 def _sources(provenance, where: str) -> tuple:
@@ -310,15 +315,20 @@ def _sources(provenance, where: str) -> tuple:
                 and segment[0] < segment[1]):
             raise ModelFileError(f"{where}: 'provenance.sources[{i}].segment' must be [t0, t1] in seconds with "
                                  f"t0 < t1, got {segment!r}")
-        loop = entry.get("controller_loop_hz")
-        if loop is not None and not (isinstance(loop, (int, float)) and not isinstance(loop, bool)
-                                     and math.isfinite(loop) and loop > 0):
-            raise ModelFileError(f"{where}: 'provenance.sources[{i}].controller_loop_hz' must be a loop rate in Hz "
-                                 f"above 0, got {loop!r}")
+        stated = {key: _positive_hz(entry.get(key), f"{where}: 'provenance.sources[{i}].{key}'", what)
+                  for key, what in (("controller_loop_hz", "a loop rate"), ("gyro_filter_hz", "a filter's corner"))}
         out.append(Source(entry.get("file"), entry.get("sha256"),
-                          None if segment is None else (float(segment[0]), float(segment[1])),
-                          None if loop is None else float(loop)))
+                          None if segment is None else (float(segment[0]), float(segment[1])), **stated))
     return tuple(out)
+
+
+def _positive_hz(value, where: str, what: str) -> float | None:
+    """``value`` as a frequency in Hz above 0, None where absent; else :class:`ModelFileError` naming ``where``."""
+    if value is None:
+        return None
+    if not (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > 0):
+        raise ModelFileError(f"{where} must be {what} in Hz above 0, got {value!r}")
+    return float(value)
 
 
 def _mapping(doc: dict, key: str, where: str, empty: bool = True):

@@ -22,9 +22,10 @@ def filtered():
 
 
 def test_a_filtered_gyros_log_is_fitted_at_half_its_rate_and_fits_there(filtered):
-    """At 100 Hz the damping reads several times the truth; the data choose 50 Hz, where it is within 10 %."""
+    """At 100 Hz the damping reads several times the truth; the data choose 50 Hz, where it is within 10 % (the log
+    states no corner here: a CSV cannot)."""
     truth = filtered.truth.values()
-    (flight,), chosen = at_fit_rate([filtered.flight])
+    (flight,), chosen = at_fit_rate([filtered.flight.with_metadata(gyro_filter_hz=None)])
     assert chosen.every == 2 and flight.sample_rate == pytest.approx(50.0)
     assert np.array_equal(flight.rates, filtered.flight.rates[:, ::2])
     assert "fitted at 50 Hz, every 2nd sample of the 100 Hz log" in flight.metadata["fit_rate"]
@@ -35,6 +36,23 @@ def test_a_filtered_gyros_log_is_fitted_at_half_its_rate_and_fits_there(filtered
         assert abs(fitted[k] / truth[k] - 1.0) < 0.10, (k, fitted[k], truth[k])
     full = MaximumLikelihoodIdentifier().fit(filtered.flight).params_.values()
     assert full["k3"] > 2.0 * truth["k3"]  # what the log's rate gives: why it is not kept
+
+
+def test_a_log_that_states_its_gyro_filter_is_thinned_until_its_noise_is_white_enough(filtered):
+    """20 Hz stated on a 100 Hz log: neighbouring samples of the filtered noise correlate by 0.58 at 100 Hz and 0.13
+    at 50 Hz, so 50 Hz is taken before the data are asked; they are then asked from there (50 Hz against 25 Hz)."""
+    from identification.fit_rate import WHITE_ENOUGH, filtered_noise_correlation, stated_every
+
+    assert filtered_noise_correlation(20.0, 0.01) == pytest.approx(0.578, abs=1e-3)
+    assert filtered_noise_correlation(20.0, 0.02) < WHITE_ENOUGH < filtered_noise_correlation(20.0, 0.01)
+    assert stated_every([filtered.flight], 100.0) == (2, 20.0)
+    assert stated_every([filtered.flight], 400.0) == (8, 20.0)
+    assert stated_every([filtered.flight], 50.0) == (1, None)  # white enough at the log's own rate
+    assert stated_every([filtered.flight.with_metadata(gyro_filter_hz=None)], 100.0) == (1, None)
+    (flight,), chosen = at_fit_rate([filtered.flight])
+    assert chosen.every == 2 and chosen.corner == 20.0 and chosen.stated == 2
+    assert [rate for rate, _ in chosen.steps] == [50.0]  # the data asked from the stated rate on
+    assert "the log states its gyro low-passed at 20 Hz" in flight.metadata["fit_rate"]
 
 
 def test_a_white_gyros_log_is_fitted_at_its_own_rate_untouched():

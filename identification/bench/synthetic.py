@@ -494,6 +494,7 @@ def _logged_flight(cfg: FlightConfig, seed, effects, time, rates, att, sticks) -
         "input_source": "flight controller commands" if cfg.pilot == "autopilot" else "pilot sticks",
         "input_hold": "zoh" if cfg.pilot == "autopilot" or cfg.held_sticks else "linear",
         **({"loop_rate_hz": float(cfg.sample_rate)} if cfg.pilot == "autopilot" else {}),  # it decides every step
+        **({"gyro_filter_hz": float(cfg.gyro_filter_hz)} if cfg.gyro_filter_hz > 0 else {}),  # as its parameters
     }
     logged = np.ascontiguousarray(sticks.T)
     n = time.size

@@ -95,11 +95,13 @@ def meta_path(csv_path) -> Path:
 
 
 def _imported_from(csv_path) -> dict:
-    """``{"imported_from": {"format", "input_source"[, "loop_rate_hz"]}}`` when ``heli import`` wrote this CSV from a
-    log (its ``.meta.json`` beside it names the log's format), else ``{}``: advice to import the log again with
+    """``{"imported_from": {"format", "input_source"[, "loop_rate_hz", "gyro_filter_hz"]}}`` when ``heli import``
+    wrote this CSV from a log (its ``.meta.json`` beside it names the log's format), else ``{}``: advice to import the log again with
     another input source (``heli import --inputs``) is given only for such a flight, where it can change the
     outcome; the flight controller's loop rate, where the log stated it, tells whether its commands moved between
-    the samples fitted (:func:`identification.validation.fit_warnings.controller_loop_warning`)."""
+    the samples fitted (:func:`identification.validation.fit_warnings.controller_loop_warning`), and its gyro
+    filter's corner what the closed-loop check's world reads the gyro through
+    (:func:`identification.validation.fit_warnings.gyro_filter`)."""
     import json
 
     try:
@@ -108,9 +110,9 @@ def _imported_from(csv_path) -> dict:
         return {}
     if not isinstance(meta, dict) or not isinstance(meta.get("format"), str):
         return {}
-    loop = meta.get("loop_rate_hz")
-    return {"imported_from": {"format": meta["format"], "input_source": str(meta.get("input_source", "")),
-                              **({"loop_rate_hz": float(loop)} if isinstance(loop, (int, float)) and loop > 0 else {})}}
+    stated = {k: float(meta[k]) for k in ("loop_rate_hz", "gyro_filter_hz")
+              if isinstance(meta.get(k), (int, float)) and meta[k] > 0}
+    return {"imported_from": {"format": meta["format"], "input_source": str(meta.get("input_source", "")), **stated}}
 
 
 def _check_regular_file(path: Path) -> None:

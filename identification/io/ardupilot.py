@@ -212,6 +212,8 @@ def load_ardupilot(path, allow_damaged: bool = False) -> RawLog:
     meta = {"firmware": firmware, "frame": params.get("FRAME"), "parser": "pymavlink DFReader", **meta_end}
     if params.get("SCHED_LOOP_RATE", 0.0) > 0:  # the main loop's rate, the rate controller's (ArduCopter >= 3.4)
         meta["loop_rate_hz"] = float(params["SCHED_LOOP_RATE"])
+    if params.get("INS_GYRO_FILTER", 0.0) > 0:  # the gyro's 2-pole low-pass, before the loop reads it and the log
+        meta["gyro_filter_hz"] = float(params["INS_GYRO_FILTER"])
     return RawLog(path=path, format="ardupilot-dataflash", vehicle=vehicle, rates=rates, attitude=attitude,
                   inputs=inputs, input_notes=notes, unavailable=unavailable, default_input=default, servos=servos,
                   segment_signals=SegmentSignals(power=power, accel=accel, altitude=altitude,

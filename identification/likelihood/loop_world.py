@@ -15,7 +15,7 @@ rate, the world makes that bias too, and the check removes it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import MappingProxyType, SimpleNamespace
 
 import numpy as np
@@ -23,7 +23,7 @@ import numpy as np
 from heli_core.terms import AXES, STICK_ROW
 
 from ..flight import Flight
-from ..validation.fit_warnings import CONTROLLER_SOURCES, FASTER_LOOP, input_source
+from ..validation.fit_warnings import CONTROLLER_SOURCES, FASTER_LOOP, gyro_filter, input_source
 from ..validation.model_verdict import bound_side
 from .axis_likelihood import MIN_SERVO_DELAY, AxisLikelihood
 from .pilot_model import AxisSignals, PilotModel, fit_pilot, reaction_delay
@@ -40,6 +40,9 @@ has no noise for the pilot fit to tell a pilot's sticks from a controller's by."
 MAX_LOOP_TICKS = 40
 """Most ticks of a flight controller's loop flown per logged sample (:func:`loop_ticks`: a 4 kHz loop logged at
 100 Hz)."""
+
+MAX_CORNER_SHARE = 0.9
+"""A stated gyro filter is flown where its corner is below this share of the loop tick's Nyquist rate."""
 
 MAX_RATE_RATIO = 2.0
 """A simulated loop whose rate's standard deviation is further than this factor from the logged one's is not
@@ -83,6 +86,7 @@ class _AxisLoop:
     dt: float  # the log's sample
     servo: np.ndarray  # (e_rz, e_zz, h0 rate, h0 servo, h1 rate, h1 servo): the stick's path (_stick_path)
     ticks: int = 1  # the loop's ticks per sample (loop_ticks): Ad, g0, g1, noise_root and servo are a tick's
+    gyro_filter: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (b0, b1, b2, a1, a2) of the gyro's low-pass at a tick (gyro_biquad)
 
 
 def axis_names(ident, a: int, fit, data) -> tuple[str, str, tuple]:
@@ -104,6 +108,10 @@ def skip_reason(ident, a: int, fit, data) -> str:
     if share < MIN_NOISE_SHARE and not fast:
         return (f"the gyro shows next to no white noise ({100 * share:.2g} % of the rate's std; a log filtered before "
                 "it was written): there is nothing in the rate a pilot could see better than it")
+    if fast and _unstated_filter(ident.flights_):
+        return ("its gyro was low-passed before it was logged (the fit's rate was lowered for it) and the log does "
+                "not state the filter's corner, which the flight controller's law reads through: the loop's world "
+                "cannot fly it (state it: --gyro-filter HZ, ArduPilot's INS_GYRO_FILTER)")
     if fit.delay < -MIN_SERVO_DELAY:
         return ("its stick was found logged late (a negative alignment): the loop flies a servo, not a log's "
                 "timing")
@@ -112,6 +120,26 @@ def skip_reason(ident, a: int, fit, data) -> str:
     if data.servo_row is None:
         return "no stick term"
     return ""
+
+
+def _unstated_filter(flights) -> bool:
+    """Some of ``flights`` was thinned for a filtered gyro (:func:`identification.fit_rate.thinned`) without a
+    stated corner (:func:`~identification.validation.fit_warnings.gyro_filter`)."""
+    return any(f.metadata.get("fit_every", 1) > 1 and gyro_filter(f.metadata) is None for f in flights)
+
+
+def gyro_biquad(flight, tick: float) -> np.ndarray:
+    """``(b0, b1, b2, a1, a2)`` of the 2-pole Butterworth low-pass ``flight``'s log states its gyro passed
+    (:func:`~identification.validation.fit_warnings.gyro_filter`), designed at the loop's tick ``tick`` [s] as the
+    firmware designs it (bilinear, ArduPilot's ``LowPassFilter2p``); empty where none is stated or its corner is
+    not below the tick's Nyquist rate (nothing the world's ticks could fly)."""
+    corner = gyro_filter(flight.metadata)
+    if corner is None or corner >= MAX_CORNER_SHARE * 0.5 / tick:
+        return np.zeros(0)
+    from scipy.signal import butter
+
+    b, a = butter(2, corner, fs=1.0 / tick)
+    return np.array([b[0], b[1], b[2], a[1], a[2]], dtype=float)
 
 
 def has_servo(fit) -> bool:
@@ -182,6 +210,8 @@ def axis_loops(ident, data: dict) -> tuple[dict, dict]:
         return loops, {}
     for i, flight in enumerate(ident.flights_):
         ticks = loop_ticks(flight, data[axes[0]].dt)
+        # the filter runs at the controller's loop: flown where the world flies that loop
+        biquad = gyro_biquad(flight, data[axes[0]].dt / ticks) if ticks > 1 else np.zeros(0)
         # a controller faster than its log: its law reads the state the sample it commands (a tick before it)
         d = 0 if ticks > 1 else reaction_delay([built[axis][0][i] for axis in axes])
         for axis in axes:
@@ -190,7 +220,7 @@ def axis_loops(ident, data: dict) -> tuple[dict, dict]:
             if ticks > 1:
                 Ad, g0, g1, root, servo = _tick_pieces(ident.axes_[axis], data[axis], ticks)
             loops[axis].append(_AxisLoop(Ad, g0, g1, root, ident.axes_[axis].noise_std, gain, other,
-                                         fit_pilot(sig, d), float(sig.angle[0]), sig.dt, servo, ticks))
+                                         fit_pilot(sig, d), float(sig.angle[0]), sig.dt, servo, ticks, biquad))
     return loops, {axis: built[axis][0] for axis in axes}
 
 
@@ -206,8 +236,12 @@ def _compiled_fly():
     return _COMPILED["fly"]
 
 
-def _fly(Ad, g0, g1, kicks, noise, gain, other, delay, coef, angle_mean, rest, dt, angle0, servo):  # pragma: no cover
+def _fly(Ad, g0, g1, kicks, noise, gain, other, delay, coef, angle_mean, rest, dt, angle0, servo,
+         biquad):  # pragma: no cover
     """The loop over samples: returns the gyro, the angle and the sticks (each (n,)).
+
+    Where ``biquad`` is not empty (:func:`gyro_biquad`) the rate passes that low-pass before the law reads it and the
+    gyro returned is it (``noise`` is then the filtered noise).
 
     ``kicks`` (m, n) are the process noise, ``noise`` (n,) the gyro's; the stick drives the rate through
     ``servo`` (:attr:`_AxisLoop.servo`, its state settled on the trim), the other torque through ``g0``, ``g1``;
@@ -216,6 +250,8 @@ def _fly(Ad, g0, g1, kicks, noise, gain, other, delay, coef, angle_mean, rest, d
     ``delay`` samples before, plus ``rest[k]``, clipped to the stick's range
     (:class:`~identification.likelihood.pilot_model.PilotModel`)."""
     m, n = Ad.shape[0], rest.size
+    filtered = biquad.size == 5
+    s0 = s1 = 0.0
     rate = np.zeros(n)
     angle = np.zeros(n)
     integral = np.zeros(n)
@@ -227,6 +263,11 @@ def _fly(Ad, g0, g1, kicks, noise, gain, other, delay, coef, angle_mean, rest, d
     z = trim
     for k in range(n):
         rate[k] = x[0]
+        if filtered:  # transposed direct form II, from rest: the settling samples start it
+            raw = x[0]
+            rate[k] = biquad[0] * raw + s0
+            s0 = biquad[1] * raw - biquad[3] * rate[k] + s1
+            s1 = biquad[2] * raw - biquad[4] * rate[k]
         if k > 0:
             integral[k] = integral[k - 1] + dt * (angle[k] - angle_mean)
         if k + 1 == n:
@@ -248,7 +289,7 @@ def _fly(Ad, g0, g1, kicks, noise, gain, other, delay, coef, angle_mean, rest, d
             y[r] = s
         y[0] += gain * (servo[0] * z + servo[2] * u[k] + servo[4] * u[j])
         z = servo[1] * z + servo[3] * u[k] + servo[5] * u[j]
-        angle[j] = angle[k] + 0.5 * dt * (x[0] + y[0])
+        angle[j] = angle[k] + 0.5 * dt * (x[0] + y[0])  # the true rate's
         x = y
     return rate + noise, angle, u
 
@@ -273,12 +314,25 @@ def fly_loop(loop: _AxisLoop, rng: np.random.Generator) -> tuple:
     n = (loop.pilot.rest.size + SETTLE) * m
     kicks = loop.noise_root @ rng.standard_normal((loop.Ad.shape[0], n))
     noise = loop.noise_std * rng.standard_normal(n)
+    if loop.gyro_filter.size:  # the noise filtered as the rate is, its std at the log's as fitted
+        noise = _filtered_noise(noise, loop.gyro_filter, m)
     rest = _between(np.concatenate([np.zeros(SETTLE), loop.pilot.rest]), m)
     other = np.repeat(np.concatenate([np.full(SETTLE, loop.other[0]), loop.other]), m)
     p = loop.pilot
     gyro, angle, u = _compiled_fly()(loop.Ad, loop.g0, loop.g1, kicks, noise, loop.gain, other, max(1, p.delay * m),
-                                     p.coefficients, p.angle_mean, rest, loop.dt / m, loop.angle0, loop.servo)
+                                     p.coefficients, p.angle_mean, rest, loop.dt / m, loop.angle0, loop.servo,
+                                     loop.gyro_filter)
     return gyro[SETTLE * m::m], angle[SETTLE * m::m], u[SETTLE * m::m]
+
+
+def _filtered_noise(white: np.ndarray, biquad: np.ndarray, every: int) -> np.ndarray:
+    """``white`` gyro noise at the loop's ticks through ``biquad`` (:func:`gyro_biquad`), scaled so that its std
+    is ``white``'s: the noise the fit measured is the filtered one, seen every ``every``-th tick."""
+    from scipy.signal import lfilter
+
+    out = lfilter(biquad[:3], np.r_[1.0, biquad[3:]], white)
+    scale = np.std(white) / max(float(np.std(out[::every])), 1e-300)
+    return out * scale
 
 
 def _implausible(loop: _AxisLoop, logged: AxisSignals) -> str:

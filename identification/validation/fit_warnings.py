@@ -244,11 +244,25 @@ def input_source(meta) -> tuple[str, float | None]:
     return source, (float(loop) if isinstance(loop, (int, float)) and loop > 0 else None)
 
 
-def stated_controller(flight, loop_hz: float):
+def gyro_filter(meta) -> float | None:
+    """The corner [Hz] of the low-pass a flight's gyro passed before its controller read it and its log wrote it (a
+    2-pole one: ArduPilot's ``INS_GYRO_FILTER``, PX4's ``IMU_GYRO_CUTOFF``; ``--gyro-filter``), None where nothing
+    stated it; from its own metadata or, for a CSV ``heli import`` wrote, the import's."""
+    imported = meta.get("imported_from") or {}
+    corner = imported.get("gyro_filter_hz", meta.get("gyro_filter_hz"))
+    return float(corner) if isinstance(corner, (int, float)) and corner > 0 else None
+
+
+def stated_controller(flight, loop_hz: float | None, gyro_filter_hz: float | None = None):
     """``flight`` with its inputs stated as a flight controller's commands from a loop at ``loop_hz`` (``heli identify``,
-    ``diagnose`` and ``refresh --controller-loop``, and a model's source that recorded it), over what its file or
-    import said (:func:`input_source` reads it back)."""
-    items = {"input_source": "flight controller commands", "loop_rate_hz": float(loop_hz)}
+    ``diagnose`` and ``refresh --controller-loop``, and a model's source that recorded it) and its gyro low-passed at
+    ``gyro_filter_hz`` before the loop read it and the log wrote it (``--gyro-filter``), each where given, over what
+    its file or import said (:func:`input_source` and :func:`gyro_filter` read them back)."""
+    items = {"input_source": "flight controller commands", "loop_rate_hz": float(loop_hz)} if loop_hz else {}
+    if gyro_filter_hz:
+        items["gyro_filter_hz"] = float(gyro_filter_hz)
+    if not items:
+        return flight
     imported = flight.metadata.get("imported_from")
     if imported:  # an import's own statement is read first (input_source): the user's replaces it
         items["imported_from"] = {**imported, **items}

@@ -466,12 +466,15 @@ def segment_read(asked, flight):
     return None if segment is None else (float(segment[0]), float(segment[1]))
 
 
-def source_entry(path, sha256: str | None = None, segment=None, controller_loop_hz: float | None = None) -> dict:
+def source_entry(path, sha256: str | None = None, segment=None, controller_loop_hz: float | None = None,
+                 gyro_filter_hz: float | None = None) -> dict:
     """Provenance entry of a flight file; ``sha256`` when its digest is already known; ``segment`` ``(t0, t1)``
     when the flight was read as that stretch of its log; ``controller_loop_hz`` when its inputs were stated as a
-    flight controller's commands from a loop at that rate (``--controller-loop``), so that ``heli refresh`` reads
-    the flight again the same way (:class:`model_store.model_file.Source`)."""
+    flight controller's commands from a loop at that rate (``--controller-loop``) and ``gyro_filter_hz`` when its
+    gyro was stated low-passed at that corner (``--gyro-filter``), so that ``heli refresh`` reads the flight again
+    the same way (:class:`model_store.model_file.Source`)."""
     p = Path(path)
     return {"file": p.name, "sha256": sha256 or sha256_of(p),
             **({"segment": [float(segment[0]), float(segment[1])]} if segment is not None else {}),
-            **({"controller_loop_hz": float(controller_loop_hz)} if controller_loop_hz else {})}
+            **({"controller_loop_hz": float(controller_loop_hz)} if controller_loop_hz else {}),
+            **({"gyro_filter_hz": float(gyro_filter_hz)} if gyro_filter_hz else {})}

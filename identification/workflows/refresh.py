@@ -154,12 +154,15 @@ class RefreshSettings:
         The new flights' inputs stated as a flight controller's commands from a loop at this rate [Hz]
         (``heli refresh --controller-loop``, for CSVs that cannot say so; as ``heli identify``'s); recorded in their
         sources. The previous flights are stated as their sources record, whatever this says.
+    gyro_filter : float, optional
+        The new flights' gyro stated low-passed at this corner [Hz] before their controller read it and their log
+        wrote it (``heli refresh --gyro-filter``, as ``heli identify``'s); recorded in their sources likewise.
 
     Raises
     ------
     RefreshError
         ``fit`` not one of :data:`FIT_CHOICES`, ``alpha`` outside (0, 1), a negative ``min_relative`` or a
-        ``controller_loop`` not above 0.
+        ``controller_loop`` or ``gyro_filter`` not above 0.
     """
 
     previous_flights: tuple = ()
@@ -175,6 +178,7 @@ class RefreshSettings:
     stage: object = None
     segment: object = None
     controller_loop: float | None = None
+    gyro_filter: float | None = None
 
     def __post_init__(self):
         if self.fit not in FIT_CHOICES:
@@ -185,6 +189,8 @@ class RefreshSettings:
             raise RefreshError(f"min_relative must be >= 0, got {self.min_relative!r}")
         if self.controller_loop is not None and not self.controller_loop > 0:
             raise RefreshError(f"controller_loop must be a loop rate in Hz above 0, got {self.controller_loop!r}")
+        if self.gyro_filter is not None and not self.gyro_filter > 0:
+            raise RefreshError(f"gyro_filter must be a filter's corner in Hz above 0, got {self.gyro_filter!r}")
 
 
 def refresh_model(model_dir, new_flights, *, settings: RefreshSettings | None = None, wait: bool = True,
@@ -269,12 +275,13 @@ def _at_model_rate(flight, model_hz):
         "log")
 
 
-def _read_flights(paths, desc: str, show: bool, segments=None, loops=None, model_hz=None) -> list:
+def _read_flights(paths, desc: str, show: bool, segments=None, loops=None, model_hz=None, filters=None) -> list:
     """Read ``paths`` with a bar only on a terminal (``disable=None``: tqdm's own check; off one, a failing
     read's error would land on the bar's line), closed on an error too; each as the stretch ``segments`` gives
-    for it (``(t0, t1)``: the one its model recorded) or None (the file as it reads by default), and its inputs
-    stated as a flight controller's from a loop at the rate ``loops`` gives for it (None: as its file states them),
-    at the model's rate ``model_hz`` (:func:`_at_model_rate`)."""
+    for it (``(t0, t1)``: the one its model recorded) or None (the file as it reads by default), its inputs
+    stated as a flight controller's from a loop at the rate ``loops`` gives for it and its gyro low-passed at the
+    corner ``filters`` gives (None: as its file states them), at the model's rate ``model_hz``
+    (:func:`_at_model_rate`)."""
     from tqdm import tqdm
 
     from ..io import read_log
@@ -282,10 +289,11 @@ def _read_flights(paths, desc: str, show: bool, segments=None, loops=None, model
 
     segments = list(segments) if segments is not None else [None] * len(paths)
     loops = list(loops) if loops is not None else [None] * len(paths)
-    with tqdm(list(zip(paths, segments, loops)), desc=desc, unit="flight", disable=None if show else True) as bar:
-        flights = [(read_log(p, segment=seg), loop) for p, seg, loop in bar]
-    return [_at_model_rate(flight if loop is None else stated_controller(flight, loop), model_hz)
-            for flight, loop in flights]
+    filters = list(filters) if filters is not None else [None] * len(paths)
+    with tqdm(list(zip(paths, segments)), desc=desc, unit="flight", disable=None if show else True) as bar:
+        flights = [read_log(p, segment=seg) for p, seg in bar]
+    return [_at_model_rate(stated_controller(flight, loop, corner), model_hz)
+            for flight, loop, corner in zip(flights, loops, filters)]
 
 
 @dataclass
@@ -316,9 +324,12 @@ class _Refresh:
         self.doc = tx.base.document
         self.structure, self.kw = identifier_settings(self.doc, str(self.model_path))
         self.estimator = estimator_of(self.doc, str(self.model_path))
-        if settings.controller_loop is not None and self.estimator != "ml":  # as heli identify refuses it
-            raise RefreshError(f"{self.model_path}: a controller loop is flown by the maximum-likelihood estimator's "
-                               f"check only; this model was identified by the {self.estimator} method")
+        stated = [name for name, v in (("a controller loop", settings.controller_loop),
+                                       ("a gyro filter", settings.gyro_filter)) if v is not None]
+        if stated and self.estimator != "ml":  # as heli identify refuses them
+            raise RefreshError(f"{self.model_path}: {' and '.join(stated)} {'is' if len(stated) == 1 else 'are'} flown "
+                               "by the maximum-likelihood estimator's check only; this model was identified by the "
+                               f"{self.estimator} method")
         self.old_sources = self.doc.sources
         self.show = (len(new_paths) > 1) if settings.progress is None else settings.progress
         self.seeds = np.random.SeedSequence(settings.seed).spawn(3)
@@ -339,14 +350,15 @@ class _Refresh:
         _say(s, f"{desc}: {s.n_replicates} replicates")
         return interval_bootstrap(flights, fitted, s.n_replicates, s.block, seq, progress=bool(self.show), desc=desc)
 
-    def fitted(self, paths, what: str, why: str, segments=None, loops=None):
-        """(flights, the model's identifier fitted on them), the step announced with ``why``; ``segments`` and
-        ``loops``: the stretch of each log and the controller loop of its inputs its model recorded
-        (:func:`_read_flights`)."""
+    def fitted(self, paths, what: str, why: str, segments=None, loops=None, filters=None):
+        """(flights, the model's identifier fitted on them), the step announced with ``why``; ``segments``,
+        ``loops`` and ``filters``: the stretch of each log, the controller loop of its inputs and its gyro filter its
+        model recorded (:func:`_read_flights`)."""
         n = len(paths)
         _say(self.settings, f"reading and fitting {n} {what} flight{'s' if n != 1 else ''} "
                             f"({'maximum likelihood' if self.estimator == 'ml' else 'integral method'}) {why}")
-        flights = _read_flights(paths, f"reading {what} flights", self.show, segments, loops, self.doc.sample_rate)
+        flights = _read_flights(paths, f"reading {what} flights", self.show, segments, loops, self.doc.sample_rate,
+                                filters)
         return flights, self.identifier().fit(flights)
 
     def run(self) -> RefreshResult:
@@ -355,7 +367,8 @@ class _Refresh:
         digests = [sha256_of(p) for p in self.new_paths]
         check_new_flights(self.new_paths, digests, self.old_sources, self.tx.base.entries)
         flights, new_ident = self.fitted(self.new_paths, "new", "for the drift table",
-                                         [s.segment] * len(self.new_paths), [s.controller_loop] * len(self.new_paths))
+                                         [s.segment] * len(self.new_paths), [s.controller_loop] * len(self.new_paths),
+                                         [s.gyro_filter] * len(self.new_paths))
         boot_new = self.uncertainty(new_ident, flights, self.seeds[0], "bootstrap (new flights)")
         names = list(boot_new.names)
         previous = self.previous(names, boot_new)
@@ -400,7 +413,8 @@ class _Refresh:
             return _Previous(found, missing, [], None, se_old, se_source, None, [note] if note else [])
         old_flights, old_ident = self.fitted([f["path"] for f in found], "previous", "for the current model's "
                                              "uncertainty", [f.get("segment") for f in found],
-                                             [f.get("controller_loop_hz") for f in found])
+                                             [f.get("controller_loop_hz") for f in found],
+                                             [f.get("gyro_filter_hz") for f in found])
         boot_old = self.uncertainty(old_ident, old_flights, self.seeds[1], "bootstrap (previous flights)")
         old_params = self.tx.base.params
         diff = max((abs(old_ident.params_.get(k) - old_params.get(k)) / max(abs(old_params.get(k)), 1e-12)
@@ -449,7 +463,7 @@ class _Refresh:
         pooled = result.fit == "pooled"
         kept = _keep_in_history(tx.root)
         old_digest = tx.base.model_sha256
-        new_sources = [source_entry(p, sha, segment_read(s.segment, f), s.controller_loop)
+        new_sources = [source_entry(p, sha, segment_read(s.segment, f), s.controller_loop, s.gyro_filter)
                        for p, sha, f in zip(self.new_paths, digests, flights)]
         created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
         record = {

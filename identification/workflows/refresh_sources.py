@@ -84,8 +84,9 @@ def find_source_flights(sources, search_dirs=(), candidates=()) -> tuple[list, l
     -------
     found : list of dict
         ``{"file", "sha256", "path"}`` per source found (its bytes hash to the recorded SHA-256), ``"segment"``
-        where the model was fitted on that stretch of the log, and ``"controller_loop_hz"`` where its inputs were
-        stated as a flight controller's commands from a loop at that rate.
+        where the model was fitted on that stretch of the log, ``"controller_loop_hz"`` where its inputs were
+        stated as a flight controller's commands from a loop at that rate and ``"gyro_filter_hz"`` where its gyro
+        was stated low-passed at that corner.
     missing : list of dict
         Sources not found (or found with other content: ``"note"`` says so).
     """
@@ -110,10 +111,11 @@ def find_source_flights(sources, search_dirs=(), candidates=()) -> tuple[list, l
                     note = f"{p} has other content (SHA-256 differs)"
         if path is not None:
             segment = getattr(src, "segment", None)  # the stretch of its log the model was fitted on
-            loop = getattr(src, "controller_loop_hz", None)  # its inputs stated as a controller's (--controller-loop)
+            # its inputs stated as a controller's (--controller-loop), its gyro as filtered (--gyro-filter)
+            stated = {k: getattr(src, k, None) for k in ("controller_loop_hz", "gyro_filter_hz")}
             found.append({"file": name, "sha256": sha, "path": str(path)}
                          | ({"segment": tuple(segment)} if segment is not None else {})
-                         | ({"controller_loop_hz": loop} if loop is not None else {}))
+                         | {k: v for k, v in stated.items() if v is not None})
         else:
             missing.append({"file": name, "sha256": sha} | ({"note": note} if note else {}))
     return found, missing
