@@ -9,8 +9,14 @@ flights with the gyro through 20 Hz and logged at 100 Hz, dampings 2 to 45 times
 0.13 s (docs/method.md, "A filtered gyro").
 
 Fitted at a lower rate, where the filter's corner lies near the new Nyquist frequency, the noise is white again
-and the same flights fit within a few per cent. Whether a log needs it is decided by the data, the way the damping
-reacts (:func:`choose_fit_rate`): the flight fitted at its rate and at half of it (every second sample) with
+and the same flights fit within a few per cent. Where the log states the filter's corner (ArduPilot's
+``INS_GYRO_FILTER``; ``--gyro-filter``) the log is thinned until neighbouring samples of its filtered noise
+correlate by at most :data:`WHITE_ENOUGH` (:func:`stated_every`), and the data are not asked: they may miss a filter
+that does not inflate the damping but still halves the noise the fit reads, on which the closed-loop check builds
+its world, and a flight controller's loop biases the damping differently at each rate, which the damping's test
+below takes for a filter (the sluggish aircraft behind a stated 30 Hz filter: thinned again from 50 to 25 Hz on a
+roll ratio of 2.9, its dampings then 22-98 % off). Where no corner is stated, whether a log needs it is decided by
+the data, the way the damping reacts (:func:`choose_fit_rate`): the flight fitted at its rate and at half of it (every second sample) with
 ``heli identify``'s timing (a servo delay and lag searched where the data suggest one: on a filtered gyro that is
 where the fit runs away first, a "servo lag" of 0.1 s before a damping at the search's bound, while the fit without
 them may look sound). A white gyro gives the two fits' dampings within a few per cent (the full rate's at most 1.08
@@ -70,17 +76,13 @@ class FitRate:
     steps : tuple of (float, dict)
         Per rate tried, the rate [Hz] and per axis the damping fitted there over the one fitted at half of it.
     corner : float or None
-        The gyro filter's corner the log states [Hz] where it thinned the log before the data were asked
-        (:func:`stated_every`), else None.
-    stated : int
-        The thinning that corner asked for (1 where none).
+        The gyro filter's corner the log states [Hz] where it thinned the log (:func:`stated_every`), else None.
     """
 
     every: int
     log_hz: float
     steps: tuple = ()
     corner: float | None = None
-    stated: int = 1
 
     @property
     def hz(self) -> float:
@@ -95,14 +97,10 @@ class FitRate:
 
         tried = "; ".join(ratios(s) for s in self.steps)
         if self.corner is not None:
-            stated = (f"fitted at {self.hz:g} Hz, every {nth(self.every)} sample of the {self.log_hz:g} Hz log: the log "
-                      f"states its gyro low-passed at {self.corner:g} Hz, whose noise is not white faster than "
-                      f"{self.log_hz / self.stated:g} Hz (neighbouring samples correlate by more than {WHITE_ENOUGH:g}, "
-                      "and the likelihood, which takes it for white, reads part of it as motion)")
-            if not self.steps:
-                return stated
-            further = "were above" if self.every > self.stated else "agree within"
-            return stated + f"; from there the dampings at a rate over those at half of it {further} {RATIO:g} ({tried})"
+            return (f"fitted at {self.hz:g} Hz, every {nth(self.every)} sample of the {self.log_hz:g} Hz log: the log "
+                    f"states its gyro low-passed at {self.corner:g} Hz, whose noise is not white faster (neighbouring "
+                    f"samples correlate by more than {WHITE_ENOUGH:g}, and the likelihood, which takes it for white, "
+                    "reads part of it as motion)")
         if self.every == 1:
             return (f"fitted at the log's {self.log_hz:g} Hz: the dampings fitted there and at half of it agree "
                     f"(their ratio {tried}; a filtered gyro's is above {RATIO:g})" if self.steps else
@@ -187,22 +185,26 @@ def stated_every(flights, log_hz: float, min_rate: float = MIN_RATE) -> tuple[in
 
 def choose_fit_rate(flights, ratio: float = RATIO, min_rate: float = MIN_RATE) -> FitRate:
     """The rate ``flights`` (one log's, at one rate) are fitted at (module docstring): where the log states its gyro
-    filter, first halved until its noise is white enough there (:func:`stated_every`); then halved while, on some
-    axis, the damping fitted at a rate exceeds the one fitted at half of it by ``ratio``, and the half rate is at
-    least ``min_rate``.
+    filter, halved until its noise is white enough there (:func:`stated_every`), the data not asked; else halved
+    while, on some axis, the damping fitted at a rate exceeds the one fitted at half of it by ``ratio``, and the half
+    rate is at least ``min_rate``.
 
     Raises
     ------
     ValueError
         Flights of different rates.
     """
+    from .validation.fit_warnings import gyro_filter
+
     flights = list(flights)
     rates = {round(f.sample_rate, 6) for f in flights}
     if len(rates) != 1:
         raise ValueError(f"expected flights of one sample rate, got {sorted(rates)} Hz")
     log_hz = round(float(flights[0].sample_rate), 6)  # a clock's last bits (100.00000000000213) are no rate
     every, corner = stated_every(flights, log_hz, min_rate)
-    stated, steps, here = every, [], None
+    if all(gyro_filter(f.metadata) for f in flights):  # the filter stated: nothing for the data to guess
+        return FitRate(every, log_hz, (), corner)
+    steps, here = [], None
     while log_hz / (2 * every) >= min_rate:
         here = _dampings(flights, every) if here is None else here
         half = _dampings(flights, 2 * every)
@@ -213,7 +215,7 @@ def choose_fit_rate(flights, ratio: float = RATIO, min_rate: float = MIN_RATE) -
         if not inflated:
             break
         every, here = 2 * every, half
-    return FitRate(every, log_hz, tuple(steps), corner, stated)
+    return FitRate(every, log_hz, tuple(steps))
 
 
 def every_for(log_hz: float, hz: float) -> int:

@@ -120,7 +120,8 @@ def _one(job):
     from heli_core.terms import AXES, TERMS
     from identification.likelihood.input_hold import std_errors_with_hold
 
-    aircraft, cell, rate, seed, duration, diagnose, effect, closed_loop, settings, delays, at_truth, fit_rate = job
+    (aircraft, cell, rate, seed, duration, diagnose, effect, closed_loop, settings, delays, at_truth, fit_rate,
+     unstated) = job
     with threadpool_limits(limits=1, user_api="blas"):
         config = replace(BENCH_CELLS[cell], duration=duration, sample_rate=float(rate), **dict(settings))
         truth = replace(_aircraft(aircraft), **{f"tau_{axis}": tau for axis, tau in delays})
@@ -128,7 +129,8 @@ def _one(job):
         truth = sim.truth.values()
         out = {"aircraft": aircraft, "cell": cell, "rate": rate, "seed": seed}
         t0 = time.perf_counter()
-        (flight,), chosen = at_fit_rate([sim.flight], fit_rate)  # as heli identify reads a log (--fit-rate)
+        logged = sim.flight.with_metadata(gyro_filter_hz=None) if unstated else sim.flight  # a CSV's: no corner
+        (flight,), chosen = at_fit_rate([logged], fit_rate)  # as heli identify reads a log (--fit-rate)
         out["fit_every"] = chosen.every
         try:
             ml = MaximumLikelihoodIdentifier(**CLI_TIMING, closed_loop=closed_loop).fit(flight)
@@ -303,6 +305,9 @@ def main(argv=None) -> None:
                     "default) or the log's own ('log')")
     ap.add_argument("--at-truth", action="store_true",
                     help="also fly the check at the truth's values (the exact correction and the spread there)")
+    ap.add_argument("--unstated-filter", action="store_true",
+                    help="the logs do not state their gyro filter's corner (a CSV without --gyro-filter; an "
+                    "ArduPilot log states INS_GYRO_FILTER)")
     args = ap.parse_args(argv)
     from identification.bench.cells import BENCH_CELLS
     from identification.bench.flight_config import EFFECTS
@@ -322,7 +327,7 @@ def main(argv=None) -> None:
     if args.at_truth and check is None:
         raise SystemExit("--at-truth flies the closed-loop check again: it needs --closed-loop auto")
     jobs = [(a, c, r, s, args.duration, args.diagnose, args.effect, check, settings, delays, args.at_truth,
-             args.fit_rate)
+             args.fit_rate, args.unstated_filter)
             for a in args.aircraft for c in args.cells for r in args.rates
             for s in range(args.first_seed, args.first_seed + args.seeds)]
     from tqdm import tqdm
@@ -341,7 +346,8 @@ def main(argv=None) -> None:
           + (" --set " + " ".join(shlex.quote(f"{k}={v!r}") for k, v in settings) if settings else "")
           + (" --servo-delay " + " ".join(f"{a}={t:g}" for a, t in delays) if delays else "")
           + ("" if check else " --closed-loop off") + (" --at-truth" if args.at_truth else "")
-          + (" --fit-rate log" if args.fit_rate == "log" else ""))
+          + (" --fit-rate log" if args.fit_rate == "log" else "")
+          + (" --unstated-filter" if args.unstated_filter else ""))
     _table(rows, args.diagnose, args.effect)
     _truth_table(rows)
 

@@ -124,7 +124,7 @@ def test_the_loop_drives_the_rate_through_the_servo_the_likelihood_fits(tau, lag
     fit = SimpleNamespace(delay=tau, lag=lag, input_hold=hold)
     servo = _stick_path(fit, damping, g0, g1, dt)
     rate, _, u = _compiled_fly()(Ad, g0, g1, np.zeros((Ad.shape[0], n)), np.zeros(n), gain, np.zeros(n), 1,
-                                 np.zeros(5), 0.0, stick, dt, 0.0, servo)
+                                 np.zeros(5), 0.0, stick, dt, 0.0, servo, np.zeros(0))
     np.testing.assert_allclose(u, stick)
     if tau or lag:
         v = servo_increments(stick, damping, tau, dt, hold, lag)
@@ -252,7 +252,7 @@ def test_an_axis_clear_of_the_loops_bias_is_not_fitted_again_while_another_axis_
     def checks(yaw_z):
         fitted.clear()
         z = {"k7": 2.0, "k11": yaw_z}  # the dampings' z: pitch in doubt (CONCLUSIVE's 1-3)
-        monkeypatch.setattr(closed_loop, "_damping_z", lambda rel: z[list(rel)[1]])
+        monkeypatch.setattr(closed_loop, "_damping_z", lambda rel, either=False: z[list(rel)[1]])
         return closed_loop.check_closed_loop(ml, 2, mode="report", workers=1, max_flights=4)
 
     monkeypatch.setattr(closed_loop, "axis_refit", counted)

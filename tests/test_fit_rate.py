@@ -40,7 +40,7 @@ def test_a_filtered_gyros_log_is_fitted_at_half_its_rate_and_fits_there(filtered
 
 def test_a_log_that_states_its_gyro_filter_is_thinned_until_its_noise_is_white_enough(filtered):
     """20 Hz stated on a 100 Hz log: neighbouring samples of the filtered noise correlate by 0.58 at 100 Hz and 0.13
-    at 50 Hz, so 50 Hz is taken before the data are asked; they are then asked from there (50 Hz against 25 Hz)."""
+    at 50 Hz, so 50 Hz is taken and the data are not asked."""
     from identification.fit_rate import WHITE_ENOUGH, filtered_noise_correlation, stated_every
 
     assert filtered_noise_correlation(20.0, 0.01) == pytest.approx(0.578, abs=1e-3)
@@ -50,9 +50,11 @@ def test_a_log_that_states_its_gyro_filter_is_thinned_until_its_noise_is_white_e
     assert stated_every([filtered.flight], 50.0) == (1, None)  # white enough at the log's own rate
     assert stated_every([filtered.flight.with_metadata(gyro_filter_hz=None)], 100.0) == (1, None)
     (flight,), chosen = at_fit_rate([filtered.flight])
-    assert chosen.every == 2 and chosen.corner == 20.0 and chosen.stated == 2
-    assert [rate for rate, _ in chosen.steps] == [50.0]  # the data asked from the stated rate on
+    assert chosen.every == 2 and chosen.corner == 20.0 and chosen.steps == ()
     assert "the log states its gyro low-passed at 20 Hz" in flight.metadata["fit_rate"]
+    fast = simulate_flight(10, seed=3, config=replace(BENCH_CELLS["independent"], gyro_filter_hz=45.0)).flight
+    (same,), kept = at_fit_rate([fast])  # 45 Hz stated: white enough at 100 Hz, and the data not asked
+    assert same is fast and kept == FitRate(1, 100.0)
 
 
 def test_a_white_gyros_log_is_fitted_at_its_own_rate_untouched():

@@ -24,10 +24,11 @@ gyro), and that shapes the phase as a delay shorter than a sample would: the ben
 100 Hz log put a yaw delay of 4.5-6.1 ms at LR 25-43 on effect-free flights, its damping +23-43 % with it after the
 check, where the check's world, which flies the loop without those filters, made it on none of 16 flights. A
 delay found within one logged sample of such a flight is therefore the loop's without a world flown
-(:attr:`DelayCheck.inside_sample`), where the check flies that loop to remove its bias (an axis the check cannot fly
-keeps its delay: the bench's autopilot behind a gyro filter the log does not state, fitted at 50 Hz, read its
-dampings +12 to +15 % with its 5 ms delay, -7 to -14 % without it); a longer one (a real servo's 10-30 ms at 100 Hz)
-is tested as above.
+(:attr:`DelayCheck.inside_sample`), also where the check then cannot fly the axis (the bench's autopilot behind a
+gyro filter the log does not state, fitted at 50 Hz: its dampings +12 to +15 % with its 5 ms delay, -7 to -14 %
+without it, and a delay a quarter of the sample long is one no fixed-step simulation at the log's rate can follow:
+the model kept with it diverged in the forward simulation at 0.1 s); a longer one (a real servo's 10-30 ms at
+100 Hz) is tested as above.
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ from ..errors import IdentifiabilityError
 from .axis_likelihood import MIN_SERVO_DELAY
 from .axis_pool import map_axes
 from .closed_loop import axis_refit
-from .loop_world import flown_flights, log_ticks, with_fits, world_loops
+from .loop_world import flown_flights, gyro_biquad, log_ticks, with_fits, world_loops
 
 N_DELAY_FLIGHTS = 16
 """Flights of the delay-free world flown per delay tested (the loop's optimum appeared on 1 of 10)."""
@@ -78,6 +79,9 @@ class DelayCheck:
     inside_sample : int
         Ticks of a flight controller's loop per logged sample where the delay lies within one sample of a loop
         faster than the log (module docstring): the loop's without a world flown; else 0.
+    kind : str
+        ``"delay"``, or ``"lag"`` for a servo lag within one sample of such a loop read through the gyro filter the
+        log states (:func:`check_filter_lag`; ``delay`` is then the lag's time constant).
     """
 
     axis: str
@@ -90,18 +94,24 @@ class DelayCheck:
     removed: bool = False
     fit: object = field(default=None, repr=False, compare=False)  # the delay-free fit
     inside_sample: int = 0
+    kind: str = "delay"
 
     def describe(self) -> dict:
         """JSON-ready."""
         return {"axis": self.axis, "delay_s": self.delay, "flight_lr": self.flight_lr,
                 "world": [list(w) for w in self.world], "loops": self.loops, "removed": self.removed,
-                "reason": self.reason, "inside_sample": self.inside_sample}
+                "reason": self.reason, "inside_sample": self.inside_sample, "kind": self.kind}
 
     def line(self) -> str:
         """One line for a report or the terminal."""
-        what = f"{self.axis}: servo delay {1000 * self.delay:.1f} ms"
+        what = f"{self.axis}: servo {self.kind} {1000 * self.delay:.1f} ms"
         if self.reason:
             return f"{what} not tested in the loop's world ({self.reason})"
+        if self.kind == "lag":
+            verdict = "the axis is fitted without it" if self.removed else "reported, kept"
+            return (f"{what} lies within one logged sample of a flight controller's loop {self.inside_sample}x faster "
+                    "than the log, read through the gyro filter the log states, which the check's world flies: the "
+                    f"filter's lag ({verdict})")
         if self.inside_sample:
             verdict = "the axis is fitted without it" if self.removed else "reported, kept"
             return (f"{what} (LR {self.flight_lr:.1f}) lies within one logged sample of a flight controller's loop "
@@ -117,6 +127,38 @@ class DelayCheck:
         """A world's flight with ``delay`` at likelihood ratio ``lr`` makes the flight's delay: within one sample
         of it, at :data:`REPRODUCED_SHARE` of its likelihood ratio or more."""
         return abs(delay - self.delay) <= self.dt * (1.0 + 1e-6) and lr >= REPRODUCED_SHARE * self.flight_lr
+
+
+def filter_lag_candidates(ident) -> list:
+    """The axes whose fit took a servo lag within one logged sample where every flight is a flight controller's loop
+    faster than its log read through a gyro filter the log states (:func:`check_filter_lag`)."""
+    dt = float(ident.flights_[0].dt)
+    ticks = log_ticks(ident.flights_, dt)
+    if ticks <= 1 or not all(gyro_biquad(f, dt / ticks).size for f in ident.flights_):
+        return []
+    return [axis for axis, fit in ident.axes_.items() if 0.0 < fit.lag <= dt * (1.0 + 1e-6)]
+
+
+def check_filter_lag(ident, axis: str) -> DelayCheck:
+    """Axis ``axis``' servo lag within one sample of a flight controller's loop read through the gyro filter the log
+    states: the filter's lag, which the check's world flies, read as the servo's (the sluggish aircraft behind a
+    20 Hz filter at an 800 Hz loop, fitted at 50 Hz: pitch and yaw lags of 9.7 ms, the world then flying the lag
+    and the filter both and measuring dampings -49 and -59 % where the fit was +73 and +63 %; the delay's rule of
+    the module docstring for a lag). Returns the lag-free fit in ``fit`` where the check's world can fly the axis."""
+    fit, dt = ident.axes_[axis], float(ident.flights_[0].dt)
+    decision = getattr(ident, "hold_decision_", None) or {}
+    hold = decision.get("fraction", fit.input_hold)
+    kept = ident._kept_terms(AXES.index(axis), fit)
+    try:
+        free = axis_refit(ident, axis, kept, ident.flights_, hold).axes_[axis]
+    except IdentifiabilityError as exc:
+        return DelayCheck(axis, fit.lag, reason=f"the axis could not be fitted without it ({exc})", dt=dt, kind="lag")
+    null_fit = replace(free, dropped=fit.dropped)
+    _, why = world_loops(with_fits(ident, {axis: null_fit}), (axis,))
+    if why:
+        return DelayCheck(axis, fit.lag, reason=why, dt=dt, kind="lag")
+    return DelayCheck(axis, fit.lag, loops=True, dt=dt, fit=null_fit, inside_sample=log_ticks(ident.flights_, dt),
+                      kind="lag")
 
 
 def delay_candidates(ident) -> list:
@@ -155,13 +197,13 @@ def check_delay(ident, axis: str, min_lr: float, n_flights: int = N_DELAY_FLIGHT
         return DelayCheck(axis, fit.delay, flight[1], reason=f"refitted at the log's hold the flight itself does not "
                           f"keep it (LR {flight[1]:.1f})", dt=dt)
     null_fit = replace(flight[2], dropped=fit.dropped)
-    world = with_fits(ident, {axis: null_fit})
-    loops, why = world_loops(world, (axis,))  # the closed-loop check's own reasons not to fly an axis
-    if why:  # a delay inside a sample too: taken for the loop's only where the check flies that loop
-        return DelayCheck(axis, fit.delay, reason=why, dt=dt)
     ticks = log_ticks(ident.flights_, dt)
     if ticks > 1 and flight[0] <= dt * (1.0 + 1e-6):
         return DelayCheck(axis, flight[0], flight[1], loops=True, dt=dt, fit=null_fit, inside_sample=ticks)
+    world = with_fits(ident, {axis: null_fit})
+    loops, why = world_loops(world, (axis,))  # the closed-loop check's own reasons not to fly an axis
+    if why:
+        return DelayCheck(axis, fit.delay, reason=why, dt=dt)
 
     def one(b):
         flights = flown_flights(world, axis, loops[axis], np.random.default_rng([seed, b, 7]))
@@ -180,11 +222,11 @@ def check_delay(ident, axis: str, min_lr: float, n_flights: int = N_DELAY_FLIGHT
 
 
 def remove_delay(ident, check: DelayCheck) -> DelayCheck:
-    """Give axis ``check.axis`` of ``ident`` its delay-free fit where the delay was the loop's (``params_``
-    follows: its delay 0). Returns ``check``, marked ``removed`` when it was."""
+    """Give axis ``check.axis`` of ``ident`` its delay- and lag-free fit where the delay (or lag: ``check.kind``) was
+    the loop's (``params_`` follows: its delay and lag 0). Returns ``check``, marked ``removed`` when it was."""
     if not check.loops:
         return check
     fit = check.fit
     ident.axes_[check.axis] = fit
-    ident.params_ = ident.params_.with_values(**fit.params, **{f"tau_{check.axis}": 0.0})
+    ident.params_ = ident.params_.with_values(**fit.params, **{f"tau_{check.axis}": 0.0, f"lag_{check.axis}": 0.0})
     return replace(check, removed=True)

@@ -2,7 +2,8 @@
 :meth:`~identification.likelihood.estimator.MaximumLikelihoodIdentifier.closed_loop_check`:
 
 1. a servo delay the search found is tested in the delay-free loop (:mod:`.delay_check`): a delay that loop makes
-   too is the loop's, and removed (a delay that stands is flown by step 2 through the servo);
+   too is the loop's, and removed (a delay that stands is flown by step 2 through the servo); a servo lag within a
+   sample of a flight controller's loop read through a stated gyro filter is the filter's, and removed likewise;
 2. the bias of each axis is measured in its loop (:mod:`.closed_loop`);
 3. where a bias the loop's way was found, the log's hold is decided again in the loop's world
    (:mod:`.hold_check`), and when it changes, step 2 runs again at the new hold.
@@ -16,7 +17,7 @@ import time
 from dataclasses import replace
 
 from .closed_loop import CLOSED_LOOP_MODES, ClosedLoopCheck, check_closed_loop, check_settings
-from .delay_check import check_delay, delay_candidates, remove_delay
+from .delay_check import check_delay, check_filter_lag, delay_candidates, filter_lag_candidates, remove_delay
 from .hold_check import decide_hold_in_loop, needs_hold_check, switch_hold
 
 
@@ -36,6 +37,7 @@ def run_checks(ident, mode: str, n_flights: int, min_lr_delay: float, workers=No
     check_settings(mode, n_flights)
     t0 = time.perf_counter()
     delays = {axis: check_delay(ident, axis, min_lr_delay, workers=workers) for axis in delay_candidates(ident)}
+    delays |= {axis: check_filter_lag(ident, axis) for axis in filter_lag_candidates(ident)}
     if mode == "auto":
         delays = {axis: remove_delay(ident, tested) for axis, tested in delays.items()}
     check = check_closed_loop(ident, n_flights, mode=mode, workers=workers)

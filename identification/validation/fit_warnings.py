@@ -298,8 +298,11 @@ def controller_loop_warning(flights, advice: bool = True, check=None) -> list[st
     if flown:
         return [cause + f"; the closed-loop check flew the loop at its rate and {flown} (docs/method.md)"]
     cause += " (the bench's autopilot with a loop 4x faster than its log: dampings 17-45 % high; docs/method.md)"
-    return [cause + (". Identify from the pilot's sticks (heli import --inputs sticks: the stabilised aircraft), or "
-                     "from commands and gyro logged at the loop's rate" if advice else "")]
+    unfiltered = any("--gyro-filter" in (c.reason or "") for c in (getattr(check, "axes", {}) or {}).values())
+    state = (". State the gyro filter's corner (--gyro-filter HZ; ArduPilot's INS_GYRO_FILTER, 20 Hz by default): the "
+             "check then flies the loop through it" if unfiltered else "")
+    return [cause + (f"{state}. Identify from the pilot's sticks (heli import --inputs sticks: the stabilised "
+                     "aircraft), or from commands and gyro logged at the loop's rate" if advice else "")]
 
 
 def _flown_at_loop_rate(check) -> str:
