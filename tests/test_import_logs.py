@@ -136,6 +136,18 @@ def test_the_logs_own_loop_rate_is_kept_for_the_fit_s_warning(raw):
     assert to_flight(r, segment="all").metadata.get("loop_rate_hz") == LOOP_RATE_HZ[name]
 
 
+GYRO_FILTER_HZ = {"px4": 40.0, "ardupilot": 20.0, "betaflight": None, "rotorflight": None}
+"""The gyro's 2-pole low-pass each log states: PX4's ``IMU_GYRO_CUTOFF``, ArduPilot's ``INS_GYRO_FILTER``; the
+blackbox logs' first-order filters are not read as one."""
+
+
+def test_the_logs_own_gyro_filter_is_kept_for_the_fit_rate_and_the_check(raw):
+    """The corner sets the rate the log is fitted at (identification.fit_rate.stated_every) and the filter the
+    closed-loop check flies a controller's loop through (identification.likelihood.loop_world.gyro_biquad)."""
+    name, r = raw
+    assert to_flight(r, segment="all").metadata.get("gyro_filter_hz") == GYRO_FILTER_HZ[name]
+
+
 # Least correlation of the attitude derivative with the rates per axis: the two flights
 # (ArduCopter, Betaflight) move a lot; the PX4 sample sits on a bench (rates ~0.1 deg/s)
 # and the Rotorflight log on the ground, so only the sign is checked there.

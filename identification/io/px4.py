@@ -242,6 +242,9 @@ def load_px4(path, allow_damaged: bool = False) -> RawLog:
         "parser": f"pyulog {getattr(pyulog, '__version__', '?')}",
         **meta_end,
     }
+    cutoff = ulog.initial_parameters.get("IMU_GYRO_CUTOFF", 0.0)
+    if isinstance(cutoff, (int, float)) and cutoff > 0:  # the gyro's 2-pole low-pass before the controller and log
+        meta["gyro_filter_hz"] = float(cutoff)
     return RawLog(path=path, format="px4-ulog", vehicle=vehicle, rates=rates, attitude=attitude, inputs=inputs,
                   input_notes=notes, unavailable=unavailable,
                   default_input="controller" if "controller" in inputs else "sticks",
