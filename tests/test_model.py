@@ -411,3 +411,22 @@ def test_servo_settings_per_axis_are_parsed_once_for_both_identifiers():
             IntegralIdentifier(delay=bad)._delays()
         with pytest.raises(ValueError, match="delay"):
             MaximumLikelihoodIdentifier(delay=bad)._delays()
+
+
+def test_a_servo_faster_than_the_sample_is_simulated_in_sub_steps_it_can_follow():
+    """A 5 ms servo delay on a 50 Hz log (what a thinned log's fit can keep): one RK4 step a sample leaves the
+    Padé pole's stability region and the simulation runs away; the default takes the sub-steps the servo needs and
+    agrees with a fine-step simulation."""
+    from heli_core.physics import simulate, stable_substeps
+
+    params = ModelParams(k2=1.3, k3=2.8, k6=-0.9, k7=3.0, k10=13.0, k11=3.8, tau_roll=0.005, tau_pitch=0.005,
+                         tau_yaw=0.005)
+    time = np.arange(500) * 0.02
+    sticks = np.zeros((4, time.size))
+    sticks[0] = 0.3 * np.sign(np.sin(time * 2.0))
+    assert stable_substeps(params, 0.02) == 4 and stable_substeps(ModelParams(), 0.02) == 1
+    with np.errstate(all="ignore"):
+        coarse = simulate(params, time, sticks, substeps=1)
+    assert not np.all(np.abs(coarse[0]) < 100.0)  # NaN or beyond any rotor's rate
+    fine = simulate(params, time, sticks, substeps=40)
+    np.testing.assert_allclose(simulate(params, time, sticks)[0], fine[0], atol=1e-3)
