@@ -16,8 +16,8 @@ that does not inflate the damping but still halves the noise the fit reads, on w
 its world, and a flight controller's loop biases the damping differently at each rate, which the damping's test
 below takes for a filter (the sluggish aircraft behind a stated 30 Hz filter: thinned again from 50 to 25 Hz on a
 roll ratio of 2.9, its dampings then 22-98 % off). Where no corner is stated, whether a log needs it is decided by
-the data, the way the damping reacts (:func:`choose_fit_rate`): the flight fitted at its rate and at half of it (every second sample) with
-``heli identify``'s timing (a servo delay and lag searched where the data suggest one: on a filtered gyro that is
+the data, the way the damping reacts (:func:`choose_fit_rate`): the flight fitted at its rate and at half of it
+(every second sample) with ``heli identify``'s timing (a servo delay and lag searched where the data suggest one: on a filtered gyro that is
 where the fit runs away first, a "servo lag" of 0.1 s before a damping at the search's bound, while the fit without
 them may look sound). A white gyro gives the two fits' dampings within a few per cent (the full rate's at most 1.08
 times the half rate's on the bench's cells, usually below it); a filtered gyro's full-rate damping is inflated,
@@ -247,6 +247,6 @@ def at_fit_rate(flights, setting="auto") -> tuple[list, FitRate]:
         chosen = FitRate(every_for(log_hz, float(setting)), log_hz)
     if chosen.every == 1:
         return flights, chosen
-    reason = chosen.describe() if chosen.steps or chosen.corner else f"fitted at {chosen.hz:g} Hz, every {nth(chosen.every)} " \
-        f"sample of the {log_hz:g} Hz log, as asked"
+    asked = f"fitted at {chosen.hz:g} Hz, every {nth(chosen.every)} sample of the {log_hz:g} Hz log, as asked"
+    reason = chosen.describe() if chosen.steps or chosen.corner else asked
     return [thinned(f, chosen.every).with_metadata(fit_rate=reason) for f in flights], chosen

@@ -96,8 +96,8 @@ def meta_path(csv_path) -> Path:
 
 def _imported_from(csv_path) -> dict:
     """``{"imported_from": {"format", "input_source"[, "loop_rate_hz", "gyro_filter_hz"]}}`` when ``heli import``
-    wrote this CSV from a log (its ``.meta.json`` beside it names the log's format), else ``{}``: advice to import the log again with
-    another input source (``heli import --inputs``) is given only for such a flight, where it can change the
+    wrote this CSV from a log (its ``.meta.json`` beside it names the log's format), else ``{}``: advice to import the
+    log again with another input source (``heli import --inputs``) is given only for such a flight, where it can change the
     outcome; the flight controller's loop rate, where the log stated it, tells whether its commands moved between
     the samples fitted (:func:`identification.validation.fit_warnings.controller_loop_warning`), and its gyro
     filter's corner what the closed-loop check's world reads the gyro through

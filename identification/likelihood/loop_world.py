@@ -86,7 +86,8 @@ class _AxisLoop:
     dt: float  # the log's sample
     servo: np.ndarray  # (e_rz, e_zz, h0 rate, h0 servo, h1 rate, h1 servo): the stick's path (_stick_path)
     ticks: int = 1  # the loop's ticks per sample (loop_ticks): Ad, g0, g1, noise_root and servo are a tick's
-    gyro_filter: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (b0, b1, b2, a1, a2) of the gyro's low-pass at a tick (gyro_biquad)
+    # (b0, b1, b2, a1, a2) of the gyro's low-pass at a tick (gyro_biquad); empty: none flown
+    gyro_filter: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def axis_names(ident, a: int, fit, data) -> tuple[str, str, tuple]:

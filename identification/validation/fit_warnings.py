@@ -254,10 +254,10 @@ def gyro_filter(meta) -> float | None:
 
 
 def stated_controller(flight, loop_hz: float | None, gyro_filter_hz: float | None = None):
-    """``flight`` with its inputs stated as a flight controller's commands from a loop at ``loop_hz`` (``heli identify``,
-    ``diagnose`` and ``refresh --controller-loop``, and a model's source that recorded it) and its gyro low-passed at
-    ``gyro_filter_hz`` before the loop read it and the log wrote it (``--gyro-filter``), each where given, over what
-    its file or import said (:func:`input_source` and :func:`gyro_filter` read them back)."""
+    """``flight`` with its inputs stated as a flight controller's commands from a loop at ``loop_hz`` (``heli
+    identify``, ``diagnose`` and ``refresh --controller-loop``, and a model's source that recorded it) and its gyro
+    low-passed at ``gyro_filter_hz`` before the loop read it and the log wrote it (``--gyro-filter``), each where
+    given, over what its file or import said (:func:`input_source` and :func:`gyro_filter` read them back)."""
     items = {"input_source": "flight controller commands", "loop_rate_hz": float(loop_hz)} if loop_hz else {}
     if gyro_filter_hz:
         items["gyro_filter_hz"] = float(gyro_filter_hz)
