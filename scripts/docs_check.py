@@ -60,6 +60,9 @@ CHECKS = (
     Check("docs/diagnosis.md", "| none |",
           ("scripts/likelihood_diagnosis_study.py", "--seeds", "20", "--duration", "180", "--workers", "2",
            "--cases", "none"), (3,), 1.0),
+    Check("docs/method.md", "| paper | broadband-autopilot | 100 Hz |",
+          ("scripts/aircraft_generalisation.py", "--aircraft", "paper", "--cells", "broadband-autopilot", "--seeds",
+           "2", "--first-seed", "1501", "--set", "gyro_filter_hz=20.0", "log_every=4"), (3, 4, 5, 6, 7, 8), 0.3),
 )
 
 
