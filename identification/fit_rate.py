@@ -97,10 +97,10 @@ class FitRate:
 
         tried = "; ".join(ratios(s) for s in self.steps)
         if self.corner is not None:
-            return (f"fitted at {self.hz:g} Hz, every {nth(self.every)} sample of the {self.log_hz:g} Hz log: the log "
-                    f"states its gyro low-passed at {self.corner:g} Hz, whose noise is not white faster (neighbouring "
-                    f"samples correlate by more than {WHITE_ENOUGH:g}, and the likelihood, which takes it for white, "
-                    "reads part of it as motion)")
+            return (f"fitted at {self.hz:g} Hz, every {nth(self.every)} sample of the {self.log_hz:g} Hz log: its gyro "
+                    f"is stated low-passed at {self.corner:g} Hz (by the log's parameters or --gyro-filter), whose noise "
+                    f"is not white faster (neighbouring samples correlate by more than {WHITE_ENOUGH:g}, and the "
+                    "likelihood, which takes it for white, reads part of it as motion)")
         if self.every == 1:
             return (f"fitted at the log's {self.log_hz:g} Hz: the dampings fitted there and at half of it agree "
                     f"(their ratio {tried}; a filtered gyro's is above {RATIO:g})" if self.steps else

@@ -51,7 +51,7 @@ def test_a_log_that_states_its_gyro_filter_is_thinned_until_its_noise_is_white_e
     assert stated_every([filtered.flight.with_metadata(gyro_filter_hz=None)], 100.0) == (1, None)
     (flight,), chosen = at_fit_rate([filtered.flight])
     assert chosen.every == 2 and chosen.corner == 20.0 and chosen.steps == ()
-    assert "the log states its gyro low-passed at 20 Hz" in flight.metadata["fit_rate"]
+    assert "its gyro is stated low-passed at 20 Hz" in flight.metadata["fit_rate"]
     fast = simulate_flight(10, seed=3, config=replace(BENCH_CELLS["independent"], gyro_filter_hz=45.0)).flight
     (same,), kept = at_fit_rate([fast])  # 45 Hz stated: white enough at 100 Hz, and the data not asked
     assert same is fast and kept == FitRate(1, 100.0)

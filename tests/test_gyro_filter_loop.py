@@ -139,6 +139,9 @@ def test_a_csvs_gyro_filter_is_stated_on_the_command_line_and_kept_in_its_source
     assert model["provenance"]["sources"][0]["gyro_filter_hz"] == 20.0
     axes = model["fit_statistics"]["closed_loop"]["axes"]
     assert any(c["checked"] and c["gyro_filter"] for c in axes.values()), axes
+    report = (out / "report.md").read_text()
+    assert "its gyro is stated low-passed at 20 Hz" in report
+    assert "its law reading the gyro through the filter the log states" in report
     capsys.readouterr()
     assert main(["identify", str(flight), "--out", str(tmp_path / "integral"), "--method", "integral",
                  "--gyro-filter", "20"]) == 2

@@ -317,6 +317,8 @@ def _flown_at_loop_rate(check) -> str:
         damping = list(c.bias)[1]  # the gain, the damping (closed_loop._biases)
         verdict = "removed" if damping in c.removed else "left"
         parts.append(f"{axis} {damping} {100 * c.bias[damping]:+.0f} % ({verdict})")
-    said = "measured the dampings' bias: " + ", ".join(parts)
+    filtered = any(getattr(c, "gyro_filter", False) for c in flown.values())
+    through = " (its law reading the gyro through the filter the log states)" if filtered else ""
+    said = f"measured the dampings' bias{through}: " + ", ".join(parts)
     left = [a for a, c in axes.items() if not c.checked]
     return said + (f"; not flown, so still biased: {', '.join(left)}" if left else "")
