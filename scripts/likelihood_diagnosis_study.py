@@ -30,10 +30,15 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))  # the --set parser is aircraft_generalisation's
+from aircraft_generalisation import config_field  # noqa: E402
 
 CASES = {
     "none": {},
@@ -76,27 +81,33 @@ TRUE_AXES = {
 }
 
 
-def _flight(name, seed, duration, cell):
-    from identification.preprocess import shift_inputs
-    from identification.bench.flight_config import MANOEUVRE_CONFIG
+def _flight(name, seed, duration, cell, settings=(), fit_rate="log"):
+    """The case's flight and the flight the diagnosis reads: ``settings`` (FlightConfig field, value) changed in
+    the flight's config, read at ``fit_rate`` as ``heli diagnose --fit-rate`` reads it."""
+    from dataclasses import replace
+
+    from identification.bench.flight_config import MANOEUVRE_CONFIG, FlightConfig
     from identification.bench.synthetic import simulate_flight
+    from identification.fit_rate import at_fit_rate
+    from identification.preprocess import shift_inputs
 
     case = CASES[name]
     config = MANOEUVRE_CONFIG if case.get("manoeuvre") else None
     if cell is not None:  # the cell's wind, pilot and sensors; a manoeuvre case keeps its large sweeps
-        from dataclasses import replace
-
         from identification.bench.cells import BENCH_CELLS
 
         config = BENCH_CELLS[cell]
         if case.get("manoeuvre"):
             config = replace(config, sweep_amplitude=MANOEUVRE_CONFIG.sweep_amplitude,
                              sweep_mode=MANOEUVRE_CONFIG.sweep_mode)
+    if settings:
+        config = replace(config or FlightConfig(), **dict(settings))
     sim = simulate_flight(duration, seed=seed, effects=case.get("effects", ()), config=config,
                           effect_scale=case.get("effect_scale", 1.0))
     flight = sim.flight
     if "shift" in case:  # the log's input column lags the response: the sticks are recorded late
         flight = shift_inputs(flight, (case["shift"],) * 3)
+    (flight,), _ = at_fit_rate([flight], fit_rate)
     return sim, flight
 
 
@@ -105,9 +116,9 @@ def _one(job):
 
     from identification.diagnosis.likelihood_diagnoser import LikelihoodDiagnoser
 
-    name, seed, duration, cell, closed_loop = job
+    name, seed, duration, cell, closed_loop, settings, fit_rate = job
     with threadpool_limits(limits=1, user_api="blas"):
-        sim, flight = _flight(name, seed, duration, cell)
+        sim, flight = _flight(name, seed, duration, cell, settings, fit_rate)
         t0 = time.perf_counter()
         d = LikelihoodDiagnoser().fit(flight)  # not told the truth: the sticks' hold is chosen by likelihood too
         seconds = time.perf_counter() - t0
@@ -216,6 +227,11 @@ def main(argv=None):
     ap.add_argument("--closed-loop", choices=("off", "auto", "report"), default="off",
                     help="check the model written in the flight's closed loop, as heli diagnose does by default "
                     "('auto'; default off: the diagnosis alone)")
+    ap.add_argument("--set", type=config_field, nargs="*", default=[], metavar="FIELD=VALUE",
+                    help="FlightConfig fields changed in every flight, e.g. gyro_filter_hz=20.0 log_every=4")
+    ap.add_argument("--fit-rate", choices=("log", "auto"), default="log",
+                    help="the rate each flight is diagnosed at: its log's (default: the figures in docs/diagnosis.md "
+                    "were measured so; no white log was ever thinned) or chosen as heli diagnose chooses it ('auto')")
     ap.add_argument("--json", default=None, metavar="PATH", help="also write every flight's row (found effects, "
                     "round-1 statistics, closed-loop shares) to PATH")
     args = ap.parse_args(argv)
@@ -227,19 +243,23 @@ def main(argv=None):
         unknown = [c for c in cells if c not in BENCH_CELLS]
         if unknown:
             raise SystemExit(f"unknown cells {unknown}; known: {', '.join(BENCH_CELLS)}")
-        rows = _run([("none", s, args.duration, c, "off") for s in seeds for c in cells], args)
+        rows = _run([("none", s, args.duration, c, "off", tuple(args.set), args.fit_rate) for s in seeds
+                     for c in cells], args)
         print(f"\nCommand: python scripts/likelihood_diagnosis_study.py --null-cells --seeds {args.seeds} "
               f"--duration {args.duration:g}" + (f" --first-seed {args.first_seed}" if args.first_seed != 1 else "")
               + (f" --cells {' '.join(args.cells)}" if args.cells else ""))
         _null_table(rows, cells)
         return
-    rows = _run([(c, s, args.duration, args.cell, args.closed_loop) for c in args.cases for s in seeds], args)
+    rows = _run([(c, s, args.duration, args.cell, args.closed_loop, tuple(args.set), args.fit_rate)
+                 for c in args.cases for s in seeds], args)
     print(f"\nLikelihood diagnosis, {args.seeds} seeds per case, {args.duration:g} s flights"
           + (f", bench cell {args.cell}" if args.cell else ", default heli simulate-flight pilot")
           + f". Command: python scripts/likelihood_diagnosis_study.py --seeds {args.seeds} --duration "
           f"{args.duration:g}" + (f" --cell {args.cell}" if args.cell else "")
           + (f" --first-seed {args.first_seed}" if args.first_seed != 1 else "")
-          + (f" --closed-loop {args.closed_loop}" if args.closed_loop != "off" else ""))
+          + (f" --closed-loop {args.closed_loop}" if args.closed_loop != "off" else "")
+          + (" --set " + " ".join(f"{k}={v!r}" for k, v in args.set) if args.set else "")
+          + (f" --fit-rate {args.fit_rate}" if args.fit_rate != "log" else ""))
     checked = args.closed_loop != "off"
     print("\n| case | named (all true axes) | partly | wrong effect | median s | dampings' RMS error k3 / k7 / k11 "
           "[worst]" + (" as fitted → after the check | check's median s" if checked else "")
