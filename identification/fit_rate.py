@@ -236,7 +236,9 @@ def every_for(log_hz: float, hz: float) -> int:
 def at_fit_rate(flights, setting="auto") -> tuple[list, FitRate]:
     """``flights`` (one log's, at one rate) as they are fitted, and the :class:`FitRate` that says why: ``setting``
     "auto" (:func:`choose_fit_rate`), "log" (the log's rate) or a rate in Hz (:func:`every_for`). Thinned flights
-    carry the reason in ``metadata["fit_rate"]``, which the fit's warnings repeat."""
+    carry the reason in ``metadata["fit_rate"]``, which the fit's warnings repeat, and in ``metadata["fit_rate_by"]``
+    what decided it: ``"corner"`` (a stated gyro filter), ``"data"`` (the dampings' test: a filtered gyro) or
+    ``"asked"`` (a rate the user gave)."""
     flights = list(flights)
     log_hz = round(float(flights[0].sample_rate), 6)  # a clock's last bits (100.00000000000213) are no rate
     if setting == "auto":
@@ -249,4 +251,5 @@ def at_fit_rate(flights, setting="auto") -> tuple[list, FitRate]:
         return flights, chosen
     asked = f"fitted at {chosen.hz:g} Hz, every {nth(chosen.every)} sample of the {log_hz:g} Hz log, as asked"
     reason = chosen.describe() if chosen.steps or chosen.corner else asked
-    return [thinned(f, chosen.every).with_metadata(fit_rate=reason) for f in flights], chosen
+    by = "corner" if chosen.corner else "data" if chosen.steps else "asked"  # why (loop_world reads it)
+    return [thinned(f, chosen.every).with_metadata(fit_rate=reason, fit_rate_by=by) for f in flights], chosen

@@ -29,6 +29,7 @@ def test_a_filtered_gyros_log_is_fitted_at_half_its_rate_and_fits_there(filtered
     assert chosen.every == 2 and flight.sample_rate == pytest.approx(50.0)
     assert np.array_equal(flight.rates, filtered.flight.rates[:, ::2])
     assert "fitted at 50 Hz, every 2nd sample of the 100 Hz log" in flight.metadata["fit_rate"]
+    assert flight.metadata["fit_rate_by"] == "data"
     (rate, ratios), *_ = chosen.steps
     assert rate == 100.0 and max(ratios.values()) > 2.0  # the full rate's damping inflated
     fitted = MaximumLikelihoodIdentifier().fit(flight).params_.values()
@@ -52,6 +53,7 @@ def test_a_log_that_states_its_gyro_filter_is_thinned_until_its_noise_is_white_e
     (flight,), chosen = at_fit_rate([filtered.flight])
     assert chosen.every == 2 and chosen.corner == 20.0 and chosen.steps == ()
     assert "its gyro is stated low-passed at 20 Hz" in flight.metadata["fit_rate"]
+    assert flight.metadata["fit_rate_by"] == "corner"
     fast = simulate_flight(10, seed=3, config=replace(BENCH_CELLS["independent"], gyro_filter_hz=45.0)).flight
     (same,), kept = at_fit_rate([fast])  # 45 Hz stated: white enough at 100 Hz, and the data not asked
     assert same is fast and kept == FitRate(1, 100.0)
@@ -68,7 +70,7 @@ def test_a_white_gyros_log_is_fitted_at_its_own_rate_untouched():
 def test_a_stated_rate_is_the_logs_over_a_whole_number(filtered):
     (flight,), chosen = at_fit_rate([filtered.flight], 25.0)
     assert chosen == FitRate(4, 100.0) and flight.sample_rate == pytest.approx(25.0)
-    assert "as asked" in flight.metadata["fit_rate"]
+    assert "as asked" in flight.metadata["fit_rate"] and flight.metadata["fit_rate_by"] == "asked"
     (same,), _ = at_fit_rate([filtered.flight], "log")
     assert same is filtered.flight
     with pytest.raises(ValueError, match=r"the log's rate divided by a whole number \(100, 50, 33.3333 \.\.\. Hz "
@@ -101,6 +103,7 @@ def test_the_fit_warnings_and_a_refresh_say_and_keep_the_fitted_rate(filtered):
     assert sum("fitted at 50 Hz" in line for line in fit_warnings([flight, flight])) == 1  # once for a log
     again = _at_model_rate(filtered.flight, 50.0)  # a model fitted at 50 Hz reads its 100 Hz flights so
     assert again.sample_rate == pytest.approx(50.0) and "the model's 50 Hz" in again.metadata["fit_rate"]
+    assert again.metadata["fit_rate_by"] == "model"
     assert _at_model_rate(filtered.flight, 100.0) is filtered.flight
     assert _at_model_rate(filtered.flight, 30.0) is filtered.flight  # not a whole fraction: as read
 

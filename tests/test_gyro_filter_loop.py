@@ -76,11 +76,14 @@ def test_a_loop_whose_gyro_filter_is_not_stated_is_not_flown_and_says_how_to_sta
     cannot fly what the law read, so the axis is not checked (the fit's own values stand) and the reason says how to
     state the filter."""
     sim, flight = _filtered_autopilot(1)
-    unstated = flight.with_metadata(gyro_filter_hz=None)
+    unstated = flight.with_metadata(gyro_filter_hz=None, fit_rate_by="data")  # as at_fit_rate's test thins it
     ml = MaximumLikelihoodIdentifier(axes=("roll",), closed_loop="auto").fit(unstated)
     check = ml.closed_loop_.axes["roll"]
     assert not check.checked and "--gyro-filter HZ" in check.reason and "low-passed" in check.reason
     assert ml.params_.k3 == ml.axes_["roll"].params["k3"]
+    asked = flight.with_metadata(gyro_filter_hz=None, fit_rate_by="asked")  # --fit-rate 50: nothing said of a filter
+    flown = MaximumLikelihoodIdentifier(axes=("roll",), closed_loop="auto").fit(asked).closed_loop_.axes["roll"]
+    assert flown.checked and not flown.gyro_filter
 
 
 def test_a_bias_either_way_is_removed_where_the_filter_was_flown():

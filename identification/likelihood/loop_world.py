@@ -124,9 +124,12 @@ def skip_reason(ident, a: int, fit, data) -> str:
 
 
 def _unstated_filter(flights) -> bool:
-    """Some of ``flights`` was thinned for a filtered gyro (:func:`identification.fit_rate.thinned`) without a
-    stated corner (:func:`~identification.validation.fit_warnings.gyro_filter`)."""
-    return any(f.metadata.get("fit_every", 1) > 1 and gyro_filter(f.metadata) is None for f in flights)
+    """Some of ``flights`` was thinned for a filtered gyro without a stated corner
+    (:func:`~identification.validation.fit_warnings.gyro_filter`): by the data's test
+    (:func:`identification.fit_rate.at_fit_rate`) or to a model's rate (``heli refresh``); a rate the user asked
+    for says nothing of the gyro."""
+    return any(f.metadata.get("fit_rate_by") in ("data", "model") and gyro_filter(f.metadata) is None
+               for f in flights)
 
 
 def gyro_biquad(flight, tick: float) -> np.ndarray:

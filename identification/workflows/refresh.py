@@ -270,9 +270,9 @@ def _at_model_rate(flight, model_hz):
         every = every_for(flight.sample_rate, model_hz)
     except ValueError:
         return flight
-    return thinned(flight, every).with_metadata(
+    return thinned(flight, every).with_metadata(  # the model's rate: chosen for a filtered gyro, or stated
         fit_rate=f"fitted at the model's {model_hz:g} Hz, every {nth(every)} sample of the {flight.sample_rate:g} Hz "
-        "log")
+        "log", fit_rate_by="model")
 
 
 def _read_flights(paths, desc: str, show: bool, segments=None, loops=None, model_hz=None, filters=None) -> list:
