@@ -179,13 +179,14 @@ def test_a_servo_lag_inside_a_sample_of_a_filtered_loop_is_the_filters():
 def test_the_warning_says_to_state_the_filter_where_the_check_could_not_fly_the_loop_without_it():
     from identification.validation.fit_warnings import controller_loop_warning
 
-    flight = SimpleNamespace(metadata={"input_source": "flight controller commands", "loop_rate_hz": 400.0},
-                             sample_rate=50.0)
+    flight = SimpleNamespace(metadata={"input_source": "flight controller commands", "loop_rate_hz": 400.0,
+                                       "fit_rate_by": "data"}, sample_rate=50.0)  # thinned by the data's test
     unflown = SimpleNamespace(checked=False, loop_ticks=8, bias={}, removed=(),
                               reason="... the loop's world cannot fly it (state it: --gyro-filter HZ, ...)")
     [line] = controller_loop_warning([flight], check=SimpleNamespace(axes={"roll": unflown}))
     assert "State the gyro filter's corner (--gyro-filter HZ" in line and "Identify from the pilot's sticks" in line
-    [plain] = controller_loop_warning([flight], check=SimpleNamespace(axes={}))
+    stated = SimpleNamespace(metadata={**flight.metadata, "gyro_filter_hz": 20.0}, sample_rate=50.0)
+    [plain] = controller_loop_warning([stated], check=SimpleNamespace(axes={}))
     assert "--gyro-filter" not in plain
 
 

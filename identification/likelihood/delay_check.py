@@ -129,6 +129,13 @@ class DelayCheck:
         return abs(delay - self.delay) <= self.dt * (1.0 + 1e-6) and lr >= REPRODUCED_SHARE * self.flight_lr
 
 
+def _log_hold(ident, fit):
+    """The hold ``ident`` decided for its log (the fraction the decision took), else axis ``fit``'s own: what an
+    axis is refitted at here."""
+    decision = getattr(ident, "hold_decision_", None) or {}
+    return decision.get("fraction", fit.input_hold)
+
+
 def filter_lag_candidates(ident) -> list:
     """The axes whose fit took a servo lag within one logged sample where every flight is a flight controller's loop
     faster than its log read through a gyro filter the log states (:func:`check_filter_lag`)."""
@@ -146,11 +153,9 @@ def check_filter_lag(ident, axis: str) -> DelayCheck:
     and the filter both and measuring dampings -49 and -59 % where the fit was +73 and +63 %; the delay's rule of
     the module docstring for a lag). Returns the lag-free fit in ``fit`` where the check's world can fly the axis."""
     fit, dt = ident.axes_[axis], float(ident.flights_[0].dt)
-    decision = getattr(ident, "hold_decision_", None) or {}
-    hold = decision.get("fraction", fit.input_hold)
     kept = ident._kept_terms(AXES.index(axis), fit)
     try:
-        free = axis_refit(ident, axis, kept, ident.flights_, hold).axes_[axis]
+        free = axis_refit(ident, axis, kept, ident.flights_, _log_hold(ident, fit)).axes_[axis]
     except IdentifiabilityError as exc:
         return DelayCheck(axis, fit.lag, reason=f"the axis could not be fitted without it ({exc})", dt=dt, kind="lag")
     null_fit = replace(free, dropped=fit.dropped)
@@ -185,8 +190,7 @@ def check_delay(ident, axis: str, min_lr: float, n_flights: int = N_DELAY_FLIGHT
     likelihood ratio at which the estimator keeps a delay (the flight's own refit must keep it too). Does not
     change ``ident``; :func:`remove_delay` does."""
     a, fit = AXES.index(axis), ident.axes_[axis]
-    decision = getattr(ident, "hold_decision_", None) or {}
-    hold = decision.get("fraction", fit.input_hold)
+    hold = _log_hold(ident, fit)
     dt = float(ident.flights_[0].dt)
     kept = ident._kept_terms(a, fit)
     try:

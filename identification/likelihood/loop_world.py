@@ -23,7 +23,7 @@ import numpy as np
 from heli_core.terms import AXES, STICK_ROW
 
 from ..flight import Flight
-from ..validation.fit_warnings import CONTROLLER_SOURCES, FASTER_LOOP, gyro_filter, input_source
+from ..validation.fit_warnings import CONTROLLER_SOURCES, FASTER_LOOP, gyro_filter, input_source, unstated_filter
 from ..validation.model_verdict import bound_side
 from .axis_likelihood import MIN_SERVO_DELAY, AxisLikelihood
 from .pilot_model import AxisSignals, PilotModel, fit_pilot, reaction_delay
@@ -109,7 +109,7 @@ def skip_reason(ident, a: int, fit, data) -> str:
     if share < MIN_NOISE_SHARE and not fast:
         return (f"the gyro shows next to no white noise ({100 * share:.2g} % of the rate's std; a log filtered before "
                 "it was written): there is nothing in the rate a pilot could see better than it")
-    if fast and _unstated_filter(ident.flights_):
+    if fast and unstated_filter(ident.flights_):
         return ("its gyro was low-passed before it was logged (the fit's rate was lowered for it) and the log does "
                 "not state the filter's corner, which the flight controller's law reads through: the loop's world "
                 "cannot fly it (state it: --gyro-filter HZ, ArduPilot's INS_GYRO_FILTER)")
@@ -121,15 +121,6 @@ def skip_reason(ident, a: int, fit, data) -> str:
     if data.servo_row is None:
         return "no stick term"
     return ""
-
-
-def _unstated_filter(flights) -> bool:
-    """Some of ``flights`` was thinned for a filtered gyro without a stated corner
-    (:func:`~identification.validation.fit_warnings.gyro_filter`): by the data's test
-    (:func:`identification.fit_rate.at_fit_rate`) or to a model's rate (``heli refresh``); a rate the user asked
-    for says nothing of the gyro."""
-    return any(f.metadata.get("fit_rate_by") in ("data", "model") and gyro_filter(f.metadata) is None
-               for f in flights)
 
 
 def gyro_biquad(flight, tick: float) -> np.ndarray:

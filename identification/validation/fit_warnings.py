@@ -240,17 +240,30 @@ def input_source(meta) -> tuple[str, float | None]:
     own metadata or, for a CSV ``heli import`` wrote, the import's."""
     imported = meta.get("imported_from") or {}
     source = str(imported.get("input_source") or meta.get("input_source") or "")
-    loop = imported.get("loop_rate_hz", meta.get("loop_rate_hz"))
-    return source, (float(loop) if isinstance(loop, (int, float)) and loop > 0 else None)
+    return source, _stated_hz(meta, "loop_rate_hz")
+
+
+def _stated_hz(meta, key: str) -> float | None:
+    """A frequency a flight's log states [Hz], from its own metadata or, for a CSV ``heli import`` wrote, the
+    import's (which is read first); None where neither states one above 0."""
+    value = (meta.get("imported_from") or {}).get(key, meta.get(key))
+    return float(value) if isinstance(value, (int, float)) and value > 0 else None
 
 
 def gyro_filter(meta) -> float | None:
     """The corner [Hz] of the low-pass a flight's gyro passed before its controller read it and its log wrote it (a
     2-pole one: ArduPilot's ``INS_GYRO_FILTER``, PX4's ``IMU_GYRO_CUTOFF``; ``--gyro-filter``), None where nothing
     stated it; from its own metadata or, for a CSV ``heli import`` wrote, the import's."""
-    imported = meta.get("imported_from") or {}
-    corner = imported.get("gyro_filter_hz", meta.get("gyro_filter_hz"))
-    return float(corner) if isinstance(corner, (int, float)) and corner > 0 else None
+    return _stated_hz(meta, "gyro_filter_hz")
+
+
+def unstated_filter(flights) -> bool:
+    """Some of ``flights`` was thinned for a filtered gyro whose corner nothing states (:func:`gyro_filter`): by the
+    data's test (:func:`identification.fit_rate.at_fit_rate`) or to a model's rate (``heli refresh``); a rate the
+    user asked for says nothing of the gyro. A flight controller's loop read through such a filter cannot be flown
+    (:func:`identification.likelihood.loop_world.skip_reason`)."""
+    return any(f.metadata.get("fit_rate_by") in ("data", "model") and gyro_filter(f.metadata) is None
+               for f in flights)
 
 
 def stated_controller(flight, loop_hz: float | None, gyro_filter_hz: float | None = None):
@@ -298,9 +311,8 @@ def controller_loop_warning(flights, advice: bool = True, check=None) -> list[st
     if flown:
         return [cause + f"; the closed-loop check flew the loop at its rate and {flown} (docs/method.md)"]
     cause += " (the bench's autopilot with a loop 4x faster than its log: dampings 17-45 % high; docs/method.md)"
-    unfiltered = any("--gyro-filter" in (c.reason or "") for c in (getattr(check, "axes", {}) or {}).values())
     state = (". State the gyro filter's corner (--gyro-filter HZ; ArduPilot's INS_GYRO_FILTER, 20 Hz by default): the "
-             "check then flies the loop through it" if unfiltered else "")
+             "check then flies the loop through it" if unstated_filter(flights) else "")
     return [cause + (f"{state}. Identify from the pilot's sticks (heli import --inputs sticks: the stabilised "
                      "aircraft), or from commands and gyro logged at the loop's rate" if advice else "")]
 
