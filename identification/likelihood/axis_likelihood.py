@@ -50,6 +50,11 @@ class AxisData:
     causal_rows: tuple = ()  # regressors made of measured rates: held over the sample, never interpolated
     rebuild: object = None  # shift (s, < 0: the log's input lags) -> regressors with the axis' stick advanced
     lag: float = 0.0  # the servo's first-order lag (eq. 31's d1 grows by it) [s]
+    corners: tuple = ()  # per flight, the gyro filter its log states [Hz] or None (gyro_path): the stick passes it
+
+    def corner(self, i: int) -> float | None:
+        """Flight ``i``'s stated gyro filter [Hz], None where its log states none."""
+        return self.corners[i] if i < len(self.corners) else None
 
 
 class AxisLikelihood:
@@ -113,7 +118,10 @@ class AxisLikelihood:
         Ad, g0, g1, L, S = self.predictor(x)
         tau = self.tau_of(x)
         regressors = d.rebuild(tau) if tau < -MIN_SERVO_DELAY else d.regressors
-        servo = d.servo_row is not None and (tau > MIN_SERVO_DELAY or (d.lag > 0.0 and tau >= -MIN_SERVO_DELAY))
+        # the stick's own path: a servo (a delay or a lag), or a gyro filter the log states (gyro_path); an input
+        # column advanced (tau < 0) enters by its regressor, filtered there
+        path = d.lag > 0.0 or any(c is not None for c in d.corners)
+        servo = d.servo_row is not None and (tau > MIN_SERVO_DELAY or (path and tau >= -MIN_SERVO_DELAY))
         # a measured rate at k+1 carries the noise of y[k+1]: only u[k] may predict y[k+1] (b_c); a command through
         # the servo enters the rate on its own (b_v)
         more = ([g0 + g1] if d.causal_rows else []) + ([np.eye(Ad.shape[0])[0]] if servo else [])
@@ -145,7 +153,7 @@ class AxisLikelihood:
         hit = self._servo.get(key)
         if hit is None:
             d = self.data
-            hit = servo_increments(d.servo_sticks[i], damping, tau, d.dt, hold, d.lag)
+            hit = servo_increments(d.servo_sticks[i], damping, tau, d.dt, hold, d.lag, d.corner(i))
             hit.setflags(write=False)  # handed out again: nobody may change it in place
             if len(self._servo) >= SYSTEMS_KEPT * len(d.y):
                 del self._servo[next(iter(self._servo))]

@@ -25,6 +25,8 @@ from heli_core.terms import AXES, FEATURES, RATE_DEPENDENCE, STICK_ROW, TERMS
 
 from .axis_fit import MLAxisFit
 from .axis_likelihood import MIN_SERVO_DELAY, AxisData, AxisLikelihood, simulation_r2
+from ..validation.fit_warnings import gyro_filter
+from .gyro_path import matched
 from .input_hold import HOLD_START, hold_fraction
 from .state_space import HOLD_INDEX, N_NONLINEAR, ZETA_BOUNDS
 
@@ -179,8 +181,11 @@ class AxisProblem:
         linear = [p for p in self.names if p != damping_name and TERMS[p].feature != "1"]
         offset = next((p for p in self.names if TERMS[p].feature == "1"), None)
 
+        corners = tuple(gyro_filter(f.metadata) for f in flights)
+
         def regressors(tau_or_shift):
-            """Every flight's regressors with the axis' command delayed (> 0, Padé) or advanced (< 0)."""
+            """Every flight's regressors with the axis' command delayed (> 0, Padé) or advanced (< 0), the
+            commands through the gyro filter its log states (:mod:`.gyro_path`; the rates are logged through it)."""
             out = []
             for i, f in enumerate(flights):
                 cmd = np.array([f.sticks[r] for r in STICK_ROW])
@@ -188,7 +193,11 @@ class AxisProblem:
                     cmd[a] = pade_filter(f.sticks[STICK_ROW[a]], tau_or_shift, f.sample_rate, lag)
                 elif tau_or_shift < 0:
                     cmd[a] = np.interp(f.time - tau_or_shift, f.time, f.sticks[STICK_ROW[a]])
-                rows = [TERMS[p].sign * np.broadcast_to(FEATURES[TERMS[p].feature](f.rates, cmd, f.sticks[2]),
+                col = f.sticks[2]
+                if corners[i] is not None:
+                    cmd = np.array([matched(c, corners[i], f.sample_rate) for c in cmd])
+                    col = matched(col, corners[i], f.sample_rate)
+                rows = [TERMS[p].sign * np.broadcast_to(FEATURES[TERMS[p].feature](f.rates, cmd, col),
                                                         (f.n,)) for p in linear]
                 if offset is not None:
                     rows += [np.full(f.n, float(j == i)) for j in range(len(flights))]
@@ -205,7 +214,7 @@ class AxisProblem:
             servo_sticks = [sign * np.asarray(f.sticks[STICK_ROW[a]], dtype=float) for f in flights]
         causal = tuple(j for j, p in enumerate(linear) if TERMS[p].feature in RATE_DEPENDENCE)
         return AxisData(ys, Xs, reg_names, flights[0].dt, self.hold_start(), self.burn, wind_model, command,
-                        servo_sticks, float(tau), causal, regressors, float(lag))
+                        servo_sticks, float(tau), causal, regressors, float(lag), corners)
 
     # ------------------------------------------------------------------ searches
     def search(self, like: AxisLikelihood, x0, max_nfev=None, tau0: float = 0.0):

@@ -37,8 +37,7 @@ The loops themselves are built and flown by :mod:`identification.likelihood.loop
 faster than its log is flown there at its own rate, and its bias is not ruled out by a gain moving up (see
 :func:`against_the_loop`); a large one is measured a second time at the corrected values (:data:`AGAIN_BIAS`).
 Where the log states the gyro filter such a loop read through (ArduPilot's ``INS_GYRO_FILTER``, ``--gyro-filter``),
-the world flies it too, and its bias is removed whichever way it points: the filter's lag, which the model reads as
-the aircraft's, biases the damping down as surely as the loop biases it up (:attr:`AxisCheck.gyro_filter`); where
+the world flies it too, and its bias is removed whichever way it points (:attr:`AxisCheck.gyro_filter`); where
 the fit's rate was lowered for a filtered gyro whose corner the log does not state, such a loop is not flown.
 
 An axis with a servo delay or lag is flown through its servo (eq. 31, Padé, discretised exactly as the likelihood
@@ -120,8 +119,8 @@ class AxisCheck:
         are then the fitted ones over one plus it. Else empty.
     gyro_filter : bool
         The world flew the gyro low-pass the log states the controller's law read through
-        (:func:`~identification.likelihood.loop_world.gyro_biquad`): its lag biases the damping down, the loop's
-        correction inside a sample up, so the bias is removed whichever way it points.
+        (:func:`~identification.likelihood.loop_world.gyro_biquad`); the bias is then removed whichever way it
+        points (:func:`against_the_loop`).
     """
 
     axis: str
@@ -207,8 +206,8 @@ class ClosedLoopCheck:
 def _who_flew(c: AxisCheck) -> str:
     """Who flew an axis' loop, as :meth:`ClosedLoopCheck.lines` says it."""
     if c.loop_ticks > 1:
-        filtered = ", on the gyro through the low-pass the log states (its lag read as the aircraft's biases the " \
-                   "damping down, the loop up: removed either way)" if c.gyro_filter else ""
+        filtered = ", on the gyro through the low-pass the log states (a bias removed whichever way it points)" \
+            if c.gyro_filter else ""
         return (f"a flight controller's commands, its loop flown at {c.loop_ticks} ticks a logged sample (the rate "
                 f"the log states){filtered}")
     delays = ", ".join(f"{p['reaction_delay_s']:.2f}" for p in c.pilots)
@@ -383,8 +382,11 @@ def against_the_loop(bias: dict, se: dict, gain: str, damping: str, ticks: int =
     controller's loop flown at its own rate (``ticks`` > 1) reads as damping alone: its gain's bias is a few tenths
     of a per cent either way (the bench's autopilot 4x faster than its log: -1.4 to +0.5 % beside dampings +14 to
     +17 %), so only the damping's direction counts there. Where the world flew the gyro filter the log states
-    (``gyro_filter``) no way is ruled out: the filter's lag, read as the aircraft's, biases the damping down (the
-    bench's autopilot at 400 Hz behind a 20 Hz filter, fitted at 50 Hz without a delay: -7 to -14 %), the loop up."""
+    (``gyro_filter``) no way is ruled out. That rule came when the model read the filter's lag as the aircraft's,
+    which biased the damping down (the bench's autopilot at 400 Hz behind a 20 Hz filter, fitted at 50 Hz: -7 to
+    -14 %); with the lag on the input side (:mod:`~identification.likelihood.gyro_path`) the same loop's biases point
+    up (+8 to +14 % on the paper aircraft's roll), and the rule is kept for a world that flies everything the log
+    states."""
     if gyro_filter:
         return ""
     if ticks == 1 and bias[gain] >= SIGNIFICANCE * se[gain]:

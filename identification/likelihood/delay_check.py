@@ -43,7 +43,7 @@ from ..errors import IdentifiabilityError
 from .axis_likelihood import MIN_SERVO_DELAY
 from .axis_pool import map_axes
 from .closed_loop import axis_refit
-from .loop_world import flown_flights, gyro_biquad, log_ticks, with_fits, world_loops
+from .loop_world import flown_flights, log_ticks, with_fits, world_loops
 
 N_DELAY_FLIGHTS = 16
 """Flights of the delay-free world flown per delay tested (the loop's optimum appeared on 1 of 10)."""
@@ -79,9 +79,6 @@ class DelayCheck:
     inside_sample : int
         Ticks of a flight controller's loop per logged sample where the delay lies within one sample of a loop
         faster than the log (module docstring): the loop's without a world flown; else 0.
-    kind : str
-        ``"delay"``, or ``"lag"`` for a servo lag within one sample of such a loop read through the gyro filter the
-        log states (:func:`check_filter_lag`; ``delay`` is then the lag's time constant).
     """
 
     axis: str
@@ -94,24 +91,18 @@ class DelayCheck:
     removed: bool = False
     fit: object = field(default=None, repr=False, compare=False)  # the delay-free fit
     inside_sample: int = 0
-    kind: str = "delay"
 
     def describe(self) -> dict:
         """JSON-ready."""
         return {"axis": self.axis, "delay_s": self.delay, "flight_lr": self.flight_lr,
                 "world": [list(w) for w in self.world], "loops": self.loops, "removed": self.removed,
-                "reason": self.reason, "inside_sample": self.inside_sample, "kind": self.kind}
+                "reason": self.reason, "inside_sample": self.inside_sample}
 
     def line(self) -> str:
         """One line for a report or the terminal."""
-        what = f"{self.axis}: servo {self.kind} {1000 * self.delay:.1f} ms"
+        what = f"{self.axis}: servo delay {1000 * self.delay:.1f} ms"
         if self.reason:
             return f"{what} not tested in the loop's world ({self.reason})"
-        if self.kind == "lag":
-            verdict = "the axis is fitted without it" if self.removed else "reported, kept"
-            return (f"{what} lies within one logged sample of a flight controller's loop {self.inside_sample}x faster "
-                    "than the log, read through the gyro filter the log states, which the check's world flies: the "
-                    f"filter's lag ({verdict})")
         if self.inside_sample:
             verdict = "the axis is fitted without it" if self.removed else "reported, kept"
             return (f"{what} (LR {self.flight_lr:.1f}) lies within one logged sample of a flight controller's loop "
@@ -134,36 +125,6 @@ def _log_hold(ident, fit):
     axis is refitted at here."""
     decision = getattr(ident, "hold_decision_", None) or {}
     return decision.get("fraction", fit.input_hold)
-
-
-def filter_lag_candidates(ident) -> list:
-    """The axes whose fit took a servo lag within one logged sample where every flight is a flight controller's loop
-    faster than its log read through a gyro filter the log states (:func:`check_filter_lag`)."""
-    dt = float(ident.flights_[0].dt)
-    ticks = log_ticks(ident.flights_, dt)
-    if ticks <= 1 or not all(gyro_biquad(f, dt / ticks).size for f in ident.flights_):
-        return []
-    return [axis for axis, fit in ident.axes_.items() if 0.0 < fit.lag <= dt * (1.0 + 1e-6)]
-
-
-def check_filter_lag(ident, axis: str) -> DelayCheck:
-    """Axis ``axis``' servo lag within one sample of a flight controller's loop read through the gyro filter the log
-    states: the filter's lag, which the check's world flies, read as the servo's (the sluggish aircraft behind a
-    20 Hz filter at an 800 Hz loop, fitted at 50 Hz: pitch and yaw lags of 9.7 ms, the world then flying the lag
-    and the filter both and measuring dampings -49 and -59 % where the fit was +73 and +63 %; the delay's rule of
-    the module docstring for a lag). Returns the lag-free fit in ``fit`` where the check's world can fly the axis."""
-    fit, dt = ident.axes_[axis], float(ident.flights_[0].dt)
-    kept = ident._kept_terms(AXES.index(axis), fit)
-    try:
-        free = axis_refit(ident, axis, kept, ident.flights_, _log_hold(ident, fit)).axes_[axis]
-    except IdentifiabilityError as exc:
-        return DelayCheck(axis, fit.lag, reason=f"the axis could not be fitted without it ({exc})", dt=dt, kind="lag")
-    null_fit = replace(free, dropped=fit.dropped)
-    _, why = world_loops(with_fits(ident, {axis: null_fit}), (axis,))
-    if why:
-        return DelayCheck(axis, fit.lag, reason=why, dt=dt, kind="lag")
-    return DelayCheck(axis, fit.lag, loops=True, dt=dt, fit=null_fit, inside_sample=log_ticks(ident.flights_, dt),
-                      kind="lag")
 
 
 def delay_candidates(ident) -> list:
@@ -226,7 +187,7 @@ def check_delay(ident, axis: str, min_lr: float, n_flights: int = N_DELAY_FLIGHT
 
 
 def remove_delay(ident, check: DelayCheck) -> DelayCheck:
-    """Give axis ``check.axis`` of ``ident`` its delay- and lag-free fit where the delay (or lag: ``check.kind``) was
+    """Give axis ``check.axis`` of ``ident`` its delay- and lag-free fit where the delay was
     the loop's (``params_`` follows: its delay and lag 0). Returns ``check``, marked ``removed`` when it was."""
     if not check.loops:
         return check

@@ -17,7 +17,7 @@ import time
 from dataclasses import replace
 
 from .closed_loop import CLOSED_LOOP_MODES, ClosedLoopCheck, check_closed_loop, check_settings
-from .delay_check import check_delay, check_filter_lag, delay_candidates, filter_lag_candidates, remove_delay
+from .delay_check import check_delay, delay_candidates, remove_delay
 from .hold_check import decide_hold_in_loop, needs_hold_check, switch_hold
 
 
@@ -37,7 +37,6 @@ def run_checks(ident, mode: str, n_flights: int, min_lr_delay: float, workers=No
     check_settings(mode, n_flights)
     t0 = time.perf_counter()
     delays = {axis: check_delay(ident, axis, min_lr_delay, workers=workers) for axis in delay_candidates(ident)}
-    delays |= {axis: check_filter_lag(ident, axis) for axis in filter_lag_candidates(ident)}
     if mode == "auto":
         delays = {axis: remove_delay(ident, tested) for axis, tested in delays.items()}
     check = check_closed_loop(ident, n_flights, mode=mode, workers=workers)

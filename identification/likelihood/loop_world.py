@@ -23,7 +23,8 @@ import numpy as np
 from heli_core.terms import AXES, STICK_ROW
 
 from ..flight import Flight
-from ..validation.fit_warnings import CONTROLLER_SOURCES, FASTER_LOOP, gyro_filter, input_source, unstated_filter
+from ..validation.fit_warnings import (CONTROLLER_SOURCES, FASTER_LOOP, gyro_filter, input_source, unstated_filter,
+                                      without_gyro_filter)
 from ..validation.model_verdict import bound_side
 from .axis_likelihood import MIN_SERVO_DELAY, AxisLikelihood
 from .pilot_model import AxisSignals, PilotModel, fit_pilot, reaction_delay
@@ -181,9 +182,9 @@ def _signals(ident, a: int, fit, data) -> tuple[list, list]:
         other = theta @ regs + fit.flight_offsets[i] - theta[row] * regs[row]  # all but the stick's torque
         stick = flight.sticks[STICK_ROW[a]]
         gain = (float(np.sign(regs[row] @ stick)) or 1.0) * theta[row]
-        if has_servo(fit):  # the stick through the servo, exactly as the likelihood has it
+        if has_servo(fit) or data.corner(i) is not None:  # the stick's path, exactly as the likelihood has it
             direct = theta[row] * servo_increments(data.servo_sticks[i], model[0], max(fit.delay, 0.0), data.dt,
-                                                   fit.input_hold, fit.lag)
+                                                   fit.input_hold, fit.lag, data.corner(i))
             states = rts_smooth(data.y[i], other, *model, data.dt, fit.input_hold, fit.wind["model"], direct)
         else:
             states = rts_smooth(data.y[i], other + theta[row] * regs[row], *model, data.dt, fit.input_hold,
@@ -369,7 +370,9 @@ def world_loops(world, axes) -> tuple[dict, str]:
 
 def flown_flights(ident, axis: str, loops: list, rng: np.random.Generator) -> list:
     """``ident``'s flights with axis ``axis``' gyro, attitude and stick replaced by one simulated flight of each
-    of its ``loops`` (one per fitted flight); the other axes as logged."""
+    of its ``loops`` (one per fitted flight); the other axes as logged. A loop that flew no gyro filter (a pilot's,
+    at the log's rate) logs a white gyro: its flight states no filter, so that its fits do not move one to the
+    input side (:mod:`~identification.likelihood.gyro_path`) that the world never flew."""
     a = AXES.index(axis)
     flights = []
     for flight, loop in zip(ident.flights_, loops):
@@ -377,6 +380,8 @@ def flown_flights(ident, axis: str, loops: list, rng: np.random.Generator) -> li
         rates, attitude, sticks = flight.rates.copy(), flight.attitude.copy(), flight.sticks.copy()
         rates[a], attitude[a], sticks[STICK_ROW[a]] = gyro, np.angle(np.exp(1j * angle)), u
         meta = {k: v for k, v in flight.metadata.items() if k not in ("units_check", "vibration_lines")}
+        if not loop.gyro_filter.size:  # the world's gyro is white: no filter for its fits to move to the input
+            meta = without_gyro_filter(meta)
         flights.append(Flight(flight.time, rates, attitude, sticks, MappingProxyType(meta), flight.extra))
     return flights
 

@@ -198,12 +198,18 @@ def servo_step(damping: float, tau: float, dt: float, hold: str, lag: float = 0.
     return float(E[0, 1]), float(E[1, 1]), ga - frac * gb, frac * gb
 
 
-def servo_increments(sticks, damping: float, tau: float, dt: float, hold: str, lag: float = 0.0) -> np.ndarray:
+def servo_increments(sticks, damping: float, tau: float, dt: float, hold: str, lag: float = 0.0,
+                     corner_hz: float | None = None) -> np.ndarray:
     """The command's exact contribution to the rate over each sample, through the servo of eq. (31)
     (:func:`servo_step`): ``v[k]``, the rate's increment from ``k`` to ``k+1`` due to the command (per unit
     control gain), so that the rate sees ``k2*v[k]`` as a one-sample input. The servo state starts settled on the
-    first stick.
+    first stick. With ``corner_hz`` the stick passes the gyro filter the log states first
+    (:func:`~identification.likelihood.gyro_path.path_increments`).
     """
+    if corner_hz is not None:
+        from .gyro_path import path_increments
+
+        return path_increments(sticks, damping, tau, dt, hold, lag, corner_hz)
     e_rz, e_zz, h0, h1 = servo_step(damping, tau, dt, hold, lag)
     u = np.asarray(sticks, dtype=float)
     u_next = np.append(u[1:], u[-1])

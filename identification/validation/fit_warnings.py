@@ -257,6 +257,15 @@ def gyro_filter(meta) -> float | None:
     return _stated_hz(meta, "gyro_filter_hz")
 
 
+def without_gyro_filter(meta) -> dict:
+    """``meta`` (a flight's metadata) with no gyro filter stated (:func:`gyro_filter`), an import's included: a
+    flight whose gyro is white, flown by a world that does not filter it (:mod:`identification.likelihood.loop_world`)."""
+    out = {k: v for k, v in meta.items() if k != "gyro_filter_hz"}
+    if isinstance(out.get("imported_from"), Mapping):
+        out["imported_from"] = {k: v for k, v in out["imported_from"].items() if k != "gyro_filter_hz"}
+    return out
+
+
 def unstated_filter(flights) -> bool:
     """Some of ``flights`` was thinned for a filtered gyro whose corner nothing states (:func:`gyro_filter`): by the
     data's test (:func:`identification.fit_rate.at_fit_rate`) or to a model's rate (``heli refresh``); a rate the
