@@ -70,3 +70,26 @@ def test_a_stated_filter_is_not_read_as_the_aircrafts_lag_or_its_damping():
     assert abs(stated.params_.k3 / k3 - 1) < 0.04 and abs(stated.params_.k2 / k2 - 1) < 0.04
     assert stated.axes_["roll"].input_hold > 0.8 > unstated.axes_["roll"].input_hold
     assert abs(unstated.params_.k3 / k3 - 1) > abs(stated.params_.k3 / k3 - 1)
+
+
+def test_a_world_that_flies_a_white_gyro_states_no_filter_for_its_fits():
+    """A pilot's world in the closed-loop check flies a white gyro at the log's rate: its flights keep the log's
+    metadata but no corner (neither the log's own nor an import's), so its fits put no filter on the input side."""
+    from identification.validation.fit_warnings import gyro_filter, without_gyro_filter
+
+    meta = {"gyro_filter_hz": 20.0, "input_source": "pilot", "imported_from": {"gyro_filter_hz": 20.0, "format": "x"}}
+    assert gyro_filter(meta) == 20.0
+    white = without_gyro_filter(meta)
+    assert gyro_filter(white) is None
+    assert white["input_source"] == "pilot" and white["imported_from"] == {"format": "x"}
+    assert meta["gyro_filter_hz"] == 20.0  # the log's own metadata is left as it was
+
+
+def test_the_fit_says_the_sticks_pass_the_stated_filter():
+    from identification.bench.synthetic import simulate_flight
+    from identification.validation.fit_warnings import fit_warnings
+
+    flight = simulate_flight(20.0, seed=3).flight
+    said = [w for w in fit_warnings(flight.with_metadata(gyro_filter_hz=20.0)) if "low-passed at" in w]
+    assert said and "20 Hz (11.3 ms of lag)" in said[0] and "passes the sticks through that filter" in said[0]
+    assert not [w for w in fit_warnings(flight) if "low-passed at" in w]

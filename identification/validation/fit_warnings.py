@@ -117,6 +117,12 @@ def fit_warnings(flights, r2: Mapping | None = None, r2_label: str = "fit", *, m
             out.append(f"{_name(f, k, len(flights))}: {band.describe()}")
     # thinned to where its gyro's noise is white (identification.fit_rate): one reason for a log's flights
     out += list(dict.fromkeys(f.metadata["fit_rate"] for f in flights if getattr(f, "metadata", {}).get("fit_rate")))
+    corners = sorted({c for c in (gyro_filter(getattr(f, "metadata", {}) or {}) for f in flights) if c is not None})
+    if corners:  # identification.likelihood.gyro_path
+        stated = ", ".join(f"{c:g} Hz ({1e3 * math.sqrt(2.0) / (2.0 * math.pi * c):.1f} ms of lag)" for c in corners)
+        out.append(f"the gyro is stated low-passed at {stated}: the maximum-likelihood fit passes the sticks through "
+                   "that filter, so that its lag is the sensor's, not read as the aircraft's (the model written is the "
+                   "aircraft's)")
     collective = static_collective(flights) if flights else None
     imported = bool(flights) and from_a_log(flights)
     if collective is not None:
