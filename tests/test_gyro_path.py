@@ -93,3 +93,19 @@ def test_the_fit_says_the_sticks_pass_the_stated_filter():
     said = [w for w in fit_warnings(flight.with_metadata(gyro_filter_hz=20.0)) if "low-passed at" in w]
     assert said and "20 Hz (11.3 ms of lag)" in said[0] and "passes the sticks through that filter" in said[0]
     assert not [w for w in fit_warnings(flight) if "low-passed at" in w]
+
+
+def test_flights_pooled_with_and_without_a_stated_filter_fit_together():
+    """``heli refresh`` pools an old CSV (no corner stated) with a new ArduPilot log (its INS_GYRO_FILTER): the stick of
+    the first enters its rate directly, the second's through the filter, in one likelihood."""
+    from identification.bench.cells import BENCH_CELLS
+    from identification.bench.synthetic import simulate_flight
+    from identification.fit_rate import thinned
+    from identification.likelihood.estimator import MaximumLikelihoodIdentifier
+
+    plain = simulate_flight(90.0, seed=5).flight
+    config = replace(BENCH_CELLS["independent"], duration=90.0, log_every=4, gyro_filter_hz=20.0)
+    filtered = simulate_flight(90.0, seed=6, config=config)
+    pooled = [thinned(plain, 2), thinned(filtered.flight, 2)]
+    ml = MaximumLikelihoodIdentifier(axes=("roll",), closed_loop=None).fit(pooled)
+    assert abs(ml.params_.k3 / filtered.truth.k3 - 1) < 0.1 and abs(ml.params_.k2 / filtered.truth.k2 - 1) < 0.05

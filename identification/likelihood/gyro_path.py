@@ -16,9 +16,9 @@ Flight controllers low-pass the gyro they fly on and log (ArduPilot's ``INS_GYRO
   any other (a 20 Hz corner leaves a gust's band below 3 Hz untouched).
 
 Without it the filter's lag (``sqrt(2) / (2 pi f_c)``, 11 ms at 20 Hz) is read as the aircraft's: as a servo lag
-named by the diagnosis on effect-free flights, as a held stick where the pilot's was interpolated, or as dampings
-off by up to 44 % where a pilot holds the sticks over each sample (docs/method.md, "The gyro filter's lag on
-the input side"). The identified model stays the aircraft's, without the filter: it is the sensor's.
+named by the diagnosis on effect-free flights (2 of 10 a pilot's, 5 of 6 behind held sticks), as a held stick where
+the pilot's was interpolated, or in the dampings (up to 9.3 % RMS where 4.1 % remains; docs/method.md, "The gyro
+filter's lag on the input side"). The identified model stays the aircraft's, without the filter: it is the sensor's.
 """
 
 from __future__ import annotations

@@ -203,10 +203,11 @@ def servo_increments(sticks, damping: float, tau: float, dt: float, hold: str, l
     """The command's exact contribution to the rate over each sample, through the servo of eq. (31)
     (:func:`servo_step`): ``v[k]``, the rate's increment from ``k`` to ``k+1`` due to the command (per unit
     control gain), so that the rate sees ``k2*v[k]`` as a one-sample input. The servo state starts settled on the
-    first stick. With ``corner_hz`` the stick passes the gyro filter the log states first
-    (:func:`~identification.likelihood.gyro_path.path_increments`).
+    first stick. With ``corner_hz`` the stick passes the gyro filter the log states first, and with neither a servo
+    nor a filter it enters the rate directly (:func:`~identification.likelihood.gyro_path.path_increments`; a flight
+    pooled with filtered ones).
     """
-    if corner_hz is not None:
+    if corner_hz is not None or (tau <= 0.0 and lag <= 0.0):
         from .gyro_path import path_increments
 
         return path_increments(sticks, damping, tau, dt, hold, lag, corner_hz)
