@@ -257,6 +257,7 @@ def main(argv=None):
           + f". Command: python scripts/likelihood_diagnosis_study.py --seeds {args.seeds} --duration "
           f"{args.duration:g}" + (f" --cell {args.cell}" if args.cell else "")
           + (f" --first-seed {args.first_seed}" if args.first_seed != 1 else "")
+          + (f" --cases {' '.join(args.cases)}" if list(args.cases) != list(CASES) else "")
           + (f" --closed-loop {args.closed_loop}" if args.closed_loop != "off" else "")
           + (" --set " + " ".join(f"{k}={v!r}" for k, v in args.set) if args.set else "")
           + (f" --fit-rate {args.fit_rate}" if args.fit_rate != "log" else ""))

@@ -120,13 +120,6 @@ class DelayCheck:
         return abs(delay - self.delay) <= self.dt * (1.0 + 1e-6) and lr >= REPRODUCED_SHARE * self.flight_lr
 
 
-def _log_hold(ident, fit):
-    """The hold ``ident`` decided for its log (the fraction the decision took), else axis ``fit``'s own: what an
-    axis is refitted at here."""
-    decision = getattr(ident, "hold_decision_", None) or {}
-    return decision.get("fraction", fit.input_hold)
-
-
 def delay_candidates(ident) -> list:
     """The axes whose servo delay the search found (``delay="detect"`` or ``"auto"``), without a lag."""
     modes = ident._delays()
@@ -151,7 +144,8 @@ def check_delay(ident, axis: str, min_lr: float, n_flights: int = N_DELAY_FLIGHT
     likelihood ratio at which the estimator keeps a delay (the flight's own refit must keep it too). Does not
     change ``ident``; :func:`remove_delay` does."""
     a, fit = AXES.index(axis), ident.axes_[axis]
-    hold = _log_hold(ident, fit)
+    decision = getattr(ident, "hold_decision_", None) or {}
+    hold = decision.get("fraction", fit.input_hold)  # the log's hold where decided, else the axis' own
     dt = float(ident.flights_[0].dt)
     kept = ident._kept_terms(a, fit)
     try:

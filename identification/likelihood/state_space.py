@@ -184,18 +184,12 @@ def servo_step(damping: float, tau: float, dt: float, hold: str, lag: float = 0.
     ValueError
         Neither a delay nor a lag (no servo state: the command enters the rate directly).
     """
-    d1, n1, n2 = servo_coefficients(tau, lag)
-    if d1 <= 0.0:
+    from .gyro_path import path_step  # the general path (a gyro filter before the servo): one state here
+
+    if servo_coefficients(tau, lag)[0] <= 0.0:
         raise ValueError(f"a servo needs a delay or a lag > 0, got tau={tau!r}, lag={lag!r}")
-    f, g = -n2 / d1, n1 + n2 / d1
-    M = np.zeros((4, 4))
-    M[:2, :2] = np.array([[-damping, g], [0.0, -1.0 / d1]]) * dt
-    M[:2, 2] = np.array([f, 1.0 / d1]) * dt
-    M[2, 3] = 1.0
-    E = expm(M)
-    ga, gb = E[:2, 2], E[:2, 3]
-    frac = hold_fraction(hold)
-    return float(E[0, 1]), float(E[1, 1]), ga - frac * gb, frac * gb
+    e_rz, e_zz, h0, h1 = path_step(damping, dt, hold, tau, lag)
+    return float(e_rz[0]), float(e_zz[0, 0]), h0, h1
 
 
 def servo_increments(sticks, damping: float, tau: float, dt: float, hold: str, lag: float = 0.0,
