@@ -23,10 +23,11 @@ Usage::
 
     python scripts/aircraft_generalisation.py [--seeds 3] [--first-seed 1] [--duration 300] [--workers 2]
         [--diagnose] [--aircraft agile ...] [--cells independent ...] [--rates 100 ...]
-        [--set FIELD=VALUE ...] [--servo-delay AXIS=SECONDS ...] [--closed-loop auto|off]
+        [--set FIELD=VALUE ...] [--servo-delay AXIS=SECONDS ...] [--closed-loop auto|off] [--timing]
 
 With ``--servo-delay`` the truths carry a servo delay (eq. 31) and the fitted delay's range and RMS error are
-printed per axis.
+printed per axis. With ``--timing`` each flight's servo delay and lag kept per axis are printed, and the closed-loop
+check's verdict on a timing the search found (:mod:`identification.likelihood.delay_check`).
 
 With ``--at-truth`` the closed-loop check is flown a second time, on each checked axis at the truth's values
 instead of the fitted ones (the flight's own pilot, hold, gust model and timing): the bias an exact correction would
@@ -149,6 +150,8 @@ def _one(job):
         out["se"] = {k: 100.0 * se[k] / abs(truth[k]) for k in PARAMS}
         out["hold"] = [f.input_hold for f in ml.axes_.values()]
         out["delays"] = {axis: (tau, ml.axes_[axis].delay) for axis, tau in delays}
+        out["timing"] = {axis: (f.delay, f.lag) for axis, f in ml.axes_.items()}
+        out["timing_checks"] = [d.line() for d in getattr(ml.closed_loop_, "delays", {}).values()]
         hold = getattr(ml.closed_loop_, "hold", None)
         out["hold_check"] = None if hold is None else hold.describe()
         if at_truth and ml.closed_loop_ is not None:
@@ -265,6 +268,16 @@ def _table(rows, diagnose: bool, effect: str | None) -> None:
               f"{len(moved)}" + (f" ({', '.join(sorted(set(moved)))})" if moved else ""))
 
 
+def _timing_lines(rows) -> None:
+    """``--timing``: per flight, the servo delay and lag each axis kept [ms] and what the check made of a timing
+    the search found (:mod:`identification.likelihood.delay_check`)."""
+    print("\nServo timing kept per flight (delay / lag, ms), and the check's verdict on a timing found:")
+    for r in sorted((r for r in rows if "timing" in r), key=lambda r: (r["aircraft"], r["cell"], r["rate"], r["seed"])):
+        kept = ", ".join(f"{a} {1000 * d:.1f} / {1000 * g:.1f}" for a, (d, g) in r["timing"].items())
+        print(f"- {r['aircraft']} {r['cell']} {r['rate']:g} Hz seed {r['seed']}: {kept}"
+              + "".join(f"\n  {line}" for line in r["timing_checks"]))
+
+
 def _standard_error_line(rows) -> None:
     """Whether the standard errors the model reports hold the errors: z = (fitted - truth) / standard error over
     every flight (RMS about 1 and |z| > 2 on about 5 % where they do; a bias shows as a mean away from 0)."""
@@ -296,6 +309,8 @@ def main(argv=None) -> None:
     ap.add_argument("--effect", default=None, help="hide this effect of the catalogue in every truth")
     ap.add_argument("--set", type=config_field, nargs="*", default=[], metavar="FIELD=VALUE",
                     help="FlightConfig fields changed in every cell, e.g. held_sticks=True command_noise=0.01")
+    ap.add_argument("--timing", action="store_true",
+                    help="print the servo delay and lag each flight's axes kept, and the check's verdict on them")
     ap.add_argument("--servo-delay", type=servo_delay, nargs="*", default=[], metavar="AXIS=SECONDS",
                     help="a true servo delay in every truth, e.g. pitch=0.01")
     ap.add_argument("--closed-loop", choices=("auto", "off"), default="auto",
@@ -347,9 +362,11 @@ def main(argv=None) -> None:
           + (" --servo-delay " + " ".join(f"{a}={t:g}" for a, t in delays) if delays else "")
           + ("" if check else " --closed-loop off") + (" --at-truth" if args.at_truth else "")
           + (" --fit-rate log" if args.fit_rate == "log" else "")
-          + (" --unstated-filter" if args.unstated_filter else ""))
+          + (" --unstated-filter" if args.unstated_filter else "") + (" --timing" if args.timing else ""))
     _table(rows, args.diagnose, args.effect)
     _truth_table(rows)
+    if args.timing:
+        _timing_lines(rows)
 
 
 if __name__ == "__main__":

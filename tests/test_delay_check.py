@@ -14,7 +14,7 @@ import pytest
 from heli_core.params import ModelParams
 from identification.bench.cells import BENCH_CELLS
 from identification.bench.synthetic import simulate_flight
-from identification.likelihood.delay_check import DelayCheck, delay_candidates
+from identification.likelihood.delay_check import DelayCheck, delay_candidates, loop_timing
 from identification.likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
 
 SLUGGISH = ModelParams(k2=0.7, k3=1.2, kd1=0.02, k6=-0.5, k7=1.1, kd2=0.01, k10=6.0, k11=1.6, k12=-0.3, kd3=0.05)
@@ -57,6 +57,40 @@ def test_only_delays_the_search_found_are_tested():
     lagged = SimpleNamespace(axes_={"pitch": SimpleNamespace(delay=0.012, lag=0.03)},
                              _delays=lambda: ["detect"] * 3)
     assert delay_candidates(lagged) == []
+
+
+def _controller_flight(rate: float):
+    """A flight controller's commands logged at ``rate`` from its loop 4x faster (what ``loop_ticks`` reads)."""
+    meta = {"imported_from": {"format": "ardupilot-dataflash", "input_source": "controller",
+                              "loop_rate_hz": 4.0 * rate}}
+    return SimpleNamespace(metadata=meta, sample_rate=rate, dt=1.0 / rate)
+
+
+def test_a_timing_a_fast_loop_makes_is_a_candidate_delay_or_lag_and_a_long_one_is_not():
+    # the sluggish autopilot's 200 Hz logs, its loop at 800 Hz: a 7.3 ms lag (yaw, seed 1501) and a 5.4 ms delay
+    # (seed 1505) on effect-free flights; the catalogue's servo lag of 30 ms is not the loop's
+    modes = lambda: ["detect"] * 3  # noqa: E731
+    fast = SimpleNamespace(flights_=[_controller_flight(200.0)], _delays=modes, axes_={
+        "roll": SimpleNamespace(delay=0.0, lag=0.0073), "pitch": SimpleNamespace(delay=-5e-5, lag=0.030),
+        "yaw": SimpleNamespace(delay=0.0054, lag=0.0)})
+    assert delay_candidates(fast) == ["roll", "yaw"]
+    behind = SimpleNamespace(flights_=[_controller_flight(200.0)], _delays=modes,
+                             axes_={"yaw": SimpleNamespace(delay=0.004, lag=0.0073)})  # 11.3 ms in all: too long
+    assert delay_candidates(behind) == []
+    pilot = SimpleNamespace(flights_=[SimpleNamespace(metadata={}, sample_rate=200.0, dt=0.005)], _delays=modes,
+                            axes_={"yaw": SimpleNamespace(delay=0.0, lag=0.0073)})  # no loop: a lag is not tested
+    assert delay_candidates(pilot) == []
+    assert loop_timing(0.005) == 0.010 and loop_timing(0.01) == 0.010 and loop_timing(0.02) == 0.02
+
+
+def test_a_lag_taken_for_the_loops_says_so():
+    check = DelayCheck("yaw", 0.0, 53.5, loops=True, dt=0.005, removed=True, inside_sample=4, lag=0.0073)
+    line = check.line()
+    assert line.startswith("yaw: servo lag 7.3 ms (LR 53.5)") and "within 10 ms (2 logged samples)" in line
+    assert "4x faster than the log" in line and "fitted without it" in line
+    assert json.loads(json.dumps(check.describe()))["lag_s"] == 0.0073
+    at_50 = replace(check, dt=0.02, lag=0.0, delay=0.005)
+    assert "servo delay 5.0 ms" in at_50.line() and "within 20 ms (1 logged sample)" in at_50.line()
 
 
 def _held_noisy_gyro(seed: int, truth):
@@ -104,3 +138,13 @@ def test_a_profiled_fit_carries_its_undelayed_likelihood_for_the_world_flights_r
     for axis in ("roll", "pitch"):
         assert profiled.axes_[axis].undelayed_nll == pytest.approx(plain.axes_[axis].nll, rel=1e-12, abs=1e-9)
         assert plain.axes_[axis].undelayed_nll is None
+
+
+def test_a_delay_whose_world_makes_more_than_all_of_it_is_corrected_to_none_not_below():
+    from identification.likelihood.closed_loop import less_bias
+
+    # seed 1501's yaw behind the autopilot 4x faster than its 200 Hz log, a real 10 ms servo delay: fitted 6.8 ms,
+    # its world's bias +107 % (a negative tau_yaw ended heli identify)
+    assert less_bias("tau_yaw", 0.0068, 1.07) == 0.0
+    assert less_bias("tau_yaw", 0.0068, 0.5) == 0.0068 * 0.5
+    assert less_bias("k11", 2.0, 0.2) == 2.0 * 0.8 and less_bias("k10", 6.0, -0.05) == 6.0 * 1.05

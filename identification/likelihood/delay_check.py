@@ -19,16 +19,21 @@ the delay. The test can only remove a delay its world reproduces; one it misses 
 found it, and is checked.
 
 A flight controller whose loop runs faster than its log (:func:`~identification.likelihood.loop_world.loop_ticks`)
-moves its command inside each logged sample through filters the log does not show (a D-term low-pass on the
-gyro), and that shapes the phase as a delay shorter than a sample would: the bench's autopilot 4x faster than its
-100 Hz log put a yaw delay of 4.5-6.1 ms at LR 25-43 on effect-free flights, its damping +23-43 % with it after the
-check, where the check's world, which flies the loop without those filters, made it on none of 16 flights. A
-delay found within one logged sample of such a flight is therefore the loop's without a world flown
+moves its command inside each logged sample, and the likelihood, which sees the command once a sample, reads that
+motion as a servo's timing: a delay or a lag of a few milliseconds. On the bench's autopilot 4x faster than its log,
+effect-free flights put a yaw delay of 4.5-6.1 ms at LR 25-43 on 100 Hz logs; on 200 Hz logs (the sluggish aircraft,
+eight flights) delays of 3.7-6.8 ms and lags of 6.7-7.3 ms, its dampings +58 to +84 % with them, where the same fits
+without a timing read +14 to +32 % and the check brought them within 8.2 % (k11). The check's world flies the loop
+without that motion's signature: it made none of those delays (0 of 16 flights) or lags (0 of 8). Neither the
+autopilot's D-term low-pass nor its sensors make it: a PD on the true state, one tick late, makes 5.5-8.5 ms delays
+too (docs/method.md, "A servo timing a fast loop makes"). A timing (delay plus lag) found within
+:data:`LOOP_TIMING` (or one logged sample, if longer) of such a flight is therefore the loop's without a world flown
 (:attr:`DelayCheck.inside_sample`), also where the check then cannot fly the axis (the bench's autopilot behind a
 gyro filter the log does not state, fitted at 50 Hz: its dampings +12 to +15 % with its 5 ms delay, -7 to -14 %
 without it, and a delay a quarter of the sample long is one no fixed-step simulation at the log's rate can follow:
-the model kept with it diverged in the forward simulation at 0.1 s); a longer one (a real servo's 10-30 ms at
-100 Hz) is tested as above.
+the model kept with it diverged in the forward simulation at 0.1 s); a longer one (the catalogue's servos of 30-80
+ms) is tested as above, a delay by the world, a lag as the search found it. A real servo faster than
+:data:`LOOP_TIMING` behind such a loop cannot be told from the loop's own motion in the log, and is not kept.
 """
 
 from __future__ import annotations
@@ -54,6 +59,11 @@ the flight's, within one sample of its delay. The delay-free world's loop optima
 aircraft, noisy gyro: 20.9-22.6 for a flight whose own loop-made delay scored 22.7, 21.8-27.3 for one whose real
 10 ms delay scored 45.4, which half its LR had taken for the loop's)."""
 
+LOOP_TIMING = 0.010
+"""A servo timing (delay plus lag) within this [s], or within one logged sample where that is longer, of a flight
+controller's loop faster than its log is the loop's (module docstring: the bench's loops made 3.7-8.5 ms on 100 and
+200 Hz logs; one logged sample was the rule until 2026-12-05, and the 200 Hz logs' 5.4-7.3 ms passed it)."""
+
 
 @dataclass(frozen=True)
 class DelayCheck:
@@ -77,8 +87,10 @@ class DelayCheck:
     dt : float
         The log's sample interval [s] (a delay within one of the flight's is the same delay).
     inside_sample : int
-        Ticks of a flight controller's loop per logged sample where the delay lies within one sample of a loop
-        faster than the log (module docstring): the loop's without a world flown; else 0.
+        Ticks of a flight controller's loop per logged sample where the timing lies within :func:`loop_timing` of a
+        loop faster than the log (module docstring): the loop's without a world flown; else 0.
+    lag : float
+        The servo lag the fit had found with the delay [s] (0: none; a lag is tested only as the loop's).
     """
 
     axis: str
@@ -91,23 +103,29 @@ class DelayCheck:
     removed: bool = False
     fit: object = field(default=None, repr=False, compare=False)  # the delay-free fit
     inside_sample: int = 0
+    lag: float = 0.0
 
     def describe(self) -> dict:
         """JSON-ready."""
         return {"axis": self.axis, "delay_s": self.delay, "flight_lr": self.flight_lr,
                 "world": [list(w) for w in self.world], "loops": self.loops, "removed": self.removed,
-                "reason": self.reason, "inside_sample": self.inside_sample}
+                "reason": self.reason, "inside_sample": self.inside_sample, "lag_s": self.lag}
 
     def line(self) -> str:
         """One line for a report or the terminal."""
         what = f"{self.axis}: servo delay {1000 * self.delay:.1f} ms"
+        if self.lag > 0.0:
+            what = f"{self.axis}: servo lag {1000 * self.lag:.1f} ms" + (
+                f" behind a delay of {1000 * self.delay:.1f} ms" if self.delay > MIN_SERVO_DELAY else "")
         if self.reason:
             return f"{what} not tested in the loop's world ({self.reason})"
         if self.inside_sample:
             verdict = "the axis is fitted without it" if self.removed else "reported, kept"
-            return (f"{what} (LR {self.flight_lr:.1f}) lies within one logged sample of a flight controller's loop "
-                    f"{self.inside_sample}x faster than the log, whose filters inside the sample shape the phase as "
-                    f"a delay would: the loop's ({verdict})")
+            within = (f"{1000 * loop_timing(self.dt):.0f} ms ({loop_timing(self.dt) / self.dt:.3g} logged "
+                      f"sample{'s' if loop_timing(self.dt) > self.dt * (1 + 1e-6) else ''})")
+            return (f"{what} (LR {self.flight_lr:.1f}) lies within {within} of a flight controller's loop "
+                    f"{self.inside_sample}x faster than the log, whose command moves inside each sample where the "
+                    f"log does not see it, and the likelihood reads that as a servo's timing: the loop's ({verdict})")
         seen = sum(1 for d, lr in self.world if self.reproduces(d, lr))
         verdict = ("not reproduced: it stands" if not self.loops else
                    "the loop's: the axis is fitted without it" if self.removed else "the loop's (reported, kept)")
@@ -120,11 +138,32 @@ class DelayCheck:
         return abs(delay - self.delay) <= self.dt * (1.0 + 1e-6) and lr >= REPRODUCED_SHARE * self.flight_lr
 
 
+def loop_timing(dt: float) -> float:
+    """The longest servo timing (delay plus lag) [s] a flight controller's loop faster than its log of samples ``dt``
+    apart is taken to make (:data:`LOOP_TIMING`, or one sample where that is longer)."""
+    return max(LOOP_TIMING, float(dt))
+
+
+def _timing(fit) -> float:
+    """An axis fit's servo timing: its delay (a negative alignment counts none) plus its lag [s]."""
+    return max(float(fit.delay), 0.0) + float(fit.lag)
+
+
 def delay_candidates(ident) -> list:
-    """The axes whose servo delay the search found (``delay="detect"`` or ``"auto"``), without a lag."""
-    modes = ident._delays()
-    return [axis for axis, fit in ident.axes_.items()
-            if modes[AXES.index(axis)] in ("auto", "detect") and fit.delay > MIN_SERVO_DELAY and fit.lag == 0.0]
+    """The axes whose servo delay the search found (``delay="detect"`` or ``"auto"``), without a lag; and, where
+    every flight is a flight controller's logged slower than its loop (:func:`~.loop_world.log_ticks`), the axes
+    whose searched delay or lag adds up to no more than :func:`loop_timing` (the loop's, module docstring)."""
+    modes, flights = ident._delays(), getattr(ident, "flights_", ())
+    fast = bool(flights) and log_ticks(flights) > 1
+    dt = float(flights[0].dt) if flights else 0.0
+    out = []
+    for axis, fit in ident.axes_.items():
+        if modes[AXES.index(axis)] not in ("auto", "detect"):
+            continue
+        timed = fit.delay > MIN_SERVO_DELAY or fit.lag > 0.0
+        if (fit.delay > MIN_SERVO_DELAY and fit.lag == 0.0) or (fast and timed and _timing(fit) <= loop_timing(dt)):
+            out.append(axis)
+    return out
 
 
 def _lr(ident, axis: str, kept: tuple, flights: list, hold, with_fit: bool = True) -> tuple[float, float, object]:
@@ -148,6 +187,9 @@ def check_delay(ident, axis: str, min_lr: float, n_flights: int = N_DELAY_FLIGHT
     hold = decision.get("fraction", fit.input_hold)  # the log's hold where decided, else the axis' own
     dt = float(ident.flights_[0].dt)
     kept = ident._kept_terms(a, fit)
+    ticks = log_ticks(ident.flights_, dt)
+    if ticks > 1 and _timing(fit) <= loop_timing(dt) * (1.0 + 1e-6):
+        return _inside_sample(ident, axis, kept, hold, ticks)
     try:
         flight = _lr(ident, axis, kept, ident.flights_, hold)
     except IdentifiabilityError as exc:
@@ -156,9 +198,6 @@ def check_delay(ident, axis: str, min_lr: float, n_flights: int = N_DELAY_FLIGHT
         return DelayCheck(axis, fit.delay, flight[1], reason=f"refitted at the log's hold the flight itself does not "
                           f"keep it (LR {flight[1]:.1f})", dt=dt)
     null_fit = replace(flight[2], dropped=fit.dropped)
-    ticks = log_ticks(ident.flights_, dt)
-    if ticks > 1 and flight[0] <= dt * (1.0 + 1e-6):
-        return DelayCheck(axis, flight[0], flight[1], loops=True, dt=dt, fit=null_fit, inside_sample=ticks)
     world = with_fits(ident, {axis: null_fit})
     loops, why = world_loops(world, (axis,))  # the closed-loop check's own reasons not to fly an axis
     if why:
@@ -178,6 +217,21 @@ def check_delay(ident, axis: str, min_lr: float, n_flights: int = N_DELAY_FLIGHT
                           dt=dt)
     check = DelayCheck(axis, flight[0], flight[1], [tuple(r) for r in runs], dt=dt, fit=null_fit)
     return replace(check, loops=any(check.reproduces(d, lr) for d, lr in check.world))
+
+
+def _inside_sample(ident, axis: str, kept: tuple, hold, ticks: int) -> DelayCheck:
+    """Axis ``axis``' timing, within :func:`loop_timing` of a flight controller's loop ``ticks`` times faster than
+    its log, taken for the loop's (module docstring): the axis fitted without a delay or lag at the log's ``hold``,
+    and the likelihood ratio the timing had over it (as fitted, at that hold)."""
+    fit, dt = ident.axes_[axis], float(ident.flights_[0].dt)
+    try:
+        none = axis_refit(ident, axis, kept, ident.flights_, hold).axes_[axis]
+    except IdentifiabilityError as exc:
+        return DelayCheck(axis, fit.delay, reason=f"the axis could not be fitted without it ({exc})", dt=dt,
+                          lag=fit.lag)
+    lr = float(max(2.0 * (none.nll - fit.nll), 0.0))
+    return DelayCheck(axis, max(float(fit.delay), 0.0), lr, loops=True, dt=dt,
+                      fit=replace(none, dropped=fit.dropped), inside_sample=ticks, lag=float(fit.lag))
 
 
 def remove_delay(ident, check: DelayCheck) -> DelayCheck:

@@ -2,8 +2,9 @@
 :meth:`~identification.likelihood.estimator.MaximumLikelihoodIdentifier.closed_loop_check`:
 
 1. a servo delay the search found is tested in the delay-free loop (:mod:`.delay_check`): a delay that loop makes
-   too is the loop's, and removed (a delay that stands is flown by step 2 through the servo); a servo lag within a
-   sample of a flight controller's loop read through a stated gyro filter is the filter's, and removed likewise;
+   too is the loop's, and removed (a delay that stands is flown by step 2 through the servo); a delay or lag within
+   :func:`~.delay_check.loop_timing` of a flight controller's loop faster than its log is the loop's, and removed
+   likewise;
 2. the bias of each axis is measured in its loop (:mod:`.closed_loop`);
 3. where a bias the loop's way was found, the log's hold is decided again in the loop's world
    (:mod:`.hold_check`), and when it changes, step 2 runs again at the new hold.
