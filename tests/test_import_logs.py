@@ -124,9 +124,11 @@ def test_each_log_parses_into_a_canonical_flight(raw):
     assert flight.metadata["sha256"] and flight.metadata["inputs_clipped"].keys() == {"lat", "lon", "col", "ped"}
 
 
-LOOP_RATE_HZ = {"px4": None, "ardupilot": None, "betaflight": 4000.0, "rotorflight": 2000.0}
+LOOP_RATE_HZ = {"px4": 400.0, "ardupilot": None, "betaflight": 4000.0, "rotorflight": 2000.0}
 """The flight controller's loop rate each log states: the blackbox headers' ``looptime`` (125 µs) times
-``pid_process_denom`` (2, 4); this ArduCopter log has no ``SCHED_LOOP_RATE`` parameter; PX4's is not read."""
+``pid_process_denom`` (2, 4); PX4's ``IMU_GYRO_RATEMAX`` (its rate controller runs on each gyro sample published,
+at most this fast: the log's ``vehicle_angular_velocity`` at 404 Hz); this ArduCopter log has no
+``SCHED_LOOP_RATE`` parameter."""
 
 
 def test_the_logs_own_loop_rate_is_kept_for_the_fit_s_warning(raw):
@@ -134,6 +136,14 @@ def test_the_logs_own_loop_rate_is_kept_for_the_fit_s_warning(raw):
     slower than it)."""
     name, r = raw
     assert to_flight(r, segment="all").metadata.get("loop_rate_hz") == LOOP_RATE_HZ[name]
+
+
+def test_a_px4_logs_loop_is_its_gyro_publication_rate():
+    """PX4's rate controller runs on each published gyro sample: ``IMU_GYRO_RATEMAX`` is its loop (800 Hz on the
+    tagged log, whose controller outputs are logged at 21 Hz)."""
+    from identification.io.px4 import load_px4
+
+    assert load_px4(_corpus_path("px4_tagged_default_params.ulg")).metadata["loop_rate_hz"] == 800.0
 
 
 GYRO_FILTER_HZ = {"px4": 40.0, "ardupilot": 20.0, "betaflight": None, "rotorflight": None}
