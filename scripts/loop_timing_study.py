@@ -126,8 +126,8 @@ def main(argv=None) -> None:
             for s in range(args.first_seed, args.first_seed + args.seeds)]
     with ProcessPoolExecutor(args.workers) as pool:
         rows = list(tqdm(pool.map(_one, jobs), total=len(jobs), desc="flights", unit="flight"))
-    print(f"\nThe sluggish aircraft's yaw, its loop at {LOG_HZ * TICKS:g} Hz logged at {LOG_HZ:g} Hz, fitted held without "
-          f"the check. Command: python scripts/loop_timing_study.py --seeds {args.seeds} --first-seed "
+    print(f"\nThe sluggish aircraft's yaw, its loop at {LOG_HZ * TICKS:g} Hz logged at {LOG_HZ:g} Hz, fitted held "
+          f"without the check. Command: python scripts/loop_timing_study.py --seeds {args.seeds} --first-seed "
           f"{args.first_seed} --gyro-noise {args.gyro_noise:g} --duration {args.duration:g}\n")
     print("| flight | seed | timing found (delay / lag, ms) | LR against none | k11 with it | k11 without |")
     print("|---|---|---|---|---|---|")

@@ -342,8 +342,8 @@ def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: st
         se = {k: float(r.std(ddof=1) / np.sqrt(r.size)) for k, r in rel.items()}
         gain, damping = checked[axis][:2]
         loops_bias = loops_direction(bias, se, gain, damping, results[axis].loop_ticks, results[axis].gyro_filter)
-        corrected = {k: (less_bias(k, v, bias[k]) if mode == "auto" and loops_bias and abs(bias[k]) > SIGNIFICANCE * se[k]
-                         else v) for k, v in fitted.items()}
+        removed = {k for k in fitted if mode == "auto" and loops_bias and abs(bias[k]) > SIGNIFICANCE * se[k]}
+        corrected = {k: less_bias(k, v, bias[k]) if k in removed else v for k, v in fitted.items()}
         results[axis] = replace(results[axis], fitted=fitted, bias=bias, bias_se=se, corrected=corrected,
                                 loops_direction=loops_bias, flights=int(rel[damping].size))
     if again:
