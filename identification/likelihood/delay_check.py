@@ -22,8 +22,8 @@ A flight controller whose loop runs faster than its log (:func:`~identification.
 moves its command inside each logged sample, and the likelihood, which sees the command once a sample, reads that
 motion as a servo's timing: a delay or a lag of a few milliseconds. On the bench's autopilot 4x faster than its log,
 effect-free flights put a yaw delay of 4.5-6.1 ms at LR 25-43 on 100 Hz logs; on 200 Hz logs (the sluggish aircraft,
-eight flights) delays of 3.7-6.8 ms and lags of 6.7-7.3 ms, its dampings +58 to +84 % with them, where the same fits
-without a timing read +14 to +32 % and the check brought them within 8.2 % (k11). The check's world flies the loop
+eight flights) delays of 3.7-6.8 ms and lags of 6.7-7.3 ms, its dampings +53 to +84 % with them and +16 to +39 % on
+the axes without one; fitted with no timing, the check brought them within 9.7 %. The check's world flies the loop
 without that motion's signature: it made none of those delays (0 of 16 flights) or lags (0 of 8). Neither the
 autopilot's D-term low-pass nor its sensors make it: a PD on the true state, one tick late, makes 5.5-8.5 ms delays
 too (docs/method.md, "A servo timing a fast loop makes"). A timing (delay plus lag) found within
