@@ -243,10 +243,10 @@ def load_px4(path, allow_damaged: bool = False) -> RawLog:
         **meta_end,
     }
     ratemax = ulog.initial_parameters.get("IMU_GYRO_RATEMAX", 0)
-    if isinstance(ratemax, (int, float)) and ratemax > 0:
-        # the rate controller runs on each vehicle_angular_velocity sample, published at most this fast (PX4's
-        # imu_gyro_parameters.c: "the loop rate for the rate controller and outputs"; 0: the sensor's own rate,
-        # which the log does not state)
+    if isinstance(ratemax, (int, float)) and ratemax > 0 and vehicle != "fixed-wing":
+        # the multicopter (and helicopter) rate controller runs on each vehicle_angular_velocity sample, published at
+        # most this fast (PX4's imu_gyro_parameters.c: "the loop rate for the rate controller and outputs"; 0: the
+        # sensor's own rate, which the log does not state); a fixed-wing's rate loop is not read as it
         meta["loop_rate_hz"] = float(ratemax)
     cutoff = ulog.initial_parameters.get("IMU_GYRO_CUTOFF", 0.0)
     if isinstance(cutoff, (int, float)) and cutoff > 0:  # the gyro's 2-pole low-pass before the controller and log
