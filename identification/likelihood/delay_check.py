@@ -144,9 +144,10 @@ def loop_timing(dt: float) -> float:
     return max(LOOP_TIMING, float(dt))
 
 
-def _timing(fit) -> float:
-    """An axis fit's servo timing: its delay (a negative alignment counts none) plus its lag [s]."""
-    return max(float(fit.delay), 0.0) + float(fit.lag)
+def _within_loop_timing(fit, dt: float) -> bool:
+    """An axis fit's servo timing, its delay (a negative alignment counts none) plus its lag, lies within
+    :func:`loop_timing` of a log of samples ``dt`` apart: what a flight controller faster than it makes."""
+    return max(float(fit.delay), 0.0) + float(fit.lag) <= loop_timing(dt) * (1.0 + 1e-6)
 
 
 def delay_candidates(ident) -> list:
@@ -161,7 +162,7 @@ def delay_candidates(ident) -> list:
         if modes[AXES.index(axis)] not in ("auto", "detect"):
             continue
         timed = fit.delay > MIN_SERVO_DELAY or fit.lag > 0.0
-        if (fit.delay > MIN_SERVO_DELAY and fit.lag == 0.0) or (fast and timed and _timing(fit) <= loop_timing(dt)):
+        if (fit.delay > MIN_SERVO_DELAY and fit.lag == 0.0) or (fast and timed and _within_loop_timing(fit, dt)):
             out.append(axis)
     return out
 
@@ -188,8 +189,8 @@ def check_delay(ident, axis: str, min_lr: float, n_flights: int = N_DELAY_FLIGHT
     dt = float(ident.flights_[0].dt)
     kept = ident._kept_terms(a, fit)
     ticks = log_ticks(ident.flights_, dt)
-    if ticks > 1 and _timing(fit) <= loop_timing(dt) * (1.0 + 1e-6):
-        return _inside_sample(ident, axis, kept, hold, ticks)
+    if ticks > 1 and _within_loop_timing(fit, dt):
+        return _the_loops_timing(ident, axis, kept, hold, ticks)
     try:
         flight = _lr(ident, axis, kept, ident.flights_, hold)
     except IdentifiabilityError as exc:
@@ -219,7 +220,7 @@ def check_delay(ident, axis: str, min_lr: float, n_flights: int = N_DELAY_FLIGHT
     return replace(check, loops=any(check.reproduces(d, lr) for d, lr in check.world))
 
 
-def _inside_sample(ident, axis: str, kept: tuple, hold, ticks: int) -> DelayCheck:
+def _the_loops_timing(ident, axis: str, kept: tuple, hold, ticks: int) -> DelayCheck:
     """Axis ``axis``' timing, within :func:`loop_timing` of a flight controller's loop ``ticks`` times faster than
     its log, taken for the loop's (module docstring): the axis fitted without a delay or lag at the log's ``hold``,
     and the likelihood ratio the timing had over it (as fitted, at that hold)."""
