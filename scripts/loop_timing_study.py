@@ -118,6 +118,9 @@ def main(argv=None) -> None:
     ap.add_argument("--duration", type=float, default=300.0)
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args(argv)
+    if args.seeds < 1 or args.workers < 1 or args.duration <= 0 or args.gyro_noise < 0:
+        ap.error(f"expected --seeds and --workers >= 1, --duration > 0 and --gyro-noise >= 0; got {args.seeds}, "
+                 f"{args.workers}, {args.duration:g} and {args.gyro_noise:g}")
     from concurrent.futures import ProcessPoolExecutor
 
     from tqdm import tqdm
