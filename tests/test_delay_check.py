@@ -88,6 +88,7 @@ def test_a_lag_taken_for_the_loops_says_so():
     line = check.line()
     assert line.startswith("yaw: servo lag 7.3 ms (LR 53.5)") and "within 10 ms (2 logged samples)" in line
     assert "4x faster than the log" in line and "fitted without it" in line
+    assert "if one is known, --delay SECONDS fits it" in line  # a real servo this fast: the user's recourse
     assert json.loads(json.dumps(check.describe()))["lag_s"] == 0.0073
     at_50 = replace(check, dt=0.02, lag=0.0, delay=0.005)
     assert "servo delay 5.0 ms" in at_50.line() and "within 20 ms (1 logged sample)" in at_50.line()

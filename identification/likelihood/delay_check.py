@@ -125,7 +125,8 @@ class DelayCheck:
                       f"sample{'s' if loop_timing(self.dt) > self.dt * (1 + 1e-6) else ''})")
             return (f"{what} (LR {self.flight_lr:.1f}) lies within {within} of a flight controller's loop "
                     f"{self.inside_sample}x faster than the log, whose command moves inside each sample where the "
-                    f"log does not see it, and the likelihood reads that as a servo's timing: the loop's ({verdict})")
+                    f"log does not see it, and the likelihood reads that as a servo's timing: the loop's ({verdict}; "
+                    f"a servo this fast cannot be told from it in this log: if one is known, --delay SECONDS fits it)")
         seen = sum(1 for d, lr in self.world if self.reproduces(d, lr))
         verdict = ("not reproduced: it stands" if not self.loops else
                    "the loop's: the axis is fitted without it" if self.removed else "the loop's (reported, kept)")
