@@ -4,6 +4,7 @@ flies the loop at the rate the log states to measure and remove it."""
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 from types import SimpleNamespace
 
@@ -160,10 +161,24 @@ def test_a_csv_of_a_controllers_commands_is_stated_on_the_command_line(tmp_path,
     assert not (tmp_path / "integral").exists()
 
 
-def test_a_large_bias_of_a_controllers_loop_is_measured_again_at_the_corrected_values(monkeypatch):
+def _world_whose_fit_is_linear(flown: list, se: float):
+    """A check whose world fits 3.9 + 0.9 (v - 3) at damping v (its bias 1.2 / v - 0.1, known to ``se``), the gain's
+    bias -2 %; each round's values are kept in ``flown``."""
+    def world_round(world, n_flights, **kw):
+        flown.append(({a: dict(world.axes_[a]) for a in world.axes_}, kw))
+        return SimpleNamespace(axes={a: SimpleNamespace(checked=True, loops_direction=True,
+                                                        bias={"k2": -0.02, "k3": 1.2 / world.axes_[a]["k3"] - 0.1},
+                                                        bias_se={"k2": se, "k3": se})
+                                     for a in world.axes_})
+    return world_round
+
+
+def test_a_large_bias_of_a_controllers_loop_is_flown_again_toward_where_the_worlds_fit_equals_the_flights(monkeypatch):
     """A damping bias above AGAIN_BIAS (a controller's loop flown at its rate, the bias removed) changes with the
-    damping it is measured at: the loop is flown again at the corrected values and the fit divided by one plus the
-    bias found there; a smaller bias, a human's loop, or a bias left, is not."""
+    damping it is measured at: the loop is flown again, each time at the next damping toward the root of the
+    world's expected fit v (1 + b(v)) = the flight's fit, and the gain divided by one plus its last bias; a smaller
+    bias, a human's loop, or a bias left, is not. Here the flight's fit 3.0 is the world's at 2.0, where one step
+    (3.0 over one plus the bias at 2.1) would stop at 2.04."""
     from identification.likelihood import closed_loop as cl
 
     def result(axis, bias, ticks=4, removed=("k3",)):
@@ -172,30 +187,51 @@ def test_a_large_bias_of_a_controllers_loop_is_measured_again_at_the_corrected_v
         return cl.AxisCheck(axis, True, fitted=fitted, bias=bias, bias_se={"k2": 0.01, "k3": 0.01},
                             corrected=corrected, loop_ticks=ticks)
 
-    flown = {}
-
-    def second_round(world, n_flights, **kw):
-        flown.update(axes=tuple(world.axes_), values={a: dict(world.axes_[a]) for a in world.axes_}, **kw)
-        seen = SimpleNamespace(checked=True, bias={"k2": -0.02, "k3": 0.5}, loops_direction=True)
-        return SimpleNamespace(axes={a: seen for a in world.axes_})
-
-    monkeypatch.setattr(cl, "check_closed_loop", second_round)
+    flown = []
+    monkeypatch.setattr(cl, "check_closed_loop", _world_whose_fit_is_linear(flown, se=0.01))
     monkeypatch.setattr(cl, "set_axis_values", lambda world, axis, values: world.axes_.__setitem__(axis, values))
     ident = SimpleNamespace(axes_={a: {} for a in ("roll", "pitch", "yaw")})
-    results = {"roll": result("roll", {"k2": 0.0, "k3": 0.3}), "pitch": result("pitch", {"k2": 0.0, "k3": 0.1}),
-               "yaw": result("yaw", {"k2": 0.0, "k3": 0.3}, ticks=1)}
+    results = {"roll": result("roll", {"k2": -0.01, "k3": 0.3}, removed=("k2", "k3")),
+               "pitch": result("pitch", {"k2": 0.0, "k3": 0.1}), "yaw": result("yaw", {"k2": 0.0, "k3": 0.3}, ticks=1)}
     out = cl._measured_again(ident, results, 8, 5, None)
-    assert flown["axes"] == ("roll",) and flown["values"]["roll"] == pytest.approx({"k2": 1.0, "k3": 2.1})
-    assert flown["mode"] == "report" and flown["again"] is False and flown["seed"] == 6
-    assert out["roll"].corrected == pytest.approx({"k2": 1.0, "k3": 2.0}) and out["roll"].bias_again["k3"] == 0.5
+    assert len(flown) == cl.AGAIN_STEPS == 2 and all(tuple(values) == ("roll",) for values, _ in flown)
+    assert flown[0][0]["roll"] == pytest.approx({"k2": 1.01, "k3": 2.1})  # the first correction, 3.0 (1 - 0.3)
+    assert flown[1][0]["roll"]["k3"] == pytest.approx(2.0)  # the secant through 3.0 and 2.1
+    assert flown[1][0]["roll"]["k2"] == pytest.approx(1.0 / 0.98)  # the gain over one plus the bias at 2.1
+    assert [kw["seed"] for _, kw in flown] == [6, 7] and all(kw["mode"] == "report" and kw["again"] is False
+                                                            for _, kw in flown)
+    assert out["roll"].corrected == pytest.approx({"k2": 1.0 / 0.98, "k3": 2.0})
+    assert out["roll"].bias_again["k3"] == pytest.approx(0.5)
+    assert [v for v, _ in out["roll"].flown_again] == pytest.approx([2.1, 2.0])
     assert out["pitch"] is results["pitch"] and out["yaw"] is results["yaw"]
-    assert "measured again at the corrected values: k3 +50.0 %" in cl.ClosedLoopCheck(out, 8, 0, "auto", 0.0).lines()[0]
+    line = cl.ClosedLoopCheck(out, 8, 0, "auto", 0.0).lines()[0]
+    assert "flown again at k3 = 2.1 (+47.1 %), 2 (+50.0 %): k3 2, toward the damping whose world's fit" in line
+    assert json.loads(json.dumps(out["roll"].describe()))["flown_again"][1] == pytest.approx([2.0, 0.5])
     left = {"roll": result("roll", {"k2": 0.0, "k3": 0.3}, removed=())}
     assert cl._measured_again(ident, left, 8, 5, None) is left
     against = SimpleNamespace(axes={"roll": SimpleNamespace(checked=True, bias={"k2": 0.0, "k3": -0.2},
                                                             loops_direction=False)})
     monkeypatch.setattr(cl, "check_closed_loop", lambda world, n, **kw: against)
     assert cl._measured_again(ident, results, 8, 5, None)["roll"] is results["roll"]  # the first correction stands
+
+
+def test_the_next_damping_is_a_secants_root_only_where_the_worlds_fits_tell_its_slope():
+    """Far from the root the world's expected fits at two dampings differ by many standard errors and their secant
+    is taken; close together (or falling, or a root of no sign) the fixed point's step, the flight's fit over one
+    plus the latest bias, which does not amplify the flights' noise (a secant through fits 0.01 apart stepped to
+    -27 % on the sluggish aircraft's 100 Hz log)."""
+    from identification.likelihood.closed_loop import SECANT_Z, next_damping
+
+    assert next_damping([(3.0, 0.3, 0.01), (2.1, 1.2 / 2.1 - 0.1, 0.01)], 3.0) == pytest.approx(2.0)
+    close = [(1.079, 0.446, 0.025), (1.009, 0.534, 0.025)]  # fits 1.560 and 1.548: 0.3 standard errors apart
+    assert next_damping(close, 1.5) == pytest.approx(1.5 / 1.534)
+    apart = [(1.079, 0.446, 0.001), (1.009, 0.534, 0.001)]  # the same fits, known to 0.001: the secant's root
+    f1, f2 = 1.079 * 1.446, 1.009 * 1.534
+    assert next_damping(apart, 1.5) == pytest.approx(1.009 + (1.5 - f2) * (1.009 - 1.079) / (f2 - f1))
+    assert SECANT_Z > 1.0
+    assert next_damping([(2.0, 0.50, 0.0), (2.1, 0.40, 0.0)], 3.0) == pytest.approx(3.0 / 1.4)  # falling: 3.0, 2.94
+    assert next_damping([(2.0, 0.5, 0.0), (2.0, 0.6, 0.0)], 3.0) == pytest.approx(3.0 / 1.6)
+    assert next_damping([(1.0, 1.0, 0.0), (1.1, 1.0, 0.0)], 0.5) == pytest.approx(0.25)  # root -3.9: no sign
 
 
 def test_diagnose_takes_the_controllers_loop_as_identify_does(tmp_path, capsys, monkeypatch):
