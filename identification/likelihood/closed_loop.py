@@ -35,7 +35,7 @@ damping bias of +0.3 +- 1.3 % or -0.5 +- 2.2 %.)
 
 The loops themselves are built and flown by :mod:`identification.likelihood.loop_world`; a flight controller's loop
 faster than its log is flown there at its own rate, and its bias is not ruled out by a gain moving up (see
-:func:`against_the_loop`); a large one is measured a second time at the corrected values (:data:`AGAIN_BIAS`).
+:func:`against_the_loop`); a large one is flown again toward the bootstrap's fixed point (:data:`AGAIN_BIAS`).
 Where the log states the gyro filter such a loop read through (ArduPilot's ``INS_GYRO_FILTER``, ``--gyro-filter``),
 the world flies it too, and its bias is removed whichever way it points (:attr:`AxisCheck.gyro_filter`); where
 the fit's rate was lowered for a filtered gyro whose corner the log does not state, such a loop is not flown.
