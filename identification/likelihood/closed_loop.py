@@ -120,15 +120,15 @@ class AxisCheck:
         Ticks of the flight controller's loop flown per logged sample
         (:func:`~identification.likelihood.loop_world.loop_ticks`; 1: the loop flown at the log's rate).
     bias_again : dict
-        Where measured again (:data:`AGAIN_BIAS`), the bias at the last values flown; the damping is then the
-        secant root of :func:`_measured_again`, the other removed values the fitted ones over one plus it. Else
-        empty.
+        Where flown again (:data:`AGAIN_BIAS`), every bias at the last values flown; the damping is then
+        :func:`next_damping`'s, the other removed values the fitted ones over one plus their bias here. Else empty.
     gyro_filter : bool
         The world flew the gyro low-pass the log states the controller's law read through
         (:func:`~identification.likelihood.loop_world.gyro_biquad`); the bias is then removed whichever way it
         points (:func:`against_the_loop`).
     flown_again : tuple of (float, float)
-        Where measured again, each damping the loop was flown at after the first and its relative bias there.
+        Where flown again, each damping it was flown at (the first correction's, then each next) and the damping's
+        relative bias there.
     """
 
     axis: str
