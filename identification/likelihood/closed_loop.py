@@ -309,8 +309,8 @@ def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: st
     The flights are flown in batches of ``n_flights``, up to ``max_flights`` (default three batches), another
     batch while a bias is neither clearly there nor clearly not (:data:`CONCLUSIVE`); an axis whose damping is
     clearly not biased the loop's way is not fitted again (its flights are still flown, so that the others' are
-    the same draws). With ``again``, a large bias of a flight controller's loop is measured a second time at the
-    corrected values (:data:`AGAIN_BIAS`).
+    the same draws). With ``again``, a large bias of a flight controller's loop is flown again toward the
+    bootstrap's fixed point (:data:`AGAIN_BIAS`, :func:`_measured_again`).
 
     Raises
     ------
