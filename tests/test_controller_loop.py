@@ -177,8 +177,9 @@ def test_a_large_bias_of_a_controllers_loop_is_flown_again_toward_where_the_worl
     """A damping bias above AGAIN_BIAS (a controller's loop flown at its rate, the bias removed) changes with the
     damping it is measured at: the loop is flown again, each time at the next damping toward the root of the
     world's expected fit v (1 + b(v)) = the flight's fit, and the gain divided by one plus its last bias; a smaller
-    bias, a human's loop, or a bias left, is not. Here the flight's fit 3.0 is the world's at 2.0, where one step
-    (3.0 over one plus the bias at 2.1) would stop at 2.04."""
+    bias, a human's loop, or a bias left, is not; where a world cannot be flown the last step measured stands. Here
+    the flight's fit 3.0 is the world's at 2.0, where one step (3.0 over one plus the bias at 2.1) would stop at
+    2.04."""
     from identification.likelihood import closed_loop as cl
 
     def result(axis, bias, ticks=4, removed=("k3",)):
@@ -209,6 +210,11 @@ def test_a_large_bias_of_a_controllers_loop_is_flown_again_toward_where_the_worl
     assert json.loads(json.dumps(out["roll"].describe()))["flown_again"][1] == pytest.approx([2.0, 0.5])
     left = {"roll": result("roll", {"k2": 0.0, "k3": 0.3}, removed=())}
     assert cl._measured_again(ident, left, 8, 5, None) is left
+    linear = _world_whose_fit_is_linear([], se=0.01)
+    monkeypatch.setattr(cl, "check_closed_loop", lambda world, n, **kw: (  # the world at the secant's 2.0 not flown
+        linear(world, n, **kw) if kw["seed"] == 6 else SimpleNamespace(axes={"roll": SimpleNamespace(checked=False)})))
+    unflown = cl._measured_again(ident, results, 8, 5, None)["roll"]
+    assert unflown.corrected["k3"] == pytest.approx(3.0 / (1.2 / 2.1 + 0.9))  # the step measured at 2.1, not 2.0
     against = SimpleNamespace(axes={"roll": SimpleNamespace(checked=True, bias={"k2": 0.0, "k3": -0.2},
                                                             loops_direction=False)})
     monkeypatch.setattr(cl, "check_closed_loop", lambda world, n, **kw: against)
@@ -232,6 +238,7 @@ def test_the_next_damping_is_a_secants_root_only_where_the_worlds_fits_tell_its_
     assert next_damping([(2.0, 0.50, 0.0), (2.1, 0.40, 0.0)], 3.0) == pytest.approx(3.0 / 1.4)  # falling: 3.0, 2.94
     assert next_damping([(2.0, 0.5, 0.0), (2.0, 0.6, 0.0)], 3.0) == pytest.approx(3.0 / 1.6)
     assert next_damping([(1.0, 1.0, 0.0), (1.1, 1.0, 0.0)], 0.5) == pytest.approx(0.25)  # root -3.9: no sign
+    assert next_damping([(2.0, 0.5, 0.0), (1.0, 1.9, 0.0)], 3.5) == pytest.approx(3.5 / 2.9)  # root 7.0: 5.8x the step
 
 
 def test_diagnose_takes_the_controllers_loop_as_identify_does(tmp_path, capsys, monkeypatch):

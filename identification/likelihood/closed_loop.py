@@ -391,7 +391,9 @@ def _measured_again(ident, results: dict, n_flights: int, seed: int, workers) ->
     it, the flight's fit 2.01), so the first correction ``v0 (1 - b(v0))`` and ``v0 / (1 + b)`` measured there stop
     short (+19 % there, where ``F``'s root is +3 %). The loop is flown :data:`AGAIN_STEPS` more times, ``n_flights``
     flights each (the pilot fitted again beside each model's smoother), each time at the next value of
-    :func:`next_damping`; the other removed values are the fitted ones over one plus the bias measured last."""
+    :func:`next_damping`; the other removed values are the fitted ones over one plus the bias measured last. Where
+    a world cannot be flown (or its bias points against the loop's way) the last step measured stands: the fit over
+    one plus the last bias, not a root that was never flown."""
     axes = [a for a, c in results.items() if c.checked and c.loop_ticks > 1 and list(c.bias)[1] in c.removed
             and abs(c.bias[list(c.bias)[1]]) > AGAIN_BIAS]
     if not axes:
@@ -400,7 +402,7 @@ def _measured_again(ident, results: dict, n_flights: int, seed: int, workers) ->
     flown = {axis: [(results[axis].fitted[d], results[axis].bias[d], results[axis].bias_se[d])]
              for axis, d in damping.items()}
     values = {axis: dict(results[axis].corrected) for axis in axes}
-    out = dict(results)
+    out, measured = dict(results), dict(results)  # measured: each axis at the fixed point's step of its last bias
     for step in range(AGAIN_STEPS):
         world = copy.copy(ident)
         world.axes_ = {axis: ident.axes_[axis] for axis in axes}
@@ -410,14 +412,16 @@ def _measured_again(ident, results: dict, n_flights: int, seed: int, workers) ->
                                  max_flights=n_flights, again=False).axes
         for axis in list(axes):
             c, d, s = results[axis], damping[axis], seen[axis]
-            if not s.checked or not s.loops_direction:  # against the loop's way: the last values stand
+            if not s.checked or not s.loops_direction:  # not flown, or against the loop's way: the last measured
+                out[axis] = measured[axis]  # stands, not a secant's root that was never flown
                 axes.remove(axis)
                 continue
             flown[axis].append((values[axis][d], s.bias[d], s.bias_se[d]))
             values[axis] = {k: v / (1.0 + s.bias[k]) if k in c.removed else v for k, v in c.fitted.items()}
+            again = {"bias_again": dict(s.bias), "flown_again": tuple((v, b) for v, b, _ in flown[axis][1:])}
+            measured[axis] = replace(c, corrected=dict(values[axis]), **again)
             values[axis][d] = next_damping(flown[axis], c.fitted[d])
-            out[axis] = replace(c, corrected=dict(values[axis]), bias_again=dict(s.bias),
-                                flown_again=tuple((v, b) for v, b, _ in flown[axis][1:]))
+            out[axis] = replace(c, corrected=dict(values[axis]), **again)
         if not axes:
             break
     return out
@@ -434,14 +438,15 @@ def next_damping(flown: list, target: float) -> float:
     :data:`SECANT_Z` standard errors and rise with ``v`` (far from the root: the sluggish pitch at 50 Hz, +101 % fitted,
     +28 % at the first correction); else the fixed point's step ``target / (1 + b)`` at the latest, which does not
     amplify the flights' noise (near it: at 100 Hz the same aircraft's first correction lands within a few per cent,
-    where a secant through fits 0.01 apart stepped to -27 %). A secant root of no sign is the step too."""
+    where a secant through fits 0.01 apart stepped to -27 %). A secant root more than a factor two from that step (of
+    no sign, say) is an extrapolation its two values do not support: the step too."""
     (v1, b1, s1), (v2, b2, s2) = flown[-2:]
     f1, f2 = v1 * (1.0 + b1), v2 * (1.0 + b2)
     step = target / (1.0 + b2)
     if v1 == v2 or (f2 - f1) / (v2 - v1) <= 0.0 or abs(f2 - f1) < SECANT_Z * np.hypot(v1 * s1, v2 * s2):
         return step
     root = v2 + (target - f2) * (v2 - v1) / (f2 - f1)
-    return root if root > 0.0 else step
+    return root if 0.5 * abs(step) <= root <= 2.0 * abs(step) else step
 
 
 def against_the_loop(bias: dict, se: dict, gain: str, damping: str, ticks: int = 1, gyro_filter: bool = False) -> str:
