@@ -26,13 +26,16 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import sys
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
-from heli_core.params import ModelParams
+sys.path.insert(0, str(Path(__file__).parent))  # the study's aircraft is aircraft_generalisation's
+from aircraft_generalisation import AIRCRAFT  # noqa: E402
 
-SLUGGISH = ModelParams(k2=0.7, k3=1.2, kd1=0.02, k6=-0.5, k7=1.1, kd2=0.01, k10=6.0, k11=1.6, k12=-0.3, kd3=0.05)
+SLUGGISH = AIRCRAFT["sluggish"]
 """``scripts/aircraft_generalisation.py``'s large, slow helicopter."""
 
 LOG_HZ, TICKS = 200.0, 4
