@@ -121,8 +121,9 @@ class DelayCheck:
             return f"{what} not tested in the loop's world ({self.reason})"
         if self.inside_sample:
             verdict = "the axis is fitted without it" if self.removed else "reported, kept"
-            within = (f"{1000 * loop_timing(self.dt):.0f} ms ({loop_timing(self.dt) / self.dt:.3g} logged "
-                      f"sample{'s' if loop_timing(self.dt) > self.dt * (1 + 1e-6) else ''})")
+            bound = loop_timing(self.dt)
+            within = (f"{1000 * bound:.0f} ms ({bound / self.dt:.3g} logged "
+                      f"sample{'s' if bound > self.dt * (1 + 1e-6) else ''})")
             return (f"{what} (LR {self.flight_lr:.1f}) lies within {within} of a flight controller's loop "
                     f"{self.inside_sample}x faster than the log, whose command moves inside each sample where the "
                     f"log does not see it, and the likelihood reads that as a servo's timing: the loop's ({verdict}; "
