@@ -26,17 +26,14 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import sys
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).parent))  # the study's aircraft is aircraft_generalisation's
-from aircraft_generalisation import AIRCRAFT  # noqa: E402
+from identification.bench.aircraft import AIRCRAFT
 
 SLUGGISH = AIRCRAFT["sluggish"]
-"""``scripts/aircraft_generalisation.py``'s large, slow helicopter."""
+"""The bench's large, slow helicopter (:data:`identification.bench.aircraft.AIRCRAFT`)."""
 
 LOG_HZ, TICKS = 200.0, 4
 YAW_ONLY = dict(sweep_amplitude=(0.0, 0.0, 0.08), wind_level=(0.0, 0.0, 0.03))

@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 
 from heli_core.files import jsonable
-from heli_core.params import ModelParams
+from identification.bench.aircraft import AIRCRAFT
 from identification.bench.cells import BENCH_CELLS
 from identification.bench.synthetic import simulate_flight
 from identification.likelihood.estimator import MaximumLikelihoodIdentifier
 
-SLUGGISH = ModelParams(k2=0.7, k3=1.2, kd1=0.02, k6=-0.5, k7=1.1, kd2=0.01, k10=6.0, k11=1.6, k12=-0.3, kd3=0.05)
-"""scripts/aircraft_generalisation.py's large, slow helicopter: the aircraft the bias was found on."""
+SLUGGISH = AIRCRAFT["sluggish"]
+"""The bench's large, slow helicopter (:mod:`identification.bench.aircraft`): the aircraft the bias was found on."""
 
 
 def _flight(cell: str, seed: int, duration: float, truth=None, **fields):

@@ -11,6 +11,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from identification.bench.aircraft import AIRCRAFT
 from identification.bench.cells import BENCH_CELLS
 from identification.bench.synthetic import simulate_flight
 from identification.likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
@@ -297,10 +298,8 @@ def test_a_lag_a_faster_controller_makes_is_the_loops_and_the_damping_holds():
     """The sluggish aircraft's yaw, its autopilot at 800 Hz logged at 200 Hz (300 s, seed 1501): the search puts a
     7.3 ms servo lag at LR 54 beside a damping +84 %; the lag is taken for the loop's (within 10 ms of a loop faster
     than its log), and the damping is within 10 % after the check (-5.4 % on all three axes)."""
-    from heli_core.params import ModelParams
 
-    sluggish = ModelParams(k2=0.7, k3=1.2, kd1=0.02, k6=-0.5, k7=1.1, kd2=0.01, k10=6.0, k11=1.6, k12=-0.3,
-                           kd3=0.05)
+    sluggish = AIRCRAFT["sluggish"]
     config = replace(BENCH_CELLS["broadband-autopilot"], duration=300.0, sample_rate=200.0, log_every=4)
     sim = simulate_flight(300.0, seed=1501, config=config, truth=sluggish)
     ml = MaximumLikelihoodIdentifier(**CLI_TIMING, axes=("yaw",), closed_loop="auto").fit(sim.flight)

@@ -12,6 +12,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from identification.bench.aircraft import AIRCRAFT
 from identification.bench.cells import BENCH_CELLS
 from identification.bench.synthetic import simulate_flight
 from identification.fit_rate import thinned
@@ -163,10 +164,9 @@ def test_the_filters_lag_is_not_taken_for_a_servo_lag_under_a_fast_loop():
     too, flew twice (on 300 s flights dampings -49 and -59 % where the fit was +73 and +63 %); a lag inside one sample
     of such a loop is removed as the filter's (delay_check.check_filter_lag). With the filter on the input side no lag
     is taken: the fit reads the loop's +59 % and the check ends at +13 %."""
-    from heli_core.params import ModelParams
     from identification.likelihood.estimator import CLI_TIMING
 
-    sluggish = ModelParams(k2=0.7, k3=1.2, kd1=0.02, k6=-0.5, k7=1.1, kd2=0.01, k10=6.0, k11=1.6, k12=-0.3, kd3=0.05)
+    sluggish = AIRCRAFT["sluggish"]
 
     config = replace(BENCH_CELLS["broadband-autopilot"], vibration_lines=(), vibration=0.0, log_every=8,
                      duration=120.0, gyro_filter_hz=20.0)

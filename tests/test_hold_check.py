@@ -11,7 +11,7 @@ from types import SimpleNamespace
 import pytest
 
 from heli_core.files import jsonable
-from heli_core.params import ModelParams
+from identification.bench.aircraft import AIRCRAFT
 from identification.bench.cells import BENCH_CELLS
 from identification.bench.synthetic import simulate_flight
 from identification.likelihood.closed_loop import AxisCheck, ClosedLoopCheck
@@ -20,8 +20,9 @@ from identification.likelihood.hold_check import (HoldCheck, axis_votes, choose_
                                                   decided_label, majority_hold, needs_hold_check)
 from identification.reports.identify import method_sentence
 
-SLUGGISH = ModelParams(k2=0.7, k3=1.2, kd1=0.02, k6=-0.5, k7=1.1, kd2=0.01, k10=6.0, k11=1.6, k12=-0.3, kd3=0.05)
-"""scripts/aircraft_generalisation.py's large, slow helicopter: the aircraft the hold's bias was found on."""
+SLUGGISH = AIRCRAFT["sluggish"]
+"""The bench's large, slow helicopter (:mod:`identification.bench.aircraft`): the aircraft the hold's bias was found
+on."""
 
 # the LRs (held - interpolated, summed over roll, pitch and yaw) of the eight flights of each world that an early
 # run of the comparison gave on the sluggish aircraft's noisy-gyro flight of seed 301 (a pilot's hand; its own

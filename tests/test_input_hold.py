@@ -8,7 +8,7 @@ import pytest
 from dataclasses import replace
 from types import SimpleNamespace
 
-from heli_core.params import ModelParams
+from identification.bench.aircraft import AIRCRAFT
 from identification.bench.cells import BENCH_CELLS, bench_flight
 from identification.bench.synthetic import simulate_flight
 from identification.likelihood.estimator import MaximumLikelihoodIdentifier
@@ -115,8 +115,8 @@ def test_a_hold_the_data_leave_in_doubt_is_named_and_widens_the_errors():
     assert hold_warning(ident) == []
 
 
-SLUGGISH = ModelParams(k2=0.7, k3=1.2, kd1=0.02, k6=-0.5, k7=1.1, kd2=0.01, k10=6.0, k11=1.6, k12=-0.3, kd3=0.05)
-"""A large, slow helicopter (scripts/aircraft_generalisation.py's 'sluggish')."""
+SLUGGISH = AIRCRAFT["sluggish"]
+"""A large, slow helicopter (the bench's 'sluggish', :mod:`identification.bench.aircraft`)."""
 
 
 def test_a_short_flight_that_cannot_tell_the_hold_says_so_and_its_errors_hold_the_gap():

@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from identification.bench.aircraft import AIRCRAFT
 from identification.bench.synthetic import simulate_flight
 from identification.diagnosis.likelihood_diagnoser import LikelihoodDiagnoser, closed_loop_share
 from identification.errors import NotFittedError
@@ -315,12 +316,10 @@ def test_a_named_servo_delay_is_searched_by_the_check_of_the_model_written(tmp_p
     check left k7 at +22 %)."""
     from dataclasses import replace
 
-    from heli_core.params import ModelParams
     from identification.bench.cells import BENCH_CELLS
     from identification.workflows.diagnose import diagnose_by_likelihood
 
-    sluggish = ModelParams(k2=0.7, k3=1.2, kd1=0.02, k6=-0.5, k7=1.1, kd2=0.01, k10=6.0, k11=1.6, k12=-0.3,
-                           kd3=0.05)
+    sluggish = AIRCRAFT["sluggish"]
     truth = replace(sluggish, tau_pitch=0.02)
     config = replace(BENCH_CELLS["broadband-pd-noisy-gyro"], held_sticks=True, command_noise=0.01)
     flight = simulate_flight(300.0, seed=304, config=config, truth=truth).flight

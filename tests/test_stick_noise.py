@@ -8,11 +8,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from heli_core.params import ModelParams
+from identification.bench.aircraft import AIRCRAFT
 
-AGILE = ModelParams(k2=4.0, k3=6.0, kd1=0.10, k6=-2.7, k7=6.5, kd2=0.05, k10=35.0, k11=7.0, k12=-1.0, kd3=0.20)
-"""A 450-class flybarless helicopter (scripts/aircraft_generalisation.py's 'agile'): its stiff yaw shows stick
-noise most."""
+AGILE = AIRCRAFT["agile"]
+"""A 450-class flybarless helicopter (the bench's 'agile', :mod:`identification.bench.aircraft`): its stiff yaw shows
+stick noise most."""
 
 
 def _flight(log_every: int, seed: int = 1301, duration: float = 90.0):

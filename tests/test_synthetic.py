@@ -250,14 +250,13 @@ def test_the_compiled_step_flies_the_same_flight_bit_for_bit(case, monkeypatch):
     """Long flights step the model compiled (heli_core.physics.compiled_rk4): every logged and true value is the
     Python step's, bit for bit, so a flight does not depend on its length's side of COMPILED_STEPS."""
     import identification.bench.synthetic as synthetic
-    from heli_core.params import ModelParams
 
     if case.startswith("paper"):
         kw = dict(effects=("servo_delay", "servo_lag"), config=FlightConfig(duration=15.0, held_sticks=True))
     else:
-        agile = ModelParams(k2=4.0, k3=6.0, kd1=0.10, k6=-2.7, k7=6.5, kd2=0.05, k10=35.0, k11=7.0, k12=-1.0,
-                            kd3=0.20)
-        kw = dict(truth=agile, effects=("nonlinear_damping",), effect_scale=5.0,
+        from identification.bench.aircraft import AIRCRAFT
+
+        kw = dict(truth=AIRCRAFT["agile"], effects=("nonlinear_damping",), effect_scale=5.0,
                   config=FlightConfig(duration=15.0, pilot="autopilot", sample_rate=200.0))
     flights = []
     for steps in (10**12, 0):  # Python, compiled
