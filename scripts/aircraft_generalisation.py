@@ -48,8 +48,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from identification.bench.aircraft import AIRCRAFT
-from identification.bench.aircraft import aircraft as _aircraft  # the name the other studies import from here
+from identification.bench.aircraft import AIRCRAFT, aircraft_truth
 
 GAINS = ("k2", "k6", "k10")
 DAMPINGS = ("k3", "k7", "k11")
@@ -104,7 +103,7 @@ def _one(job):
      unstated) = job
     with threadpool_limits(limits=1, user_api="blas"):
         config = replace(BENCH_CELLS[cell], duration=duration, sample_rate=float(rate), **dict(settings))
-        truth = replace(_aircraft(aircraft), **{f"tau_{axis}": tau for axis, tau in delays})
+        truth = replace(aircraft_truth(aircraft), **{f"tau_{axis}": tau for axis, tau in delays})
         sim = simulate_flight(duration, seed=seed, config=config, truth=truth, effects=(effect,) if effect else ())
         truth = sim.truth.values()
         out = {"aircraft": aircraft, "cell": cell, "rate": rate, "seed": seed}

@@ -24,18 +24,15 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import sys
 import warnings
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
-from pathlib import Path
 
 import numba
 import numpy as np
 from scipy import linalg, optimize
 
-sys.path.insert(0, str(Path(__file__).parent))  # the study's aircraft are aircraft_generalisation's
-from aircraft_generalisation import AIRCRAFT, _aircraft  # noqa: E402
+from identification.bench.aircraft import AIRCRAFT, aircraft_truth
 
 AXES = {"roll": ("k3", "k2"), "pitch": ("k7", "k6")}
 BURN = 200
@@ -169,7 +166,7 @@ def _one(job) -> dict:
     damping, gain = AXES[axis_name]
     with threadpool_limits(limits=1, user_api="blas"):
         config = replace(BENCH_CELLS[cell], duration=duration, gyro_noise=gyro, vibration_lines=(), vibration=0.0)
-        sim = simulate_flight(duration, seed=seed, config=config, truth=_aircraft(aircraft))
+        sim = simulate_flight(duration, seed=seed, config=config, truth=aircraft_truth(aircraft))
         truth = sim.truth.values()
         package = MaximumLikelihoodIdentifier(input_hold=0.0).fit(sim.flight).params_.values()
         attitude, attitude_noise = None, config.attitude_noise

@@ -24,7 +24,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))  # the study's aircraft are aircraft_generalisation's
-from aircraft_generalisation import AIRCRAFT, _aircraft, config_field  # noqa: E402
+from aircraft_generalisation import config_field  # noqa: E402
+from identification.bench.aircraft import AIRCRAFT, aircraft_truth  # noqa: E402
 
 DAMPINGS = ("k3", "k7", "k11")
 GAINS = ("k2", "k6", "k10")
@@ -44,7 +45,7 @@ def _one(job) -> list:
     aircraft, cell, fields, hold, duration, seed, check = job
     with threadpool_limits(limits=1, user_api="blas"):
         config = replace(BENCH_CELLS[cell], duration=duration, **fields)
-        sim = simulate_flight(duration, seed=seed, config=config, truth=_aircraft(aircraft))
+        sim = simulate_flight(duration, seed=seed, config=config, truth=aircraft_truth(aircraft))
         truth = sim.truth.values()
         ml = MaximumLikelihoodIdentifier(input_hold=hold, workers=1).fit(sim.flight)
         fitted = ml.params_.values()

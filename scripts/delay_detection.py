@@ -2,7 +2,7 @@
 
 Per bench cell, size of the catalogue's servo dynamics (``--effects``: the delay 80 / 80 / 50 ms roll / pitch /
 yaw, the first-order lag 40 / 40 / 30 ms; times ``--scales``, 0: none), aircraft
-(:data:`aircraft_generalisation.AIRCRAFT`, or the paper's) and seed, a 300 s flight is identified by maximum
+(:data:`identification.bench.aircraft.AIRCRAFT`, or the paper's) and seed, a 300 s flight is identified by maximum
 likelihood twice on one core: without servo dynamics (``delay=None``, the default before) and with
 ``delay="detect", servo_lag="detect"`` (``heli identify``'s default now). Prints per row the RMS [worst]
 relative error of the dampings (k3, k7, k11) both ways, how many axes with a true delay got one within 5 ms
@@ -18,27 +18,18 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
+
+from identification.bench.aircraft import AIRCRAFT, aircraft_truth
 
 DAMPINGS = ("k3", "k7", "k11")
 AXES = ("roll", "pitch", "yaw")
 DEFAULT_CELLS = ("independent", "held-sticks-pd", "broadband-autopilot", "dryden-2Hz-pd", "default",
                  "broadband-pd-noisy-gyro")
-
-
-def _aircraft_study():
-    """``scripts/aircraft_generalisation.py``, whose table of aircraft this study flies."""
-    path = Path(__file__).with_name("aircraft_generalisation.py")
-    spec = importlib.util.spec_from_file_location("aircraft_generalisation", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _one(job):
@@ -51,7 +42,7 @@ def _one(job):
     cell, scale, aircraft, seed, duration, effects = job
     with threadpool_limits(limits=1, user_api="blas"):
         config = replace(BENCH_CELLS[cell], duration=duration)
-        sim = simulate_flight(duration, seed=seed, config=config, truth=_aircraft_study()._aircraft(aircraft),
+        sim = simulate_flight(duration, seed=seed, config=config, truth=aircraft_truth(aircraft),
                               effects=tuple(effects) if scale else (), effect_scale=scale or 1.0)
         truth = sim.truth
         fits, seconds = {}, {}
@@ -121,7 +112,7 @@ def main(argv=None) -> None:
     unknown = [c for c in args.cells if c not in BENCH_CELLS]
     if unknown:
         raise SystemExit(f"unknown cells {unknown}; known: {', '.join(BENCH_CELLS)}")
-    known = ["paper", *_aircraft_study().AIRCRAFT]
+    known = ["paper", *AIRCRAFT]
     if any(a not in known for a in args.aircraft):
         raise SystemExit(f"unknown aircraft {[a for a in args.aircraft if a not in known]}; known: {', '.join(known)}")
     jobs = [(c, s, a, seed, args.duration, tuple(args.effects)) for a in args.aircraft for c in args.cells for s in args.scales

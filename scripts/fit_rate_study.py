@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 def _one(job):
     from threadpoolctl import threadpool_limits
 
-    from aircraft_generalisation import _aircraft
+    from identification.bench.aircraft import aircraft_truth
     from identification.bench.cells import BENCH_CELLS
     from identification.bench.synthetic import simulate_flight
     from identification.fit_rate import choose_fit_rate
@@ -41,7 +41,7 @@ def _one(job):
             return job, None
         config = replace(BENCH_CELLS[cell], duration=duration, sample_rate=float(rate), log_every=every,
                          gyro_filter_hz=float(gf))
-        flight = simulate_flight(duration, seed=seed, config=config, truth=_aircraft(aircraft)).flight
+        flight = simulate_flight(duration, seed=seed, config=config, truth=aircraft_truth(aircraft)).flight
         t0 = time.perf_counter()
         chosen = choose_fit_rate([flight])
         top = max((max(r.values(), default=0.0) for _, r in chosen.steps[:1]), default=float("nan"))

@@ -1,6 +1,6 @@
 """Does ``heli identify``'s stick-noise test name the logs whose sticks moved between samples, and only those?
 
-Per aircraft (:data:`aircraft_generalisation.AIRCRAFT`, or the paper's), bench cell, log rate, ``--log-every``
+Per aircraft (:data:`identification.bench.aircraft.AIRCRAFT`, or the paper's), bench cell, log rate, ``--log-every``
 (the world steps that many times per logged sample: 1 is a world at the log's rate, whose sticks the aircraft
 felt as logged) and seed, a flight is identified by maximum likelihood as ``heli identify`` does (the closed-loop
 check left out: the test fits its own models) and
@@ -31,7 +31,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))  # the study's aircraft and --set are aircraft_generalisation's
-from aircraft_generalisation import AIRCRAFT, _aircraft, config_field  # noqa: E402
+from aircraft_generalisation import config_field  # noqa: E402
+from identification.bench.aircraft import AIRCRAFT, aircraft_truth  # noqa: E402
 
 AXES = ("roll", "pitch", "yaw")
 PARAMS = ("k2", "k3", "k6", "k7", "k10", "k11")
@@ -51,7 +52,7 @@ def _one(job):
     out = {"row": (aircraft, cell, rate, every), "seed": seed}
     with threadpool_limits(limits=1, user_api="blas"):
         config = replace(BENCH_CELLS[cell], duration=duration, sample_rate=rate, log_every=every, **dict(settings))
-        sim = simulate_flight(duration, seed=seed, config=config, truth=_aircraft(aircraft))
+        sim = simulate_flight(duration, seed=seed, config=config, truth=aircraft_truth(aircraft))
         truth = sim.truth.values()
         try:
             ml = MaximumLikelihoodIdentifier(**CLI_TIMING, workers=1).fit(sim.flight)
@@ -80,7 +81,7 @@ def _interval_mean_errors(sim, config, aircraft: str, truth: dict) -> dict:
     from identification.likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
 
     every = config.log_every
-    world = simulate_flight(config.duration, seed=sim.seed, truth=_aircraft(aircraft),
+    world = simulate_flight(config.duration, seed=sim.seed, truth=aircraft_truth(aircraft),
                             config=replace(config, sample_rate=config.sample_rate * every, log_every=1)).flight
     logged = sim.flight
     n = logged.n

@@ -23,7 +23,7 @@ AIRCRAFT: dict[str, ModelParams] = {
 """Truth parameters of the aircraft flown besides the paper's (``"paper"``)."""
 
 
-def aircraft(name: str) -> ModelParams:
+def aircraft_truth(name: str) -> ModelParams:
     """The truth of aircraft ``name``: ``"paper"`` (eqs. 68-70) or a key of :data:`AIRCRAFT`.
 
     Raises
