@@ -22,11 +22,11 @@ import numpy as np
 from scipy import fft as sp_fft
 from scipy import signal
 
-from heli_core.terms import INPUT_FOR_AXIS
+from heli_core.terms import INPUT_FOR_AXIS, STICK_ROW
 
 from .errors import FlightLogError
 from .flight import Flight
-from .vibration import remove_folded_lines
+from .vibration import remove_fed_back_lines, remove_folded_lines
 
 DEFAULT_PASS_HZ = 4.0
 DEFAULT_STOP_HZ = 8.0
@@ -151,13 +151,23 @@ def lowpass_flight(flight: Flight, pass_hz: float = DEFAULT_PASS_HZ, stop_hz: fl
 
 def without_folded_lines(flight: Flight) -> tuple[Flight, list]:
     """``flight`` with the sensor share of the vibration lines a slow log folded into the aircraft's band taken
-    out of its gyro (:func:`identification.vibration.remove_folded_lines`; no low-pass can remove them), and those
-    lines: ``(flight, [])`` itself where there are none."""
+    out of its gyro (:func:`identification.vibration.remove_folded_lines`; no low-pass can remove them), and,
+    where the sticks are a flight controller's commands from a loop faster than the log, those it fed back into them
+    out of both (:func:`identification.vibration.remove_fed_back_lines`), and those lines: ``(flight, [])`` itself
+    where there are none."""
+    from .likelihood.loop_world import loop_ticks  # the likelihood's package imports this module
+
     rates, found = remove_folded_lines(flight.rates, flight.attitude, flight.sample_rate)
     if not found:
         return flight, []
-    meta = MappingProxyType({**flight.metadata, "vibration_lines": found})
-    return Flight(flight.time, rates, flight.attitude, flight.sticks, meta, flight.extra), found
+    rows, sticks, fed = list(STICK_ROW), flight.sticks, []
+    if loop_ticks(flight) > 1:
+        rates, commands, fed = remove_fed_back_lines(rates, flight.sticks[rows], flight.sample_rate, found)
+    if fed:
+        sticks = np.array(flight.sticks, dtype=float, copy=True)
+        sticks[rows] = commands
+    meta = MappingProxyType({**flight.metadata, "vibration_lines": found + fed})
+    return Flight(flight.time, rates, flight.attitude, sticks, meta, flight.extra), found + fed
 
 
 def shift_inputs(flight: Flight, shifts) -> Flight:

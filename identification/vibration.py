@@ -13,7 +13,9 @@ saw, left the dampings 450-600 % off. There a line cannot be told from the motio
 :func:`remove_folded_lines` asks the attitude: the aircraft's own motion at a frequency shows in the attitude
 as the rate's integral, a sensor's line does not, and only the part of the line the attitude does not explain is
 removed (the whole line behind a pilot, the sensor's share behind an autopilot that flew on it; nothing of a
-sine-dwell the pilot flew).
+sine-dwell the pilot flew). A flight controller whose loop runs faster than its log commands the line at its own
+frequency, and the log folds the command's line with the gyro's: the aircraft answered it up there, not at the
+folded frequency, so :func:`remove_fed_back_lines` takes it out of the commands and the gyro together.
 """
 
 from __future__ import annotations
@@ -171,11 +173,7 @@ def remove_folded_lines(rates, attitude, fs: float, below_hz: float = 8.0, max_l
         peaks = band[1:-1][(inner > power[band[:-2]]) & (inner >= power[band[2:]])]  # local maxima
         removed = 0
         for k in peaks[np.argsort(power[peaks])[::-1][:_CANDIDATES]]:
-            left, right = max(0, k - _GAP), k + _GAP + 1
-            sides = (power[max(0, left - _NARROW):left], power[right:right + _NARROW],  # the cheap ones first
-                     power[max(0, k - half):left], power[right:k + half + 1])
-            if not all(side.size for side in sides) or any(power[k] < prominence * np.median(side)
-                                                           for side in sides):
+            if not _stands_out(power, k, half, prominence):
                 continue
             hz = _least_squares_frequency(x, t, _refined(power, freqs, k), 2 * freqs[1])
             basis = _basis(hz, t)
@@ -197,6 +195,15 @@ def remove_folded_lines(rates, attitude, fs: float, below_hz: float = 8.0, max_l
     return rates, found
 
 
+def _stands_out(power, k: int, half: int, prominence: float) -> bool:
+    """Bin ``k`` of ``power`` stands ``prominence`` times above the median power on *each* side of its main lobe,
+    both over the :data:`_NARROW` bins just beyond it and over ``half`` bins (2 Hz): a line lasting the record."""
+    left, right = max(0, k - _GAP), k + _GAP + 1
+    sides = (power[max(0, left - _NARROW):left], power[right:right + _NARROW],  # the cheap ones first
+             power[max(0, k - half):left], power[right:k + half + 1])
+    return all(side.size for side in sides) and all(power[k] >= prominence * np.median(side) for side in sides)
+
+
 def _nyquist_line(rate, x, power, half: int, prominence: float) -> tuple:
     """``rate`` without a line folded onto half the sample rate (a 30 Hz rotor logged at 20 Hz: the samples
     alternate, ``B (-1)^k``), and ``|B|`` (0.0 if none): the last bin standing ``prominence`` times above the
@@ -209,6 +216,66 @@ def _nyquist_line(rate, x, power, half: int, prominence: float) -> tuple:
     alternating = np.where(np.arange(x.size) % 2, -1.0, 1.0)
     b = float(alternating @ x) / x.size
     return rate - b * alternating, abs(b)
+
+
+COMMAND_PROMINENCE = 10.0
+"""A command's periodogram at a folded gyro line's frequency standing this many times above each side of it (the
+test of :func:`remove_folded_lines` at a frequency known beforehand, not searched for: one bin of noise passes it
+with a probability of 0.1 %) is a line the flight controller fed back (reported as the command's)."""
+
+
+def remove_fed_back_lines(rates, commands, fs: float, folded: list, prominence: float = COMMAND_PROMINENCE) -> tuple:
+    """The folded lines (:func:`remove_folded_lines`' ``folded``) regressed out of the commands and, what the
+    sensor's share left of them, out of the gyro: the same prefilter on input and output (module docstring).
+
+    A loop that flies on a vibrating gyro puts the line into its commands at the line's own frequency; the log
+    folds it to the same frequency as the gyro's. The aircraft answered it up there (27 Hz: a yaw gain of 13.5
+    rad/s² turns a command line of 0.0075 into 0.0006 rad/s), but a model driven by the logged commands answers
+    it at the folded frequency (2 Hz: 0.008 rad/s, thirteen times as much, and in another phase), and the fit bends
+    its damping and a servo lag to damp an answer the aircraft never gave (the bench's autopilot, 200 Hz loop logged
+    at 25 Hz: the paper aircraft's yaw damping +296 % behind a 46 ms lag; docs/method.md). Where a command stands
+    out at such a line's frequency (``prominence`` times above each side of it, as :func:`remove_folded_lines` tests
+    a line), the line is regressed out of that command and of its axis' gyro. A pilot's sticks carry none, and
+    nothing is done: taking the frequency out of sticks and gyro regardless is not free (a sweep passing through it
+    has its share there, and the regression's is not the aircraft's answer to it: on the bench's pilot flights at
+    25 Hz the dampings moved by up to 6 points, the integral method's by 4).
+
+    Returns
+    -------
+    rates, commands : ndarray, shape (3, n)
+    lines : list of dict
+        Those removed from the commands: ``"signal": "command"``, ``folded`` True, ``amplitude`` the command's.
+    """
+    rates = np.array(rates, dtype=float, copy=True)
+    commands = np.array(commands, dtype=float, copy=True)
+    n = commands.shape[1]
+    if n < 64 or not folded:
+        return rates, commands, []
+    nfft, freqs, half = _grid(n, fs)
+    t, win = np.arange(n) / fs, np.hanning(n)
+    alternating = np.where(np.arange(n) % 2, -1.0, 1.0)
+    found = []
+    for a in range(commands.shape[0]):
+        x = commands[a] - np.mean(commands[a])
+        power = np.abs(np.fft.rfft(x * win, nfft)) ** 2
+        inside = []
+        for hz in (ln["frequency_hz"] for ln in folded if ln["axis"] == AXES[a]):
+            if hz >= 0.5 * fs - freqs[1]:  # the line on half the sample rate: the samples alternate
+                commands[a], b = _nyquist_line(commands[a], x, power, half, prominence)
+                if b:
+                    rates[a] -= float(alternating @ (rates[a] - np.mean(rates[a]))) / n * alternating
+                    found.append(_line(commands, a, hz, b, folded=True, signal="command"))
+                continue
+            k = int(round(hz / freqs[1]))
+            lo, hi = max(1, k - _GAP // 2), min(power.size - 1, k + _GAP // 2 + 1)
+            if _stands_out(power, lo + int(np.argmax(power[lo:hi])), half, prominence):  # its peak in the lobe
+                inside.append(hz)
+                amplitude = np.hypot(*np.linalg.lstsq(_basis(hz, t).T, x, rcond=None)[0])
+                found.append(_line(commands, a, hz, float(amplitude), folded=True, signal="command"))
+        if inside:
+            commands[a] = remove_lines(commands[a], fs, inside)
+            rates[a] = remove_lines(rates[a], fs, inside)
+    return rates, commands, found
 
 
 def _least_squares_frequency(x, t, hz: float, width: float) -> float:
@@ -238,7 +305,7 @@ def remove_lines(x, fs: float, frequencies) -> np.ndarray:
 
 
 def remove_common_lines(rates, commands, fs: float, min_hz: float = 8.0,
-                        attitude=None) -> tuple[np.ndarray, np.ndarray, list]:
+                        attitude=None, faster_loop: bool = False) -> tuple[np.ndarray, np.ndarray, list]:
     """Vibration lines removed from the gyro, and from the commands where these carry lines too.
 
     Each axis' gyro (``rates``, (3, n)) is cleaned by :func:`remove_vibration_lines`. Where that axis'
@@ -246,8 +313,12 @@ def remove_common_lines(rates, commands, fs: float, min_hz: float = 8.0,
     gyro back), the lines of either are removed from both, from the raw signals in one regression, so that
     input and output see the same prefilter. A pilot's sticks have no such lines: then only the gyro is
     cleaned, exactly as :func:`remove_vibration_lines` does. With the ``attitude`` (3, n) the lines a slow
-    log folded below ``min_hz`` are then taken out of the gyro by :func:`remove_folded_lines` (the commands
-    keep them: what the aircraft answered is in the attitude, and only the sensor's share is removed).
+    log folded below ``min_hz`` are then taken out of the gyro by :func:`remove_folded_lines` (only the sensor's
+    share: what the aircraft answered is in the attitude). Where the commands are a flight controller's from a loop
+    faster than the log (``faster_loop``), those it fed back are taken out of the commands and the gyro together
+    (:func:`remove_fed_back_lines`); a loop at the log's rate holds its command over each sample, and the aircraft
+    felt the line there at the folded frequency: the commands keep it (the bench's autopilot at 20-25 Hz, its
+    loop at the log's rate: taking the lines out of its commands left k7 +53 and +82 % on two flights).
 
     Returns
     -------
@@ -273,5 +344,8 @@ def remove_common_lines(rates, commands, fs: float, min_hz: float = 8.0,
         lines += [{**ln, "signal": "command"} for ln in in_commands if ln["axis"] == AXES[a]]
     if attitude is not None:
         cleaned, folded = remove_folded_lines(cleaned, attitude, fs, min_hz)
-        lines += folded
+        fed = []
+        if faster_loop:
+            cleaned, commands, fed = remove_fed_back_lines(cleaned, commands, fs, folded)
+        lines += folded + fed
     return cleaned, commands, lines

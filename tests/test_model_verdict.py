@@ -37,6 +37,25 @@ def test_a_damping_at_the_search_bound_is_unusable():
     assert judge_fit(fit).level == "usable"  # an estimator without bounds (the integral method): no bound to sit at
 
 
+def _checked(fitted: float, corrected: float, removed=("k2", "k7"), ticks: int = 8) -> dict:
+    """A closed-loop check's record (ClosedLoopCheck.describe) whose pitch damping went from fitted to corrected."""
+    return {"axes": {"pitch": {"fitted": {"k6": -0.9, "k7": fitted}, "corrected": {"k6": -0.88, "k7": corrected},
+                               "removed": list(removed), "loop_ticks": ticks},
+                     "roll": {"checked": False, "reason": "a pilot's"}}}
+
+
+def test_a_damping_the_closed_loop_check_corrected_by_half_or_more_is_doubtful():
+    """The bench's large, slow aircraft under an autopilot 8x faster than its 25 Hz log: fitted +159 to +234 %, the
+    check's values still +62 to +76 % from the truth; where it took less than a third off, within 13 %."""
+    v = judge_fit(GOOD, damping_bounds=ML_DAMPING_BOUNDS, closed_loop=_checked(3.68, 1.934))
+    assert v.level == "doubtful" and len(v.reasons) == 1
+    assert v.reasons[0].startswith("pitch: the closed-loop check put damping k7 at 1.934 1/s where the fit read 3.68")
+    assert "8x faster than the log" in v.reasons[0]
+    assert judge_fit(GOOD, closed_loop=_checked(3.68, 2.5)).level == "usable"  # 1.47 times: a loop's usual bias
+    assert judge_fit(GOOD, closed_loop=_checked(3.68, 1.934, removed=("k2",))).level == "usable"  # not corrected
+    assert judge_fit(GOOD, closed_loop={"axes": {}}).level == "usable"
+
+
 def test_a_non_positive_damping_is_unusable():
     v = judge_fit(dict(GOOD, pitch=_axis({"k6": -0.9, "k7": -0.4, "kd2": 0.0})))
     assert v.level == "unusable" and "damping k7 = -0.4 1/s is not positive" in v.reasons[0]

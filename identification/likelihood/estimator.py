@@ -79,7 +79,7 @@ from .closed_loop import check_settings as check_closed_loop_settings
 from .input_hold import (HOLDS, check_hold, decide_hold, hold_alternative, std_errors_with_hold,
                          undecided_against)
 from .loop_checks import run_checks
-from .loop_world import log_ticks
+from .loop_world import log_ticks, loop_ticks
 from .servo_lag import profile_lag
 from .state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll, rts_smooth, wind_block
 
@@ -264,7 +264,8 @@ class MaximumLikelihoodIdentifier:
             return flight, []
         rows = list(STICK_ROW)
         rates, commands, found = remove_common_lines(flight.rates, flight.sticks[rows], flight.sample_rate,
-                                                     self.vibration_min_hz, flight.attitude)
+                                                     self.vibration_min_hz, flight.attitude,
+                                                     faster_loop=loop_ticks(flight) > 1)
         sticks = flight.sticks
         if any(ln.get("signal") == "command" for ln in found):
             sticks = np.array(flight.sticks, dtype=float, copy=True)

@@ -195,16 +195,22 @@ def folded_lines_warning(ident) -> list[str]:
     """One line where the gyro carried lines a slow log folded into the aircraft's band
     (:func:`identification.vibration.remove_folded_lines`, ``ident.vibration_lines_``): which, at what rate, and
     what avoids them. They are removed before the fit; left in, the bench's dampings came out 450-600 % off."""
-    lines = [ln for per_flight in getattr(ident, "vibration_lines_", None) or [] for ln in per_flight
+    found = [ln for per_flight in getattr(ident, "vibration_lines_", None) or [] for ln in per_flight
              if ln.get("folded")]
+    lines = [ln for ln in found if ln.get("signal") != "command"]
     if not lines:
         return []
     where = sorted({round(ln["frequency_hz"], 2) for ln in lines})
     axes = [axis for axis in AXES if any(ln["axis"] == axis for ln in lines)]
+    fed = [axis for axis in AXES if any(ln["axis"] == axis and ln.get("signal") == "command" for ln in found)]
+    commands = (f"; the flight controller flew on that gyro and its {', '.join(fed)} command{'s' if len(fed) > 1 else ''} "
+                "carr" + ("y" if len(fed) > 1 else "ies") + " them too, folded alike: the aircraft answered them at "
+                "their own frequency, not at the folded one, so they were removed from those commands and the gyro "
+                "together (the same prefilter on both)") if fed else ""
     return [f"the gyro ({', '.join(axes)}) carries narrow lines at {', '.join(f'{hz:g}' for hz in where)} Hz that the "
             "attitude does not show: vibration faster than half the log's rate, folded into the aircraft's band by "
-            "sampling. Their sensor share was removed before the fit; log the gyro at more than twice the rotor's "
-            "frequency, or low-passed below half the log's rate, to be rid of them"]
+            f"sampling. Their sensor share was removed before the fit{commands}; log the gyro at more than twice the "
+            "rotor's frequency, or low-passed below half the log's rate, to be rid of them"]
 
 
 def stick_noise_warning(check) -> list[str]:
