@@ -10,7 +10,7 @@ import shutil
 import pytest
 
 from heli_cli.main import main
-from identification.validation.model_verdict import ML_DAMPING_BOUNDS, judge_fit
+from identification.validation.model_verdict import ML_DAMPING_BOUNDS, judge_fit, judge_identifier
 from model_store.errors import ModelFileError, UnusableModelError
 from model_store.model_file import load_model, model_document, params_from_document, require_usable, verdict_of
 from model_store.verdict import NOT_JUDGED, ModelVerdict
@@ -67,6 +67,33 @@ def test_a_gain_the_other_estimator_signs_otherwise_is_unusable():
     v = judge_fit(fit, reference=reference)
     assert v.level == "unusable"
     assert "control gain k2 = -2125 rad/s² against +788 by the integral method" in v.reasons[0]
+
+
+class _Fitted:
+    """A fitted identifier as judge_identifier reads it: its summary, its sticks' shifts and its search's bounds."""
+
+    damping_bounds = ML_DAMPING_BOUNDS
+
+    def __init__(self, summary, shifts=None):
+        self._summary, self.input_shifts_ = summary, shifts or {}
+
+    def summary(self):
+        return self._summary
+
+
+def test_a_sign_is_compared_across_a_small_alignment_but_not_a_large_one():
+    """The Betaflight quad's roll, its stick advanced one 10 ms sample: -909 beside the integral method's +737 was
+    left unflagged while any difference of alignment excluded the axis; the T-REX's 0.29 s still excludes it."""
+    flipped = _axis({"k2": -908.6, "k3": 100.2, "kd1": -9.6}, r2=0.1)
+    fit = dict(GOOD, roll={**flipped, "delay_s": 0.0})
+    reference = _Fitted(dict(GOOD, roll=_axis({"k2": 736.7, "k3": -8.2, "kd1": 7.4})))
+    v = judge_identifier(_Fitted(fit, {"roll": -0.010}), reference)
+    assert v.level == "unusable" and v.reasons[0].startswith("roll: control gain k2 = -908.6 rad/s² against +736.7")
+    assert not any("by the integral method 736.7" in d for d in v.doubts)  # sizes: only where aligned exactly alike
+    assert judge_identifier(_Fitted(fit, {"roll": -0.29}), reference).level == "usable"
+    delayed = dict(fit, roll={**flipped, "delay_s": 0.02})  # a servo delay within the tolerance counts the same
+    assert judge_identifier(_Fitted(delayed), reference).level == "unusable"
+    assert judge_identifier(_Fitted(dict(fit, roll={**flipped, "delay_s": 0.08})), reference).level == "usable"
 
 
 def test_a_gain_within_two_standard_errors_of_zero_is_doubtful():

@@ -172,7 +172,8 @@ def _loop_findings(closed_loop: Mapping | None) -> list[str]:
 
 
 def judge_fit(summary: Mapping, *, damping_bounds=None, reference: Mapping | None = None,
-              diverged: str | None = None, min_r2: float = MIN_R2, closed_loop: Mapping | None = None) -> ModelVerdict:
+              diverged: str | None = None, min_r2: float = MIN_R2, closed_loop: Mapping | None = None,
+              sign_reference: Mapping | None = None) -> ModelVerdict:
     """The verdict on a fitted model (module docstring).
 
     Parameters
@@ -186,7 +187,12 @@ def judge_fit(summary: Mapping, *, damping_bounds=None, reference: Mapping | Non
         maximum-likelihood fit); None for an estimator without bounds (the integral method).
     reference : mapping, optional
         Another estimator's summary on the same flights (the integral method beside a maximum-likelihood fit),
-        against whose control gains the signs are checked.
+        against whose control gains the signs are checked and whose gains and dampings an axis the sticks explain
+        little of must be near (within :data:`ESTIMATOR_RATIO`).
+    sign_reference : mapping, optional
+        Where given, the signs are checked against it instead (:func:`judge_identifier`: the axes aligned alike
+        within :data:`SAME_ALIGNMENT`, where ``reference`` holds only those aligned exactly alike, since a delay
+        that cannot turn a sign still moves the magnitudes).
     diverged : str, optional
         Why the model diverged when simulated from the flight's sticks, when it did.
     min_r2 : float
@@ -206,7 +212,7 @@ def judge_fit(summary: Mapping, *, damping_bounds=None, reference: Mapping | Non
         if stats is None:
             continue
         unusable += _damping_findings(axis, stats, damping_bounds)
-        bad, doubt = _gain_findings(axis, stats, reference)
+        bad, doubt = _gain_findings(axis, stats, reference if sign_reference is None else sign_reference)
         unusable += bad
         doubts += doubt + _r2_finding(axis, stats, reference, min_r2)
     doubts += _loop_findings(closed_loop)
@@ -217,18 +223,31 @@ def judge_fit(summary: Mapping, *, damping_bounds=None, reference: Mapping | Non
     return ModelVerdict(DOUBTFUL, tuple(doubts)) if doubts else ModelVerdict(USABLE)
 
 
+SAME_ALIGNMENT = 0.025
+"""s: two fits whose sticks' alignments (a shift of the stick plus a servo delay) differ by no more than this are
+compared (:func:`judge_identifier`). A stick moved by ``tau`` turns its gain's sign only where its motion lies near
+``1 / (4 tau)``: 10 Hz for this, below 1 Hz for the T-REX hover's 0.29 s. A servo lag turns no sign (its phase stays
+below 90°) and is not counted. Until 2026-12-05 any difference excluded the axis: the Betaflight quad's roll, its
+stick advanced one 10 ms sample, kept a gain of -909 rad/s² beside the integral method's +737, unflagged."""
+
+
 def judge_identifier(ident, reference=None, diverged: str | None = None) -> ModelVerdict:
     """:func:`judge_fit` on a fitted identifier (its ``summary()``), with the search's bounds of its estimator
-    and ``reference`` another fitted identifier on the same flights (or None), compared on the axes where both
-    used the same alignment (a stick advanced or delayed by one fit only changes the other's gains, even
-    their sign: the T-REX hover's sticks, 0.29 s late, give the unaligned integral fit k2 = -10.5)."""
+    and ``reference`` another fitted identifier on the same flights (or None): the gains' signs compared on the
+    axes where both aligned the stick alike within :data:`SAME_ALIGNMENT` (a stick advanced or delayed further by
+    one fit changes the other's gains, even their sign: the T-REX hover's sticks, 0.29 s late, give the unaligned
+    integral fit k2 = -10.5), their sizes where both aligned it exactly alike."""
     bounds = getattr(ident, "damping_bounds", None)  # the estimator says where it searched (the integral: nowhere)
     summary = ident.summary()
     ref = reference.summary() if reference is not None else None
+    signs = None
     if ref is not None:  # compare only axes both fitted on the same alignment of sticks and response
         shifts = getattr(ident, "input_shifts_", None) or {}
-        ref = {a: s for a, s in ref.items() if a in summary and not shifts.get(a)
-               and summary[a].get("delay_s", 0.0) == s.get("delay_s", 0.0)}
+        apart = {a: abs(float(shifts.get(a) or 0.0)) + abs(float(summary[a].get("delay_s") or 0.0)
+                                                           - float(s.get("delay_s") or 0.0))
+                 for a, s in ref.items() if a in summary}
+        signs = {a: ref[a] for a, t in apart.items() if t <= SAME_ALIGNMENT}
+        ref = {a: ref[a] for a, t in apart.items() if t == 0.0}
     check = getattr(ident, "closed_loop_", None)
     return judge_fit(summary, damping_bounds=bounds, reference=ref, diverged=diverged,
-                     closed_loop=None if check is None else check.describe())
+                     closed_loop=None if check is None else check.describe(), sign_reference=signs)
