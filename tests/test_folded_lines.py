@@ -78,6 +78,22 @@ def test_a_line_a_controller_fed_back_leaves_its_commands_and_the_gyro_together(
     assert none == [] and np.array_equal(kept, sticks) and np.array_equal(same, cleaned)
 
 
+def test_a_fed_back_line_on_half_the_rate_leaves_the_command_too():
+    """At 20 Hz a 30 Hz rotor sits on 10 Hz, where the samples alternate: the command's alternation goes with the
+    gyro's."""
+    fs, n = 20.0, 6000
+    rng = np.random.default_rng(7)
+    rates = sosfiltfilt(butter(4, 3.0, fs=fs, output="sos"), 0.1 * rng.standard_normal((3, n)), axis=1)
+    attitude = cumulative_trapezoid(rates, dx=1 / fs, axis=1, initial=0.0)
+    alternating = np.where(np.arange(n) % 2, -1.0, 1.0)
+    cleaned, folded = remove_folded_lines(rates + 0.02 * alternating, attitude, fs)
+    sticks = sosfiltfilt(butter(4, 3.0, fs=fs, output="sos"), 0.05 * rng.standard_normal((3, n)), axis=1)
+    commands = sticks + 0.01 * alternating
+    out, felt, fed = remove_fed_back_lines(cleaned, commands, fs, folded)
+    assert sorted((ln["axis"], ln["frequency_hz"]) for ln in fed) == [("pitch", 10.0), ("roll", 10.0), ("yaw", 10.0)]
+    assert np.std(felt - sticks) < 0.001 and np.std(out - rates) < 0.002
+
+
 def test_the_edge_of_a_band_a_logger_filtered_is_no_line():
     """Nothing above 2.4 Hz in the log (the T-REX hover): every bin below the edge stands far above the empty
     side beyond it; a line must stand above both sides."""
