@@ -14,8 +14,9 @@ What makes a model **unusable** (each on the parameters the fit estimated):
 * a damping that is not positive: a rotor damps its rates; an axis that does not is unstable on its own and
   a fit that finds one has fitted something else (a controller's loop, a misread input);
 * a control gain (``k2``, ``k6``, ``k10``) whose sign the other estimator on the same flight contradicts,
-  both clear of zero by :data:`SIGN_Z` standard errors: the data do not say which way the stick turns the
-  aircraft, and a controller with the wrong sign pushes the wrong way;
+  both clear of zero by :data:`SIGN_Z` standard errors, their sticks aligned alike within :data:`SAME_ALIGNMENT`:
+  the data do not say which way the stick turns the aircraft, and a controller with the wrong sign pushes the
+  wrong way;
 * a simulation from the flight's sticks that diverges (passed in by the caller that ran it).
 
 What makes it **doubtful**:
