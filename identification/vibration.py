@@ -220,8 +220,9 @@ def _nyquist_line(rate, x, power, half: int, prominence: float) -> tuple:
 
 COMMAND_PROMINENCE = 10.0
 """A command's periodogram at a folded gyro line's frequency standing this many times above each side of it (the
-test of :func:`remove_folded_lines` at a frequency known beforehand, not searched for: one bin of noise passes it
-with a probability of 0.1 %) is a line the flight controller fed back (reported as the command's)."""
+test of :func:`remove_folded_lines` at a frequency known beforehand, not searched for: a periodogram bin of noise
+stands ten times above its sides' median with a probability of 2^-10, and the peak is sought among the few independent
+bins of the line's main lobe) is a line the flight controller fed back (reported as the command's)."""
 
 
 def remove_fed_back_lines(rates, commands, fs: float, folded: list, prominence: float = COMMAND_PROMINENCE) -> tuple:
