@@ -170,7 +170,7 @@ def _loop_findings(closed_loop: Mapping | None) -> list[str]:
             out.append(f"{axis}: the closed-loop check put damping {name} at {corrected:.4g} 1/s where the fit read "
                        f"{fitted:.4g} ({fitted / corrected:.2g} times it): {who}, and a damping corrected this far "
                        "rests on the check's simulated loop more than on the data (on the bench such dampings lay "
-                       "-18 to +76 % from the truth; docs/method.md); log the commands and the gyro at the loop's "
+                       "-19 to +76 % from the truth; docs/method.md); log the commands and the gyro at the loop's "
                        "rate to identify it")
     return out
 
