@@ -46,6 +46,21 @@ def test_a_weak_fit_names_the_axis_and_the_share_explained():
     assert len(fit_warnings([_flight()], {**GOOD, "roll": -0.5})) == 1  # a negative R² reads as 0 %
 
 
+def test_a_weak_fit_of_a_loop_faster_than_the_log_says_the_true_model_predicts_little_there():
+    """A 25 Hz log of a 200 Hz loop's commands: the bench's true model predicted its yaw 0.5 s ahead at R² -0.24."""
+    f = _flight(rate=25.0)
+    fast = make_flight(f.time, f.rates, f.sticks, metadata={"source": "ap25.csv", "loop_rate_hz": 200.0,
+                                                             "input_source": "flight controller commands"})
+    (line,) = fit_warnings([fast], {**GOOD, "yaw": -0.19})
+    assert line.startswith("yaw: the model explains 0 % of the rate variance")
+    assert "from a loop 8x faster than the log" in line and "even the true model predicts little" in line
+    (plain,) = fit_warnings([f], {**GOOD, "yaw": -0.19})  # a pilot's sticks: no such clause
+    assert plain.endswith("check the segment and the logging rate")
+    at_rate = make_flight(f.time, f.rates, f.sticks, metadata={"loop_rate_hz": 25.0,
+                                                               "input_source": "flight controller commands"})
+    assert fit_warnings([at_rate], {**GOOD, "yaw": -0.19})[0].endswith("check the segment and the logging rate")
+
+
 def test_another_input_source_is_advised_only_for_a_flight_from_a_log():
     """``heli import --inputs`` can change a fit only where a flight controller's log was imported: a CSV the user
     wrote, or a synthetic flight, gets no advice it cannot follow (#31.3)."""
