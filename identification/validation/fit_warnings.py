@@ -141,7 +141,7 @@ def fit_warnings(flights, r2: Mapping | None = None, r2_label: str = "fit", *, m
                            f"{math.degrees(r_std):.2g} deg/s (std); its gain and damping are not identifiable "
                            f"from these data (fly sweeps on {stick}"
                            + (", or check the input source: heli import --inputs)" if imported else ")"))
-    ticks = _loop_ticks(flights)
+    ticks = _log_ticks(flights)
     for axis in AXES:
         value = None if r2 is None else r2.get(axis)
         if value is None or np.isnan(value):
@@ -155,23 +155,22 @@ def fit_warnings(flights, r2: Mapping | None = None, r2_label: str = "fit", *, m
     return out
 
 
-_FASTER_LOOP_R2 = ("; the inputs are a flight controller's commands from a loop {ticks:.0f}x faster than the log, whose "
+_FASTER_LOOP_R2 = ("; the inputs are a flight controller's commands from a loop {ticks}x faster than the log, whose "
                    "corrections inside each sample the logged commands do not hold, so that even the true model predicts "
                    "little far from the samples (the bench's autopilot 8x faster than a 25 Hz log: 0.5 s-ahead R² 0.42 / "
                    "0.26 / -0.24 at the true gains and dampings)")
 """The low-R² warning's clause for a log of a flight controller's commands slower than its loop."""
 
 
-def _loop_ticks(flights) -> float:
-    """How many times faster than the log the flight controller whose commands every one of ``flights`` holds runs
-    its loop, where each states one faster by :data:`FASTER_LOOP` (the least over the flights); else 1."""
-    ratios = []
-    for f in flights:
-        source, loop = input_source(getattr(f, "metadata", {}) or {})
-        rate = 1.0 / float(np.median(np.diff(f.time))) if len(f.time) > 1 else 0.0
-        ratios.append(loop / rate if source in CONTROLLER_SOURCES and loop and rate and loop > FASTER_LOOP * rate
-                      else 1.0)
-    return min(ratios, default=1.0)
+def _log_ticks(flights) -> int:
+    """The flight controller's ticks per logged sample that every one of ``flights`` states
+    (:func:`~identification.likelihood.loop_world.log_ticks`, at the first flight's sample interval); 1 where the
+    commands are not a controller's or its loop is not faster than the log."""
+    from ..likelihood.loop_world import log_ticks  # that module imports this one
+
+    if not flights or len(flights[0].time) < 2:
+        return 1
+    return log_ticks(flights, float(np.median(np.diff(flights[0].time))))
 
 
 __getattr__ = module_getattr(__name__)
