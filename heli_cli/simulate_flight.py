@@ -99,7 +99,7 @@ def _line(text):
 
 def run(args) -> int:
     from identification.bench.synthetic import simulate_flight
-    from identification.likelihood.loop_world import loop_ticks
+    from identification.validation.fit_warnings import loop_ticks
 
     from .progress import progress_of
 

@@ -155,7 +155,7 @@ def without_folded_lines(flight: Flight) -> tuple[Flight, list]:
     where the sticks are a flight controller's commands from a loop faster than the log, those it fed back into them
     out of both (:func:`identification.vibration.remove_fed_back_lines`), and those lines: ``(flight, [])`` itself
     where there are none."""
-    from .likelihood.loop_world import loop_ticks  # the likelihood's package imports this module
+    from .validation.fit_warnings import loop_ticks  # it imports the likelihood's package, which imports this module
 
     rates, found = remove_folded_lines(flight.rates, flight.attitude, flight.sample_rate)
     if not found:

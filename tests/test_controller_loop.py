@@ -1,4 +1,4 @@
-"""A flight controller whose loop runs faster than its log (identification.likelihood.loop_world.loop_ticks): the
+"""A flight controller whose loop runs faster than its log (identification.validation.fit_warnings.loop_ticks): the
 loop corrects the aircraft inside each logged sample, the model reads that as damping, and the closed-loop check
 flies the loop at the rate the log states to measure and remove it."""
 
@@ -32,7 +32,7 @@ def _imported(source: str, loop=None, rate: float = 100.0):
 
 
 def test_the_loops_ticks_a_sample_come_from_the_rate_the_log_states():
-    from identification.likelihood.loop_world import MAX_LOOP_TICKS, loop_ticks
+    from identification.validation.fit_warnings import MAX_LOOP_TICKS, loop_ticks
 
     assert loop_ticks(_imported("controller", 400.0)) == 4
     assert loop_ticks(_imported("servos", 1000.0, rate=200.0)) == 5

@@ -76,7 +76,7 @@ CONCLUSIVE = (1.0, 3.0)
 check's ``max_flights``). At the paper's wind 8 flights decide; at twice the wind a +5 % damping bias took 16-24."""
 
 AGAIN_BIAS = 0.15
-"""A flight controller's loop flown at its rate (:func:`~identification.likelihood.loop_world.loop_ticks` > 1)
+"""A flight controller's loop flown at its rate (:func:`~identification.validation.fit_warnings.loop_ticks` > 1)
 whose damping's bias, removed, exceeds this share is flown again (:func:`_measured_again`): a bias this large
 changes with the damping it is measured at (the sluggish aircraft's autopilot, 200 Hz loop logged at 50 Hz: +35-50 %
 at dampings fitted 65-98 % high, +80-100 % flown at the truth), so the bias at the fit's damping is short of the
@@ -118,7 +118,7 @@ class AxisCheck:
         (or no axis was in doubt).
     loop_ticks : int
         Ticks of the flight controller's loop flown per logged sample
-        (:func:`~identification.likelihood.loop_world.loop_ticks`; 1: the loop flown at the log's rate).
+        (:func:`~identification.validation.fit_warnings.loop_ticks`; 1: the loop flown at the log's rate).
     bias_again : dict
         Where flown again (:data:`AGAIN_BIAS`), every bias at the last values flown; the damping is then
         :func:`next_damping`'s, the other removed values the fitted ones over one plus their bias here. Else empty.

@@ -18,7 +18,7 @@ the flight's — the delay is the loop's: the axis takes its delay-free fit. Whe
 the delay. The test can only remove a delay its world reproduces; one it misses stays as ``delay="detect"``
 found it, and is checked.
 
-A flight controller whose loop runs faster than its log (:func:`~identification.likelihood.loop_world.loop_ticks`)
+A flight controller whose loop runs faster than its log (:func:`~identification.validation.fit_warnings.loop_ticks`)
 moves its command inside each logged sample, and the likelihood, which sees the command once a sample, reads that
 motion as a servo's timing: a delay or a lag of a few milliseconds. On the bench's autopilot 4x faster than its log,
 effect-free flights put a yaw delay of 4.5-6.1 ms at LR 25-43 on 100 Hz logs; on 200 Hz logs (the sluggish aircraft,
@@ -48,7 +48,8 @@ from ..errors import IdentifiabilityError
 from .axis_likelihood import MIN_SERVO_DELAY
 from .axis_pool import map_axes
 from .closed_loop import axis_refit
-from .loop_world import flown_flights, log_ticks, with_fits, world_loops
+from ..validation.fit_warnings import log_ticks
+from .loop_world import flown_flights, with_fits, world_loops
 
 N_DELAY_FLIGHTS = 16
 """Flights of the delay-free world flown per delay tested (the loop's optimum appeared on 1 of 10)."""
@@ -154,7 +155,7 @@ def _within_loop_timing(fit, dt: float) -> bool:
 
 def delay_candidates(ident) -> list:
     """The axes whose servo delay the search found (``delay="detect"`` or ``"auto"``), without a lag; and, where
-    every flight is a flight controller's logged slower than its loop (:func:`~.loop_world.log_ticks`), the axes
+    every flight is a flight controller's logged slower than its loop (:func:`~identification.validation.fit_warnings.log_ticks`), the axes
     whose searched delay or lag adds up to no more than :func:`loop_timing` (the loop's, module docstring)."""
     modes, flights = ident._delays(), getattr(ident, "flights_", ())
     fast = bool(flights) and log_ticks(flights) > 1

@@ -69,6 +69,7 @@ from ..excitation import on_static_input, require_moving_sticks, static_collecti
 from ..flight import Flight
 from ..integral.method import IntegralIdentifier
 from ..preprocess import shift_inputs
+from ..validation.fit_warnings import log_ticks, loop_ticks
 from ..vibration import remove_common_lines
 from .axis_fit import MLAxisFit, model_values
 from .axis_likelihood import MIN_SERVO_DELAY, AxisData, AxisLikelihood
@@ -79,7 +80,6 @@ from .closed_loop import check_settings as check_closed_loop_settings
 from .input_hold import (HOLDS, check_hold, decide_hold, hold_alternative, std_errors_with_hold,
                          undecided_against)
 from .loop_checks import run_checks
-from .loop_world import log_ticks, loop_ticks
 from .servo_lag import profile_lag
 from .state_space import HOLD_INDEX, WIND_MODELS, concentrated_nll, rts_smooth, wind_block
 

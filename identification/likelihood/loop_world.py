@@ -4,7 +4,7 @@ flown again, the loop of each as its flight had it, and its flights.
 The loop of an axis is the identified model (eqs. 18/21 with the fitted gust model of eqs. 41-42, exactly
 discretised; a servo delay or lag through the servo of eq. 31) under the pilot fitted to its logged sticks
 (:mod:`identification.likelihood.pilot_model`), who sees the simulated aircraft his reaction delay late, his sweeps
-and jitter replayed. A flight controller whose loop runs faster than its log (:func:`loop_ticks`) is flown at its
+and jitter replayed. A flight controller whose loop runs faster than its log (:func:`~identification.validation.fit_warnings.loop_ticks`) is flown at its
 own rate instead: the model discretised over one of its ticks with the command held, its law reading the state a
 tick before each command, the rest of its command (the pilot's setpoint through it) moving linearly between the
 logged samples, and the log keeping every ``ticks``-th tick. Inside each logged sample such a loop corrects the
@@ -23,7 +23,7 @@ import numpy as np
 from heli_core.terms import AXES, STICK_ROW
 
 from ..flight import Flight
-from ..validation.fit_warnings import (CONTROLLER_SOURCES, FASTER_LOOP, gyro_filter, input_source, unstated_filter,
+from ..validation.fit_warnings import (gyro_filter, log_ticks, loop_ticks, unstated_filter,  # what the log states
                                       without_gyro_filter)
 from ..validation.model_verdict import bound_side
 from .axis_likelihood import MIN_SERVO_DELAY, AxisLikelihood
@@ -38,37 +38,12 @@ MIN_NOISE_SHARE = 0.02
 bias needs a noisy gyro (none measured without one, docs/method.md), and a log filtered before it was written
 has no noise for the pilot fit to tell a pilot's sticks from a controller's by."""
 
-MAX_LOOP_TICKS = 40
-"""Most ticks of a flight controller's loop flown per logged sample (:func:`loop_ticks`: a 4 kHz loop logged at
-100 Hz)."""
-
 MAX_CORNER_SHARE = 0.9
 """A stated gyro filter is flown where its corner is below this share of the loop tick's Nyquist rate."""
 
 MAX_RATE_RATIO = 2.0
 """A simulated loop whose rate's standard deviation is further than this factor from the logged one's is not
 the flight's loop (the pilot's fit failed); the axis is then not checked."""
-
-
-def loop_ticks(flight, dt: float | None = None) -> int:
-    """Ticks of a flight controller's loop per sample of ``flight`` (its samples ``dt`` apart, default its own): the
-    loop's rate over the samples', rounded, where the inputs are a flight controller's commands and the log states a
-    loop faster than them by :data:`~identification.validation.fit_warnings.FASTER_LOOP` (at most
-    :data:`MAX_LOOP_TICKS`); else 1. Such a loop corrects the aircraft inside each logged sample, and the model,
-    driven by the sampled commands, reads that as damping (docs/method.md): the check flies it at its own rate."""
-    source, loop = input_source(getattr(flight, "metadata", {}) or {})
-    rate = 1.0 / dt if dt else flight.sample_rate
-    if source not in CONTROLLER_SOURCES or loop is None or loop <= FASTER_LOOP * rate:
-        return 1
-    return int(min(MAX_LOOP_TICKS, round(loop / rate)))
-
-
-def log_ticks(flights, dt: float | None = None) -> int:
-    """The controller ticks a sample that every one of a log's ``flights`` has (:func:`loop_ticks`, the least):
-    > 1 only where each is a flight controller's commands logged slower than its stated loop. What the log as a
-    whole is decided by (its hold, a delay within a sample, the gyro noise a check needs); each flight's own loop
-    is still flown at its own ticks."""
-    return min((loop_ticks(f, dt) for f in flights), default=1)
 
 
 @dataclass(frozen=True, eq=False)

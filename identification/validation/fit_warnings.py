@@ -163,11 +163,8 @@ _FASTER_LOOP_R2 = ("; the inputs are a flight controller's commands from a loop 
 
 
 def _log_ticks(flights) -> int:
-    """The flight controller's ticks per logged sample that every one of ``flights`` states
-    (:func:`~identification.likelihood.loop_world.log_ticks`, at the first flight's sample interval); 1 where the
-    commands are not a controller's or its loop is not faster than the log."""
-    from ..likelihood.loop_world import log_ticks  # that module imports this one
-
+    """:func:`log_ticks` of ``flights`` at the first flight's sample interval (the ticks the closed-loop check flies);
+    1 for a flight of fewer than two samples."""
     if not flights or len(flights[0].time) < 2:
         return 1
     return log_ticks(flights, float(np.median(np.diff(flights[0].time))))
@@ -263,7 +260,7 @@ flight controller's log, the bench's autopilot), not the pilot's sticks. A CSV's
 
 FASTER_LOOP = 1.25
 """A flight controller's loop faster than the fit's rate by more than this factor corrects the aircraft inside each
-fitted sample (:func:`controller_loop_warning`, :func:`~identification.likelihood.loop_world.loop_ticks`)."""
+fitted sample (:func:`controller_loop_warning`, :func:`loop_ticks`)."""
 
 
 def input_source(meta) -> tuple[str, float | None]:
@@ -272,6 +269,32 @@ def input_source(meta) -> tuple[str, float | None]:
     imported = meta.get("imported_from") or {}
     source = str(imported.get("input_source") or meta.get("input_source") or "")
     return source, _stated_hz(meta, "loop_rate_hz")
+
+
+MAX_LOOP_TICKS = 40
+"""Most ticks of a flight controller's loop flown per logged sample (:func:`loop_ticks`: a 4 kHz loop logged at
+100 Hz)."""
+
+
+def loop_ticks(flight, dt: float | None = None) -> int:
+    """Ticks of a flight controller's loop per sample of ``flight`` (its samples ``dt`` apart, default its own): the
+    loop's rate over the samples', rounded, where the inputs are a flight controller's commands and the log states a
+    loop faster than them by :data:`FASTER_LOOP` (at most
+    :data:`MAX_LOOP_TICKS`); else 1. Such a loop corrects the aircraft inside each logged sample, and the model,
+    driven by the sampled commands, reads that as damping (docs/method.md): the check flies it at its own rate."""
+    source, loop = input_source(getattr(flight, "metadata", {}) or {})
+    rate = 1.0 / dt if dt else flight.sample_rate
+    if source not in CONTROLLER_SOURCES or loop is None or loop <= FASTER_LOOP * rate:
+        return 1
+    return int(min(MAX_LOOP_TICKS, round(loop / rate)))
+
+
+def log_ticks(flights, dt: float | None = None) -> int:
+    """The controller ticks a sample that every one of a log's ``flights`` has (:func:`loop_ticks`, the least):
+    > 1 only where each is a flight controller's commands logged slower than its stated loop. What the log as a
+    whole is decided by (its hold, a delay within a sample, the gyro noise a check needs); each flight's own loop
+    is still flown at its own ticks."""
+    return min((loop_ticks(f, dt) for f in flights), default=1)
 
 
 def _stated_hz(meta, key: str) -> float | None:
