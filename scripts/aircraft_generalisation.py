@@ -17,7 +17,8 @@ positive pitch gain) and log rates, and per flight runs what a user runs with no
 
 Prints per aircraft and cell the RMS [worst] relative error of each parameter over the seeds, the hold
 fractions, and the wrong diagnoses; then, over every flight, whether the standard errors the model reports hold
-its errors (z = error / standard error: RMS about 1 where they do).
+its errors (z = error / standard error: RMS about 1 where they do), a true servo delay's too (``--servo-delay``)
+where the fit kept one.
 
 Usage::
 
@@ -126,6 +127,11 @@ def _one(job):
         out["hold_doubt"] = alternative is not None
         out["z"] = {k: (v[k] - truth[k]) / se[k] for k in PARAMS if se[k] > 0}
         out["se"] = {k: 100.0 * se[k] / abs(truth[k]) for k in PARAMS}
+        for axis, tau in delays:  # a true servo delay the fit kept, with its standard error
+            fit, k = ml.axes_[axis], f"tau_{axis}"
+            if fit.delay > 0.0 and widened[axis].get(k, 0.0) > 0.0:
+                out["z"][k] = (fit.delay - tau) / widened[axis][k]
+                out["se"][k] = 100.0 * widened[axis][k] / tau
         out["hold"] = [f.input_hold for f in ml.axes_.values()]
         out["delays"] = {axis: (tau, ml.axes_[axis].delay) for axis, tau in delays}
         out["timing"] = {axis: (f.delay, f.lag) for axis, f in ml.axes_.items()}
@@ -263,9 +269,9 @@ def _standard_error_line(rows) -> None:
     if not fitted:
         return
     cols = []
-    for k in PARAMS:
+    for k in PARAMS + tuple(sorted({k for r in fitted for k in r["z"] if k.startswith("tau_")})):
         z = np.array([r["z"][k] for r in fitted if k in r["z"]])
-        se = np.median([r["se"][k] for r in fitted])
+        se = np.median([r["se"][k] for r in fitted if k in r["se"]])
         cols.append(f"{k} {np.sqrt(np.mean(z ** 2)):.2f} ({np.mean(z):+.2f}, SE {se:.1f} %)")
     every = np.array([z for r in fitted for z in r["z"].values()])
     doubt = sum(bool(r.get("hold_doubt")) for r in fitted)

@@ -89,6 +89,27 @@ def test_servo_delay_is_found_by_the_likelihood_profile():
     assert 0 < fit.std_errors["tau_roll"] < 0.01  # the delay's own standard error (searched with the rest)
 
 
+
+def test_a_delay_beside_an_undecided_hold_keeps_a_standard_error_its_error_fits():
+    # a pilot's sticks behind a 40 ms servo: searched together, the hold (which trades half a sample with the
+    # delay) is left undecided by the data, its linearised spread several times its range [0, 1]; the delay's
+    # standard error carried that spread (16 ms where it was found within 1 ms) and is read with the hold kept
+    # to its range, while the hold's own stays the data's (the log's hold is decided by pooling those)
+    from identification.bench.cells import BENCH_CELLS
+
+    sf = simulate_flight(120, seed=1, config=BENCH_CELLS["dryden-2Hz-pd"], effects=("servo_delay",), effect_scale=0.5)
+    from identification.reports.identify import parameter_table
+
+    ident = MaximumLikelihoodIdentifier(delay="auto", axes=("roll",), delay_grid=np.arange(0.0, 0.2001, 0.02)).fit(
+        sf.flight)
+    fit = ident.axes_["roll"]
+    assert fit.input_hold_se > 1.0  # undecided by the data: the case of this test
+    se = fit.std_errors["tau_roll"]
+    assert se < 0.5 * sf.flight.dt  # within half a sample, the most the hold's range can move the delay
+    assert abs(fit.delay - sf.truth.tau_roll) < 3.0 * se
+    # the report's delay row says how well it is known
+    assert f"| tau_roll | s | {fit.delay:.3f} ± {se:.3f} |" in parameter_table({"decoupled": ident}, None)
+
 def test_detect_leaves_an_undelayed_fit_alone_bit_for_bit(fitted, flight180):
     # heli identify's default on a flight without a servo delay: the short search finds none the data support,
     # and the fit is the undelayed one, every parameter equal

@@ -181,7 +181,14 @@ class AxisLikelihood:
         """Standard errors of ``(x, theta)`` at the optimum and the condition number of the column-normalised
         Fisher information (Gauss-Newton: de/dx by central differences, de/dtheta = -Z); ``mse`` is the mean
         squared innovation. Entries of ``x`` not searched (``fixed`` indices; the damping of a structure
-        without one) are left out of the information and get a standard error of 0."""
+        without one) are left out of the information and get a standard error of 0.
+
+        A searched hold fraction lies in [0, 1], which its linearised information does not know: beside a searched
+        delay, with which it trades half a sample, the data may hardly decide it (a pilot's 120 s flight with a
+        40 ms servo delay: the hold 1.0 +- 3.0, a spread no value in [0, 1] can have), and the delay's standard
+        error carried it (16 ms where the delay was found within 1 ms). The other values' standard errors are
+        read with the hold's information raised by that of its range (:data:`HOLD_RANGE_VARIANCE`); the hold's
+        own is the data's alone (the log's hold is decided by pooling those: a range is no measurement)."""
         _, Z, _ = self.filtered(x)
         nx = len(x)
         held = set(int(i) for i in fixed) | (set() if free_damping else {0})
@@ -197,13 +204,32 @@ class AxisLikelihood:
         J[:, nx:] = -Z.T
         keep = np.array([j not in held for j in range(J.shape[1])])
         F = J[:, keep].T @ J[:, keep]
-        dscale = np.sqrt(np.maximum(np.diag(F), 1e-300))
-        Fn = F / np.outer(dscale, dscale)
-        w = np.linalg.eigvalsh(Fn)
-        cond = float(w[-1] / max(w[0], 1e-300))
-        se = np.zeros(J.shape[1])
-        se[keep] = np.sqrt(np.maximum(np.diag(np.linalg.pinv(Fn)) * mse, 0.0)) / dscale
+        se, cond = _standard_errors(F, mse, keep)
+        if HOLD_INDEX < nx and HOLD_INDEX not in held:
+            hold = int(np.count_nonzero(keep[:HOLD_INDEX]))  # its row among the kept
+            bounded = F.copy()
+            bounded[hold, hold] += mse / HOLD_RANGE_VARIANCE
+            se_hold = se[HOLD_INDEX]
+            se = _standard_errors(bounded, mse, keep)[0]
+            se[HOLD_INDEX] = se_hold
         return se, cond
+
+
+HOLD_RANGE_VARIANCE = 0.25
+"""The largest variance a value in [0, 1] can have (half its weight at each end: the two named holds, between which
+:func:`~identification.likelihood.input_hold.decide_hold` chooses where the data cannot tell): a hold fraction is
+known at least that well, whatever its linearised information says (:meth:`AxisLikelihood.fisher`)."""
+
+
+def _standard_errors(F: np.ndarray, mse: float, keep: np.ndarray) -> tuple[np.ndarray, float]:
+    """Standard errors from the Gauss-Newton information ``F`` of the ``keep`` columns (0 elsewhere) at mean squared
+    innovation ``mse``, and the condition number of ``F`` normalised by its diagonal."""
+    dscale = np.sqrt(np.maximum(np.diag(F), 1e-300))
+    Fn = F / np.outer(dscale, dscale)
+    w = np.linalg.eigvalsh(Fn)
+    se = np.zeros(keep.size)
+    se[keep] = np.sqrt(np.maximum(np.diag(np.linalg.pinv(Fn)) * mse, 0.0)) / dscale
+    return se, float(w[-1] / max(w[0], 1e-300))
 
 
 def simulation_r2(data: AxisData, damping: float, theta, hold=None) -> float:

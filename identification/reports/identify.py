@@ -69,8 +69,10 @@ def parameter_table(identifiers: dict, truth: ModelParams | None) -> str:
     for kind, servo in (("tau", lambda p: p.taus), ("lag", lambda p: p.lags)):  # the servo's delay and lag
         for axis in AXES:
             values = [servo(identifiers[lab].params_)[AXES.index(axis)] for lab in labels]
-            if any(values):
-                row = [f"{kind}_{axis}", "s"] + [f"{t:.3f}" for t in values]
+            if any(values):  # a delay searched with the rest has its standard error (a lag's profile has none)
+                se = [ses[lab].get(axis, {}).get(f"{kind}_{axis}", 0.0) if t else 0.0 for lab, t in zip(labels, values)]
+                row = [f"{kind}_{axis}", "s"] + [f"{t:.3f} ± {e:.3f}" if e > 0 else f"{t:.3f}"
+                                                 for t, e in zip(values, se)]
                 if truth is not None:
                     row += [f"{servo(truth)[AXES.index(axis)]:.3f}"] + ["—" for _ in labels]
                 rows.append(row)
