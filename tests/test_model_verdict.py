@@ -114,6 +114,30 @@ def test_a_low_r2_is_doubtful_only_where_the_parameters_are_not_pinned_down():
     assert "k11 25.9, by the integral method 3.5" in judge_fit(disagree, reference=GOOD).reasons[0]
 
 
+
+def test_the_integral_methods_reading_is_compared_with_its_reading_in_the_models_own_loop():
+    # a slow aircraft's pitch behind held sticks (the bench's verdict survey): the likelihood's k7 1.127, within 4 %
+    # of the truth, the integral method's 0.553 on the flight -- which it also reads on the model's own flights in
+    # the flight's loop (it has no wind model, and the pilot answers the gusts): its bias, not the model's error
+    fit = dict(GOOD, pitch=_axis({"k6": -0.9, "k7": 1.127, "kd2": 0.01}, r2=0.2))
+    ref = dict(GOOD, pitch=_axis({"k6": -0.9, "k7": 0.553, "kd2": 0.01}))
+
+    def check(integral, checked=True):  # checked or not: flown for the integral method's reading alone
+        return {"axes": {"pitch": {"checked": checked, "integral": integral}}}
+
+    assert "k7 1.127, by the integral method 0.553" in judge_fit(fit, reference=ref).reasons[0]  # no check flown
+    assert judge_fit(fit, reference=ref, closed_loop=check({"k6": -0.88, "k7": 0.58})).level == "usable"
+    v = judge_fit(fit, reference=ref, closed_loop=check({"k6": -0.88, "k7": 1.3}))  # the loop does not explain it
+    assert v.level == "doubtful"
+    assert ("k7 1.127, by the integral method 0.553, which reads 1.3 on the model's own flights in the flight's loop "
+            "(0.38 without that bias)") in v.reasons[0]
+    # behind an autopilot its damping lies near zero on the flight and in the loop alike: no ratio of those is asked
+    near_zero = dict(ref, pitch=_axis({"k6": -0.9, "k7": -0.054, "kd2": 0.01}))
+    assert judge_fit(fit, reference=near_zero, closed_loop=check({"k6": -0.88, "k7": 0.178})).level == "usable"
+    assert judge_fit(fit, reference=ref, closed_loop=check({"k6": -0.88, "k7": 0.58}, checked=False)).level == "usable"
+    unflown = judge_fit(fit, reference=ref, closed_loop=check({}, checked=False))
+    assert "k7 1.127, by the integral method 0.553" in unflown.reasons[0]
+
 def test_an_unusable_verdict_keeps_its_doubts_apart():
     fit = dict(GOOD, roll=_axis({"k2": 1.35, "k3": 200.0, "kd1": 0.04}),
                yaw=_axis(GOOD["yaw"]["params"], se={"k10": 5.0, "k11": 0.1, "k12": 0.1, "kd3": 0.1}, r2=0.1))

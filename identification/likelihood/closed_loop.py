@@ -60,7 +60,8 @@ from heli_core.terms import AXES
 from ..errors import IdentifiabilityError
 from .axis_likelihood import MIN_SERVO_DELAY
 from .axis_pool import map_axes
-from .loop_world import axis_loops, axis_names, flown_flights, skip_reason, unflyable
+from .loop_world import (axis_loops, axis_names, flown_flights, implausible, on_logged_sensors, skip_reason,
+                         unflyable)
 
 CLOSED_LOOP_MODES = ("auto", "report")
 """``"auto"``: check and remove a significant bias; ``"report"``: check and leave the fit as it is."""
@@ -129,6 +130,9 @@ class AxisCheck:
     flown_again : tuple of (float, float)
         Where flown again, each damping it was flown at (the first correction's, then each next) and the damping's
         relative bias there.
+    integral : dict
+        The gain and damping the integral method (Fig. 5) reads from the flights flown, median over them: what the
+        verdict's second opinion would read on the flight were the model right (:func:`integral_values`).
     """
 
     axis: str
@@ -145,6 +149,7 @@ class AxisCheck:
     bias_again: dict = field(default_factory=dict)
     gyro_filter: bool = False
     flown_again: tuple = ()
+    integral: dict = field(default_factory=dict)
 
     @property
     def removed(self) -> tuple:
@@ -157,7 +162,7 @@ class AxisCheck:
                 "fitted": self.fitted, "bias": self.bias, "bias_se": self.bias_se, "corrected": self.corrected,
                 "loops_direction": self.loops_direction, "removed": list(self.removed), "flights": self.flights,
                 "loop_ticks": self.loop_ticks, "bias_again": self.bias_again, "gyro_filter": self.gyro_filter,
-                "flown_again": [list(p) for p in self.flown_again]}
+                "flown_again": [list(p) for p in self.flown_again], "integral": self.integral}
 
 
 @dataclass(frozen=True)
@@ -288,8 +293,29 @@ def _replicate(ident, loops: dict, checked: dict, seed: int, b: int, fitted: tup
         except IdentifiabilityError as exc:  # the simulated loop left the stick still, or the fit refused it
             out[axis] = str(exc)
             continue
-        out[axis] = checked_values(again.axes_[axis], axis, names, _searched_delay(ident, axis))
+        out[axis] = {**checked_values(again.axes_[axis], axis, names, _searched_delay(ident, axis)),
+                     **integral_values(axis, names, flights)}
     return out
+
+
+INTEGRAL_PREFIX = "integral:"
+"""Key prefix of the integral method's values in a replicate's results (:func:`integral_values`)."""
+
+
+def integral_values(axis: str, names: tuple, flights: list) -> dict:
+    """The gain and damping (``names[:2]``) the integral method (Fig. 5) reads from ``flights`` flown by the check,
+    fitted as the model verdict's second opinion is (:func:`~identification.validation.model_verdict.judge_identifier`:
+    its defaults, the axis' terms ``names[2]``), keyed ``integral:<name>``; empty where it refuses them. The integral
+    method has no wind model, so a pilot or controller that answers the gusts biases it (a slow aircraft's pitch
+    behind held sticks: 0.55 where the truth and the likelihood read 1.13); its reading on the model's own flights in
+    the flight's loop is that bias, which the verdict then does not take for the model's error."""
+    from ..integral.method import IntegralIdentifier
+
+    try:
+        params = IntegralIdentifier(structure={AXES.index(axis): names[2]}, axes=(axis,)).fit(flights).params_
+    except (IdentifiabilityError, ValueError, np.linalg.LinAlgError):  # no second opinion from these flights
+        return {}
+    return {INTEGRAL_PREFIX + k: float(params.get(k)) for k in names[:2]}
 
 
 def check_settings(mode, n_flights) -> None:
@@ -324,7 +350,7 @@ def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: st
     check_settings(mode, n_flights)
     t0 = time.perf_counter()
     max_flights = 3 * n_flights if max_flights is None else max(int(max_flights), n_flights)
-    results, checked = {}, {}
+    results, checked, read_only = {}, {}, {}  # read_only: flown for the integral method's reading alone
     data = {axis: ident._fitted_data(AXES.index(axis), fit, ident.flights_, 0) for axis, fit in ident.axes_.items()}
     reasons = {axis: skip_reason(ident, AXES.index(axis), fit, data[axis]) for axis, fit in ident.axes_.items()}
     loops, signals = axis_loops(ident, {axis: data[axis] for axis, why in reasons.items() if not why})
@@ -338,6 +364,8 @@ def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: st
                                   gyro_filter=any(loop.gyro_filter.size for loop in loops[axis]))
         if not why:
             checked[axis] = axis_names(ident, AXES.index(axis), fit, data[axis])
+        elif on_logged_sensors(loops[axis]) and not implausible(loops[axis], signals[axis]):
+            read_only[axis] = axis_names(ident, AXES.index(axis), fit, data[axis])
     runs, fitting = [], tuple(checked)
     while fitting and len(runs) < max_flights:
         start = len(runs)
@@ -363,11 +391,33 @@ def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: st
         loops_bias = loops_direction(bias, se, gain, damping, results[axis].loop_ticks, results[axis].gyro_filter)
         removed = {k for k in fitted if mode == "auto" and loops_bias and abs(bias[k]) > SIGNIFICANCE * se[k]}
         corrected = {k: less_bias(k, v, bias[k]) if k in removed else v for k, v in fitted.items()}
+        integral = {k: float(np.median(v)) for k in (gain, damping)
+                    if (v := [run[axis][INTEGRAL_PREFIX + k] for run in runs
+                              if isinstance(run.get(axis), dict) and INTEGRAL_PREFIX + k in run[axis]])}
         results[axis] = replace(results[axis], fitted=fitted, bias=bias, bias_se=se, corrected=corrected,
-                                loops_direction=loops_bias, flights=int(rel[damping].size))
+                                loops_direction=loops_bias, flights=int(rel[damping].size), integral=integral)
+    if read_only:
+        for axis, integral in _integral_only(ident, loops, read_only, seed, n_flights, workers).items():
+            results[axis] = replace(results[axis], integral=integral)
     if again:
         results = _measured_again(ident, results, n_flights, seed, workers)
     return ClosedLoopCheck(results, len(runs), int(seed), mode, time.perf_counter() - t0)
+
+
+def _integral_only(ident, loops: dict, axes: dict, seed: int, n_flights: int, workers) -> dict:
+    """Per axis of ``axes`` (its :func:`axis_names`), the integral method's gain and damping (median) on
+    ``n_flights`` flights of the model in the flight's loop, flown only for that reading (a loop on the logged
+    sensors, whose bias the likelihood does not have: :func:`~.loop_world.on_logged_sensors`); its own draws
+    (``seed``, a stream apart from the check's)."""
+    def replicate(b):
+        rng = np.random.default_rng([seed, b, 0x1A7])
+        return {axis: integral_values(axis, names, flown_flights(ident, axis, loops[axis], rng))
+                for axis, names in axes.items()}
+
+    runs = map_axes(replicate, range(n_flights), workers)
+    return {axis: {k: float(np.median(v)) for k in names[:2]
+                   if (v := [run[axis][INTEGRAL_PREFIX + k] for run in runs if INTEGRAL_PREFIX + k in run[axis]])}
+            for axis, names in axes.items()}
 
 
 def less_bias(name: str, value: float, bias: float) -> float:

@@ -322,12 +322,25 @@ def _implausible(loop: _AxisLoop, logged: AxisSignals) -> str:
 
 def unflyable(loops: list, signals: list) -> str:
     """Why an axis' ``loops`` (one per flight, beside the logged ``signals`` they were fitted to) are not the
-    loop the check models, or empty: sticks that follow the logged gyro, or a pilot who does not fly the model as
-    the flight went (:func:`_implausible`)."""
-    if any(loop.pilot.flies_on == "sensors" and loop.ticks == 1 for loop in loops):
+    loop the check models, or empty: sticks that follow the logged gyro (:func:`on_logged_sensors`), or a pilot who
+    does not fly the model as the flight went (:func:`_implausible`)."""
+    if on_logged_sensors(loops):
         return ("its sticks follow the logged gyro's noise (a loop closed on the logged sensors, as a flight "
                 "controller's): the likelihood conditioned on them is the right one")
+    return implausible(loops, signals)
+
+
+def implausible(loops: list, signals: list) -> str:
+    """Why an axis' simulated ``loops`` are not the flight's (:func:`_implausible` of the first that is not), or
+    empty."""
     return next(filter(None, (_implausible(lp, sig) for lp, sig in zip(loops, signals))), "")
+
+
+def on_logged_sensors(loops: list) -> bool:
+    """Some of an axis' ``loops`` closes on the sensors the log holds, at the log's rate (a flight controller's):
+    the likelihood, conditioned on its sticks, has no bias of it to check. Its world is still the flight's, and the
+    check flies it for the integral method's reading alone (:func:`~.closed_loop.check_closed_loop`)."""
+    return any(loop.pilot.flies_on == "sensors" and loop.ticks == 1 for loop in loops)
 
 
 def world_loops(world, axes) -> tuple[dict, str]:
