@@ -22,7 +22,9 @@ where the fit runs away first, a "servo lag" of 0.1 s before a damping at the se
 them may look sound). A white gyro gives the two fits' dampings within a few per cent (the full rate's at most 1.08
 times the half rate's on the bench's cells, usually below it); a filtered gyro's full-rate damping is inflated,
 1.3 to 300 times the half rate's. Above :data:`RATIO`, and by :data:`Z` standard errors, on some axis the half
-rate is taken and tried again against its own half, down to :data:`MIN_RATE`.
+rate is taken and tried again against its own half, down to :data:`MIN_RATE`. The half rate is fitted first, and an
+axis whose damping at the rate, fitted without the timing, already exceeds it so is not searched for a timing
+(:func:`_dampings`): the timing can only decide the rate where the fit without it looks sound.
 
 The estimator itself fits the flights it is given; the commands (``heli identify``, ``diagnose``, ``tune``, and
 ``refresh`` at its model's rate) call :func:`at_fit_rate` first, and so should a script that wants their choice.
@@ -128,15 +130,22 @@ def thinned(flight: Flight, every: int) -> Flight:
                        extra={k: np.ascontiguousarray(v[keep]) for k, v in flight.extra.items()})
 
 
-def _dampings(flights, every: int) -> dict | None:
+def _dampings(flights, every: int, half: dict | None = None, ratio: float = RATIO) -> dict | None:
     """Per axis ``(damping, its standard error)`` the estimator fits to ``flights`` thinned by ``every`` with
     ``heli identify``'s timing (the servo delay and lag searched where the data suggest one; no closed-loop check),
-    None where it refuses them."""
+    None where it refuses them. ``half``: the dampings fitted at half this rate, where known; an axis whose damping
+    fitted without the timing already exceeds its half rate's (:func:`_exceeds`) is not searched for a timing
+    (``MaximumLikelihoodIdentifier.timing_gate``): the rate is thinned whatever a timing would add, and on a
+    filtered gyro the timing's searches at a damping run away are the choice's slowest part (a 200 Hz log behind a
+    20 Hz filter: 17 s of its 41 on one core, roll and pitch at the search's bound)."""
     from .errors import IdentifiabilityError
     from .likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
 
+    ident = MaximumLikelihoodIdentifier(**CLI_TIMING, closed_loop=None)
+    if half:
+        ident.timing_gate = lambda axis, d: axis in half and _exceeds(d, *half[axis], ratio)
     try:
-        fitted = MaximumLikelihoodIdentifier(**CLI_TIMING, closed_loop=None).fit([thinned(f, every) for f in flights])
+        fitted = ident.fit([thinned(f, every) for f in flights])
     except (IdentifiabilityError, ValueError, np.linalg.LinAlgError):  # a refusal at either rate: the log's stands
         return None
     return {axis: (float(fit.params[DAMPINGS[axis]]), float(fit.std_errors.get(DAMPINGS[axis], np.inf)))
@@ -152,11 +161,17 @@ def _inflated(here: dict, half: dict, ratio: float) -> tuple[dict, bool]:
     for axis, (d, _) in here.items():
         if axis not in half or not (d > 0 and half[axis][0] > 0):
             continue
-        d_half, se_half = half[axis]
-        by_axis[axis] = d / d_half
-        if d / d_half > ratio and d - d_half > Z * float(np.hypot(se_half, se_half * d / d_half)):
-            inflated = True
+        by_axis[axis] = d / half[axis][0]
+        inflated = inflated or _exceeds(d, *half[axis], ratio)
     return by_axis, inflated
+
+
+def _exceeds(d: float, d_half: float, se_half: float, ratio: float = RATIO) -> bool:
+    """A damping ``d`` fitted at a rate exceeds ``d_half`` fitted at half of it (standard error ``se_half``) by
+    ``ratio`` and by :data:`Z` standard errors of the difference (:func:`_inflated`)."""
+    if not (d > 0 and d_half > 0):
+        return False
+    return d / d_half > ratio and d - d_half > Z * float(np.hypot(se_half, se_half * d / d_half))
 
 
 def filtered_noise_correlation(corner_hz: float, spacing_s: float) -> float:
@@ -206,8 +221,8 @@ def choose_fit_rate(flights, ratio: float = RATIO, min_rate: float = MIN_RATE) -
         return FitRate(every, log_hz, (), corner)
     steps, here = [], None
     while log_hz / (2 * every) >= min_rate:
-        here = _dampings(flights, every) if here is None else here
-        half = _dampings(flights, 2 * every)
+        half = _dampings(flights, 2 * every, ratio=ratio)  # first: it gates the timing's search at this rate
+        here = _dampings(flights, every, half, ratio) if here is None else here
         if here is None or half is None:
             break
         by_axis, inflated = _inflated(here, half, ratio)

@@ -216,6 +216,10 @@ class MaximumLikelihoodIdentifier:
     method = "maximum likelihood (filter error, Gauss-Markov wind)"
     damping_bounds = DAMPING_BOUNDS
     """The interval each damping is searched in [1/s] (a damping at a bound was not placed by the data)."""
+    timing_gate = None
+    """With ``delay="detect"``: None, or ``gate(axis, damping)``, called with an axis' damping fitted without a timing;
+    where True its timing is not searched (the undelayed fit stands). The fit rate's choice sets it on its fits
+    (:func:`identification.fit_rate._dampings`): a damping already inflated there needs no timing to decide."""
 
     def __init__(self, structure="decoupled", extra_terms=(), input_hold="auto", delay=None,
                  delay_grid=None, wind_model: str = "auto", remove_vibration: bool = True,
@@ -346,7 +350,7 @@ class MaximumLikelihoodIdentifier:
         if any(fits[a].delay_profile for a in detected):
             # the log's timing is shared by its channels: where one axis' timing was questioned, every axis is
             # profiled (the T-REX hover's yaw, whose pedal barely moves it, is late as its sticks are)
-            rest = [a for a in detected if not fits[a].delay_profile]
+            rest = [a for a in detected if not fits[a].delay_profile and not self._gated(a, fits[a])]
             fits.update(zip(rest, map_axes(partial(one_axis, delay="auto"), rest, self.workers)))
         self.hold_decision_ = controller_hold or self._decide_log_hold(fits, flights, burn)
         self._decided_hold = None
@@ -383,6 +387,13 @@ class MaximumLikelihoodIdentifier:
         apply_check(self, check)
         self.closed_loop, self.closed_loop_ = mode, check
         return check
+
+    def _gated(self, axis: str, fit: MLAxisFit) -> bool:
+        """Whether :attr:`timing_gate` kept ``axis``' undelayed ``fit`` from a timing search (asked again of the
+        damping it was asked of: the undelayed fit stood)."""
+        damping = next((p for p in fit.params if TERMS[p].effect == "damping"), None)
+        return (self.timing_gate is not None and damping is not None
+                and bool(self.timing_gate(axis, fit.params[damping])))
 
     def _controller_hold(self, ticks: int, axes: list, names: dict, flights, burn: int, start) -> dict | None:
         """With ``input_hold="auto"`` on a flight controller's commands logged slower than its loop (``ticks`` > 1 a
@@ -533,6 +544,9 @@ class MaximumLikelihoodIdentifier:
         undelayed = problem.per_kind(0.0, x0, models, lag=lag)
         kind = min(undelayed, key=lambda k: undelayed[k][3])
         cost, x, _, aic = undelayed[kind]
+        if self.timing_gate is not None and problem.searches_damping and self.timing_gate(
+                AXES[problem.axis], float(-x[0] / TERMS[problem.damping_name].sign)):
+            return WindFit(cost, x, kind, 0.0), [], None  # decided without a timing (timing_gate)
         aic_free = problem.per_kind(0.0, {kind: x}, (kind,), DETECT_NFEV, free_tau=True, lag=lag)[kind][3]
         if 2.0 * (aic - aic_free) < MIN_LR_DELAY:
             return WindFit(cost, x, kind, 0.0), [], None
