@@ -131,6 +131,10 @@ def test_the_integral_methods_reading_is_compared_with_its_reading_in_the_models
     assert v.level == "doubtful"
     assert ("k7 1.127, by the integral method 0.553, which reads 1.3 on the model's own flights in the flight's loop "
             "(0.38 without that bias)") in v.reasons[0]
+    # the check's flights fly the model as fitted; where the check then corrected it (here 3.0 -> 1.127), the bias is
+    # read against the value flown: 0.553 - (2.5 - 3.0), not against the corrected value
+    corrected = {"axes": {"pitch": {"checked": True, "integral": {"k7": 2.5}, "fitted": {"k6": -0.9, "k7": 3.0}}}}
+    assert judge_fit(fit, reference=ref, closed_loop=corrected).level == "usable"
     # behind an autopilot its damping lies near zero on the flight and in the loop alike: no ratio of those is asked
     near_zero = dict(ref, pitch=_axis({"k6": -0.9, "k7": -0.054, "kd2": 0.01}))
     assert judge_fit(fit, reference=near_zero, closed_loop=check({"k6": -0.88, "k7": 0.178})).level == "usable"

@@ -134,12 +134,12 @@ def _gain_findings(axis: str, stats: Mapping, reference: Mapping | None) -> tupl
 
 
 def _unplaced(axis: str, stats: Mapping, reference: Mapping | None, in_loop: Mapping | None = None) -> list[str]:
-    """Why the axis' gain and damping are not pinned down (empty when both are). ``in_loop``: what the integral
-    method read on the model's own flights in the flight's loop (the closed-loop check's ``integral``); where given,
-    its reading on the flight is compared with the model's value less that bias (``reading - (in_loop - value)``:
-    the additive correction of a parametric bootstrap, which stays meaningful where a biased reading lies near
-    zero, as the integral method's dampings behind an autopilot do: -0.05 and 0.18 on the flight and in its loop
-    where the model reads 1.12)."""
+    """Why the axis' gain and damping are not pinned down (empty when both are). ``in_loop``: per name, what the
+    integral method read on the model's own flights in the flight's loop (the closed-loop check's ``integral``) and
+    the value they were flown at (None: the model's); where given, its reading on the flight less that bias,
+    ``reading - (in_loop - flown at)``, is compared with the model's value (the additive correction of a
+    parametric bootstrap, which stays meaningful where a biased reading lies near zero, as the integral method's
+    dampings behind an autopilot do: -0.05 and 0.18 on the flight and in its loop where the model reads 1.12)."""
     out = []
     for name in (GAIN[axis], DAMPING[axis]):
         got = _value(stats, name)
@@ -151,9 +151,9 @@ def _unplaced(axis: str, stats: Mapping, reference: Mapping | None, in_loop: Map
         ref = _value(reference.get(axis) or {}, name) if reference else None
         if ref is None:
             continue
-        expected = (in_loop or {}).get(name)
+        expected, flown_at = (in_loop or {}).get(name, (None, None))
         if expected is not None:  # its bias in the model's own loop removed (a parametric bootstrap's correction)
-            corrected = ref[0] - (expected - value)
+            corrected = ref[0] - (expected - (value if flown_at is None else flown_at))
             if not 1.0 / ESTIMATOR_RATIO <= corrected / value <= ESTIMATOR_RATIO:
                 out.append(f"{name} {value:.4g}, by the integral method {ref[0]:.4g}, which reads {expected:.4g} on the "
                            f"model's own flights in the flight's loop ({corrected:.4g} without that bias)")
@@ -163,11 +163,13 @@ def _unplaced(axis: str, stats: Mapping, reference: Mapping | None, in_loop: Map
 
 
 def _integral_in_loop(closed_loop: Mapping | None, axis: str) -> Mapping | None:
-    """The integral method's gain and damping on the flights the closed-loop check flew of ``axis`` (median; its
-    record's ``integral``, kept wherever it flew them: to measure the likelihood's bias, or for this reading alone
-    where the loop closes on the logged sensors), else None."""
+    """Per name, the integral method's gain and damping on the flights the closed-loop check flew of ``axis``
+    (median; its record's ``integral``, kept wherever it flew them: to measure the likelihood's bias, or for this
+    reading alone where the loop closes on the logged sensors) and the value the model was flown at (the check's
+    ``fitted``: the model's value may be the check's correction of it), else None."""
     c = ((closed_loop or {}).get("axes") or {}).get(axis) or {}
-    return c.get("integral") or None
+    fitted = c.get("fitted") or {}
+    return {k: (v, fitted.get(k)) for k, v in c["integral"].items()} if c.get("integral") else None
 
 
 def _r2_finding(axis: str, stats: Mapping, reference: Mapping | None, min_r2: float,
