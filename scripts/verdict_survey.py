@@ -24,8 +24,6 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-DAMPINGS = ("k3", "k7", "k11")
-
 
 def _one(job) -> dict:
     from threadpoolctl import threadpool_limits
@@ -38,7 +36,7 @@ def _one(job) -> dict:
     from identification.integral.method import IntegralIdentifier
     from identification.likelihood.closed_loop import set_axis_values
     from identification.likelihood.estimator import CLI_TIMING, MaximumLikelihoodIdentifier
-    from identification.validation.model_verdict import judge_identifier
+    from identification.validation.model_verdict import DAMPING, GAIN, judge_identifier
 
     cell, aircraft, seed, delay, wrong = job
     warnings.simplefilter("ignore")
@@ -48,14 +46,13 @@ def _one(job) -> dict:
         (flight,), _ = at_fit_rate([sim.flight], "auto")
         ml = MaximumLikelihoodIdentifier(**CLI_TIMING, closed_loop=None if wrong else "auto", workers=1).fit(flight)
         if wrong:  # every damping off by the factor, the rest as fitted; the check flown on that model
-            for axis, name in zip(AXES, DAMPINGS):
-                fit = ml.axes_[axis]
-                set_axis_values(ml, axis, {**{k: v for k, v in fit.params.items() if k in ("k2", "k6", "k10")},
-                                           name: wrong * fit.params[name]})
+            for axis in AXES:
+                params, gain, damping = ml.axes_[axis].params, GAIN[axis], DAMPING[axis]
+                set_axis_values(ml, axis, {gain: params[gain], damping: wrong * params[damping]})
             ml.closed_loop_check("report")
         verdict = judge_identifier(ml, IntegralIdentifier(structure="decoupled").fit(flight))
     return {"job": job, "level": verdict.level, "reasons": list(verdict.reasons),
-            "dampings": {k: (ml.params_.values()[k], truth.values()[k]) for k in DAMPINGS}}
+            "dampings": {DAMPING[a]: (ml.params_.values()[DAMPING[a]], truth.values()[DAMPING[a]]) for a in AXES}}
 
 
 def main(argv=None) -> None:

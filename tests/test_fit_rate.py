@@ -177,19 +177,18 @@ def test_a_damping_inflated_without_a_timing_is_not_searched_for_one(filtered):
     """The choice's fit at a rate is gated by its half rate's dampings: an axis already inflated without a timing
     keeps its undelayed fit (on a filtered gyro the timing's searches at a run-away damping were the slow part);
     the others are searched as ``heli identify`` searches them."""
-    from identification.fit_rate import _dampings, _exceeds
+    from identification.fit_rate import DAMPINGS, _dampings, _exceeds
     from identification.likelihood.estimator import CLI_TIMING
 
     flight = filtered.flight.with_metadata(gyro_filter_hz=None)
     half = _dampings([flight], 2)
     plain = MaximumLikelihoodIdentifier().fit(flight)
-    inflated = {a for a, f in plain.axes_.items() if _exceeds(f.params[{"roll": "k3", "pitch": "k7", "yaw": "k11"}[a]],
-                                                              *half[a])}
+    inflated = {a for a, f in plain.axes_.items() if _exceeds(f.params[DAMPINGS[a]], *half[a])}
     assert inflated  # the case of this test: the 20 Hz filter inflates the 100 Hz damping
     gated = MaximumLikelihoodIdentifier(**CLI_TIMING)
     gated.timing_gate = lambda axis, d: axis in inflated
     gated.fit(flight)
     for axis in inflated:
         assert gated.axes_[axis].delay_profile == () and gated.axes_[axis].params == plain.axes_[axis].params
-    assert _dampings([flight], 1, half) == {a: (f.params[k], f.std_errors[k]) for a, f in gated.axes_.items()
-                                             for k in [{"roll": "k3", "pitch": "k7", "yaw": "k11"}[a]]}
+    assert _dampings([flight], 1, half) == {a: (f.params[DAMPINGS[a]], f.std_errors[DAMPINGS[a]])
+                                             for a, f in gated.axes_.items()}

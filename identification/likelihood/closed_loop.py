@@ -391,11 +391,9 @@ def check_closed_loop(ident, n_flights: int = N_FLIGHTS, seed: int = 0, mode: st
         loops_bias = loops_direction(bias, se, gain, damping, results[axis].loop_ticks, results[axis].gyro_filter)
         removed = {k for k in fitted if mode == "auto" and loops_bias and abs(bias[k]) > SIGNIFICANCE * se[k]}
         corrected = {k: less_bias(k, v, bias[k]) if k in removed else v for k, v in fitted.items()}
-        integral = {k: float(np.median(v)) for k in (gain, damping)
-                    if (v := [run[axis][INTEGRAL_PREFIX + k] for run in runs
-                              if isinstance(run.get(axis), dict) and INTEGRAL_PREFIX + k in run[axis]])}
         results[axis] = replace(results[axis], fitted=fitted, bias=bias, bias_se=se, corrected=corrected,
-                                loops_direction=loops_bias, flights=int(rel[damping].size), integral=integral)
+                                loops_direction=loops_bias, flights=int(rel[damping].size),
+                                integral=_median_integral(runs, axis, (gain, damping)))
     if read_only:
         for axis, integral in _integral_only(ident, loops, read_only, seed, n_flights, workers).items():
             results[axis] = replace(results[axis], integral=integral)
@@ -415,9 +413,19 @@ def _integral_only(ident, loops: dict, axes: dict, seed: int, n_flights: int, wo
                 for axis, names in axes.items()}
 
     runs = map_axes(replicate, range(n_flights), workers)
-    return {axis: {k: float(np.median(v)) for k in names[:2]
-                   if (v := [run[axis][INTEGRAL_PREFIX + k] for run in runs if INTEGRAL_PREFIX + k in run[axis]])}
-            for axis, names in axes.items()}
+    return {axis: _median_integral(runs, axis, names[:2]) for axis, names in axes.items()}
+
+
+def _median_integral(runs: list, axis: str, names) -> dict:
+    """Per name of ``names`` the median of the integral method's readings (:func:`integral_values`) over the
+    ``runs`` that hold one for ``axis`` (a run whose flights it refused, or that failed, holds none)."""
+    out = {}
+    for k in names:
+        v = [run[axis][INTEGRAL_PREFIX + k] for run in runs
+             if isinstance(run.get(axis), dict) and INTEGRAL_PREFIX + k in run[axis]]
+        if v:
+            out[k] = float(np.median(v))
+    return out
 
 
 def less_bias(name: str, value: float, bias: float) -> float:
