@@ -26,7 +26,7 @@ from heli_core.terms import INPUT_FOR_AXIS, STICK_ROW
 
 from .errors import FlightLogError
 from .flight import Flight
-from .vibration import remove_fed_back_lines, remove_folded_lines
+from .vibration import remove_all_folded_lines
 
 DEFAULT_PASS_HZ = 4.0
 DEFAULT_STOP_HZ = 8.0
@@ -157,17 +157,17 @@ def without_folded_lines(flight: Flight) -> tuple[Flight, list]:
     where there are none."""
     from .validation.fit_warnings import loop_ticks  # it imports the likelihood's package, which imports this module
 
-    rates, found = remove_folded_lines(flight.rates, flight.attitude, flight.sample_rate)
+    rows = list(STICK_ROW)
+    rates, commands, found = remove_all_folded_lines(flight.rates, flight.sticks[rows], flight.attitude,
+                                                     flight.sample_rate, faster_loop=loop_ticks(flight) > 1)
     if not found:
         return flight, []
-    rows, sticks, fed = list(STICK_ROW), flight.sticks, []
-    if loop_ticks(flight) > 1:
-        rates, commands, fed = remove_fed_back_lines(rates, flight.sticks[rows], flight.sample_rate, found)
-    if fed:
+    sticks = flight.sticks
+    if any(ln.get("signal") == "command" for ln in found):
         sticks = np.array(flight.sticks, dtype=float, copy=True)
         sticks[rows] = commands
-    meta = MappingProxyType({**flight.metadata, "vibration_lines": found + fed})
-    return Flight(flight.time, rates, flight.attitude, sticks, meta, flight.extra), found + fed
+    meta = MappingProxyType({**flight.metadata, "vibration_lines": found})
+    return Flight(flight.time, rates, flight.attitude, sticks, meta, flight.extra), found
 
 
 def shift_inputs(flight: Flight, shifts) -> Flight:

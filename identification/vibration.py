@@ -344,9 +344,19 @@ def remove_common_lines(rates, commands, fs: float, min_hz: float = 8.0,
         commands[a] = remove_lines(commands[a], fs, freqs)
         lines += [{**ln, "signal": "command"} for ln in in_commands if ln["axis"] == AXES[a]]
     if attitude is not None:
-        cleaned, folded = remove_folded_lines(cleaned, attitude, fs, min_hz)
-        fed = []
-        if faster_loop:
-            cleaned, commands, fed = remove_fed_back_lines(cleaned, commands, fs, folded)
-        lines += folded + fed
+        cleaned, commands, folded = remove_all_folded_lines(cleaned, commands, attitude, fs, min_hz, faster_loop)
+        lines += folded
     return cleaned, commands, lines
+
+
+def remove_all_folded_lines(rates, commands, attitude, fs: float, min_hz: float = 8.0,
+                            faster_loop: bool = False) -> tuple[np.ndarray, np.ndarray, list]:
+    """The lines a slow log folded below ``min_hz`` taken out of the gyro (their sensor's share,
+    :func:`remove_folded_lines`) and, where the commands are a flight controller's from a loop faster than the log
+    (``faster_loop``), those it fed back out of the commands and the gyro together (:func:`remove_fed_back_lines`).
+    Returns the rates, the commands and the lines (the gyro's, then the commands')."""
+    rates, folded = remove_folded_lines(rates, attitude, fs, min_hz)
+    fed = []
+    if faster_loop:
+        rates, commands, fed = remove_fed_back_lines(rates, commands, fs, folded)
+    return rates, commands, folded + fed
