@@ -56,14 +56,22 @@ def _one(job) -> dict:
 
 
 def main(argv=None) -> None:
+    from heli_cli.argtypes import number, whole
+    from identification.bench.aircraft import AIRCRAFT
+    from identification.bench.cells import BENCH_CELLS
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cells", nargs="+", default=["independent", "held-sticks-pd", "broadband-autopilot"])
-    ap.add_argument("--aircraft", nargs="+", default=["paper", "sluggish", "agile"])
-    ap.add_argument("--seeds", type=int, default=2)
+    ap.add_argument("--cells", nargs="+", default=["independent", "held-sticks-pd", "broadband-autopilot"],
+                    choices=list(BENCH_CELLS), metavar="CELL")
+    ap.add_argument("--aircraft", nargs="+", default=["paper", "sluggish", "agile"], choices=["paper", *AIRCRAFT])
+    ap.add_argument("--seeds", type=whole(1), default=2)
     ap.add_argument("--first-seed", type=int, default=2101)
-    ap.add_argument("--delays", nargs="+", type=float, default=[0.0, 0.01, 0.02], help="true servo delays [s]")
-    ap.add_argument("--wrong", type=float, default=None, help="multiply every fitted damping by this factor")
-    ap.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
+    ap.add_argument("--delays", nargs="+", type=number("a servo delay in seconds, 0 or more", 0.0, low_open=False),
+                    default=[0.0, 0.01, 0.02], help="true servo delays [s]")
+    ap.add_argument("--wrong", type=number("a factor above 0", 0.0), default=None,
+                    help="multiply every fitted damping by this factor")
+    ap.add_argument("--workers", type=whole(1),
+                    default=min(2, os.cpu_count() or 1))
     args = ap.parse_args(argv)
     jobs = [(c, a, s, d, args.wrong) for c in args.cells for a in args.aircraft
             for s in range(args.first_seed, args.first_seed + args.seeds) for d in args.delays]
